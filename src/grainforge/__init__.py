@@ -1,0 +1,14 @@
+"""grainforge: realistic, printable 3D grain shapes for geotechnical research.
+
+The three generators of Hanaor et al., *3D printable geomaterials*:
+:func:`fso` (Fractal Surface Overlay), and the others as they land, each
+returning an immutable :class:`Grain`.
+"""
+
+from ._version import __version__
+from .grain import Grain
+from .methods import generate
+from .methods.fso import fso
+from .params import ParameterError
+
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso"]

@@ -1,0 +1,1 @@
+"""The ``grainforge`` command line: a thin click layer over the library."""

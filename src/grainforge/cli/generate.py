@@ -1,0 +1,59 @@
+"""``grainforge generate METHOD``: write grains and a manifest into a folder."""
+
+from __future__ import annotations
+
+import click
+
+from ..methods import METHODS, get
+from ..params import ParameterError
+from .options import bad_parameter, build_params, output_options, param_options
+from .progress import progress_bar
+
+
+@click.group()
+def generate():
+    """Generate grains with one of the methods into a folder."""
+
+
+def run_generate(method: str, params, *, out, count, seed, size, size_definition, fmt, overwrite, extra_columns=()):
+    """Shared body of every ``generate METHOD`` command."""
+    from ..run import write_run
+
+    seeds = [seed + i for i in range(count)]
+    try:
+        write_run(
+            method, params, seeds, out, fmt=fmt, size=size, size_definition=size_definition,
+            overwrite=overwrite, progress=progress_bar(total=count, desc=f"{method} grains"),
+            extra_columns=extra_columns,
+        )
+    except ParameterError as exc:
+        raise bad_parameter(exc) from None
+    except FileExistsError as exc:
+        raise click.UsageError(str(exc)) from None
+    click.echo(f"wrote {count} {method} grain(s) and manifest.csv to {out}", err=True)
+
+
+def make_command(method: str) -> click.Command:
+    """A ``generate METHOD`` command whose options come from the method's Params.
+
+    A method module may define ``cli_command(run_generate)`` to build its own
+    command (for options that are not plain parameters).
+    """
+    module = get(method)
+    custom = getattr(module, "cli_command", None)
+    if custom is not None:
+        return custom(run_generate)
+
+    @click.command(name=method, help=(module.__doc__ or "").strip().splitlines()[0])
+    @output_options
+    @param_options(module.Params)
+    def command(out, count, seed, size, size_definition, fmt, overwrite, **values):
+        params = build_params(module.Params, values)
+        run_generate(method, params, out=out, count=count, seed=seed, size=size,
+                     size_definition=size_definition, fmt=fmt, overwrite=overwrite)
+
+    return command
+
+
+for _name in METHODS:
+    generate.add_command(make_command(_name))

@@ -1,0 +1,66 @@
+"""The ``grainforge`` command group and its error handling.
+
+Every user mistake (bad option, unreadable file, an output that exists)
+ends as one line on stderr and exit code 2; no traceback.
+"""
+
+from __future__ import annotations
+
+import sys
+
+import click
+
+from .._version import __version__
+from ..params import ParameterError
+
+
+class GrainforgeGroup(click.Group):
+    """A click group that reports errors as a single line."""
+
+    def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        try:
+            rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
+        except click.exceptions.Abort:
+            click.echo("Aborted.", err=True)
+            sys.exit(1)
+        except click.ClickException as exc:
+            click.echo(f"Error: {exc.format_message()}", err=True)
+            sys.exit(exc.exit_code)
+        except (ParameterError, FileExistsError, FileNotFoundError, ValueError) as exc:
+            click.echo(f"Error: {_one_line(exc)}", err=True)
+            sys.exit(2)
+        except KeyboardInterrupt:
+            click.echo("Interrupted.", err=True)
+            sys.exit(130)
+        if standalone_mode:
+            sys.exit(rv if isinstance(rv, int) else 0)
+        return rv
+
+
+def _one_line(exc: BaseException) -> str:
+    return " ".join(str(exc).split())
+
+
+@click.group(cls=GrainforgeGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
+@click.version_option(__version__, prog_name="grainforge")
+def cli():
+    """grainforge: realistic, printable 3D grain shapes for geotechnical research.
+
+    Generators (paper: Hanaor et al., 3D printable geomaterials): FSO (fractal
+    surface overlay).  Run `grainforge COMMAND --help` for each command.
+    """
+
+
+def _register():
+    from . import demo, generate, render
+
+    cli.add_command(generate.generate)
+    cli.add_command(render.render)
+    cli.add_command(demo.demo)
+
+
+_register()
+
+
+def main() -> None:  # console-script entry point
+    cli.main(prog_name="grainforge")

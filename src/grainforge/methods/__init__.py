@@ -1,0 +1,83 @@
+"""Grain generators and their registry.
+
+Each generator lives in its own module exposing
+
+- ``NAME`` : str, the method name used by the CLI, manifests and recipes;
+- ``Params`` : a frozen dataclass declared with :func:`grainforge.params.param`;
+- ``build(params, rng) -> (vertices, faces, info)`` : the pure geometry.
+
+:func:`generate` turns a (method, params, seed) triple into a checked,
+centred :class:`~grainforge.grain.Grain`.
+"""
+
+from __future__ import annotations
+
+import importlib
+from types import ModuleType
+from typing import Any
+
+import numpy as np
+
+from ..grain import Grain
+from ..solid import require_solid, volume_centroid
+
+__all__ = ["METHODS", "get", "generate", "resolve_rng"]
+
+#: method name -> module path.  Modules are imported lazily.
+METHODS: dict[str, str] = {
+    "fso": "grainforge.methods.fso",
+}
+
+
+def get(name: str) -> ModuleType:
+    """The module implementing method ``name``.
+
+    Raises
+    ------
+    ValueError
+        If no such method exists.
+    """
+    try:
+        path = METHODS[name]
+    except KeyError:
+        raise ValueError(f"method must be one of {', '.join(sorted(METHODS))}, got {name!r}") from None
+    return importlib.import_module(path)
+
+
+def resolve_rng(rng: Any) -> tuple[np.random.Generator, int | None]:
+    """Normalise ``rng`` to a Generator, returning the seed when there is one.
+
+    ``None`` draws fresh entropy but still records it, so every grain can be
+    regenerated from its recorded seed.
+    """
+    if isinstance(rng, np.random.Generator):
+        return rng, None
+    if rng is None:
+        rng = int(np.random.SeedSequence().entropy)
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        seed = int(rng)
+        if seed < 0:
+            raise ValueError(f"seed must be a non-negative integer, got {seed}")
+        return np.random.default_rng(seed), seed
+    raise ValueError(f"rng must be None, a non-negative int or a numpy Generator, got {rng!r}")
+
+
+def generate(name: str, params: Any, rng: Any = None) -> Grain:
+    """Generate one grain of method ``name`` with ``params``.
+
+    The mesh is checked (closed, oriented, one body, positive volume) and
+    translated so that its volume centroid is at the origin.
+
+    Raises
+    ------
+    ValueError
+        Naming the parameter when the result would not be a valid solid.
+    """
+    module = get(name)
+    if not isinstance(params, module.Params):
+        raise TypeError(f"params must be {module.Params.__name__}, got {type(params).__name__}")
+    generator, seed = resolve_rng(rng)
+    vertices, faces, info = module.build(params, generator)
+    require_solid(vertices, faces, getattr(module, "VALIDITY_PARAMETER", "parameters"))
+    vertices = vertices - volume_centroid(vertices, faces)
+    return Grain(vertices=vertices, faces=faces, method=module.NAME, params=params, seed=seed, info=info)

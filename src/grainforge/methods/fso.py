@@ -1,0 +1,304 @@
+"""Fractal Surface Overlay (FSO): a Weierstrass–Mandelbrot surface on a geodesic sphere.
+
+Implements Eqs. 2 and 3 of Hanaor et al., *3D printable geomaterials*
+(see ``docs/methods/fso.md`` and ALGORITHMS.md §1).  For a vertex at azimuth
+θ and polar angle φ, with φ' = φ in the upper hemisphere and π − φ in the
+lower one,
+
+    R = R0 + K Σ_m Σ_n w_n {cos(ψ_mn + ζ_mn c) − cos(k_n φ' cos(θ − α_m) + ψ_mn + ζ_mn c)}
+
+where w_n = (2πγ^(n−1)/L)^(D−3), k_n = 2πγ^n/L, c = cos φ in the upper
+hemisphere and 0 in the lower one (Eq. 3 has no ζ terms).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geodesic import icosphere, spherical
+from ..params import ParameterError, param, validate
+
+__all__ = ["Params", "build", "fso", "wm_sum", "wm_sum_reference", "draw_field", "Field"]
+
+NAME = "fso"
+VALIDITY_PARAMETER = "amplitude"
+#: generation outputs recorded in manifests (K actually used, extreme radii / R0)
+INFO_COLUMNS = ("K", "min_radius", "max_radius")
+DEFAULT_AMPLITUDE = 0.1
+#: icosphere level on which the ``amplitude`` RMS is measured (642 points),
+#: so that K, and therefore the grain, does not depend on the mesh resolution.
+REFERENCE_SUBDIVISIONS = 3
+#: smallest allowed radius, as a fraction of R0.
+MIN_RADIUS = 0.05
+#: largest phase, in turns, the double sum may reach (keeps float64 phases exact to ~1e-6 rad).
+MAX_TURNS = 2.0**32
+TWO_PI = 2.0 * np.pi
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of the FSO generator (paper Eqs. 2–3)."""
+
+    fractal_dimension: float = param(
+        2.4, "fractal dimension D of the overlaid surface", low=2.0, high=3.0, high_open=True
+    )
+    length_ratio: float = param(
+        7.0, "stochastic length parameter L relative to R0 (L/R0 > π elongates)",
+        low=0.0, low_open=True, high=1000.0,
+    )
+    amplitude: float | None = param(
+        None, f"RMS of (R − R0)/R0 (default {DEFAULT_AMPLITUDE}; exclusive with k)", low=0.0, high=1.0
+    )
+    k: float | None = param(None, "the paper's raw amplitude scaling K (exclusive with amplitude)", low=0.0)
+    ridges: int = param(40, "number of superimposed ridges M", kind="int", low=1, high=400)
+    frequencies: int = param(40, "number of frequencies n_max", kind="int", low=1, high=400)
+    gamma: float = param(1.5, "frequency density γ", low=1.0, low_open=True, high=10.0)
+    subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
+
+    def __post_init__(self):
+        validate(self)
+        if self.amplitude is not None and self.k is not None:
+            raise ParameterError("amplitude", "cannot be combined with k: give one of them")
+        if self.amplitude is None and self.k is None:
+            object.__setattr__(self, "amplitude", DEFAULT_AMPLITUDE)
+        turns = self.gamma**self.frequencies * (np.pi / 2) / self.length_ratio
+        if turns > MAX_TURNS:
+            raise ParameterError(
+                "frequencies",
+                f"too large for gamma={self.gamma} and length_ratio={self.length_ratio}: "
+                f"γ^n_max·π/(2L) = {turns:.3g} turns exceeds {MAX_TURNS:.3g} (float64 phase precision)",
+            )
+
+
+@dataclass(frozen=True)
+class Field:
+    """The random field of one grain: phases ψ, ζ (M, n_max) and ridge angles α (M,)."""
+
+    psi: np.ndarray
+    zeta: np.ndarray
+    alpha: np.ndarray
+    weights: np.ndarray  # (n_max,) w_n
+    wavenumbers: np.ndarray  # (n_max,) k_n
+
+
+def draw_field(p: Params, rng: np.random.Generator) -> Field:
+    """Draw ψ and ζ ~ U(0, 2π) (in that order) and set α_m = π m / M.
+
+    α_m = πm/M follows Yan & Komvopoulos (1998): ridge directions evenly
+    cover all orientations, so the overlay is statistically isotropic.
+    """
+    M, N = p.ridges, p.frequencies
+    psi = rng.uniform(0.0, TWO_PI, size=(M, N))
+    zeta = rng.uniform(0.0, TWO_PI, size=(M, N))
+    alpha = np.pi * np.arange(1, M + 1) / M
+    n = np.arange(1, N + 1, dtype=np.float64)
+    weights = (TWO_PI * p.gamma ** (n - 1) / p.length_ratio) ** (p.fractal_dimension - 3.0)
+    wavenumbers = TWO_PI * p.gamma**n / p.length_ratio
+    return Field(psi, zeta, alpha, weights, wavenumbers)
+
+
+def _hemisphere_coords(unit: np.ndarray):
+    theta, phi = spherical(unit)
+    upper = phi <= np.pi / 2
+    phi_eff = np.where(upper, phi, np.pi - phi)
+    return theta, phi, phi_eff, upper
+
+
+def wm_sum_reference(unit: np.ndarray, f: Field) -> np.ndarray:
+    """The double sum S of Eqs. 2–3, evaluated straightforwardly in float64.
+
+    Used as the accuracy reference for :func:`wm_sum` in tests and benchmarks.
+
+    Parameters
+    ----------
+    unit : (V, 3) float64
+        Unit vectors.
+    f : Field
+
+    Returns
+    -------
+    (V,) float64
+    """
+    theta, phi, phi_eff, upper = _hemisphere_coords(unit)
+    c = np.where(upper, np.cos(phi), 0.0)
+    out = np.empty(len(unit))
+    for i0 in range(0, len(unit), 256):
+        sl = slice(i0, i0 + 256)
+        u = phi_eff[sl, None] * np.cos(theta[sl, None] - f.alpha[None, :])
+        b = f.psi[None] + f.zeta[None] * c[sl, None, None]
+        a = f.wavenumbers[None, None, :] * u[:, :, None] + b
+        out[sl] = ((np.cos(b) - np.cos(a)) * f.weights).sum(axis=(1, 2))
+    return out
+
+
+def _first_term_upper(f: Field):
+    """Σ_mn w_n cos(ψ_mn + ζ_mn c) as a Chebyshev interpolant in c ∈ [0, 1].
+
+    The function is band-limited (|ζ| ≤ 2π), so a degree-40 interpolant is exact
+    to rounding (its Chebyshev coefficients fall below 1e-20 of the leading one).
+    """
+
+    def exact(c):
+        c = np.asarray(c, dtype=np.float64)
+        return np.einsum("cmn,n->c", np.cos(f.psi[None] + f.zeta[None] * c[:, None, None]), f.weights)
+
+    return np.polynomial.Chebyshev.interpolate(exact, 40, domain=[0.0, 1.0])
+
+
+def wm_sum(unit: np.ndarray, f: Field, chunk: int = 64) -> np.ndarray:
+    """Fast evaluation of the double sum S of Eqs. 2–3.
+
+    Phases are reduced modulo one turn in float64 and the cosine is then
+    evaluated in float32 (see ALGORITHMS.md §1 item 7); vertices are processed
+    in chunks to stay in cache.  The result agrees with
+    :func:`wm_sum_reference` to about 1e-5 in S.
+
+    Parameters
+    ----------
+    unit : (V, 3) float64
+    f : Field
+    chunk : int
+        Vertices per block.
+
+    Returns
+    -------
+    (V,) float64
+    """
+    theta, phi, phi_eff, upper = _hemisphere_coords(unit)
+    # u_vm = φ' cos(θ − α_m) = X cos α_m + Y sin α_m with (X, Y) = φ'(cos θ, sin θ)
+    xy = np.stack([phi_eff * np.cos(theta), phi_eff * np.sin(theta)], axis=1)
+    U = xy @ np.stack([np.cos(f.alpha), np.sin(f.alpha)])  # (V, M)
+    M, N = f.psi.shape
+    turns_per_u = f.wavenumbers / TWO_PI
+    psi_t = f.psi / TWO_PI
+    zeta_t = f.zeta / TWO_PI
+    w32 = f.weights.astype(np.float32)
+    out = np.empty(len(unit))
+    lower_first = float((f.weights * np.cos(f.psi)).sum())
+    cosphi = np.cos(phi)
+    first_upper = _first_term_upper(f)
+
+    t = np.empty((chunk, M, N))
+    r = np.empty_like(t)
+    x = np.empty((chunk, M, N), dtype=np.float32)
+    for hemi in (upper, ~upper):
+        idx = np.flatnonzero(hemi)
+        is_upper = hemi is upper
+        for i0 in range(0, len(idx), chunk):
+            ii = idx[i0 : i0 + chunk]
+            n = len(ii)
+            tt, rr, xx = t[:n], r[:n], x[:n]
+            np.multiply(U[ii][:, :, None], turns_per_u, out=tt)
+            tt += psi_t
+            if is_upper:
+                tt += zeta_t * cosphi[ii][:, None, None]
+            np.rint(tt, out=rr)
+            tt -= rr
+            np.copyto(xx, tt, casting="same_kind")
+            xx *= np.float32(TWO_PI)
+            np.cos(xx, out=xx)
+            second = np.einsum("vmn,n->v", xx, w32, dtype=np.float64)
+            first = first_upper(cosphi[ii]) if is_upper else lower_first
+            out[ii] = first - second
+    return out
+
+
+def build(p: Params, rng: np.random.Generator):
+    """Vertices, faces and info of one FSO grain (R0 = 1, not yet centred)."""
+    unit, faces = icosphere(p.subdivisions)
+    f = draw_field(p, rng)
+    S = wm_sum(unit, f)
+    if p.k is not None:
+        K = p.k
+        which = "k"
+    else:
+        ref_unit, _ = icosphere(REFERENCE_SUBDIVISIONS)
+        S_ref = S if p.subdivisions == REFERENCE_SUBDIVISIONS else wm_sum(ref_unit, f)
+        rms = float(np.sqrt(np.mean(S_ref**2)))
+        K = p.amplitude / rms if rms > 0 else 0.0
+        which = "amplitude"
+    R = 1.0 + K * S
+    rmin = float(R.min())
+    if rmin <= MIN_RADIUS:
+        value = p.k if which == "k" else p.amplitude
+        raise ParameterError(
+            which,
+            f"{value} is too large for this grain: the smallest radius would be {rmin:.3f}·R0 "
+            f"(must stay above {MIN_RADIUS}·R0 for a star-shaped solid); lower it",
+        )
+    vertices = unit * R[:, None]
+    info = {"K": float(K), "min_radius": rmin, "max_radius": float(R.max())}
+    return vertices, np.array(faces), info
+
+
+def fso(
+    *,
+    fractal_dimension: float = 2.4,
+    length_ratio: float = 7.0,
+    amplitude: float | None = None,
+    k: float | None = None,
+    ridges: int = 40,
+    frequencies: int = 40,
+    gamma: float = 1.5,
+    subdivisions: int = 5,
+    rng=None,
+):
+    """Generate one grain by Fractal Surface Overlay (paper §2.1, Eqs. 2–3).
+
+    Parameters
+    ----------
+    fractal_dimension : float
+        D in [2, 3); higher is rougher at a fixed amplitude.
+    length_ratio : float
+        L/R0 > 0; small values give nodular grains, values above π elongated ones.
+    amplitude : float, optional
+        Target RMS of (R − R0)/R0, measured on a level-3 geodesic sphere
+        (default 0.1).  Exclusive with ``k``.
+    k : float, optional
+        The paper's raw amplitude K.  Exclusive with ``amplitude``.
+    ridges, frequencies : int
+        M and n_max (default 40 each).
+    gamma : float
+        Frequency density γ > 1 (default 1.5).
+    subdivisions : int
+        Icosphere level 0–8 (default 5: 10,242 vertices).
+    rng : None, int or numpy.random.Generator
+        Seed or generator.  An int (or None, which draws one) is recorded
+        as ``Grain.seed``.
+
+    Returns
+    -------
+    Grain
+        Centred on its volume centroid, R0 = 1.
+
+    Raises
+    ------
+    ValueError
+        For an out-of-range parameter, or when the amplitude is so large that
+        some radius falls to 0.05·R0 or less (the message names the amplitude).
+
+    References
+    ----------
+    Hanaor, Gan, Revay, Airey, Einav, *3D printable geomaterials*,
+    Géotechnique (2016), Eqs. 2 and 3.
+
+    Examples
+    --------
+    >>> from grainforge import fso
+    >>> g = fso(fractal_dimension=2.4, length_ratio=7, subdivisions=3, rng=42)
+    >>> len(g.vertices), g.seed
+    (642, 42)
+    >>> fso(fractal_dimension=3.2)
+    Traceback (most recent call last):
+    ...
+    grainforge.params.ParameterError: fractal_dimension must be in [2, 3), got 3.2
+    """
+    from . import generate
+
+    p = Params(
+        fractal_dimension=fractal_dimension, length_ratio=length_ratio, amplitude=amplitude, k=k,
+        ridges=ridges, frequencies=frequencies, gamma=gamma, subdivisions=subdivisions,
+    )
+    return generate(NAME, p, rng)

@@ -1,0 +1,210 @@
+"""Declaring method parameters once.
+
+Every generator describes its parameters as a frozen dataclass whose fields
+are made with :func:`param`.  The field metadata (help text, unit, valid
+range) is the single source of truth: validation (:func:`validate`), the CLI
+options, recipe validation and the manifest columns are all derived from it.
+
+Examples
+--------
+>>> from dataclasses import dataclass
+>>> @dataclass(frozen=True)
+... class Demo:
+...     d: float = param(2.4, "fractal dimension", low=2, high=3, high_open=True)
+...     def __post_init__(self):
+...         validate(self)
+>>> Demo(2.5).d
+2.5
+>>> Demo(3.0)
+Traceback (most recent call last):
+...
+grainforge.params.ParameterError: d must be in [2, 3), got 3.0
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+from dataclasses import dataclass, field
+from typing import Any
+
+__all__ = [
+    "ParameterError",
+    "ParamSpec",
+    "param",
+    "validate",
+    "specs",
+    "as_dict",
+]
+
+_KEY = "grainforge"
+
+
+class ParameterError(ValueError):
+    """A parameter value is out of range or malformed.
+
+    Attributes
+    ----------
+    name : str
+        The parameter's field name (``fractal_dimension``); the CLI turns it
+        into the option name (``--fractal-dimension``).
+    reason : str
+        The message without the name.
+    """
+
+    def __init__(self, name: str, reason: str):
+        self.name = name
+        self.reason = reason
+        super().__init__(f"{name} {reason}")
+
+
+@dataclass(frozen=True)
+class ParamSpec:
+    """Metadata of one parameter field."""
+
+    name: str
+    default: Any
+    help: str
+    unit: str = ""
+    kind: str = "float"  # "float", "int", "str", "floats" (tuple of floats)
+    low: float | None = None
+    high: float | None = None
+    low_open: bool = False
+    high_open: bool = False
+    choices: tuple[str, ...] | None = None
+    optional: bool = False
+    cli: bool = True
+
+    @property
+    def option(self) -> str:
+        """The CLI option name, e.g. ``--fractal-dimension``."""
+        return "--" + self.name.replace("_", "-")
+
+    def range_text(self) -> str:
+        """Human-readable valid range, e.g. ``[2, 3)``."""
+        if self.choices:
+            return "one of " + ", ".join(self.choices)
+        if self.low is None and self.high is None:
+            return ""
+        lo = "-inf" if self.low is None else _fmt(self.low)
+        hi = "inf" if self.high is None else _fmt(self.high)
+        lb = "(" if (self.low_open or self.low is None) else "["
+        rb = ")" if (self.high_open or self.high is None) else "]"
+        return f"{lb}{lo}, {hi}{rb}"
+
+    def check(self, value: Any) -> Any:
+        """Return the normalised value or raise :class:`ParameterError`."""
+        if value is None:
+            if self.optional:
+                return None
+            raise ParameterError(self.name, "is required")
+        if self.kind == "str":
+            if not isinstance(value, str):
+                raise ParameterError(self.name, f"must be a string, got {value!r}")
+            if self.choices and value not in self.choices:
+                raise ParameterError(self.name, f"must be {self.range_text()}, got {value!r}")
+            return value
+        if self.kind == "floats":
+            try:
+                vals = tuple(float(v) for v in value)
+            except (TypeError, ValueError):
+                raise ParameterError(self.name, f"must be a list of numbers, got {value!r}") from None
+            for v in vals:
+                self._check_number(v, value)
+            return vals
+        if isinstance(value, bool) or not isinstance(value, numbers.Real):
+            raise ParameterError(self.name, f"must be a number, got {value!r}")
+        if self.kind == "int":
+            if float(value) != int(value):
+                raise ParameterError(self.name, f"must be a whole number, got {value!r}")
+            value = int(value)
+        else:
+            value = float(value)
+        self._check_number(value, value)
+        return value
+
+    def _check_number(self, v: float, shown: Any) -> None:
+        if not math.isfinite(v):
+            raise ParameterError(self.name, f"must be finite, got {shown!r}")
+        bad = (
+            (self.low is not None and (v < self.low or (self.low_open and v == self.low)))
+            or (self.high is not None and (v > self.high or (self.high_open and v == self.high)))
+        )
+        if bad:
+            raise ParameterError(self.name, f"must be in {self.range_text()}, got {shown!r}")
+
+
+def _fmt(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else repr(float(x))
+
+
+def param(
+    default: Any,
+    help: str,
+    *,
+    unit: str = "",
+    kind: str = "float",
+    low: float | None = None,
+    high: float | None = None,
+    low_open: bool = False,
+    high_open: bool = False,
+    choices: tuple[str, ...] | None = None,
+    optional: bool = False,
+    cli: bool = True,
+) -> Any:
+    """Declare a parameter field with its metadata.
+
+    Parameters
+    ----------
+    default : object
+        Default value (``None`` for optional parameters).
+    help : str
+        One-line description used by ``--help``, the docs and the manifest.
+    unit : str, optional
+        Unit of the value (``""`` for dimensionless).
+    kind : {"float", "int", "str", "floats"}
+        Value type.
+    low, high : float, optional
+        Range bounds; ``low_open``/``high_open`` make them exclusive.
+    choices : tuple of str, optional
+        Allowed values for ``kind="str"``.
+    optional : bool
+        Whether ``None`` is allowed.
+    cli : bool
+        Whether the CLI exposes the parameter as an option.
+    """
+    spec = dict(
+        default=default, help=help, unit=unit, kind=kind, low=low, high=high,
+        low_open=low_open, high_open=high_open, choices=choices,
+        optional=optional or default is None, cli=cli,
+    )
+    return field(default=default, metadata={_KEY: spec})
+
+
+def specs(cls_or_obj: Any) -> list[ParamSpec]:
+    """The :class:`ParamSpec` of every declared field, in declaration order."""
+    out = []
+    for f in dataclasses.fields(cls_or_obj):
+        meta = f.metadata.get(_KEY)
+        if meta is not None:
+            out.append(ParamSpec(name=f.name, **meta))
+    return out
+
+
+def validate(obj: Any) -> None:
+    """Check and normalise every declared field of a frozen dataclass in place.
+
+    Raises
+    ------
+    ParameterError
+        Naming the first field whose value is out of range or malformed.
+    """
+    for spec in specs(obj):
+        value = spec.check(getattr(obj, spec.name))
+        object.__setattr__(obj, spec.name, value)
+
+
+def as_dict(obj: Any) -> dict[str, Any]:
+    """The declared parameters of ``obj`` as a plain ``{name: value}`` dict."""
+    return {s.name: getattr(obj, s.name) for s in specs(obj)}
