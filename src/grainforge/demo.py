@@ -18,15 +18,16 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
     from .render import contact_sheet
     from .run import write_run
 
-    meshes, labels = [], []
-    for value in values:
+    panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
+    for j, value in enumerate(values):
         folder = out / f"{label}={value:g}"
         rows = write_run(method, make_params(value), seeds, folder, overwrite=True)
-        for r in rows:
-            meshes.append(read_mesh(folder / r["file"]))
-            labels.append(f"{label}={value:g}  seed {r['seed']}")
+        for i, r in enumerate(rows):
+            panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
+    order = sorted(panels)
     sheet = out.with_suffix(".png")
-    contact_sheet(meshes, labels, sheet, columns=len(seeds), title=title)
+    contact_sheet([panels[k][0] for k in order], [panels[k][1] for k in order], sheet,
+                  columns=len(values), title=title)
     return [out, sheet]
 
 
