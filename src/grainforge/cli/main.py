@@ -58,6 +58,10 @@ def _register():
     cli.add_command(render.render)
     cli.add_command(demo.demo)
 
+    from . import batch
+
+    cli.add_command(batch.batch)
+
 
 _register()
 

@@ -1,0 +1,763 @@
+"""Populations of grains: TOML recipes, per-grain seeds, and executors (local, Dask).
+
+A *recipe* describes a population: the method, each parameter either fixed or
+drawn from a distribution, a size distribution (a grading curve given as sieve
+sizes and percent passing, a lognormal, or one fixed size), the count, the
+root seed and the output format::
+
+    method = "fso"
+    count = 200
+    seed = 2024
+    format = "stl"
+
+    [params]
+    fractal_dimension = { distribution = "uniform", low = 2.2, high = 2.6 }
+    length_ratio = 7.0
+    subdivisions = 4
+
+    [size]
+    definition = "sieve"            # equivalent | sieve | longest
+    sieves_mm = [0.15, 0.3, 0.6, 1.18, 2.36]
+    percent_passing = [0, 10, 50, 90, 100]
+    basis = "mass"                  # mass (as a sieve analysis reports) | count
+
+Parameter ranges are never repeated here: every value and every distribution
+bound is checked against the method's ``Params`` specs
+(:func:`grainforge.params.specs`).  Errors name the TOML field and its line.
+
+Seeds
+-----
+Grain ``i`` owns the stream ``default_rng(SeedSequence(root, spawn_key=(i,)))``
+— the ``i``-th child of ``SeedSequence(root).spawn(...)`` — which depends on
+the root seed and ``i`` alone.  From it, in this order: the grain's own 63-bit
+seed (recorded in the manifest; ``grainforge.generate(method, params, seed)``
+regenerates the grain), then one draw for each distributed parameter in the
+order of the method's ``Params`` fields, then the size.  So outputs do not
+depend on the number of workers or on the executor.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import math
+import os
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from .fabrication.scale import SIZE_DEFINITIONS
+from .io import FORMATS, atomic_write, export_bytes, write_csv
+from .params import ParameterError, ParamSpec, specs
+
+__all__ = [
+    "RecipeError",
+    "Distribution",
+    "GradingCurve",
+    "LognormalSize",
+    "FixedSize",
+    "Recipe",
+    "load_recipe",
+    "parse_recipe",
+    "grain_stream",
+    "draw_grain",
+    "make_grain",
+    "run_batch",
+    "JOURNAL",
+]
+
+#: hidden folder inside the output folder: recipe copy and one sidecar per finished grain.
+JOURNAL = ".grainforge-batch"
+DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice")
+_DIST_KEYS = {
+    "uniform": ("low", "high"),
+    "normal": ("mean", "sd"),
+    "truncnormal": ("mean", "sd", "low", "high"),
+    "lognormal": ("median", "sigma"),
+    "choice": ("values",),
+}
+_TOP_KEYS = ("method", "count", "seed", "format", "params", "size")
+
+
+class RecipeError(ValueError):
+    """A recipe field is missing or invalid.
+
+    Attributes
+    ----------
+    field : str
+        Dotted TOML path, e.g. ``params.fractal_dimension.high``.
+    line : int or None
+        1-based line of the field in the recipe file (``None`` if absent).
+    """
+
+    def __init__(self, source: str, field: str, reason: str, line: int | None = None):
+        self.source = source
+        self.field = field
+        self.reason = reason
+        self.line = line
+        where = f"{source}:{line}" if line else source
+        super().__init__(f"{where}: {field}: {reason}")
+
+
+# --------------------------------------------------------------------------- line numbers
+_HEADER = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+_KEY = re.compile(r"""^\s*((?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*'))*)\s*=""")
+
+
+def _split_key(text: str) -> tuple[str, ...]:
+    parts = re.findall(r"""[A-Za-z0-9_-]+|"[^"]*"|'[^']*'""", text)
+    return tuple(p.strip("\"'") for p in parts)
+
+
+def field_line(text: str, path: Sequence[str]) -> int | None:
+    """The 1-based line of the TOML field ``path`` (or of its nearest enclosing key).
+
+    ``tomllib`` keeps no positions, so the source is scanned: table headers
+    set the current table, ``key =`` lines define keys, and the line whose
+    full key is the longest prefix of ``path`` wins (a field inside an inline
+    table is reported at its key's line).
+
+    Examples
+    --------
+    >>> src = 'method = "fso"\\n[params]\\nD = { distribution = "uniform", low = 2 }\\n'
+    >>> field_line(src, ["params", "D", "low"]), field_line(src, ["method"]), field_line(src, ["count"])
+    (3, 1, None)
+    """
+    path = tuple(path)
+    table: tuple[str, ...] = ()
+    best, best_len = None, 0
+    for no, line in enumerate(text.splitlines(), start=1):
+        m = _HEADER.match(line)
+        if m and "=" not in m.group(1):
+            table = _split_key(m.group(1))
+            full = table
+        else:
+            m = _KEY.match(line)
+            if not m:
+                continue
+            full = table + _split_key(m.group(1))
+        n = len(full)
+        if n > best_len and path[:n] == full:
+            best, best_len = no, n
+    return best
+
+
+# --------------------------------------------------------------------------- distributions
+@dataclass(frozen=True)
+class Distribution:
+    """A parameter drawn per grain.
+
+    ``kind`` is one of ``uniform(low, high)``, ``normal(mean, sd)``,
+    ``truncnormal(mean, sd, low, high)``, ``lognormal(median, sigma)`` (sigma
+    of ln x) or ``choice(values, weights)``.  Every draw consumes exactly one
+    uniform variate (inverse CDF), except ``choice`` (one ``Generator.choice``).
+
+    Examples
+    --------
+    >>> d = Distribution("truncnormal", {"mean": 2.4, "sd": 0.2, "low": 2.2, "high": 2.6})
+    >>> x = d.draw(np.random.default_rng(0))
+    >>> 2.2 <= x <= 2.6
+    True
+    """
+
+    kind: str
+    args: Mapping[str, Any]
+    integer: bool = False
+
+    def support(self) -> tuple[float, float]:
+        a = self.args
+        if self.kind in ("uniform", "truncnormal"):
+            return float(a["low"]), float(a["high"])
+        if self.kind == "normal":
+            return -math.inf, math.inf
+        if self.kind == "lognormal":
+            return 0.0, math.inf
+        raise ValueError("choice has no interval support")
+
+    def typical(self) -> Any:
+        """A representative value (used to check cross-parameter rules up front)."""
+        a = self.args
+        if self.kind == "uniform":
+            mid = 0.5 * (a["low"] + a["high"])
+            return int(round(mid)) if self.integer else mid
+        if self.kind in ("normal", "truncnormal"):
+            m = float(a["mean"])
+            return min(max(m, a["low"]), a["high"]) if self.kind == "truncnormal" else m
+        if self.kind == "lognormal":
+            return float(a["median"])
+        return self.args["values"][0]
+
+    def draw(self, rng: np.random.Generator) -> Any:
+        """One value from ``rng``."""
+        from scipy.special import ndtr, ndtri
+
+        a = self.args
+        if self.kind == "choice":
+            values = a["values"]
+            return values[int(rng.choice(len(values), p=a["weights"]))]
+        if self.kind == "uniform" and self.integer:
+            return int(rng.integers(int(a["low"]), int(a["high"]) + 1))
+        u = float(rng.random())
+        if self.kind == "uniform":
+            return float(a["low"] + u * (a["high"] - a["low"]))
+        if self.kind == "normal":
+            return float(a["mean"] + a["sd"] * ndtri(u if u > 0 else 2.0**-60))
+        if self.kind == "truncnormal":
+            lo = ndtr((a["low"] - a["mean"]) / a["sd"])
+            hi = ndtr((a["high"] - a["mean"]) / a["sd"])
+            x = float(a["mean"] + a["sd"] * ndtri(lo + u * (hi - lo)))
+            return min(max(x, a["low"]), a["high"])
+        return float(a["median"] * math.exp(a["sigma"] * ndtri(u if u > 0 else 2.0**-60)))
+
+
+# --------------------------------------------------------------------------- sizes
+@dataclass(frozen=True)
+class FixedSize:
+    """Every grain has the same size (mm)."""
+
+    mm: float
+
+    def sample(self, u: float) -> float:
+        return self.mm
+
+
+@dataclass(frozen=True)
+class LognormalSize:
+    """ln(size) ~ N(ln median_mm, sigma²)."""
+
+    median_mm: float
+    sigma: float
+
+    def sample(self, u: float) -> float:
+        from scipy.special import ndtri
+
+        return float(self.median_mm * math.exp(self.sigma * ndtri(min(max(u, 2.0**-60), 1 - 2.0**-53))))
+
+
+@dataclass(frozen=True)
+class GradingCurve:
+    """A grading curve: sieve apertures (mm) and percent passing, linear in log-size.
+
+    Between two sieves the passing fraction is taken as linear in ln(size)
+    (the way grading curves are drawn).  With ``basis="mass"`` (what a sieve
+    analysis reports) the curve is a mass fraction and is converted to a
+    number fraction with mass ∝ size³, so that a population of grains of
+    similar shape reproduces it by mass; with ``basis="count"`` it is a number
+    fraction directly.
+
+    Examples
+    --------
+    >>> g = GradingCurve((0.1, 1.0), (0.0, 100.0), basis="count")
+    >>> [round(g.sample(q), 6) for q in (0.0, 0.5, 1.0)]
+    [0.1, 0.316228, 1.0]
+    """
+
+    sieves_mm: tuple[float, ...]
+    percent_passing: tuple[float, ...]
+    basis: str = "mass"
+
+    def _number_cdf(self) -> tuple[np.ndarray, np.ndarray]:
+        """Log sizes and the number CDF at each sieve."""
+        u = np.log(np.asarray(self.sieves_mm, dtype=np.float64))
+        P = np.asarray(self.percent_passing, dtype=np.float64) / 100.0
+        if self.basis == "count":
+            return u, P
+        dP = np.diff(P)
+        du = np.diff(u)
+        # number weight of bin i: ∫ (dP/du) e^{-3u} du over the bin
+        w = dP / du * (np.exp(-3 * u[:-1]) - np.exp(-3 * u[1:])) / 3.0
+        return u, np.concatenate([[0.0], np.cumsum(w) / w.sum()])
+
+    def sample(self, q: float) -> float:
+        """The size (mm) at number quantile ``q`` in [0, 1] (inverse CDF)."""
+        return float(self.sample_many(np.array([q]))[0])
+
+    def sample_many(self, q: np.ndarray) -> np.ndarray:
+        u, F = self._number_cdf()
+        q = np.clip(np.asarray(q, dtype=np.float64), 0.0, 1.0)
+        i = np.clip(np.searchsorted(F, q, side="right") - 1, 0, len(u) - 2)
+        # skip empty bins (equal F on both sides)
+        while np.any(nz := (F[i + 1] <= F[i]) & (i < len(u) - 2)):
+            i = np.where(nz, i + 1, i)
+        t = np.where(F[i + 1] > F[i], (q - F[i]) / np.where(F[i + 1] > F[i], F[i + 1] - F[i], 1.0), 0.0)
+        t = np.clip(t, 0.0, 1.0)
+        if self.basis == "count":
+            return np.exp(u[i] + t * (u[i + 1] - u[i]))
+        a, b = np.exp(-3 * u[i]), np.exp(-3 * u[i + 1])
+        return np.exp(-np.log(a - t * (a - b)) / 3.0)
+
+    def passing(self, sizes: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+        """Achieved percent passing at each sieve for ``sizes`` (weighted, e.g. by volume)."""
+        sizes = np.asarray(sizes, dtype=np.float64)
+        w = np.ones_like(sizes) if weights is None else np.asarray(weights, dtype=np.float64)
+        total = w.sum()
+        return np.array([100.0 * w[sizes <= s].sum() / total for s in self.sieves_mm])
+
+
+# --------------------------------------------------------------------------- recipe
+@dataclass(frozen=True)
+class Recipe:
+    """A validated population recipe (see the module docstring for the format)."""
+
+    method: str
+    count: int
+    seed: int
+    format: str
+    params: Mapping[str, Any]  # name -> fixed value or Distribution
+    size: Any  # FixedSize | LognormalSize | GradingCurve
+    size_definition: str
+    text: str = field(default="", repr=False)
+    source: str = "<recipe>"
+
+    @property
+    def digest(self) -> str:
+        """SHA-256 of the recipe text (identifies the batch for ``--resume``)."""
+        return hashlib.sha256(self.text.encode("utf-8")).hexdigest()
+
+    def file_name(self, index: int) -> str:
+        from .run import grain_file_name
+
+        return grain_file_name(self.method, index, self.format)
+
+
+def load_recipe(path: str | os.PathLike) -> Recipe:
+    """Read and validate a TOML recipe file.
+
+    Raises
+    ------
+    RecipeError
+        Naming the field (dotted TOML path) and its line.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{path}: cannot read recipe ({exc})") from None
+    return parse_recipe(text, source=str(path))
+
+
+def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
+    """Validate recipe ``text``; see :func:`load_recipe`.
+
+    Examples
+    --------
+    >>> r = parse_recipe('method = "fso"\\ncount = 3\\nseed = 1\\n[size]\\nmm = 2.0\\n')
+    >>> r.method, r.count, r.size
+    ('fso', 3, FixedSize(mm=2.0))
+    >>> parse_recipe('method = "fso"\\ncount = 0\\nseed = 1\\n')
+    Traceback (most recent call last):
+    ...
+    grainforge.population.RecipeError: <recipe>:2: count: must be a whole number >= 1, got 0
+    """
+    from .methods import METHODS, get
+
+    def fail(path: Sequence[str], reason: str):
+        raise RecipeError(source, ".".join(path), reason, field_line(text, path))
+
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        m = re.search(r"line (\d+)", str(exc))
+        raise RecipeError(source, "TOML", str(exc), int(m.group(1)) if m else None) from None
+
+    for key in data:
+        if key not in _TOP_KEYS:
+            fail([key], f"unknown field (expected {', '.join(_TOP_KEYS)})")
+    if "method" not in data:
+        fail(["method"], f"is required (one of {', '.join(sorted(METHODS))})")
+    method = data["method"]
+    if not isinstance(method, str) or method not in METHODS:
+        fail(["method"], f"must be one of {', '.join(sorted(METHODS))}, got {method!r}")
+    count = _whole(data, "count", 1, fail, required=True)
+    seed = _whole(data, "seed", 0, fail, required=True)
+    fmt = data.get("format", "stl")
+    if fmt not in FORMATS:
+        fail(["format"], f"must be one of {', '.join(FORMATS)}, got {fmt!r}")
+
+    module = get(method)
+    pspecs = {s.name: s for s in specs(module.Params)}
+    raw_params = data.get("params", {})
+    if not isinstance(raw_params, dict):
+        fail(["params"], "must be a table of parameter = value or { distribution = ... }")
+    params: dict[str, Any] = {}
+    for name, value in raw_params.items():
+        if name not in pspecs:
+            fail(["params", name], f"is not a {method} parameter (expected one of {', '.join(pspecs)})")
+        params[name] = _param_value(pspecs[name], value, ["params", name], fail)
+    typical = {k: (v.typical() if isinstance(v, Distribution) else v) for k, v in params.items()}
+    try:
+        module.Params(**typical)
+    except ParameterError as exc:
+        bad = exc.name if exc.name in params else next(iter(params), exc.name)
+        fail(["params", bad], exc.reason)
+
+    size, definition = _size(data.get("size"), fail)
+    return Recipe(method=method, count=count, seed=seed, format=fmt, params=params, size=size,
+                  size_definition=definition, text=text, source=source)
+
+
+def _whole(data, key, low, fail, required=False):
+    if key not in data:
+        if required:
+            fail([key], "is required")
+        return None
+    v = data[key]
+    if isinstance(v, bool) or not isinstance(v, int) or v < low:
+        fail([key], f"must be a whole number >= {low}, got {v!r}")
+    return v
+
+
+def _number(v) -> bool:
+    return isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+
+
+def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
+    if not isinstance(value, dict):
+        try:
+            return spec.check(value)
+        except ParameterError as exc:
+            fail(path, exc.reason)
+    kind = value.get("distribution")
+    if kind not in DISTRIBUTIONS:
+        fail(path + ["distribution"], f"must be one of {', '.join(DISTRIBUTIONS)}, got {kind!r}")
+    expected = _DIST_KEYS[kind] + (("weights",) if kind == "choice" else ())
+    for k in value:
+        if k != "distribution" and k not in expected:
+            fail(path + [k], f"is not a field of a {kind} distribution (expected {', '.join(expected)})")
+    for k in _DIST_KEYS[kind]:
+        if k not in value:
+            fail(path + [k], f"is required for a {kind} distribution")
+    if kind == "choice":
+        return _choice(spec, value, path, fail)
+    if spec.kind in ("str", "floats") or (spec.kind == "int" and kind != "uniform"):
+        fail(path + ["distribution"], f"{spec.name} is {spec.kind}-valued: use a fixed value or choice"
+             + (" or uniform" if spec.kind == "int" else ""))
+    args = {}
+    for k in _DIST_KEYS[kind]:
+        v = value[k]
+        if not _number(v):
+            fail(path + [k], f"must be a finite number, got {v!r}")
+        args[k] = float(v) if spec.kind != "int" else v
+    if spec.kind == "int":
+        for k in ("low", "high"):
+            if not isinstance(args[k], int):
+                fail(path + [k], f"must be a whole number ({spec.name} is an integer), got {args[k]!r}")
+    if kind in ("uniform", "truncnormal") and not args["low"] < args["high"]:
+        fail(path + ["high"], f"must be greater than low ({args['low']!r}), got {args['high']!r}")
+    for k in ("sd", "sigma"):
+        if k in args and not args[k] > 0:
+            fail(path + [k], f"must be positive, got {args[k]!r}")
+    if kind == "lognormal" and not args["median"] > 0:
+        fail(path + ["median"], f"must be positive, got {args['median']!r}")
+    if kind == "truncnormal" and not args["low"] <= args["mean"] <= args["high"]:
+        fail(path + ["mean"], f"must lie in [low, high] = [{args['low']}, {args['high']}], got {args['mean']!r}")
+    dist = Distribution(kind, args, integer=spec.kind == "int")
+    lo, hi = dist.support()
+    for bound, key in ((lo, "low"), (hi, "high")):
+        if math.isfinite(bound):
+            try:
+                spec.check(bound)
+            except ParameterError as exc:
+                fail(path + [key] if key in args else path, exc.reason)
+        elif (key == "low" and spec.low is not None) or (key == "high" and spec.high is not None):
+            fail(path + ["distribution"], f"{kind} is unbounded but {spec.name} must be in {spec.range_text()}: "
+                 "use truncnormal with low/high inside that range")
+    if kind == "lognormal" and spec.low is not None and spec.low > 0:
+        fail(path + ["distribution"], f"lognormal reaches 0 but {spec.name} must be in {spec.range_text()}")
+    return dist
+
+
+def _choice(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:
+    values = value["values"]
+    if not isinstance(values, list) or not values:
+        fail(path + ["values"], "must be a non-empty list")
+    checked = []
+    for v in values:
+        try:
+            checked.append(spec.check(v))
+        except ParameterError as exc:
+            fail(path + ["values"], exc.reason)
+    weights = value.get("weights", [1.0] * len(values))
+    if (not isinstance(weights, list) or len(weights) != len(values)
+            or not all(_number(w) and w >= 0 for w in weights) or sum(weights) <= 0):
+        fail(path + ["weights"], f"must be {len(values)} non-negative numbers with a positive sum, got {weights!r}")
+    total = float(sum(weights))
+    return Distribution("choice", {"values": tuple(checked), "weights": tuple(float(w) / total for w in weights)})
+
+
+def _size(raw, fail):
+    if raw is None:
+        return FixedSize(10.0), "equivalent"
+    if not isinstance(raw, dict):
+        fail(["size"], "must be a table")
+    allowed = ("definition", "mm", "distribution", "median_mm", "sigma", "sieves_mm", "percent_passing", "basis")
+    for k in raw:
+        if k not in allowed:
+            fail(["size", k], f"unknown field (expected {', '.join(allowed)})")
+    definition = raw.get("definition", "equivalent")
+    if definition not in SIZE_DEFINITIONS:
+        fail(["size", "definition"], f"must be one of {', '.join(SIZE_DEFINITIONS)}, got {definition!r}")
+    modes = [m for m in ("mm", "distribution", "sieves_mm") if m in raw]
+    if len(modes) != 1:
+        fail(["size"], "give exactly one of mm (fixed), distribution = \"lognormal\", or sieves_mm + percent_passing")
+    if "mm" in raw:
+        if not (_number(raw["mm"]) and raw["mm"] > 0):
+            fail(["size", "mm"], f"must be a positive number of millimetres, got {raw['mm']!r}")
+        return FixedSize(float(raw["mm"])), definition
+    if "distribution" in raw:
+        if raw["distribution"] != "lognormal":
+            fail(["size", "distribution"], f"must be \"lognormal\" (or use sieves_mm), got {raw['distribution']!r}")
+        for k in ("median_mm", "sigma"):
+            if k not in raw:
+                fail(["size", k], "is required for a lognormal size")
+            if not (_number(raw[k]) and raw[k] > 0):
+                fail(["size", k], f"must be a positive number, got {raw[k]!r}")
+        return LognormalSize(float(raw["median_mm"]), float(raw["sigma"])), definition
+    sieves, passing = raw["sieves_mm"], raw.get("percent_passing")
+    if passing is None:
+        fail(["size", "percent_passing"], "is required with sieves_mm")
+    if not isinstance(sieves, list) or len(sieves) < 2 or not all(_number(s) and s > 0 for s in sieves):
+        fail(["size", "sieves_mm"], f"must be a list of at least 2 positive sizes, got {sieves!r}")
+    if any(b <= a for a, b in zip(sieves, sieves[1:])):
+        fail(["size", "sieves_mm"], "must be strictly increasing")
+    if not isinstance(passing, list) or len(passing) != len(sieves) or not all(_number(p) for p in passing):
+        fail(["size", "percent_passing"], f"must be {len(sieves)} numbers, one per sieve, got {passing!r}")
+    if any(b < a for a, b in zip(passing, passing[1:])):
+        fail(["size", "percent_passing"], "must not decrease with sieve size")
+    if passing[0] != 0 or passing[-1] != 100:
+        fail(["size", "percent_passing"], "must start at 0 and end at 100 (add the sieves that pass none and all)")
+    basis = raw.get("basis", "mass")
+    if basis not in ("mass", "count"):
+        fail(["size", "basis"], f"must be \"mass\" or \"count\", got {basis!r}")
+    return GradingCurve(tuple(float(s) for s in sieves), tuple(float(p) for p in passing), basis), definition
+
+
+# --------------------------------------------------------------------------- per-grain work
+def grain_stream(root_seed: int, index: int) -> np.random.Generator:
+    """Grain ``index``'s own random stream: child ``index`` of ``SeedSequence(root_seed)``.
+
+    Examples
+    --------
+    >>> a = grain_stream(7, 3).random()
+    >>> b = np.random.default_rng(np.random.SeedSequence(7).spawn(4)[3]).random()
+    >>> a == b
+    True
+    """
+    return np.random.default_rng(np.random.SeedSequence(root_seed, spawn_key=(index,)))
+
+
+def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
+    """Grain ``index``'s seed, Params and size (mm), from its own stream only."""
+    from .methods import get
+
+    rng = grain_stream(recipe.seed, index)
+    seed = int(rng.integers(0, 2**63))
+    values = {}
+    for spec in specs(get(recipe.method).Params):
+        v = recipe.params.get(spec.name)
+        if isinstance(v, Distribution):
+            values[spec.name] = v.draw(rng)
+        elif spec.name in recipe.params:
+            values[spec.name] = v
+    size = recipe.size.sample(float(rng.random()))
+    try:
+        params = get(recipe.method).Params(**values)
+    except ParameterError as exc:
+        raise ValueError(f"grain {index}: drawn params.{exc.name} {exc.reason}") from None
+    return seed, params, size
+
+
+@dataclass(frozen=True)
+class GrainResult:
+    """What a worker sends back: the file name, its bytes and its manifest row."""
+
+    index: int
+    name: str
+    data: bytes
+    row: dict
+
+
+def make_grain(recipe: Recipe, index: int) -> GrainResult:
+    """Generate, scale, measure and encode grain ``index`` (pure: writes nothing).
+
+    Runs in a worker process (local pool or Dask); the client writes the file.
+    """
+    from .fabrication.scale import scale_factor
+    from .methods import generate
+    from .run import manifest_row
+
+    seed, params, size = draw_grain(recipe, index)
+    try:
+        grain = generate(recipe.method, params, seed)
+    except ParameterError as exc:
+        raise ValueError(f"grain {index} (seed {seed}): params.{exc.name} {exc.reason}") from None
+    grain = grain.scaled(scale_factor(grain, size, recipe.size_definition))
+    name = recipe.file_name(index)
+    data = export_bytes(grain, recipe.format)
+    row = manifest_row(grain, name, size, recipe.size_definition)
+    row["sha256"] = hashlib.sha256(data).hexdigest()
+    # JSON round trip: a row read back from a sidecar is identical to a fresh one.
+    return GrainResult(index, name, data, json.loads(json.dumps(row)))
+
+
+# --------------------------------------------------------------------------- journal
+def _sidecar(out: Path, index: int) -> Path:
+    return out / JOURNAL / f"grain-{index:06d}.json"
+
+
+def _intact_row(out: Path, recipe: Recipe, index: int) -> dict | None:
+    """The recorded row of grain ``index`` if its file is complete and intact, else None."""
+    try:
+        rec = json.loads(_sidecar(out, index).read_text(encoding="utf-8"))
+        path = out / rec["row"]["file"]
+        if rec["row"]["file"] != recipe.file_name(index) or path.stat().st_size != rec["bytes"]:
+            return None
+        if hashlib.sha256(path.read_bytes()).hexdigest() != rec["row"]["sha256"]:
+            return None
+        return rec["row"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+
+
+def _record(out: Path, res: GrainResult) -> None:
+    atomic_write(out / res.name, res.data)
+    atomic_write(_sidecar(out, res.index), json.dumps({"bytes": len(res.data), "row": res.row}, sort_keys=True))
+
+
+# --------------------------------------------------------------------------- executors
+def _local_results(recipe: Recipe, todo: Sequence[int], workers: int) -> Iterable[GrainResult]:
+    if workers == 1:
+        for i in todo:
+            yield make_grain(recipe, i)
+        return
+    import multiprocessing
+    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+
+    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
+    try:
+        pending = {ex.submit(make_grain, recipe, i) for i in todo}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_EXCEPTION)
+            for f in sorted(done, key=lambda f: f.exception() is None):
+                yield f.result()
+    finally:
+        ex.shutdown(wait=True, cancel_futures=True)
+
+
+def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterable[GrainResult]:
+    try:
+        from distributed import Client, as_completed
+    except ImportError:
+        raise ValueError("--scheduler needs Dask distributed: pip install grainforge[dask]") from None
+    try:
+        client = Client(scheduler, timeout="20s", set_as_default=False)
+    except (OSError, TimeoutError) as exc:
+        raise ValueError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
+    try:
+        futures = client.map(make_grain, [recipe] * len(todo), list(todo), pure=False)
+        try:
+            for fut in as_completed(futures):
+                yield fut.result()
+        finally:
+            client.cancel(futures)
+    finally:
+        client.close()
+
+
+def run_batch(
+    recipe: Recipe,
+    out: str | os.PathLike,
+    *,
+    workers: int | None = None,
+    scheduler: str | None = None,
+    resume: bool = False,
+    overwrite: bool = False,
+    progress: Callable[[Iterable], Iterable] | None = None,
+    report: bool = True,
+) -> dict[str, Any]:
+    """Generate the population of ``recipe`` into ``out``.
+
+    Every grain is generated by :func:`make_grain` in a worker (a local
+    process pool of ``workers`` processes, default the CPU count, or the Dask
+    cluster at ``scheduler``), then written atomically by this process
+    together with a sidecar (byte size and SHA-256) in ``out/.grainforge-batch``.
+    At the end ``manifest.csv`` (rows in grain order), its companion
+    ``manifest.json`` (summary statistics) and ``population.png`` are written.
+
+    Parameters
+    ----------
+    resume : bool
+        Keep every grain whose file matches its sidecar; generate the rest.
+        The recipe must be the one the interrupted batch used.
+    overwrite : bool
+        Replace existing outputs (regenerates everything).
+
+    Returns
+    -------
+    dict
+        ``{"generated": n, "reused": m, "rows": [...], "summary": {...}}``.
+
+    Raises
+    ------
+    FileExistsError
+        If outputs exist and neither ``resume`` nor ``overwrite`` is given.
+    ValueError
+        For a recipe that does not match the interrupted batch, an unreachable
+        scheduler, or a grain that cannot be made (named by index and seed).
+    """
+    from .run import MANIFEST, manifest_columns
+
+    if workers is not None and workers < 1:
+        raise ValueError(f"workers must be >= 1, got {workers}")
+    out = Path(out)
+    journal = out / JOURNAL
+    names = [recipe.file_name(i) for i in range(recipe.count)]
+    saved = journal / "recipe.toml"
+    if resume and saved.exists():
+        if saved.read_text(encoding="utf-8") != recipe.text:
+            raise ValueError(f"{recipe.source} differs from the recipe of the batch in {out}; "
+                             "resume with the same recipe or use --overwrite")
+    elif not overwrite and not resume:
+        existing = [out / n for n in names + [MANIFEST] if (out / n).exists()]
+        if existing or journal.exists():
+            first = existing[0] if existing else journal
+            raise FileExistsError(f"{first} exists (a batch is already in {out}); use --resume or --overwrite")
+    out.mkdir(parents=True, exist_ok=True)
+    for tmp in out.glob(".*.tmp"):  # leftovers of atomic writes interrupted by a kill
+        tmp.unlink(missing_ok=True)
+    if overwrite and journal.exists():
+        for p in journal.glob("grain-*.json"):
+            p.unlink()
+    atomic_write(saved, recipe.text)
+
+    rows: dict[int, dict] = {}
+    if resume:
+        for i in range(recipe.count):
+            row = _intact_row(out, recipe, i)
+            if row is not None:
+                rows[i] = row
+    reused = len(rows)
+    todo = [i for i in range(recipe.count) if i not in rows]
+    if scheduler:
+        results = _dask_results(recipe, todo, scheduler)
+    else:
+        n = workers or os.cpu_count() or 1
+        results = _local_results(recipe, todo, min(n, max(len(todo), 1)))
+    if progress is not None:
+        results = progress(results)
+    for res in results:
+        _record(out, res)
+        rows[res.index] = res.row
+    ordered = [rows[i] for i in range(recipe.count)]
+    write_csv(out / MANIFEST, ordered, manifest_columns(recipe.method, ("sha256",)))
+    summary = None
+    if report:
+        from .report import population_report
+
+        summary = population_report(recipe, ordered, out)
+    return {"generated": len(todo), "reused": reused, "rows": ordered, "summary": summary}
