@@ -6,9 +6,11 @@ returning an immutable :class:`Grain`.
 """
 
 from ._version import __version__
+from .contours import Contour
 from .grain import Grain
 from .methods import generate
+from .methods.cri import cri
 from .methods.fso import fso
 from .params import ParameterError
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso"]
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "Contour"]

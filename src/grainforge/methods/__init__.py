@@ -26,6 +26,7 @@ __all__ = ["METHODS", "get", "generate", "resolve_rng"]
 #: method name -> module path.  Modules are imported lazily.
 METHODS: dict[str, str] = {
     "fso": "grainforge.methods.fso",
+    "cri": "grainforge.methods.cri",
 }
 
 
