@@ -1,0 +1,293 @@
+"""Streaming writers for many-part print files: 3MF (one named object per part) and binary STL.
+
+Both writers take one part at a time and keep only a few numbers per part in
+memory, so a tray of thousands of grains is written with bounded memory:
+
+- :class:`ThreeMFWriter` streams the model XML into a deflated zip entry
+  (``3D/3dmodel.model``); each part is an ``<object>`` with its own name and
+  mesh, placed by a ``<build><item transform=...>``.  The mesh XML of a part
+  can be made in a worker process (:func:`mesh_xml`).
+- :class:`STLWriter` writes the 80-byte header and a placeholder count, then
+  the triangles of each part, and patches the count on close.
+
+:func:`read_3mf` reads a 3MF back with the standard library only (trimesh's
+3MF reader needs lxml) and returns the placed parts.
+
+Examples
+--------
+>>> import io, trimesh
+>>> box = trimesh.creation.box()
+>>> buf = io.BytesIO()
+>>> with ThreeMFWriter(buf) as w:
+...     a = w.add_object("box-a", mesh_xml(box.vertices, box.faces))
+...     b = w.add_object("box-b", mesh_xml(box.vertices, box.faces), translation=(3.0, 0, 0))
+>>> parts = read_3mf(buf)
+>>> [(p.name, len(p.faces), round(float(p.vertices[:, 0].min()), 3)) for p in parts]
+[('box-a', 12, -0.5), ('box-b', 12, 2.5)]
+"""
+
+from __future__ import annotations
+
+import struct
+import zipfile
+from dataclasses import dataclass
+from typing import BinaryIO, Sequence
+from xml.etree import ElementTree
+from xml.sax.saxutils import quoteattr
+
+import numpy as np
+
+from .._version import __version__
+
+__all__ = ["ThreeMFWriter", "STLWriter", "mesh_xml", "stl_triangles", "read_3mf", "read_stl_parts", "Part"]
+
+_NS = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
+_MODEL = "3D/3dmodel.model"
+_CONTENT_TYPES = (
+    '<?xml version="1.0" encoding="UTF-8"?>\n'
+    '<Types xmlns="http://schemas.openxmlformats.org/package/2006/content-types">'
+    '<Default Extension="rels" ContentType="application/vnd.openxmlformats-package.relationships+xml"/>'
+    '<Default Extension="model" ContentType="application/vnd.ms-package.3dmanufacturing-3dmodel+xml"/>'
+    "</Types>"
+)
+_RELS = (
+    '<?xml version="1.0" encoding="UTF-8"?>\n'
+    '<Relationships xmlns="http://schemas.openxmlformats.org/package/2006/relationships">'
+    '<Relationship Target="/3D/3dmodel.model" Id="rel0" '
+    'Type="http://schemas.microsoft.com/3dmanufacturing/2013/01/3dmodel"/>'
+    "</Relationships>"
+)
+#: fixed timestamp: the same tray always gives the same bytes
+_DATE = (1980, 1, 1, 0, 0, 0)
+
+
+def mesh_xml(vertices: np.ndarray, faces: np.ndarray, decimals: int = 5) -> bytes:
+    """The ``<mesh>`` element of a 3MF object, as UTF-8 bytes.
+
+    Coordinates are written with ``decimals`` digits after the point
+    (default 5: 10 nm in millimetres, far below any printer).
+
+    Examples
+    --------
+    >>> mesh_xml(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.5]]), np.array([[0, 1, 2]]))[:61]
+    b'<mesh><vertices><vertex x="0.00000" y="0.00000" z="0.00000"/>'
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    d = int(decimals)
+    vt = f'<vertex x="%.{d}f" y="%.{d}f" z="%.{d}f"/>'
+    text = ["<mesh><vertices>", (vt * len(v)) % tuple(v.ravel().tolist()), "</vertices><triangles>",
+            ('<triangle v1="%d" v2="%d" v3="%d"/>' * len(f)) % tuple(f.ravel().tolist()),
+            "</triangles></mesh>"]
+    return "".join(text).encode("ascii")
+
+
+class ThreeMFWriter:
+    """Write a 3MF package one object at a time.
+
+    Parameters
+    ----------
+    file : path or binary file object
+        Seekable destination.
+    compresslevel : int
+        Deflate level of the model entry (1 = fastest; the XML compresses ~3x anyway).
+    """
+
+    def __init__(self, file, compresslevel: int = 1):
+        self._zip = zipfile.ZipFile(file, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=compresslevel)
+        for name, text in (("[Content_Types].xml", _CONTENT_TYPES), ("_rels/.rels", _RELS)):
+            self._zip.writestr(zipfile.ZipInfo(name, _DATE), text)
+        info = zipfile.ZipInfo(_MODEL, _DATE)
+        info.compress_type = zipfile.ZIP_DEFLATED
+        self._model = self._zip.open(info, "w", force_zip64=True)
+        self._model.write(
+            ('<?xml version="1.0" encoding="UTF-8"?>\n'
+             f'<model unit="millimeter" xml:lang="en-US" xmlns="{_NS}">'
+             f'<metadata name="Application">grainforge {__version__}</metadata><resources>').encode()
+        )
+        self._items: list[tuple[int, tuple[float, float, float]]] = []
+        self.count = 0
+
+    def add_object(self, name: str, mesh: bytes, translation: Sequence[float] = (0.0, 0.0, 0.0)) -> int:
+        """Append one named object (``mesh`` from :func:`mesh_xml`) placed at ``translation``; return its id."""
+        self.count += 1
+        oid = self.count
+        self._model.write(f'<object id="{oid}" name={quoteattr(str(name))} type="model">'.encode())
+        self._model.write(mesh)
+        self._model.write(b"</object>")
+        self._items.append((oid, tuple(float(t) for t in translation)))
+        return oid
+
+    def close(self) -> None:
+        """Write the build section and finish the package."""
+        if self._model is None:
+            return
+        self._model.write(b"</resources><build>")
+        parts = []
+        for oid, (x, y, z) in self._items:
+            parts.append(f'<item objectid="{oid}" transform="1 0 0 0 1 0 0 0 1 {x!r} {y!r} {z!r}"/>')
+            if len(parts) >= 4096:
+                self._model.write("".join(parts).encode())
+                parts = []
+        self._model.write(("".join(parts) + "</build></model>").encode())
+        self._model.close()
+        self._model = None
+        self._zip.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+        else:  # leave the caller to delete the partial file
+            try:
+                self._model.close()
+                self._zip.close()
+            except Exception:  # pragma: no cover - best effort on the error path
+                pass
+
+
+_STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
+
+
+def stl_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Binary-STL records (50 bytes each) of a mesh, with unit face normals.
+
+    Returns
+    -------
+    (F,) structured array of dtype ``normal (3,) f4, vertices (3, 3) f4, attr u2``
+    """
+    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
+    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
+    out = np.zeros(len(tri), dtype=_STL_DTYPE)
+    out["normal"] = n
+    out["vertices"] = tri
+    return out
+
+
+class STLWriter:
+    """Write a binary STL one part at a time (header, triangles, then the count is patched)."""
+
+    def __init__(self, file: BinaryIO, header: str = ""):
+        self._fh = file
+        head = (header or f"grainforge {__version__} tray").encode("ascii", "replace")[:80].ljust(80, b" ")
+        if head.lower().startswith(b"solid"):
+            head = b"_" + head[:79]
+        self._start = file.tell()
+        file.write(head + struct.pack("<I", 0))
+        self.triangles = 0
+        self.count = 0
+
+    def add_object(self, name: str, records: np.ndarray, translation: Sequence[float] = (0.0, 0.0, 0.0)) -> int:
+        """Append a part (records from :func:`stl_triangles`, in part coordinates) moved by ``translation``."""
+        rec = records.copy()
+        rec["vertices"] += np.asarray(translation, dtype=np.float64).astype(np.float32)
+        self._fh.write(rec.tobytes())
+        self.triangles += len(rec)
+        self.count += 1
+        return self.count
+
+    def close(self) -> None:
+        if self.triangles >= 2**32:
+            raise ValueError(f"binary STL holds at most 2^32 - 1 triangles, got {self.triangles}; use .3mf")
+        end = self._fh.tell()
+        self._fh.seek(self._start + 80)
+        self._fh.write(struct.pack("<I", self.triangles))
+        self._fh.seek(end)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, exc_type, exc, tb):
+        if exc_type is None:
+            self.close()
+
+
+@dataclass(frozen=True)
+class Part:
+    """One placed part read back from a print file."""
+
+    name: str
+    vertices: np.ndarray
+    faces: np.ndarray
+
+    @property
+    def mesh(self):
+        import trimesh
+
+        return trimesh.Trimesh(self.vertices, self.faces, process=False, validate=False)
+
+
+def read_3mf(file) -> list[Part]:
+    """Every build item of a 3MF file as a placed :class:`Part` (object meshes with their transforms).
+
+    Only what grainforge writes is supported in full: mesh objects (no
+    components) placed by build items with an affine ``transform``.
+
+    Raises
+    ------
+    ValueError
+        If the file is not a 3MF package.
+    """
+    try:
+        zf = zipfile.ZipFile(file)
+    except (zipfile.BadZipFile, OSError) as exc:
+        raise ValueError(f"not a 3MF file ({exc})") from None
+    with zf:
+        names = {n.lower(): n for n in zf.namelist()}
+        if _MODEL.lower() not in names:
+            raise ValueError("not a 3MF file (no 3D/3dmodel.model)")
+        objects: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
+        items: list[tuple[str, np.ndarray]] = []
+        with zf.open(names[_MODEL.lower()]) as fh:
+            for _, el in ElementTree.iterparse(fh, events=("end",)):
+                tag = el.tag.rsplit("}", 1)[-1]
+                if tag == "object":
+                    mesh = next((c for c in el if c.tag.endswith("mesh")), None)
+                    if mesh is not None:
+                        vs = next(c for c in mesh if c.tag.endswith("vertices"))
+                        ts = next(c for c in mesh if c.tag.endswith("triangles"))
+                        v = np.array([[float(a.get("x")), float(a.get("y")), float(a.get("z"))] for a in vs])
+                        f = np.array([[int(a.get("v1")), int(a.get("v2")), int(a.get("v3"))] for a in ts],
+                                     dtype=np.int64)
+                        objects[el.get("id")] = (el.get("name") or el.get("id"), v.reshape(-1, 3), f.reshape(-1, 3))
+                    el.clear()
+                elif tag == "item":
+                    m = np.eye(4)
+                    t = el.get("transform")
+                    if t:
+                        vals = np.array([float(x) for x in t.split()]).reshape(4, 3)
+                        m[:3, :3] = vals[:3].T
+                        m[:3, 3] = vals[3]
+                    items.append((el.get("objectid"), m))
+    parts = []
+    for oid, m in items:
+        if oid not in objects:
+            raise ValueError(f"3MF build item refers to missing object {oid}")
+        name, v, f = objects[oid]
+        parts.append(Part(name, v @ m[:3, :3].T + m[:3, 3], f))
+    return parts
+
+
+def read_stl_parts(path) -> list[Part]:
+    """The connected bodies of a binary STL (vertices merged exactly), in file order."""
+    import trimesh
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    mesh = trimesh.load(path, file_type="stl", process=False)
+    v, inv = np.unique(np.asarray(mesh.vertices), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(mesh.faces)]
+    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v), len(v)))
+    _, labels = connected_components(g, directed=False)
+    face_label = labels[f[:, 0]]
+    _, order = np.unique(face_label, return_index=True)
+    parts = []
+    for k, lab in enumerate(face_label[np.sort(order)]):
+        ff = f[face_label == lab]
+        used, local = np.unique(ff, return_inverse=True)
+        parts.append(Part(f"body-{k}", v[used], local.reshape(-1, 3)))
+    return parts
