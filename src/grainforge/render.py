@@ -1,4 +1,16 @@
-"""Shaded pictures of grains and contact sheets (PNG, via matplotlib)."""
+"""Shaded pictures of grains and contact sheets (PNG).
+
+Meshes are drawn by a small NumPy z-buffer rasteriser (:func:`rasterize`):
+orthographic view, per-pixel interpolated vertex normals (Phong shading)
+with a key light, a fill light, a rim term and Blinn–Phong highlights,
+2× supersampling for anti-aliasing.  It draws a 20,000-face grain in a few
+tens of milliseconds, far faster than matplotlib's ``Poly3DCollection``,
+and without its depth-sorting artefacts.  matplotlib only lays the panels
+out and writes the labels.
+
+The same rasteriser gives the binary silhouettes used by the principal
+projection Fourier descriptors (:mod:`grainforge.analysis.fourier`).
+"""
 
 from __future__ import annotations
 
@@ -7,39 +19,257 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["shade", "contact_sheet"]
+__all__ = ["rasterize", "silhouette", "render_image", "shade", "contact_sheet", "view_rotation"]
 
-_LIGHT = np.array([0.45, -0.55, 0.70])
+#: default grain colour (a sand tone), RGB in [0, 1]
+SAND = (0.80, 0.70, 0.53)
 
 
-def shade(ax, mesh, *, color=(0.78, 0.68, 0.52), elev: float = 20.0, azim: float = -60.0) -> None:
-    """Draw ``mesh`` on a 3D matplotlib axis with Lambert + ambient shading."""
-    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+#: bucket edges for triangle bounding boxes (exact up to 6 px, then ~25 % steps)
+_SIZES = np.unique(np.concatenate([np.arange(1, 7), np.round(6 * 1.25 ** np.arange(1, 60))]).astype(np.int64))
 
-    v = np.asarray(mesh.vertices)
-    f = np.asarray(mesh.faces)
-    tri = v[f]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n /= np.linalg.norm(n, axis=1, keepdims=True) + 1e-300
-    light = _LIGHT / np.linalg.norm(_LIGHT)
-    lam = np.clip(n @ light, 0.0, 1.0)
-    base = np.asarray(color)
-    rgb = np.clip(base[None, :] * (0.30 + 0.75 * lam[:, None]), 0, 1)
-    coll = Poly3DCollection(tri, facecolors=rgb, edgecolors="none", linewidths=0, antialiased=False)
-    ax.add_collection3d(coll)
+
+def _bucket(n: np.ndarray) -> np.ndarray:
+    return _SIZES[np.searchsorted(_SIZES, np.maximum(n, 1))]
+
+
+def rasterize(xy: np.ndarray, faces: np.ndarray, shape: tuple[int, int], depth: np.ndarray | None = None):
+    """Scan-convert projected triangles onto a pixel grid.
+
+    Pixel ``(row, col)`` has its centre at ``x = col, y = row`` in the units
+    of ``xy``.  A pixel is covered by a triangle if its centre lies inside it
+    or on its boundary.  Triangles are processed in buckets of equal
+    (power-of-two) bounding-box size, so the work is vectorised and
+    proportional to the covered area.
+
+    Parameters
+    ----------
+    xy : (V, 2) float64
+        Vertex positions in pixel units (x = column, y = row).
+    faces : (F, 3) int64
+    shape : (H, W)
+    depth : (V,) float64, optional
+        Vertex depth (smaller is nearer).  Without it only coverage is computed.
+
+    Returns
+    -------
+    coverage : (H, W) bool
+        Without ``depth``.
+    face, bary : (H, W) int64, (H, W, 3) float64
+        With ``depth``: index of the nearest face at each pixel (−1 for
+        background) and the pixel's barycentric coordinates in that face.
+
+    Examples
+    --------
+    >>> xy = np.array([[1.0, 1.0], [8.0, 1.0], [1.0, 8.0]])
+    >>> int(rasterize(xy, np.array([[0, 1, 2]]), (10, 10)).sum())  # 8 + 7 + ... + 1
+    36
+    """
+    H, W = int(shape[0]), int(shape[1])
+    xy = np.asarray(xy, dtype=np.float64)
+    faces = np.asarray(faces, dtype=np.int64)
+    tri = xy[faces]  # (F, 3, 2)
+    x0 = np.maximum(np.ceil(tri[..., 0].min(1) - 1e-9), 0).astype(np.int64)
+    x1 = np.minimum(np.floor(tri[..., 0].max(1) + 1e-9), W - 1).astype(np.int64)
+    y0 = np.maximum(np.ceil(tri[..., 1].min(1) - 1e-9), 0).astype(np.int64)
+    y1 = np.minimum(np.floor(tri[..., 1].max(1) + 1e-9), H - 1).astype(np.int64)
+    a, b, c = tri[:, 0], tri[:, 1], tri[:, 2]
+    area2 = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
+    keep = (x1 >= x0) & (y1 >= y0) & (np.abs(area2) > 1e-12)
+    idx = np.flatnonzero(keep)
+    bw = _bucket(x1[idx] - x0[idx] + 1)
+    bh = _bucket(y1[idx] - y0[idx] + 1)
+    key = bw * (1 << 20) + bh
+    pix_all, face_all, bary_all, z_all = [], [], [], []
+    cover = np.zeros(H * W, dtype=bool) if depth is None else None
+    order = np.argsort(key, kind="stable")
+    keys_sorted = key[order]
+    bounds = np.flatnonzero(np.diff(keys_sorted)) + 1
+    for grp in np.split(order, bounds):
+        if len(grp) == 0:
+            continue
+        f = idx[grp]
+        gw, gh = int(bw[grp[0]]), int(bh[grp[0]])
+        # cap the candidate array size by processing the group in slices
+        step = max(1, 2_000_000 // (gw * gh))
+        oy, ox = np.divmod(np.arange(gw * gh), gw)
+        for s0 in range(0, len(f), step):
+            ff = f[s0 : s0 + step]
+            px = x0[ff, None] + ox[None, :]
+            py = y0[ff, None] + oy[None, :]
+            inb = (px <= x1[ff, None]) & (py <= y1[ff, None])
+            A, B, C = a[ff], b[ff], c[ff]
+            inv = 1.0 / area2[ff]
+            # barycentric coordinates from edge functions
+            w0 = ((B[:, 0, None] - px) * (C[:, 1, None] - py) - (B[:, 1, None] - py) * (C[:, 0, None] - px)) * inv[:, None]
+            w1 = ((C[:, 0, None] - px) * (A[:, 1, None] - py) - (C[:, 1, None] - py) * (A[:, 0, None] - px)) * inv[:, None]
+            w2 = 1.0 - w0 - w1
+            eps = -1e-9
+            ok = inb & (w0 >= eps) & (w1 >= eps) & (w2 >= eps)
+            ti, ci = np.nonzero(ok)
+            pix = py[ti, ci] * W + px[ti, ci]
+            if depth is None:
+                cover[pix] = True
+                continue
+            fsel = ff[ti]
+            bary = np.stack([w0[ti, ci], w1[ti, ci], w2[ti, ci]], axis=1)
+            z = (depth[faces[fsel]] * bary).sum(1)
+            pix_all.append(pix)
+            face_all.append(fsel)
+            bary_all.append(bary)
+            z_all.append(z)
+    if depth is None:
+        return cover.reshape(H, W)
+    face_img = np.full(H * W, -1, dtype=np.int64)
+    bary_img = np.zeros((H * W, 3))
+    if pix_all:
+        pix = np.concatenate(pix_all)
+        z = np.concatenate(z_all)
+        o = np.lexsort((z, pix))
+        first = np.ones(len(o), dtype=bool)
+        first[1:] = pix[o][1:] != pix[o][:-1]
+        sel = o[first]
+        face_img[pix[sel]] = np.concatenate(face_all)[sel]
+        bary_img[pix[sel]] = np.concatenate(bary_all)[sel]
+    return face_img.reshape(H, W), bary_img.reshape(H, W, 3)
+
+
+def silhouette(points2d: np.ndarray, faces: np.ndarray, size: int = 256, margin: int = 4) -> np.ndarray:
+    """Binary silhouette of a mesh already projected to 2D, fitted in a ``size``² image.
+
+    Both axes share one scale, so shapes are not distorted.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> m = trimesh.creation.box(extents=(2.0, 1.0, 1.0))
+    >>> mask = silhouette(m.vertices[:, :2], m.faces, size=100, margin=0)
+    >>> mask.shape, round(float(mask.mean()), 1)
+    ((100, 100), 0.5)
+    """
+    p = np.asarray(points2d, dtype=np.float64)
+    lo, hi = p.min(0), p.max(0)
+    span = float((hi - lo).max()) or 1.0
+    scale = (size - 1 - 2 * margin) / span
+    xy = (p - (lo + hi) / 2) * scale + (size - 1) / 2
+    return rasterize(xy, faces, (size, size))
+
+
+def view_rotation(elev: float = 20.0, azim: float = -60.0) -> np.ndarray:
+    """Rotation taking world coordinates to camera coordinates (x right, y up, z towards viewer).
+
+    ``elev``/``azim`` follow matplotlib's convention (degrees), with +z up.
+    """
+    e, a = np.radians(elev), np.radians(azim)
+    view = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])  # towards the viewer
+    right = np.array([-np.sin(a), np.cos(a), 0.0])
+    up = np.cross(view, right)
+    return np.stack([right, up, view])
+
+
+def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # area-weighted
+    vn = np.zeros_like(v)
+    for k in range(3):
+        np.add.at(vn, f[:, k], fn)
+    return vn / (np.linalg.norm(vn, axis=1, keepdims=True) + 1e-300), fn
+
+
+def render_image(
+    mesh, *, size: int = 400, elev: float = 20.0, azim: float = -60.0, color=SAND,
+    background=(1.0, 1.0, 1.0), smooth: bool = True, supersample: int = 2,
+) -> np.ndarray:
+    """An RGB picture of a mesh: orthographic, Phong-shaded, anti-aliased.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or Grain
+    size : int
+        Output width and height in pixels.
+    elev, azim : float
+        Viewing direction in degrees (matplotlib convention, +z up).
+    color : RGB tuple in [0, 1]
+    background : RGB tuple in [0, 1]
+    smooth : bool
+        Interpolate vertex normals (Phong) rather than flat facets.
+    supersample : int
+        Render at this factor and average down (anti-aliasing).
+
+    Returns
+    -------
+    (size, size, 3) float64 in [0, 1]
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> img = render_image(trimesh.creation.icosphere(3), size=64)
+    >>> img.shape, bool(img[32, 32].sum() < 3.0), bool(np.allclose(img[0, 0], 1.0))
+    ((64, 64, 3), True, True)
+    """
+    if hasattr(mesh, "params") and hasattr(mesh, "faces"):
+        mesh = mesh.mesh
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    f = np.asarray(mesh.faces, dtype=np.int64)
+    ss = max(1, int(supersample))
+    n = int(size) * ss
+    R = view_rotation(elev, azim)
     c = (v.max(0) + v.min(0)) / 2
-    r = (v.max(0) - v.min(0)).max() / 2
-    ax.set_xlim(c[0] - r, c[0] + r)
-    ax.set_ylim(c[1] - r, c[1] + r)
-    ax.set_zlim(c[2] - r, c[2] + r)
-    ax.set_box_aspect((1, 1, 1))
-    ax.view_init(elev=elev, azim=azim)
+    cam = (v - c) @ R.T
+    radius = float(np.linalg.norm(cam, axis=1).max()) or 1.0
+    scale = (n / 2 - 2 * ss) / radius
+    xy = np.empty((len(v), 2))
+    xy[:, 0] = cam[:, 0] * scale + (n - 1) / 2
+    xy[:, 1] = -cam[:, 1] * scale + (n - 1) / 2  # image rows grow downwards
+    vn, fn = _vertex_normals(v, f)
+    fnu = fn / (np.linalg.norm(fn, axis=1, keepdims=True) + 1e-300)
+    # back-face culling is safe only for a closed, outward-oriented mesh
+    closed = bool(getattr(mesh, "is_watertight", False)) and float(getattr(mesh, "volume", 0.0)) > 0
+    drawn = np.flatnonzero(fn @ R[2] > 0) if closed else np.arange(len(f))
+    face_img, bary = rasterize(xy, f[drawn], (n, n), depth=-cam[:, 2])
+    hit = face_img >= 0
+    fi = drawn[face_img[hit]]
+    if smooth:
+        # per-corner normals: the vertex normal unless it is more than 45° from
+        # the face normal (a crease, e.g. a cube's edge), then the face normal
+        corner = vn[f[fi]]
+        crease = (corner * fnu[fi][:, None, :]).sum(2) < np.cos(np.radians(45))
+        corner = np.where(crease[:, :, None], fnu[fi][:, None, :], corner)
+        nrm = (corner * bary[hit][:, :, None]).sum(1)
+    else:
+        nrm = fn[fi]
+    nrm = nrm @ R.T
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True) + 1e-300
+    # faces seen from behind (open meshes) are lit as if facing the viewer
+    nrm *= np.where(nrm[:, 2:3] < 0, -1.0, 1.0)
+    key = np.array([-0.45, 0.60, 0.66])
+    key /= np.linalg.norm(key)
+    fill = np.array([0.70, -0.25, 0.67])
+    fill /= np.linalg.norm(fill)
+    half = key + np.array([0.0, 0.0, 1.0])
+    half /= np.linalg.norm(half)
+    diff = 0.78 * np.clip(nrm @ key, 0, 1) + 0.25 * np.clip(nrm @ fill, 0, 1)
+    spec = 0.22 * np.clip(nrm @ half, 0, 1) ** 40
+    rim = 0.10 * (1.0 - np.clip(nrm[:, 2], 0, 1)) ** 3
+    base = np.asarray(color, dtype=np.float64)
+    rgb = base[None] * (0.22 + diff[:, None]) + (spec + rim)[:, None]
+    img = np.empty((n, n, 3))
+    img[:] = np.asarray(background, dtype=np.float64)
+    img[hit] = np.clip(rgb, 0, 1)
+    if ss > 1:
+        img = img.reshape(size, ss, size, ss, 3).mean(axis=(1, 3))
+    return img
+
+
+def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size: int = 400) -> None:
+    """Draw a shaded picture of ``mesh`` on a (2D) matplotlib axis."""
+    ax.imshow(render_image(mesh, size=size, color=color, elev=elev, azim=azim), interpolation="antialiased")
     ax.set_axis_off()
 
 
 def contact_sheet(
     meshes: Sequence, labels: Sequence[str], out: str | Path, *, columns: int | None = None,
-    title: str | None = None, panel_size: float = 2.4, dpi: int = 110,
+    title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
+    elev: float = 20.0, azim: float = -60.0, color=SAND,
 ) -> Path:
     """Write a PNG with one shaded, labelled panel per mesh.
 
@@ -52,10 +282,18 @@ def contact_sheet(
         PNG file to write (atomically).
     columns : int, optional
         Panels per row (default: about square).
+    title : str, optional
+        Title above the panels.
+    panel_size : float
+        Panel edge in inches.
+    dpi : int
+        Output resolution.
     """
     import matplotlib
 
     matplotlib.use("Agg")
+    import io
+
     import matplotlib.pyplot as plt
 
     from .io import atomic_write
@@ -67,16 +305,15 @@ def contact_sheet(
     n = len(meshes)
     cols = columns or int(np.ceil(np.sqrt(n)))
     rows = int(np.ceil(n / cols))
+    px = int(panel_size * dpi)
     fig = plt.figure(figsize=(panel_size * cols, panel_size * rows + (0.4 if title else 0)), dpi=dpi)
     for i, (m, lab) in enumerate(zip(meshes, labels)):
-        ax = fig.add_subplot(rows, cols, i + 1, projection="3d")
-        shade(ax, m.mesh if hasattr(m, "params") else m)
-        ax.set_title(lab, fontsize=8, pad=-2)
+        ax = fig.add_subplot(rows, cols, i + 1)
+        shade(ax, m, color=color, elev=elev, azim=azim, size=px)
+        ax.set_title(lab, fontsize=8, pad=2)
     if title:
         fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0, right=1, bottom=0, top=0.92 if title else 0.97, wspace=0, hspace=0.08)
-    import io
-
+    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92 if title else 0.96, wspace=0.02, hspace=0.12)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", metadata={"Software": None})
     plt.close(fig)

@@ -1,19 +1,121 @@
-"""3D shape descriptors (ALGORITHMS.md §4)."""
+"""3D shape descriptors (ALGORITHMS.md §4).
+
+:func:`basic_descriptors` gives the columns every manifest carries;
+:func:`describe` gives everything ``grainforge analyse`` reports: size and
+form (volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S from the
+minimum-volume box and from the principal axes, Zingg ratios, Krumbein
+intercept sphericity), texture (roughness and a surface fractal dimension,
+:mod:`grainforge.analysis.fractal`), outline (Fourier descriptors of the
+three principal projections, :mod:`grainforge.analysis.fourier`) and, for
+aggregates, porosity, radius of gyration and the aggregate dimension D_A.
+"""
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["basic_descriptors", "principal_dimensions", "BASIC_COLUMNS"]
+__all__ = [
+    "basic_descriptors", "principal_dimensions", "describe", "BASIC_COLUMNS", "DESCRIPTOR_COLUMNS",
+    "mass_properties", "is_closed",
+]
 
 #: the measured columns every manifest carries, in order.
 BASIC_COLUMNS = (
     "volume", "surface_area", "equivalent_diameter", "sphericity", "convexity", "L", "I", "S",
 )
 
+#: every scalar column of :func:`describe` except the Fourier descriptors, in order.
+DESCRIPTOR_COLUMNS = BASIC_COLUMNS + (
+    "L_pca", "I_pca", "S_pca", "elongation", "flatness", "krumbein_sphericity",
+    "roughness", "fractal_dimension", "porosity", "radius_of_gyration", "aggregate_dimension",
+    "closed",
+)
+
 
 def _mesh(obj):
     return obj.mesh if hasattr(obj, "faces") and not hasattr(obj, "area_faces") else obj
+
+
+def _arrays(obj) -> tuple[np.ndarray, np.ndarray]:
+    if hasattr(obj, "params") and hasattr(obj, "faces"):  # Grain
+        return np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces, dtype=np.int64)
+    return np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces, dtype=np.int64)
+
+
+def is_closed(faces: np.ndarray, n_vertices: int) -> bool:
+    """True if every directed edge appears once and its reverse once (closed, consistently oriented).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> b = trimesh.creation.box()
+    >>> is_closed(b.faces, len(b.vertices)), is_closed(b.faces[:-1], len(b.vertices))
+    (True, False)
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0:
+        return False
+    a = f.ravel()
+    b = np.roll(f, -1, axis=1).ravel()
+    key = a * n_vertices + b
+    rev = b * n_vertices + a
+    key_sorted = np.sort(key)
+    if np.any(key_sorted[1:] == key_sorted[:-1]):
+        return False
+    return bool(np.array_equal(key_sorted, np.sort(rev)))
+
+
+def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
+    """Volume, area, centroid and second central moments of a closed triangle mesh.
+
+    Signed tetrahedra from the vertex mean: ∫x xᵀ dV over a tetrahedron
+    (0, a, b, c) is (V/20)(aaᵀ + bbᵀ + ccᵀ + ssᵀ) with s = a + b + c.
+
+    Returns
+    -------
+    dict
+        ``volume``, ``area``, ``centroid`` (3,), ``covariance`` (3, 3): the
+        second central moment per unit volume (its trace is R_g²), and
+        ``face_areas`` (F,).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    o = v.mean(0)
+    a, b, c = v[f[:, 0]] - o, v[f[:, 1]] - o, v[f[:, 2]] - o
+    cr = np.cross(b - a, c - a)
+    face_areas = 0.5 * np.linalg.norm(cr, axis=1)
+    vol6 = np.einsum("ij,ij->i", a, np.cross(b, c))
+    V = vol6.sum() / 6.0
+    s = a + b + c
+    if V != 0:
+        centroid_o = (vol6[:, None] * s).sum(0) / (24.0 * V)
+        w = vol6 / 120.0
+        second = (
+            np.einsum("t,ti,tj->ij", w, a, a) + np.einsum("t,ti,tj->ij", w, b, b)
+            + np.einsum("t,ti,tj->ij", w, c, c) + np.einsum("t,ti,tj->ij", w, s, s)
+        )
+        cov = second / V - np.outer(centroid_o, centroid_o)
+    else:
+        centroid_o = np.zeros(3)
+        cov = np.zeros((3, 3))
+    return {
+        "volume": float(V), "area": float(face_areas.sum()), "centroid": centroid_o + o,
+        "covariance": cov, "face_areas": face_areas,
+    }
+
+
+def _moments(v: np.ndarray, f: np.ndarray, mp: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """Centre and covariance for principal axes: the solid's if it has volume, else the surface's."""
+    if mp is None:
+        mp = mass_properties(v, f)
+    if mp["volume"] > 0 and np.all(np.linalg.eigvalsh(mp["covariance"]) > 0):
+        return mp["centroid"], mp["covariance"]
+    fa = mp["face_areas"]
+    cen = v[f].mean(1)
+    wsum = fa.sum() or 1.0
+    c0 = (fa[:, None] * cen).sum(0) / wsum
+    d = cen - c0
+    return c0, np.einsum("t,ti,tj->ij", fa, d, d) / wsum
 
 
 def principal_dimensions(obj) -> tuple[float, float, float]:
@@ -32,10 +134,23 @@ def principal_dimensions(obj) -> tuple[float, float, float]:
     """
     import trimesh
 
-    mesh = _mesh(obj)
-    _, extents = trimesh.bounds.oriented_bounds(mesh)
+    v, _ = _arrays(obj)
+    _, extents = trimesh.bounds.oriented_bounds(_hull_points(v))
     L, I, S = sorted((float(e) for e in extents), reverse=True)
     return L, I, S
+
+
+def _hull(v: np.ndarray):
+    from scipy.spatial import ConvexHull
+
+    return ConvexHull(v)
+
+
+def _hull_points(v: np.ndarray) -> np.ndarray:
+    try:
+        return v[_hull(v).vertices]
+    except Exception:  # degenerate (flat) point sets: let trimesh handle all points
+        return v
 
 
 def basic_descriptors(obj) -> dict[str, float]:
@@ -59,14 +174,125 @@ def basic_descriptors(obj) -> dict[str, float]:
     >>> round(d["sphericity"], 3), round(d["convexity"], 3)
     (0.806, 1.0)
     """
-    mesh = _mesh(obj)
-    V = float(mesh.volume)
-    A = float(mesh.area)
+    v, f = _arrays(obj)
+    mp = mass_properties(v, f)
+    return _basic(v, mp)
+
+
+def _basic(v: np.ndarray, mp: dict, hull=None) -> dict[str, float]:
+    import trimesh
+
+    V, A = mp["volume"], mp["area"]
     d_eq = float(np.cbrt(6.0 * V / np.pi)) if V > 0 else 0.0
     sph = float(np.pi ** (1 / 3) * (6 * V) ** (2 / 3) / A) if V > 0 and A > 0 else 0.0
-    hull_v = float(mesh.convex_hull.volume)
-    L, I, S = principal_dimensions(mesh)
+    if hull is None:
+        try:
+            hull = _hull(v)
+        except Exception:
+            hull = None
+    hull_v = float(hull.volume) if hull is not None else 0.0
+    pts = v[hull.vertices] if hull is not None else v
+    _, extents = trimesh.bounds.oriented_bounds(pts)
+    L, I, S = sorted((float(e) for e in extents), reverse=True)
     return {
         "volume": V, "surface_area": A, "equivalent_diameter": d_eq, "sphericity": sph,
         "convexity": V / hull_v if hull_v > 0 else 0.0, "L": L, "I": I, "S": S,
     }
+
+
+def describe(
+    obj, *, fractal: bool = True, fourier: bool = True, primary_volume: float | None = None,
+    fd_image_size: int = 256,
+) -> dict[str, float]:
+    """Every descriptor of one body (ALGORITHMS.md §4).
+
+    Parameters
+    ----------
+    obj : Grain or trimesh.Trimesh
+        One body.  If it is not closed (``closed`` = 0 in the result), the
+        volume-based values describe the mesh as if it were and should be
+        read with care.
+    fractal : bool
+        Compute the surface fractal dimension (the slowest step).
+    fourier : bool
+        Compute the principal-projection Fourier descriptors.
+    primary_volume : float, optional
+        Volume V_p of an aggregate's primary particle; with it the aggregate
+        dimension D_A = log(V/V_p) / log(Ā/a) of paper Eq. 5 is reported, Ā
+        the mean edge of the minimum-volume box and a = V_p^(1/3) the primary
+        size (ALGORITHMS.md §3, the convention of
+        ``grainforge.analysis.aggregate``).  NaN when V ≤ V_p or Ā ≤ a.
+
+    Returns
+    -------
+    dict
+        :data:`DESCRIPTOR_COLUMNS` (``aggregate_dimension`` NaN without a
+        primary volume, ``fractal_dimension`` NaN if not computed or not
+        measurable) followed by the Fourier columns of
+        :func:`~grainforge.analysis.fourier.fd_columns` and ``fd_star_shaped``.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> d = describe(trimesh.creation.box(extents=(4, 2, 1)), fractal=False, fourier=False)
+    >>> d["L"], d["I"], d["S"], d["elongation"], d["flatness"]
+    (4.0, 2.0, 1.0, 0.5, 0.5)
+    >>> round(d["krumbein_sphericity"], 4)  # (I·S/L²)^(1/3)
+    0.5
+    """
+    from . import fourier as fourier_mod
+    from .fractal import fractal_dimension, radial_function, roughness, smooth_fit
+
+    v, f = _arrays(obj)
+    if len(f) == 0:
+        raise ValueError("the mesh holds no triangles")
+    closed = is_closed(f, len(v))
+    mp = mass_properties(v, f)
+    try:
+        hull = _hull(v)
+    except Exception:
+        hull = None
+    out: dict[str, float] = dict(_basic(v, mp, hull))
+    L, I, S = out["L"], out["I"], out["S"]
+    centre, axes = fourier_mod.principal_axes(v, f, mp)
+    proj = (v - centre) @ axes.T
+    Lp, Ip, Sp = sorted(proj.max(0) - proj.min(0), reverse=True)
+    out.update({"L_pca": float(Lp), "I_pca": float(Ip), "S_pca": float(Sp)})
+    out["elongation"] = I / L if L > 0 else 0.0
+    out["flatness"] = S / I if I > 0 else 0.0
+    out["krumbein_sphericity"] = float(np.cbrt(I * S / L**2)) if L > 0 else 0.0
+    # radial function about the volume centroid, area weights per vertex
+    u, r = radial_function(v, mp["centroid"])
+    wv = np.bincount(f.ravel(), np.repeat(mp["face_areas"] / 3.0, 3), minlength=len(v))
+    used = wv > 0
+    fit = smooth_fit(u[used], r[used], wv[used])
+    res = r[used] - fit
+    rbar = float(np.sum(wv[used] * r[used]) / np.sum(wv[used]))
+    out["roughness"] = roughness(res, wv[used], rbar) if rbar > 0 else 0.0
+    if fractal:
+        e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+        edge_angle = float(np.median(np.arccos(np.clip((u[e[:, 0]] * u[e[:, 1]]).sum(1), -1, 1))))
+        out["fractal_dimension"] = fractal_dimension(u[used], res / rbar, edge_angle)
+    else:
+        out["fractal_dimension"] = float("nan")
+    hull_v = float(hull.volume) if hull is not None else 0.0
+    out["porosity"] = 1.0 - mp["volume"] / hull_v if hull_v > 0 else 0.0
+    out["radius_of_gyration"] = float(np.sqrt(max(np.trace(mp["covariance"]), 0.0)))
+    if primary_volume is not None:
+        if not primary_volume > 0:
+            raise ValueError(f"primary_volume must be positive, got {primary_volume!r}")
+        Vn = mp["volume"] / primary_volume
+        An = (L + I + S) / 3.0 / np.cbrt(primary_volume)
+        out["aggregate_dimension"] = float(np.log(Vn) / np.log(An)) if Vn > 1 and An > 1 else float("nan")
+    else:
+        out["aggregate_dimension"] = float("nan")
+    out["closed"] = 1.0 if closed else 0.0
+    if fourier:
+        try:
+            out.update(fourier_mod.projection_descriptors(
+                v, f, size=fd_image_size, axes=(centre, axes), closed=closed and mp["volume"] > 0
+            ))
+        except ValueError:
+            out.update({c: float("nan") for c in fourier_mod.fd_columns()})
+            out["fd_star_shaped"] = 0.0
+    return out
