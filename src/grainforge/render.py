@@ -306,14 +306,19 @@ def contact_sheet(
     cols = columns or int(np.ceil(np.sqrt(n)))
     rows = int(np.ceil(n / cols))
     px = int(panel_size * dpi)
-    fig = plt.figure(figsize=(panel_size * cols, panel_size * rows + (0.4 if title else 0)), dpi=dpi)
+    lines = max(str(lab).count("\n") + 1 for lab in labels)
+    label_in = 0.05 + 0.16 * lines  # inches above each panel for its label
+    title_in = 0.4 if title else 0.0
+    height = rows * (panel_size + label_in) + title_in
+    fig = plt.figure(figsize=(panel_size * cols, height), dpi=dpi)
     for i, (m, lab) in enumerate(zip(meshes, labels)):
         ax = fig.add_subplot(rows, cols, i + 1)
         shade(ax, m, color=color, elev=elev, azim=azim, size=px)
         ax.set_title(lab, fontsize=8, pad=2)
     if title:
-        fig.suptitle(title, fontsize=10)
-    fig.subplots_adjust(left=0.01, right=0.99, bottom=0.01, top=0.92 if title else 0.96, wspace=0.02, hspace=0.12)
+        fig.suptitle(title, fontsize=10, y=1 - 0.08 / height)
+    fig.subplots_adjust(left=0.005, right=0.995, bottom=0.005, top=1 - (title_in + label_in) / height,
+                        wspace=0.02, hspace=label_in / panel_size)
     buf = io.BytesIO()
     fig.savefig(buf, format="png", metadata={"Software": None})
     plt.close(fig)

@@ -62,6 +62,12 @@ def _register():
 
     cli.add_command(batch.batch)
 
+    from . import analyse, figures, plot
+
+    cli.add_command(analyse.analyse)
+    cli.add_command(plot.plot)
+    cli.add_command(figures.figures)
+
 
 _register()
 

@@ -1,0 +1,36 @@
+"""``grainforge figures --out DIR``: the paper's Figures 1–6 as PNGs."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+
+@click.command()
+@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Folder for the PNGs.")
+@click.option("--only", "only", multiple=True, type=click.IntRange(1, 6), help="Only this figure (repeatable).")
+@click.option("--subdivisions", type=click.IntRange(2, 6), default=5, show_default=True,
+              help="Icosphere level of the FSO and CRI grains (lower is faster).")
+@click.option("--overwrite", is_flag=True, help="Replace existing figure files.")
+def figures(out, only, subdivisions, overwrite):
+    """Regenerate the paper's Figures 1-6 (FSO, contours, CRI, DPA) into OUT.
+
+    Same panels and parameters as the paper's captions, fixed seeds.
+    """
+    from ..figures import FIGURES, make_figures
+
+    numbers = tuple(sorted(set(only))) or tuple(FIGURES)
+    if not overwrite:
+        existing = [out / FIGURES[n][0] for n in numbers if (out / FIGURES[n][0]).exists()]
+        if existing:
+            raise click.UsageError(f"{existing[0]} exists; use --overwrite")
+    with click.progressbar(length=len(numbers), label="figures", file=click.get_text_stream("stderr")) as bar:
+        def echo(msg):
+            bar.update(1)
+
+        written, skipped = make_figures(out, numbers, subdivisions=subdivisions, echo=echo)
+    for p in written:
+        click.echo(f"wrote {p}", err=True)
+    for n, reason in skipped:
+        click.echo(f"skipped Figure {n}: {reason}", err=True)

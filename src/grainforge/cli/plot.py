@@ -1,0 +1,33 @@
+"""``grainforge plot KIND MANIFEST.csv... -o OUT.png``: population plots."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+KIND_NAMES = ("zingg", "sphericity-convexity", "fd-spectrum", "size-distribution")
+
+
+@click.command()
+@click.argument("kind", type=click.Choice(KIND_NAMES))
+@click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="PNG to write.")
+@click.option("--title", default=None, help="Plot title.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
+def plot(kind, manifests, out, title, overwrite):
+    """Plot KIND for one or more MANIFEST CSVs (overlaid, with a legend).
+
+    \b
+    zingg                 S/I against I/L with the Zingg classes (columns L, I, S)
+    sphericity-convexity  Wadell sphericity against convexity
+    fd-spectrum           Fourier descriptors D2..D16, log-log (columns of `analyse --csv`;
+                          a CRI manifest's input spectrum is drawn dashed)
+    size-distribution     % finer by volume against equivalent diameter
+    """
+    from ..plots import plot as draw
+
+    if out.exists() and not overwrite:
+        raise click.UsageError(f"{out} exists; use --overwrite")
+    draw(kind, manifests, out, title=title)
+    click.echo(f"wrote {out}", err=True)

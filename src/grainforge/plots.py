@@ -1,0 +1,205 @@
+"""Population plots from manifests: Zingg diagram, sphericity–convexity, FD spectra, size distribution.
+
+Each plot takes one or more manifests (CSV files written by ``grainforge
+generate``/``batch`` or ``grainforge analyse --csv``) and overlays them with a
+legend.  Columns used: ``L, I, S`` (Zingg), ``sphericity, convexity``,
+``equivalent_diameter`` (and ``volume`` for mass weighting), and for FD
+spectra the ``fd_LI_n``/``fd_LS_n``/``fd_IS_n`` columns of ``analyse`` (or a
+CRI manifest's ``descriptors``/``decay``/``modes``, drawn as the input spectrum).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+__all__ = ["KINDS", "read_manifest", "plot", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution"]
+
+
+def read_manifest(path: str | Path) -> dict[str, list[str]]:
+    """Columns of a CSV manifest as lists of strings.
+
+    Raises
+    ------
+    ValueError
+        If the file is missing, not CSV or empty.
+    """
+    path = Path(path)
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            rows = list(csv.DictReader(fh))
+    except (UnicodeDecodeError, csv.Error) as exc:
+        raise ValueError(f"{path}: not a CSV manifest ({exc})") from None
+    if not rows:
+        raise ValueError(f"{path}: holds no rows")
+    return {k: [r.get(k) or "" for r in rows] for k in rows[0] if k is not None}
+
+
+def _numeric(table: dict, column: str, path) -> np.ndarray:
+    if column not in table:
+        raise ValueError(f"{path}: no column {column!r}")
+    out = np.full(len(table[column]), np.nan)
+    for i, s in enumerate(table[column]):
+        try:
+            out[i] = float(s)
+        except ValueError:
+            pass
+    return out
+
+
+def _label(path: Path) -> str:
+    path = Path(path)
+    return path.parent.name or path.stem if path.name == "manifest.csv" else path.stem
+
+
+def zingg(ax, tables) -> None:
+    """Zingg diagram: flatness S/I against elongation I/L, with the 2/3 class boundaries."""
+    for (path, t), marker in zip(tables, _markers()):
+        L, I, S = (_numeric(t, c, path) for c in ("L", "I", "S"))
+        ax.scatter(I / L, S / I, s=14, alpha=0.75, marker=marker, label=f"{_label(path)} (n={len(L)})")
+    ax.axvline(2 / 3, color="0.6", lw=0.8)
+    ax.axhline(2 / 3, color="0.6", lw=0.8)
+    for x, y, name in ((1 / 3, 1 / 3, "blade"), (5 / 6, 1 / 3, "disc"), (1 / 3, 5 / 6, "rod"), (5 / 6, 5 / 6, "equant")):
+        ax.text(x, y, name, ha="center", va="center", color="0.5", fontsize=9)
+    ax.set(xlim=(0, 1), ylim=(0, 1), xlabel="elongation I/L", ylabel="flatness S/I", title="Zingg diagram")
+    ax.set_aspect("equal")
+
+
+def sphericity_convexity(ax, tables) -> None:
+    """Wadell sphericity against convexity V/V_hull."""
+    for (path, t), marker in zip(tables, _markers()):
+        x, y = _numeric(t, "convexity", path), _numeric(t, "sphericity", path)
+        ax.scatter(x, y, s=14, alpha=0.75, marker=marker, label=f"{_label(path)} (n={len(x)})")
+    ax.set(xlabel="convexity V/V_hull", ylabel="Wadell sphericity", title="Sphericity vs convexity")
+    ax.set_xlim(right=1.01)
+    ax.set_ylim(top=1.01)
+
+
+def _fd_matrix(t, plane: str):
+    cols = sorted(
+        ((int(k.rsplit("_", 1)[1]), k) for k in t if k.startswith(f"fd_{plane}_") and k.rsplit("_", 1)[1].isdigit())
+    )
+    return [n for n, _ in cols], [k for _, k in cols]
+
+
+def fd_spectrum(ax, tables) -> None:
+    """Fourier descriptor spectra D_n (log–log): median and 10–90 % band over each population.
+
+    Uses the principal-projection descriptors of ``grainforge analyse`` (all
+    three planes pooled); a CRI manifest's input spectrum (its
+    ``descriptors``, ``decay`` and ``modes``) is drawn dashed where present.
+    """
+    from .contours import descriptor_spectrum
+
+    drew = False
+    for (path, t), color in zip(tables, _colors()):
+        lab = _label(path)
+        planes = [p for p in ("LI", "LS", "IS") if _fd_matrix(t, p)[0]]
+        if planes:
+            n, _ = _fd_matrix(t, planes[0])
+            M = np.concatenate([
+                np.stack([_numeric(t, k, path) for k in _fd_matrix(t, p)[1]], axis=1) for p in planes
+            ])
+            M = np.where(M > 0, M, np.nan)
+            med = np.nanmedian(M, axis=0)
+            lo, hi = np.nanpercentile(M, [10, 90], axis=0)
+            ax.fill_between(n, lo, hi, color=color, alpha=0.2, lw=0)
+            ax.plot(n, med, "o-", color=color, ms=3, label=f"{lab}: measured (median, 10–90 %)")
+            drew = True
+        if "descriptors" in t and any(t["descriptors"]):
+            s = next(x for x in t["descriptors"] if x)
+            d2, d3, d8 = (float(x) for x in s.split())
+            decay = tuple(float(x) for x in t["decay"][0].split()) if t.get("decay", [""])[0] else (-5 / 3, -5 / 3)
+            modes = int(float(t["modes"][0])) if t.get("modes", [""])[0] else 64
+            D = descriptor_spectrum(d2, d3, d8, decay=decay, modes=modes)
+            k = np.arange(2, min(len(D), 17))
+            keep = D[k] > 0
+            ax.plot(k[keep], D[k][keep], "--", color=color, label=f"{lab}: input ({d2:g}, {d3:g}, {d8:g})")
+            drew = True
+    if not drew:
+        raise ValueError(
+            "no Fourier descriptor columns (fd_LI_2 ...) or CRI input descriptors in the manifest(s); "
+            "measure the grains with `grainforge analyse FILES --csv OUT.csv`"
+        )
+    ax.set_xscale("log")
+    ax.set_yscale("log")
+    ax.set(xlabel="order n", ylabel="D_n", title="Fourier descriptor spectrum (principal projections)")
+    ax.set_xticks([2, 3, 4, 6, 8, 12, 16])
+    ax.set_xticklabels(["2", "3", "4", "6", "8", "12", "16"])
+
+
+def size_distribution(ax, tables) -> None:
+    """Grading curve: percentage finer by volume (mass) against equivalent diameter (log scale)."""
+    for (path, t), color in zip(tables, _colors()):
+        d = _numeric(t, "equivalent_diameter", path)
+        w = _numeric(t, "volume", path) if "volume" in t else d**3
+        ok = np.isfinite(d) & np.isfinite(w)
+        d, w = d[ok], w[ok]
+        o = np.argsort(d)
+        finer = 100 * np.cumsum(w[o]) / w.sum()
+        ax.step(d[o], finer, where="post", color=color, label=f"{_label(path)} (n={len(d)})")
+    ax.set_xscale("log")
+    ax.set(xlabel="equivalent diameter d_eq", ylabel="% finer by volume", ylim=(0, 100), title="Size distribution")
+    ax.grid(True, which="both", color="0.9", lw=0.5)
+
+
+def _markers():
+    while True:
+        yield from ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
+def _colors():
+    while True:
+        yield from (f"C{i}" for i in range(10))
+
+
+#: plot kind -> function(ax, [(path, table), ...])
+KINDS = {
+    "zingg": zingg,
+    "sphericity-convexity": sphericity_convexity,
+    "fd-spectrum": fd_spectrum,
+    "size-distribution": size_distribution,
+}
+
+
+def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: str | None = None) -> Path:
+    """Draw plot ``kind`` for one or more manifests into a PNG (atomically).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> _ = (d / "m.csv").write_text("L,I,S\\n3,2,1\\n2,2,1\\n")
+    >>> plot("zingg", [d / "m.csv"], d / "z.png").name
+    'z.png'
+    """
+    if kind not in KINDS:
+        raise ValueError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    if not manifests:
+        raise ValueError("at least one manifest is needed")
+    tables = [(Path(p), read_manifest(p)) for p in manifests]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .io import atomic_write
+
+    fig, ax = plt.subplots(figsize=(6.0, 4.6) if kind != "zingg" else (5.4, 5.4), dpi=130)
+    try:
+        KINDS[kind](ax, tables)
+        if title:
+            ax.set_title(title)
+        ax.legend(fontsize=7, loc="best")
+        fig.tight_layout()
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", metadata={"Software": None})
+    finally:
+        plt.close(fig)
+    return atomic_write(out, buf.getvalue())
