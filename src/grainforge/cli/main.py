@@ -47,7 +47,9 @@ def cli():
     """grainforge: realistic, printable 3D grain shapes for geotechnical research.
 
     Generators (paper: Hanaor et al., 3D printable geomaterials): FSO (fractal
-    surface overlay).  Run `grainforge COMMAND --help` for each command.
+    surface overlay), CRI (contour rotation interpolation; `grainforge fourier`
+    measures the Fourier descriptors of grain images).  Run
+    `grainforge COMMAND --help` for each command.
     """
 
 
@@ -58,9 +60,18 @@ def _register():
     cli.add_command(render.render)
     cli.add_command(demo.demo)
 
+    from . import check, tray
+
+    cli.add_command(check.check)
+    cli.add_command(tray.tray)
+
     from . import batch
 
     cli.add_command(batch.batch)
+
+    from . import fourier
+
+    cli.add_command(fourier.fourier)
 
     from . import analyse, figures, plot
 

@@ -22,6 +22,7 @@ y intermediate, z shortest.  C1 lies in the xy plane (angle from +x towards
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
@@ -50,13 +51,15 @@ DEFAULT_PRESET = "rough-angular"
 #: fine grid on which the contours are interpolated (periodic, linear).
 GRID = 2048
 PLANES = ("xy", "xz", "yz")
+#: icosphere level on which the extents are measured for a requested aspect
+ASPECT_REFERENCE_SUBDIVISIONS = 5
 MEASURED = (2, 3, 8)
 #: generation outputs recorded in manifests: FDs (D2, D3, D8) of the three input
 #: contours as given, and of the three principal sections (the corrected
 #: contours), the largest correction |f − 1|, and the extreme radii.
 INFO_COLUMNS = tuple(
     f"{kind}_{plane}_D{n}" for kind in ("contour", "section") for plane in PLANES for n in MEASURED
-) + ("correction", "min_radius", "max_radius")
+) + ("target_aspect", "axis_scale", "correction", "min_radius", "max_radius")
 
 
 def _triplet(name):
@@ -72,7 +75,7 @@ class Params:
 
     contour: str | None = param(
         None, "contour source: fourier, fractal or image (default fourier; image when images are given)",
-        kind="str", choices=SOURCES,
+        kind="str", choices=SOURCES[:3],
     )
     preset: str | None = param(
         None, "named descriptors: rough-sphere = 0,0,0.02; rough-angular = 0.15,0.10,0.03",
@@ -112,8 +115,8 @@ class Params:
             if len(secs) != 3 or not all(isinstance(c, Contour) for c in secs):
                 raise ParameterError("sections", "must be three Contour objects (xy, xz, yz)")
             object.__setattr__(self, "sections", secs)
-            if source not in (None, "given"):
-                raise ParameterError("contour", f"must be 'given' (or unset) with sections, got {source!r}")
+            if source is not None:
+                raise ParameterError("contour", f"must be unset when sections are given, got {source!r}")
             source = "given"
         elif self.images is not None:
             if source not in (None, "image"):
@@ -123,9 +126,8 @@ class Params:
             if len(paths) != 3:
                 raise ParameterError("images", f"must name three image files A,B,C, got {self.images!r}")
             object.__setattr__(self, "images", ",".join(paths))
-        elif source in ("image", "given"):
-            name = "images" if source == "image" else "sections"
-            raise ParameterError(name, f"are required with contour={source!r}")
+        elif source == "image":
+            raise ParameterError("images", "are required with contour='image'")
         source = source or "fourier"
         object.__setattr__(self, "contour", source)
 
@@ -220,18 +222,37 @@ class Construction:
         The corrected contours on the fine grid θ_j = 2πj/GRID: the principal
         sections of the grain (xy, xz, yz), in the grain's units.
     factors : (3, GRID) float64
-        The correction factors f(θ) applied to the aligned (and stretched) contours.
+        The correction factors f(θ) applied to the aligned and stretched contours.
     morph_exponent : float
+    dims : (3,) float
+        The diameters through the origin along x, y, z that the contours were
+        stretched to (geometric mean 2): the requested aspect, or the
+        least-squares ratio consistent with the three contours' own
+        axis-diameter ratios.  The correction keeps them exactly.
+    axis_scale : (3,) float
+        Final scaling of x, y, z (1 unless an aspect is requested): it makes
+        the extents of the surface (measured on a level-5 icosphere) exactly
+        L:I:S, with the same geometric mean.  The principal sections of the
+        grain are then the corrected contours stretched by these factors.
     """
 
     inputs: tuple[Contour, Contour, Contour]
     sections: np.ndarray
     factors: np.ndarray
     morph_exponent: float
+    dims: tuple[float, float, float] = (2.0, 2.0, 2.0)
+    axis_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
 
     def section(self, plane: str) -> Contour:
         """The principal section ``"xy"``, ``"xz"`` or ``"yz"`` as a :class:`Contour` (scale kept)."""
         return Contour(self.sections[PLANES.index(plane)])
+
+    def points(self, unit: np.ndarray, geometry: _Geometry | None = None) -> np.ndarray:
+        """Surface points (V, 3) along unit vectors: r(θ, ψ)·unit, scaled by ``axis_scale``."""
+        pts = unit * self.radius(unit, geometry)[:, None]
+        if self.axis_scale != (1.0, 1.0, 1.0):
+            pts = pts * np.asarray(self.axis_scale)
+        return pts
 
     def radius(self, unit: np.ndarray, geometry: _Geometry | None = None) -> np.ndarray:
         """r(θ, ψ) along unit vectors ``unit`` (V, 3)."""
@@ -252,6 +273,34 @@ class Construction:
 def _fine(c: Contour) -> np.ndarray:
     """Physical radii (radii × scale) on the fine grid."""
     return c.resampled(GRID) * c.scale
+
+
+def _variants(fine: np.ndarray) -> list[np.ndarray]:
+    """The contour, turned by π, mirrored (θ → −θ), and both: each keeps its longest diameter on axis."""
+    mirrored = np.roll(fine[::-1], 1)
+    h = GRID // 2
+    return [fine, np.roll(fine, h), mirrored, np.roll(mirrored, h)]
+
+
+def _best_orientation(fines: Sequence[np.ndarray]) -> list[np.ndarray]:
+    """Of the 4³ orientations of the three contours, the one with the smallest axis mismatch.
+
+    Turning a contour by π or mirroring it changes neither its shape nor its
+    descriptors, but changes which radii meet at the six axis points; picking
+    the best combination makes the correction (step 1) as small as it can be.
+    """
+    q = GRID // 4
+    idx = [0, q, 2 * q, 3 * q]
+    v = [np.array([f[idx] for f in _variants(fine)]) for fine in fines]  # 3 × (4 variants, 4 axis values)
+    a, b, c = v[0][:, None, None, :], v[1][None, :, None, :], v[2][None, None, :, :]
+    # pairs: C1(0)~C2(0), C1(π)~C2(π), C1(π/2)~C3(0), C1(3π/2)~C3(π), C2(π/2)~C3(π/2), C2(3π/2)~C3(3π/2)
+    cost = (
+        (a[..., 0] - b[..., 0]) ** 2 + (a[..., 2] - b[..., 2]) ** 2
+        + (a[..., 1] - c[..., 0]) ** 2 + (a[..., 3] - c[..., 2]) ** 2
+        + (b[..., 1] - c[..., 1]) ** 2 + (b[..., 3] - c[..., 3]) ** 2
+    )
+    i, j, k = np.unravel_index(int(np.argmin(cost)), cost.shape)
+    return [_variants(fines[0])[i], _variants(fines[1])[j], _variants(fines[2])[k]]
 
 
 def _correct(fines: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -328,17 +377,29 @@ def construct(p: Params, rng: Any = None) -> Construction:
     rng = np.random.default_rng(rng)
     inputs = input_contours(p, rng)
     aligned = [Contour(c.radii).aligned() for c in inputs]
+    # diameters through the origin along each contour's first and second axis
+    ext = np.array([[c(0.0) + c(np.pi), c(np.pi / 2) + c(3 * np.pi / 2)] for c in aligned]).reshape(3, 2)
     if p.aspect is not None:
-        L, I, S = p.aspect
-        g = (L * I * S) ** (1.0 / 3.0) / 2.0  # equal-volume diameter about 2
-        L, I, S = L / g, I / g, S / g
-        stretched = []
-        for c, (a, b) in zip(aligned, ((L, I), (L, S), (I, S))):
-            ex, ey = c.extents()
-            stretched.append(c.stretched(a / ex, b / ey))
-        aligned = stretched
-    sections, factors = _correct([_fine(c) for c in aligned])
-    return Construction(tuple(inputs), sections, factors, p.morph_exponent)
+        logs = np.log(np.asarray(p.aspect, dtype=np.float64))
+    else:
+        # least-squares X:Y:Z consistent with the three contours' own axis-diameter ratios
+        a, b, c = np.log(ext[:, 0] / ext[:, 1])
+        logs = np.array([a + b, c - a, -b - c]) / 3.0
+    dims = 2.0 * np.exp(logs - logs.mean())  # geometric mean 2: equal-volume diameter about 2
+    X, Y, Z = dims
+    stretched = [
+        c.stretched(u / e[0], v / e[1]) for c, e, (u, v) in zip(aligned, ext, ((X, Y), (X, Z), (Y, Z)))
+    ]
+    sections, factors = _correct(_best_orientation([_fine(c) for c in stretched]))
+    con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
+    if p.aspect is not None:
+        unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
+        ext = np.ptp(con.points(unit, geom), axis=0)
+        want = np.asarray(p.aspect, dtype=np.float64)
+        k = want / ext
+        k /= np.exp(np.log(k).mean())
+        con = dataclasses.replace(con, axis_scale=tuple(float(x) for x in k))
+    return con
 
 
 def build(p: Params, rng: np.random.Generator):
@@ -349,6 +410,8 @@ def build(p: Params, rng: np.random.Generator):
     if not np.isfinite(R).all() or R.min() <= 0:
         raise ParameterError(VALIDITY_PARAMETER, "give a surface with non-positive radii")
     vertices = unit * R[:, None]
+    if con.axis_scale != (1.0, 1.0, 1.0):
+        vertices *= np.asarray(con.axis_scale)
     info: dict[str, float] = {}
     D_in = [c.descriptors(8) for c in con.inputs]
     D_sec = descriptors_of_radii(con.sections, 8)
@@ -359,6 +422,8 @@ def build(p: Params, rng: np.random.Generator):
         for n in MEASURED:
             info[f"section_{plane}_D{n}"] = float(D_sec[k][n])
     info["correction"] = float(np.abs(con.factors - 1.0).max())
+    info["target_aspect"] = tuple(round(d / con.dims[2], 6) for d in con.dims)
+    info["axis_scale"] = con.axis_scale
     info["min_radius"] = float(R.min())
     info["max_radius"] = float(R.max())
     return vertices, np.array(faces), info
