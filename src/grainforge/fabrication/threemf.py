@@ -39,7 +39,9 @@ import numpy as np
 
 from .._version import __version__
 
-__all__ = ["ThreeMFWriter", "STLWriter", "mesh_xml", "stl_triangles", "read_3mf", "read_stl_parts", "Part"]
+__all__ = [
+    "ThreeMFWriter", "STLWriter", "mesh_xml", "stl_triangles", "read_3mf", "read_stl_parts", "read_parts", "Part",
+]
 
 _NS = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
 _MODEL = "3D/3dmodel.model"
@@ -291,3 +293,33 @@ def read_stl_parts(path) -> list[Part]:
         used, local = np.unique(ff, return_inverse=True)
         parts.append(Part(f"body-{k}", v[used], local.reshape(-1, 3)))
     return parts
+
+
+def read_parts(path) -> list[Part]:
+    """The parts of a mesh file: every build item of a 3MF, the single mesh of an STL/OBJ/PLY.
+
+    Raises
+    ------
+    ValueError
+        If the file is missing, unreadable or holds no triangles.
+    """
+    from pathlib import Path
+
+    path = Path(path)
+    if path.suffix.lower() == ".3mf":
+        if not path.is_file():
+            raise ValueError(f"{path}: no such file")
+        try:
+            parts = read_3mf(path)
+        except (ValueError, ElementTree.ParseError) as exc:
+            raise ValueError(f"{path}: {exc}") from None
+        if not parts:
+            raise ValueError(f"{path}: holds no objects")
+        return parts
+    from ..io import read_mesh
+
+    mesh = read_mesh(path)
+    # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
+    v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
+    return [Part(path.stem, v, f)]

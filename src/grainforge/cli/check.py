@@ -1,0 +1,53 @@
+"""``grainforge check FILE... --printer P``: will these grains print?"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+COLUMNS = ("file", "part", "status", "faces", "d_eq_mm", "solid", "self_intersections", "min_wall_mm",
+           "thin_area_%", "min_neck_mm", "problems")
+
+
+def _table(rows: list[dict]) -> str:
+    widths = {c: max(len(c), *(len(str(r[c])) for r in rows)) for c in COLUMNS if c != "problems"}
+    lines = ["  ".join(c.ljust(widths[c]) for c in widths) + "  problems"]
+    for r in rows:
+        lines.append("  ".join(str(r[c]).ljust(widths[c]) for c in widths) + "  " + str(r["problems"]))
+    return "\n".join(lines)
+
+
+@click.command()
+@click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
+@click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
+              help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
+@click.option("--csv", "as_csv", is_flag=True, help="Print the table as CSV instead of aligned text.")
+def check(files, printer_spec, as_csv):
+    """Check mesh FILES (STL, OBJ, PLY, 3MF; every object of a 3MF) against a printer.
+
+    Checks: watertight, manifold, one body, no self-intersection, wall
+    thickness / minimum feature and thin necks against the printer's minimum
+    wall, and grains below the printer's reliable size.  Prints a table on
+    stdout; exits with 1 when something will not print (FAIL), 0 otherwise
+    (WARN rows print but are fragile).
+    """
+    from ..fabrication.printability import check_mesh
+    from ..fabrication.printers import get_printer
+    from ..fabrication.threemf import read_parts
+    from ..io import csv_text
+    from .progress import progress_bar
+
+    printer = get_printer(printer_spec)
+    parts = [(path, part) for path in files for part in read_parts(path)]  # ValueError -> exit 2
+    rows = []
+    for path, part in progress_bar(total=len(parts), desc="check")(parts):
+        r = check_mesh(part.vertices, part.faces, printer, name=part.name).row()
+        rows.append({"file": str(path), **r})
+    click.echo(csv_text(rows, COLUMNS) if as_csv else _table(rows), nl=not as_csv)
+    failed = sum(r["status"] == "FAIL" for r in rows)
+    warned = sum(r["status"] == "WARN" for r in rows)
+    click.echo(f"{printer.name}: {len(rows)} part(s), {failed} will not print, {warned} fragile "
+               f"(min wall {printer.min_wall:g} mm, reliable size {printer.min_size:g} mm)", err=True)
+    if failed:
+        raise SystemExit(1)

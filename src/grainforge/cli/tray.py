@@ -1,0 +1,124 @@
+"""``grainforge tray``: lay out many grains on a printer's build plates in one print file."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from ..fabrication.scale import SIZE_DEFINITIONS
+from ..params import ParameterError
+from .options import bad_parameter
+from .progress import progress_bar
+
+
+def parse_param_values(method: str, pairs, preset: str | None):
+    """``name=value`` strings to a method's Params, converting by each field's declared kind."""
+    from ..methods import get
+    from ..params import specs
+    from .options import FloatList, build_params
+
+    module = get(method)
+    by_name = {s.name: s for s in specs(module.Params)}
+    values = {}
+    for pair in pairs:
+        name, sep, text = pair.partition("=")
+        name = name.strip().replace("-", "_")
+        if not sep or not name:
+            raise click.BadParameter(f"expected NAME=VALUE, got {pair!r}", param_hint="'--param'")
+        spec = by_name.get(name)
+        if spec is None:
+            raise click.BadParameter(
+                f"{method} has no parameter {name!r} (has {', '.join(by_name)})", param_hint="'--param'")
+        try:
+            if spec.kind == "int":
+                values[name] = int(text)
+            elif spec.kind == "float":
+                values[name] = float(text)
+            elif spec.kind == "floats":
+                values[name] = FloatList().convert(text, None, None)
+            else:
+                values[name] = text
+        except (ValueError, click.BadParameter):
+            raise click.BadParameter(f"{name}: cannot read {text!r} as {spec.kind}", param_hint="'--param'") from None
+    if preset is not None:
+        if "preset" not in by_name:
+            raise click.BadParameter(f"method {method!r} has no presets", param_hint="'--preset'")
+        values["preset"] = preset
+    return build_params(module.Params, values), values
+
+
+@click.command()
+@click.argument("inputs", nargs=-1, type=click.Path(path_type=Path))
+@click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
+              help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
+@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+              help="Print file: .3mf (one named object per grain) or .stl (binary). "
+                   "Also writes STEM.csv and STEM-plateK.png.")
+@click.option("--method", default=None, help="Generate grains on the fly with this method (instead of INPUTS).")
+@click.option("--preset", default=None, help="The method's preset (same as --param preset=NAME).")
+@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
+              help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
+@click.option("--count", default=1, show_default=True, type=click.IntRange(min=1),
+              help="Number of generated grains; grain i uses seed S + i.")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="Seed S of the first grain.")
+@click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="Grain size in mm (generated grains: default 10; files: keep their size unless given).")
+@click.option("--size-definition", default="equivalent", show_default=True, type=click.Choice(list(SIZE_DEFINITIONS)),
+              help="equivalent: sphere of equal volume; sieve: intermediate dimension I; longest: L.")
+@click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
+              help="Minimum distance between grains in mm [default: two printer resolutions].")
+@click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
+              help="Finest mesh level resolution matching may choose [default 6].")
+@click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),
+              help="Processes making grains (the output does not depend on it).")
+@click.option("--overwrite", is_flag=True, help="Replace existing output files.")
+def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, size_definition, gap,
+         max_subdivisions, workers, overwrite):
+    """Lay out grains on the build plates of a printer, at least --gap apart, in one print file.
+
+    Grains come from INPUTS (mesh files, folders of them, or manifest.csv files
+    written by `grainforge generate`) or are generated on the fly with --method:
+
+      grainforge tray --method cri --preset rough-angular --count 8000 --size 2 \\
+          --printer objet-eden-250 --out tray.3mf
+
+    Generated grains get the mesh resolution their printed size and the
+    printer call for (unless --param subdivisions=N is given); the choice is
+    reported and recorded in the CSV.  PolyJet printers stack grains in 3D;
+    others get one layer, each grain resting on a stable face.
+    """
+    from ..fabrication.printers import get_printer
+    from ..fabrication.tray import FileSource, GeneratorSource, build_tray, files_from
+
+    printer = get_printer(printer_spec)
+    if method is not None:
+        if inputs:
+            raise click.UsageError("give either INPUTS or --method, not both")
+        p, given = parse_param_values(method, params, preset)
+        source = GeneratorSource(method, p, tuple(range(seed, seed + count)), 10.0 if size is None else size,
+                                 size_definition)
+        match = "subdivisions" not in given
+    else:
+        if not inputs:
+            raise click.UsageError("give grain files, folders or manifests, or --method to generate grains")
+        if params or preset:
+            raise click.UsageError("--param and --preset need --method")
+        source = FileSource(files_from(inputs), size, size_definition)
+        match = False
+    try:
+        result = build_tray(
+            source, printer, out, gap=gap, workers=workers, overwrite=overwrite, match_resolution=match,
+            max_subdivisions=max_subdivisions, progress=progress_bar(total=len(source), desc="tray"),
+        )
+    except ParameterError as exc:
+        raise bad_parameter(exc) from None
+    except FileExistsError as exc:
+        raise click.UsageError(str(exc)) from None
+    if result.resolution is not None:
+        click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): "
+                   f"{result.resolution.describe()}", err=True)
+    layers = ", ".join(str(n) for n in result.layers)
+    click.echo(f"wrote {len(result.rows)} grains on {result.plates} plate(s) ({layers} layer(s)), "
+               f"gap {result.gap * 1000:g} µm: {', '.join(map(str, result.files))}; "
+               f"positions in {result.csv}; previews {', '.join(p.name for p in result.previews)}", err=True)

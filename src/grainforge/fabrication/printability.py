@@ -1,0 +1,244 @@
+"""Will it print?  Checks of a grain mesh against a printer profile.
+
+:func:`check_mesh` runs, for one part:
+
+- **solid**: watertight, manifold, consistently oriented, one body, positive
+  volume (:func:`grainforge.solid.solid_problems`);
+- **self-intersection**: pairs of non-adjacent triangles that cross
+  (:func:`self_intersections`);
+- **wall thickness / minimum feature**: rays cast inward along the normal of
+  each face (or an area-weighted sample of faces) measure the local thickness
+  of the solid (:func:`local_thickness`).  The part fails when more than
+  :data:`THIN_AREA_LIMIT` of its surface is thinner than the printer's
+  ``min_wall``; a smaller thin area (sharp corners and tips) is a warning;
+- **necks**: the thickness measured at saddle-shaped parts of the surface
+  (negative angle defect at the face's vertices), where aggregates of
+  particles join.  Thinner than ``min_wall``: fail; thinner than
+  :data:`NECK_FACTOR` x ``min_wall``: a warning that the grain is fragile;
+- **size**: an equivalent diameter below the printer's reliable ``min_size``
+  fails, and so does a part larger than the build volume.
+
+All lengths are in millimetres.  Thickness along the inward normal is an
+approximation of the medial-axis thickness (it can over-estimate a wall
+met at a slant); coplanar overlapping triangles are not reported as
+self-intersections.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+__all__ = ["CheckResult", "check_mesh", "local_thickness", "self_intersections", "THIN_AREA_LIMIT", "NECK_FACTOR"]
+
+#: largest fraction of the surface area allowed below ``min_wall`` before a part fails.
+THIN_AREA_LIMIT = 0.005
+#: necks thinner than this many ``min_wall`` are reported as fragile.
+NECK_FACTOR = 2.0
+#: faces sampled for ray casting (all faces when there are fewer).
+MAX_RAYS = 4000
+
+
+@dataclass
+class CheckResult:
+    """Outcome of :func:`check_mesh` for one part."""
+
+    name: str
+    faces: int
+    equivalent_diameter: float
+    solid: list[str]
+    self_intersections: int
+    min_thickness: float
+    thin_area: float
+    min_neck: float
+    failures: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+    @property
+    def ok(self) -> bool:
+        return not self.failures
+
+    @property
+    def status(self) -> str:
+        return "FAIL" if self.failures else ("WARN" if self.warnings else "OK")
+
+    def row(self) -> dict[str, Any]:
+        return {
+            "part": self.name, "status": self.status, "faces": self.faces,
+            "d_eq_mm": round(self.equivalent_diameter, 4),
+            "solid": "yes" if not self.solid else "no",
+            "self_intersections": self.self_intersections,
+            "min_wall_mm": round(self.min_thickness, 4) if np.isfinite(self.min_thickness) else "",
+            "thin_area_%": round(100 * self.thin_area, 2),
+            "min_neck_mm": round(self.min_neck, 4) if np.isfinite(self.min_neck) else "",
+            "problems": "; ".join(self.failures + self.warnings),
+        }
+
+
+def self_intersections(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9) -> int:
+    """Number of pairs of triangles without a shared vertex whose interiors cross.
+
+    Candidate pairs come from a k-d tree on triangle centroids (bounding-sphere
+    overlap); each pair is tested exactly by intersecting the three edges of
+    each triangle with the other (vectorised Möller–Trumbore).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> a = trimesh.creation.box()
+    >>> self_intersections(a.vertices, a.faces)
+    0
+    >>> b = a.copy().apply_translation([0.5, 0.3, 0.2])
+    >>> both = trimesh.util.concatenate([a, b])
+    >>> self_intersections(both.vertices, both.faces) > 0
+    True
+    """
+    from scipy.spatial import cKDTree
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    tri = v[f]
+    cen = tri.mean(axis=1)
+    rad = np.linalg.norm(tri - cen[:, None], axis=2).max(axis=1)
+    pairs = cKDTree(cen).query_pairs(2 * rad.max() + tol, output_type="ndarray")
+    if len(pairs) == 0:
+        return 0
+    i, j = pairs[:, 0], pairs[:, 1]
+    near = np.linalg.norm(cen[i] - cen[j], axis=1) <= rad[i] + rad[j] + tol
+    share = (f[i][:, :, None] == f[j][:, None, :]).any(axis=(1, 2))
+    keep = near & ~share
+    i, j = i[keep], j[keep]
+    hit = np.zeros(len(i), dtype=bool)
+    for a, b in ((i, j), (j, i)):
+        for k in range(3):
+            p0 = tri[a, k]
+            p1 = tri[a, (k + 1) % 3]
+            hit |= _segment_hits_triangle(p0, p1, tri[b], tol)
+    return int(hit.sum())
+
+
+def _segment_hits_triangle(p0, p1, tri, tol):
+    d = p1 - p0
+    e1 = tri[:, 1] - tri[:, 0]
+    e2 = tri[:, 2] - tri[:, 0]
+    h = np.cross(d, e2)
+    a = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(a) > 1e-15
+    inv = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
+    s = p0 - tri[:, 0]
+    u = inv * np.einsum("ij,ij->i", s, h)
+    q = np.cross(s, e1)
+    w = inv * np.einsum("ij,ij->i", d, q)
+    t = inv * np.einsum("ij,ij->i", e2, q)
+    eps = 1e-9
+    return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
+
+
+def local_thickness(mesh, max_rays: int = MAX_RAYS) -> tuple[np.ndarray, np.ndarray]:
+    """Thickness of the solid behind sampled faces, by rays cast inward along the face normals.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh
+        A closed, outward-oriented mesh.
+    max_rays : int
+        At most this many faces are sampled (area-weighted, deterministic).
+
+    Returns
+    -------
+    faces : (k,) int64
+        Sampled face indices.
+    thickness : (k,) float64
+        Distance to the first surface crossed (``inf`` if none).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> _, t = local_thickness(trimesh.creation.box(extents=(4.0, 4.0, 0.1)))
+    >>> round(float(t.min()), 6)
+    0.1
+    """
+    from trimesh.ray.ray_triangle import RayMeshIntersector
+
+    nf = len(mesh.faces)
+    if nf <= max_rays:
+        idx = np.arange(nf)
+    else:
+        rng = np.random.default_rng(0)
+        p = mesh.area_faces / mesh.area_faces.sum()
+        idx = np.sort(rng.choice(nf, size=max_rays, replace=False, p=p))
+    normals = np.asarray(mesh.face_normals)[idx]
+    scale = float(np.ptp(mesh.vertices, axis=0).max())
+    eps = 1e-7 * scale
+    origins = np.asarray(mesh.triangles_center)[idx] - normals * eps
+    locs, ray_idx, tri_idx = RayMeshIntersector(mesh).intersects_location(origins, -normals, multiple_hits=True)
+    thickness = np.full(len(idx), np.inf)
+    if len(ray_idx):
+        dist = np.einsum("ij,ij->i", locs - origins[ray_idx], -normals[ray_idx])
+        valid = (dist > eps) & (tri_idx != idx[ray_idx])
+        np.minimum.at(thickness, ray_idx[valid], dist[valid] + eps)
+    return idx, thickness
+
+
+def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "part") -> CheckResult:
+    """Check one part against ``printer`` (a :class:`~grainforge.fabrication.printers.Printer` or name).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(3, radius=1.0)
+    >>> r = check_mesh(s.vertices, s.faces, "objet-eden-250")
+    >>> r.status, round(r.min_thickness, 1)   # faces of an inscribed polyhedron: just under 2
+    ('OK', 2.0)
+    >>> tiny = check_mesh(s.vertices * 0.05, s.faces, "objet-eden-250")
+    >>> tiny.status, tiny.failures[0][:31]
+    ('FAIL', 'equivalent diameter 0.0997 mm <')
+    """
+    import trimesh
+
+    from ..solid import signed_volume, solid_problems
+    from .printers import get_printer
+
+    printer = get_printer(printer)
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    problems = solid_problems(v, f)
+    vol = signed_volume(v, f) if len(f) else 0.0
+    d_eq = float(np.cbrt(6 * abs(vol) / np.pi))
+    res = CheckResult(name, len(f), d_eq, problems, 0, np.inf, 0.0, np.inf)
+    if problems:
+        res.failures.append("not a valid solid: " + "; ".join(problems))
+    if len(f) == 0:
+        return res
+    res.self_intersections = self_intersections(v, f)
+    if res.self_intersections:
+        res.failures.append(f"{res.self_intersections} self-intersecting triangle pairs")
+    ext = np.sort(np.ptp(v, axis=0))[::-1]
+    if (ext > np.sort(printer.build_volume)[::-1]).any():
+        res.failures.append(f"larger than the build volume ({' x '.join(f'{e:.1f}' for e in ext)} mm)")
+    if d_eq < printer.min_size:
+        res.failures.append(f"equivalent diameter {d_eq:.3g} mm < reliable size {printer.min_size:g} mm")
+    if not problems:
+        mesh = trimesh.Trimesh(v, f, process=False, validate=False)
+        idx, t = local_thickness(mesh)
+        area = mesh.area_faces[idx]
+        thin = t < printer.min_wall
+        res.min_thickness = float(t.min())
+        res.thin_area = float(area[thin].sum() / area.sum())
+        if res.thin_area > THIN_AREA_LIMIT:
+            res.failures.append(f"{100 * res.thin_area:.1f}% of the surface is thinner than the "
+                                f"minimum wall {printer.min_wall:g} mm (thinnest {res.min_thickness:.3g} mm)")
+        elif thin.any():
+            res.warnings.append(f"thin spots (min {res.min_thickness:.3g} mm < {printer.min_wall:g} mm) "
+                                f"on {100 * res.thin_area:.2f}% of the surface: sharp tips will be rounded")
+        defect = mesh.vertex_defects[f[idx]].mean(axis=1)
+        saddle = defect < -1e-9
+        if saddle.any():
+            res.min_neck = float(t[saddle].min())
+            if res.min_neck < printer.min_wall and res.thin_area <= THIN_AREA_LIMIT:
+                res.failures.append(f"neck {res.min_neck:.3g} mm thinner than the minimum wall {printer.min_wall:g} mm")
+            elif res.min_neck < NECK_FACTOR * printer.min_wall:
+                res.warnings.append(f"fragile neck {res.min_neck:.3g} mm (< {NECK_FACTOR:g} x minimum wall)")
+    return res

@@ -1,0 +1,554 @@
+"""Bulk print trays: many grains laid out on the build plates of a printer.
+
+The pipeline streams: grains are made (generated or read) and oriented in
+worker processes, then placed one by one in index order by an online shelf
+packer and appended to the print file, so memory does not grow with the
+number of grains.  Only a few numbers and a small footprint polygon per
+grain are kept, for the CSV of positions and the plate previews.
+
+Layout
+------
+Each grain is oriented first:
+
+- printers that allow stacking (PolyJet, support material surrounds every
+  part): the principal axes of the grain are aligned with x, y, z (longest
+  along x), which makes its bounding box tight;
+- other printers (FDM, SLA): the grain rests on a **stable face** of its
+  convex hull, the hull face nearest to the volume centroid (the centroid
+  projects inside that face, so the grain does not tip over), and is turned
+  about z to align its footprint with x.
+
+The oriented boxes are then packed in rows along x, rows stacked along y into
+a layer, and, when stacking is allowed, layers stacked along z; when a plate is
+full a new one starts.  Boxes are separated by at least the gap, and every
+grain lies inside its box, so no two grains are closer than the gap.
+
+Examples
+--------
+>>> p = ShelfPacker((10.0, 10.0, 10.0), gap=1.0, stacking=True)
+>>> [p.place((4.0, 4.0, 4.0)) for _ in range(5)]
+[(0, 0.0, 0.0, 0.0), (0, 5.0, 0.0, 0.0), (0, 0.0, 5.0, 0.0), (0, 5.0, 5.0, 0.0), (0, 0.0, 0.0, 5.0)]
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import os
+import tempfile
+from collections import deque
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable, Iterable, Iterator, Sequence
+
+import numpy as np
+
+__all__ = [
+    "ShelfPacker", "GeneratorSource", "FileSource", "Prepared", "TrayResult", "build_tray",
+    "orient_principal", "orient_stable", "files_from", "tray_outputs",
+]
+
+OUT_FORMATS = (".3mf", ".stl")
+
+
+# --------------------------------------------------------------------------- orientation
+
+def orient_principal(vertices: np.ndarray) -> np.ndarray:
+    """Rotate vertices so their principal axes are x (largest spread), y, z (a proper rotation)."""
+    c = vertices.mean(axis=0)
+    d = vertices - c
+    _, vecs = np.linalg.eigh(d.T @ d)
+    R = vecs[:, ::-1].copy()
+    if np.linalg.det(R) < 0:
+        R[:, 2] *= -1
+    return d @ R
+
+
+def _rotation_to(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """The rotation matrix turning unit vector ``a`` onto unit vector ``b``."""
+    v = np.cross(a, b)
+    s = np.linalg.norm(v)
+    c = float(a @ b)
+    if s < 1e-12:
+        if c > 0:
+            return np.eye(3)
+        axis = np.array([1.0, 0.0, 0.0]) if abs(a[0]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        axis -= a * (axis @ a)
+        axis /= np.linalg.norm(axis)
+        return 2.0 * np.outer(axis, axis) - np.eye(3)
+    K = np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+    return np.eye(3) + K + K @ K * ((1 - c) / s**2)
+
+
+def orient_stable(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Rotate a closed mesh so it rests on a stable face of its hull (that face at the bottom, z = min).
+
+    The hull face whose plane is nearest to the volume centroid is chosen: the
+    centroid's projection onto it lies inside it, so the grain is in stable
+    equilibrium resting on that face.  The footprint is then turned about z
+    so its principal axis is x.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> box = trimesh.creation.box(extents=(1.0, 3.0, 2.0))
+    >>> v = orient_stable(np.asarray(box.vertices), np.asarray(box.faces))
+    >>> np.round(v.max(axis=0) - v.min(axis=0), 6).tolist()   # rests on its largest face
+    [3.0, 2.0, 1.0]
+    """
+    from scipy.spatial import ConvexHull
+
+    from ..solid import volume_centroid
+
+    c = volume_centroid(vertices, faces)
+    eq = ConvexHull(vertices).equations  # n·x + d <= 0 inside, n outward unit
+    dist = -(eq[:, :3] @ c + eq[:, 3])
+    n = eq[int(np.argmin(dist)), :3]
+    v = (vertices - c) @ _rotation_to(n, np.array([0.0, 0.0, -1.0])).T
+    xy = v[:, :2] - v[:, :2].mean(axis=0)
+    _, vecs = np.linalg.eigh(xy.T @ xy)
+    a = vecs[:, 1]
+    ang = np.arctan2(a[1], a[0])
+    ca, sa = np.cos(-ang), np.sin(-ang)
+    Rz = np.array([[ca, -sa, 0.0], [sa, ca, 0.0], [0.0, 0.0, 1.0]])
+    return v @ Rz.T
+
+
+# --------------------------------------------------------------------------- packing
+
+class ShelfPacker:
+    """Online shelf packing of boxes on build plates with a minimum gap.
+
+    Boxes are placed in rows along x; rows fill a layer along y; with
+    ``stacking`` layers fill the plate along z; then a new plate starts.
+
+    Parameters
+    ----------
+    volume : (3,) float
+        Build volume x, y, z.
+    gap : float
+        Minimum distance between boxes (> 0).
+    stacking : bool
+        Whether layers may be stacked in z.
+    """
+
+    def __init__(self, volume: Sequence[float], gap: float, stacking: bool):
+        self.W, self.D, self.H = (float(x) for x in volume)
+        self.row_width = self.W
+        self.gap = float(gap)
+        self.stacking = bool(stacking)
+        self.plate = 0
+        self.x = self.y = self.z = 0.0
+        self.row_depth = self.layer_height = 0.0
+        self.layers = 1
+
+    def compact(self, count: int, extents: Sequence[float]) -> None:
+        """Limit rows to about a square patch for ``count`` boxes like ``extents`` (a compact, not a strip, layout)."""
+        a, b, _ = (float(e) + self.gap for e in extents)
+        side = float(np.sqrt(count * a * b * 1.1))
+        self.row_width = min(self.W, max(side, a))
+
+    def place(self, extents: Sequence[float]) -> tuple[int, float, float, float]:
+        """Position (plate, x, y, z) of the min corner of the next box.
+
+        Raises
+        ------
+        ValueError
+            If the box is larger than the build volume.
+        """
+        a, b, c = (float(e) for e in extents)
+        if a > self.W or b > self.D or c > self.H:
+            raise ValueError(
+                f"a grain of {a:.3g} x {b:.3g} x {c:.3g} mm does not fit the build volume "
+                f"{self.W:g} x {self.D:g} x {self.H:g} mm"
+            )
+        while True:
+            if self.x + a <= max(self.row_width, a) and self.y + b <= self.D and self.z + c <= self.H:
+                pos = (self.plate, self.x, self.y, self.z)
+                self.x += a + self.gap
+                self.row_depth = max(self.row_depth, b)
+                self.layer_height = max(self.layer_height, c)
+                return pos
+            if self.x > 0:  # new row
+                self.y += self.row_depth + self.gap
+                self.x, self.row_depth = 0.0, 0.0
+            elif self.y > 0 and self.stacking:  # new layer
+                self.z += self.layer_height + self.gap
+                self.y, self.layer_height = 0.0, 0.0
+                self.layers += 1
+            else:  # new plate
+                self.plate += 1
+                self.x = self.y = self.z = 0.0
+                self.row_depth = self.layer_height = 0.0
+                self.layers = 1
+
+
+# --------------------------------------------------------------------------- sources
+
+@dataclass(frozen=True)
+class GeneratorSource:
+    """Grains generated on the fly: ``method`` with ``params``, grain i from ``seeds[i]``, scaled to ``size`` mm."""
+
+    method: str
+    params: Any
+    seeds: tuple[int, ...]
+    size: float
+    size_definition: str = "equivalent"
+
+    def __len__(self):
+        return len(self.seeds)
+
+
+@dataclass(frozen=True)
+class FileSource:
+    """Grains read from mesh files (millimetres), optionally rescaled to ``size``."""
+
+    paths: tuple[Path, ...]
+    size: float | None = None
+    size_definition: str = "equivalent"
+
+    def __len__(self):
+        return len(self.paths)
+
+
+def files_from(inputs: Iterable[str | Path]) -> tuple[Path, ...]:
+    """Mesh files named by ``inputs``: files, folders (every STL/OBJ/PLY/3MF in them, sorted) or manifest CSVs.
+
+    Raises
+    ------
+    ValueError
+        For a missing path, a manifest without a ``file`` column, or no files at all.
+    """
+    import csv
+
+    exts = {".stl", ".obj", ".ply", ".3mf"}
+    out: list[Path] = []
+    for item in inputs:
+        p = Path(item)
+        if p.is_dir():
+            out += sorted(q for q in p.iterdir() if q.suffix.lower() in exts and not q.name.startswith("."))
+        elif p.suffix.lower() == ".csv" and p.is_file():
+            with p.open(newline="", encoding="utf-8") as fh:
+                reader = csv.DictReader(fh)
+                if not reader.fieldnames or "file" not in reader.fieldnames:
+                    raise ValueError(f"{p}: a manifest needs a 'file' column")
+                out += [p.parent / row["file"] for row in reader]
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise ValueError(f"{p}: no such file or folder")
+    if not out:
+        raise ValueError("no grain files found in the inputs")
+    missing = [q for q in out if not q.is_file()]
+    if missing:
+        raise ValueError(f"{missing[0]}: no such file")
+    return tuple(out)
+
+
+# --------------------------------------------------------------------------- per-grain work (workers)
+
+@dataclass
+class Prepared:
+    """A grain made ready for the tray (picklable, small except ``payload``)."""
+
+    index: int
+    name: str
+    source: str
+    extents: np.ndarray
+    footprint: np.ndarray  # (k, 2) float32 convex hull of the xy projection, part coordinates
+    payload: Any  # 3MF <mesh> bytes or STL records
+    faces: int
+    volume: float
+    subdivisions: int | None
+
+
+def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
+    kind = task["kind"]
+    if kind == "gen":
+        from ..methods import generate
+        from .scale import scale_factor
+
+        g = generate(task["method"], task["params"], task["seed"])
+        k = scale_factor(g, task["size"], task["size_definition"])
+        name = f"{task['method']}-{task['index']:05d}"
+        return name, f"seed {task['seed']}", g.vertices * k, g.faces, getattr(task["params"], "subdivisions", None)
+    from ..solid import solid_problems
+    from .scale import scale_factor
+    from .threemf import read_parts
+
+    path = Path(task["path"])
+    parts = read_parts(path)
+    if len(parts) != 1:
+        raise ValueError(f"{path}: holds {len(parts)} parts; a tray takes one grain per file")
+    v, f = parts[0].vertices, parts[0].faces
+    problems = solid_problems(v, f)
+    if problems:
+        raise ValueError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
+    if task["size"] is not None:
+        from types import SimpleNamespace
+
+        v = v * scale_factor(SimpleNamespace(vertices=v, faces=f, mesh=parts[0].mesh), task["size"],
+                             task["size_definition"])
+    return path.stem, str(path), v, f, None
+
+
+def prepare(task: dict) -> Prepared:
+    """Make, scale and orient one grain, and encode it for the output format."""
+    from scipy.spatial import ConvexHull
+
+    from ..solid import signed_volume
+    from .threemf import mesh_xml, stl_triangles
+
+    name, source, v, f, subdivisions = _grain_mesh(task)
+    v = orient_principal(v) if task["stacking"] else orient_stable(v, f)
+    v = v - v.min(axis=0)
+    extents = v.max(axis=0)
+    hull = ConvexHull(v[:, :2])
+    footprint = v[hull.vertices, :2].astype(np.float32)
+    payload = mesh_xml(v, f) if task["fmt"] == ".3mf" else stl_triangles(v, f)
+    return Prepared(task["index"], name, source, extents, footprint, payload, len(f), signed_volume(v, f),
+                    subdivisions)
+
+
+def _prepare_chunk(tasks: list[dict]) -> list[Prepared]:
+    return [prepare(t) for t in tasks]
+
+
+def _prepared_in_order(tasks: list[dict], workers: int, chunk: int = 16) -> Iterator[Prepared]:
+    """Prepared grains in index order; at most a few chunks in flight, so memory stays bounded."""
+    chunks = [tasks[i : i + chunk] for i in range(0, len(tasks), chunk)]
+    if workers <= 1:
+        for c in chunks:
+            yield from _prepare_chunk(c)
+        return
+    from concurrent.futures import ProcessPoolExecutor
+
+    with ProcessPoolExecutor(max_workers=workers) as pool:
+        pending: deque = deque()
+        it = iter(chunks)
+        for c in it:
+            pending.append(pool.submit(_prepare_chunk, c))
+            if len(pending) >= 3 * workers:
+                break
+        while pending:
+            done = pending.popleft().result()
+            nxt = next(it, None)
+            if nxt is not None:
+                pending.append(pool.submit(_prepare_chunk, nxt))
+            yield from done
+
+
+# --------------------------------------------------------------------------- the tray
+
+@dataclass
+class TrayResult:
+    """What :func:`build_tray` wrote."""
+
+    files: list[Path]
+    previews: list[Path]
+    csv: Path
+    rows: list[dict[str, Any]]
+    plates: int
+    resolution: Any = None
+    gap: float = 0.0
+    layers: list[int] = field(default_factory=list)
+
+
+def tray_outputs(out: Path, plates: int) -> tuple[list[Path], list[Path], Path]:
+    """Print files, previews and CSV of a tray of ``plates`` plates written to ``out``.
+
+    One plate: ``out`` itself; several: ``STEM-plateK.EXT``.  Previews are
+    always ``STEM-plateK.png`` and the CSV ``STEM.csv``.
+    """
+    stem, ext = out.stem, out.suffix
+    files = [out] if plates == 1 else [out.with_name(f"{stem}-plate{k}{ext}") for k in range(1, plates + 1)]
+    previews = [out.with_name(f"{stem}-plate{k}.png") for k in range(1, plates + 1)]
+    return files, previews, out.with_name(f"{stem}.csv")
+
+
+def _existing_outputs(out: Path) -> list[Path]:
+    stem, ext = out.stem, out.suffix
+    found = [p for p in (out, out.with_name(f"{stem}.csv")) if p.exists()]
+    if out.parent.is_dir():
+        found += sorted(out.parent.glob(f"{stem}-plate*{ext}")) + sorted(out.parent.glob(f"{stem}-plate*.png"))
+    return found
+
+
+def _preview(path: Path, footprints: list[np.ndarray], layer_of: list[int], volume, title: str) -> None:
+    import io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+    from matplotlib.patches import Rectangle
+
+    from ..io import atomic_write
+
+    W, D, _ = volume
+    fig, ax = plt.subplots(figsize=(6, 6 * D / W + 0.4), dpi=120)
+    ax.add_patch(Rectangle((0, 0), W, D, fill=False, edgecolor="0.3", linewidth=1))
+    cmap = plt.get_cmap("viridis")
+    top = max(layer_of) if layer_of else 0
+    colors = [cmap(0.15 + 0.7 * (lay / top if top else 0)) for lay in layer_of]
+    ax.add_collection(PolyCollection(footprints, facecolors=colors, edgecolors="none"))
+    ax.set_xlim(-0.02 * W, 1.02 * W)
+    ax.set_ylim(-0.02 * D, 1.02 * D)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (mm)")
+    ax.set_ylabel("y (mm)")
+    ax.set_title(title, fontsize=9)
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", metadata={"Software": None})
+    plt.close(fig)
+    atomic_write(path, buf.getvalue())
+
+
+def _tasks(source, fmt: str, stacking: bool) -> list[dict]:
+    common = {"fmt": fmt, "stacking": stacking}
+    if isinstance(source, GeneratorSource):
+        return [dict(common, kind="gen", index=i, method=source.method, params=source.params, seed=int(s),
+                     size=float(source.size), size_definition=source.size_definition)
+                for i, s in enumerate(source.seeds)]
+    return [dict(common, kind="file", index=i, path=str(p), size=source.size,
+                 size_definition=source.size_definition) for i, p in enumerate(source.paths)]
+
+
+def build_tray(
+    source: GeneratorSource | FileSource,
+    printer,
+    out: str | Path,
+    *,
+    gap: float | None = None,
+    workers: int = 2,
+    overwrite: bool = False,
+    match_resolution: bool = True,
+    max_subdivisions: int | None = None,
+    progress: Callable[[Iterable], Iterable] | None = None,
+) -> TrayResult:
+    """Lay out grains on the build plates of ``printer`` and write the print file(s).
+
+    Parameters
+    ----------
+    source : GeneratorSource or FileSource
+    printer : Printer or str
+    out : path
+        ``.3mf`` (one named object per grain) or ``.stl`` (binary).
+    gap : float, optional
+        Minimum distance between grains, mm (default two printer resolutions).
+    workers : int
+        Processes that make the grains (output does not depend on it).
+    overwrite : bool
+        Replace existing outputs.
+    match_resolution : bool
+        For generated grains whose method has ``subdivisions``: choose it with
+        :func:`~grainforge.fabrication.resolution.match_subdivisions` (pilots:
+        the first three seeds).  If false, the given params are used as they are.
+    max_subdivisions : int, optional
+        Finest level resolution matching may choose.
+    progress : callable, optional
+        Wraps the iterator of grains (a progress bar).
+
+    Returns
+    -------
+    TrayResult
+
+    Raises
+    ------
+    ValueError
+        For a bad extension, gap, or a grain that does not fit the printer.
+    FileExistsError
+        If an output exists and ``overwrite`` is false.
+    """
+    from ..io import write_csv
+    from .printers import get_printer
+    from .resolution import MAX_MATCHED, match_subdivisions, supports_matching
+    from .threemf import STLWriter, ThreeMFWriter
+
+    printer = get_printer(printer)
+    out = Path(out)
+    fmt = out.suffix.lower()
+    if fmt not in OUT_FORMATS:
+        raise ValueError(f"--out must end in .3mf or .stl, got {out.name!r}")
+    gap = printer.default_gap if gap is None else float(gap)
+    if not np.isfinite(gap) or gap <= 0:
+        raise ValueError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
+    if len(source) == 0:
+        raise ValueError("no grains to lay out")
+    if not overwrite:
+        existing = _existing_outputs(out)
+        if existing:
+            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+    resolution = None
+    if isinstance(source, GeneratorSource) and match_resolution and supports_matching(source.method):
+        resolution = match_subdivisions(
+            source.method, source.params, source.size, source.size_definition, printer, source.seeds[:3],
+            max_level=MAX_MATCHED if max_subdivisions is None else max_subdivisions,
+        )
+        source = dataclasses.replace(source, params=dataclasses.replace(source.params,
+                                                                         subdivisions=resolution.subdivisions))
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    packer = ShelfPacker(printer.build_volume, gap, printer.stacking)
+    temps: list[Path] = []
+    rows: list[dict[str, Any]] = []
+    footprints: list[list[np.ndarray]] = []
+    layers_of: list[list[int]] = []
+    layer_count: list[int] = []
+    writer = fh = None
+    plate = -1
+    try:
+        it = _prepared_in_order(_tasks(source, fmt, printer.stacking), workers)
+        if progress is not None:
+            it = progress(it)
+        for p in it:
+            if not rows:
+                packer.compact(len(source), p.extents)
+            pl, x, y, z = packer.place(p.extents)
+            if pl != plate:
+                if writer is not None:
+                    writer.close()
+                    fh.close()
+                    layer_count.append(prev_layers)
+                fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+                temps.append(Path(tmp))
+                umask = os.umask(0)
+                os.umask(umask)
+                os.chmod(tmp, 0o666 & ~umask)
+                fh = os.fdopen(fd, "w+b")
+                writer = ThreeMFWriter(fh) if fmt == ".3mf" else STLWriter(fh)
+                footprints.append([])
+                layers_of.append([])
+                plate = pl
+            prev_layers = packer.layers
+            writer.add_object(p.name, p.payload, (x, y, z))
+            footprints[-1].append(p.footprint + np.array([x, y], dtype=np.float32))
+            layers_of[-1].append(packer.layers - 1)
+            rows.append({
+                "index": p.index, "name": p.name, "source": p.source, "plate": pl + 1,
+                "x": x, "y": y, "z": z,
+                "size_x": float(p.extents[0]), "size_y": float(p.extents[1]), "size_z": float(p.extents[2]),
+                "volume": p.volume, "equivalent_diameter": float(np.cbrt(6 * p.volume / np.pi)),
+                "faces": p.faces, "subdivisions": p.subdivisions,
+                "chordal_deviation": None if resolution is None else resolution.deviation,
+            })
+        writer.close()
+        fh.close()
+        layer_count.append(packer.layers)
+        files, previews, csv_path = tray_outputs(out, len(temps))
+        for tmp, final in zip(temps, files):
+            os.replace(tmp, final)
+        temps = []
+        for k, path in enumerate(previews):
+            n = len(footprints[k])
+            _preview(path, footprints[k], layers_of[k], printer.build_volume,
+                     f"{out.name} plate {k + 1}/{len(previews)}: {n} grains, {layer_count[k]} layer(s), "
+                     f"{printer.name}, gap {gap * 1000:.0f} µm")
+        write_csv(csv_path, rows)
+    except BaseException:
+        if fh is not None and not fh.closed:
+            fh.close()
+        for t in temps:
+            t.unlink(missing_ok=True)
+        raise
+    return TrayResult(files, previews, csv_path, rows, len(files), resolution, gap, layer_count)
