@@ -310,6 +310,7 @@ class Recipe:
     params: Mapping[str, Any]  # name -> fixed value or Distribution
     size: Any  # FixedSize | LognormalSize | GradingCurve
     size_definition: str
+    sampling: str = "quasi"
     text: str = field(default="", repr=False)
     source: str = "<recipe>"
 
@@ -396,8 +397,11 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
         fail(["params", bad], exc.reason)
 
     size, definition = _size(data.get("size"), fail)
+    sampling = (data.get("size") or {}).get("sampling", "quasi")
+    if sampling not in ("quasi", "random"):
+        fail(["size", "sampling"], f"must be \"quasi\" or \"random\", got {sampling!r}")
     return Recipe(method=method, count=count, seed=seed, format=fmt, params=params, size=size,
-                  size_definition=definition, text=text, source=source)
+                  size_definition=definition, sampling=sampling, text=text, source=source)
 
 
 def _whole(data, key, low, fail, required=False):
@@ -494,7 +498,8 @@ def _size(raw, fail):
         return FixedSize(10.0), "equivalent"
     if not isinstance(raw, dict):
         fail(["size"], "must be a table")
-    allowed = ("definition", "mm", "distribution", "median_mm", "sigma", "sieves_mm", "percent_passing", "basis")
+    allowed = ("definition", "mm", "distribution", "median_mm", "sigma", "sieves_mm", "percent_passing", "basis",
+               "sampling")
     for k in raw:
         if k not in allowed:
             fail(["size", k], f"unknown field (expected {', '.join(allowed)})")
@@ -563,12 +568,40 @@ def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
             values[spec.name] = v.draw(rng)
         elif spec.name in recipe.params:
             values[spec.name] = v
-    size = recipe.size.sample(float(rng.random()))
+    size = recipe.size.sample(size_quantile(recipe, index, float(rng.random())))
     try:
         params = get(recipe.method).Params(**values)
     except ParameterError as exc:
         raise ValueError(f"grain {index}: drawn params.{exc.name} {exc.reason}") from None
     return seed, params, size
+
+
+_GOLDEN = (math.sqrt(5.0) - 1.0) / 2.0
+
+
+def size_quantile(recipe: Recipe, index: int, u: float) -> float:
+    """The size quantile of grain ``index`` given its own uniform draw ``u``.
+
+    With ``sampling = "random"`` it is ``u`` (independent draws).  With
+    ``sampling = "quasi"`` (the default) it is ``frac(c + index·g + u/count)``
+    where ``g = (√5 − 1)/2`` and ``c`` comes from the root seed: a jittered
+    golden-ratio (Kronecker) sequence, whose every prefix covers [0, 1]
+    evenly, so the achieved grading follows the target far more closely
+    than independent draws do (error ~1/count instead of ~1/√count).  It
+    still depends only on the root seed, ``index``, ``count`` and grain
+    ``index``'s own stream.
+
+    Examples
+    --------
+    >>> r = parse_recipe('method = "fso"\ncount = 4\nseed = 3\n[size]\nmm = 1.0\n')
+    >>> qs = [size_quantile(r, i, 0.5) for i in range(4)]
+    >>> sorted(int(q * 4) for q in qs)
+    [0, 1, 2, 3]
+    """
+    if recipe.sampling == "random":
+        return u
+    c = int(np.random.SeedSequence(recipe.seed).generate_state(1, np.uint64)[0]) / 2.0**64
+    return math.fmod(c + math.fmod(index * _GOLDEN, 1.0) + u / recipe.count, 1.0)
 
 
 @dataclass(frozen=True)

@@ -80,6 +80,16 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def _hist(ax, vals, colour) -> None:
+    """A histogram that also copes with (nearly) constant data."""
+    x = np.asarray(vals, dtype=np.float64)
+    lo, hi = float(x.min()), float(x.max())
+    if hi - lo <= 1e-9 * max(1.0, abs(hi)):
+        lo, hi = lo - 0.5 * max(abs(lo) * 1e-3, 1e-9), hi + 0.5 * max(abs(hi) * 1e-3, 1e-9)
+    bins = int(np.clip(np.sqrt(len(x)), 5, 40))
+    ax.hist(x, bins=np.linspace(lo, hi, bins + 1), color=colour)
+
+
 def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
     import matplotlib
 
@@ -109,7 +119,7 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
             ax.legend(fontsize=7, loc="upper left")
             ax.set_title("grading curve")
         elif name == "size":
-            ax.hist(achieved_sizes(rows, recipe.size_definition), bins="auto", color=colour)
+            _hist(ax, achieved_sizes(rows, recipe.size_definition), colour)
             ax.set_xlabel(f"{recipe.size_definition} size (mm)")
             ax.set_title("size")
         else:
@@ -118,7 +128,7 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
                 labels = sorted(set(vals))
                 ax.bar(labels, [vals.count(s) for s in labels], color=colour)
             else:
-                ax.hist(np.asarray(vals, dtype=float), bins="auto", color=colour)
+                _hist(ax, vals, colour)
             ax.set_title(name)
         ax.tick_params(labelsize=7)
     fig.suptitle(f"{recipe.method} population: {len(rows)} grains, root seed {recipe.seed}", fontsize=10)
