@@ -270,9 +270,17 @@ class Construction:
         return blend * (1.0 + (s - 1.0) * weight)
 
 
-def _fine(c: Contour) -> np.ndarray:
-    """Physical radii (radii × scale) on the fine grid."""
-    return c.resampled(GRID) * c.scale
+def _fine(c: Contour, modes: int) -> np.ndarray:
+    """Physical radii (radii × scale) on the fine grid, band-limited to ``modes`` harmonics.
+
+    Descriptor and fractal contours have nothing above ``modes`` anyway; an
+    image contour loses its pixel-scale noise, which no mesh could resolve.
+    """
+    spec = np.fft.rfft(c.radii) / c.n_angles
+    spec = spec[: modes + 1]
+    out = np.zeros(GRID // 2 + 1, dtype=np.complex128)
+    out[: len(spec)] = spec
+    return np.fft.irfft(out * GRID, GRID) * c.scale
 
 
 def _variants(fine: np.ndarray) -> list[np.ndarray]:
@@ -390,7 +398,7 @@ def construct(p: Params, rng: Any = None) -> Construction:
     stretched = [
         c.stretched(u / e[0], v / e[1]) for c, e, (u, v) in zip(aligned, ext, ((X, Y), (X, Z), (Y, Z)))
     ]
-    sections, factors = _correct(_best_orientation([_fine(c) for c in stretched]))
+    sections, factors = _correct(_best_orientation([_fine(c, p.modes) for c in stretched]))
     con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
     if p.aspect is not None:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
