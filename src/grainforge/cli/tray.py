@@ -70,11 +70,13 @@ def parse_param_values(method: str, pairs, preset: str | None):
               help="Minimum distance between grains in mm [default: two printer resolutions].")
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
               help="Finest mesh level resolution matching may choose [default 6].")
+@click.option("--max-triangles", default=20_000_000, show_default=True, type=click.IntRange(min=20),
+              help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
 @click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),
               help="Processes making grains (the output does not depend on it).")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, size_definition, gap,
-         max_subdivisions, workers, overwrite):
+         max_subdivisions, max_triangles, workers, overwrite):
     """Lay out grains on the build plates of a printer, at least --gap apart, in one print file.
 
     Grains come from INPUTS (mesh files, folders of them, or manifest.csv files
@@ -109,7 +111,7 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
     try:
         result = build_tray(
             source, printer, out, gap=gap, workers=workers, overwrite=overwrite, match_resolution=match,
-            max_subdivisions=max_subdivisions, progress=progress_bar(total=len(source), desc="tray"),
+            max_subdivisions=max_subdivisions, max_triangles=max_triangles, progress=progress_bar(total=len(source), desc="tray"),
         )
     except ParameterError as exc:
         raise bad_parameter(exc) from None

@@ -52,8 +52,12 @@ class Resolution:
     faces : int
         Triangles per grain.
     converged : bool
-        False when even :data:`MAX_MATCHED` exceeds the tolerance (the
-        finest level is then used and the deviation reported).
+        False when the finest level allowed (by ``max_level`` or the triangle
+        budget) still exceeds the tolerance; that level is then used and its
+        deviation reported.
+    limited_by : str
+        ``"tolerance"`` (the rule was met), ``"budget"`` (the triangle budget
+        capped the level) or ``"max level"``.
     """
 
     subdivisions: int
@@ -62,9 +66,10 @@ class Resolution:
     edge: float
     faces: int
     converged: bool
+    limited_by: str = "tolerance"
 
     def describe(self) -> str:
-        cmp = "≤" if self.converged else "> (finest level allowed)"
+        cmp = "≤" if self.converged else f"> (level capped by the {self.limited_by})"
         return (f"subdivisions {self.subdivisions}: {self.faces} faces, mean edge {self.edge * 1000:.0f} µm, "
                 f"chordal deviation {self.deviation * 1000:.1f} µm {cmp} {self.tolerance * 1000:.1f} µm")
 
@@ -134,6 +139,7 @@ def match_subdivisions(
     seeds: Sequence[int],
     *,
     max_level: int = MAX_MATCHED,
+    max_faces: int | None = None,
 ) -> Resolution:
     """The coarsest icosphere level whose chordal deviation is ≤ half the printer resolution.
 
@@ -155,6 +161,9 @@ def match_subdivisions(
         Pilot seeds (usually the first grains of the job).
     max_level : int
         Finest level considered.
+    max_faces : int, optional
+        Triangle budget per grain: levels with more faces are not considered
+        (``build_tray`` passes its per-job budget divided by the grain count).
 
     Examples
     --------
@@ -173,6 +182,13 @@ def match_subdivisions(
     if not seeds:
         raise ValueError("at least one pilot seed is needed")
     max_level = int(min(max_level, MAX_SUBDIVISIONS - 1))
+    limit = "max level"
+    if max_faces is not None:
+        budget_level = 0
+        while 20 * 4 ** (budget_level + 1) <= max_faces:
+            budget_level += 1
+        if budget_level < max_level:
+            max_level, limit = budget_level, "budget"
     tol = printer.max_deviation
     dev = np.inf
     level = 0
@@ -192,4 +208,5 @@ def match_subdivisions(
     k = scale_factor(g, size, size_definition)
     e, _ = _midpoint_index(level)
     edge = float(np.linalg.norm(g.vertices[e[:, 0]] - g.vertices[e[:, 1]], axis=1).mean() * k)
-    return Resolution(level, float(dev), tol, edge, len(f), bool(dev <= tol))
+    ok = bool(dev <= tol)
+    return Resolution(level, float(dev), tol, edge, len(f), ok, "tolerance" if ok else limit)

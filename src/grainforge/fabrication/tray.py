@@ -48,6 +48,10 @@ __all__ = [
 ]
 
 OUT_FORMATS = (".3mf", ".stl")
+#: triangles per print job that resolution matching may spend (about a 1 GB binary STL);
+#: print-preparation software handles jobs of this size, and it keeps the paper's
+#: 8,000-grain tray within two minutes and 2 GB.  See docs/printing.md.
+DEFAULT_TRIANGLE_BUDGET = 20_000_000
 
 
 # --------------------------------------------------------------------------- orientation
@@ -424,6 +428,7 @@ def build_tray(
     overwrite: bool = False,
     match_resolution: bool = True,
     max_subdivisions: int | None = None,
+    max_triangles: int | None = DEFAULT_TRIANGLE_BUDGET,
     progress: Callable[[Iterable], Iterable] | None = None,
 ) -> TrayResult:
     """Lay out grains on the build plates of ``printer`` and write the print file(s).
@@ -446,6 +451,10 @@ def build_tray(
         the first three seeds).  If false, the given params are used as they are.
     max_subdivisions : int, optional
         Finest level resolution matching may choose.
+    max_triangles : int, optional
+        Triangle budget of the whole job for resolution matching (default
+        :data:`DEFAULT_TRIANGLE_BUDGET`; ``None``: no budget).  Each grain may
+        use ``max_triangles // count`` faces.
     progress : callable, optional
         Wraps the iterator of grains (a progress bar).
 
@@ -484,6 +493,7 @@ def build_tray(
         resolution = match_subdivisions(
             source.method, source.params, source.size, source.size_definition, printer, source.seeds[:3],
             max_level=MAX_MATCHED if max_subdivisions is None else max_subdivisions,
+            max_faces=None if max_triangles is None else max(20, int(max_triangles) // len(source)),
         )
         source = dataclasses.replace(source, params=dataclasses.replace(source.params,
                                                                          subdivisions=resolution.subdivisions))
@@ -531,6 +541,7 @@ def build_tray(
                 "volume": p.volume, "equivalent_diameter": float(np.cbrt(6 * p.volume / np.pi)),
                 "faces": p.faces, "subdivisions": p.subdivisions,
                 "chordal_deviation": None if resolution is None else resolution.deviation,
+                "resolution_limited_by": None if resolution is None else resolution.limited_by,
             })
         writer.close()
         fh.close()
