@@ -147,30 +147,39 @@ def _first_term_upper(f: Field):
     return np.polynomial.Chebyshev.interpolate(exact, 40, domain=[0.0, 1.0])
 
 
-#: vertices per block in :func:`wm_sum`.  A block's phase matrix is
-#: ``chunk × M·n_max`` float64 (410 kB at the defaults, so the block's three
-#: work arrays stay in L2), and ``chunk·M·n_max·4`` stays below OpenBLAS's
-#: multithreading threshold (65536·4) at the defaults, so the product runs on one core.
-WM_CHUNK = 32
+#: terms (vertices × M·n_max) per block in :func:`wm_sum`: 32 vertices at
+#: M = n_max = 40.  The block's float64 phases take 410 kB, so its three work
+#: arrays stay in L2, and the product's size (block terms × 4) stays below
+#: OpenBLAS's multithreading threshold (65536·4), so it runs on one core.
+WM_BLOCK_TERMS = 51_200
+
+
+#: phases are reduced modulo this many turns: f32(2π·3) is 11 times closer to
+#: 2π·3 than f32(2π) is to 2π, and the float32 scale's rounding error biases
+#: every phase by the same relative amount (visible when S is a small
+#: difference of large sums, e.g. L/R0 ≈ 1000 with γ ≈ 1).
+_WRAP_TURNS = 3
 
 
 def _phase_setup(theta, phi_eff, c, f: Field):
     """Per-vertex coefficients P (V, 4), per-term coefficients Q (4, M·N) and the fraction bits.
 
-    The phase of term (m, n) at vertex v, in turns, is the rank-4 product
-    ``P[v] @ Q[:, (m, n)]`` = k_n/2π · φ'(cos θ cos α_m + sin θ sin α_m) + ζ_mn/2π · c + ψ_mn/2π
+    The phase of term (m, n) at vertex v, in units of ``_WRAP_TURNS`` turns, is
+    the rank-4 product ``P[v] @ Q[:, (m, n)]`` =
+    (k_n φ'(cos θ cos α_m + sin θ sin α_m) + ζ_mn c + ψ_mn) / (2π·_WRAP_TURNS)
     (c = 0 in the lower hemisphere).  Q's last row also carries the "magic"
     constant 1.5·2^(52−fb): adding it rounds the float64 phase to a multiple of
-    2^−fb turns, so the low 32 bits of the float64 are the phase's fixed-point
+    2^−fb units, so the low 32 bits of the float64 are the phase's fixed-point
     fraction (plus a few integer bits when fb < 32), see :func:`wm_sum`.
     """
-    kt = f.wavenumbers / TWO_PI
+    unit_rad = TWO_PI * _WRAP_TURNS
+    kt = f.wavenumbers / unit_rad
     P = np.empty((len(theta), 4))
     P[:, 0] = phi_eff * np.cos(theta)
     P[:, 1] = phi_eff * np.sin(theta)
     P[:, 2] = c
     P[:, 3] = 1.0
-    # |phase| bound in turns: |u| ≤ φ' ≤ π/2, ζ/2π < 1 (c ≤ 1), ψ/2π < 1
+    # |phase| bound: |u| ≤ φ' ≤ π/2, ζ, ψ < 2π (c ≤ 1)
     tmax = float(np.max(np.abs(kt))) * (np.pi / 2) + 2.0
     # the magic add is exact-rounding only while |phase| < 2^(51−fb): keep a bit of margin
     fb = min(32, 50 - int(np.ceil(np.log2(tmax))))
@@ -178,12 +187,12 @@ def _phase_setup(theta, phi_eff, c, f: Field):
     Q = np.empty((4, f.psi.size))
     Q[0] = (np.cos(f.alpha)[:, None] * kt).ravel()
     Q[1] = (np.sin(f.alpha)[:, None] * kt).ravel()
-    Q[2] = (f.zeta / TWO_PI).ravel()
-    Q[3] = (f.psi / TWO_PI).ravel() + magic
+    Q[2] = (f.zeta / unit_rad).ravel()
+    Q[3] = (f.psi / unit_rad).ravel() + magic
     return P, Q, fb
 
 
-def wm_sum(unit: np.ndarray, f: Field, chunk: int = WM_CHUNK) -> np.ndarray:
+def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
     """Fast evaluation of the double sum S of Eqs. 2–3.
 
     The first term Σ w_n cos(ψ_mn + ζ_mn c) does not depend on θ: it is a
@@ -212,8 +221,9 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int = WM_CHUNK) -> np.ndarray:
     unit : (V, 3) float64
         Unit vectors.
     f : Field
-    chunk : int
-        Vertices per block.
+    chunk : int, optional
+        Vertices per block (default: ``WM_BLOCK_TERMS // (M·n_max)``, at least 1).
+        The result does not depend on it.
 
     Returns
     -------
@@ -233,7 +243,7 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int = WM_CHUNK) -> np.ndarray:
     c = np.where(upper, cosphi, 0.0)
     P, Q, fb = _phase_setup(theta, phi_eff, c, f)
     shift = 32 - fb if fb < 28 else 0
-    scale = np.float32(TWO_PI / 2.0 ** (fb + shift))
+    scale = np.float32(TWO_PI * _WRAP_TURNS / 2.0 ** (fb + shift))
     w_t = np.tile(f.weights, f.psi.shape[0]).astype(np.float32)  # w_n for the flattened (m, n)
 
     first = np.full(len(unit), float((f.weights * np.cos(f.psi)).sum()))
@@ -241,6 +251,8 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int = WM_CHUNK) -> np.ndarray:
         first[upper] = _first_term_upper(f)(cosphi[upper])
 
     V, T = len(unit), Q.shape[1]
+    if chunk is None:
+        chunk = WM_BLOCK_TERMS // T
     chunk = max(1, min(int(chunk), V))
     s = np.empty((chunk, T))
     i32 = np.empty((chunk, T), dtype=np.int32)
