@@ -10,7 +10,8 @@ from .contours import Contour
 from .grain import Grain
 from .methods import generate
 from .methods.cri import cri
+from .methods.dpa import dpa
 from .methods.fso import fso
 from .params import ParameterError
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "Contour"]
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour"]

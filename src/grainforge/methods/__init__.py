@@ -27,6 +27,7 @@ __all__ = ["METHODS", "get", "generate", "resolve_rng"]
 METHODS: dict[str, str] = {
     "fso": "grainforge.methods.fso",
     "cri": "grainforge.methods.cri",
+    "dpa": "grainforge.methods.dpa",
 }
 
 

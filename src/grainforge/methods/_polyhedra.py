@@ -217,30 +217,30 @@ def edge_directions(s: Solid, verts: np.ndarray) -> np.ndarray:
 
 
 def _overlap(axes: np.ndarray, a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Overlap of the projections of a (V, 3) and b (M, V, 3) on axes (M, A, 3): (M, A)."""
-    pa = axes @ a.T
+    """Overlap of the projections of a and b (P, V, 3) on axes (P, A, 3): (P, A)."""
+    pa = axes @ a.transpose(0, 2, 1)
     pb = axes @ b.transpose(0, 2, 1)
     return np.minimum(pa.max(-1), pb.max(-1)) - np.maximum(pa.min(-1), pb.min(-1))
 
 
 def sat_intrudes(a, a_normals, a_edges, b, b_normals, b_edges, tol: float = 1e-9) -> np.ndarray:
-    """Separating-axis intrusion test with precomputed normals and edge directions.
+    """Separating-axis intrusion test of P pairs with precomputed normals and edge directions.
 
-    ``a`` (V, 3) with ``a_normals`` (F, 3) and ``a_edges`` (D, 3) against
-    ``b`` (M, V, 3) with ``b_normals`` (M, F, 3) and ``b_edges`` (M, D, 3).
-    Returns (M,) bool: True where the interiors overlap by more than ``tol``
-    on every candidate axis.  Face axes are tried first; edge–edge axes only
-    for the pairs they do not separate.
+    ``a`` and ``b`` (P, V, 3) with normals (P, F, 3) and edge directions
+    (P, D, 3).  Returns (P,) bool: True where the interiors of pair p
+    overlap by more than ``tol`` on every candidate axis (face normals of
+    both, cross products of an edge of each).  Face axes are tried first;
+    edge–edge axes only for the pairs they do not separate.
     """
-    M = len(b)
-    if M == 0:
+    P = len(b)
+    if P == 0:
         return np.zeros(0, dtype=bool)
-    axes = np.concatenate([np.broadcast_to(a_normals, (M,) + a_normals.shape), b_normals], axis=1)
+    axes = np.concatenate([a_normals, b_normals], axis=1)
     hit = (_overlap(axes, a, b) > tol).all(axis=1)
     idx = np.flatnonzero(hit)
     if len(idx) == 0:
         return hit
-    ea = a_edges[None, :, None, :]
+    ea = a_edges[idx][:, :, None, :]
     eb = b_edges[idx][:, None, :, :]
     cross = np.stack([
         ea[..., 1] * eb[..., 2] - ea[..., 2] * eb[..., 1],
@@ -248,9 +248,9 @@ def sat_intrudes(a, a_normals, a_edges, b, b_normals, b_edges, tol: float = 1e-9
         ea[..., 0] * eb[..., 1] - ea[..., 1] * eb[..., 0],
     ], axis=-1).reshape(len(idx), -1, 3)
     length = np.sqrt((cross**2).sum(-1))[..., None]
-    # parallel edges give no axis: replace by a face normal (already tested, and overlapping)
-    cross = np.where(length > 1e-9, cross / np.where(length > 1e-9, length, 1.0), a_normals[0])
-    hit[idx] = (_overlap(cross, a, b[idx]) > tol).all(axis=1)
+    # parallel edges give no axis: use a face normal instead (already tested, overlapping)
+    cross = np.where(length > 1e-9, cross / np.where(length > 1e-9, length, 1.0), a_normals[idx][:, :1, :])
+    hit[idx] = (_overlap(cross, a[idx], b[idx]) > tol).all(axis=1)
     return hit
 
 
@@ -288,5 +288,6 @@ def intrudes(s: Solid, a: np.ndarray, others: np.ndarray, tol: float = 1e-9) -> 
     """
     a = np.asarray(a, dtype=np.float64)
     others = np.asarray(others, dtype=np.float64).reshape(-1, len(a), 3)
-    return sat_intrudes(a, face_normals(s, a), edge_directions(s, a),
+    aa = np.broadcast_to(a, others.shape)
+    return sat_intrudes(aa, face_normals(s, aa), edge_directions(s, aa),
                         others, face_normals(s, others), edge_directions(s, others), tol)
