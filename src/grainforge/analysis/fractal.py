@@ -3,11 +3,13 @@
 Both work on the grain's radial function r(u) = |x − c| sampled at the
 vertices (u the unit direction from the volume centroid c):
 
-* **roughness** — a smooth low-order shape is fitted to r by area-weighted
-  least squares on the polynomials of degree ≤ 4 in u (the same space as the
-  spherical harmonics of degree ≤ 4); roughness is the area-weighted RMS of
-  the residual, relative to the mean radius.  A sphere, an ellipsoid or any
-  shape the fit can represent has roughness ≈ 0.
+* **roughness** — a smooth low-order shape is fitted by area-weighted least
+  squares of 1/r² on the polynomials of degree ≤ 4 in u (the same space as
+  the spherical harmonics of degree ≤ 4), r_fit = (fit)^(−1/2).  Fitting 1/r²
+  rather than r makes every centred ellipsoid exact (1/r² = uᵀAu is
+  quadratic in u), so form (elongation, flatness) does not count as
+  roughness.  Roughness is the area-weighted RMS of r − r_fit relative to the
+  mean radius: 0 for spheres and ellipsoids.
 * **fractal dimension** — the variogram of the residual h:
   γ(δ) = ½ E[(h(u) − h(u′))²] over vertex pairs at angular separation δ.
   For a self-affine surface γ ∝ δ^(2H) with Hurst exponent H, and the
@@ -52,12 +54,27 @@ def _basis(u: np.ndarray) -> np.ndarray:
 
 
 def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
-    """Area-weighted least-squares fit of r(u) by polynomials of degree ≤ 4 in u; returns the fitted r."""
+    """Smooth radii: area-weighted least-squares fit of 1/r² by polynomials of degree ≤ 4 in u.
+
+    Exact for spheres and centred ellipsoids of any orientation.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> e = trimesh.creation.icosphere(3)
+    >>> _ = e.apply_scale((3.0, 2.0, 1.0))
+    >>> u, r = radial_function(e.vertices, np.zeros(3))
+    >>> bool(np.allclose(smooth_fit(u, r, np.ones(len(r))), r, rtol=1e-8))
+    True
+    """
     B = _basis(u)
     Bw = B * weights[:, None]
     # normal equations (35 × 35); lstsq copes with the monomials' redundancy on the sphere
-    coef, *_ = np.linalg.lstsq(Bw.T @ B, Bw.T @ r, rcond=1e-12)
-    return B @ coef
+    scale = float(np.mean(r)) or 1.0
+    g = (scale / r) ** 2
+    coef, *_ = np.linalg.lstsq(Bw.T @ B, Bw.T @ g, rcond=1e-12)
+    fit = B @ coef
+    return scale / np.sqrt(np.maximum(fit, 1e-6))
 
 
 def roughness(residual: np.ndarray, weights: np.ndarray, mean_radius: float) -> float:
