@@ -283,11 +283,42 @@ def _fine(c: Contour, modes: int) -> np.ndarray:
     return np.fft.irfft(out * GRID, GRID) * c.scale
 
 
-def _variants(fine: np.ndarray) -> list[np.ndarray]:
-    """The contour, turned by π, mirrored (θ → −θ), and both: each keeps its longest diameter on axis."""
-    mirrored = np.roll(fine[::-1], 1)
+_T = 2 * np.pi * np.arange(GRID) / GRID
+_COS, _SIN, _COS2 = np.cos(_T), np.sin(_T), np.cos(2 * _T)
+
+
+def _aligned(fine: np.ndarray) -> np.ndarray:
+    """The contour turned (by a whole number of grid steps) so that its longest diameter is along θ = 0."""
     h = GRID // 2
-    return [fine, np.roll(fine, h), mirrored, np.roll(mirrored, h)]
+    k = int(np.argmax(fine[:h] + fine[h:]))
+    return np.concatenate([fine[k:], fine[:k]])
+
+
+def _stretch(fine: np.ndarray, ax: float, ay: float) -> np.ndarray:
+    """Radii on the grid of the contour with x scaled by ``ax`` and y by ``ay``.
+
+    A linear map with positive factors keeps θ = 0 fixed and maps angles
+    monotonically, so the new radii are a periodic 1D interpolation.
+    """
+    x, y = ax * fine * _COS, ay * fine * _SIN
+    a = np.arctan2(y, x)
+    a[a < 0] += 2 * np.pi
+    a[0] = 0.0
+    return np.interp(_T, np.r_[a, 2 * np.pi], np.r_[np.hypot(x, y), fine[0] * ax])
+
+
+#: how each orientation permutes the values at (0, π/2, π, 3π/2): identity, turned by π,
+#: mirrored (θ → −θ), mirrored and turned.  Each keeps the longest diameter on the first axis.
+_PERMUTATIONS = np.array([[0, 1, 2, 3], [2, 3, 0, 1], [0, 3, 2, 1], [2, 1, 0, 3]])
+
+
+def _variant(fine: np.ndarray, i: int) -> np.ndarray:
+    if i in (2, 3):
+        fine = np.concatenate([fine[:1], fine[:0:-1]])  # r(−θ)
+    if i in (1, 3):
+        h = GRID // 2
+        fine = np.concatenate([fine[h:], fine[:h]])  # r(θ − π)
+    return fine
 
 
 def _best_orientation(fines: Sequence[np.ndarray]) -> list[np.ndarray]:
@@ -298,8 +329,8 @@ def _best_orientation(fines: Sequence[np.ndarray]) -> list[np.ndarray]:
     the best combination makes the correction (step 1) as small as it can be.
     """
     q = GRID // 4
-    idx = [0, q, 2 * q, 3 * q]
-    v = [np.array([f[idx] for f in _variants(fine)]) for fine in fines]  # 3 × (4 variants, 4 axis values)
+    axis = np.array([f[[0, q, 2 * q, 3 * q]] for f in fines])  # (3, 4)
+    v = axis[:, _PERMUTATIONS]  # (3 contours, 4 variants, 4 axis values)
     a, b, c = v[0][:, None, None, :], v[1][None, :, None, :], v[2][None, None, :, :]
     # pairs: C1(0)~C2(0), C1(π)~C2(π), C1(π/2)~C3(0), C1(3π/2)~C3(π), C2(π/2)~C3(π/2), C2(3π/2)~C3(3π/2)
     cost = (
@@ -307,8 +338,8 @@ def _best_orientation(fines: Sequence[np.ndarray]) -> list[np.ndarray]:
         + (a[..., 1] - c[..., 0]) ** 2 + (a[..., 3] - c[..., 2]) ** 2
         + (b[..., 1] - c[..., 1]) ** 2 + (b[..., 3] - c[..., 3]) ** 2
     )
-    i, j, k = np.unravel_index(int(np.argmin(cost)), cost.shape)
-    return [_variants(fines[0])[i], _variants(fines[1])[j], _variants(fines[2])[k]]
+    choice = np.unravel_index(int(np.argmin(cost)), cost.shape)
+    return [_variant(f, int(i)) for f, i in zip(fines, choice)]
 
 
 def _correct(fines: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
@@ -328,8 +359,7 @@ def _correct(fines: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
     a1 = (ratio[:, 0] - ratio[:, 2]) / 2
     b1 = (ratio[:, 1] - ratio[:, 3]) / 2
     a2 = (ratio[:, 0] - ratio[:, 1] + ratio[:, 2] - ratio[:, 3]) / 4
-    t = 2 * np.pi * np.arange(GRID) / GRID
-    f = a0[:, None] + a1[:, None] * np.cos(t) + b1[:, None] * np.sin(t) + a2[:, None] * np.cos(2 * t)
+    f = a0[:, None] + a1[:, None] * _COS + b1[:, None] * _SIN + a2[:, None] * _COS2
     out = np.stack(fines) * f
     # the axis values are the targets exactly (removes rounding of the products)
     out[:, [0, q, 2 * q, 3 * q]] = targets
@@ -384,9 +414,10 @@ def construct(p: Params, rng: Any = None) -> Construction:
     """
     rng = np.random.default_rng(rng)
     inputs = input_contours(p, rng)
-    aligned = [Contour(c.radii).aligned() for c in inputs]
+    fines = [_aligned(_fine(Contour(c.radii), p.modes)) for c in inputs]
+    h, q = GRID // 2, GRID // 4
     # diameters through the origin along each contour's first and second axis
-    ext = np.array([[c(0.0) + c(np.pi), c(np.pi / 2) + c(3 * np.pi / 2)] for c in aligned]).reshape(3, 2)
+    ext = np.array([[f[0] + f[h], f[q] + f[3 * q]] for f in fines])
     if p.aspect is not None:
         logs = np.log(np.asarray(p.aspect, dtype=np.float64))
     else:
@@ -395,10 +426,8 @@ def construct(p: Params, rng: Any = None) -> Construction:
         logs = np.array([a + b, c - a, -b - c]) / 3.0
     dims = 2.0 * np.exp(logs - logs.mean())  # geometric mean 2: equal-volume diameter about 2
     X, Y, Z = dims
-    stretched = [
-        c.stretched(u / e[0], v / e[1]) for c, e, (u, v) in zip(aligned, ext, ((X, Y), (X, Z), (Y, Z)))
-    ]
-    sections, factors = _correct(_best_orientation([_fine(c, p.modes) for c in stretched]))
+    stretched = [_stretch(f, u / e[0], v / e[1]) for f, e, (u, v) in zip(fines, ext, ((X, Y), (X, Z), (Y, Z)))]
+    sections, factors = _correct(_best_orientation(stretched))
     con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
     if p.aspect is not None:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
