@@ -80,6 +80,8 @@ _DIST_KEYS = {
     "lognormal": ("median", "sigma"),
     "choice": ("values",),
 }
+#: how long ``--scheduler`` waits for the scheduler to answer.
+DASK_CONNECT_TIMEOUT = "20s"
 _TOP_KEYS = ("method", "count", "seed", "format", "params", "size")
 
 
@@ -688,13 +690,13 @@ def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterab
     except ImportError:
         raise ValueError("--scheduler needs Dask distributed: pip install grainforge[dask]") from None
     try:
-        client = Client(scheduler, timeout="20s", set_as_default=False)
+        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT, set_as_default=False)
     except (OSError, TimeoutError) as exc:
         raise ValueError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
     try:
         futures = client.map(make_grain, [recipe] * len(todo), list(todo), pure=False)
         try:
-            for fut in as_completed(futures):
+            for fut in as_completed(futures, loop=client.loop):
                 yield fut.result()
         finally:
             client.cancel(futures)
