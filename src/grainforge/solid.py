@@ -54,22 +54,25 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
         problems.append("degenerate faces (repeated vertex index)")
     nv = np.int64(len(vertices))
     e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]])
-    directed = e[:, 0] * nv + e[:, 1]
-    uniq, counts = np.unique(directed, return_counts=True)
-    if (counts > 1).any():
+    # sort-based set tests: np.unique(return_counts) and np.isin were ~30 ms at 10k vertices
+    directed = np.sort(e[:, 0] * nv + e[:, 1])
+    if (directed[1:] == directed[:-1]).any():
         problems.append("edges used twice in the same direction (inconsistent orientation or non-manifold)")
-    reverse = e[:, 1] * nv + e[:, 0]
-    if not np.isin(reverse, uniq, assume_unique=False).all():
+    reverse = np.sort(e[:, 1] * nv + e[:, 0])
+    pos = np.minimum(np.searchsorted(directed, reverse), len(directed) - 1)
+    if not (directed[pos] == reverse).all():
         problems.append("open boundary (not watertight)")
     if not problems:
         from scipy.sparse import coo_matrix
         from scipy.sparse.csgraph import connected_components
 
-        used = np.unique(faces)
+        used = np.zeros(len(vertices), dtype=bool)
+        used[faces.ravel()] = True
         g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(vertices),) * 2)
         _, labels = connected_components(g, directed=False)
-        if len(np.unique(labels[used])) != 1:
-            problems.append(f"{len(np.unique(labels[used]))} separate bodies")
+        bodies = np.count_nonzero(np.bincount(labels[used]))
+        if bodies != 1:
+            problems.append(f"{bodies} separate bodies")
     if not problems and signed_volume(vertices, faces) <= 0:
         problems.append("non-positive volume (inward orientation)")
     return problems
