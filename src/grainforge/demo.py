@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SECTIONS", "run_demo", "fso_sweeps"]
+__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "cri_gallery"]
 
 
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
@@ -50,9 +50,91 @@ def fso_sweeps(out: Path, quick: bool = False) -> list[Path]:
     return written
 
 
+def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
+    """The paper's Figures 3 and 4: contours from three sources, and CRI grains from them.
+
+    There are no real micrographs in this repository: the "micrograph" is a
+    synthetic grain image (a Fourier contour drawn, blurred and speckled with
+    scikit-image) that is written to PNG and read back like a real one.
+    """
+    import numpy as np
+
+    from .contours import Contour, draw_contours
+    from .io import atomic_write, read_mesh
+    from .methods.cri import Params
+    from .render import contact_sheet
+    from .run import write_run
+
+    seeds = [0, 1] if quick else [0, 1, 2]
+    s = 3 if quick else 5
+    folder = out / "cri"
+    folder.mkdir(parents=True, exist_ok=True)
+    # synthetic micrographs: three drawn grains, blurred, with sensor noise
+    from skimage.filters import gaussian
+
+    images = []
+    for i in range(3):
+        c = Contour.from_descriptors("rough-angular", rng=100 + i)
+        img = draw_contours((512, 512), [(c, (256, 256), 170.0)], background=40, fill=200).astype(float)
+        img = gaussian(img, sigma=2.0, preserve_range=True)
+        img += np.random.default_rng(200 + i).normal(0.0, 12.0, img.shape)
+        png = folder / f"synthetic-micrograph-{i}.png"
+        import io as _io
+
+        from PIL import Image
+
+        buf = _io.BytesIO()
+        Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
+        atomic_write(png, buf.getvalue())
+        images.append(str(png))
+    # Figure 3: one contour from each source
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    sources = [
+        ("fractal profile (2D Eq. 1)", Contour.from_fractal(rng=1)),
+        ("Fourier descriptors 0.15, 0.10, 0.03", Contour.from_descriptors("rough-angular", rng=1)),
+        ("synthetic micrograph (extracted)", Contour.from_image(images[0])),
+    ]
+    fig, axes = plt.subplots(1, 3, figsize=(9, 3.3), dpi=110)
+    for ax, (label, c) in zip(axes, sources):
+        p = np.vstack([c.points(), c.points()[:1]])
+        ax.fill(p[:, 0], p[:, 1], color=(0.78, 0.68, 0.52), lw=1.0, ec="k")
+        d = c.descriptors()
+        ax.set_title(f"{label}\nD2={d[2]:.3f} D3={d[3]:.3f} D8={d[8]:.3f}", fontsize=8)
+        ax.set_aspect("equal")
+        ax.set_axis_off()
+    fig.suptitle("CRI input contours from three sources (paper Fig. 3)", fontsize=10)
+    fig.subplots_adjust(top=0.78, bottom=0.02, left=0.02, right=0.98)
+    buf = __import__("io").BytesIO()
+    fig.savefig(buf, format="png", metadata={"Software": None})
+    plt.close(fig)
+    written = [atomic_write(out / "cri-contours.png", buf.getvalue())]
+    # Figure 4: grains from both presets and the three sources
+    runs = [
+        ("rough-sphere", Params(preset="rough-sphere", subdivisions=s)),
+        ("rough-angular", Params(preset="rough-angular", subdivisions=s)),
+        ("fractal", Params(contour="fractal", subdivisions=s)),
+        ("micrographs", Params(images=",".join(images), subdivisions=s)),
+    ]
+    meshes, labels = [], []
+    for name, params in runs:
+        run_seeds = seeds[:1] if name == "micrographs" else seeds  # images: no randomness
+        rows = write_run("cri", params, run_seeds, folder / name, overwrite=True)
+        for r in rows:
+            meshes.append(read_mesh(folder / name / r["file"]))
+            labels.append(f"{name}  seed {r['seed']}")
+    sheet = contact_sheet(meshes, labels, out / "cri-grains.png", columns=len(seeds),
+                          title="CRI grains by contour source (paper Figs. 4, 8)")
+    return written + [folder, sheet]
+
+
 #: (name, function(out_folder, quick) -> written paths)
 SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("FSO sweeps (Figs. 1-2)", fso_sweeps),
+    ("CRI contours and grains (Figs. 3-4)", cri_gallery),
 ]
 
 
