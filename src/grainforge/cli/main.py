@@ -48,7 +48,8 @@ def cli():
 
     Generators (paper: Hanaor et al., 3D printable geomaterials): FSO (fractal
     surface overlay), CRI (contour rotation interpolation; `grainforge fourier`
-    measures the Fourier descriptors of grain images).  Run
+    measures the Fourier descriptors of grain images), DPA (directed polyhedra
+    aggregation; `grainforge calibrate dpa` links its exponent to D_A).  Run
     `grainforge COMMAND --help` for each command.
     """
 
@@ -78,6 +79,10 @@ def _register():
     cli.add_command(analyse.analyse)
     cli.add_command(plot.plot)
     cli.add_command(figures.figures)
+
+    from . import calibrate
+
+    cli.add_command(calibrate.calibrate)
 
 
 _register()

@@ -1,0 +1,370 @@
+"""Calibration of the DPA exponent ε against the aggregate fractal dimension D_A.
+
+For one primitive and number of primaries N, :func:`calibrate` grows
+``repeats`` aggregates at every ε of a grid and records the mean and the
+standard deviation of D_A (Eq. 5), porosity and R_g.  The mean curve is
+inverted by :meth:`Calibration.exponent_for`, so a user can ask for a target
+D_A (paper §2.3: "by constructing a calibration curve, it is possible to
+control the value of the exponent ε to yield a desired D_A").
+
+Aggregate ``k`` of the grid (ε index i, repeat r, k = i·repeats + r) is grown
+from ``SeedSequence(seed).spawn(...)[k]``, so the numbers do not depend on
+the number of worker processes.  Curves used by ``dpa(target_fractal_dimension=...)``
+are cached as CSV under :func:`cache_dir`.
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from .params import ParameterError
+
+__all__ = [
+    "Calibration", "calibrate", "parse_exponents", "cache_dir", "cached_calibration",
+    "exponent_for_dimension", "DEFAULT_EXPONENTS", "DEFAULT_REPEATS", "COLUMNS",
+]
+
+#: ε grid of the cached curves: 16 points, log-spaced from 0.05 to 100.
+DEFAULT_EXPONENTS = tuple(float(x) for x in np.round(np.geomspace(0.05, 100.0, 16), 6))
+DEFAULT_REPEATS = 8
+#: bump when the DPA algorithm changes so that old cached curves are not reused.
+ALGORITHM_VERSION = 1
+COLUMNS = (
+    "exponent", "D_A_mean", "D_A_std", "porosity_mean", "porosity_std", "R_g_mean", "R_g_std",
+    "primitive", "primaries", "repeats", "seed",
+)
+
+
+def parse_exponents(text: str) -> np.ndarray:
+    """``"A:B:STEP"`` → A, A + STEP, …, B (inclusive); ``"a,b,c"`` → that list.
+
+    Examples
+    --------
+    >>> parse_exponents("0.5:2:0.5").tolist()
+    [0.5, 1.0, 1.5, 2.0]
+    >>> parse_exponents("0.1,1,10").tolist()
+    [0.1, 1.0, 10.0]
+    >>> parse_exponents("2:1:0.5")
+    Traceback (most recent call last):
+    ...
+    grainforge.params.ParameterError: exponents must be A:B:STEP with 0 < A <= B and STEP > 0, got '2:1:0.5'
+    """
+    text = str(text).strip()
+    try:
+        if ":" in text:
+            a, b, step = (float(x) for x in text.split(":"))
+            if not (0 < a <= b and step > 0 and np.isfinite([a, b, step]).all()):
+                raise ValueError
+            n = int(np.floor((b - a) / step + 1e-9)) + 1
+            values = np.round(a + step * np.arange(n), 12)
+        else:
+            values = np.array([float(x) for x in text.split(",") if x.strip()])
+            if len(values) == 0 or not (values > 0).all():
+                raise ValueError
+    except ValueError:
+        raise ParameterError(
+            "exponents", f"must be A:B:STEP with 0 < A <= B and STEP > 0, got {text!r}"
+        ) from None
+    if len(values) > 1000:
+        raise ParameterError("exponents", f"gives {len(values)} values; at most 1000 are allowed")
+    return values
+
+
+@dataclass(frozen=True)
+class Calibration:
+    """An ε → D_A calibration curve (mean and spread over seeds).
+
+    Attributes
+    ----------
+    primitive : str
+    primaries : int
+    repeats : int
+    seed : int
+    exponent, D_A_mean, D_A_std, porosity_mean, porosity_std, R_g_mean, R_g_std : (E,) float64
+    """
+
+    primitive: str
+    primaries: int
+    repeats: int
+    seed: int
+    exponent: np.ndarray
+    D_A_mean: np.ndarray
+    D_A_std: np.ndarray
+    porosity_mean: np.ndarray
+    porosity_std: np.ndarray
+    R_g_mean: np.ndarray
+    R_g_std: np.ndarray
+
+    def rows(self) -> list[dict]:
+        """One dict per ε, keys :data:`COLUMNS`."""
+        out = []
+        for i, e in enumerate(self.exponent):
+            out.append({
+                "exponent": float(e), "D_A_mean": float(self.D_A_mean[i]), "D_A_std": float(self.D_A_std[i]),
+                "porosity_mean": float(self.porosity_mean[i]), "porosity_std": float(self.porosity_std[i]),
+                "R_g_mean": float(self.R_g_mean[i]), "R_g_std": float(self.R_g_std[i]),
+                "primitive": self.primitive, "primaries": self.primaries, "repeats": self.repeats, "seed": self.seed,
+            })
+        return out
+
+    def write_csv(self, path: str | os.PathLike) -> Path:
+        """Write ``calibration.csv``-style text atomically."""
+        from .io import write_csv
+
+        return write_csv(path, self.rows(), COLUMNS)
+
+    @classmethod
+    def read_csv(cls, path: str | os.PathLike) -> "Calibration":
+        """Read a file written by :meth:`write_csv`."""
+        with open(path, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+        if not rows:
+            raise ValueError(f"{path}: empty calibration file")
+        col = lambda k: np.array([float(r[k]) for r in rows])  # noqa: E731
+        r0 = rows[0]
+        return cls(
+            primitive=r0["primitive"], primaries=int(r0["primaries"]), repeats=int(r0["repeats"]),
+            seed=int(r0["seed"]), exponent=col("exponent"), D_A_mean=col("D_A_mean"), D_A_std=col("D_A_std"),
+            porosity_mean=col("porosity_mean"), porosity_std=col("porosity_std"),
+            R_g_mean=col("R_g_mean"), R_g_std=col("R_g_std"),
+        )
+
+    def usable(self) -> tuple[np.ndarray, np.ndarray]:
+        """The invertible part of the curve: ε and mean D_A from the ε of the largest D_A on,
+        made non-increasing (running minimum).  D_A falls with ε except for a small dip at the
+        very lowest ε (breadth-first growth around the first primaries)."""
+        m = np.asarray(self.D_A_mean, dtype=np.float64)
+        good = np.isfinite(m)
+        e, m = np.asarray(self.exponent)[good], m[good]
+        if len(e) == 0:
+            return e, m
+        k = int(np.argmax(m))
+        return e[k:], np.minimum.accumulate(m[k:])
+
+    def exponent_for(self, target: float) -> float:
+        """ε whose mean D_A is ``target`` (interpolated in log ε on :meth:`usable`).
+
+        Raises
+        ------
+        ParameterError
+            If ``target`` lies outside the calibrated range of mean D_A.
+        """
+        e, m = self.usable()
+        target = float(target)
+        if len(e) == 0 or not (m.min() <= target <= m.max()):
+            lo, hi = (float(m.min()), float(m.max())) if len(m) else (float("nan"),) * 2
+            raise ParameterError(
+                "target_fractal_dimension",
+                f"must be within the calibrated range [{lo:.3f}, {hi:.3f}] of mean D_A for "
+                f"{self.primitive} aggregates of N={self.primaries}, got {target!r}",
+            )
+        if len(e) == 1:
+            return float(e[0])
+        # m is non-increasing: interpolate on the reversed (non-decreasing) arrays
+        x = np.interp(target, m[::-1], np.log(e[::-1]))
+        return float(np.exp(x))
+
+    def plot(self, path: str | os.PathLike) -> Path:
+        """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."""
+        import io
+
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from .io import atomic_write
+
+        e = np.asarray(self.exponent)
+        fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
+        ax.fill_between(e, self.D_A_mean - self.D_A_std, self.D_A_mean + self.D_A_std, color="C0", alpha=0.25,
+                        label="D_A ± 1 s.d.")
+        ax.plot(e, self.D_A_mean, "o-", color="C0", ms=3, label="mean D_A")
+        ax.set_xlabel("exponent ε (Eq. 4)")
+        ax.set_ylabel("aggregate fractal dimension D_A (Eq. 5)")
+        if e.max() / e.min() > 20:
+            ax.set_xscale("log")
+        ax2 = ax.twinx()
+        ax2.plot(e, self.porosity_mean, "s--", color="C3", ms=3, label="porosity")
+        ax2.set_ylabel("porosity 1 − V/V_hull", color="C3")
+        lines = ax.get_legend_handles_labels()
+        lines2 = ax2.get_legend_handles_labels()
+        ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8, loc="best")
+        ax.set_title(f"DPA calibration: {self.primitive}, N = {self.primaries}, {self.repeats} seeds per ε",
+                     fontsize=9)
+        fig.tight_layout()
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png")
+        plt.close(fig)
+        return atomic_write(path, buf.getvalue())
+
+
+def _measure(task) -> tuple[float, float, float]:
+    """Grow one aggregate and return (D_A, porosity, R_g).  Module level so that it pickles."""
+    from .methods.dpa import aggregate
+
+    primitive, primaries, exponent, seed_seq = task
+    m = aggregate(primitive, primaries, exponent, np.random.default_rng(seed_seq)).measures()
+    return m["D_A"], m["porosity"], m["R_g"]
+
+
+def calibrate(
+    primitive: str = "cube",
+    primaries: int = 200,
+    exponents: Sequence[float] = DEFAULT_EXPONENTS,
+    repeats: int = DEFAULT_REPEATS,
+    *,
+    seed: int = 0,
+    workers: int | None = 1,
+    progress: Callable[[Iterable], Iterable] | None = None,
+) -> Calibration:
+    """Measure D_A, porosity and R_g over ``repeats`` seeds at each ε.
+
+    Parameters
+    ----------
+    primitive : str
+        One of :data:`grainforge.methods.dpa.PRIMITIVES`.
+    primaries : int
+        N.
+    exponents : sequence of float
+        The ε grid (each in [0.01, 100]).
+    repeats : int
+        Aggregates per ε (≥ 1).
+    seed : int
+        Root seed; aggregate k uses ``SeedSequence(seed).spawn(E·repeats)[k]``.
+    workers : int or None
+        Processes (1: in this process; None: one per CPU).  The result does
+        not depend on it.
+    progress : callable, optional
+        Wraps the iterator of finished aggregates (e.g. a tqdm bar).
+
+    Returns
+    -------
+    Calibration
+
+    Examples
+    --------
+    >>> c = calibrate("cube", 30, [0.5, 20.0], repeats=3, seed=1)
+    >>> c.exponent.tolist(), bool(c.D_A_mean[0] > c.D_A_mean[1])
+    ([0.5, 20.0], True)
+    """
+    from .methods.dpa import Params
+
+    exps = np.asarray([float(e) for e in exponents], dtype=np.float64)
+    if len(exps) == 0:
+        raise ParameterError("exponents", "must hold at least one value")
+    for e in exps:
+        Params(primitive=primitive, exponent=float(e), primaries=primaries)  # validates every value
+    if int(repeats) != repeats or repeats < 1:
+        raise ParameterError("repeats", f"must be a whole number >= 1, got {repeats!r}")
+    if int(seed) != seed or seed < 0:
+        raise ParameterError("seed", f"must be a non-negative integer, got {seed!r}")
+    repeats = int(repeats)
+    children = np.random.SeedSequence(int(seed)).spawn(len(exps) * repeats)
+    tasks = [(primitive, int(primaries), float(exps[k // repeats]), children[k]) for k in range(len(children))]
+    if workers is None:
+        workers = os.cpu_count() or 1
+    if workers < 1:
+        raise ParameterError("workers", f"must be >= 1, got {workers!r}")
+    if workers == 1 or len(tasks) == 1:
+        results: Iterable = map(_measure, tasks)
+        pool = None
+    else:
+        from concurrent.futures import ProcessPoolExecutor
+
+        pool = ProcessPoolExecutor(max_workers=int(workers))
+        results = pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
+    try:
+        if progress is not None:
+            results = progress(results)
+        values = np.array(list(results), dtype=np.float64).reshape(len(exps), repeats, 3)
+    finally:
+        if pool is not None:
+            pool.shutdown(cancel_futures=True)
+
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows (N = 1: D_A undefined) stay NaN
+        mean = np.nanmean(values, axis=1)
+        std = np.nanstd(values, axis=1)
+    (dm, pm, rm), (ds, ps, rs) = mean.T, std.T
+    return Calibration(
+        primitive=primitive, primaries=int(primaries), repeats=repeats, seed=int(seed), exponent=exps,
+        D_A_mean=dm, D_A_std=ds, porosity_mean=pm, porosity_std=ps, R_g_mean=rm, R_g_std=rs,
+    )
+
+
+def cache_dir() -> Path:
+    """Where calibration curves are cached.
+
+    ``$GRAINFORGE_CACHE`` if set, else ``$XDG_CACHE_HOME/grainforge``, else
+    ``~/.cache/grainforge``.
+    """
+    env = os.environ.get("GRAINFORGE_CACHE")
+    if env:
+        return Path(env)
+    xdg = os.environ.get("XDG_CACHE_HOME")
+    base = Path(xdg) if xdg else Path.home() / ".cache"
+    return base / "grainforge"
+
+
+def _cache_path(primitive: str, primaries: int, exponents, repeats: int, seed: int) -> Path:
+    key = repr((ALGORITHM_VERSION, [float(e) for e in exponents], int(repeats), int(seed)))
+    digest = hashlib.sha256(key.encode()).hexdigest()[:12]
+    return cache_dir() / "calibration" / f"dpa-{primitive}-N{int(primaries)}-{digest}.csv"
+
+
+def cached_calibration(
+    primitive: str,
+    primaries: int,
+    *,
+    exponents: Sequence[float] = DEFAULT_EXPONENTS,
+    repeats: int = DEFAULT_REPEATS,
+    seed: int = 0,
+    workers: int | None = None,
+    progress: Callable[[Iterable], Iterable] | None = None,
+) -> Calibration:
+    """The calibration for (primitive, N, grid), read from the cache or computed and stored.
+
+    The cache key is the primitive, N, the ε grid, the repeats, the root seed
+    and :data:`ALGORITHM_VERSION`; a damaged cache file is recomputed.
+    """
+    path = _cache_path(primitive, primaries, exponents, repeats, seed)
+    if path.exists():
+        try:
+            return Calibration.read_csv(path)
+        except (ValueError, KeyError, OSError):
+            pass
+    cal = calibrate(primitive, primaries, exponents, repeats, seed=seed, workers=workers, progress=progress)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    cal.write_csv(path)
+    return cal
+
+
+def exponent_for_dimension(
+    target: float,
+    *,
+    primitive: str = "cube",
+    primaries: int = 200,
+    progress: Callable[[Iterable], Iterable] | None = None,
+) -> float:
+    """ε expected to give mean D_A = ``target`` for this primitive and N (cached calibration).
+
+    Raises
+    ------
+    ParameterError
+        If ``target`` is outside the calibrated range (the message gives it).
+    """
+    from .methods.dpa import Params
+
+    Params(primitive=primitive, exponent=1.0, primaries=primaries, target_fractal_dimension=target)
+    cal = cached_calibration(primitive, primaries, progress=progress)
+    return cal.exponent_for(target)
