@@ -58,7 +58,8 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     for name, v in recipe.params.items():
         vals = [r[name] for r in rows]
         if isinstance(v, Distribution) and v.kind == "choice":
-            counts = {str(c): sum(1 for x in vals if x == c) for c in v.args["values"]}
+            labels = [_label(x) for x in vals]
+            counts = {_label(c): labels.count(_label(c)) for c in v.args["values"]}
             out["parameters"][name] = {"distribution": "choice", "counts": counts}
         elif isinstance(v, Distribution):
             out["parameters"][name] = {"distribution": v.kind, **dict(v.args), "achieved": _stats(vals)}
@@ -78,6 +79,13 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             "max_abs_deviation_percent": float(np.max(np.abs(achieved - np.array(g.percent_passing)))),
         }
     return out
+
+
+def _label(v: Any) -> str:
+    """A choice value as text (lists and tuples as ``a,b,c``)."""
+    if isinstance(v, (list, tuple)):
+        return ",".join(_label(x) for x in v)
+    return repr(v) if isinstance(v, float) else str(v)
 
 
 def _hist(ax, vals, colour) -> None:
@@ -111,7 +119,7 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
             g = info["grading"]
             ax.semilogx(g["sieves_mm"], g["target_percent_passing"], "k-o", ms=3, label="target")
             ax.semilogx(g["sieves_mm"], g["achieved_percent_passing"], "s--", ms=3, color="tab:red",
-                        label=f"achieved (max dev {g['max_abs_deviation_percent']:.1f} %)")
+                        label=f"achieved (max dev {g['max_abs_deviation_percent']:.1f} points)")
             ax.set_xlabel(f"{recipe.size_definition} size (mm)")
             ax.set_ylabel(f"percent passing (by {g['basis']})")
             ax.set_ylim(-2, 102)
@@ -124,9 +132,11 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
             ax.set_title("size")
         else:
             vals = [r[name] for r in rows]
-            if all(isinstance(v, str) for v in vals):
-                labels = sorted(set(vals))
-                ax.bar(labels, [vals.count(s) for s in labels], color=colour)
+            if name in recipe.params and recipe.params[name].kind == "choice":
+                labels = [_label(x) for x in vals]
+                keys = [_label(c) for c in recipe.params[name].args["values"]]
+                ax.bar(range(len(keys)), [labels.count(k) for k in keys], color=colour)
+                ax.set_xticks(range(len(keys)), keys, rotation=20 if len(keys) > 3 else 0)
             else:
                 _hist(ax, vals, colour)
             ax.set_title(name)
