@@ -153,3 +153,15 @@ def test_identical_across_blas_thread_counts():
     u, _ = icosphere(3)
     here = hashlib.sha256(fso.wm_sum(u, f).tobytes() + fso.wm_sum(u, f, chunk=642).tobytes()).hexdigest()
     assert digests == [here, here]
+
+
+@pytest.mark.parametrize("subdivisions", [2, 3, 4, 5])
+def test_build_amplitude_uses_level3_sum_exactly(subdivisions):
+    # build() reuses the first 642 values of the grain's own sum when the mesh
+    # is level 3 or finer; K must equal the one from a separate level-3 evaluation
+    p = fso.Params(subdivisions=subdivisions)
+    _, _, info = fso.build(p, np.random.default_rng(9))
+    field = fso.draw_field(p, np.random.default_rng(9))
+    ref_unit, _ = icosphere(fso.REFERENCE_SUBDIVISIONS)
+    s_ref = fso.wm_sum(ref_unit, field)
+    assert info["K"] == fso.DEFAULT_AMPLITUDE / float(np.sqrt(np.mean(s_ref**2)))

@@ -282,7 +282,14 @@ def build(p: Params, rng: np.random.Generator):
         which = "k"
     else:
         ref_unit, _ = icosphere(REFERENCE_SUBDIVISIONS)
-        S_ref = S if p.subdivisions == REFERENCE_SUBDIVISIONS else wm_sum(ref_unit, f)
+        nref = len(ref_unit)
+        if p.subdivisions >= REFERENCE_SUBDIVISIONS and np.array_equal(unit[:nref], ref_unit):
+            # finer icospheres start with the level-3 vertices, and wm_sum is
+            # evaluated vertex by vertex (bit-identical whatever the block), so
+            # this is exactly wm_sum(ref_unit, f) without evaluating it again
+            S_ref = S[:nref]
+        else:
+            S_ref = wm_sum(ref_unit, f)
         rms = float(np.sqrt(np.mean(S_ref**2)))
         K = p.amplitude / rms if rms > 0 else 0.0
         which = "amplitude"
