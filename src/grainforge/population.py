@@ -672,8 +672,16 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int) -> Iterabl
     import multiprocessing
     from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
 
-    method = "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
-    ex = ProcessPoolExecutor(max_workers=workers, mp_context=multiprocessing.get_context(method))
+    from .methods import METHODS
+
+    if "forkserver" in multiprocessing.get_all_start_methods():
+        # Workers fork from a server that has already imported the heavy modules once.
+        ctx = multiprocessing.get_context("forkserver")
+        ctx.set_forkserver_preload(["grainforge.population", METHODS[recipe.method], "grainforge.run",
+                                    "trimesh", "scipy.special"])
+    else:
+        ctx = multiprocessing.get_context("spawn")
+    ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
     try:
         pending = {ex.submit(make_grain, recipe, i) for i in todo}
         while pending:
