@@ -13,5 +13,6 @@ from .methods.cri import cri
 from .methods.dpa import dpa
 from .methods.fso import fso
 from .params import ParameterError
+from .population import load_recipe, run_batch
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour"]
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour", "load_recipe", "run_batch"]

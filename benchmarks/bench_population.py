@@ -1,0 +1,89 @@
+"""Population runner: throughput with 1 and 2 local workers, and the runner's per-grain overhead.
+
+Prints figures; asserts nothing about time.  Run on an otherwise idle machine:
+
+    .venv/bin/python benchmarks/bench_population.py [--count 24] [--subdivisions 5]
+
+- generation time: ``make_grain`` called in a plain loop (draw, generate, scale to size, measure,
+  encode), i.e. what any loop over grains must do;
+- runner overhead: batch with 1 worker (files written atomically, SHA-256, sidecar journal, manifest;
+  report excluded) minus the plain loop, per grain and as a fraction of the generation time;
+- throughput: grains/s of ``run_batch`` with workers=1 and workers=2 (pool start-up included),
+  and the speed-up.
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import shutil
+import tempfile
+import time
+from pathlib import Path
+
+from grainforge.population import make_grain, parse_recipe, run_batch
+
+RECIPE = """\
+method = "fso"
+count = {count}
+seed = 7
+[params]
+fractal_dimension = {{ distribution = "uniform", low = 2.2, high = 2.6 }}
+subdivisions = {subdivisions}
+[size]
+definition = "equivalent"
+distribution = "lognormal"
+median_mm = 5.0
+sigma = 0.2
+"""
+
+
+def timed_batch(recipe, workers: int, tmp: Path) -> float:
+    out = tmp / f"w{workers}"
+    shutil.rmtree(out, ignore_errors=True)
+    t0 = time.perf_counter()
+    run_batch(recipe, out, workers=workers, report=False)
+    return time.perf_counter() - t0
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--count", type=int, default=24)
+    ap.add_argument("--subdivisions", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=2)
+    a = ap.parse_args()
+    recipe = parse_recipe(RECIPE.format(count=a.count, subdivisions=a.subdivisions))
+    print(f"FSO population: {a.count} grains, subdivisions {a.subdivisions}, {os.cpu_count()} CPUs, "
+          f"load average {os.getloadavg()[0]:.2f} at start")
+    make_grain(recipe, 0)  # warm imports and caches
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        loop, one, two = [], [], []
+        for _ in range(a.repeats):
+            t0 = time.perf_counter()
+            for i in range(recipe.count):
+                make_grain(recipe, i)
+            loop.append(time.perf_counter() - t0)
+            one.append(timed_batch(recipe, 1, tmp))
+            two.append(timed_batch(recipe, 2, tmp))
+        t_loop, t1, t2 = min(loop), min(one), min(two)
+        t0 = time.perf_counter()
+        from grainforge.report import population_report
+
+        rows = run_batch(recipe, tmp / "w1", resume=True, report=False)["rows"]
+        population_report(recipe, rows, tmp / "w1")
+        t_report = time.perf_counter() - t0
+    n = recipe.count
+    gen = t_loop / n
+    over = (t1 - t_loop) / n
+    print(f"generation (plain loop):     {1e3 * gen:8.1f} ms/grain")
+    print(f"runner overhead, 1 worker:   {1e3 * over:8.1f} ms/grain = {100 * over / gen:5.1f} % of generation")
+    print(f"batch, 1 worker:             {n / t1:8.2f} grains/s ({t1:.2f} s)")
+    print(f"batch, 2 workers:            {n / t2:8.2f} grains/s ({t2:.2f} s, pool start-up included)")
+    print(f"speed-up 2 vs 1 worker:      {t1 / t2:8.2f}x")
+    print(f"resume check + report (once): {t_report:6.2f} s")
+    print(f"load average at end {os.getloadavg()[0]:.2f} (best of {a.repeats} repeats)")
+
+
+if __name__ == "__main__":
+    main()
