@@ -76,12 +76,12 @@ def figure2(out: Path, subdivisions: int = 5) -> Path:
                          title="Fig. 2  FSO grains: fractal dimension D from 2.0 to 2.8, L = 7 R")
 
 
-def _synthetic_micrograph(size: int = 320) -> np.ndarray:
+def _synthetic_micrograph(size: int = 320, subdivisions: int = 5) -> np.ndarray:
     """A grey image of a rendered FSO grain on a dark background (stand-in for a micrograph)."""
     from .methods.fso import fso
     from .render import render_image
 
-    g = fso(fractal_dimension=2.3, length_ratio=4.0, amplitude=0.12, subdivisions=5, rng=SEED)
+    g = fso(fractal_dimension=2.3, length_ratio=4.0, amplitude=0.12, subdivisions=subdivisions, rng=SEED)
     img = render_image(g, size=size, elev=90.0, azim=-90.0, color=(0.85, 0.80, 0.70), background=(0.08, 0.08, 0.10))
     return img.mean(axis=2)
 
@@ -102,7 +102,7 @@ def figure3(out: Path, subdivisions: int = 5) -> Path:
 
     frac = Contour.from_fractal(fractal_dimension=2.4, length_ratio=2.0, amplitude=0.06, rng=SEED)
     four = Contour.from_descriptors(FIG4_SAME, rng=SEED)
-    image = _synthetic_micrograph()
+    image = _synthetic_micrograph(subdivisions=subdivisions)
     traced = Contour.from_image(image)
     fig, axes = plt.subplots(1, 3, figsize=(9.6, 3.6), dpi=130)
     for ax, c, lab in ((axes[0], frac, "(a) fractal profile, D = 2.4, L = 2 R"),

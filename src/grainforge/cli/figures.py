@@ -25,12 +25,7 @@ def figures(out, only, subdivisions, overwrite):
         existing = [out / FIGURES[n][0] for n in numbers if (out / FIGURES[n][0]).exists()]
         if existing:
             raise click.UsageError(f"{existing[0]} exists; use --overwrite")
-    with click.progressbar(length=len(numbers), label="figures", file=click.get_text_stream("stderr")) as bar:
-        def echo(msg):
-            bar.update(1)
-
-        written, skipped = make_figures(out, numbers, subdivisions=subdivisions, echo=echo)
-    for p in written:
-        click.echo(f"wrote {p}", err=True)
+    written, skipped = make_figures(out, numbers, subdivisions=subdivisions,
+                                    echo=lambda msg: click.echo(msg, err=True))
     for n, reason in skipped:
         click.echo(f"skipped Figure {n}: {reason}", err=True)
