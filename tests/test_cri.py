@@ -7,7 +7,7 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import grainforge
-from grainforge.contours import Contour, draw_contours
+from grainforge.contours import Contour, descriptor_spectrum, draw_contours
 from grainforge.io import export_bytes
 from grainforge.methods import generate
 from grainforge.methods.cri import GRID, PLANES, Params, build, construct
@@ -43,9 +43,7 @@ def _sources(images):
         "fourier": Params(preset="rough-angular", subdivisions=5),
         "fourier-3-sets": Params(descriptors=(0.1, 0.05, 0.02), descriptors_xz=(0.2, 0.1, 0.03),
                                  descriptors_yz=(0.05, 0.02, 0.01), subdivisions=5),
-        # fractal profiles keep a nearly flat spectrum up to mode 64, at the Nyquist limit of a
-        # level-5 mesh (128 vertices per great circle; max section error 1.1 % there): use level 6
-        "fractal": Params(contour="fractal", subdivisions=6),
+        "fractal": Params(contour="fractal", subdivisions=5),
         "image": Params(images=",".join(images), subdivisions=5),
     }
 
@@ -82,6 +80,21 @@ def test_principal_sections_reproduce_the_contours(source, three_images):
     for k, plane in enumerate(PLANES):
         assert info[f"section_{plane}_D8"] == pytest.approx(Contour(s[k]).descriptors()[8], rel=1e-9)
     assert 0 <= info["correction"] < 0.3
+
+
+def test_contours_are_band_limited_to_the_mesh():
+    """A level-s grain keeps harmonics up to 2^s: coarse grains are low-passed, not aliased."""
+    for s, kept in ((2, 4), (3, 8), (5, 32), (6, 64)):
+        p = Params(preset="rough-angular", subdivisions=s)
+        D = np.array([Contour(x).descriptors(128) for x in construct(p, 1).sections])
+        # above kept + 2 nothing is left (the smooth stretch and correction, which are mostly
+        # modes 0-2, shift a little energy by up to two harmonics)
+        if kept < 64:
+            unlimited = descriptor_spectrum(0.15, 0.10, 0.03)[kept + 3]
+            assert D[:, kept + 3:].max() < 0.15 * unlimited
+        assert build(p, np.random.default_rng(1))[2]["modes_used"] == min(64, kept)
+    hi = Contour(construct(Params(preset="rough-angular", subdivisions=3), 1).sections[0])
+    assert hi.descriptors()[8] > 0.015  # roughness D8 survives at level 3
 
 
 def test_sections_keep_the_input_contours_shape():

@@ -128,7 +128,54 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
             labels.append(f"{name}  seed {r['seed']}")
     sheet = contact_sheet(meshes, labels, out / "cri-grains.png", columns=len(seeds),
                           title="CRI grains by contour source (paper Figs. 4, 8)")
-    return written + [folder, sheet]
+    written += [folder, sheet, cri_sections_figure(out / "cri-sections.png", s)]
+    return written
+
+
+def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
+    """Verification figure: a CRI grain's principal sections against its contours."""
+    import io as _io
+
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+    import trimesh
+
+    from .contours import Contour
+    from .io import atomic_write
+    from .methods.cri import GRID, PLANES, Params, build, construct
+
+    p = Params(preset="rough-angular", subdivisions=subdivisions)
+    v, f, _ = build(p, np.random.default_rng(0))
+    con = construct(p, 0)
+    mesh = trimesh.Trimesh(v, f, process=False)
+    normals = {"xy": (0, 0, 1), "xz": (0, 1, 0), "yz": (1, 0, 0)}
+    axes2 = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
+    t = 2 * np.pi * np.arange(GRID + 1) / GRID
+    fig, axes = plt.subplots(1, 3, figsize=(10, 3.6), dpi=100)
+    for k, (ax, plane) in enumerate(zip(axes, PLANES)):
+        src = con.inputs[k]
+        r_in = np.r_[Contour(src.radii).aligned().resampled(GRID), src.radii[0]]
+        r_sec = np.r_[con.sections[k], con.sections[k][0]]
+        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="input contour (aligned)")
+        ax.plot(r_sec * np.cos(t), r_sec * np.sin(t), color="C0", lw=1.5, label="stretched + corrected")
+        cut = np.asarray(mesh.section(plane_origin=(0, 0, 0), plane_normal=normals[plane]).vertices)
+        i, j = axes2[plane]
+        ax.plot(cut[:, i], cut[:, j], ".", color="C3", ms=2, label="mesh section")
+        sec = Contour(con.sections[k])
+        ang = np.arctan2(cut[:, j], cut[:, i])
+        err = np.abs(np.hypot(cut[:, i], cut[:, j]) - sec(ang) * sec.scale).max() / con.sections[k].mean()
+        ax.set_title(f"{plane} section: max error {100 * err:.2f} % of r0", fontsize=9)
+        ax.set_aspect("equal")
+        ax.tick_params(labelsize=7)
+    axes[0].legend(fontsize=7, loc="lower left")
+    fig.suptitle(f"CRI rough-angular, seed 0, subdivisions {subdivisions}: principal sections", fontsize=10)
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", metadata={"Software": None})
+    plt.close(fig)
+    return atomic_write(path, buf.getvalue())
 
 
 #: (name, function(out_folder, quick) -> written paths)

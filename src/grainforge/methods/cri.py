@@ -39,7 +39,7 @@ from ..contours import (
 from ..geodesic import icosphere
 from ..params import ParameterError, param, validate
 
-__all__ = ["Params", "build", "cri", "construct", "Construction", "SOURCES", "PRESETS"]
+__all__ = ["Params", "build", "cri", "construct", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
 
 NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
@@ -56,10 +56,12 @@ ASPECT_REFERENCE_SUBDIVISIONS = 5
 MEASURED = (2, 3, 8)
 #: generation outputs recorded in manifests: FDs (D2, D3, D8) of the three input
 #: contours as given, and of the three principal sections (the corrected
-#: contours), the largest correction |f − 1|, and the extreme radii.
+#: contours), the harmonics kept (min(modes, 2^s)), the x:y:z diameters the
+#: contours were stretched to, the final axis scaling (aspect), the largest
+#: correction |f − 1|, and the extreme radii.
 INFO_COLUMNS = tuple(
     f"{kind}_{plane}_D{n}" for kind in ("contour", "section") for plane in PLANES for n in MEASURED
-) + ("target_aspect", "axis_scale", "correction", "min_radius", "max_radius")
+) + ("modes_used", "target_aspect", "axis_scale", "correction", "min_radius", "max_radius")
 
 
 def _triplet(name):
@@ -270,6 +272,25 @@ class Construction:
         return blend * (1.0 + (s - 1.0) * weight)
 
 
+def mesh_modes(subdivisions: int) -> int:
+    """Highest contour harmonic a level-``s`` icosphere resolves: 2^s.
+
+    A principal great circle of the icosphere carries 4·2^s vertices, so
+    harmonic 2^s has four vertices per wavelength; above it, linear
+    interpolation between vertices (and aliasing) would misrepresent the
+    contour.  Contours are band-limited to this, so a coarse grain is the
+    low-pass version of the fine grain with the same seed.
+    """
+    return 2 ** int(subdivisions)
+
+
+def _band_limit(fine: np.ndarray, modes: int) -> np.ndarray:
+    """The grid function with every harmonic above ``modes`` removed."""
+    spec = np.fft.rfft(fine)
+    spec[modes + 1:] = 0.0
+    return np.fft.irfft(spec, GRID)
+
+
 def _fine(c: Contour, modes: int) -> np.ndarray:
     """Physical radii (radii × scale) on the fine grid, band-limited to ``modes`` harmonics.
 
@@ -427,7 +448,8 @@ def construct(p: Params, rng: Any = None) -> Construction:
     dims = 2.0 * np.exp(logs - logs.mean())  # geometric mean 2: equal-volume diameter about 2
     X, Y, Z = dims
     stretched = [_stretch(f, u / e[0], v / e[1]) for f, e, (u, v) in zip(fines, ext, ((X, Y), (X, Z), (Y, Z)))]
-    sections, factors = _correct(_best_orientation(stretched))
+    keep = min(p.modes, mesh_modes(p.subdivisions))
+    sections, factors = _correct(_best_orientation([_band_limit(f, keep) for f in stretched]))
     con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
     if p.aspect is not None:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
@@ -459,6 +481,7 @@ def build(p: Params, rng: np.random.Generator):
         for n in MEASURED:
             info[f"section_{plane}_D{n}"] = float(D_sec[k][n])
     info["correction"] = float(np.abs(con.factors - 1.0).max())
+    info["modes_used"] = min(p.modes, mesh_modes(p.subdivisions))
     info["target_aspect"] = tuple(round(d / con.dims[2], 6) for d in con.dims)
     info["axis_scale"] = con.axis_scale
     info["min_radius"] = float(R.min())
