@@ -326,17 +326,21 @@ def cached_calibration(
     primitive: str,
     primaries: int,
     *,
-    exponents: Sequence[float] = DEFAULT_EXPONENTS,
-    repeats: int = DEFAULT_REPEATS,
+    exponents: Sequence[float] | None = None,
+    repeats: int | None = None,
     seed: int = 0,
     workers: int | None = None,
     progress: Callable[[Iterable], Iterable] | None = None,
 ) -> Calibration:
     """The calibration for (primitive, N, grid), read from the cache or computed and stored.
 
-    The cache key is the primitive, N, the ε grid, the repeats, the root seed
-    and :data:`ALGORITHM_VERSION`; a damaged cache file is recomputed.
+    ``exponents`` and ``repeats`` default to :data:`DEFAULT_EXPONENTS` and
+    :data:`DEFAULT_REPEATS`.  The cache key is the primitive, N, the ε grid,
+    the repeats, the root seed and :data:`ALGORITHM_VERSION`; a damaged cache
+    file is recomputed.
     """
+    exponents = DEFAULT_EXPONENTS if exponents is None else exponents
+    repeats = DEFAULT_REPEATS if repeats is None else repeats
     path = _cache_path(primitive, primaries, exponents, repeats, seed)
     if path.exists():
         try:
