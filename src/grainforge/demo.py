@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "cri_gallery"]
+__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery"]
 
 
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
@@ -156,10 +156,10 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     t = 2 * np.pi * np.arange(GRID + 1) / GRID
     fig, axes = plt.subplots(1, 3, figsize=(10, 3.6), dpi=100)
     for k, (ax, plane) in enumerate(zip(axes, PLANES)):
-        src = con.inputs[k]
-        r_in = np.r_[Contour(src.radii).aligned().resampled(GRID), src.radii[0]]
+        before = con.sections[k] / con.factors[k]
+        r_in = np.r_[before, before[0]]
         r_sec = np.r_[con.sections[k], con.sections[k][0]]
-        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="input contour (aligned)")
+        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="before correction")
         ax.plot(r_sec * np.cos(t), r_sec * np.sin(t), color="C0", lw=1.5, label="stretched + corrected")
         cut = np.asarray(mesh.section(plane_origin=(0, 0, 0), plane_normal=normals[plane]).vertices)
         i, j = axes2[plane]
@@ -179,9 +179,33 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
 
 
 #: (name, function(out_folder, quick) -> written paths)
+def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
+    """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε."""
+    from .methods.dpa import Params
+
+    seeds = [0, 1] if quick else [0, 1, 2]
+    n = 100 if quick else 300
+    values = [0.1, 1, 3, 10, 30, 100]
+    written = _sweep(
+        out / "dpa-cubes", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n),
+        values, "eps", seeds, f"DPA, {n} cubes: exponent ε from 0.1 (compact) to 100 (branching) (paper Fig. 5)",
+    )
+    written += _sweep(
+        out / "dpa-cubes-smoothed", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n, smooth=2),
+        values[::2] if quick else values, "eps", seeds[:1] if quick else seeds,
+        f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)",
+    )
+    written += _sweep(
+        out / "dpa-octahedra", "dpa", lambda e: Params(primitive="octahedron", exponent=e, primaries=n),
+        values, "eps", seeds, f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)",
+    )
+    return written
+
+
 SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("FSO sweeps (Figs. 1-2)", fso_sweeps),
     ("CRI contours and grains (Figs. 3-4)", cri_gallery),
+    ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
 ]
 
 
