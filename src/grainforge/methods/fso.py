@@ -201,18 +201,20 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
     in the upper one.  The second term is evaluated per block of ``chunk``
     vertices in four array passes over the ``chunk × M·n_max`` terms:
 
-    1. phases in turns, rounded to 2^−fb turns, by one float64 rank-4 matrix
-       product (see ``_phase_setup``; ``fb`` = 28 at the defaults);
-    2. reduction modulo one turn: the low 32 bits of each float64 are taken
+    1. phases in units of 3 turns, rounded to 2^−fb units, by one float64
+       rank-4 matrix product (see ``_phase_setup``; fb = 30 at the defaults);
+    2. reduction modulo 3 turns: the low 32 bits of each float64 are taken
        as int32 (a truncating integer cast), i.e. the phase in units of 2^−fb
-       turns modulo 2^(32−fb) turns (shifted left when fb < 28 so that only
-       the fraction remains), then converted to float32 radians;
+       modulo 2^(32−fb) units (shifted left when fb < 28 so that only the
+       fraction remains), then converted to float32 radians;
     3. float32 cosine (ALGORITHMS.md §1 item 7);
-    4. the w_n-weighted sum over (m, n) with ``einsum``.
+    4. the w_n-weighted sum over (m, n) with ``einsum`` (float32).
 
-    Only the cosine and the final sum run in float32; the phase error is
-    below 2^−21 turns (≈ 3e-6 rad) at the defaults and the result agrees
-    with :func:`wm_sum_reference` to about 1e-5 in S (radius error ≈ K·1e-5).
+    Only steps 2–4 run in float32.  At the defaults the result agrees with
+    :func:`wm_sum_reference` to ~1e-5 in S (~2e-6 of its RMS, a radius error
+    ~1e-7·R0 at amplitude 0.1); the worst case found over the parameter
+    ranges (L/R0 ≈ 1000 with γ ≈ 1, where S is a small difference of large
+    sums) is ~3e-4 of the RMS, i.e. 3e-5·R0.  See docs/methods/fso-performance.md.
     The evaluation is deterministic: the matrix product has only 4 terms per
     entry, summed in a fixed order, and runs single-threaded for blocks this
     small; everything else is element-wise or NumPy's own ``einsum`` loop.
