@@ -21,6 +21,8 @@ import numpy as np
 
 __all__ = ["rasterize", "silhouette", "render_image", "shade", "contact_sheet", "view_rotation"]
 
+#: a corner whose vertex normal is further than this from its face normal is shaded flat
+CREASE_DEGREES = 50.0
 #: default grain colour (a sand tone), RGB in [0, 1]
 SAND = (0.80, 0.70, 0.53)
 
@@ -167,12 +169,43 @@ def view_rotation(elev: float = 20.0, azim: float = -60.0) -> np.ndarray:
     return np.stack([right, up, view])
 
 
-def _vertex_normals(v: np.ndarray, f: np.ndarray) -> np.ndarray:
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # area-weighted
-    vn = np.zeros_like(v)
-    for k in range(3):
-        np.add.at(vn, f[:, k], fn)
-    return vn / (np.linalg.norm(vn, axis=1, keepdims=True) + 1e-300), fn
+def _corner_normals(v: np.ndarray, f: np.ndarray, crease_degrees: float = CREASE_DEGREES):
+    """Per-corner shading normals with smoothing groups.
+
+    The normal at corner (face, vertex) is the area-weighted mean of the normals
+    of the faces around that vertex that lie within ``crease_degrees`` of the
+    face itself, so smooth surfaces shade smoothly while creases (a cube's
+    edges) stay sharp and flat faces stay flat.
+
+    Returns
+    -------
+    corner : (F, 3, 3) float64
+        Unit normals per face corner.
+    face_normals : (F, 3) float64
+        Area-weighted (unnormalised) face normals.
+    """
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+    fnu = fn / (np.linalg.norm(fn, axis=1, keepdims=True) + 1e-300)
+    nf = len(f)
+    vert = f.ravel()
+    face = np.repeat(np.arange(nf), 3)
+    order = np.argsort(vert, kind="stable")
+    vs, fs = vert[order], face[order]
+    starts = np.flatnonzero(np.r_[True, vs[1:] != vs[:-1]])
+    sizes = np.diff(np.r_[starts, len(vs)])
+    k = np.repeat(sizes, sizes)  # group size of each sorted corner
+    grp_start = np.repeat(starts, sizes)
+    a = np.repeat(np.arange(len(vs)), k)  # sorted corner index
+    offs = np.arange(len(a)) - np.repeat(np.cumsum(k) - k, k)
+    b = np.repeat(grp_start, k) + offs  # every corner at the same vertex
+    fa, fb = fs[a], fs[b]
+    ok = np.einsum("ij,ij->i", fnu[fa], fnu[fb]) >= np.cos(np.radians(crease_degrees))
+    acc = np.zeros((len(vs), 3))
+    np.add.at(acc, a[ok], fn[fb[ok]])
+    corner = np.empty((3 * nf, 3))
+    corner[order] = acc
+    corner /= np.linalg.norm(corner, axis=1, keepdims=True) + 1e-300
+    return corner.reshape(nf, 3, 3), fn
 
 
 def render_image(
@@ -220,8 +253,7 @@ def render_image(
     xy = np.empty((len(v), 2))
     xy[:, 0] = cam[:, 0] * scale + (n - 1) / 2
     xy[:, 1] = -cam[:, 1] * scale + (n - 1) / 2  # image rows grow downwards
-    vn, fn = _vertex_normals(v, f)
-    fnu = fn / (np.linalg.norm(fn, axis=1, keepdims=True) + 1e-300)
+    corner, fn = _corner_normals(v, f) if smooth else (None, np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]))
     # back-face culling is safe only for a closed, outward-oriented mesh
     closed = bool(getattr(mesh, "is_watertight", False)) and float(getattr(mesh, "volume", 0.0)) > 0
     drawn = np.flatnonzero(fn @ R[2] > 0) if closed else np.arange(len(f))
@@ -229,12 +261,7 @@ def render_image(
     hit = face_img >= 0
     fi = drawn[face_img[hit]]
     if smooth:
-        # per-corner normals: the vertex normal unless it is more than 45° from
-        # the face normal (a crease, e.g. a cube's edge), then the face normal
-        corner = vn[f[fi]]
-        crease = (corner * fnu[fi][:, None, :]).sum(2) < np.cos(np.radians(45))
-        corner = np.where(crease[:, :, None], fnu[fi][:, None, :], corner)
-        nrm = (corner * bary[hit][:, :, None]).sum(1)
+        nrm = (corner[fi] * bary[hit][:, :, None]).sum(1)
     else:
         nrm = fn[fi]
     nrm = nrm @ R.T
