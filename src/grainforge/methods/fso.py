@@ -267,7 +267,8 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
         np.matmul(P[i0 : i0 + n], Q, out=ss)
         np.copyto(ii, ss.view(np.int64), casting="unsafe")  # low 32 bits (wraps)
         if shift:
-            np.left_shift(ii, shift, out=ii)
+            uu = ii.view(np.uint32)  # unsigned: the shift wraps, well defined
+            np.left_shift(uu, np.uint32(shift), out=uu)
         np.copyto(xx, ii, casting="unsafe")
         xx *= scale
         np.cos(xx, out=xx)
