@@ -595,7 +595,7 @@ def size_quantile(recipe: Recipe, index: int, u: float) -> float:
 
     Examples
     --------
-    >>> r = parse_recipe('method = "fso"\ncount = 4\nseed = 3\n[size]\nmm = 1.0\n')
+    >>> r = parse_recipe('method = "fso"\\ncount = 4\\nseed = 3\\n[size]\\nmm = 1.0\\n')
     >>> qs = [size_quantile(r, i, 0.5) for i in range(4)]
     >>> sorted(int(q * 4) for q in qs)
     [0, 1, 2, 3]
@@ -670,7 +670,7 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int) -> Iterabl
             yield make_grain(recipe, i)
         return
     import multiprocessing
-    from concurrent.futures import FIRST_EXCEPTION, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
 
     from .methods import METHODS
 
@@ -685,7 +685,7 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int) -> Iterabl
     try:
         pending = {ex.submit(make_grain, recipe, i) for i in todo}
         while pending:
-            done, pending = wait(pending, return_when=FIRST_EXCEPTION)
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
             for f in sorted(done, key=lambda f: f.exception() is None):
                 yield f.result()
     finally:
