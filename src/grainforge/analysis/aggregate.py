@@ -46,7 +46,7 @@ def aggregate_dimension(volume: float, box_edges) -> float:
     >>> aggregate_dimension(27.0, (3.0, 3.0, 3.0))
     3.0
     >>> round(aggregate_dimension(10.0, (10.0, 1.0, 1.0)), 4)  # a straight rod of 10 cubes
-    1.6824
+    1.661
     """
     A = float(np.mean(box_edges))
     V = float(volume)

@@ -48,8 +48,8 @@ class Params:
     )
     primaries: int = param(200, "number of primary particles N", kind="int", low=1, high=100_000)
     smooth: int = param(
-        0, "corner smoothing: 0 keeps sharp corners, K ≥ 1 rounds them and splits each edge into K+1",
-        kind="int", low=0, high=6,
+        0, "corner smoothing: 0 keeps sharp corners, K ≥ 1 rounds them by K Loop subdivision steps (4^K triangles)",
+        kind="int", low=0, high=4,
     )
     target_fractal_dimension: float | None = param(
         None, "the D_A the exponent was calibrated for (recorded, set by --target-fractal-dimension)",
@@ -515,20 +515,17 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
 
 
 def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
-    """Round the corners: manifold3d tangent smoothing, each edge split into ``level + 1``.
+    """Round the corners by ``level`` steps of Loop subdivision (each splits a triangle into four).
 
-    Every edge is made G1-smooth (``smooth_out`` with all edges smooth) and
-    the curved triangles are sampled by ``refine``; the result is a closed,
-    oriented 2-manifold.  Flat regions stay flat.
+    Loop subdivision works on the connectivity only, so a closed, oriented
+    2-manifold stays one; flat regions stay flat, edges and corners are
+    rounded over about one primary size and convex parts shrink slightly.
     """
-    import manifold3d as m3
+    from trimesh.remesh import subdivide_loop
 
-    m = m3.Manifold(m3.Mesh64(vert_properties=np.ascontiguousarray(vertices, dtype=np.float64),
-                              tri_verts=np.ascontiguousarray(faces, dtype=np.uint32)))
-    if m.status() != m3.Error.NoError:
-        raise ValueError(f"smooth: the aggregate surface is not a manifold ({m.status()})")
-    m = m.smooth_out(180.0, 0.0).refine(level + 1)
-    return _manifold_mesh(m)
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    v, f = subdivide_loop(v, f, iterations=int(level))
+    return np.asarray(v, dtype=np.float64), np.asarray(f, dtype=np.int64)
 
 
 # --------------------------------------------------------------------------- the generator
@@ -579,7 +576,8 @@ def dpa(
     primaries : int
         Number of primaries N in [1, 100000] (default 200).
     smooth : int
-        0 keeps sharp corners; K ≥ 1 rounds them (edges split into K + 1).
+        0 keeps sharp corners; K in 1..4 rounds them by K steps of Loop
+        subdivision (each step multiplies the triangles by four).
     target_fractal_dimension : float, optional
         Ask for an aggregate fractal dimension D_A instead of ε: ε is read
         from the (cached, computed on first use) calibration curve of this
@@ -615,18 +613,20 @@ def dpa(
     ...
     grainforge.params.ParameterError: exponent must be in [0.01, 100], got 0.0
     """
-    from . import generate
+    from . import generate, get
+
+    P = get(NAME).Params  # the registered module's class (robust to the module being imported twice)
 
     if target_fractal_dimension is not None and exponent is not None:
         raise ParameterError("target_fractal_dimension", "cannot be combined with exponent: give one of them")
     if target_fractal_dimension is not None:
-        Params(primitive=primitive, exponent=1.0, primaries=primaries, smooth=smooth,
-               target_fractal_dimension=target_fractal_dimension)  # validate first
+        P(primitive=primitive, exponent=1.0, primaries=primaries, smooth=smooth,
+          target_fractal_dimension=target_fractal_dimension)  # validate first
         from ..calibration import exponent_for_dimension
 
         exponent = exponent_for_dimension(target_fractal_dimension, primitive=primitive, primaries=primaries)
-    p = Params(primitive=primitive, exponent=exponent, primaries=primaries, smooth=smooth,
-               target_fractal_dimension=target_fractal_dimension)
+    p = P(primitive=primitive, exponent=exponent, primaries=primaries, smooth=smooth,
+          target_fractal_dimension=target_fractal_dimension)
     return generate(NAME, p, rng)
 
 
