@@ -148,3 +148,13 @@ def test_resume_after_killing_a_real_batch_process(tmp_path):
     got, expected = tree(out), tree(ref)
     assert got == expected
     assert not [p for p in out.iterdir() if p.name.endswith(".tmp")]
+
+
+def test_a_grain_that_cannot_be_made_is_named_by_index_and_seed(runner, tmp_path):
+    bad = tmp_path / "k.toml"
+    bad.write_text(RECIPE.replace("amplitude = {", "k = 50.0\n# amplitude = {"))
+    out = tmp_path / "o"
+    res = runner.invoke(cli, ["batch", str(bad), "--out", str(out), "--workers", "1"])
+    assert res.exit_code == 2
+    assert res.output.startswith("Error: grain 0 (seed ") and "params.k 50.0 is too large" in res.output
+    assert not (out / "manifest.csv").exists()
