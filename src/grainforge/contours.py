@@ -596,19 +596,24 @@ def grain_masks(image: np.ndarray, *, threshold: float | None = None, foreground
     return ~bright if border.mean() > 0.5 else bright
 
 
-def mask_contour(mask: np.ndarray, *, n_angles: int = DEFAULT_ANGLES, offset=(0.0, 0.0)) -> Contour:
+def mask_contour(
+    mask: np.ndarray, *, n_angles: int = DEFAULT_ANGLES, offset=(0.0, 0.0), filled: bool = False
+) -> Contour:
     """The :class:`Contour` of one connected component given as a boolean mask.
 
     Holes are filled, the boundary is traced at the 0.5 level, the origin is
     the polygon's area centroid and the radius along each of ``n_angles`` rays
     is the outermost crossing of the boundary.  Coordinates are (x, y) =
     (column, −row) so that angles run counter-clockwise as displayed;
-    ``offset`` = (row0, col0) of the mask in a larger image.
+    ``offset`` = (row0, col0) of the mask in a larger image; ``filled`` says
+    that the holes are filled already.
     """
     from scipy.ndimage import binary_fill_holes
     from skimage.measure import find_contours
 
-    m = binary_fill_holes(np.asarray(mask, dtype=bool))
+    m = np.asarray(mask, dtype=bool)
+    if not filled:
+        m = binary_fill_holes(m)
     if not m.any():
         raise ValueError("mask holds no grain")
     padded = np.pad(m, 1).astype(np.float64)
@@ -628,24 +633,38 @@ def mask_contour(mask: np.ndarray, *, n_angles: int = DEFAULT_ANGLES, offset=(0.
 
 
 def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, bool]:
-    """Outermost crossing of each ray from the origin with the closed polygon (x, y)."""
-    t = TWO_PI * np.arange(n_angles) / n_angles
+    """Outermost crossing of each ray from the origin with the closed polygon (x, y).
+
+    Each edge is intersected only with the rays inside its angular span
+    (θ in [lo, hi), usually zero or one ray per edge), so the cost is
+    O(edges + crossings) rather than O(edges × rays).
+    """
+    x1, y1 = np.roll(x, -1), np.roll(y, -1)
+    a0 = np.arctan2(y, x)
+    da = np.mod(np.arctan2(y1, x1) - a0 + np.pi, TWO_PI) - np.pi  # signed angular step of each edge
+    lo = np.minimum(a0, a0 + da)
+    hi = np.maximum(a0, a0 + da)
+    step = TWO_PI / n_angles
+    k0 = np.ceil(lo / step).astype(np.int64)
+    k1 = np.ceil(hi / step).astype(np.int64)  # rays k with lo <= kΔ < hi
+    count = np.maximum(k1 - k0, 0)
+    edge = np.repeat(np.arange(len(x)), count)
+    k = np.repeat(k0 - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
+    t = k * step
     dx, dy = np.cos(t), np.sin(t)
-    px, py = x, y
-    ex, ey = np.roll(x, -1) - x, np.roll(y, -1) - y
-    # ray: s·d ; edge: p + u·e  →  s d − u e = p
-    den = dx[:, None] * ey[None, :] - dy[:, None] * ex[None, :]  # cross(d, e)
+    px, py = x[edge], y[edge]
+    ex, ey = x1[edge] - px, y1[edge] - py
+    den = dx * ey - dy * ex  # cross(d, e)
     with np.errstate(divide="ignore", invalid="ignore"):
-        s = (px[None, :] * ey[None, :] - py[None, :] * ex[None, :]) / den  # cross(p, e)/cross(d, e)
-        u = (px[None, :] * dy[:, None] - py[None, :] * dx[:, None]) / den  # cross(p, d)/cross(d, e)
-    hit = (den != 0) & (u >= 0) & (u < 1) & (s > 0)
-    s = np.where(hit, s, -np.inf)
-    radii = s.max(axis=1)
+        dist = (px * ey - py * ex) / den  # ray: s·d = p + u·e
+    ok = np.isfinite(dist) & (dist > 0)
+    ray = np.mod(k[ok], n_angles)
+    radii = np.full(n_angles, -np.inf)
+    np.maximum.at(radii, ray, dist[ok])
     if not np.isfinite(radii).all():
         raise ValueError("grain boundary does not enclose its centroid; cannot cast rays")
-    star = bool((hit.sum(axis=1) == 1).all())
+    star = bool((np.bincount(ray, minlength=n_angles) == 1).all())
     return radii, star
-
 
 
 @dataclass(frozen=True)
@@ -724,7 +743,7 @@ def scan_image(
             small += 1
             continue
         try:
-            contours.append(mask_contour(filled, n_angles=n_angles, offset=(r0, c0)))
+            contours.append(mask_contour(filled, n_angles=n_angles, offset=(r0, c0), filled=True))
         except ValueError:
             unmeasurable += 1
             continue
