@@ -285,23 +285,23 @@ def mesh_modes(subdivisions: int) -> int:
 
 
 def _band_limit(fine: np.ndarray, modes: int) -> np.ndarray:
-    """The grid function with every harmonic above ``modes`` removed."""
-    spec = np.fft.rfft(fine)
-    spec[modes + 1:] = 0.0
-    return np.fft.irfft(spec, GRID)
+    """The grid functions (last axis) with every harmonic above ``modes`` removed."""
+    spec = np.fft.rfft(fine, axis=-1)
+    spec[..., modes + 1:] = 0.0
+    return np.fft.irfft(spec, GRID, axis=-1)
 
 
-def _fine(c: Contour, modes: int) -> np.ndarray:
-    """Physical radii (radii × scale) on the fine grid, band-limited to ``modes`` harmonics.
+def _fine(radii: np.ndarray, modes: int) -> np.ndarray:
+    """Radii (last axis, any regular grid) on the fine grid, band-limited to ``modes`` harmonics.
 
     Descriptor and fractal contours have nothing above ``modes`` anyway; an
     image contour loses its pixel-scale noise, which no mesh could resolve.
     """
-    spec = np.fft.rfft(c.radii) / c.n_angles
-    spec = spec[: modes + 1]
-    out = np.zeros(GRID // 2 + 1, dtype=np.complex128)
-    out[: len(spec)] = spec
-    return np.fft.irfft(out * GRID, GRID) * c.scale
+    n = radii.shape[-1]
+    spec = np.fft.rfft(radii, axis=-1)[..., : min(modes, (n - 1) // 2) + 1]
+    out = np.zeros(radii.shape[:-1] + (GRID // 2 + 1,), dtype=np.complex128)
+    out[..., : spec.shape[-1]] = spec * (GRID / n)
+    return np.fft.irfft(out, GRID, axis=-1)
 
 
 _T = 2 * np.pi * np.arange(GRID) / GRID
@@ -435,7 +435,11 @@ def construct(p: Params, rng: Any = None) -> Construction:
     """
     rng = np.random.default_rng(rng)
     inputs = input_contours(p, rng)
-    fines = [_aligned(_fine(Contour(c.radii), p.modes)) for c in inputs]
+    if len({c.n_angles for c in inputs}) == 1:
+        fines = _fine(np.stack([c.radii for c in inputs]), p.modes)  # one FFT pair for all three
+    else:
+        fines = [_fine(c.radii, p.modes) for c in inputs]
+    fines = [_aligned(f) for f in fines]
     h, q = GRID // 2, GRID // 4
     # diameters through the origin along each contour's first and second axis
     ext = np.array([[f[0] + f[h], f[q] + f[3 * q]] for f in fines])
@@ -449,7 +453,7 @@ def construct(p: Params, rng: Any = None) -> Construction:
     X, Y, Z = dims
     stretched = [_stretch(f, u / e[0], v / e[1]) for f, e, (u, v) in zip(fines, ext, ((X, Y), (X, Z), (Y, Z)))]
     keep = min(p.modes, mesh_modes(p.subdivisions))
-    sections, factors = _correct(_best_orientation([_band_limit(f, keep) for f in stretched]))
+    sections, factors = _correct(_best_orientation(list(_band_limit(np.stack(stretched), keep))))
     con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
     if p.aspect is not None:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
@@ -472,7 +476,10 @@ def build(p: Params, rng: np.random.Generator):
     if con.axis_scale != (1.0, 1.0, 1.0):
         vertices *= np.asarray(con.axis_scale)
     info: dict[str, float] = {}
-    D_in = [c.descriptors(8) for c in con.inputs]
+    if len({c.n_angles for c in con.inputs}) == 1:
+        D_in = descriptors_of_radii(np.stack([c.radii for c in con.inputs]), 8)
+    else:
+        D_in = [c.descriptors(8) for c in con.inputs]
     D_sec = descriptors_of_radii(con.sections, 8)
     for k, plane in enumerate(PLANES):
         for n in MEASURED:
