@@ -126,6 +126,18 @@ def test_union_volume_is_n_primaries_and_one_body(name, eps):
         assert not intrudes(s, agg.vertices[i], agg.vertices[:i]).any()
 
 
+@pytest.mark.parametrize("name", ["truncated-octahedron", "octahedron"])
+def test_no_intrusion_in_larger_aggregates(name):
+    # the truncated octahedron's faces lie at two distances from its centre: the neighbour search
+    # must reach the children of the farther (square) faces too
+    agg = D.aggregate(name, 250, 1.0, np.random.default_rng(1))
+    s = agg.solid
+    for i in range(1, agg.primaries):
+        d2 = ((agg.centres[:i] - agg.centres[i]) ** 2).sum(axis=1)
+        near = d2 < (2 * s.circumradius) ** 2
+        assert not intrudes(s, agg.vertices[i], agg.vertices[:i][near]).any()
+
+
 def test_lattice_surface_pinched_contacts_stay_manifold():
     # four cubes meeting pairwise along edges only around a common vertex, plus face-joined neighbours
     cells = np.array([[0, 0, 0], [1, 1, 0], [1, 0, 1], [0, 1, 1], [1, 0, 0], [1, 1, 1]])

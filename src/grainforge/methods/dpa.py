@@ -241,8 +241,9 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
     open_ = np.zeros(n_total, dtype=bool)
     open_[0] = True
     R, r_in = s.circumradius, s.inradius
+    r_face = max(float(np.dot(v0[f[0]], face_frame(v0, f, np.zeros(3))[1])) for f in s.faces)
     h = 2.0 * R
-    reach2 = (2.0 * R + 2.0 * r_in) ** 2  # candidates' centres lie 2·r_in from the parent's
+    reach2 = (2.0 * R + 2.0 * r_face) ** 2  # a child's centre lies twice its face distance from the parent's
     grid: dict[tuple[int, int, int], list[int]] = {(0, 0, 0): [0]}
     span = (-2, -1, 0, 1, 2)  # reach < 2h, so cells two apart suffice
     offsets = [(a, b, c) for a in span for b in span for c in span
