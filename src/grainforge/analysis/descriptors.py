@@ -90,10 +90,8 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
     if V != 0:
         centroid_o = (vol6[:, None] * s).sum(0) / (24.0 * V)
         w = vol6 / 120.0
-        second = (
-            np.einsum("t,ti,tj->ij", w, a, a) + np.einsum("t,ti,tj->ij", w, b, b)
-            + np.einsum("t,ti,tj->ij", w, c, c) + np.einsum("t,ti,tj->ij", w, s, s)
-        )
+        X = np.concatenate([a, b, c, s])
+        second = (X * np.tile(w, 4)[:, None]).T @ X
         cov = second / V - np.outer(centroid_o, centroid_o)
     else:
         centroid_o = np.zeros(3)
@@ -202,7 +200,6 @@ def _basic(v: np.ndarray, mp: dict, hull=None) -> dict[str, float]:
 
 def describe(
     obj, *, fractal: bool = True, fourier: bool = True, primary_volume: float | None = None,
-    fd_image_size: int = 256,
 ) -> dict[str, float]:
     """Every descriptor of one body (ALGORITHMS.md §4).
 
@@ -290,7 +287,7 @@ def describe(
     if fourier:
         try:
             out.update(fourier_mod.projection_descriptors(
-                v, f, size=fd_image_size, axes=(centre, axes), closed=closed and mp["volume"] > 0
+                v, f, axes=(centre, axes), closed=closed and mp["volume"] > 0
             ))
         except ValueError:
             out.update({c: float("nan") for c in fourier_mod.fd_columns()})
