@@ -44,7 +44,7 @@ import numpy as np
 
 __all__ = [
     "ShelfPacker", "GeneratorSource", "FileSource", "Prepared", "TrayResult", "build_tray",
-    "orient_principal", "orient_stable", "files_from", "tray_outputs",
+    "orient_principal", "orient_stable", "files_from", "tray_outputs", "min_mesh_distance",
 ]
 
 OUT_FORMATS = (".3mf", ".stl")
@@ -563,3 +563,57 @@ def build_tray(
             t.unlink(missing_ok=True)
         raise
     return TrayResult(files, previews, csv_path, rows, len(files), resolution, gap, layer_count)
+
+
+def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, seed: int = 0) -> float:
+    """Smallest distance between the surfaces of any two parts whose boxes are closer than ``within``.
+
+    For every such pair, the vertices and ``samples`` random surface points of
+    each part are projected onto the other part exactly
+    (``trimesh.proximity.closest_point``); the minimum is an upper bound of
+    the true surface distance that tightens with ``samples``.  Pairs whose
+    boxes are farther apart than ``within`` are not measured (their distance
+    exceeds ``within``).
+
+    Parameters
+    ----------
+    parts : sequence of objects with ``vertices`` and ``faces`` (e.g. :class:`~grainforge.fabrication.threemf.Part`)
+    within : float
+    samples : int
+    seed : int
+
+    Returns
+    -------
+    float
+        ``inf`` when no two boxes are within ``within``.
+    """
+    import trimesh
+    from scipy.spatial import cKDTree
+
+    lo = np.array([np.asarray(p.vertices).min(axis=0) for p in parts])
+    hi = np.array([np.asarray(p.vertices).max(axis=0) for p in parts])
+    centre, half = (lo + hi) / 2, (hi - lo) / 2
+    tree = cKDTree(centre)
+    reach = 2 * float(np.linalg.norm(half, axis=1).max()) + within
+    best = np.inf
+    meshes: dict[int, Any] = {}
+    rng = np.random.default_rng(seed)
+
+    def mesh(i):
+        if i not in meshes:
+            meshes[i] = trimesh.Trimesh(parts[i].vertices, parts[i].faces, process=False, validate=False)
+        return meshes[i]
+
+    for i, j in sorted(tree.query_pairs(reach)):
+        box_gap = np.maximum(0.0, np.maximum(lo[i] - hi[j], lo[j] - hi[i]))
+        if np.linalg.norm(box_gap) > within:
+            continue
+        for a, b in ((i, j), (j, i)):
+            ma = mesh(a)
+            pts = np.vstack([ma.vertices, trimesh.sample.sample_surface(ma, samples, seed=rng)[0]])
+            # only points near b's box can be closer than ``within``
+            near = ((pts >= lo[b] - within) & (pts <= hi[b] + within)).all(axis=1)
+            for k in range(0, int(near.sum()), 512):
+                _, dist, _ = trimesh.proximity.closest_point(mesh(b), pts[near][k : k + 512])
+                best = min(best, float(dist.min()))
+    return best
