@@ -212,3 +212,19 @@ def test_bad_generation_inputs(tmp_path):
         grainforge.cri(images=[tmp_path / "a.png"] * 3, subdivisions=1)
     with pytest.raises(ParameterError, match="sections"):
         Params(sections=(Contour(np.ones(16)),))
+
+
+@pytest.mark.slow
+def test_demo_section(tmp_path):
+    """The demo's CRI section writes its figures, grains and manifests (quick mode)."""
+    from grainforge.demo import SECTIONS, cri_gallery
+
+    assert cri_gallery in [f for _, f in SECTIONS]
+    written = cri_gallery(tmp_path, quick=True)
+    names = {p.name for p in written}
+    assert {"cri-contours.png", "cri-grains.png", "cri-sections.png", "cri"} <= names
+    for run in ("rough-sphere", "rough-angular", "fractal", "micrographs"):
+        assert (tmp_path / "cri" / run / "manifest.csv").is_file()
+        assert (tmp_path / "cri" / run / "cri-0000.stl").stat().st_size > 84
+    for png in ("cri-contours.png", "cri-grains.png", "cri-sections.png"):
+        assert (tmp_path / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
