@@ -182,7 +182,7 @@ def test_recorded_seed_and_params_regenerate_the_grain_file():
 
 
 @pytest.mark.slow
-def test_grading_curve_of_2000_grains_is_within_one_and_a_half_points_of_the_target(tmp_path):
+def test_grading_curve_of_2000_grains_is_within_the_stated_tolerance(tmp_path):
     # ASTM C778 graded standard sand (mid-band), by mass; FSO grains measured after generation.
     text = """\
 method = "fso"
@@ -201,8 +201,14 @@ basis = "mass"
     r = parse_recipe(text)
     result = run_batch(r, tmp_path / "pop", workers=2)
     grading = result["summary"]["grading"]
-    dev = np.abs(np.array(grading["achieved_percent_passing"]) - np.array(grading["target_percent_passing"]))
-    # Stated tolerance (docs/populations.md): 1.5 percentage points for 2,000 grains with quasi sampling.
-    assert dev.max() <= 1.5
-    assert grading["max_abs_deviation_percent"] == pytest.approx(dev.max())
+    target = np.array(grading["target_percent_passing"])
+    by_mass = np.array(grading["achieved_percent_passing"])
+    # Stated tolerances (docs/populations.md), 2,000 grains, quasi sampling:
+    # by mass 3.5 points (a handful of coarse grains carry the top 2 % of the mass),
+    assert np.abs(by_mass - target).max() <= 3.5
+    assert grading["max_abs_deviation_percent"] == pytest.approx(np.abs(by_mass - target).max())
+    # by count, against the number distribution the mass curve implies, 0.25 points.
+    sizes = np.array([row["equivalent_diameter"] for row in result["rows"]])
+    by_count = r.size.passing(sizes)
+    assert np.abs(by_count - r.size.number_percent_passing()).max() <= 0.25
     assert (tmp_path / "pop" / "population.png").stat().st_size > 10_000

@@ -274,6 +274,10 @@ class GradingCurve:
         w = dP / du * (np.exp(-3 * u[:-1]) - np.exp(-3 * u[1:])) / 3.0
         return u, np.concatenate([[0.0], np.cumsum(w) / w.sum()])
 
+    def number_percent_passing(self) -> np.ndarray:
+        """Percent passing *by count* at each sieve implied by the curve (equal to it for ``basis="count"``)."""
+        return 100.0 * self._number_cdf()[1]
+
     def sample(self, q: float) -> float:
         """The size (mm) at number quantile ``q`` in [0, 1] (inverse CDF)."""
         return float(self.sample_many(np.array([q]))[0])
