@@ -49,8 +49,9 @@ def cli():
     Generators (paper: Hanaor et al., 3D printable geomaterials): FSO (fractal
     surface overlay), CRI (contour rotation interpolation; `grainforge fourier`
     measures the Fourier descriptors of grain images), DPA (directed polyhedra
-    aggregation; `grainforge calibrate dpa` links its exponent to D_A).  Run
-    `grainforge COMMAND --help` for each command.
+    aggregation; `grainforge calibrate dpa` links its exponent to D_A).
+    Populations from a TOML recipe: `grainforge batch` (local processes or
+    Dask).  Run `grainforge COMMAND --help` for each command.
     """
 
 
