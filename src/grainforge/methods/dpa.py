@@ -245,9 +245,8 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
     h = 2.0 * R
     reach2 = (2.0 * R + 2.0 * r_face) ** 2  # a child's centre lies twice its face distance from the parent's
     grid: dict[tuple[int, int, int], list[int]] = {(0, 0, 0): [0]}
-    span = (-2, -1, 0, 1, 2)  # reach < 2h, so cells two apart suffice
-    offsets = [(a, b, c) for a in span for b in span for c in span
-               if sum(max(abs(x) - 1, 0) ** 2 for x in (a, b, c)) * h * h < reach2]
+    cell = float(np.sqrt(reach2))  # hash-grid cell: every primary within reach is in the 27 cells around
+    offsets = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]
     face_idx = s.faces
     for n in range(1, n_total):
         placed = None
@@ -259,7 +258,7 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
             Rc = Rp @ slot_A[ff, qq]                       # (C, 3, 3)
             tc = slot_b[ff, qq] @ Rp.T + shift[p]          # (C, 3)
             kids = v0 @ Rc.transpose(0, 2, 1) + tc[:, None, :]
-            key = np.floor(shift[p] / h).astype(np.int64)
+            key = np.floor(shift[p] / cell).astype(np.int64)
             near = np.array([i for o in offsets
                              for i in grid.get((key[0] + o[0], key[1] + o[1], key[2] + o[2]), ())], dtype=np.int64)
             near = near[((shift[near] - shift[p]) ** 2).sum(axis=1) < reach2]
@@ -301,8 +300,7 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
         avail[n] = base
         avail[n, f] = False
         open_[n] = avail[n].any()
-        cell = tuple(int(x) for x in np.floor(tn / h))
-        grid.setdefault(cell, []).append(n)
+        grid.setdefault(tuple(int(x) for x in np.floor(tn / cell)), []).append(n)
     return verts, shift
 
 
