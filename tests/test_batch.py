@@ -158,3 +158,13 @@ def test_a_grain_that_cannot_be_made_is_named_by_index_and_seed(runner, tmp_path
     assert res.exit_code == 2
     assert res.output.startswith("Error: grain 0 (seed ") and "params.k 50.0 is too large" in res.output
     assert not (out / "manifest.csv").exists()
+
+
+def test_resume_never_replaces_files_it_did_not_make(recipe_file, tmp_path):
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "fso-0001.stl").write_bytes(b"someone else's grain")
+    with pytest.raises(FileExistsError, match="not made by this batch"):
+        run_batch(load_recipe(recipe_file), out, resume=True, workers=1)
+    assert (out / "fso-0001.stl").read_bytes() == b"someone else's grain"
+    assert not (out / JOURNAL).exists()

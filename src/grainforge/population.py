@@ -769,14 +769,17 @@ def run_batch(
         if saved.read_text(encoding="utf-8") != recipe.text:
             raise ValueError(f"{recipe.source} differs from the recipe of the batch in {out}; "
                              "resume with the same recipe or use --overwrite")
-    elif not overwrite and not resume:
+    elif not overwrite:
         existing = [out / n for n in names + [MANIFEST] if (out / n).exists()]
         if existing or journal.exists():
             first = existing[0] if existing else journal
-            raise FileExistsError(f"{first} exists (a batch is already in {out}); use --resume or --overwrite")
+            hint = "use --overwrite (no batch journal to resume from)" if resume else "use --resume or --overwrite"
+            raise FileExistsError(f"{first} exists (not made by this batch); {hint}" if resume
+                                  else f"{first} exists (a batch is already in {out}); {hint}")
     out.mkdir(parents=True, exist_ok=True)
-    for tmp in out.glob(".*.tmp"):  # leftovers of atomic writes interrupted by a kill
-        tmp.unlink(missing_ok=True)
+    for name in names + [MANIFEST]:  # leftovers of atomic writes interrupted by a kill
+        for tmp in out.glob(f".{name}.*.tmp"):
+            tmp.unlink(missing_ok=True)
     if overwrite and journal.exists():
         for p in journal.glob("grain-*.json"):
             p.unlink()
