@@ -247,7 +247,7 @@ def render_image(
     n = int(size) * ss
     R = view_rotation(elev, azim)
     c = (v.max(0) + v.min(0)) / 2
-    cam = (v - c) @ R.T
+    cam = np.einsum("vi,ji->vj", v - c, R)  # einsum: no threaded BLAS for skinny products
     radius = float(np.linalg.norm(cam, axis=1).max()) or 1.0
     scale = (n / 2 - 2 * ss) / radius
     xy = np.empty((len(v), 2))
@@ -264,7 +264,7 @@ def render_image(
         nrm = (corner[fi] * bary[hit][:, :, None]).sum(1)
     else:
         nrm = fn[fi]
-    nrm = nrm @ R.T
+    nrm = np.einsum("vi,ji->vj", nrm, R)
     nrm /= np.linalg.norm(nrm, axis=1, keepdims=True) + 1e-300
     # faces seen from behind (open meshes) are lit as if facing the viewer
     nrm *= np.where(nrm[:, 2:3] < 0, -1.0, 1.0)

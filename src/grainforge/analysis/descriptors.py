@@ -91,7 +91,8 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
         centroid_o = (vol6[:, None] * s).sum(0) / (24.0 * V)
         w = vol6 / 120.0
         X = np.concatenate([a, b, c, s])
-        second = (X * np.tile(w, 4)[:, None]).T @ X
+        # einsum, not BLAS: a threaded BLAS call on this skinny product is slow on a busy machine
+        second = np.einsum("ti,tj->ij", X * np.tile(w, 4)[:, None], X)
         cov = second / V - np.outer(centroid_o, centroid_o)
     else:
         centroid_o = np.zeros(3)
@@ -252,7 +253,7 @@ def describe(
     out: dict[str, float] = dict(_basic(v, mp, hull))
     L, I, S = out["L"], out["I"], out["S"]
     centre, axes = fourier_mod.principal_axes(v, f, mp)
-    proj = (v - centre) @ axes.T
+    proj = np.einsum("vi,ji->vj", v - centre, axes)
     Lp, Ip, Sp = sorted(proj.max(0) - proj.min(0), reverse=True)
     out.update({"L_pca": float(Lp), "I_pca": float(Ip), "S_pca": float(Sp)})
     out["elongation"] = I / L if L > 0 else 0.0

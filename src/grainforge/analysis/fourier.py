@@ -163,7 +163,7 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
     w, vec = np.linalg.eigh(cov)
     axes = vec[:, ::-1].T.copy()
     # deterministic signs: each axis points towards its farthest vertex
-    proj = (vertices - centre) @ axes.T
+    proj = np.einsum("vi,ji->vj", vertices - centre, axes)
     flip = np.abs(proj.max(0)) < np.abs(proj.min(0))
     axes[flip] *= -1
     if np.linalg.det(axes) < 0:
@@ -368,7 +368,7 @@ def projection_descriptors(
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     centre, ax = axes if axes is not None else principal_axes(v, f)
-    p = (v - centre) @ ax.T
+    p = np.einsum("vi,ji->vj", v - centre, ax)
     out: dict[str, float] = {}
     star = True
     if closed:

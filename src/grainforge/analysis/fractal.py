@@ -72,8 +72,9 @@ def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
     # normal equations (35 × 35); lstsq copes with the monomials' redundancy on the sphere
     scale = float(np.mean(r)) or 1.0
     g = (scale / r) ** 2
-    coef, *_ = np.linalg.lstsq(Bw.T @ B, Bw.T @ g, rcond=1e-12)
-    fit = B @ coef
+    # einsum rather than BLAS: threaded BLAS on these skinny products is slow on a busy machine
+    coef, *_ = np.linalg.lstsq(np.einsum("vi,vj->ij", Bw, B), np.einsum("vi,v->i", Bw, g), rcond=1e-12)
+    fit = np.einsum("vi,i->v", B, coef)
     return scale / np.sqrt(np.maximum(fit, 1e-6))
 
 
