@@ -110,3 +110,18 @@ def test_figures_dpa_written_or_skipped_with_reason(tmp_path):
         assert skipped == [(6, "the DPA generator is not available in this build")]
     with pytest.raises(ValueError, match="1–6"):
         make_figures(tmp_path, (7,))
+
+
+def test_demo_plots(tmp_path):
+    from grainforge.methods.fso import Params
+    from grainforge.plots import demo_plots
+    from grainforge.run import write_run
+
+    assert demo_plots(tmp_path) == []
+    write_run("fso", Params(subdivisions=2), [0, 1, 2], tmp_path / "fso" / "L=7")
+    write_run("fso", Params(subdivisions=2, length_ratio=2.0), [0, 1], tmp_path / "fso" / "L=2")
+    written = demo_plots(tmp_path, quick=True)
+    names = sorted(p.name for p in written)
+    assert names == ["fd-spectrum.png", "fso-measured.csv", "fso.csv", "size-distribution.png",
+                     "sphericity-convexity.png", "zingg.png"]
+    assert len((tmp_path / "analysis" / "fso.csv").read_text().splitlines()) == 1 + 5  # pooled rows

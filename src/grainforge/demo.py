@@ -178,6 +178,12 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     return atomic_write(path, buf.getvalue())
 
 
+def _analysis_plots(out: Path, quick: bool = False) -> list[Path]:
+    from .plots import demo_plots
+
+    return demo_plots(out, quick)
+
+
 #: (name, function(out_folder, quick) -> written paths)
 def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε."""
@@ -233,6 +239,7 @@ SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("CRI contours and grains (Figs. 3-4)", cri_gallery),
     ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
     ("Population: CRI sand graded like ASTM C778", lambda out, quick: population_demo(out, quick)),
+    ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
 ]
 
 

@@ -17,7 +17,9 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["KINDS", "read_manifest", "plot", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution"]
+__all__ = [
+    "KINDS", "read_manifest", "plot", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution", "demo_plots",
+]
 
 
 def read_manifest(path: str | Path) -> dict[str, list[str]]:
@@ -203,3 +205,49 @@ def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: 
     finally:
         plt.close(fig)
     return atomic_write(out, buf.getvalue())
+
+
+def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:
+    """The demo's analysis section: population plots of every run the demo wrote.
+
+    Manifests are pooled per top-level folder of ``out`` (one legend entry
+    each) into ``out/analysis/<folder>.csv``; up to 4 (quick: 2) grain
+    files per folder are measured with :func:`~grainforge.analysis.measure.analyse_file`
+    for the FD spectra.  Writes ``out/analysis/*.png``.
+    """
+    from .analysis.measure import ANALYSE_COLUMNS, analyse_file
+    from .io import write_csv
+
+    out = Path(out)
+    dest = out / "analysis"
+    groups: dict[str, list[Path]] = {}
+    for m in sorted(out.rglob("manifest.csv")):
+        rel = m.relative_to(out)
+        if rel.parts[0] == "analysis" or any(p.startswith(".") for p in rel.parts):
+            continue
+        groups.setdefault(rel.parts[0] if len(rel.parts) > 1 else out.name, []).append(m)
+    if not groups:
+        return []
+    pooled, measured = [], []
+    per_group = 2 if quick else 4
+    for name, files in groups.items():
+        rows: list[dict] = []
+        meshes: list[Path] = []
+        for m in files:
+            t = read_manifest(m)
+            n = len(next(iter(t.values())))
+            rows += [{k: t[k][i] for k in t} for i in range(n)]
+            meshes += [m.parent / f for f in t.get("file", []) if f and (m.parent / f).is_file()]
+        pooled.append(write_csv(dest / f"{name}.csv", rows))
+        if meshes:
+            pick = [meshes[i] for i in np.linspace(0, len(meshes) - 1, min(per_group, len(meshes))).astype(int)]
+            mrows = [r for p in pick for r in analyse_file(p, fractal=False)]
+            measured.append(write_csv(dest / f"{name}-measured.csv", mrows, ANALYSE_COLUMNS(True)))
+    written = [
+        plot("zingg", pooled, dest / "zingg.png"),
+        plot("sphericity-convexity", pooled, dest / "sphericity-convexity.png"),
+        plot("size-distribution", pooled, dest / "size-distribution.png"),
+    ]
+    if measured:
+        written.append(plot("fd-spectrum", measured, dest / "fd-spectrum.png"))
+    return pooled + measured + written
