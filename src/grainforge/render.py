@@ -8,8 +8,10 @@ tens of milliseconds, far faster than matplotlib's ``Poly3DCollection``,
 and without its depth-sorting artefacts.  matplotlib only lays the panels
 out and writes the labels.
 
-The same rasteriser gives the binary silhouettes used by the principal
-projection Fourier descriptors (:mod:`grainforge.analysis.fourier`).
+:func:`silhouette` gives a binary silhouette image of a projected mesh (a
+synthetic "micrograph"; the principal-projection Fourier descriptors of
+:mod:`grainforge.analysis.fourier` are computed exactly from the triangles
+instead).
 """
 
 from __future__ import annotations
