@@ -29,6 +29,7 @@ Examples
 from __future__ import annotations
 
 import struct
+from functools import lru_cache
 import zipfile
 from dataclasses import dataclass
 from typing import BinaryIO, Sequence
@@ -79,9 +80,15 @@ def mesh_xml(vertices: np.ndarray, faces: np.ndarray, decimals: int = 5) -> byte
     d = int(decimals)
     vt = f'<vertex x="%.{d}f" y="%.{d}f" z="%.{d}f"/>'
     text = ["<mesh><vertices>", (vt * len(v)) % tuple(v.ravel().tolist()), "</vertices><triangles>",
-            ('<triangle v1="%d" v2="%d" v3="%d"/>' * len(f)) % tuple(f.ravel().tolist()),
-            "</triangles></mesh>"]
+            _triangles_xml(f.tobytes(), len(f)), "</triangles></mesh>"]
     return "".join(text).encode("ascii")
+
+
+@lru_cache(maxsize=8)
+def _triangles_xml(faces: bytes, n: int) -> str:
+    # grains generated on the same geodesic sphere share their triangles: format them once
+    f = np.frombuffer(faces, dtype=np.int64)
+    return ('<triangle v1="%d" v2="%d" v3="%d"/>' * n) % tuple(f.tolist())
 
 
 class ThreeMFWriter:
