@@ -1,5 +1,17 @@
-"""From grains to printable files: physical scale, printability, trays."""
+"""From grains to printable files: physical scale, printer profiles, resolution matching,
+printability checks and bulk print trays."""
 
+from .printability import CheckResult, check_mesh
+from .printers import PRINTERS, Printer, get_printer, load_printers
+from .resolution import Resolution, match_subdivisions
 from .scale import SIZE_DEFINITIONS, scale_factor, to_size
+from .threemf import read_3mf, read_parts
+from .tray import FileSource, GeneratorSource, TrayResult, build_tray
 
-__all__ = ["SIZE_DEFINITIONS", "scale_factor", "to_size"]
+__all__ = [
+    "SIZE_DEFINITIONS", "scale_factor", "to_size",
+    "Printer", "PRINTERS", "get_printer", "load_printers",
+    "Resolution", "match_subdivisions",
+    "CheckResult", "check_mesh",
+    "GeneratorSource", "FileSource", "TrayResult", "build_tray", "read_3mf", "read_parts",
+]
