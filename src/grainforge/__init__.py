@@ -7,6 +7,7 @@ returning an immutable :class:`Grain`.
 
 from ._version import __version__
 from .contours import Contour
+from .fabrication import build_tray, check_mesh, get_printer
 from .grain import Grain
 from .methods import generate
 from .methods.cri import cri
@@ -15,4 +16,5 @@ from .methods.fso import fso
 from .params import ParameterError
 from .population import load_recipe, run_batch
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour", "load_recipe", "run_batch"]
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour", "load_recipe", "run_batch",
+           "get_printer", "check_mesh", "build_tray"]
