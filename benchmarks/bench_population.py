@@ -8,20 +8,27 @@ Prints figures; asserts nothing about time.  Run on an otherwise idle machine:
   encode), i.e. what any loop over grains must do;
 - runner overhead: batch with 1 worker (files written atomically, SHA-256, sidecar journal, manifest;
   report excluded) minus the plain loop, per grain and as a fraction of the generation time;
-- throughput: grains/s of ``run_batch`` with workers=1 and workers=2 (pool start-up included),
-  and the speed-up.
+- throughput: grains/s of ``run_batch`` with a pool of 1 and of 2 worker processes (pool start-up
+  included), and the speed-up.
+
+BLAS is limited to one thread in this process too (set before NumPy loads), as in pool workers, so
+that "one worker" means one core everywhere.
 """
 
 from __future__ import annotations
 
-import argparse
 import os
+
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
 import shutil
 import tempfile
 import time
 from pathlib import Path
 
-from grainforge.population import make_grain, parse_recipe, run_batch
+from grainforge.population import make_grain, parse_recipe, run_batch  # noqa: E402
 
 RECIPE = """\
 method = "fso"
@@ -38,11 +45,11 @@ sigma = 0.2
 """
 
 
-def timed_batch(recipe, workers: int, tmp: Path) -> float:
-    out = tmp / f"w{workers}"
+def timed_batch(recipe, workers: int, tmp: Path, in_process: bool) -> float:
+    out = tmp / f"w{workers}-{in_process}"
     shutil.rmtree(out, ignore_errors=True)
     t0 = time.perf_counter()
-    run_batch(recipe, out, workers=workers, report=False)
+    run_batch(recipe, out, workers=workers, report=False, in_process=in_process)
     return time.perf_counter() - t0
 
 
@@ -58,27 +65,31 @@ def main() -> None:
     make_grain(recipe, 0)  # warm imports and caches
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        loop, one, two = [], [], []
+        loop, inproc, one, two = [], [], [], []
         for _ in range(a.repeats):
             t0 = time.perf_counter()
             for i in range(recipe.count):
                 make_grain(recipe, i)
             loop.append(time.perf_counter() - t0)
-            one.append(timed_batch(recipe, 1, tmp))
-            two.append(timed_batch(recipe, 2, tmp))
-        t_loop, t1, t2 = min(loop), min(one), min(two)
+            inproc.append(timed_batch(recipe, 1, tmp, True))
+            one.append(timed_batch(recipe, 1, tmp, False))
+            two.append(timed_batch(recipe, 2, tmp, False))
+        t_loop, t_in, t1, t2 = min(loop), min(inproc), min(one), min(two)
         t0 = time.perf_counter()
         from grainforge.report import population_report
 
-        rows = run_batch(recipe, tmp / "w1", resume=True, report=False)["rows"]
-        population_report(recipe, rows, tmp / "w1")
+        rows = run_batch(recipe, tmp / "w1-True", resume=True, report=False)["rows"]
+        population_report(recipe, rows, tmp / "w1-True")
         t_report = time.perf_counter() - t0
     n = recipe.count
     gen = t_loop / n
-    over = (t1 - t_loop) / n
+    over = (t_in - t_loop) / n
+    over_pool = (t1 - t_loop) / n
     print(f"generation (plain loop):     {1e3 * gen:8.1f} ms/grain")
-    print(f"runner overhead, 1 worker:   {1e3 * over:8.1f} ms/grain = {100 * over / gen:5.1f} % of generation")
-    print(f"batch, 1 worker:             {n / t1:8.2f} grains/s ({t1:.2f} s)")
+    print(f"runner overhead, in-process: {1e3 * over:8.1f} ms/grain = {100 * over / gen:5.1f} % of generation")
+    print(f"runner overhead, 1-process pool: {1e3 * over_pool:4.1f} ms/grain = {100 * over_pool / gen:5.1f} % "
+          "(start-up included)")
+    print(f"batch, 1 worker (pool):      {n / t1:8.2f} grains/s ({t1:.2f} s)")
     print(f"batch, 2 workers:            {n / t2:8.2f} grains/s ({t2:.2f} s, pool start-up included)")
     print(f"speed-up 2 vs 1 worker:      {t1 / t2:8.2f}x")
     print(f"resume check + report (once): {t_report:6.2f} s")
