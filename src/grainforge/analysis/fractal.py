@@ -35,7 +35,9 @@ __all__ = ["radial_function", "smooth_fit", "roughness", "variogram", "fractal_d
 
 #: degree of the smooth fit removed before roughness and fractal analysis
 FIT_DEGREE = 4
-_MONOMIALS = [(a, b, c) for d in range(FIT_DEGREE + 1) for a in range(d + 1) for b in range(d + 1 - a) for c in [d - a - b]]
+#: homogeneous monomials of degrees 4 and 3 (15 + 10 = 25): on the unit sphere (x² + y² + z² = 1)
+#: they span every polynomial of degree ≤ 4, i.e. the spherical harmonics of degree ≤ 4, without redundancy
+_MONOMIALS = [(a, b, d - a - b) for d in (FIT_DEGREE, FIT_DEGREE - 1) for a in range(d + 1) for b in range(d + 1 - a)]
 
 
 def radial_function(vertices: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -69,7 +71,7 @@ def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
     """
     B = _basis(u)
     Bw = B * weights[:, None]
-    # normal equations (35 × 35); lstsq copes with the monomials' redundancy on the sphere
+    # normal equations (25 × 25)
     scale = float(np.mean(r)) or 1.0
     g = (scale / r) ** 2
     # einsum rather than BLAS: threaded BLAS on these skinny products is slow on a busy machine
