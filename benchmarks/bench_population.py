@@ -65,7 +65,8 @@ def main() -> None:
     make_grain(recipe, 0)  # warm imports and caches
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        timed_batch(recipe, 2, tmp, False)  # start the fork server (once per process) before timing
+        # start the fork server (once per process) before timing
+        timed_batch(parse_recipe(RECIPE.format(count=2, subdivisions=a.subdivisions)), 2, tmp, False)
         loop, inproc, one, two = [], [], [], []
         for _ in range(a.repeats):
             t0 = time.perf_counter()
