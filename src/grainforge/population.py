@@ -678,7 +678,7 @@ def _single_threaded_children():
     """Set the BLAS thread limits to 1 while worker processes are started, then restore them.
 
     NumPy's OpenBLAS otherwise starts one thread per core in *every* worker,
-    and N workers oversubscribe the CPUs (measured: 2 workers no faster than 1).
+    so N workers would run N × cores busy threads on the machine's cores.
     """
     saved = {k: os.environ.get(k) for k in _THREAD_VARS}
     for k, v in saved.items():
