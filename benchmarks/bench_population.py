@@ -47,6 +47,27 @@ sigma = 0.2
 """
 
 
+def _burn(n: int) -> int:
+    s = 0
+    for i in range(n):
+        s += i * i
+    return s
+
+
+def machine_parallelism() -> float:
+    """Control: speed-up of a pure-Python CPU burn with 2 processes vs 1 (about 2 on an idle 2-core machine)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    times = []
+    for w in (1, 2):
+        with ProcessPoolExecutor(w) as ex:
+            list(ex.map(_burn, [10] * w))
+            t = time.perf_counter()
+            list(ex.map(_burn, [2_000_000] * 8))
+            times.append(time.perf_counter() - t)
+    return times[0] / times[1]
+
+
 def runner_overhead(recipe, tmp: Path) -> tuple[float, float]:
     """(batch wall time, time inside make_grain) of one in-process batch."""
     spent = []
@@ -115,6 +136,7 @@ def main() -> None:
     print(f"batch, 1 worker (pool):      {n / t1:8.2f} grains/s ({t1:.2f} s)")
     print(f"batch, 2 workers:            {n / t2:8.2f} grains/s ({t2:.2f} s, pool start-up included)")
     print(f"speed-up 2 vs 1 worker:      {t1 / t2:8.2f}x")
+    print(f"control: CPU burn 2 vs 1 process {machine_parallelism():5.2f}x (what the machine allows now)")
     print(f"resume check + report (once): {t_report:6.2f} s")
     print(f"load average at end {os.getloadavg()[0]:.2f} (best of {a.repeats} repeats)")
 
