@@ -31,7 +31,17 @@ def test_sphere_prints():
     r = check_mesh(s.vertices, s.faces, "objet-eden-250")
     assert r.ok and r.status == "OK"
     assert r.solid == [] and r.self_intersections == 0
-    assert r.min_thickness == pytest.approx(2.0, rel=0.01)
+    assert r.min_thickness == np.inf  # nothing thinner than the 4 x min_wall horizon
+
+
+def test_short_rays_agree_with_full_ray_casting():
+    m = _neck(0.07)
+    idx, full = local_thickness(m, max_rays=1500)
+    idx2, short = local_thickness(m, max_rays=1500, max_distance=0.5)
+    assert (idx == idx2).all()
+    near = full < 0.5
+    assert near.any() and np.allclose(short[near], full[near], rtol=1e-6)
+    assert np.isinf(short[~near]).all()
 
 
 def test_too_thin_wall_fails():

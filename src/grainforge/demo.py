@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery"]
+__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "print_tray"]
 
 
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
@@ -240,7 +240,24 @@ SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
     ("Population: CRI sand graded like ASTM C778", lambda out, quick: population_demo(out, quick)),
     ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
+    ("Print tray: 2 mm rough-angular CRI grains on the paper's PolyJet, checked", lambda out, quick: print_tray(out, quick)),
 ]
+
+
+def print_tray(out: Path, quick: bool = False) -> list[Path]:
+    """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains."""
+    from .fabrication.printability import check_mesh
+    from .fabrication.threemf import read_3mf
+    from .fabrication.tray import GeneratorSource, build_tray
+    from .io import write_csv
+    from .methods.cri import Params
+
+    n = 40 if quick else 400
+    res = build_tray(GeneratorSource("cri", Params(preset="rough-angular"), tuple(range(n)), 2.0),
+                     "objet-eden-250", out / "tray.3mf", overwrite=True)
+    rows = [check_mesh(p.vertices, p.faces, "objet-eden-250", name=p.name).row() for p in read_3mf(res.files[0])[:5]]
+    checked = write_csv(out / "check.csv", rows)
+    return [*res.files, *res.previews, res.csv, checked]
 
 
 def run_demo(out: str | Path, quick: bool = False, echo: Callable[[str], None] = print) -> list[Path]:
