@@ -2,7 +2,7 @@
 
 Prints figures; asserts nothing about time.  Run on an otherwise idle machine:
 
-    .venv/bin/python benchmarks/bench_population.py [--count 24] [--subdivisions 5]
+    .venv/bin/python benchmarks/bench_population.py [--count 64] [--subdivisions 5]
 
 - generation time: ``make_grain`` called in a plain loop (draw, generate, scale to size, measure,
   encode), i.e. what any loop over grains must do;
@@ -96,7 +96,7 @@ def timed_batch(recipe, workers: int, tmp: Path, in_process: bool) -> float:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--count", type=int, default=24)
+    ap.add_argument("--count", type=int, default=64)
     ap.add_argument("--subdivisions", type=int, default=5)
     ap.add_argument("--repeats", type=int, default=2)
     a = ap.parse_args()
