@@ -7,6 +7,8 @@ from typing import Any
 
 import numpy as np
 
+from ..solid import split_bodies
+
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
 #: identity and quality columns that precede the descriptors in ``analyse`` output
@@ -22,42 +24,6 @@ def ANALYSE_COLUMNS(fourier: bool = True) -> list[str]:  # noqa: N802 (a column 
     if fourier:
         cols += fd_columns() + ["fd_star_shaped"]
     return cols
-
-
-def split_bodies(vertices: np.ndarray, faces: np.ndarray) -> list[tuple[np.ndarray, np.ndarray]]:
-    """Merge coincident vertices and split a triangle set into edge-connected bodies.
-
-    Bodies are ordered by their first face in the input.
-
-    Examples
-    --------
-    >>> import trimesh
-    >>> a = trimesh.creation.box()
-    >>> b = trimesh.creation.box()
-    >>> _ = b.apply_translation((3, 0, 0))
-    >>> both = trimesh.util.concatenate([a, b])
-    >>> [len(f) for _, f in split_bodies(both.vertices, both.faces)]
-    [12, 12]
-    """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    v, inv = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
-    f = inv.reshape(-1)[np.asarray(faces, dtype=np.int64)]
-    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]  # drop collapsed triangles
-    if len(f) == 0:
-        return []
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v), len(v)))
-    _, labels = connected_components(g, directed=False)
-    face_label = labels[f[:, 0]]
-    _, first = np.unique(face_label, return_index=True)
-    bodies = []
-    for lab in face_label[np.sort(first)]:
-        ff = f[face_label == lab]
-        used, local = np.unique(ff, return_inverse=True)
-        bodies.append((v[used], local.reshape(-1, 3)))
-    return bodies
 
 
 def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:

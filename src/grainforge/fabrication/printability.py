@@ -121,19 +121,28 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-
     return int(hit.sum())
 
 
-def _segment_hits_triangle(p0, p1, tri, tol):
-    d = p1 - p0
+def _moller_trumbore(p0, d, tri, det_min):
+    """Vectorised Möller–Trumbore: barycentrics (u, w) and parameter t of p0 + t·d on each triangle.
+
+    ``ok`` is false where the segment is parallel to the triangle (|det| ≤ det_min).
+    """
     e1 = tri[:, 1] - tri[:, 0]
     e2 = tri[:, 2] - tri[:, 0]
     h = np.cross(d, e2)
     a = np.einsum("ij,ij->i", e1, h)
-    ok = np.abs(a) > 1e-15
+    ok = np.abs(a) > det_min
     inv = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
     s = p0 - tri[:, 0]
     u = inv * np.einsum("ij,ij->i", s, h)
     q = np.cross(s, e1)
     w = inv * np.einsum("ij,ij->i", d, q)
     t = inv * np.einsum("ij,ij->i", e2, q)
+    return ok, u, w, t
+
+
+def _segment_hits_triangle(p0, p1, tri, tol):
+    """Whether segment p0→p1 crosses each triangle's interior (strictly, by a 1e-9 margin)."""
+    ok, u, w, t = _moller_trumbore(p0, p1 - p0, tri, 1e-15)
     eps = 1e-9
     return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
 
@@ -206,20 +215,7 @@ def _short_rays(mesh, idx, origins, normals, length, eps):
     cand = np.concatenate([np.asarray(c, dtype=np.int64) for c in lists])
     keep = cand != idx[ray]
     ray, cand = ray[keep], cand[keep]
-    d = -normals[ray] * length
-    p0 = origins[ray]
-    t3 = tri[cand]
-    e1 = t3[:, 1] - t3[:, 0]
-    e2 = t3[:, 2] - t3[:, 0]
-    h = np.cross(d, e2)
-    a = np.einsum("ij,ij->i", e1, h)
-    ok = np.abs(a) > 1e-30
-    inv = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
-    sv = p0 - t3[:, 0]
-    u = inv * np.einsum("ij,ij->i", sv, h)
-    q = np.cross(sv, e1)
-    w = inv * np.einsum("ij,ij->i", d, q)
-    t = inv * np.einsum("ij,ij->i", e2, q)
+    ok, u, w, t = _moller_trumbore(origins[ray], -normals[ray] * length, tri[cand], 1e-30)
     hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t * length > eps) & (t <= 1)
     np.minimum.at(out, ray[hit], t[hit] * length + eps)
     return out

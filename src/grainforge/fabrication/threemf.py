@@ -283,23 +283,12 @@ def read_3mf(file) -> list[Part]:
 def read_stl_parts(path) -> list[Part]:
     """The connected bodies of a binary STL (vertices merged exactly), in file order."""
     import trimesh
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
+
+    from ..solid import split_bodies
 
     mesh = trimesh.load(path, file_type="stl", process=False)
-    v, inv = np.unique(np.asarray(mesh.vertices), axis=0, return_inverse=True)
-    f = inv.reshape(-1)[np.asarray(mesh.faces)]
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v), len(v)))
-    _, labels = connected_components(g, directed=False)
-    face_label = labels[f[:, 0]]
-    _, order = np.unique(face_label, return_index=True)
-    parts = []
-    for k, lab in enumerate(face_label[np.sort(order)]):
-        ff = f[face_label == lab]
-        used, local = np.unique(ff, return_inverse=True)
-        parts.append(Part(f"body-{k}", v[used], local.reshape(-1, 3)))
-    return parts
+    bodies = split_bodies(mesh.vertices, mesh.faces, drop_degenerate=False)
+    return [Part(f"body-{k}", v, f) for k, (v, f) in enumerate(bodies)]
 
 
 def read_parts(path) -> list[Part]:
