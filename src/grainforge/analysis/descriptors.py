@@ -140,15 +140,19 @@ def principal_dimensions(obj) -> tuple[float, float, float]:
 
 
 def _hull(v: np.ndarray):
-    from scipy.spatial import ConvexHull
+    """scipy ConvexHull of the points; ``ValueError`` for degenerate (flat, too few) point sets."""
+    from scipy.spatial import ConvexHull, QhullError
 
-    return ConvexHull(v)
+    try:
+        return ConvexHull(v)
+    except QhullError as exc:
+        raise ValueError(f"no 3D convex hull: {str(exc).splitlines()[0]}") from None
 
 
 def _hull_points(v: np.ndarray) -> np.ndarray:
     try:
         return v[_hull(v).vertices]
-    except Exception:  # degenerate (flat) point sets: let trimesh handle all points
+    except ValueError:  # degenerate (flat) point sets: let trimesh handle all points
         return v
 
 
@@ -187,7 +191,7 @@ def _basic(v: np.ndarray, mp: dict, hull=None) -> dict[str, float]:
     if hull is None:
         try:
             hull = _hull(v)
-        except Exception:
+        except ValueError:
             hull = None
     hull_v = float(hull.volume) if hull is not None else 0.0
     pts = v[hull.vertices] if hull is not None else v
@@ -248,7 +252,7 @@ def describe(
     mp = mass_properties(v, f)
     try:
         hull = _hull(v)
-    except Exception:
+    except ValueError:
         hull = None
     out: dict[str, float] = dict(_basic(v, mp, hull))
     L, I, S = out["L"], out["I"], out["S"]
