@@ -150,3 +150,39 @@ def test_help_and_version(runner):
     res = runner.invoke(cli, ["generate", "fso", "--help"])
     assert res.exit_code == 0 and "--fractal-dimension" in res.output and "[2, 3)" in res.output
     assert runner.invoke(cli, ["--version"]).exit_code == 0
+
+
+def test_printer_matches_resolution_and_records_it(runner, tmp_path):
+    from grainforge.fabrication.resolution import match_subdivisions
+    from grainforge.methods.fso import Params
+
+    res = runner.invoke(cli, ["generate", "fso", "--out", str(tmp_path), "--count", "2", "--size", "10",
+                              "--printer", "generic-fdm"])
+    assert res.exit_code == 0, res.output
+    assert "resolution matching (generic-fdm" in res.output
+    row = read_manifest(tmp_path)[0]
+    expected = match_subdivisions("fso", Params(), 10.0, "equivalent", "generic-fdm", [0, 1])
+    assert int(row["subdivisions"]) == expected.subdivisions
+    assert row["printer"] == "generic-fdm"
+    assert float(row["chordal_deviation"]) == pytest.approx(expected.deviation)
+    assert float(row["deviation_tolerance"]) == pytest.approx(0.2)  # half the 0.4 mm nozzle
+    assert row["resolution_limited_by"] == expected.limited_by
+    assert len(trimesh.load(tmp_path / "fso-0000.stl").faces) == 20 * 4 ** expected.subdivisions
+
+
+def test_finer_printer_gives_finer_mesh(runner, tmp_path):
+    levels = {}
+    for printer in ("generic-fdm", "objet-eden-250"):
+        out = tmp_path / printer
+        assert runner.invoke(cli, ["generate", "cri", "--out", str(out), "--size", "2",
+                                   "--printer", printer]).exit_code == 0
+        levels[printer] = int(read_manifest(out)[0]["subdivisions"])
+    assert levels["objet-eden-250"] > levels["generic-fdm"]
+
+
+@pytest.mark.parametrize("args", [["fso", "--printer", "nosuch"], ["dpa", "--primaries", "5", "--printer", "generic-fdm"]])
+def test_printer_errors(runner, tmp_path, args):
+    res = runner.invoke(cli, ["generate", args[0], "--out", str(tmp_path / "x"), *args[1:]])
+    assert res.exit_code == 2
+    assert len(res.output.strip().splitlines()) == 1 and "--printer" in res.output
+    assert not (tmp_path / "x").exists()

@@ -68,12 +68,16 @@ def write_run(
     overwrite: bool = False,
     progress: Callable[[Iterable], Iterable] | None = None,
     extra_columns: Sequence[str] = (),
+    row_extra: dict[str, Any] | None = None,
 ) -> list[dict[str, Any]]:
     """Generate grain ``i`` with ``seeds[i]``, scale it, write it and the manifest.
 
     Files are staged in a hidden folder inside ``out`` and moved into place
     only when every grain succeeded: a failure (bad parameter, a seed for
     which the amplitude is too large, ...) leaves no new file behind.
+
+    ``row_extra`` (e.g. the printer and the chosen resolution) is added to
+    every manifest row; list its keys in ``extra_columns``.
 
     Returns
     -------
@@ -113,7 +117,7 @@ def write_run(
             grain = grain.scaled(scale_factor(grain, size, size_definition))
             name = grain_file_name(method, i, fmt)
             (stage / name).write_bytes(export_bytes(grain, fmt))
-            rows.append(manifest_row(grain, name, size, size_definition))
+            rows.append({**manifest_row(grain, name, size, size_definition), **(row_extra or {})})
         for i in range(len(seeds)):
             name = grain_file_name(method, i, fmt)
             (stage / name).replace(out / name)

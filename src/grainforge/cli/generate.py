@@ -6,7 +6,7 @@ import click
 
 from ..methods import METHODS, get
 from ..params import ParameterError
-from .options import bad_parameter, build_params, output_options, param_options
+from .options import PRINTER_KEY, bad_parameter, build_params, output_options, param_options
 from .progress import progress_bar
 
 
@@ -20,17 +20,40 @@ def run_generate(method: str, params, *, out, count, seed, size, size_definition
     from ..run import write_run
 
     seeds = [seed + i for i in range(count)]
+    printer = click.get_current_context().meta.get(PRINTER_KEY)
+    row_extra = {}
     try:
+        if printer is not None:
+            params, row_extra = _match_resolution(method, params, seeds, size, size_definition, printer)
+            extra_columns = tuple(extra_columns) + tuple(row_extra)
         write_run(
             method, params, seeds, out, fmt=fmt, size=size, size_definition=size_definition,
             overwrite=overwrite, progress=progress_bar(total=count, desc=f"{method} grains"),
-            extra_columns=extra_columns,
+            extra_columns=extra_columns, row_extra=row_extra,
         )
     except ParameterError as exc:
         raise bad_parameter(exc) from None
     except FileExistsError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"wrote {count} {method} grain(s) and manifest.csv to {out}", err=True)
+
+
+def _match_resolution(method, params, seeds, size, size_definition, printer):
+    """Choose ``subdivisions`` for ``printer`` at ``size``; report it; return (params, manifest extras)."""
+    import dataclasses
+
+    from ..fabrication.resolution import match_subdivisions, supports_matching
+
+    if not supports_matching(method):
+        raise click.BadParameter(
+            f"resolution matching applies to methods with --subdivisions (fso, cri), not {method}",
+            param_hint="'--printer'",
+        )
+    res = match_subdivisions(method, params, size, size_definition, printer, seeds[:3])
+    click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): {res.describe()}", err=True)
+    extras = {"printer": printer.name, "chordal_deviation": res.deviation, "deviation_tolerance": res.tolerance,
+              "mean_edge": res.edge, "resolution_limited_by": res.limited_by}
+    return dataclasses.replace(params, subdivisions=res.subdivisions), extras
 
 
 def make_command(method: str) -> click.Command:

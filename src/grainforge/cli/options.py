@@ -86,8 +86,23 @@ def bad_parameter(exc: ParameterError) -> click.BadParameter:
     return click.BadParameter(exc.reason, param_hint=f"'{option}'")
 
 
+PRINTER_KEY = "grainforge.printer"
+
+
+def _remember_printer(ctx, param, value):
+    if value is not None:
+        from ..fabrication.printers import get_printer
+
+        try:
+            value = get_printer(value)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+        ctx.meta[PRINTER_KEY] = value
+    return value
+
+
 def output_options(f):
-    """--out, --count, --seed, --size, --size-definition, --format, --overwrite."""
+    """--out, --count, --seed, --size, --size-definition, --format, --overwrite, --printer."""
     opts = [
         click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
                      help="Folder to write the grains and manifest.csv into."),
@@ -103,6 +118,9 @@ def output_options(f):
         click.option("--format", "fmt", default="stl", show_default=True, type=click.Choice(list(FORMATS)),
                      help="Mesh file format (binary STL, OBJ or binary PLY)."),
         click.option("--overwrite", is_flag=True, help="Replace existing output files."),
+        click.option("--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
+                     help="Match the mesh resolution to this printer (a built-in profile or file.toml[#name]) "
+                          "at --size: chooses --subdivisions (fso, cri); see docs/printing.md."),
     ]
     for opt in reversed(opts):
         f = opt(f)
