@@ -12,7 +12,7 @@ from pathlib import Path
 from typing import Any, Callable, Iterable, Sequence
 
 from .analysis.descriptors import BASIC_COLUMNS, basic_descriptors
-from .fabrication.scale import scale_factor
+from .fabrication.scale import check_size, to_size
 from .io import FORMATS, export_bytes, write_csv
 from .methods import generate, get
 from .params import as_dict, specs
@@ -93,9 +93,7 @@ def write_run(
     """
     if fmt not in FORMATS:
         raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
-    scale_factor_check = float(size)
-    if not scale_factor_check > 0:
-        raise ValueError(f"size must be a positive number of millimetres, got {size!r}")
+    check_size(size, size_definition)  # before anything is generated or written
     out = Path(out)
     targets = planned_files(out, method, len(seeds), fmt)
     if not overwrite:
@@ -113,19 +111,15 @@ def write_run(
         if progress is not None:
             iterator = progress(iterator)
         for i, seed in iterator:
-            grain = generate(method, params, int(seed))
-            grain = grain.scaled(scale_factor(grain, size, size_definition))
+            grain = to_size(generate(method, params, int(seed)), size, size_definition)
             name = grain_file_name(method, i, fmt)
             (stage / name).write_bytes(export_bytes(grain, fmt))
             rows.append({**manifest_row(grain, name, size, size_definition), **(row_extra or {})})
-        for i in range(len(seeds)):
-            name = grain_file_name(method, i, fmt)
-            (stage / name).replace(out / name)
+        for row in rows:
+            (stage / row["file"]).replace(out / row["file"])
         write_csv(out / MANIFEST, rows, manifest_columns(method, extra_columns))
-    except BaseException:
+    finally:  # on success the stage is empty; on failure nothing new is left behind
         shutil.rmtree(stage, ignore_errors=True)
         if created and not any(out.iterdir()):
             out.rmdir()
-        raise
-    shutil.rmtree(stage, ignore_errors=True)
     return rows

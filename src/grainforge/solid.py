@@ -11,6 +11,12 @@ import numpy as np
 __all__ = ["signed_volume", "volume_centroid", "solid_problems", "require_solid", "split_bodies"]
 
 
+def _tetra_volumes(vertices: np.ndarray, faces: np.ndarray):
+    """Corners a, b, c of every face and the triple product a·(b×c) (6× its tetrahedron's volume)."""
+    a, b, c = (np.take(vertices, faces[:, i], axis=0) for i in range(3))
+    return a, b, c, np.einsum("ij,ij->i", a, np.cross(b, c))
+
+
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Signed volume of a closed triangle mesh (positive when outward).
 
@@ -21,14 +27,13 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     >>> round(signed_volume(v, f), 2)
     4.15
     """
-    a, b, c = (np.take(vertices, faces[:, i], axis=0) for i in range(3))
-    return float(np.einsum("ij,ij->i", a, np.cross(b, c)).sum() / 6.0)
+    return float(_tetra_volumes(vertices, faces)[3].sum() / 6.0)
 
 
 def volume_centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Centroid of the enclosed volume, shape (3,)."""
-    a, b, c = (np.take(vertices, faces[:, i], axis=0) for i in range(3))
-    vol = np.einsum("ij,ij->i", a, np.cross(b, c)) / 6.0
+    a, b, c, six_vol = _tetra_volumes(vertices, faces)
+    vol = six_vol / 6.0
     total = vol.sum()
     if total == 0:
         return vertices.mean(axis=0)

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SIZE_DEFINITIONS", "scale_factor", "to_size"]
+__all__ = ["SIZE_DEFINITIONS", "check_size", "scale_factor", "to_size"]
 
 #: definition -> description
 SIZE_DEFINITIONS = {
@@ -24,6 +24,25 @@ def _current_size(grain, definition: str) -> float:
     return I if definition == "sieve" else L
 
 
+def check_size(size: float, definition: str = "equivalent") -> float:
+    """Validate a size in mm and its definition; return the size as a float.
+
+    Raises
+    ------
+    ValueError
+        For a non-positive or non-finite size or an unknown definition.
+    """
+    if definition not in SIZE_DEFINITIONS:
+        raise ValueError(f"size_definition must be one of {', '.join(SIZE_DEFINITIONS)}, got {definition!r}")
+    try:
+        value = float(size)
+    except (TypeError, ValueError):
+        value = float("nan")
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"size must be a positive number of millimetres, got {size!r}")
+    return value
+
+
 def scale_factor(grain, size: float, definition: str = "equivalent") -> float:
     """The factor that brings ``grain`` to ``size`` under ``definition``.
 
@@ -32,12 +51,7 @@ def scale_factor(grain, size: float, definition: str = "equivalent") -> float:
     ValueError
         For a non-positive size or an unknown definition.
     """
-    if definition not in SIZE_DEFINITIONS:
-        raise ValueError(f"size_definition must be one of {', '.join(SIZE_DEFINITIONS)}, got {definition!r}")
-    size = float(size)
-    if not np.isfinite(size) or size <= 0:
-        raise ValueError(f"size must be a positive number of millimetres, got {size!r}")
-    return size / _current_size(grain, definition)
+    return check_size(size, definition) / _current_size(grain, definition)
 
 
 def to_size(grain, size: float, definition: str = "equivalent"):
