@@ -60,7 +60,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     import numpy as np
 
     from .contours import Contour, draw_contours
-    from .io import atomic_write, read_mesh
+    from .io import atomic_write, read_mesh, save_figure
     from .methods.cri import Params
     from .render import contact_sheet
     from .run import write_run
@@ -70,6 +70,9 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     folder = out / "cri"
     folder.mkdir(parents=True, exist_ok=True)
     # synthetic micrographs: three drawn grains, blurred, with sensor noise
+    import io as _io
+
+    from PIL import Image
     from skimage.filters import gaussian
 
     images = []
@@ -79,10 +82,6 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
         img = gaussian(img, sigma=2.0, preserve_range=True)
         img += np.random.default_rng(200 + i).normal(0.0, 12.0, img.shape)
         png = folder / f"synthetic-micrograph-{i}.png"
-        import io as _io
-
-        from PIL import Image
-
         buf = _io.BytesIO()
         Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
         atomic_write(png, buf.getvalue())
@@ -108,10 +107,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
         ax.set_axis_off()
     fig.suptitle("CRI input contours from three sources (paper Fig. 3)", fontsize=10)
     fig.subplots_adjust(top=0.78, bottom=0.02, left=0.02, right=0.98)
-    buf = __import__("io").BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": None})
-    plt.close(fig)
-    written = [atomic_write(out / "cri-contours.png", buf.getvalue())]
+    written = [save_figure(fig, out / "cri-contours.png")]
     # Figure 4: grains from both presets and the three sources
     runs = [
         ("rough-sphere", Params(preset="rough-sphere", subdivisions=s)),
@@ -134,8 +130,6 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
 
 def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     """Verification figure: a CRI grain's principal sections against its contours."""
-    import io as _io
-
     import matplotlib
 
     matplotlib.use("Agg")
@@ -144,7 +138,7 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     import trimesh
 
     from .contours import Contour
-    from .io import atomic_write
+    from .io import save_figure
     from .methods.cri import GRID, PLANES, Params, build, construct
 
     p = Params(preset="rough-angular", subdivisions=subdivisions)
@@ -172,19 +166,15 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
         ax.tick_params(labelsize=7)
     axes[0].legend(fontsize=7, loc="lower left")
     fig.suptitle(f"CRI rough-angular, seed 0, subdivisions {subdivisions}: principal sections", fontsize=10)
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": None})
-    plt.close(fig)
-    return atomic_write(path, buf.getvalue())
+    return save_figure(fig, path)
 
 
 def _analysis_plots(out: Path, quick: bool = False) -> list[Path]:
-    from .plots import demo_plots
+    from .plots import demo_plots  # lazily: matplotlib
 
     return demo_plots(out, quick)
 
 
-#: (name, function(out_folder, quick) -> written paths)
 def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε."""
     from .methods.dpa import Params
@@ -234,14 +224,6 @@ def population_demo(out: Path, quick: bool = False) -> list[Path]:
     return [folder, folder / "population.png"]
 
 
-SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
-    ("FSO sweeps (Figs. 1-2)", fso_sweeps),
-    ("CRI contours and grains (Figs. 3-4)", cri_gallery),
-    ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
-    ("Population: CRI sand graded like ASTM C778", lambda out, quick: population_demo(out, quick)),
-    ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
-    ("Print tray: 2 mm rough-angular CRI grains on the paper's PolyJet, checked", lambda out, quick: print_tray(out, quick)),
-]
 
 
 def print_tray(out: Path, quick: bool = False) -> list[Path]:
@@ -258,6 +240,17 @@ def print_tray(out: Path, quick: bool = False) -> list[Path]:
     rows = [check_mesh(p.vertices, p.faces, "objet-eden-250", name=p.name).row() for p in read_3mf(res.files[0])[:5]]
     checked = write_csv(out / "check.csv", rows)
     return [*res.files, *res.previews, res.csv, checked]
+
+
+#: (name, function(out_folder, quick) -> written paths), run in this order
+SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
+    ("FSO sweeps (Figs. 1-2)", fso_sweeps),
+    ("CRI contours and grains (Figs. 3-4)", cri_gallery),
+    ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
+    ("Population: CRI sand graded like ASTM C778", population_demo),
+    ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
+    ("Print tray: 2 mm rough-angular CRI grains on the paper's PolyJet, checked", print_tray),
+]
 
 
 def run_demo(out: str | Path, quick: bool = False, echo: Callable[[str], None] = print) -> list[Path]:

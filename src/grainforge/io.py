@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["FORMATS", "export_bytes", "atomic_write", "write_mesh", "write_csv", "read_mesh"]
+__all__ = ["FORMATS", "export_bytes", "atomic_write", "write_mesh", "write_csv", "read_mesh", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -111,6 +111,19 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
             pass
         raise
     return path
+
+
+def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
+    """Write a matplotlib figure as PNG (atomically) and close it.
+
+    No "Software" metadata is written, so the same figure gives the same bytes.
+    """
+    import matplotlib.pyplot as plt
+
+    buf = _io.BytesIO()
+    fig.savefig(buf, format="png", dpi="figure" if dpi is None else dpi, metadata={"Software": None})
+    plt.close(fig)
+    return atomic_write(path, buf.getvalue())
 
 
 def write_mesh(obj, path: str | os.PathLike, fmt: str | None = None) -> Path:
