@@ -56,34 +56,13 @@ def cli():
 
 
 def _register():
-    from . import demo, generate, render
+    from . import analyse, batch, calibrate, check, demo, figures, fourier, generate, plot, render, tray
 
-    cli.add_command(generate.generate)
-    cli.add_command(render.render)
-    cli.add_command(demo.demo)
-
-    from . import check, tray
-
-    cli.add_command(check.check)
-    cli.add_command(tray.tray)
-
-    from . import batch
-
-    cli.add_command(batch.batch)
-
-    from . import fourier
-
-    cli.add_command(fourier.fourier)
-
-    from . import analyse, figures, plot
-
-    cli.add_command(analyse.analyse)
-    cli.add_command(plot.plot)
-    cli.add_command(figures.figures)
-
-    from . import calibrate
-
-    cli.add_command(calibrate.calibrate)
+    for command in (
+        generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
+        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate,
+    ):
+        cli.add_command(command)
 
 
 _register()
