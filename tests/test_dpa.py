@@ -256,7 +256,7 @@ def test_determinism():
     assert np.array_equal(a.vertices, b.vertices) and np.array_equal(a.faces, b.faces)
     assert dict(a.info) == dict(b.info)
     c = grainforge.dpa(primitive="octahedron", exponent=2.0, primaries=50, rng=10)
-    assert not np.array_equal(a.vertices.shape, c.vertices.shape) or not np.array_equal(a.vertices, c.vertices)
+    assert not np.array_equal(a.vertices, c.vertices)  # False too when the shapes differ
 
 
 @pytest.mark.parametrize(

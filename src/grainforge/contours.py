@@ -231,11 +231,7 @@ class Contour:
         fine = _fine(self)
         t = TWO_PI * np.arange(len(fine)) / len(fine)
         x, y = fine * np.cos(t), fine * np.sin(t)
-        x1, y1 = np.roll(x, -1), np.roll(y, -1)
-        cross = x * y1 - x1 * y
-        area = cross.sum() / 2.0
-        cx = ((x + x1) * cross).sum() / (6.0 * area)
-        cy = ((y + y1) * cross).sum() / (6.0 * area)
+        cx, cy = _area_centroid(x, y)
         radii, star = _ray_cast(x - cx, y - cy, self.n_angles)
         centroid = self.centroid + self.scale * np.array([cx, cy])
         return Contour(radii * self.scale, 1.0, centroid, star and self.star_shaped, self.source)
@@ -652,15 +648,25 @@ def mask_contour(
     loop = max(loops, key=len)
     x = loop[:, 1] - 1 + offset[1]
     y = -(loop[:, 0] - 1 + offset[0])
+    cx, cy = _area_centroid(x, y)
+    radii, star = _ray_cast(x - cx, y - cy, n_angles)
+    return Contour(radii, 1.0, (cx, cy), star, "image")
+
+
+def _area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
+    """Area centroid of the closed polygon (x, y) (shoelace formula).
+
+    Raises
+    ------
+    ValueError
+        If the polygon encloses no area.
+    """
     x1, y1 = np.roll(x, -1), np.roll(y, -1)
     cross = x * y1 - x1 * y
     area = cross.sum() / 2.0
     if abs(area) < 1e-12:
         raise ValueError("grain is too small to trace a contour")
-    cx = ((x + x1) * cross).sum() / (6.0 * area)
-    cy = ((y + y1) * cross).sum() / (6.0 * area)
-    radii, star = _ray_cast(x - cx, y - cy, n_angles)
-    return Contour(radii, 1.0, (cx, cy), star, "image")
+    return ((x + x1) * cross).sum() / (6.0 * area), ((y + y1) * cross).sum() / (6.0 * area)
 
 
 def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, bool]:

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from ..methods.dpa import PRIMITIVES
 from ..params import ParameterError
 from .options import bad_parameter
 from .progress import progress_bar
@@ -18,8 +19,7 @@ def calibrate():
 
 @calibrate.command(name="dpa")
 @click.option("--primitive", default="cube", show_default=True,
-              type=click.Choice(["cube", "octahedron", "tetrahedron", "dodecahedron", "icosahedron",
-                                 "truncated-octahedron"]),
+              type=click.Choice(PRIMITIVES),
               help="Primary particle shape.")
 @click.option("--primaries", default=200, show_default=True, type=click.IntRange(min=1, max=100_000),
               help="Number of primaries N per aggregate.")

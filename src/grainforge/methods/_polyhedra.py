@@ -13,7 +13,7 @@ from functools import lru_cache
 import numpy as np
 
 __all__ = ["Solid", "solid", "PRIMITIVES", "intrudes", "sat_intrudes", "face_normals", "edge_directions",
-           "mirror", "rotate_about", "face_frame"]
+           "mirror", "rotate_about", "rotation_matrix", "face_frame"]
 
 _PHI = (1.0 + 5.0**0.5) / 2.0
 
@@ -101,15 +101,18 @@ def mirror(points: np.ndarray, centre: np.ndarray, normal: np.ndarray) -> np.nda
     return points - 2.0 * d[..., None] * normal
 
 
+def rotation_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
+    """(3, 3) rotation by ``angle`` about unit ``axis`` (Rodrigues' formula)."""
+    x, y, z = axis
+    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
+    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+
+
 def rotate_about(points: np.ndarray, centre: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
     """Rotate ``points`` by ``angle`` about the line through ``centre`` along unit ``axis``."""
     if angle == 0.0:
         return points
-    c, s = np.cos(angle), np.sin(angle)
-    x, y, z = axis
-    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    R = np.eye(3) + s * K + (1 - c) * (K @ K)
-    return (points - centre) @ R.T + centre
+    return (points - centre) @ rotation_matrix(axis, angle).T + centre
 
 
 def face_frame(vertices: np.ndarray, face: np.ndarray, centroid: np.ndarray):

@@ -435,11 +435,7 @@ def construct(p: Params, rng: Any = None) -> Construction:
     """
     rng = np.random.default_rng(rng)
     inputs = input_contours(p, rng)
-    if len({c.n_angles for c in inputs}) == 1:
-        fines = _fine(np.stack([c.radii for c in inputs]), p.modes)  # one FFT pair for all three
-    else:
-        fines = [_fine(c.radii, p.modes) for c in inputs]
-    fines = [_aligned(f) for f in fines]
+    fines = [_aligned(_fine(c.radii, p.modes)) for c in inputs]
     h, q = GRID // 2, GRID // 4
     # diameters through the origin along each contour's first and second axis
     ext = np.array([[f[0] + f[h], f[q] + f[3 * q]] for f in fines])
@@ -476,10 +472,7 @@ def build(p: Params, rng: np.random.Generator):
     if con.axis_scale != (1.0, 1.0, 1.0):
         vertices *= np.asarray(con.axis_scale)
     info: dict[str, float] = {}
-    if len({c.n_angles for c in con.inputs}) == 1:
-        D_in = descriptors_of_radii(np.stack([c.radii for c in con.inputs]), 8)
-    else:
-        D_in = [c.descriptors(8) for c in con.inputs]
+    D_in = [c.descriptors(8) for c in con.inputs]
     D_sec = descriptors_of_radii(con.sections, 8)
     for k, plane in enumerate(PLANES):
         for n in MEASURED:

@@ -15,7 +15,9 @@ from functools import lru_cache
 import numpy as np
 
 from ..params import ParameterError, param, validate
-from ._polyhedra import PRIMITIVES, Solid, edge_directions, face_frame, face_normals, sat_intrudes, solid
+from ._polyhedra import (
+    PRIMITIVES, Solid, edge_directions, face_frame, face_normals, rotation_matrix, sat_intrudes, solid,
+)
 
 __all__ = [
     "Params", "Aggregate", "build", "dpa", "aggregate", "parent_index", "lattice_surface",
@@ -188,12 +190,6 @@ def _aggregate_cubes(n_total: int, exponent: float, rng: np.random.Generator) ->
     return np.array(cells, dtype=np.int64).reshape(-1, 3)
 
 
-def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
-    x, y, z = axis
-    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
-
-
 @lru_cache(maxsize=None)
 def _templates(name: str):
     """For each face f and distinct orientation j: the map x -> A x + b that turns the
@@ -207,7 +203,7 @@ def _templates(name: str):
         Mf = np.eye(3) - 2.0 * np.outer(n, n)
         per_face = []
         for j in js:
-            R = _rotation(n, 2.0 * np.pi * int(j) / len(f))
+            R = rotation_matrix(n, 2.0 * np.pi * int(j) / len(f))
             A = R @ Mf
             b = R @ (2.0 * np.dot(c, n) * n - c) + c
             kid = v0 @ A.T + b
