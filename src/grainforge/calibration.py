@@ -173,14 +173,12 @@ class Calibration:
 
     def plot(self, path: str | os.PathLike) -> Path:
         """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."""
-        import io
-
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from .io import atomic_write
+        from .io import save_figure
 
         e = np.asarray(self.exponent)
         fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
@@ -200,10 +198,7 @@ class Calibration:
         ax.set_title(f"DPA calibration: {self.primitive}, N = {self.primaries}, {self.repeats} seeds per ε",
                      fontsize=9)
         fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png")
-        plt.close(fig)
-        return atomic_write(path, buf.getvalue())
+        return save_figure(fig, path)
 
 
 def _measure(task) -> tuple[float, float, float]:
