@@ -158,6 +158,17 @@ def test_tray_failures_leave_no_files(tmp_path, small_polyjet):
     assert list(tmp_path.iterdir()) == [tmp_path / "small.toml"]
 
 
+def test_tray_failure_after_a_plate_was_started_leaves_no_files(tmp_path, small_polyjet):
+    """The second grain does not fit: the first one's plate file was already being written."""
+    write_run("fso", SMALL, [0], tmp_path / "small", size=2.0)
+    write_run("fso", SMALL, [1], tmp_path / "big", size=20.0)
+    files = (tmp_path / "small" / "fso-0000.stl", tmp_path / "big" / "fso-0000.stl")
+    out = tmp_path / "out" / "t.3mf"
+    with pytest.raises(ValueError, match="does not fit"):
+        build_tray(FileSource(files), small_polyjet, out, workers=1)
+    assert list(out.parent.iterdir()) == []
+
+
 def test_cli_tray(runner, tmp_path):
     out = tmp_path / "t.3mf"
     args = ["tray", "--method", "fso", "--param", "amplitude=0", "--count", "4", "--size", "2",

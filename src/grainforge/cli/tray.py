@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..fabrication.scale import SIZE_DEFINITIONS
+from ..fabrication.tray import DEFAULT_TRIANGLE_BUDGET
 from ..params import ParameterError
 from .options import bad_parameter
 from .progress import progress_bar
@@ -70,7 +71,7 @@ def parse_param_values(method: str, pairs, preset: str | None):
               help="Minimum distance between grains in mm [default: two printer resolutions].")
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
               help="Finest mesh level resolution matching may choose [default 6].")
-@click.option("--max-triangles", default=20_000_000, show_default=True, type=click.IntRange(min=20),
+@click.option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
               help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
 @click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),
               help="Processes making grains (the output does not depend on it).")

@@ -117,7 +117,7 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-
         for k in range(3):
             p0 = tri[a, k]
             p1 = tri[a, (k + 1) % 3]
-            hit |= _segment_hits_triangle(p0, p1, tri[b], tol)
+            hit |= _segment_hits_triangle(p0, p1, tri[b])
     return int(hit.sum())
 
 
@@ -140,7 +140,7 @@ def _moller_trumbore(p0, d, tri, det_min):
     return ok, u, w, t
 
 
-def _segment_hits_triangle(p0, p1, tri, tol):
+def _segment_hits_triangle(p0, p1, tri):
     """Whether segment p0→p1 crosses each triangle's interior (strictly, by a 1e-9 margin)."""
     ok, u, w, t = _moller_trumbore(p0, p1 - p0, tri, 1e-15)
     eps = 1e-9

@@ -203,10 +203,9 @@ def match_subdivisions(
                 break
         if dev <= tol:
             break
-    v, f = icosphere(level)
     g = generate(method, dataclasses.replace(params, subdivisions=level), int(seeds[0]))
     k = scale_factor(g, size, size_definition)
     e, _ = _midpoint_index(level)
     edge = float(np.linalg.norm(g.vertices[e[:, 0]] - g.vertices[e[:, 1]], axis=1).mean() * k)
     ok = bool(dev <= tol)
-    return Resolution(level, float(dev), tol, edge, len(f), ok, "tolerance" if ok else limit)
+    return Resolution(level, float(dev), tol, edge, len(g.faces), ok, "tolerance" if ok else limit)

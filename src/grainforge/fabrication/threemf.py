@@ -143,18 +143,25 @@ class ThreeMFWriter:
         self._model = None
         self._zip.close()
 
+    def abort(self) -> None:
+        """Stop without a build section, releasing the file (the caller deletes the partial file)."""
+        if self._model is None:
+            return
+        try:
+            self._model.close()
+            self._zip.close()
+        except Exception:  # pragma: no cover - best effort on the error path
+            pass
+        self._model = None
+
     def __enter__(self):
         return self
 
     def __exit__(self, exc_type, exc, tb):
         if exc_type is None:
             self.close()
-        else:  # leave the caller to delete the partial file
-            try:
-                self._model.close()
-                self._zip.close()
-            except Exception:  # pragma: no cover - best effort on the error path
-                pass
+        else:
+            self.abort()
 
 
 _STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
@@ -205,6 +212,9 @@ class STLWriter:
         self._fh.seek(self._start + 80)
         self._fh.write(struct.pack("<I", self.triangles))
         self._fh.seek(end)
+
+    def abort(self) -> None:
+        """Stop without patching the count (the caller deletes the partial file)."""
 
     def __enter__(self):
         return self

@@ -266,32 +266,29 @@ class Prepared:
 
 
 def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
-    kind = task["kind"]
-    if kind == "gen":
+    from .scale import scale_factor
+
+    if task["kind"] == "gen":
         from ..methods import generate
-        from .scale import scale_factor
 
         g = generate(task["method"], task["params"], task["seed"])
         k = scale_factor(g, task["size"], task["size_definition"])
         name = f"{task['method']}-{task['index']:05d}"
         return name, f"seed {task['seed']}", g.vertices * k, g.faces, getattr(task["params"], "subdivisions", None)
     from ..solid import solid_problems
-    from .scale import scale_factor
     from .threemf import read_parts
 
     path = Path(task["path"])
     parts = read_parts(path)
     if len(parts) != 1:
         raise ValueError(f"{path}: holds {len(parts)} parts; a tray takes one grain per file")
-    v, f = parts[0].vertices, parts[0].faces
+    part = parts[0]
+    v, f = part.vertices, part.faces
     problems = solid_problems(v, f)
     if problems:
         raise ValueError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
     if task["size"] is not None:
-        from types import SimpleNamespace
-
-        v = v * scale_factor(SimpleNamespace(vertices=v, faces=f, mesh=parts[0].mesh), task["size"],
-                             task["size_definition"])
+        v = v * scale_factor(part, task["size"], task["size_definition"])
     return path.stem, str(path), v, f, None
 
 
@@ -378,8 +375,6 @@ def _existing_outputs(out: Path) -> list[Path]:
 
 
 def _preview(path: Path, footprints: list[np.ndarray], layer_of: list[int], volume, title: str) -> None:
-    import io
-
     import matplotlib
 
     matplotlib.use("Agg")
@@ -387,7 +382,7 @@ def _preview(path: Path, footprints: list[np.ndarray], layer_of: list[int], volu
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Rectangle
 
-    from ..io import atomic_write
+    from ..io import save_figure
 
     W, D, _ = volume
     fig, ax = plt.subplots(figsize=(6, 6 * D / W + 0.4), dpi=120)
@@ -402,10 +397,7 @@ def _preview(path: Path, footprints: list[np.ndarray], layer_of: list[int], volu
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_title(title, fontsize=9)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": None})
-    plt.close(fig)
-    atomic_write(path, buf.getvalue())
+    save_figure(fig, path)
 
 
 def _tasks(source, fmt: str, stacking: bool) -> list[dict]:
@@ -469,7 +461,7 @@ def build_tray(
     FileExistsError
         If an output exists and ``overwrite`` is false.
     """
-    from ..io import write_csv
+    from ..io import _file_mode, write_csv
     from .printers import get_printer
     from .resolution import MAX_MATCHED, match_subdivisions, supports_matching
     from .threemf import STLWriter, ThreeMFWriter
@@ -504,7 +496,6 @@ def build_tray(
     rows: list[dict[str, Any]] = []
     footprints: list[list[np.ndarray]] = []
     layers_of: list[list[int]] = []
-    layer_count: list[int] = []
     writer = fh = None
     plate = -1
     try:
@@ -519,18 +510,14 @@ def build_tray(
                 if writer is not None:
                     writer.close()
                     fh.close()
-                    layer_count.append(prev_layers)
                 fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
                 temps.append(Path(tmp))
-                umask = os.umask(0)
-                os.umask(umask)
-                os.chmod(tmp, 0o666 & ~umask)
+                os.chmod(tmp, _file_mode())
                 fh = os.fdopen(fd, "w+b")
                 writer = ThreeMFWriter(fh) if fmt == ".3mf" else STLWriter(fh)
                 footprints.append([])
                 layers_of.append([])
                 plate = pl
-            prev_layers = packer.layers
             writer.add_object(p.name, p.payload, (x, y, z))
             footprints[-1].append(p.footprint + np.array([x, y], dtype=np.float32))
             layers_of[-1].append(packer.layers - 1)
@@ -545,7 +532,7 @@ def build_tray(
             })
         writer.close()
         fh.close()
-        layer_count.append(packer.layers)
+        layer_count = [layers[-1] + 1 for layers in layers_of]  # layers only grow within a plate
         files, previews, csv_path = tray_outputs(out, len(temps))
         for tmp, final in zip(temps, files):
             os.replace(tmp, final)
@@ -557,6 +544,8 @@ def build_tray(
                      f"{printer.name}, gap {gap * 1000:.0f} µm")
         write_csv(csv_path, rows)
     except BaseException:
+        if writer is not None:
+            writer.abort()
         if fh is not None and not fh.closed:
             fh.close()
         for t in temps:
@@ -612,8 +601,8 @@ def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, seed:
             ma = mesh(a)
             pts = np.vstack([ma.vertices, trimesh.sample.sample_surface(ma, samples, seed=rng)[0]])
             # only points near b's box can be closer than ``within``
-            near = ((pts >= lo[b] - within) & (pts <= hi[b] + within)).all(axis=1)
-            for k in range(0, int(near.sum()), 512):
-                _, dist, _ = trimesh.proximity.closest_point(mesh(b), pts[near][k : k + 512])
+            pts = pts[((pts >= lo[b] - within) & (pts <= hi[b] + within)).all(axis=1)]
+            for k in range(0, len(pts), 512):
+                _, dist, _ = trimesh.proximity.closest_point(mesh(b), pts[k : k + 512])
                 best = min(best, float(dist.min()))
     return best
