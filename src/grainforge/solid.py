@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["signed_volume", "volume_centroid", "solid_problems", "require_solid", "split_bodies"]
+__all__ = ["signed_volume", "volume_centroid", "face_components", "solid_problems", "require_solid", "split_bodies"]
 
 
 def _tetra_volumes(vertices: np.ndarray, faces: np.ndarray):
@@ -38,6 +38,24 @@ def volume_centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     if total == 0:
         return vertices.mean(axis=0)
     return ((a + b + c) / 4.0 * vol[:, None]).sum(axis=0) / total
+
+
+def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
+    """Label of the edge-connected component of every face, shape (F,).
+
+    Examples
+    --------
+    >>> face_components(np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]]), 7).tolist()
+    [0, 0, 1]
+    """
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    faces = np.asarray(faces, dtype=np.int64)
+    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
+    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(n_vertices, n_vertices))
+    _, labels = connected_components(g, directed=False)
+    return labels[faces[:, 0]]
 
 
 def solid_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
@@ -73,14 +91,7 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     if not closed:
         problems.append("open boundary (not watertight)")
     if not problems:
-        from scipy.sparse import coo_matrix
-        from scipy.sparse.csgraph import connected_components
-
-        used = np.zeros(len(vertices), dtype=bool)
-        used[faces.ravel()] = True
-        g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(vertices),) * 2)
-        _, labels = connected_components(g, directed=False)
-        bodies = np.count_nonzero(np.bincount(labels[used]))
+        bodies = len(np.unique(face_components(faces, len(vertices))))
         if bodies != 1:
             problems.append(f"{bodies} separate bodies")
     if not problems and signed_volume(vertices, faces) <= 0:
@@ -118,19 +129,13 @@ def split_bodies(
     >>> [len(f) for _, f in split_bodies(both.vertices, both.faces)]
     [12, 12]
     """
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
     v, inv = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
     f = inv.reshape(-1)[np.asarray(faces, dtype=np.int64)]
     if drop_degenerate:
         f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]
     if len(f) == 0:
         return []
-    e = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(len(v), len(v)))
-    _, labels = connected_components(g, directed=False)
-    face_label = labels[f[:, 0]]
+    face_label = face_components(f, len(v))
     _, first = np.unique(face_label, return_index=True)
     bodies = []
     for lab in face_label[np.sort(first)]:

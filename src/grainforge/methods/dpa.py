@@ -440,16 +440,6 @@ def lattice_surface(cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, int]:
     return vertices.astype(np.float64), faces.astype(np.int64), int(cavity.sum())
 
 
-def _mesh_components(faces: np.ndarray, nv: int) -> np.ndarray:
-    from scipy.sparse import coo_matrix
-    from scipy.sparse.csgraph import connected_components
-
-    e = np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]]])
-    g = coo_matrix((np.ones(len(e)), (e[:, 0], e[:, 1])), shape=(nv, nv))
-    _, lab = connected_components(g, directed=False)
-    return lab[faces[:, 0]]
-
-
 def _manifold_mesh(m) -> tuple[np.ndarray, np.ndarray]:
     mesh = m.to_mesh64()
     return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3].copy(), np.asarray(mesh.tri_verts, dtype=np.int64)
@@ -470,7 +460,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
     """
     import manifold3d as m3
 
-    from ..solid import signed_volume
+    from ..solid import face_components, signed_volume
 
     s = agg.solid
     tris = s.triangles.astype(np.uint32)
@@ -489,7 +479,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
         u = m3.Manifold.batch_boolean(parts, m3.OpType.Add) if n > 1 else parts[0]
         volume = float(u.volume())
         v, f = _manifold_mesh(u)
-        comp = _mesh_components(f, len(v))
+        comp = face_components(f, len(v))
         keep = np.zeros(len(f), dtype=bool)
         cavity, bodies = 0.0, 0
         for k in np.unique(comp):
