@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["FORMATS", "export_bytes", "atomic_write", "write_mesh", "write_csv", "read_mesh", "save_figure"]
+__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -82,7 +82,7 @@ def export_bytes(obj, fmt: str = "stl", header: str | None = None) -> bytes:
     return exporter(_as_trimesh(obj), header)
 
 
-def _file_mode() -> int:
+def file_mode() -> int:
     """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give."""
     mask = os.umask(0)
     os.umask(mask)
@@ -102,7 +102,7 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
     try:
         with os.fdopen(fd, "wb") as fh:
             fh.write(data)
-        os.chmod(tmp, _file_mode())
+        os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
         try:

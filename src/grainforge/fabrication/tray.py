@@ -461,7 +461,7 @@ def build_tray(
     FileExistsError
         If an output exists and ``overwrite`` is false.
     """
-    from ..io import _file_mode, write_csv
+    from ..io import file_mode, write_csv
     from .printers import get_printer
     from .resolution import MAX_MATCHED, match_subdivisions, supports_matching
     from .threemf import STLWriter, ThreeMFWriter
@@ -512,7 +512,7 @@ def build_tray(
                     fh.close()
                 fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
                 temps.append(Path(tmp))
-                os.chmod(tmp, _file_mode())
+                os.chmod(tmp, file_mode())
                 fh = os.fdopen(fd, "w+b")
                 writer = ThreeMFWriter(fh) if fmt == ".3mf" else STLWriter(fh)
                 footprints.append([])
