@@ -88,14 +88,12 @@ def _synthetic_micrograph(size: int = 320, subdivisions: int = 5) -> np.ndarray:
 
 def figure3(out: Path, subdivisions: int = 5) -> Path:
     """Contours from a fractal profile, Fourier descriptors and an image (paper Fig. 3)."""
-    import io as _io
-
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_write
+    from .io import save_figure
 
     _method("cri")
     from .contours import Contour
@@ -125,10 +123,7 @@ def figure3(out: Path, subdivisions: int = 5) -> Path:
     ax.set_axis_off()
     fig.suptitle("Fig. 3  Grain contours from three sources", fontsize=10)
     fig.tight_layout()
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": None})
-    plt.close(fig)
-    return atomic_write(out, buf.getvalue())
+    return save_figure(fig, out)
 
 
 def figure4(out: Path, subdivisions: int = 5) -> Path:

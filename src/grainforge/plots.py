@@ -11,7 +11,6 @@ CRI manifest's ``descriptors``/``decay``/``modes``, drawn as the input spectrum)
 from __future__ import annotations
 
 import csv
-import io
 from pathlib import Path
 from typing import Sequence
 
@@ -97,17 +96,16 @@ def fd_spectrum(ax, tables) -> None:
     three planes pooled); a CRI manifest's input spectrum (its
     ``descriptors``, ``decay`` and ``modes``) is drawn dashed where present.
     """
-    from .contours import descriptor_spectrum
+    from .analysis.fourier import FD_ORDERS, PLANES
+    from .contours import DEFAULT_DECAY, DEFAULT_MODES, descriptor_spectrum
 
     drew = False
     for (path, t), color in zip(tables, _colors()):
         lab = _label(path)
-        planes = [p for p in ("LI", "LS", "IS") if _fd_matrix(t, p)[0]]
+        planes = [m for m in (_fd_matrix(t, p) for p in PLANES) if m[0]]
         if planes:
-            n, _ = _fd_matrix(t, planes[0])
-            M = np.concatenate([
-                np.stack([_numeric(t, k, path) for k in _fd_matrix(t, p)[1]], axis=1) for p in planes
-            ])
+            n = planes[0][0]
+            M = np.concatenate([np.stack([_numeric(t, k, path) for k in cols], axis=1) for _, cols in planes])
             M = np.where(M > 0, M, np.nan)
             med = np.nanmedian(M, axis=0)
             lo, hi = np.nanpercentile(M, [10, 90], axis=0)
@@ -117,10 +115,10 @@ def fd_spectrum(ax, tables) -> None:
         if "descriptors" in t and any(t["descriptors"]):
             s = next(x for x in t["descriptors"] if x)
             d2, d3, d8 = (float(x) for x in s.split())
-            decay = tuple(float(x) for x in t["decay"][0].split()) if t.get("decay", [""])[0] else (-5 / 3, -5 / 3)
-            modes = int(float(t["modes"][0])) if t.get("modes", [""])[0] else 64
+            decay = tuple(float(x) for x in t["decay"][0].split()) if t.get("decay", [""])[0] else DEFAULT_DECAY
+            modes = int(float(t["modes"][0])) if t.get("modes", [""])[0] else DEFAULT_MODES
             D = descriptor_spectrum(d2, d3, d8, decay=decay, modes=modes)
-            k = np.arange(2, min(len(D), 17))
+            k = np.arange(FD_ORDERS[0], min(len(D), FD_ORDERS[-1] + 1))
             keep = D[k] > 0
             ax.plot(k[keep], D[k][keep], "--", color=color, label=f"{lab}: input ({d2:g}, {d3:g}, {d8:g})")
             drew = True
@@ -191,7 +189,7 @@ def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import atomic_write
+    from .io import save_figure
 
     fig, ax = plt.subplots(figsize=(6.0, 4.6) if kind != "zingg" else (5.4, 5.4), dpi=130)
     try:
@@ -200,11 +198,9 @@ def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: 
             ax.set_title(title)
         ax.legend(fontsize=7, loc="best")
         fig.tight_layout()
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", metadata={"Software": None})
+        return save_figure(fig, out)
     finally:
-        plt.close(fig)
-    return atomic_write(out, buf.getvalue())
+        plt.close(fig)  # also when drawing fails
 
 
 def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:

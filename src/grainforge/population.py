@@ -566,10 +566,11 @@ def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
     """Grain ``index``'s seed, Params and size (mm), from its own stream only."""
     from .methods import get
 
+    params_type = get(recipe.method).Params
     rng = grain_stream(recipe.seed, index)
     seed = int(rng.integers(0, 2**63))
     values = {}
-    for spec in specs(get(recipe.method).Params):
+    for spec in specs(params_type):
         v = recipe.params.get(spec.name)
         if isinstance(v, Distribution):
             values[spec.name] = v.draw(rng)
@@ -577,7 +578,7 @@ def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
             values[spec.name] = v
     size = recipe.size.sample(size_quantile(recipe, index, float(rng.random())))
     try:
-        params = get(recipe.method).Params(**values)
+        params = params_type(**values)
     except ParameterError as exc:
         raise ValueError(f"grain {index}: drawn params.{exc.name} {exc.reason}") from None
     return seed, params, size
@@ -626,7 +627,7 @@ def make_grain(recipe: Recipe, index: int) -> GrainResult:
 
     Runs in a worker process (local pool or Dask); the client writes the file.
     """
-    from .fabrication.scale import scale_factor
+    from .fabrication.scale import to_size
     from .methods import generate
     from .run import manifest_row
 
@@ -635,7 +636,7 @@ def make_grain(recipe: Recipe, index: int) -> GrainResult:
         grain = generate(recipe.method, params, seed)
     except ParameterError as exc:
         raise ValueError(f"grain {index} (seed {seed}): params.{exc.name} {exc.reason}") from None
-    grain = grain.scaled(scale_factor(grain, size, recipe.size_definition))
+    grain = to_size(grain, size, recipe.size_definition)
     name = recipe.file_name(index)
     data = export_bytes(grain, recipe.format)
     row = manifest_row(grain, name, size, recipe.size_definition)

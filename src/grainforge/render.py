@@ -321,11 +321,9 @@ def contact_sheet(
     import matplotlib
 
     matplotlib.use("Agg")
-    import io
-
     import matplotlib.pyplot as plt
 
-    from .io import atomic_write
+    from .io import save_figure
 
     if len(meshes) != len(labels):
         raise ValueError("one label per mesh is needed")
@@ -348,7 +346,4 @@ def contact_sheet(
         fig.suptitle(title, fontsize=10, y=1 - 0.08 / height)
     fig.subplots_adjust(left=0.005, right=0.995, bottom=0.005, top=1 - (title_in + label_in) / height,
                         wspace=0.02, hspace=label_in / panel_size)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", metadata={"Software": None})
-    plt.close(fig)
-    return atomic_write(out, buf.getvalue())
+    return save_figure(fig, out)

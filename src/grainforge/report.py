@@ -19,7 +19,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from .io import atomic_write
+from .io import atomic_write, save_figure
 
 __all__ = ["summary", "population_report", "achieved_sizes", "SUMMARY", "FIGURE"]
 
@@ -143,12 +143,7 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
         ax.tick_params(labelsize=7)
     fig.suptitle(f"{recipe.method} population: {len(rows)} grains, root seed {recipe.seed}", fontsize=10)
     fig.tight_layout()
-    import io as _io
-
-    buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90, metadata={"Software": None})
-    plt.close(fig)
-    atomic_write(path, buf.getvalue())
+    save_figure(fig, path, dpi=90)
 
 
 def population_report(recipe, rows: Sequence[Mapping[str, Any]], out: str | Path) -> dict[str, Any]:

@@ -32,13 +32,8 @@ DESCRIPTOR_COLUMNS = BASIC_COLUMNS + (
 )
 
 
-def _mesh(obj):
-    return obj.mesh if hasattr(obj, "faces") and not hasattr(obj, "area_faces") else obj
-
-
 def _arrays(obj) -> tuple[np.ndarray, np.ndarray]:
-    if hasattr(obj, "params") and hasattr(obj, "faces"):  # Grain
-        return np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces, dtype=np.int64)
+    """(V, 3) float64 vertices and (F, 3) int64 faces of a Grain, trimesh or anything with both."""
     return np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces, dtype=np.int64)
 
 
@@ -131,29 +126,27 @@ def principal_dimensions(obj) -> tuple[float, float, float]:
     >>> [round(x, 6) for x in principal_dimensions(box)]
     [3.0, 2.0, 1.0]
     """
-    import trimesh
-
     v, _ = _arrays(obj)
-    _, extents = trimesh.bounds.oriented_bounds(_hull_points(v))
-    L, I, S = sorted((float(e) for e in extents), reverse=True)
-    return L, I, S
+    return _box_dimensions(v, _hull(v))
 
 
 def _hull(v: np.ndarray):
-    """scipy ConvexHull of the points; ``ValueError`` for degenerate (flat, too few) point sets."""
+    """scipy ConvexHull of the points, or None for degenerate (flat, too few) point sets."""
     from scipy.spatial import ConvexHull, QhullError
 
     try:
         return ConvexHull(v)
-    except QhullError as exc:
-        raise ValueError(f"no 3D convex hull: {str(exc).splitlines()[0]}") from None
+    except QhullError:
+        return None
 
 
-def _hull_points(v: np.ndarray) -> np.ndarray:
-    try:
-        return v[_hull(v).vertices]
-    except ValueError:  # degenerate (flat) point sets: let trimesh handle all points
-        return v
+def _box_dimensions(v: np.ndarray, hull) -> tuple[float, float, float]:
+    """L ≥ I ≥ S of the minimum-volume box, searched over the hull's points (all points without a hull)."""
+    import trimesh
+
+    _, extents = trimesh.bounds.oriented_bounds(v[hull.vertices] if hull is not None else v)
+    L, I, S = sorted((float(e) for e in extents), reverse=True)
+    return L, I, S
 
 
 def basic_descriptors(obj) -> dict[str, float]:
@@ -178,25 +171,16 @@ def basic_descriptors(obj) -> dict[str, float]:
     (0.806, 1.0)
     """
     v, f = _arrays(obj)
-    mp = mass_properties(v, f)
-    return _basic(v, mp)
+    return _basic(v, mass_properties(v, f), _hull(v))
 
 
-def _basic(v: np.ndarray, mp: dict, hull=None) -> dict[str, float]:
-    import trimesh
-
+def _basic(v: np.ndarray, mp: dict, hull) -> dict[str, float]:
+    """The :data:`BASIC_COLUMNS` from the mass properties and the convex hull (None if degenerate)."""
     V, A = mp["volume"], mp["area"]
     d_eq = float(np.cbrt(6.0 * V / np.pi)) if V > 0 else 0.0
     sph = float(np.pi ** (1 / 3) * (6 * V) ** (2 / 3) / A) if V > 0 and A > 0 else 0.0
-    if hull is None:
-        try:
-            hull = _hull(v)
-        except ValueError:
-            hull = None
     hull_v = float(hull.volume) if hull is not None else 0.0
-    pts = v[hull.vertices] if hull is not None else v
-    _, extents = trimesh.bounds.oriented_bounds(pts)
-    L, I, S = sorted((float(e) for e in extents), reverse=True)
+    L, I, S = _box_dimensions(v, hull)
     return {
         "volume": V, "surface_area": A, "equivalent_diameter": d_eq, "sphericity": sph,
         "convexity": V / hull_v if hull_v > 0 else 0.0, "L": L, "I": I, "S": S,
@@ -250,11 +234,8 @@ def describe(
         raise ValueError("the mesh holds no triangles")
     closed = is_closed(f, len(v))
     mp = mass_properties(v, f)
-    try:
-        hull = _hull(v)
-    except ValueError:
-        hull = None
-    out: dict[str, float] = dict(_basic(v, mp, hull))
+    hull = _hull(v)
+    out: dict[str, float] = _basic(v, mp, hull)
     L, I, S = out["L"], out["I"], out["S"]
     centre, axes = fourier_mod.principal_axes(v, f, mp)
     proj = np.einsum("vi,ji->vj", v - centre, axes)

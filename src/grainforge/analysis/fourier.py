@@ -376,11 +376,12 @@ def projection_descriptors(
     for name, (i, j) in PLANES.items():
         q = p[:, [i, j]]
         origin = np.zeros(2)
+        tris, r = f, None
         if closed:
             a, b, c = q[f[:, 0]], q[f[:, 1]], q[f[:, 2]]
             area2 = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
             front = area2 >= 0
-            ff = f[front]
+            tris = f[front]
             # the outline lies on the contour edges (between a front and a back face)
             contour = edges[front[edge_faces[:, 0]] != front[edge_faces[:, 1]]]
             r_fine, _ = _outline_radii(q, contour, 512)
@@ -390,18 +391,14 @@ def projection_descriptors(
                 # rays crossing no contour edge before the outermost one are
                 # covered from the origin; only the others need the exact test
                 s = True
-                if np.all(np.isfinite(r)) and inner.any():
-                    _, s = silhouette_radii(q, ff, origin, n_rays, rays=inner > 0)
-                elif not np.all(np.isfinite(r)):
-                    r, s = silhouette_radii(q, ff, origin, n_rays)
-            else:
-                r_fine, _ = silhouette_radii(q, ff, origin, 512)
-                origin = _polygon_area_centroid_of_radii(r_fine, origin)
-                r, s = silhouette_radii(q, ff, origin, n_rays)
-        else:
-            r_fine, _ = silhouette_radii(q, f, origin, 512)
+                if not np.all(np.isfinite(r)):
+                    r, s = silhouette_radii(q, tris, origin, n_rays)
+                elif inner.any():
+                    _, s = silhouette_radii(q, tris, origin, n_rays, rays=inner > 0)
+        if r is None:  # open mesh, or no closed outline among the contour edges: the exact silhouette
+            r_fine, _ = silhouette_radii(q, tris, origin, 512)
             origin = _polygon_area_centroid_of_radii(r_fine, origin)
-            r, s = silhouette_radii(q, f, origin, n_rays)
+            r, s = silhouette_radii(q, tris, origin, n_rays)
         star &= s
         for n, d in zip(orders, descriptors_from_radii(r, orders)):
             out[f"fd_{name}_{n}"] = float(d)

@@ -3,11 +3,12 @@
 from __future__ import annotations
 
 from pathlib import Path
+from types import SimpleNamespace
 from typing import Any
 
 import numpy as np
 
-from ..solid import split_bodies
+from ..solid import signed_volume, split_bodies
 
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
@@ -68,24 +69,18 @@ def analyse_mesh(vertices, faces, **options) -> dict[str, Any]:
     dict
         ``faces``, ``flags`` and :func:`~grainforge.analysis.descriptors.describe`'s values.
     """
-    from .descriptors import describe, is_closed, mass_properties
+    from .descriptors import describe, is_closed
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     flags = []
     if not is_closed(f, len(v)):
         flags.append("open")
-    elif mass_properties(v, f)["volume"] < 0:
+    elif signed_volume(v, f) < 0:
         f = f[:, ::-1]
         flags.append("inverted")
-
-    class _Body:  # describe() reads .vertices and .faces
-        pass
-
-    body = _Body()
-    body.vertices, body.faces = v, f
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
-    row.update(describe(body, **options))
+    row.update(describe(SimpleNamespace(vertices=v, faces=f), **options))  # describe() reads .vertices and .faces
     return row
 
 

@@ -6,11 +6,11 @@ from pathlib import Path
 
 import click
 
-KIND_NAMES = ("zingg", "sphericity-convexity", "fd-spectrum", "size-distribution")
+from ..plots import KINDS
 
 
 @click.command()
-@click.argument("kind", type=click.Choice(KIND_NAMES))
+@click.argument("kind", type=click.Choice(tuple(KINDS)))
 @click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="PNG to write.")
 @click.option("--title", default=None, help="Plot title.")
