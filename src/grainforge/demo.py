@@ -33,18 +33,19 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
 
 def fso_sweeps(out: Path, quick: bool = False) -> list[Path]:
     """The paper's Figures 1 and 2: FSO grains over L/R0 at D = 2.4 and over D at L = 7R0."""
+    from .figures import FIG1_LENGTHS, FIG2_DIMENSIONS
     from .methods.fso import Params
 
     seeds = [0, 1] if quick else [0, 1, 2]
     s = 4 if quick else 5
     written = _sweep(
         out / "fso-length-ratio", "fso", lambda L: Params(length_ratio=L, subdivisions=s),
-        [0.1, 0.5, 1, 2, 3.5, 5, 7, 10], "L", seeds,
+        FIG1_LENGTHS, "L", seeds,
         "FSO, D = 2.4: stochastic length L/R0 from 0.1 to 10 (paper Fig. 1)",
     )
     written += _sweep(
         out / "fso-fractal-dimension", "fso", lambda D: Params(fractal_dimension=D, subdivisions=s),
-        [2.0, 2.2, 2.4, 2.6, 2.8], "D", seeds,
+        FIG2_DIMENSIONS, "D", seeds,
         "FSO, L = 7 R0: fractal dimension D from 2.0 to 2.8 (paper Fig. 2)",
     )
     return written

@@ -627,19 +627,15 @@ def make_grain(recipe: Recipe, index: int) -> GrainResult:
 
     Runs in a worker process (local pool or Dask); the client writes the file.
     """
-    from .fabrication.scale import to_size
-    from .methods import generate
-    from .run import manifest_row
+    from .run import encode_grain
 
     seed, params, size = draw_grain(recipe, index)
+    name = recipe.file_name(index)
     try:
-        grain = generate(recipe.method, params, seed)
+        data, row = encode_grain(recipe.method, params, seed, name, fmt=recipe.format, size=size,
+                                 size_definition=recipe.size_definition)
     except ParameterError as exc:
         raise ValueError(f"grain {index} (seed {seed}): params.{exc.name} {exc.reason}") from None
-    grain = to_size(grain, size, recipe.size_definition)
-    name = recipe.file_name(index)
-    data = export_bytes(grain, recipe.format)
-    row = manifest_row(grain, name, size, recipe.size_definition)
     row["sha256"] = hashlib.sha256(data).hexdigest()
     # JSON round trip: a row read back from a sidecar is identical to a fresh one.
     return GrainResult(index, name, data, json.loads(json.dumps(row)))

@@ -17,7 +17,7 @@ from .io import FORMATS, export_bytes, write_csv
 from .methods import generate, get
 from .params import as_dict, specs
 
-__all__ = ["grain_file_name", "manifest_row", "manifest_columns", "write_run", "planned_files"]
+__all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files"]
 
 MANIFEST = "manifest.csv"
 
@@ -49,6 +49,14 @@ def manifest_row(grain, file: str, size: float, size_definition: str) -> dict[st
     row.update(basic_descriptors(grain))
     row["version"] = grain.version
     return row
+
+
+def encode_grain(
+    method: str, params: Any, seed: int, name: str, *, fmt: str, size: float, size_definition: str,
+) -> tuple[bytes, dict[str, Any]]:
+    """Generate one grain, scale it to ``size`` and encode it: (file bytes, manifest row). Writes nothing."""
+    grain = to_size(generate(method, params, int(seed)), size, size_definition)
+    return export_bytes(grain, fmt), manifest_row(grain, name, size, size_definition)
 
 
 def planned_files(out: Path, method: str, count: int, fmt: str) -> list[Path]:
@@ -111,10 +119,10 @@ def write_run(
         if progress is not None:
             iterator = progress(iterator)
         for i, seed in iterator:
-            grain = to_size(generate(method, params, int(seed)), size, size_definition)
             name = grain_file_name(method, i, fmt)
-            (stage / name).write_bytes(export_bytes(grain, fmt))
-            rows.append({**manifest_row(grain, name, size, size_definition), **(row_extra or {})})
+            data, row = encode_grain(method, params, seed, name, fmt=fmt, size=size, size_definition=size_definition)
+            (stage / name).write_bytes(data)
+            rows.append({**row, **(row_extra or {})})
         for row in rows:
             (stage / row["file"]).replace(out / row["file"])
         write_csv(out / MANIFEST, rows, manifest_columns(method, extra_columns))

@@ -14,6 +14,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..solid import is_closed
+
 __all__ = [
     "basic_descriptors", "principal_dimensions", "describe", "BASIC_COLUMNS", "DESCRIPTOR_COLUMNS",
     "mass_properties", "is_closed",
@@ -35,29 +37,6 @@ DESCRIPTOR_COLUMNS = BASIC_COLUMNS + (
 def _arrays(obj) -> tuple[np.ndarray, np.ndarray]:
     """(V, 3) float64 vertices and (F, 3) int64 faces of a Grain, trimesh or anything with both."""
     return np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces, dtype=np.int64)
-
-
-def is_closed(faces: np.ndarray, n_vertices: int) -> bool:
-    """True if every directed edge appears once and its reverse once (closed, consistently oriented).
-
-    Examples
-    --------
-    >>> import trimesh
-    >>> b = trimesh.creation.box()
-    >>> is_closed(b.faces, len(b.vertices)), is_closed(b.faces[:-1], len(b.vertices))
-    (True, False)
-    """
-    f = np.asarray(faces, dtype=np.int64)
-    if len(f) == 0:
-        return False
-    a = f.ravel()
-    b = np.roll(f, -1, axis=1).ravel()
-    key = a * n_vertices + b
-    rev = b * n_vertices + a
-    key_sorted = np.sort(key)
-    if np.any(key_sorted[1:] == key_sorted[:-1]):
-        return False
-    return bool(np.array_equal(key_sorted, np.sort(rev)))
 
 
 def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:

@@ -132,15 +132,15 @@ def descriptors_from_radii(r: np.ndarray, orders=FD_ORDERS) -> np.ndarray:
     >>> np.round(descriptors_from_radii(r, orders=(2, 3, 8)), 6).tolist()
     [0.2, 0.0, 0.05]
     """
+    from ..contours import descriptors_of_radii
+
     r = np.asarray(r, dtype=np.float64)
-    c = np.fft.rfft(r) / len(r)
-    r0 = c[0].real
-    if not r0 > 0:
+    if not r.mean() > 0:
         raise ValueError("mean radius must be positive")
     orders = np.asarray(orders)
-    if orders.max() >= len(c):
+    if orders.max() >= len(r) // 2 + 1:
         raise ValueError(f"order {int(orders.max())} needs more than {len(r)} radii")
-    return 2 * np.abs(c[orders]) / r0
+    return descriptors_of_radii(r)[orders]
 
 
 def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[np.ndarray, np.ndarray]:
