@@ -94,9 +94,9 @@ def _moments(v: np.ndarray, f: np.ndarray, mp: dict | None = None) -> tuple[np.n
 def principal_dimensions(obj) -> tuple[float, float, float]:
     """L ≥ I ≥ S: edges of the minimum-volume oriented bounding box.
 
-    Uses trimesh's ``oriented_bounds`` (exact minimum-area rectangles over
-    the convex hull's face directions, a close approximation of the 3D
-    minimum-volume box).
+    Uses :func:`grainforge.analysis.box.minimum_box`: the smallest box with a
+    face flush with the convex hull, exact over every hull-face direction
+    (the classical search for the 3D minimum-volume box, an upper bound on it).
 
     Examples
     --------
@@ -120,11 +120,10 @@ def _hull(v: np.ndarray):
 
 
 def _box_dimensions(v: np.ndarray, hull) -> tuple[float, float, float]:
-    """L ≥ I ≥ S of the minimum-volume box, searched over the hull's points (all points without a hull)."""
-    import trimesh
+    """L ≥ I ≥ S of the minimum-volume box (:func:`grainforge.analysis.box.minimum_box`)."""
+    from .box import minimum_box
 
-    _, extents = trimesh.bounds.oriented_bounds(v[hull.vertices] if hull is not None else v)
-    L, I, S = sorted((float(e) for e in extents), reverse=True)
+    L, I, S = (float(e) for e in minimum_box(v, hull)[0])
     return L, I, S
 
 

@@ -1,0 +1,221 @@
+"""Minimum-volume oriented bounding box of a point set (ALGORITHMS.md §4, L ≥ I ≥ S).
+
+The search is the classical one (O'Rourke 1985; trimesh's ``oriented_bounds``):
+a box with one face flush with a face of the convex hull.  For each distinct
+hull-face normal n the hull is projected on the plane ⟂ n, the smallest
+rectangle around the projected outline is found by rotating calipers (one side
+flush with an outline edge), and the box volume is that rectangle's area times
+the hull's extent along n.
+
+What is different from ``trimesh.bounds.oriented_bounds``:
+
+- every distinct face normal is tried (trimesh keeps one normal per 0.1 rad
+  bin of spherical angles, which misses the best box by up to ~9 % in volume
+  on rough grains), unless the hull has more than :data:`MAX_NORMALS` of them
+  (smooth, finely tessellated hulls): there one normal per 0.1 cell of a
+  grid of unit-vector components (about 0.1 rad) is tried, then every normal
+  within 0.2 of the best one;
+- all candidate normals are processed at once: the projected outline of a
+  convex hull is made of its *silhouette edges* (between a face turned
+  towards n and one turned away); sorted by the angle of their outward
+  normal they are the outline polygon in order, so the support value in any
+  direction is found with one ``searchsorted`` (rotating calipers without a
+  loop).
+
+The result is exact over the candidate set (no angular rounding); the true
+3D minimum-volume box can in rare cases have no face flush with the hull
+(O'Rourke), so like every face-flush search this is an upper bound on it.
+The reported extents are measured directly in the chosen frame, so the box
+always contains every point.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["minimum_box", "MAX_NORMALS"]
+
+#: distinct hull-face normals tried exactly; above this they are binned (smooth, dense hulls)
+MAX_NORMALS = 2048
+#: bin size of the normal grid used above MAX_NORMALS (about 0.1 rad, like trimesh)
+_BIN = 0.1
+#: memory budget: candidate normals × hull edges processed per chunk
+_CHUNK = 4_000_000
+#: the angle seam of the sorted outlines is put at an irrational angle, away from the
+#: multiples of π/4 that lattice (cube-aggregate) outlines are made of
+_SEAM = 0.6180339887498949
+
+
+def _fallback(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Flat, collinear or tiny point sets (no 3D hull): the smallest rectangle in their plane."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    c = points - points.mean(axis=0)
+    axes = np.linalg.svd(c, full_matrices=True)[2] if len(c) else np.eye(3)
+    q = c @ axes[:2].T
+    try:
+        poly = q[ConvexHull(q).vertices]
+    except (QhullError, ValueError):  # collinear or fewer than three points: the SVD axes
+        poly = None
+    if poly is not None:
+        e = np.roll(poly, -1, axis=0) - poly
+        e /= np.linalg.norm(e, axis=1, keepdims=True)
+        w_t = np.ptp(poly @ e.T, axis=0)
+        w_n = np.ptp(poly @ np.stack([-e[:, 1], e[:, 0]], axis=1).T, axis=0)
+        i = int(np.argmin(w_t * w_n))
+        u = e[i, 0] * axes[0] + e[i, 1] * axes[1]
+        axes = np.stack([u, np.cross(axes[2], u), axes[2]])
+    extents = np.ptp(points @ axes.T, axis=0) if len(points) else np.zeros(3)
+    order = np.argsort(-extents, kind="stable")
+    return extents[order], axes[order]
+
+
+def _candidate_normals(normals: np.ndarray) -> np.ndarray:
+    """Distinct hull-face normals up to sign (n and −n give the same box), binned if too many."""
+    k = np.argmax(np.abs(normals), axis=1)
+    n = normals * np.sign(normals[np.arange(len(normals)), k])[:, None]
+    _, first = np.unique(np.round(n, 9), axis=0, return_index=True)
+    return n[np.sort(first)]
+
+
+def _binned(n: np.ndarray) -> np.ndarray:
+    """One normal per cell of a grid of side :data:`_BIN` (the first of each)."""
+    _, first = np.unique(np.round(n / _BIN), axis=0, return_index=True)
+    return n[np.sort(first)]
+
+
+def _plane_bases(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Orthonormal a, b spanning the plane ⟂ each unit normal n (rows)."""
+    helper = np.eye(3)[np.argmin(np.abs(n), axis=1)]
+    a = np.cross(n, helper)
+    a /= np.linalg.norm(a, axis=1, keepdims=True)
+    return a, np.cross(n, a)
+
+
+def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.ndarray,
+                   edge_faces: np.ndarray, n: np.ndarray) -> tuple[float, int, tuple[float, float]]:
+    """Smallest box volume over candidate normals ``n``: (volume, candidate index, direction of
+    the rectangle's first side in that candidate's plane basis)."""
+    B = len(n)
+    height = np.ptp(X @ n.T, axis=0)  # (B,)
+    side = (fn @ n.T) > -1e-10  # (F, B): face turned towards n (or edge-on)
+    e_idx, k = np.nonzero(side[edge_faces[:, 0]] != side[edge_faces[:, 1]])  # silhouette edges
+    a, b = _plane_bases(n)
+    Y = (X - centre) @ np.concatenate([a, b]).T  # (H, 2B): every hull vertex in every plane
+    ends = edges[e_idx]
+    px0, py0 = Y[ends[:, 0], k], Y[ends[:, 0], k + B]
+    dx, dy = Y[ends[:, 1], k] - px0, Y[ends[:, 1], k + B] - py0
+    length = np.hypot(dx, dy)
+    keep = length > 1e-12 * float(np.ptp(X, axis=0).max())  # edges seen end-on project to points
+    px0, py0, dx, dy, length, k = px0[keep], py0[keep], dx[keep], dy[keep], length[keep], k[keep]
+    dx /= length
+    dy /= length
+    # (dy, -dx) is a normal of the edge line; orient it out of the outline (the origin, the
+    # hull's centre, is inside); d then runs counter-clockwise round the outline
+    sgn = np.where(px0 * dy - py0 * dx < 0, -1.0, 1.0)
+    dx *= sgn
+    dy *= sgn
+    alpha = np.mod(np.arctan2(-dx, dy) - _SEAM, 2 * np.pi)  # angle of the outward normal
+
+    # the outline of candidate k, counter-clockwise: its edges sorted by outward-normal angle
+    o = np.argsort(k * 8.0 + alpha, kind="stable")
+    k, alpha, px0, py0, dx, dy = k[o], alpha[o], px0[o], py0[o], dx[o], dy[o]
+    # collinear neighbours (same outward normal) merge into one edge spanning them all
+    starts = np.flatnonzero(np.r_[True, (k[1:] != k[:-1]) | (np.diff(alpha) > 1e-9)])
+    t0 = px0 * dx + py0 * dy  # position of each end along the edge direction
+    t1 = t0 + length[keep][o] * sgn[o]
+    tmin = np.minimum.reduceat(np.minimum(t0, t1), starts)
+    k, alpha, dx, dy = k[starts], alpha[starts], dx[starts], dy[starts]
+    s = px0[starts] * dy - py0[starts] * dx  # offset of the edge line = support along its normal
+    vx, vy = s * dy + tmin * dx, -s * dx + tmin * dy  # the edge's first corner (counter-clockwise)
+    count = np.bincount(k, minlength=B)
+    first = (np.cumsum(count) - count)[k]
+    count = count[k]
+    key = k * 8.0 + alpha
+
+    def corner(phi: np.ndarray) -> np.ndarray:
+        """Index of the outline corner extreme in direction φ (relative to the seam): the first
+        corner of the first edge whose outward normal is at φ or beyond."""
+        pos = np.searchsorted(key, k * 8.0 + np.mod(phi, 2 * np.pi)) - first
+        return first + np.where(pos >= count, 0, pos)
+
+    c = corner(alpha + np.pi)  # opposite the edge
+    width_n = s - (vx[c] * dy - vy[c] * dx)
+    c1, c2 = corner(alpha + np.pi / 2), corner(alpha - np.pi / 2)  # the two ends along the edge
+    width_t = (vx[c1] - vx[c2]) * dx + (vy[c1] - vy[c2]) * dy
+    volume = width_n * width_t * height[k]
+    i = int(np.argmin(volume))
+    return float(volume[i]), int(k[i]), (float(dx[i]), float(dy[i]))
+
+
+def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
+    """Smallest-volume box with a face flush with the convex hull.
+
+    Parameters
+    ----------
+    points : (P, 3) float
+    hull : scipy.spatial.ConvexHull, optional
+        The convex hull of ``points`` if already computed.
+
+    Returns
+    -------
+    extents : (3,) float64
+        Box edges, descending (L ≥ I ≥ S).
+    axes : (3, 3) float64
+        Unit box directions (rows) matching ``extents``.
+
+    Examples
+    --------
+    >>> import numpy as np
+    >>> corners = np.array(np.meshgrid([0, 4], [0, 1], [0, 2])).T.reshape(-1, 3)
+    >>> R = np.array([[0.36, 0.48, -0.8], [-0.8, 0.6, 0.0], [0.48, 0.64, 0.6]])  # a rotation
+    >>> extents, axes = minimum_box(corners @ R.T)
+    >>> extents.round(9).tolist()
+    [4.0, 2.0, 1.0]
+    >>> np.abs(axes @ R[:, 0]).round(9).tolist()  # L along the rotated x axis
+    [1.0, 0.0, 0.0]
+    """
+    from scipy.spatial import ConvexHull, QhullError
+
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    if hull is None:
+        try:
+            hull = ConvexHull(pts)
+        except (QhullError, ValueError):
+            return _fallback(pts)
+    X = hull.points[hull.vertices]
+    fn = hull.equations[:, :3]
+    # edges of the triangulated hull, each once, with the two faces that share it
+    nb = hull.neighbors  # nb[i, j]: the face opposite vertex j of face i
+    i, j = np.nonzero(nb > np.arange(len(nb))[:, None])
+    simp = hull.simplices
+    edges_all = np.stack([simp[i, (j + 1) % 3], simp[i, (j + 2) % 3]], axis=1)
+    edge_faces = np.stack([i, nb[i, j]], axis=1)
+    remap = np.full(len(hull.points), -1, dtype=np.int64)
+    remap[hull.vertices] = np.arange(len(hull.vertices))
+    edges = remap[edges_all]
+    centre = X.mean(axis=0)
+
+    n_all = _candidate_normals(fn)
+    n = n_all if len(n_all) <= MAX_NORMALS else _binned(n_all)
+    per = max(1, _CHUNK // max(len(edges), 1))
+    best = (np.inf, (1.0, 0.0), None)
+
+    def search(cands):
+        nonlocal best
+        for c0 in range(0, len(cands), per):
+            v, k, side = _best_in_chunk(X, centre, fn, edges, edge_faces, cands[c0:c0 + per])
+            if v < best[0]:
+                best = (v, side, cands[c0 + k])
+
+    search(n)
+    if len(n) < len(n_all):  # binned: then every normal near the best bin's
+        near = np.minimum(np.linalg.norm(n_all - best[2], axis=1), np.linalg.norm(n_all + best[2], axis=1))
+        search(n_all[near < 2 * _BIN])
+    (dx, dy), normal = best[1], best[2]
+    a, b = _plane_bases(normal[None])
+    u = dx * a[0] + dy * b[0]
+    axes = np.stack([u, np.cross(normal, u), normal])
+    extents = np.ptp(X @ axes.T, axis=0)  # measured, so the box holds every point
+    order = np.argsort(-extents, kind="stable")
+    return extents[order], axes[order]
