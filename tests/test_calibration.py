@@ -133,3 +133,23 @@ def test_generate_with_target_fractal_dimension_records_both(runner, tmp_path, m
     res = runner.invoke(cli, ["generate", "dpa", "--out", str(tmp_path / "r2"), "--primaries", "30",
                               "--target-fractal-dimension", "2.99"])
     assert res.exit_code == 2 and "calibrated range" in res.output
+
+
+def test_old_calibration_files_without_scaling_columns_still_read(tmp_path):
+    from grainforge.calibration import COLUMNS, Calibration, calibrate
+
+    c = calibrate("cube", 40, [0.5, 20.0], repeats=2, seed=3)
+    assert np.all(np.isfinite(c.D_A_scaling_mean)) and np.all(c.D_A_scaling_std >= 0)
+    path = c.write_csv(tmp_path / "new.csv")
+    again = Calibration.read_csv(path)
+    assert np.array_equal(again.D_A_scaling_mean, c.D_A_scaling_mean)
+    # a file written before the scaling columns existed
+    old = [col for col in COLUMNS if not col.startswith("D_A_scaling")]
+    lines = path.read_text().splitlines()
+    header = lines[0].split(",")
+    keep = [header.index(col) for col in old]
+    (tmp_path / "old.csv").write_text("\n".join(",".join(row.split(",")[i] for i in keep) for row in lines) + "\n")
+    legacy = Calibration.read_csv(tmp_path / "old.csv")
+    assert np.all(np.isnan(legacy.D_A_scaling_mean))
+    assert np.array_equal(legacy.D_A_mean, c.D_A_mean)
+    legacy.plot(tmp_path / "old.png")  # the plot copes without them

@@ -35,9 +35,10 @@ __all__ = [
 DEFAULT_EXPONENTS = tuple(float(x) for x in np.round(np.geomspace(0.05, 100.0, 16), 6))
 DEFAULT_REPEATS = 8
 #: bump when the DPA algorithm changes so that old cached curves are not reused.
-ALGORITHM_VERSION = 1
+ALGORITHM_VERSION = 2  # 2: exact minimum-volume box (analysis.box), D_A_scaling columns
 COLUMNS = (
     "exponent", "D_A_mean", "D_A_std", "porosity_mean", "porosity_std", "R_g_mean", "R_g_std",
+    "D_A_scaling_mean", "D_A_scaling_std",
     "primitive", "primaries", "repeats", "seed",
 )
 
@@ -88,6 +89,9 @@ class Calibration:
     repeats : int
     seed : int
     exponent, D_A_mean, D_A_std, porosity_mean, porosity_std, R_g_mean, R_g_std : (E,) float64
+    D_A_scaling_mean, D_A_scaling_std : (E,) float64
+        The scaling dimension (:func:`grainforge.analysis.aggregate.scaling_dimension`);
+        NaN when read from a file written before it existed.
     """
 
     primitive: str
@@ -101,6 +105,14 @@ class Calibration:
     porosity_std: np.ndarray
     R_g_mean: np.ndarray
     R_g_std: np.ndarray
+    D_A_scaling_mean: np.ndarray | None = None
+    D_A_scaling_std: np.ndarray | None = None
+
+    def __post_init__(self):
+        nan = np.full(len(self.exponent), np.nan)
+        for name in ("D_A_scaling_mean", "D_A_scaling_std"):
+            if getattr(self, name) is None:
+                object.__setattr__(self, name, nan)
 
     def rows(self) -> list[dict]:
         """One dict per ε, keys :data:`COLUMNS`."""
@@ -110,6 +122,8 @@ class Calibration:
                 "exponent": float(e), "D_A_mean": float(self.D_A_mean[i]), "D_A_std": float(self.D_A_std[i]),
                 "porosity_mean": float(self.porosity_mean[i]), "porosity_std": float(self.porosity_std[i]),
                 "R_g_mean": float(self.R_g_mean[i]), "R_g_std": float(self.R_g_std[i]),
+                "D_A_scaling_mean": float(self.D_A_scaling_mean[i]),
+                "D_A_scaling_std": float(self.D_A_scaling_std[i]),
                 "primitive": self.primitive, "primaries": self.primaries, "repeats": self.repeats, "seed": self.seed,
             })
         return out
@@ -127,13 +141,14 @@ class Calibration:
             rows = list(csv.DictReader(fh))
         if not rows:
             raise ValueError(f"{path}: empty calibration file")
-        col = lambda k: np.array([float(r[k]) for r in rows])  # noqa: E731
+        col = lambda k: np.array([float(r[k]) for r in rows]) if k in r0 else None  # noqa: E731
         r0 = rows[0]
         return cls(
             primitive=r0["primitive"], primaries=int(r0["primaries"]), repeats=int(r0["repeats"]),
             seed=int(r0["seed"]), exponent=col("exponent"), D_A_mean=col("D_A_mean"), D_A_std=col("D_A_std"),
             porosity_mean=col("porosity_mean"), porosity_std=col("porosity_std"),
             R_g_mean=col("R_g_mean"), R_g_std=col("R_g_std"),
+            D_A_scaling_mean=col("D_A_scaling_mean"), D_A_scaling_std=col("D_A_scaling_std"),
         )
 
     def usable(self) -> tuple[np.ndarray, np.ndarray]:
@@ -184,9 +199,13 @@ class Calibration:
         fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
         ax.fill_between(e, self.D_A_mean - self.D_A_std, self.D_A_mean + self.D_A_std, color="C0", alpha=0.25,
                         label="D_A ± 1 s.d.")
-        ax.plot(e, self.D_A_mean, "o-", color="C0", ms=3, label="mean D_A")
+        ax.plot(e, self.D_A_mean, "o-", color="C0", ms=3, label="mean D_A (Eq. 5)")
+        if np.any(np.isfinite(self.D_A_scaling_mean)):
+            sm, ss = self.D_A_scaling_mean, self.D_A_scaling_std
+            ax.fill_between(e, sm - ss, sm + ss, color="C2", alpha=0.15, label="D_A scaling ± 1 s.d.")
+            ax.plot(e, sm, "^:", color="C2", ms=3, label="mean D_A scaling (growth slope)")
         ax.set_xlabel("exponent ε (Eq. 4)")
-        ax.set_ylabel("aggregate fractal dimension D_A (Eq. 5)")
+        ax.set_ylabel("aggregate fractal dimension D_A")
         if e.max() / e.min() > 20:
             ax.set_xscale("log")
         ax2 = ax.twinx()
@@ -201,13 +220,13 @@ class Calibration:
         return save_figure(fig, path)
 
 
-def _measure(task) -> tuple[float, float, float]:
-    """Grow one aggregate and return (D_A, porosity, R_g).  Module level so that it pickles."""
+def _measure(task) -> tuple[float, float, float, float]:
+    """Grow one aggregate and return (D_A, porosity, R_g, D_A_scaling).  Module level so that it pickles."""
     from .methods.dpa import aggregate
 
     primitive, primaries, exponent, seed_seq = task
     m = aggregate(primitive, primaries, exponent, np.random.default_rng(seed_seq)).measures()
-    return m["D_A"], m["porosity"], m["R_g"]
+    return m["D_A"], m["porosity"], m["R_g"], m["D_A_scaling"]
 
 
 def calibrate(
@@ -220,7 +239,7 @@ def calibrate(
     workers: int | None = 1,
     progress: Callable[[Iterable], Iterable] | None = None,
 ) -> Calibration:
-    """Measure D_A, porosity and R_g over ``repeats`` seeds at each ε.
+    """Measure D_A, D_A_scaling, porosity and R_g over ``repeats`` seeds at each ε.
 
     Parameters
     ----------
@@ -279,7 +298,7 @@ def calibrate(
     try:
         if progress is not None:
             results = progress(results)
-        values = np.array(list(results), dtype=np.float64).reshape(len(exps), repeats, 3)
+        values = np.array(list(results), dtype=np.float64).reshape(len(exps), repeats, 4)
     finally:
         if pool is not None:
             pool.shutdown(cancel_futures=True)
@@ -290,10 +309,11 @@ def calibrate(
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN rows (N = 1: D_A undefined) stay NaN
         mean = np.nanmean(values, axis=1)
         std = np.nanstd(values, axis=1)
-    (dm, pm, rm), (ds, ps, rs) = mean.T, std.T
+    (dm, pm, rm, sm), (ds, ps, rs, ss) = mean.T, std.T
     return Calibration(
         primitive=primitive, primaries=int(primaries), repeats=repeats, seed=int(seed), exponent=exps,
         D_A_mean=dm, D_A_std=ds, porosity_mean=pm, porosity_std=ps, R_g_mean=rm, R_g_std=rs,
+        D_A_scaling_mean=sm, D_A_scaling_std=ss,
     )
 
 

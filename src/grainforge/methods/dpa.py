@@ -27,7 +27,7 @@ __all__ = [
 NAME = "dpa"
 VALIDITY_PARAMETER = "smooth"
 #: generation outputs recorded in manifests (see :func:`build`)
-INFO_COLUMNS = ("D_A", "porosity", "R_g", "cavity_volume", "primary_size")
+INFO_COLUMNS = ("D_A", "D_A_scaling", "porosity", "R_g", "cavity_volume", "primary_size")
 DEFAULT_EXPONENT = 1.0
 #: draws of Eq. 4 tried before sampling the same distribution restricted to non-full parents directly.
 MAX_REDRAWS = 16
@@ -152,14 +152,16 @@ class Aggregate:
         return len(self.centres)
 
     def measures(self) -> dict[str, float]:
-        """D_A (Eq. 5), porosity, R_g (units of a) and box mean edge of the aggregate."""
+        """D_A (Eq. 5), D_A_scaling, porosity, R_g (units of a) and box mean edge of the aggregate."""
         from ..analysis.aggregate import aggregate_measures
 
-        if self.cells is not None:  # only the distinct lattice corners matter
-            pts = np.unique(self.vertices.reshape(-1, 3), axis=0)
-        else:
-            pts = self.vertices.reshape(-1, 3)
-        return aggregate_measures(pts, self.centres, float(self.primaries), self.solid.gyration2)
+        pts = self.vertices.reshape(-1, 3)
+        owner = np.repeat(np.arange(self.primaries), self.vertices.shape[1])
+        if self.cells is not None:  # only the distinct lattice corners matter (first owner kept)
+            _, first = np.unique(pts, axis=0, return_index=True)
+            first = np.sort(first)
+            pts, owner = pts[first], owner[first]
+        return aggregate_measures(pts, self.centres, float(self.primaries), self.solid.gyration2, owner)
 
 
 def _aggregate_cubes(n_total: int, exponent: float, rng: np.random.Generator) -> np.ndarray:
@@ -518,7 +520,8 @@ def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one DPA grain (scaled to equivalent radius 1, not centred).
 
-    Info: ``D_A`` (Eq. 5), ``porosity`` (1 − V/V_hull) and ``R_g`` (radius
+    Info: ``D_A`` (Eq. 5), ``D_A_scaling`` (the slope of log V against log A
+    over the aggregate's growth), ``porosity`` (1 − V/V_hull) and ``R_g`` (radius
     of gyration in primary sizes) of the aggregate of primaries;
     ``cavity_volume`` (sealed cavities filled in the mesh, in primary
     volumes); ``primary_size`` (the primary's V_p^(1/3) in grain units).
@@ -533,7 +536,7 @@ def build(p: Params, rng: np.random.Generator):
     scale = float((4.0 * np.pi / (3.0 * p.primaries)) ** (1.0 / 3.0))
     m = agg.measures()
     info = {
-        "D_A": m["D_A"], "porosity": m["porosity"], "R_g": m["R_g"],
+        "D_A": m["D_A"], "D_A_scaling": m["D_A_scaling"], "porosity": m["porosity"], "R_g": m["R_g"],
         "cavity_volume": float(cavity), "primary_size": scale,
     }
     return v * scale, f, info
