@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 from scipy.spatial import ConvexHull
 
 from grainforge import fso
-from grainforge.analysis.box import MAX_NORMALS, minimum_box
+from grainforge.analysis.box import MAX_HULL_VERTICES, minimum_box
 
 
 def _rotation(seed):
@@ -81,14 +81,18 @@ def test_lattice_points_with_collinear_outline_edges():
     np.testing.assert_allclose(extents, [4, 3, 2], atol=1e-9)
 
 
-def test_dense_smooth_hull_is_binned_and_close():
-    # an ellipsoid hull with 20,480 faces: more normals than MAX_NORMALS, so the search is binned
-    # (approximate: within 0.5 % of the axis-aligned 4 × 2 × 1 box of the faceted ellipsoid)
-    e = trimesh.creation.icosphere(5)
+@pytest.mark.parametrize("level", [5, 6])
+def test_dense_smooth_hull_is_searched_on_extreme_points_and_close(level):
+    # an ellipsoid hull with 10,242 or 40,962 vertices: more than MAX_HULL_VERTICES, so the search
+    # runs on the extreme points in 1,024 directions (approximate: within 0.3 % of the 4 × 2 × 1
+    # box of the faceted ellipsoid); the box is measured on every point, so it holds them all
+    e = trimesh.creation.icosphere(level)
     e.apply_scale((2.0, 1.0, 0.5))
-    assert len(e.faces) > MAX_NORMALS
-    extents, _ = minimum_box(e.vertices @ _rotation(2).T)
-    np.testing.assert_allclose(extents, [4, 2, 1], rtol=5e-3)
+    assert len(e.vertices) > MAX_HULL_VERTICES
+    pts = e.vertices @ _rotation(2).T
+    extents, axes = minimum_box(pts)
+    np.testing.assert_allclose(extents, [4, 2, 1], rtol=3e-3)
+    np.testing.assert_allclose(np.ptp(pts @ axes.T, axis=0), extents, rtol=1e-12)
 
 
 def test_flat_points_fall_back():

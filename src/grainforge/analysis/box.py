@@ -11,10 +11,11 @@ What is different from ``trimesh.bounds.oriented_bounds``:
 
 - every distinct face normal is tried (trimesh keeps one normal per 0.1 rad
   bin of spherical angles, which misses the best box by up to ~9 % in volume
-  on rough grains), unless the hull has more than :data:`MAX_NORMALS` of them
-  (smooth, finely tessellated hulls): there one normal per 0.1 cell of a
-  grid of unit-vector components (about 0.1 rad) is tried, then every normal
-  within 0.2 of the best one;
+  on rough grains).  Hulls with more than :data:`MAX_HULL_VERTICES` vertices
+  (smooth, finely tessellated surfaces) are first reduced to their extreme
+  points in :data:`SAMPLE_DIRECTIONS` evenly spread directions, and the
+  search runs on the hull of those: an approximation (within 0.1 % in volume
+  on a 20,480-face ellipsoid), but the box is still measured on every point;
 - all candidate normals are processed at once: the projected outline of a
   convex hull is made of its *silhouette edges* (between a face turned
   towards n and one turned away); sorted by the angle of their outward
@@ -33,12 +34,12 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["minimum_box", "MAX_NORMALS"]
+__all__ = ["minimum_box", "MAX_HULL_VERTICES", "SAMPLE_DIRECTIONS"]
 
-#: distinct hull-face normals tried exactly; above this they are binned (smooth, dense hulls)
-MAX_NORMALS = 2048
-#: bin size of the normal grid used above MAX_NORMALS (about 0.1 rad, like trimesh)
-_BIN = 0.1
+#: hulls with up to this many vertices are searched exactly over all their face normals
+MAX_HULL_VERTICES = 2048
+#: larger hulls are reduced to their extreme points in this many directions (Fibonacci sphere)
+SAMPLE_DIRECTIONS = 1024
 #: memory budget: candidate normals × hull edges processed per chunk
 _CHUNK = 4_000_000
 #: the angle seam of the sorted outlines is put at an irrational angle, away from the
@@ -78,10 +79,16 @@ def _candidate_normals(normals: np.ndarray) -> np.ndarray:
     return n[np.sort(first)]
 
 
-def _binned(n: np.ndarray) -> np.ndarray:
-    """One normal per cell of a grid of side :data:`_BIN` (the first of each)."""
-    _, first = np.unique(np.round(n / _BIN), axis=0, return_index=True)
-    return n[np.sort(first)]
+def _extreme_points(X: np.ndarray, count: int) -> np.ndarray:
+    """The distinct points of X extreme in ``count`` directions spread evenly over the sphere."""
+    i = np.arange(count) + 0.5
+    z = 1.0 - 2.0 * i / count
+    phi = np.pi * (3.0 - np.sqrt(5.0)) * i
+    rho = np.sqrt(1.0 - z * z)
+    u = np.stack([rho * np.cos(phi), rho * np.sin(phi), z], axis=1)
+    c = X - X.mean(axis=0)
+    idx = np.concatenate([np.argmax(u[j:j + 128] @ c.T, axis=1) for j in range(0, count, 128)])
+    return X[np.unique(idx)]
 
 
 def _plane_bases(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -184,34 +191,29 @@ def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
         except (QhullError, ValueError):
             return _fallback(pts)
     X = hull.points[hull.vertices]
-    fn = hull.equations[:, :3]
+    search_hull = hull
+    if len(X) > MAX_HULL_VERTICES:  # smooth dense hull: search on its extreme points
+        search_hull = ConvexHull(_extreme_points(X, SAMPLE_DIRECTIONS))
+    Xs = search_hull.points[search_hull.vertices]
+    fn = search_hull.equations[:, :3]
     # edges of the triangulated hull, each once, with the two faces that share it
-    nb = hull.neighbors  # nb[i, j]: the face opposite vertex j of face i
+    nb = search_hull.neighbors  # nb[i, j]: the face opposite vertex j of face i
     i, j = np.nonzero(nb > np.arange(len(nb))[:, None])
-    simp = hull.simplices
+    simp = search_hull.simplices
     edges_all = np.stack([simp[i, (j + 1) % 3], simp[i, (j + 2) % 3]], axis=1)
     edge_faces = np.stack([i, nb[i, j]], axis=1)
-    remap = np.full(len(hull.points), -1, dtype=np.int64)
-    remap[hull.vertices] = np.arange(len(hull.vertices))
+    remap = np.full(len(search_hull.points), -1, dtype=np.int64)
+    remap[search_hull.vertices] = np.arange(len(search_hull.vertices))
     edges = remap[edges_all]
-    centre = X.mean(axis=0)
+    centre = Xs.mean(axis=0)
 
-    n_all = _candidate_normals(fn)
-    n = n_all if len(n_all) <= MAX_NORMALS else _binned(n_all)
+    n = _candidate_normals(fn)
     per = max(1, _CHUNK // max(len(edges), 1))
     best = (np.inf, (1.0, 0.0), None)
-
-    def search(cands):
-        nonlocal best
-        for c0 in range(0, len(cands), per):
-            v, k, side = _best_in_chunk(X, centre, fn, edges, edge_faces, cands[c0:c0 + per])
-            if v < best[0]:
-                best = (v, side, cands[c0 + k])
-
-    search(n)
-    if len(n) < len(n_all):  # binned: then every normal near the best bin's
-        near = np.minimum(np.linalg.norm(n_all - best[2], axis=1), np.linalg.norm(n_all + best[2], axis=1))
-        search(n_all[near < 2 * _BIN])
+    for c0 in range(0, len(n), per):
+        v, k, side = _best_in_chunk(Xs, centre, fn, edges, edge_faces, n[c0:c0 + per])
+        if v < best[0]:
+            best = (v, side, n[c0 + k])
     (dx, dy), normal = best[1], best[2]
     a, b = _plane_bases(normal[None])
     u = dx * a[0] + dy * b[0]
