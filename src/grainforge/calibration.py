@@ -291,10 +291,11 @@ def calibrate(
         results: Iterable = map(_measure, tasks)
         pool = None
     else:
-        from concurrent.futures import ProcessPoolExecutor
+        from .workers import process_pool, single_threaded_children
 
-        pool = ProcessPoolExecutor(max_workers=int(workers))
-        results = pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
+        pool = process_pool(workers, ["grainforge.calibration", "grainforge.methods.dpa", "trimesh"])
+        with single_threaded_children():  # map submits every task, starting the workers
+            results = pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
     try:
         if progress is not None:
             results = progress(results)

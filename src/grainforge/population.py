@@ -44,7 +44,6 @@ import math
 import os
 import re
 import tomllib
-from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -666,49 +665,20 @@ def _record(out: Path, res: GrainResult) -> None:
 
 
 # --------------------------------------------------------------------------- executors
-#: BLAS/OpenMP thread limits given to pool workers (unless the user set them): one worker = one core.
-_THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
-
-
-@contextmanager
-def _single_threaded_children():
-    """Set the BLAS thread limits to 1 while worker processes are started, then restore them.
-
-    NumPy's OpenBLAS otherwise starts one thread per core in *every* worker,
-    so N workers would run N × cores busy threads on the machine's cores.
-    """
-    saved = {k: os.environ.get(k) for k in _THREAD_VARS}
-    for k, v in saved.items():
-        if v is None:
-            os.environ[k] = "1"
-    try:
-        yield
-    finally:
-        for k, v in saved.items():
-            if v is None:
-                os.environ.pop(k, None)
-
-
 def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process: bool) -> Iterable[GrainResult]:
     if in_process:
         for i in todo:
             yield make_grain(recipe, i)
         return
-    import multiprocessing
-    from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
+    from concurrent.futures import FIRST_COMPLETED, wait
 
     from .methods import METHODS
+    from .workers import process_pool, single_threaded_children
 
-    if "forkserver" in multiprocessing.get_all_start_methods():
-        # Workers fork from a server that has already imported the heavy modules once.
-        ctx = multiprocessing.get_context("forkserver")
-        ctx.set_forkserver_preload(["grainforge.population", METHODS[recipe.method], "grainforge.run",
-                                    "trimesh", "scipy.special"])
-    else:
-        ctx = multiprocessing.get_context("spawn")
-    ex = ProcessPoolExecutor(max_workers=workers, mp_context=ctx)
+    ex = process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.run",
+                                "trimesh", "scipy.special"])
     try:
-        with _single_threaded_children():  # workers (and the fork server) start during submit
+        with single_threaded_children():  # workers (and the fork server) start during submit
             pending = {ex.submit(make_grain, recipe, i) for i in todo}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)

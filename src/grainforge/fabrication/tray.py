@@ -321,15 +321,16 @@ def _prepared_in_order(tasks: list[dict], workers: int, chunk: int = 16) -> Iter
         for c in chunks:
             yield from _prepare_chunk(c)
         return
-    from concurrent.futures import ProcessPoolExecutor
+    from ..workers import process_pool, single_threaded_children
 
-    with ProcessPoolExecutor(max_workers=workers) as pool:
+    with process_pool(workers, ["grainforge.fabrication.tray", "trimesh", "scipy.special"]) as pool:
         pending: deque = deque()
         it = iter(chunks)
-        for c in it:
-            pending.append(pool.submit(_prepare_chunk, c))
-            if len(pending) >= 3 * workers:
-                break
+        with single_threaded_children():  # the workers start with the first submissions
+            for c in it:
+                pending.append(pool.submit(_prepare_chunk, c))
+                if len(pending) >= 3 * workers:
+                    break
         while pending:
             done = pending.popleft().result()
             nxt = next(it, None)
