@@ -101,23 +101,33 @@ def _remember_printer(ctx, param, value):
     return value
 
 
+def count_option(help="Number of grains; grain i uses seed S + i."):
+    """--count (shared by ``generate`` and ``tray``)."""
+    return click.option("--count", default=1, show_default=True, type=click.IntRange(min=1), help=help)
+
+
+#: --seed, --size-definition and --overwrite, shared by ``generate`` and ``tray``
+seed_option = click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
+                           help="Seed S of the first grain.")
+size_definition_option = click.option(
+    "--size-definition", default="equivalent", show_default=True, type=click.Choice(list(SIZE_DEFINITIONS)),
+    help="equivalent: sphere of equal volume; sieve: intermediate dimension I; longest: L.")
+overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output files.")
+
+
 def output_options(f):
     """--out, --count, --seed, --size, --size-definition, --format, --overwrite, --printer."""
     opts = [
         click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
                      help="Folder to write the grains and manifest.csv into."),
-        click.option("--count", default=1, show_default=True, type=click.IntRange(min=1),
-                     help="Number of grains; grain i uses seed S + i."),
-        click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
-                     help="Seed S of the first grain."),
+        count_option(),
+        seed_option,
         click.option("--size", default=10.0, show_default=True, type=click.FloatRange(min=0, min_open=True),
                      help="Grain size in millimetres (see --size-definition)."),
-        click.option("--size-definition", default="equivalent", show_default=True,
-                     type=click.Choice(list(SIZE_DEFINITIONS)),
-                     help="equivalent: sphere of equal volume; sieve: intermediate dimension I; longest: L."),
+        size_definition_option,
         click.option("--format", "fmt", default="stl", show_default=True, type=click.Choice(list(FORMATS)),
                      help="Mesh file format (binary STL, OBJ or binary PLY)."),
-        click.option("--overwrite", is_flag=True, help="Replace existing output files."),
+        overwrite_option,
         click.option("--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
                      help="Match the mesh resolution to this printer (a built-in profile or file.toml[#name]) "
                           "at --size: chooses --subdivisions (fso, cri); see docs/printing.md."),

@@ -6,10 +6,9 @@ from pathlib import Path
 
 import click
 
-from ..fabrication.scale import SIZE_DEFINITIONS
 from ..fabrication.tray import DEFAULT_TRIANGLE_BUDGET
 from ..params import ParameterError
-from .options import bad_parameter
+from .options import bad_parameter, count_option, overwrite_option, seed_option, size_definition_option
 from .progress import progress_bar
 
 
@@ -60,13 +59,11 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @click.option("--preset", default=None, help="The method's preset (same as --param preset=NAME).")
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
-@click.option("--count", default=1, show_default=True, type=click.IntRange(min=1),
-              help="Number of generated grains; grain i uses seed S + i.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="Seed S of the first grain.")
+@count_option("Number of generated grains; grain i uses seed S + i.")
+@seed_option
 @click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
               help="Grain size in mm (generated grains: default 10; files: keep their size unless given).")
-@click.option("--size-definition", default="equivalent", show_default=True, type=click.Choice(list(SIZE_DEFINITIONS)),
-              help="equivalent: sphere of equal volume; sieve: intermediate dimension I; longest: L.")
+@size_definition_option
 @click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
               help="Minimum distance between grains in mm [default: two printer resolutions].")
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
@@ -75,7 +72,7 @@ def parse_param_values(method: str, pairs, preset: str | None):
               help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
 @click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),
               help="Processes making grains (the output does not depend on it).")
-@click.option("--overwrite", is_flag=True, help="Replace existing output files.")
+@overwrite_option
 def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, size_definition, gap,
          max_subdivisions, max_triangles, workers, overwrite):
     """Lay out grains on the build plates of a printer, at least --gap apart, in one print file.
