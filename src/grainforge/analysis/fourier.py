@@ -212,50 +212,50 @@ def silhouette_radii(
     """
     q = np.asarray(points, dtype=np.float64) - np.asarray(origin, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    tri = q[f]  # (F, 3, 2)
+    wanted = np.ones(n_rays, bool) if rays is None else np.asarray(rays, dtype=bool)
     step = 2 * np.pi / n_rays
-    ang = np.arctan2(tri[..., 1], tri[..., 0])  # (F, 3)
-    d = np.angle(np.exp(1j * (ang - ang[:, :1])))  # unwrapped relative to the first corner
-    lo = ang[:, 0] + d.min(1)
-    hi = ang[:, 0] + d.max(1)
+    # corner coordinates, one (F,) array per corner; the angles once per vertex
+    x, y = q[:, 0], q[:, 1]
+    ang = np.arctan2(y, x)
+    i0, i1, i2 = f[:, 0], f[:, 1], f[:, 2]
+    x0, x1, x2, y0, y1, y2 = x[i0], x[i1], x[i2], y[i0], y[i1], y[i2]
+    a0 = ang[i0]
+    d1, d2 = _wrap(ang[i1] - a0), _wrap(ang[i2] - a0)  # relative to the first corner
+    lo = a0 + np.minimum(np.minimum(d1, d2), 0.0)
+    hi = a0 + np.maximum(np.maximum(d1, d2), 0.0)
     # triangles containing the origin see every ray
-    e0, e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 1], tri[:, 0] - tri[:, 2]
-    c0 = e0[:, 0] * (-tri[:, 0, 1]) - e0[:, 1] * (-tri[:, 0, 0])
-    c1 = e1[:, 0] * (-tri[:, 1, 1]) - e1[:, 1] * (-tri[:, 1, 0])
-    c2 = e2[:, 0] * (-tri[:, 2, 1]) - e2[:, 1] * (-tri[:, 2, 0])
+    c0 = (x1 - x0) * (-y0) - (y1 - y0) * (-x0)
+    c1 = (x2 - x1) * (-y1) - (y2 - y1) * (-x1)
+    c2 = (x0 - x2) * (-y2) - (y0 - y2) * (-x2)
     inside = ((c0 >= 0) & (c1 >= 0) & (c2 >= 0)) | ((c0 <= 0) & (c1 <= 0) & (c2 <= 0))
-    k0 = np.ceil(lo / step - 1e-9).astype(np.int64)
-    k1 = np.floor(hi / step + 1e-9).astype(np.int64)
-    k0 = np.where(inside, 0, k0)
-    k1 = np.where(inside, n_rays - 1, k1)
-    count = np.maximum(k1 - k0 + 1, 0)
-    tri_idx = np.repeat(np.arange(len(f)), count)
-    k = np.repeat(k0, count) + (np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count))
-    ray = np.mod(k, n_rays)
+    k0 = np.where(inside, 0, np.ceil(lo / step - 1e-9).astype(np.int64))
+    k1 = np.where(inside, n_rays - 1, np.floor(hi / step + 1e-9).astype(np.int64))
+    # (triangle, ray) pairs for the rays within each triangle's angular span, wanted rays only
+    tri_idx, ray = _span_pairs(k0, k1, n_rays)
     if rays is not None:
-        keep = np.asarray(rays, dtype=bool)[ray]
+        keep = wanted[ray]
         ray, tri_idx = ray[keep], tri_idx[keep]
     th = step * np.arange(n_rays)
     ux, uy = np.cos(th)[ray], np.sin(th)[ray]
-    E = np.roll(tri, -1, axis=1) - tri  # (F, 3, 2) edges
+    X = (x0[tri_idx], x1[tri_idx], x2[tri_idx])
+    Y = (y0[tri_idx], y1[tri_idx], y2[tri_idx])
     t_hi = np.full(len(ray), -np.inf)
     t_lo = np.full(len(ray), np.inf)
     with np.errstate(divide="ignore", invalid="ignore"):
-        for m in range(3):  # ray t·u = P + s·E for each edge of the triangle
-            px, py = tri[tri_idx, m, 0], tri[tri_idx, m, 1]
-            ex, ey = E[tri_idx, m, 0], E[tri_idx, m, 1]
+        for m in range(3):  # ray t·u = P + s·E for each edge P → P' of the triangle
+            px, py = X[m], Y[m]
+            ex, ey = X[(m + 1) % 3] - px, Y[(m + 1) % 3] - py
             den = uy * ex - ux * ey
             t = (py * ex - px * ey) / den
             sp = (ux * py - uy * px) / den
             ok = (sp >= -1e-9) & (sp <= 1 + 1e-9) & (t >= 0)  # NaN (parallel edge) compares False
             np.maximum(t_hi, np.where(ok, t, -np.inf), out=t_hi)
             np.minimum(t_lo, np.where(ok, t, np.inf), out=t_lo)
-    t_lo = np.where(inside[tri_idx], 0.0, t_lo)
+    t_lo[inside[tri_idx]] = 0.0
     hit = np.isfinite(t_hi)
     ray, t_lo, t_hi = ray[hit], t_lo[hit], t_hi[hit]
     r = np.full(n_rays, -np.inf)
     np.maximum.at(r, ray, t_hi)
-    wanted = np.ones(n_rays, bool) if rays is None else np.asarray(rays, dtype=bool)
     if not np.all(np.isfinite(r[wanted])):
         raise ValueError("the silhouette does not surround its centroid")
     r[~wanted] = np.nan
@@ -264,7 +264,7 @@ def silhouette_radii(
     # star-shaped: per ray, the union of [t_lo, t_hi] covers [0, r] without a gap
     big = 4.0 * float(r.max()) + 1.0
     s_ = t_lo + ray * big
-    o = np.argsort(s_, kind="stable")
+    o = _stable_argsort(s_)
     s_, e_, ray_o = s_[o], t_hi[o] + ray[o] * big, ray[o]
     reach = np.maximum.accumulate(e_)
     first = np.r_[True, ray_o[1:] != ray_o[:-1]]
@@ -272,6 +272,33 @@ def silhouette_radii(
     gap_first = first & (t_lo[o] > tol)
     gap_next = ~first & (s_ > np.r_[-np.inf, reach[:-1]] + tol)
     return r, not bool(gap_first.any() or gap_next.any())
+
+
+def _wrap(d: np.ndarray) -> np.ndarray:
+    """Angle differences in [−2π, 2π] wrapped to [−π, π] (unchanged when already there)."""
+    return np.where(d > np.pi, d - 2 * np.pi, np.where(d < -np.pi, d + 2 * np.pi, d))
+
+
+def _span_pairs(k0: np.ndarray, k1: np.ndarray, n_rays: int) -> tuple[np.ndarray, np.ndarray]:
+    """Expand index spans [k0_i, k1_i] (empty if k1 < k0) into (item, ray mod n_rays) pairs."""
+    count = np.maximum(k1 - k0 + 1, 0)
+    item = np.repeat(np.arange(len(k0)), count)
+    # k = k0 + (position − position of the item's first pair)
+    k = np.arange(len(item))
+    k -= (np.cumsum(count) - count - k0)[item]
+    if len(k) and -n_rays <= k.min() and k.max() < 2 * n_rays:  # always so for angles in [−2π, 2π]
+        k += np.where(k < 0, n_rays, np.where(k >= n_rays, -n_rays, 0))  # much cheaper than np.mod
+        return item, k
+    return item, np.mod(k, n_rays)
+
+
+def _stable_argsort(a: np.ndarray) -> np.ndarray:
+    """``np.argsort(a, kind="stable")``, through the faster default sort when ``a`` has no ties."""
+    o = np.argsort(a)
+    s = a[o]
+    if np.any(s[1:] == s[:-1]):
+        o = np.argsort(a, kind="stable")
+    return o
 
 
 def _polygon_area_centroid_of_radii(r: np.ndarray, origin: np.ndarray) -> np.ndarray:
@@ -282,36 +309,41 @@ def _polygon_area_centroid_of_radii(r: np.ndarray, origin: np.ndarray) -> np.nda
 def _edge_faces(faces: np.ndarray):
     """Undirected edges shared by exactly two faces: (E, 2) vertex pairs and (E, 2) face indices."""
     f = np.asarray(faces, dtype=np.int64)
-    a = f.ravel()
-    b = np.roll(f, -1, axis=1).ravel()
-    lo, hi = np.minimum(a, b), np.maximum(a, b)
-    key = lo * (int(f.max()) + 1) + hi
-    o = np.argsort(key, kind="stable")
-    k = key[o]
-    pair = np.flatnonzero(k[1:] == k[:-1])
-    single = np.ones(len(k), bool)
-    single[pair] = single[pair + 1] = False
-    fi = np.repeat(np.arange(len(f)), 3)[o]
-    return np.stack([lo[o][pair], hi[o][pair]], 1), np.stack([fi[pair], fi[pair + 1]], 1)
+    a = f.ravel()  # half-edge h = 3·face + corner runs from a[h] to b[h]
+    b = f[:, [1, 2, 0]].ravel()
+    n, m = int(f.max()) + 1, len(a)
+    key = np.minimum(a, b)
+    key *= n
+    key += np.maximum(a, b)  # min·n + max: the undirected edge
+    if n * n * m < 2**62:
+        # stable argsort of the keys as one plain sort of key·m + h (faster than a stable argsort)
+        key *= m
+        key += np.arange(m)
+        key.sort()
+        k, o = np.divmod(key, m)
+    else:
+        o = np.argsort(key, kind="stable")
+        k = key[o]
+    pair = np.flatnonzero(k[1:] == k[:-1])  # runs of equal keys: the half-edges of one edge
+    lo, hi = np.divmod(k[pair], n)
+    return np.stack([lo, hi], 1), np.stack([o[pair] // 3, o[pair + 1] // 3], 1)
 
 
 def _outline_radii(q: np.ndarray, edges: np.ndarray, n_rays: int):
     """Outermost crossing of segments q[edges] along rays from the origin (NaN where none),
     and per ray the number of crossings nearer than the outermost one."""
-    seg = q[edges]  # (E, 2, 2)
     step = 2 * np.pi / n_rays
-    ang = np.arctan2(seg[..., 1], seg[..., 0])
-    d = np.angle(np.exp(1j * (ang[:, 1] - ang[:, 0])))
-    lo = ang[:, 0] + np.minimum(d, 0)
-    hi = ang[:, 0] + np.maximum(d, 0)
-    k0 = np.ceil(lo / step - 1e-9).astype(np.int64)
-    count = np.maximum(np.floor(hi / step + 1e-9).astype(np.int64) - k0 + 1, 0)
-    idx = np.repeat(np.arange(len(seg)), count)
-    ray = np.mod(np.repeat(k0, count) + np.arange(count.sum()) - np.repeat(np.cumsum(count) - count, count), n_rays)
+    xa, ya = q[edges[:, 0], 0], q[edges[:, 0], 1]
+    xb, yb = q[edges[:, 1], 0], q[edges[:, 1], 1]
+    ang = np.arctan2(ya, xa)
+    d = _wrap(np.arctan2(yb, xb) - ang)
+    lo = ang + np.minimum(d, 0)
+    hi = ang + np.maximum(d, 0)
+    idx, ray = _span_pairs(np.ceil(lo / step - 1e-9).astype(np.int64), np.floor(hi / step + 1e-9).astype(np.int64), n_rays)
     th = step * np.arange(n_rays)
     ux, uy = np.cos(th)[ray], np.sin(th)[ray]
-    px, py = seg[idx, 0, 0], seg[idx, 0, 1]
-    ex, ey = seg[idx, 1, 0] - px, seg[idx, 1, 1] - py
+    px, py = xa[idx], ya[idx]
+    ex, ey = xb[idx] - px, yb[idx] - py
     with np.errstate(divide="ignore", invalid="ignore"):
         den = uy * ex - ux * ey
         t = (py * ex - px * ey) / den
@@ -373,17 +405,21 @@ def projection_descriptors(
     star = True
     if closed:
         edges, edge_faces = _edge_faces(f)
+        # triangle sides b − a and c − a per principal coordinate, for the facing tests
+        ab, ac = [], []
+        for coord in p.T.copy():
+            at = coord[f[:, 0]]
+            ab.append(coord[f[:, 1]] - at)
+            ac.append(coord[f[:, 2]] - at)
     for name, (i, j) in PLANES.items():
         q = p[:, [i, j]]
         origin = np.zeros(2)
         tris, r = f, None
         if closed:
-            a, b, c = q[f[:, 0]], q[f[:, 1]], q[f[:, 2]]
-            area2 = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-            front = area2 >= 0
-            tris = f[front]
+            front = ab[i] * ac[j] - ab[j] * ac[i] >= 0  # twice the signed projected area
+            tris = np.compress(front, f, axis=0)  # (compress: much faster than boolean indexing of rows)
             # the outline lies on the contour edges (between a front and a back face)
-            contour = edges[front[edge_faces[:, 0]] != front[edge_faces[:, 1]]]
+            contour = np.compress(front[edge_faces[:, 0]] != front[edge_faces[:, 1]], edges, axis=0)
             r_fine, _ = _outline_radii(q, contour, 512)
             if np.all(np.isfinite(r_fine)):
                 origin = _polygon_area_centroid_of_radii(r_fine, origin)

@@ -48,11 +48,33 @@ def radial_function(vertices: np.ndarray, centre: np.ndarray) -> tuple[np.ndarra
 
 
 def _basis(u: np.ndarray) -> np.ndarray:
-    px = [u[:, 0] ** k for k in range(FIT_DEGREE + 1)]
-    py = [u[:, 1] ** k for k in range(FIT_DEGREE + 1)]
-    pz = [u[:, 2] ** k for k in range(FIT_DEGREE + 1)]
-    powers = [px[a] * py[b] * pz[c] for a, b, c in _MONOMIALS]
-    return np.stack(powers, axis=1)
+    """The 25 monomials of ``_MONOMIALS`` at the directions ``u``, as rows: (25, V)."""
+    n = len(u)
+    # powers 0…4 of each coordinate, built by repeated multiplication: pw[axis, k] = u[:, axis]**k
+    pw = np.empty((3, FIT_DEGREE + 1, n))
+    pw[:, 0] = 1.0
+    pw[:, 1] = u.T
+    for k in range(2, FIT_DEGREE + 1):
+        np.multiply(pw[:, k - 1], pw[:, 1], out=pw[:, k])
+    B = np.empty((len(_MONOMIALS), n))
+    for row, (a, b, c) in enumerate(_MONOMIALS):
+        np.multiply(pw[0, a], pw[1, b], out=B[row])
+        B[row] *= pw[2, c]
+    return B
+
+
+def _pairs_by_exponent():
+    """Representative basis pairs (i, j) of each distinct exponent sum e_i + e_j, and the map
+    from the 25 × 25 Gram entries to them (the Gram matrix has only 109 distinct entries)."""
+    e = np.array(_MONOMIALS)
+    s = e[:, None, :] + e[None, :, :]  # exponents of B_i·B_j
+    key = (s[..., 0] * (2 * FIT_DEGREE + 1) + s[..., 1]) * (2 * FIT_DEGREE + 1) + s[..., 2]
+    _, first, inverse = np.unique(key.ravel(), return_index=True, return_inverse=True)
+    i, j = np.unravel_index(first, key.shape)
+    return list(zip(i.tolist(), j.tolist())), inverse.reshape(key.shape)
+
+
+_GRAM_PAIRS, _GRAM_INDEX = _pairs_by_exponent()
 
 
 def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
@@ -69,14 +91,16 @@ def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
     >>> bool(np.allclose(smooth_fit(u, r, np.ones(len(r))), r, rtol=1e-8))
     True
     """
-    B = _basis(u)
-    Bw = B * weights[:, None]
-    # normal equations (25 × 25)
+    B = _basis(np.asarray(u, dtype=np.float64))  # (25, V)
+    Bw = B * weights
+    # normal equations (25 × 25).  Entry (i, j) is the weighted sum of the monomial B_i·B_j, so
+    # only one product per distinct monomial is summed.  einsum rather than BLAS: threaded BLAS
+    # on these skinny products is slow on a busy machine.
+    moments = np.array([np.einsum("v,v->", Bw[i], B[j]) for i, j in _GRAM_PAIRS])
     scale = float(np.mean(r)) or 1.0
     g = (scale / r) ** 2
-    # einsum rather than BLAS: threaded BLAS on these skinny products is slow on a busy machine
-    coef, *_ = np.linalg.lstsq(np.einsum("vi,vj->ij", Bw, B), np.einsum("vi,v->i", Bw, g), rcond=1e-12)
-    fit = np.einsum("vi,i->v", B, coef)
+    coef, *_ = np.linalg.lstsq(moments[_GRAM_INDEX], np.einsum("iv,v->i", Bw, g), rcond=1e-12)
+    fit = np.einsum("iv,i->v", B, coef)
     return scale / np.sqrt(np.maximum(fit, 1e-6))
 
 
