@@ -51,7 +51,7 @@ def main():
         ("closed check", lambda: D.is_closed(f, len(v))),
         ("volume, area, centroid, second moments", lambda: D.mass_properties(v, f)),
         ("convex hull (scipy)", lambda: D._hull(v)),
-        ("minimum-volume box (trimesh, on hull points)", lambda: D._basic(v, mp, hull)),
+        ("basic columns incl. minimum-volume box (analysis.box)", lambda: D._basic(v, mp, hull)),
         ("principal axes", lambda: fourier.principal_axes(v, f, mp)),
         ("radial fit + roughness", lambda: fractal.smooth_fit(u, r, w)),
         ("3 silhouettes + FDs (256 px)",
@@ -74,6 +74,31 @@ def main():
     for i, (name, fn) in enumerate(totals):
         b, m = best(fn, args.repeat)
         print(f"| {name} | {b:.1f} | {m:.1f} | {targets.get(i, '')} |")
+
+    # other generators' grains, and the box against trimesh's oriented_bounds on the same hull points
+    import trimesh
+
+    from grainforge import cri, dpa
+    from grainforge.analysis.box import minimum_box
+
+    others = [
+        ("FSO s=5 (above)", g),
+        ("CRI s=5", cri(subdivisions=5, rng=1)),
+        ("DPA 200 octahedra", dpa(primitive="octahedron", primaries=200, rng=1)),
+        ("DPA 1000 cubes, smooth 1", dpa(primitive="cube", primaries=1000, smooth=1, rng=1)),
+    ]
+    print("\n| grain | faces | describe w/o FD best ms | box ms | trimesh box ms | box volume / trimesh's |")
+    print("|---|---:|---:|---:|---:|---:|")
+    for name, grain in others:
+        gv = np.asarray(grain.vertices)
+        h = D._hull(gv)
+        hv = gv[h.vertices]
+        D.describe(grain, fractal=False)
+        b, _ = best(lambda: D.describe(grain, fractal=False), args.repeat)
+        bb, _ = best(lambda: minimum_box(gv, h), args.repeat)
+        bt, _ = best(lambda: trimesh.bounds.oriented_bounds(hv), args.repeat)
+        ratio = np.prod(minimum_box(gv, h)[0]) / np.prod(trimesh.bounds.oriented_bounds(hv)[1])
+        print(f"| {name} | {len(grain.faces)} | {b:.1f} | {bb:.1f} | {bt:.1f} | {ratio:.4f} |")
 
 
 if __name__ == "__main__":

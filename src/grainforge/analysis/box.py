@@ -105,8 +105,9 @@ def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     the rectangle's first side in that candidate's plane basis)."""
     B = len(n)
     height = np.ptp(X @ n.T, axis=0)  # (B,)
-    side = (fn @ n.T) > -1e-10  # (F, B): face turned towards n (or edge-on)
-    e_idx, k = np.nonzero(side[edge_faces[:, 0]] != side[edge_faces[:, 1]])  # silhouette edges
+    side = (n @ fn.T) > -1e-10  # (B, F): face turned towards n (or edge-on)
+    # silhouette edges, grouped by candidate
+    k, e_idx = np.nonzero(side[:, edge_faces[:, 0]] != side[:, edge_faces[:, 1]])
     a, b = _plane_bases(n)
     Y = (X - centre) @ np.concatenate([a, b]).T  # (H, 2B): every hull vertex in every plane
     ends = edges[e_idx]
@@ -114,7 +115,8 @@ def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     dx, dy = Y[ends[:, 1], k] - px0, Y[ends[:, 1], k + B] - py0
     length = np.hypot(dx, dy)
     keep = length > 1e-12 * float(np.ptp(X, axis=0).max())  # edges seen end-on project to points
-    px0, py0, dx, dy, length, k = px0[keep], py0[keep], dx[keep], dy[keep], length[keep], k[keep]
+    if not keep.all():
+        px0, py0, dx, dy, length, k = px0[keep], py0[keep], dx[keep], dy[keep], length[keep], k[keep]
     dx /= length
     dy /= length
     # (dy, -dx) is a normal of the edge line; orient it out of the outline (the origin, the
@@ -125,30 +127,36 @@ def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     alpha = np.mod(np.arctan2(-dx, dy) - _SEAM, 2 * np.pi)  # angle of the outward normal
 
     # the outline of candidate k, counter-clockwise: its edges sorted by outward-normal angle
-    o = np.argsort(k * 8.0 + alpha, kind="stable")
+    o = np.argsort(k * 16.0 + alpha, kind="stable")
     k, alpha, px0, py0, dx, dy = k[o], alpha[o], px0[o], py0[o], dx[o], dy[o]
     # collinear neighbours (same outward normal) merge into one edge spanning them all
     starts = np.flatnonzero(np.r_[True, (k[1:] != k[:-1]) | (np.diff(alpha) > 1e-9)])
     t0 = px0 * dx + py0 * dy  # position of each end along the edge direction
-    t1 = t0 + length[keep][o] * sgn[o]
+    t1 = t0 + length[o] * sgn[o]
     tmin = np.minimum.reduceat(np.minimum(t0, t1), starts)
     k, alpha, dx, dy = k[starts], alpha[starts], dx[starts], dy[starts]
     s = px0[starts] * dy - py0[starts] * dx  # offset of the edge line = support along its normal
     vx, vy = s * dy + tmin * dx, -s * dx + tmin * dy  # the edge's first corner (counter-clockwise)
     count = np.bincount(k, minlength=B)
-    first = (np.cumsum(count) - count)[k]
-    count = count[k]
-    key = k * 8.0 + alpha
+    first = np.cumsum(count) - count
+    local = np.arange(len(k)) - first[k]
+    first, count = first[k], count[k]
+    # each outline's angles twice, the second time + 2π, so that the three look-ups below
+    # (φ = α + π/2, α + π, α + 3π/2, all in [0, 4π)) need no wrapping and their needles come
+    # in increasing order (numpy's searchsorted is then a linear merge)
+    ext = np.empty(2 * len(k))
+    ext[2 * first + local] = k * 16.0 + alpha
+    ext[2 * first + count + local] = k * 16.0 + alpha + 2 * np.pi
 
     def corner(phi: np.ndarray) -> np.ndarray:
         """Index of the outline corner extreme in direction φ (relative to the seam): the first
-        corner of the first edge whose outward normal is at φ or beyond."""
-        pos = np.searchsorted(key, k * 8.0 + np.mod(phi, 2 * np.pi)) - first
-        return first + np.where(pos >= count, 0, pos)
+        corner of the first edge whose outward normal is at φ or beyond (rotating calipers)."""
+        pos = np.searchsorted(ext, k * 16.0 + phi) - 2 * first
+        return first + pos % count
 
     c = corner(alpha + np.pi)  # opposite the edge
     width_n = s - (vx[c] * dy - vy[c] * dx)
-    c1, c2 = corner(alpha + np.pi / 2), corner(alpha - np.pi / 2)  # the two ends along the edge
+    c1, c2 = corner(alpha + np.pi / 2), corner(alpha + 3 * np.pi / 2)  # the two ends along the edge
     width_t = (vx[c1] - vx[c2]) * dx + (vy[c1] - vy[c2]) * dy
     volume = width_n * width_t * height[k]
     i = int(np.argmin(volume))
