@@ -20,7 +20,7 @@ from grainforge.analysis.descriptors import (
     principal_dimensions,
 )
 from grainforge.analysis.fourier import (
-    descriptors_from_radii, fd_columns, projection_descriptors, radii_from_mask, radii_from_polygon,
+    descriptors_from_radii, fd_columns, projection_descriptors,
 )
 from grainforge.analysis.fractal import fractal_dimension
 from grainforge.analysis.measure import analyse_file, split_bodies
@@ -239,20 +239,22 @@ def test_descriptors_from_radii_round_trip():
         descriptors_from_radii(-r)
 
 
-def test_radii_from_polygon_and_mask():
+def test_polygon_and_mask_contours():
+    from grainforge.contours import mask_contour, polygon_contour
+
     sq = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
-    r, star = radii_from_polygon(sq, 8)
-    assert star
-    assert r == pytest.approx([1, np.sqrt(2)] * 4)
+    c = polygon_contour(sq, n_angles=8)
+    assert c.star_shaped
+    assert c.radii * c.scale == pytest.approx([1, np.sqrt(2)] * 4)
     # a square with a slot cut in from the right: rays through the slot's end cross three times
     slot = np.array([[-1, -1], [1, -1], [1, 0.2], [0.3, 0.2], [0.3, 0.3], [1, 0.3], [1, 1], [-1, 1]], dtype=float)
-    r, star = radii_from_polygon(slot)
-    assert not star
-    assert r.max() == pytest.approx(np.sqrt(2), rel=0.02)  # the outermost crossing is kept
-    with pytest.raises(ValueError, match="no object"):
-        radii_from_mask(np.zeros((10, 10), bool))
+    c = polygon_contour(slot, n_angles=128)
+    assert not c.star_shaped
+    assert (c.radii * c.scale).max() == pytest.approx(np.sqrt(2), rel=0.02)  # the outermost crossing is kept
+    with pytest.raises(ValueError, match="no grain"):
+        mask_contour(np.zeros((10, 10), bool))
     with pytest.raises(ValueError, match="3 points"):
-        radii_from_polygon(sq[:2])
+        polygon_contour(sq[:2])
 
 
 def test_projection_descriptors_of_an_open_mesh():

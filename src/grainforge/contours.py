@@ -47,6 +47,7 @@ __all__ = [
     "grain_masks",
     "load_image",
     "mask_contour",
+    "polygon_contour",
     "scan_image",
     "GrainScan",
     "draw_contours",
@@ -648,9 +649,42 @@ def mask_contour(
     loop = max(loops, key=len)
     x = loop[:, 1] - 1 + offset[1]
     y = -(loop[:, 0] - 1 + offset[0])
-    cx, cy = _area_centroid(x, y)
-    radii, star = _ray_cast(x - cx, y - cy, n_angles)
-    return Contour(radii, 1.0, (cx, cy), star, "image")
+    return polygon_contour(np.stack([x, y], axis=1), n_angles=n_angles, source="image")
+
+
+def polygon_contour(points, *, n_angles: int = DEFAULT_ANGLES, source: str = "polygon") -> Contour:
+    """The :class:`Contour` of a closed polygon: radii from its area centroid (outermost crossings).
+
+    Parameters
+    ----------
+    points : (P, 2) float
+        Vertices (x, y) in order; the closing edge is implied (a repeated last point is fine).
+    n_angles : int
+        Rays θ_j = 2πj/n_angles.
+    source : str
+        Recorded in :attr:`Contour.source`.
+
+    Raises
+    ------
+    ValueError
+        If the polygon has fewer than 3 points, encloses no area, or some ray
+        from its centroid meets no edge.
+
+    Examples
+    --------
+    >>> sq = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
+    >>> c = polygon_contour(sq, n_angles=8)
+    >>> np.round(c.radii * c.scale, 6).tolist()[:2], c.star_shaped  # radii are stored over their mean
+    ([1.0, 1.414214], True)
+    """
+    p = np.asarray(points, dtype=np.float64).reshape(-1, 2)
+    if len(p) > 1 and np.allclose(p[0], p[-1]):
+        p = p[:-1]
+    if len(p) < 3:
+        raise ValueError("an outline needs at least 3 points")
+    cx, cy = _area_centroid(p[:, 0], p[:, 1])
+    radii, star = _ray_cast(p[:, 0] - cx, p[:, 1] - cy, n_angles)
+    return Contour(radii, 1.0, (cx, cy), star, source)
 
 
 def _area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:

@@ -9,10 +9,9 @@ its three principal planes (L–I, L–S, I–S, axes from the volume inertia), 
 printed, scanned or generated grains can be compared with descriptors
 measured on micrographs.  The silhouette radii are computed exactly from the
 projected triangles (:func:`silhouette_radii`), not from a raster, so they
-carry no pixel noise; an image goes through :func:`radii_from_mask`.
-
-This module duplicates on purpose the image → contour → descriptor step that
-:mod:`grainforge.contours` provides for micrographs; the two can be merged.
+carry no pixel noise.  Outlines given as polygons or images (micrographs)
+go through :func:`grainforge.contours.polygon_contour` and
+:func:`grainforge.contours.mask_contour`, with the same convention.
 """
 
 from __future__ import annotations
@@ -20,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = [
-    "N_RAYS", "FD_ORDERS", "PLANES", "radii_from_polygon", "radii_from_mask", "descriptors_from_radii",
+    "N_RAYS", "FD_ORDERS", "PLANES", "descriptors_from_radii",
     "principal_axes", "silhouette_radii", "projection_descriptors", "fd_columns",
 ]
 
@@ -51,75 +50,6 @@ def _polygon_centroid(poly: np.ndarray) -> np.ndarray:
     if abs(a) < 1e-300:
         return poly.mean(0)
     return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * a)
-
-
-def radii_from_polygon(poly: np.ndarray, n_rays: int = N_RAYS) -> tuple[np.ndarray, bool]:
-    """Radii of a closed polygon along ``n_rays`` rays from its area centroid.
-
-    Parameters
-    ----------
-    poly : (P, 2) float64
-        Vertices in order (closing edge implied; a repeated last point is fine).
-    n_rays : int
-
-    Returns
-    -------
-    r : (n_rays,) float64
-        Distance to the outermost crossing along θ_j = 2πj/n_rays.
-    star_shaped : bool
-        True if every ray crosses the outline exactly once.
-
-    Examples
-    --------
-    >>> t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
-    >>> r, star = radii_from_polygon(np.c_[2 * np.cos(t), 2 * np.sin(t)])
-    >>> bool(np.allclose(r, 2, atol=1e-3)), star
-    (True, True)
-    """
-    p = np.asarray(poly, dtype=np.float64)
-    if len(p) > 1 and np.allclose(p[0], p[-1]):
-        p = p[:-1]
-    if len(p) < 3:
-        raise ValueError("an outline needs at least 3 points")
-    p = p - _polygon_centroid(p)
-    q = np.roll(p, -1, axis=0)
-    e = q - p  # edges
-    th = 2 * np.pi * np.arange(n_rays) / n_rays
-    u = np.stack([np.cos(th), np.sin(th)], 1)  # (N, 2)
-    # ray t·u = p + s·e  ->  solve for t (along ray) and s in [0, 1) (along edge)
-    den = u[:, None, 0] * (-e[None, :, 1]) - u[:, None, 1] * (-e[None, :, 0])  # det[u, -e]
-    with np.errstate(divide="ignore", invalid="ignore"):
-        t = (p[None, :, 0] * (-e[None, :, 1]) - p[None, :, 1] * (-e[None, :, 0])) / den
-        s = (u[:, None, 0] * p[None, :, 1] - u[:, None, 1] * p[None, :, 0]) / den
-    tol = 1e-9
-    ok = (np.abs(den) > 1e-15) & (s >= -tol) & (s < 1 + tol) & (t > 0)
-    r = np.where(ok, t, -np.inf).max(1)
-    if not np.all(np.isfinite(r)):
-        raise ValueError("the outline does not surround its centroid")
-    # star-shaped: no crossing other than the outermost one (a vertex hit counts once)
-    inner = ok & (t < r[:, None] * (1 - 1e-7))
-    return r, not bool(inner.any())
-
-
-def radii_from_mask(mask: np.ndarray, n_rays: int = N_RAYS) -> tuple[np.ndarray, bool]:
-    """Radii of the largest object in a binary image (holes ignored), see :func:`radii_from_polygon`.
-
-    Examples
-    --------
-    >>> yy, xx = np.mgrid[:101, :101]
-    >>> disk = (xx - 50) ** 2 + (yy - 50) ** 2 <= 40**2
-    >>> r, star = radii_from_mask(disk)
-    >>> bool(abs(r.mean() - 40.5) < 0.5), star
-    (True, True)
-    """
-    from skimage.measure import find_contours
-
-    m = np.pad(np.asarray(mask, dtype=np.float64), 1)
-    if not m.any():
-        raise ValueError("the image holds no object")
-    contours = find_contours(m, 0.5)
-    longest = max(contours, key=len)
-    return radii_from_polygon(longest[:, ::-1], n_rays)
 
 
 def descriptors_from_radii(r: np.ndarray, orders=FD_ORDERS) -> np.ndarray:
