@@ -13,9 +13,11 @@ What is different from ``trimesh.bounds.oriented_bounds``:
   bin of spherical angles, which misses the best box by up to ~9 % in volume
   on rough grains).  Hulls with more than :data:`MAX_HULL_VERTICES` vertices
   (smooth, finely tessellated surfaces) are first reduced to their extreme
-  points in :data:`SAMPLE_DIRECTIONS` evenly spread directions, and the
-  search runs on the hull of those: an approximation (within 0.1 % in volume
-  on a 20,480-face ellipsoid), but the box is still measured on every point;
+  points in :data:`SAMPLE_DIRECTIONS` evenly spread directions, the search
+  runs on the hull of those, and the best box is then turned a little
+  (Nelder–Mead over rotations) to fit all the points: an approximation
+  (within 0.05 % in volume of the 4 × 2 × 1 box of 20,480- and 81,920-face
+  ellipsoids), but the box is always measured on every point;
 - all candidate normals are processed at once: the projected outline of a
   convex hull is made of its *silhouette edges* (between a face turned
   towards n and one turned away); sorted by the angle of their outward
@@ -163,6 +165,43 @@ def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     return float(volume[i]), int(k[i]), (float(dx[i]), float(dy[i]))
 
 
+def _rotation(r: np.ndarray) -> np.ndarray:
+    """Rotation matrix of the rotation vector r (Rodrigues)."""
+    t = float(np.linalg.norm(r))
+    if t == 0.0:
+        return np.eye(3)
+    k = r / t
+    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
+    return np.eye(3) + np.sin(t) * K + (1.0 - np.cos(t)) * (K @ K)
+
+
+def _polish(X: np.ndarray, axes: np.ndarray) -> np.ndarray:
+    """Turn the box found on the extreme points a little (Nelder–Mead over a rotation vector) to
+    shrink it on all the hull points ``X``; never returns a larger box.
+
+    Only points within 3 % of the box's largest edge of one of its faces can become extreme
+    under the small turns tried (≈ 0.02 rad), so only those are used while turning; the
+    caller measures the final box on every point."""
+    from scipy.optimize import minimize
+
+    q = (X - X.mean(axis=0)) @ axes.T
+    lo, hi = q.min(axis=0), q.max(axis=0)
+    margin = 0.03 * float((hi - lo).max())
+    c = np.ascontiguousarray(q[((q < lo + margin) | (q > hi - margin)).any(axis=1)].T)  # (3, n)
+
+    def volume(r):
+        p = _rotation(r) @ c
+        return float(np.prod(p.max(axis=1) - p.min(axis=1)))
+
+    v0 = volume(np.zeros(3))
+    res = minimize(volume, np.zeros(3), method="Nelder-Mead",
+                   options={"initial_simplex": np.vstack([np.zeros(3), 0.02 * np.eye(3)]),
+                            "xatol": 1e-5, "fatol": 1e-10 * v0, "maxfev": 300})
+    if not res.fun < v0:
+        return axes
+    return _rotation(res.x) @ axes
+
+
 def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
     """Smallest-volume box with a face flush with the convex hull.
 
@@ -226,6 +265,8 @@ def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
     a, b = _plane_bases(normal[None])
     u = dx * a[0] + dy * b[0]
     axes = np.stack([u, np.cross(normal, u), normal])
+    if search_hull is not hull:
+        axes = _polish(X, axes)
     extents = np.ptp(X @ axes.T, axis=0)  # measured, so the box holds every point
     order = np.argsort(-extents, kind="stable")
     return extents[order], axes[order]
