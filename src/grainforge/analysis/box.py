@@ -74,7 +74,7 @@ def _fallback(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _candidate_normals(normals: np.ndarray) -> np.ndarray:
-    """Distinct hull-face normals up to sign (n and −n give the same box), binned if too many."""
+    """Distinct hull-face normals up to sign (n and −n give the same box)."""
     k = np.argmax(np.abs(normals), axis=1)
     n = normals * np.sign(normals[np.arange(len(normals)), k])[:, None]
     _, first = np.unique(np.round(n, 9), axis=0, return_index=True)
