@@ -110,6 +110,7 @@ def test_resume_regenerates_only_damaged_or_unrecorded_grains(recipe_file, tmp_p
     (out / JOURNAL / "grain-000006.json").unlink()  # file written, sidecar never recorded
     (out / "fso-0007.stl").unlink()
     (out / ".fso-0003.stl.abc123.tmp").write_bytes(b"half")  # leftover of a killed atomic write
+    (out / JOURNAL / ".grain-000007.json.def456.tmp").write_bytes(b"")  # a sidecar cut off by the kill
     kept = {i: (out / f"fso-{i:04d}.stl").stat().st_mtime_ns for i in (0, 1, 3, 4)}
     res = run_batch(r, out, workers=2, resume=True, report=False)
     assert (res["generated"], res["reused"]) == (4, 4)

@@ -777,6 +777,8 @@ def run_batch(
     for name in names + [MANIFEST]:  # leftovers of atomic writes interrupted by a kill
         for tmp in out.glob(f".{name}.*.tmp"):
             tmp.unlink(missing_ok=True)
+    for tmp in journal.glob(".*.tmp"):  # the journal's own (sidecars, recipe copy): all ours
+        tmp.unlink(missing_ok=True)
     if overwrite and journal.exists():
         for p in journal.glob("grain-*.json"):
             p.unlink()
