@@ -66,7 +66,7 @@ def test_matches_independent_search_and_holds_every_point(seed, n):
 
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
-def test_never_larger_than_trimesh_and_tighter_on_rough_grains(seed):
+def test_never_larger_than_trimesh_and_equal_to_the_exhaustive_search_on_rough_grains(seed):
     v = np.asarray(fso(subdivisions=4, rng=seed).vertices)
     ours = np.prod(minimum_box(v)[0])
     _, ext = trimesh.bounds.oriented_bounds(v)

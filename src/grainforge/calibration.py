@@ -141,8 +141,8 @@ class Calibration:
             rows = list(csv.DictReader(fh))
         if not rows:
             raise ValueError(f"{path}: empty calibration file")
-        col = lambda k: np.array([float(r[k]) for r in rows]) if k in r0 else None  # noqa: E731
         r0 = rows[0]
+        col = lambda k: np.array([float(r[k]) for r in rows]) if k in r0 else None  # noqa: E731
         return cls(
             primitive=r0["primitive"], primaries=int(r0["primaries"]), repeats=int(r0["repeats"]),
             seed=int(r0["seed"]), exponent=col("exponent"), D_A_mean=col("D_A_mean"), D_A_std=col("D_A_std"),

@@ -67,7 +67,7 @@ SCALING_SPAN = 16
 SCALING_MIN = 8
 
 
-def scaling_dimension(points, owner, primaries: int) -> float:
+def scaling_dimension(points, owner, primaries: int, *, whole_mean_edge: float | None = None) -> float:
     """Slope of log V against log A over an aggregate's growth (its scaling dimension).
 
     The first n primaries of an aggregate grown one primary at a time are
@@ -84,6 +84,8 @@ def scaling_dimension(points, owner, primaries: int) -> float:
         0-based index (growth order) of the primary each point belongs to.
     primaries : int
         N.
+    whole_mean_edge : float, optional
+        A(N), the box mean edge of the whole aggregate, if already measured.
 
     Returns
     -------
@@ -106,7 +108,8 @@ def scaling_dimension(points, owner, primaries: int) -> float:
     sizes = sorted({int(round(N / np.sqrt(2.0) ** j)) for j in range(80) if N / np.sqrt(2.0) ** j >= low})
     if len(sizes) < 3:
         return float("nan")
-    A = [float(minimum_box(pts[own < n])[0].mean()) for n in sizes]
+    A = [float(whole_mean_edge) if n == N and whole_mean_edge is not None
+         else float(minimum_box(pts[own < n])[0].mean()) for n in sizes]
     return float(np.polyfit(np.log(A), np.log(sizes), 1)[0])
 
 
@@ -129,8 +132,9 @@ def bounding_box_edges(points) -> np.ndarray:
     return minimum_box(points)[0]
 
 
-def porosity(volume: float, points) -> float:
-    """1 − V / V_hull with V_hull the convex hull volume of ``points``.
+def porosity(volume: float, points, hull=None) -> float:
+    """1 − V / V_hull with V_hull the convex hull volume of ``points`` (or of ``hull``, their
+    scipy ``ConvexHull`` if already computed).
 
     Examples
     --------
@@ -141,7 +145,8 @@ def porosity(volume: float, points) -> float:
     """
     from scipy.spatial import ConvexHull
 
-    hull = ConvexHull(np.asarray(points, dtype=np.float64))
+    if hull is None:
+        hull = ConvexHull(np.asarray(points, dtype=np.float64))
     return float(max(0.0, 1.0 - float(volume) / hull.volume))
 
 
@@ -219,12 +224,21 @@ def aggregate_measures(points, centres, volume: float, primary_gyration2: float,
         Growth index of the primary of each point; with it ``D_A_scaling``
         (:func:`scaling_dimension`) is measured, else it is NaN.
     """
-    edges = bounding_box_edges(points)
+    from scipy.spatial import ConvexHull
+
+    from .box import minimum_box
+
+    pts = np.asarray(points, dtype=np.float64).reshape(-1, 3)
+    hull = ConvexHull(pts)  # one hull for the box and the porosity
+    edges = minimum_box(pts, hull)[0]
     n = len(np.asarray(centres).reshape(-1, 3))
+    scaling = float("nan")
+    if owner is not None:
+        scaling = scaling_dimension(pts, owner, n, whole_mean_edge=float(edges.mean()))
     return {
         "D_A": aggregate_dimension(volume, edges),
-        "D_A_scaling": scaling_dimension(points, owner, n) if owner is not None else float("nan"),
-        "porosity": porosity(volume, points),
+        "D_A_scaling": scaling,
+        "porosity": porosity(volume, pts, hull),
         "R_g": radius_of_gyration(centres, primary_gyration2),
         "box_mean_edge": float(edges.mean()),
     }
