@@ -13,8 +13,9 @@ from .methods import generate
 from .methods.cri import cri
 from .methods.dpa import dpa
 from .methods.fso import fso
+from .methods.rf import rf
 from .params import ParameterError
 from .population import load_recipe, run_batch
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour", "load_recipe", "run_batch",
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "rf", "Contour", "load_recipe", "run_batch",
            "get_printer", "check_mesh", "build_tray"]

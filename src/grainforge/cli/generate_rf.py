@@ -1,0 +1,30 @@
+"""Hook of ``grainforge generate rf`` (see :mod:`grainforge.cli.generate`): ``--aspect L:I:S``."""
+
+from __future__ import annotations
+
+import click
+
+from .options import FloatList
+
+HELP = (
+    "\n\nTarget spectrum from mean section descriptors (--descriptors D2,D3,D8 or --preset, with the CRI "
+    "decay rules) or from the grains of real images (--spectrum fd.csv, written by 'grainforge fourier')."
+)
+EXCLUDE = ("aspect",)
+
+
+class AspectType(FloatList):
+    """``L:I:S`` (or ``L,I,S``): three numbers."""
+
+    name = "L:I:S"
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str):
+            value = value.replace(":", ",")
+        return super().convert(value, param, ctx)
+
+
+OPTIONS = [
+    click.option("--aspect", "aspect", type=AspectType(3), default=None,
+                 help="Stretch the grain so that its x:y:z extents are L:I:S, e.g. 2:1.5:1 [default: isotropic]."),
+]
