@@ -11,7 +11,7 @@ from .fabrication import build_tray, check_mesh, get_printer
 from .grain import Grain
 from .methods import generate
 from .methods.cri import cri
-from .methods.dpa import dpa
+from .calibration import dpa
 from .methods.fso import fso
 from .params import ParameterError
 from .population import load_recipe, run_batch
