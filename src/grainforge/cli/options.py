@@ -14,7 +14,7 @@ from .paths import OutPath
 
 
 class FloatList(click.ParamType):
-    """Comma-separated numbers, e.g. ``0.15,0.10,0.03``."""
+    """Comma-separated numbers, e.g. ``0.15,0.10,0.03`` (also accepted: ``;`` or ``:``, as in ``2:1.5:1``)."""
 
     name = "LIST"
 
@@ -25,7 +25,7 @@ class FloatList(click.ParamType):
         if isinstance(value, (tuple, list)):
             return tuple(float(v) for v in value)
         try:
-            vals = tuple(float(x) for x in str(value).replace(";", ",").split(",") if x.strip())
+            vals = tuple(float(x) for x in str(value).replace(";", ",").replace(":", ",").split(",") if x.strip())
         except ValueError:
             self.fail(f"expected comma-separated numbers, got {value!r}", param, ctx)
         if self.length is not None and len(vals) != self.length:
