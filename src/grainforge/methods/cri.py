@@ -66,8 +66,8 @@ INFO_COLUMNS = tuple(
 
 def _triplet(name):
     return param(
-        None, f"Fourier descriptors D2,D3,D8 of the {name} contour (default: those of --descriptors)",
-        kind="floats", low=0.0, high=1.0,
+        None, f"Fourier descriptors D2,D3,D8 of the {name} contour",
+        kind="floats", low=0.0, high=1.0, shown_default="those of descriptors",
     )
 
 
@@ -76,16 +76,16 @@ class Params:
     """Parameters of the CRI generator (paper §2.2)."""
 
     contour: str | None = param(
-        None, "contour source: fourier, fractal or image (default fourier; image when images are given)",
-        kind="str", choices=SOURCES[:3],
+        None, "contour source: fourier, fractal or image",
+        kind="str", choices=SOURCES[:3], shown_default="fourier; image when images are given",
     )
     preset: str | None = param(
         None, "named descriptors: rough-sphere = 0,0,0.02; rough-angular = 0.15,0.10,0.03",
         kind="str", choices=tuple(PRESETS),
     )
     descriptors: tuple[float, float, float] | None = param(
-        None, f"Fourier descriptors D2,D3,D8 (elongation, irregularity, roughness) of all three contours "
-        f"(default: the {DEFAULT_PRESET} preset)", kind="floats", low=0.0, high=1.0,
+        None, "Fourier descriptors D2,D3,D8 (elongation, irregularity, roughness) of all three contours",
+        kind="floats", low=0.0, high=1.0, shown_default=f"the {DEFAULT_PRESET} preset",
     )
     descriptors_xz: tuple[float, float, float] | None = _triplet("xz")
     descriptors_yz: tuple[float, float, float] | None = _triplet("yz")
@@ -101,8 +101,8 @@ class Params:
     fractal_amplitude: float = param(0.06, "fractal contours: RMS of (r - r0)/r0", low=0.0, high=0.5)
     images: str | None = param(None, "three grain images A,B,C for the xy, xz and yz contours", kind="str")
     aspect: tuple[float, float, float] | None = param(
-        None, "target ratio L:I:S of the principal dimensions (default: from the contours)",
-        kind="floats", low=0.0, low_open=True, high=100.0,
+        None, "target ratio L:I:S of the principal dimensions",
+        kind="floats", low=0.0, low_open=True, high=100.0, shown_default="as the contours give it",
     )
     morph_exponent: float = param(2.0, "exponent p of the morphing weight sin^p(theta)", low=0.5, high=8.0)
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
