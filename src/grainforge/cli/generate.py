@@ -46,7 +46,7 @@ def _match_resolution(method, params, seeds, size, size_definition, printer):
 
     if not supports_matching(method):
         raise click.BadParameter(
-            f"resolution matching applies to methods with --subdivisions (fso, cri), not {method}",
+            f"resolution matching applies to methods with --subdivisions (fso, cri, angular), not {method}",
             param_hint="'--printer'",
         )
     res = match_subdivisions(method, params, size, size_definition, printer, seeds[:3])

@@ -13,7 +13,7 @@ from ..params import ParameterError, ParamSpec, specs
 
 
 class FloatList(click.ParamType):
-    """Comma-separated numbers, e.g. ``0.15,0.10,0.03``."""
+    """Comma-separated numbers, e.g. ``0.15,0.10,0.03`` (``:`` also separates: ``2:1.5:1``)."""
 
     name = "LIST"
 
@@ -24,7 +24,7 @@ class FloatList(click.ParamType):
         if isinstance(value, (tuple, list)):
             return tuple(float(v) for v in value)
         try:
-            vals = tuple(float(x) for x in str(value).replace(";", ",").split(",") if x.strip())
+            vals = tuple(float(x) for x in str(value).replace(";", ",").replace(":", ",").split(",") if x.strip())
         except ValueError:
             self.fail(f"expected comma-separated numbers, got {value!r}", param, ctx)
         if self.length is not None and len(vals) != self.length:
@@ -130,7 +130,7 @@ def output_options(f):
         overwrite_option,
         click.option("--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
                      help="Match the mesh resolution to this printer (a built-in profile or file.toml[#name]) "
-                          "at --size: chooses --subdivisions (fso, cri); see docs/printing.md."),
+                          "at --size: chooses --subdivisions (fso, cri, angular); see docs/printing.md."),
     ]
     for opt in reversed(opts):
         f = opt(f)
