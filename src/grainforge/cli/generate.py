@@ -18,7 +18,9 @@ def generate():
 def run_generate(method: str, params, *, out, count, seed, size, size_definition, fmt, overwrite, extra_columns=()):
     """Shared body of every ``generate METHOD`` command."""
     from ..run import write_run
+    from .paths import output_dir
 
+    output_dir(out)  # write_run refuses existing outputs without --overwrite
     seeds = [seed + i for i in range(count)]
     printer = click.get_current_context().meta.get(PRINTER_KEY)
     row_extra = {}

@@ -10,6 +10,7 @@ import click
 from ..fabrication.scale import SIZE_DEFINITIONS
 from ..io import FORMATS
 from ..params import ParameterError, ParamSpec, specs
+from .paths import OutPath
 
 
 class FloatList(click.ParamType):
@@ -118,7 +119,7 @@ overwrite_option = click.option("--overwrite", is_flag=True, help="Replace exist
 def output_options(f):
     """--out, --count, --seed, --size, --size-definition, --format, --overwrite, --printer."""
     opts = [
-        click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
+        click.option("--out", "out", required=True, type=OutPath(file_okay=False),
                      help="Folder to write the grains and manifest.csv into."),
         count_option(),
         seed_option,

@@ -319,8 +319,15 @@ def read_parts(path) -> list[Part]:
             parts = read_3mf(path)
         except (ValueError, ElementTree.ParseError) as exc:
             raise ValueError(f"{path}: {exc}") from None
+        except OSError as exc:
+            raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
+        except Exception as exc:  # a malformed package: missing elements or attributes, bad indices
+            raise ValueError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
         if not parts:
             raise ValueError(f"{path}: holds no objects")
+        for part in parts:
+            if not np.isfinite(part.vertices).all():
+                raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
         return parts
     from ..io import read_mesh
 
