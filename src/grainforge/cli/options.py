@@ -14,7 +14,7 @@ from .paths import OutPath
 
 
 class FloatList(click.ParamType):
-    """Comma-separated numbers, e.g. ``0.15,0.10,0.03`` (``:`` also separates: ``2:1.5:1``)."""
+    """Comma-separated numbers, e.g. ``0.15,0.10,0.03`` (also accepted: ``;`` or ``:``, as in ``2:1.5:1``)."""
 
     name = "LIST"
 
