@@ -12,7 +12,7 @@ from .grain import Grain
 from .methods import generate
 from .methods.angular import angular
 from .methods.cri import cri
-from .methods.dpa import dpa
+from .calibration import dpa
 from .methods.fso import fso
 from .params import ParameterError
 from .population import load_recipe, run_batch

@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "check_stl", "save_figure"]
+__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -261,9 +261,9 @@ def read_mesh(path: str | os.PathLike):
         if suffix == ".stl":
             check_stl(path)
         if suffix == ".3mf":
-            from .fabrication.threemf import read_parts
+            from .fabrication.threemf import read_3mf_file
 
-            parts = read_parts(path)
+            parts = read_3mf_file(path)
             loaded = trimesh.util.concatenate(
                 [trimesh.Trimesh(p.vertices, p.faces, process=False, validate=False) for p in parts])
         else:
@@ -285,3 +285,28 @@ def read_mesh(path: str | os.PathLike):
     if not np.isfinite(np.asarray(loaded.vertices)).all():
         raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
     return loaded
+
+
+def read_parts(path: str | os.PathLike) -> list:
+    """The parts of a mesh file: every build item of a 3MF, the single mesh of an STL/OBJ/PLY.
+
+    Returns
+    -------
+    list of grainforge.fabrication.threemf.Part
+        Named parts; an STL's triangle soup has its exactly coincident vertices merged.
+
+    Raises
+    ------
+    ValueError
+        If the file is missing, unreadable or holds no triangles.
+    """
+    from .fabrication.threemf import Part, read_3mf_file
+
+    path = Path(path)
+    if path.suffix.lower() == ".3mf":
+        return read_3mf_file(path)
+    mesh = read_mesh(path)
+    # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
+    v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
+    return [Part(path.stem, v, f)]

@@ -38,7 +38,7 @@ def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
     """
     path = Path(path)
     if path.suffix.lower() == ".3mf":
-        from ..fabrication.threemf import read_parts
+        from ..io import read_parts
 
         parts = read_parts(path)
         v = np.concatenate([p.vertices for p in parts])

@@ -34,7 +34,7 @@ def check(files, printer_spec, as_csv):
     """
     from ..fabrication.printability import check_mesh
     from ..fabrication.printers import get_printer
-    from ..fabrication.threemf import read_parts
+    from ..io import read_parts
     from ..io import csv_text
     from .paths import mesh_inputs
     from .progress import progress_bar

@@ -116,8 +116,15 @@ size_definition_option = click.option(
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 
 
-def output_options(f):
-    """--out, --count, --seed, --size, --size-definition, --format, --overwrite, --printer."""
+def output_options(f=None, *, printer: bool = True):
+    """--out, --count, --seed, --size, --size-definition, --format, --overwrite and (``printer=True``) --printer.
+
+    Use as ``@output_options`` or ``@output_options(printer=False)`` (methods
+    without an icosphere ``subdivisions`` parameter: resolution matching does
+    not apply to them, so the option is not offered).
+    """
+    if f is None:
+        return lambda g: output_options(g, printer=printer)
     opts = [
         click.option("--out", "out", required=True, type=OutPath(file_okay=False),
                      help="Folder to write the grains and manifest.csv into."),
@@ -129,10 +136,12 @@ def output_options(f):
         click.option("--format", "fmt", default="stl", show_default=True, type=click.Choice(list(FORMATS)),
                      help="Mesh file format (binary STL, OBJ or binary PLY)."),
         overwrite_option,
-        click.option("--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
-                     help="Match the mesh resolution to this printer (a built-in profile or file.toml[#name]) "
-                          "at --size: chooses --subdivisions (fso, cri, angular); see docs/printing.md."),
     ]
+    if printer:
+        opts.append(click.option(
+            "--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
+            help="Match the mesh resolution (--subdivisions) to this printer (a built-in profile or "
+                 "file.toml[#name]) at --size; see docs/printing.md."))
     for opt in reversed(opts):
         f = opt(f)
     return f
