@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from .options import FloatList
+from .generate_cri import AspectType
 
 HELP = (
     "\n\nTarget spectrum from mean section descriptors (--descriptors D2,D3,D8 or --preset, with the CRI "
@@ -13,18 +13,7 @@ HELP = (
 EXCLUDE = ("aspect",)
 
 
-class AspectType(FloatList):
-    """``L:I:S`` (or ``L,I,S``): three numbers."""
-
-    name = "L:I:S"
-
-    def convert(self, value, param, ctx):
-        if isinstance(value, str):
-            value = value.replace(":", ",")
-        return super().convert(value, param, ctx)
-
-
 OPTIONS = [
     click.option("--aspect", "aspect", type=AspectType(3), default=None,
-                 help="Stretch the grain so that its x:y:z extents are L:I:S, e.g. 2:1.5:1 [default: isotropic]."),
+                 help="Stretch the grain so that its x:y:z extents are in the ratio L:I:S, e.g. 2:1.5:1."),
 ]

@@ -9,6 +9,7 @@ import click
 from ..fabrication.tray import DEFAULT_TRIANGLE_BUDGET
 from ..params import ParameterError
 from .options import bad_parameter, count_option, overwrite_option, seed_option, size_definition_option
+from .paths import OutPath, output_file
 from .progress import progress_bar
 
 
@@ -52,7 +53,7 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @click.argument("inputs", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
               help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", required=True, type=OutPath(dir_okay=False),
               help="Print file: .3mf (one named object per grain) or .stl (binary). "
                    "Also writes STEM.csv and STEM-plateK.png.")
 @click.option("--method", default=None, help="Generate grains on the fly with this method (instead of INPUTS).")
@@ -62,12 +63,13 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @count_option("Number of generated grains; grain i uses seed S + i.")
 @seed_option
 @click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="Grain size in mm (generated grains: default 10; files: keep their size unless given).")
+              show_default="10 for generated grains; files keep their size",
+              help="Grain size in mm (see --size-definition).")
 @size_definition_option
 @click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="Minimum distance between grains in mm [default: two printer resolutions].")
+              show_default="two printer resolutions", help="Minimum distance between grains in mm.")
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
-              help="Finest mesh level resolution matching may choose [default 6].")
+              show_default="6", help="Finest mesh level resolution matching may choose.")
 @click.option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
               help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
 @click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),
@@ -91,6 +93,7 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
     from ..fabrication.printers import get_printer
     from ..fabrication.tray import FileSource, GeneratorSource, build_tray, files_from
 
+    output_file(out, overwrite=True, option="--out", suffixes=(".3mf", ".stl"))  # existing outputs: build_tray
     printer = get_printer(printer_spec)
     if method is not None:
         if inputs:

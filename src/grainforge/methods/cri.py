@@ -40,7 +40,7 @@ from ..geodesic import icosphere
 from ..params import ParameterError, param, validate
 from ..spectra import extend_spectrum, read_spectra
 
-__all__ = ["Params", "build", "cri", "construct", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
+__all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
 
 NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
@@ -68,8 +68,8 @@ INFO_COLUMNS = tuple(
 
 def _triplet(name):
     return param(
-        None, f"Fourier descriptors D2,D3,D8 of the {name} contour (default: those of --descriptors)",
-        kind="floats", low=0.0, high=1.0,
+        None, f"Fourier descriptors D2,D3,D8 of the {name} contour",
+        kind="floats", low=0.0, high=1.0, shown_default="those of descriptors",
     )
 
 
@@ -78,16 +78,17 @@ class Params:
     """Parameters of the CRI generator (paper §2.2)."""
 
     contour: str | None = param(
-        None, "contour source: fourier, fractal, image or spectrum (default fourier; image when images are given, "
-        "spectrum when a spectrum table is)", kind="str", choices=SOURCES[:4],
+        None, "contour source: fourier, fractal, image or spectrum",
+        kind="str", choices=SOURCES[:4],
+        shown_default="fourier; image when images are given, spectrum when a spectrum table is",
     )
     preset: str | None = param(
         None, "named descriptors: rough-sphere = 0,0,0.02; rough-angular = 0.15,0.10,0.03",
         kind="str", choices=tuple(PRESETS),
     )
     descriptors: tuple[float, float, float] | None = param(
-        None, f"Fourier descriptors D2,D3,D8 (elongation, irregularity, roughness) of all three contours "
-        f"(default: the {DEFAULT_PRESET} preset)", kind="floats", low=0.0, high=1.0,
+        None, "Fourier descriptors D2,D3,D8 (elongation, irregularity, roughness) of all three contours",
+        kind="floats", low=0.0, high=1.0, shown_default=f"the {DEFAULT_PRESET} preset",
     )
     descriptors_xz: tuple[float, float, float] | None = _triplet("xz")
     descriptors_yz: tuple[float, float, float] | None = _triplet("yz")
@@ -107,8 +108,8 @@ class Params:
         "for its three contours (above D16: decay B2)", kind="str",
     )
     aspect: tuple[float, float, float] | None = param(
-        None, "target ratio L:I:S of the principal dimensions (default: from the contours)",
-        kind="floats", low=0.0, low_open=True, high=100.0,
+        None, "target ratio L:I:S of the principal dimensions",
+        kind="floats", low=0.0, low_open=True, high=100.0, shown_default="as the contours give it",
     )
     morph_exponent: float = param(2.0, "exponent p of the morphing weight sin^p(theta)", low=0.5, high=8.0)
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
@@ -409,7 +410,14 @@ def _image_contour(path: str, mtime_ns: int, size: int) -> Contour:
     return Contour.from_image(path)
 
 
-def _load_image_contour(path: str) -> Contour:
+def load_image_contour(path: str) -> Contour:
+    """The outline of the grain in image ``path`` (cached by path, modification time and size).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``images`` when the file does not exist or holds no grain outline.
+    """
     p = Path(path)
     if not p.is_file():
         raise ParameterError("images", f"{path}: no such image file")
@@ -422,7 +430,7 @@ def input_contours(p: Params, rng: np.random.Generator) -> tuple[Contour, Contou
     if p.contour == "given":
         return p.sections
     if p.contour == "image":
-        return tuple(_load_image_contour(x) for x in p.images.split(","))
+        return tuple(load_image_contour(x) for x in p.images.split(","))
     if p.contour == "spectrum":
         table = read_spectra(p.spectrum)
         D = extend_spectrum(table.D[table.draw(rng)], p.decay[1], p.modes)
@@ -609,39 +617,3 @@ def cri(
         sections=None if contours is None else tuple(contours),
     )
     return generate(NAME, p, rng)
-
-
-# ------------------------------------------------------------------ CLI
-def cli_command(run_generate):
-    """``grainforge generate cri``: the Params options plus ``--aspect L:I:S``."""
-    import click
-
-    from ..cli.options import FloatList, build_params, output_options, param_options
-
-    class AspectType(FloatList):
-        name = "L:I:S"
-
-        def convert(self, value, param, ctx):
-            if isinstance(value, str):
-                value = value.replace(":", ",")
-            return super().convert(value, param, ctx)
-
-    @click.command(name=NAME, help=(__doc__ or "").strip().splitlines()[0] + (
-        "\n\nContours from Fourier descriptors (--descriptors D2,D3,D8 or --preset), fractal profiles "
-        "(--contour fractal) or three grain images (--images A.png,B.png,C.png)."))
-    @output_options
-    @param_options(Params, exclude=("aspect",))
-    @click.option("--aspect", "aspect", type=AspectType(3), default=None,
-                  help="Target ratio L:I:S of the principal dimensions, e.g. 2:1.5:1.")
-    def command(out, count, seed, size, size_definition, fmt, overwrite, **values):
-        params = build_params(Params, values)
-        if params.contour == "image":
-            for path in params.images.split(","):
-                try:
-                    _load_image_contour(path)
-                except ValueError as exc:
-                    raise click.BadParameter(str(exc), param_hint="'--images'") from None
-        run_generate(NAME, params, out=out, count=count, seed=seed, size=size,
-                     size_definition=size_definition, fmt=fmt, overwrite=overwrite)
-
-    return command

@@ -71,8 +71,8 @@ class Params:
         kind="str", choices=tuple(PRESETS),
     )
     descriptors: tuple[float, float, float] | None = param(
-        None, "mean D2,D3,D8 (elongation, irregularity, roughness) of central sections in any orientation "
-        f"(default: the {DEFAULT_PRESET} preset)", kind="floats", low=0.0, high=0.3,
+        None, "mean D2,D3,D8 (elongation, irregularity, roughness) of central sections in any orientation",
+        kind="floats", low=0.0, high=0.3, shown_default=f"the {DEFAULT_PRESET} preset",
     )
     spectrum: str | None = param(
         None, "a 'grainforge fourier' CSV: each grain takes the D2..D16 of one measured grain, drawn at random",
@@ -85,8 +85,8 @@ class Params:
     degree: int = param(32, "highest spherical-harmonic degree L (and descriptor order) of the field",
                         kind="int", low=8, high=64)
     aspect: tuple[float, float, float] | None = param(
-        None, "stretch x:y:z so that the grain's extents are in the ratio L:I:S (default: isotropic)",
-        kind="floats", low=0.0, low_open=True, high=100.0,
+        None, "stretch x:y:z so that the grain's extents are in the ratio L:I:S",
+        kind="floats", low=0.0, low_open=True, high=100.0, shown_default="isotropic",
     )
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
 
