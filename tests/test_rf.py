@@ -268,12 +268,14 @@ def test_cli_generate_rf(runner, tmp_path, spectrum_csv):
 
     out = tmp_path / "g"
     res = runner.invoke(main, ["generate", "rf", "--out", str(out), "--count", "2", "--subdivisions", "3",
-                               "--spectrum", spectrum_csv, "--size", "2"])
+                               "--spectrum", spectrum_csv, "--size", "2", "--aspect", "2:1.5:1"])
     assert res.exit_code == 0, res.output
     rows = (out / "manifest.csv").read_text().splitlines()
     assert len(rows) == 3 and "spectrum_row" in rows[0]
     m = trimesh.load(out / "rf-0001.stl")
     assert m.is_watertight and m.volume > 0
+    ext = np.ptp(m.vertices, axis=0)
+    assert np.allclose(ext / ext[2], (2.0, 1.5, 1.0), rtol=0.03)  # exact on level 5; this is level 3
     res = runner.invoke(main, ["generate", "rf", "--out", str(tmp_path / "h"), "--spectrum", str(tmp_path / "x.csv")])
     assert res.exit_code == 2 and "--spectrum" in res.output and "Traceback" not in res.output
     assert not (tmp_path / "h").exists() or not any((tmp_path / "h").iterdir())
