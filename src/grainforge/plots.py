@@ -51,6 +51,9 @@ def _numeric(table: dict, column: str, path) -> np.ndarray:
             out[i] = float(s)
         except ValueError:
             pass
+    if len(out) and not np.isfinite(out).any():
+        bad = next((s for s in table[column] if s.strip()), "")
+        raise ValueError(f"{path}: column {column!r} holds no numbers" + (f" (e.g. {bad!r})" if bad else ""))
     return out
 
 

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, mesh_inputs, output_file
+
 #: columns of the terminal table (all columns go to --csv and --json)
 TABLE = (
     ("file", "file", "{}"), ("body", "body", "{}"), ("faces", "faces", "{}"), ("flags", "flags", "{}"),
@@ -47,7 +49,7 @@ def _json_value(v):
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--csv", "csv_out", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--csv", "csv_out", type=OutPath(dir_okay=False), default=None,
               help="Also write every column to this CSV file.")
 @click.option("--json", "as_json", is_flag=True, help="Print JSON (a list of rows, all columns) instead of the table.")
 @click.option("--fractal/--no-fractal", default=True, show_default=True, help="Estimate the surface fractal dimension.")
@@ -56,8 +58,10 @@ def _json_value(v):
 @click.option("--primary-volume", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
-def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite):
-    """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF), one row per body.
+@click.option("--workers", default=None, type=click.IntRange(min=1),
+              help="Processes measuring files [default: one per CPU, at most one per file]; rows do not depend on it.")
+def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite, workers):
+    """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.
 
     Volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S (minimum-volume
     box, and principal axes), Zingg ratios, Krumbein sphericity, roughness,
@@ -66,14 +70,23 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite
     closed are analysed and flagged `open`; files with several bodies are
     flagged `multi-body`.  The table goes to stdout; see docs/validation.md.
     """
-    from ..analysis.measure import ANALYSE_COLUMNS, analyse_file
-    from ..io import write_csv
+    import os
 
-    if csv_out is not None and csv_out.exists() and not overwrite:
-        raise click.UsageError(f"{csv_out} exists; use --overwrite")
+    from ..analysis.measure import ANALYSE_COLUMNS, analyse_files
+    from ..io import write_csv
+    from .progress import progress_bar
+
+    if primary_volume is not None and not math.isfinite(primary_volume):
+        raise click.BadParameter(f"must be a finite volume, got {primary_volume}", param_hint="'--primary-volume'")
+    if csv_out is not None:
+        output_file(csv_out, overwrite=overwrite, option="--csv", suffixes=(".csv",))
+    files = mesh_inputs(files)
+    n = min(len(files), workers or os.cpu_count() or 1)
     rows = []
-    for f in files:
-        rows += analyse_file(f, fractal=fractal, fourier=fourier, primary_volume=primary_volume)
+    bar = progress_bar(total=len(files), desc="analyse", unit="file")
+    for file_rows in bar(analyse_files(files, workers=n, fractal=fractal, fourier=fourier,
+                                       primary_volume=primary_volume)):
+        rows += file_rows
     columns = ANALYSE_COLUMNS(fourier)
     if csv_out is not None:
         write_csv(csv_out, rows, columns)

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, output_file
+
 #: descriptors printed per grain (D2..D16)
 N_MAX = 16
 
@@ -35,8 +37,9 @@ COLUMNS = ["image", "grain", "x", "y", "area", "r0", "star_shaped", "elongation"
 
 @click.command()
 @click.argument("images", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=str))
-@click.option("--csv", "csv_path", type=click.Path(dir_okay=False, path_type=Path), default=None,
+@click.option("--csv", "csv_path", type=OutPath(dir_okay=False), default=None,
               help="Write the table to this CSV file instead of stdout.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
 @click.option("--min-area", default=50, show_default=True, type=click.IntRange(min=0),
               help="Skip specks smaller than this many pixels.")
 @click.option("--threshold", type=float, default=None, help="Grey level separating grains and background [default: Otsu].")
@@ -44,31 +47,52 @@ COLUMNS = ["image", "grain", "x", "y", "area", "r0", "star_shaped", "elongation"
               help="Which side of the threshold the grains are; auto: the side covering fewer border pixels.")
 @click.option("--rays", default=128, show_default=True, type=click.IntRange(min=2 * N_MAX + 2),
               help="Rays cast from each grain's area centroid.")
-def fourier(images, csv_path, min_area, threshold, foreground, rays):
+def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays):
     """Fourier descriptors D2..D16 of every grain in IMAGE... (one CSV row per grain).
 
     Grains are segmented by thresholding (holes filled); D_n = 2|c_n|/c_0 of the
     radius r(theta) cast from each grain's area centroid.  elongation,
     irregularity and roughness are D2, D3 and D8.  Grains touching the image
     border and specks below --min-area are skipped and counted on stderr.
+    An image that cannot be read or holds no grain is named on stderr and
+    skipped; the others are measured, and the exit code is then 1.
     """
+    import math
+
     from ..io import atomic_write, csv_text
 
+    if threshold is not None and not math.isfinite(threshold):
+        raise click.BadParameter(f"must be a finite grey level, got {threshold}", param_hint="'--threshold'")
+    if csv_path is not None:
+        output_file(csv_path, overwrite=overwrite, option="--csv", suffixes=(".csv",))
+    _check_rays(rays)
     all_rows = []
     border = small = bad = 0
+    failed: list[str] = []
     for path in images:
         try:
             rows, scan = descriptor_rows(path, min_area=min_area, threshold=threshold,
                                          foreground=foreground, rays=rays)
         except ValueError as exc:
-            raise click.BadParameter(" ".join(str(exc).split()), param_hint="IMAGE") from None
+            message = " ".join(str(exc).split())
+            failed.append(path)
+            if len(images) == 1:
+                raise click.BadParameter(message, param_hint="IMAGE") from None
+            click.echo(f"skipped {message if path in message else f'{path}: {message}'}", err=True)
+            continue
+        if not rows:
+            failed.append(path)
+            if len(images) > 1:
+                click.echo(f"skipped {path}: no grain measured ({scan.border} touching the border, "
+                           f"{scan.small} below {min_area} px)", err=True)
         all_rows += rows
         border += scan.border
         small += scan.small
         bad += scan.unmeasurable
     if not all_rows:
         raise click.UsageError(
-            f"no grain measured (skipped {border} touching the border, {small} below {min_area} px)"
+            f"no grain measured in {len(images)} image(s) (skipped {border} touching the border, "
+            f"{small} below {min_area} px" + (f", {len(failed)} image(s) unreadable or empty" if failed else "") + ")"
         )
     text = csv_text(all_rows, COLUMNS)
     if csv_path is not None:
@@ -80,3 +104,22 @@ def fourier(images, csv_path, min_area, threshold, foreground, rays):
         f"{small} below {min_area} px" + (f", {bad} not measurable from their centroid" if bad else ""),
         err=True,
     )
+    if failed:
+        click.echo(f"skipped {len(failed)} of {len(images)} image(s): {', '.join(failed)}", err=True)
+        raise SystemExit(1)
+
+
+#: memory one ray costs while a grain's radii are cast (bytes; 1e8 rays held 5.9 GB, issue 12)
+RAY_BYTES = 64
+#: largest memory the rays of one grain may take
+RAY_MEMORY = 2 * 1024**3
+
+
+def _check_rays(rays: int) -> None:
+    """Refuse --rays that would not fit in memory (estimate first)."""
+    need = rays * RAY_BYTES
+    if need > RAY_MEMORY:
+        raise click.BadParameter(
+            f"{rays} rays need about {need / 1024**3:.1f} GiB per grain (limit {RAY_MEMORY / 1024**3:.0f} GiB); "
+            f"use at most {RAY_MEMORY // RAY_BYTES} (the descriptors need only {2 * N_MAX + 2})",
+            param_hint="'--rays'")

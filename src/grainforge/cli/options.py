@@ -10,10 +10,11 @@ import click
 from ..fabrication.scale import SIZE_DEFINITIONS
 from ..io import FORMATS
 from ..params import ParameterError, ParamSpec, specs
+from .paths import OutPath
 
 
 class FloatList(click.ParamType):
-    """Comma-separated numbers, e.g. ``0.15,0.10,0.03``."""
+    """Comma-separated numbers, e.g. ``0.15,0.10,0.03`` (also accepted: ``;`` or ``:``, as in ``2:1.5:1``)."""
 
     name = "LIST"
 
@@ -24,7 +25,7 @@ class FloatList(click.ParamType):
         if isinstance(value, (tuple, list)):
             return tuple(float(v) for v in value)
         try:
-            vals = tuple(float(x) for x in str(value).replace(";", ",").split(",") if x.strip())
+            vals = tuple(float(x) for x in str(value).replace(";", ",").replace(":", ",").split(",") if x.strip())
         except ValueError:
             self.fail(f"expected comma-separated numbers, got {value!r}", param, ctx)
         if self.length is not None and len(vals) != self.length:
@@ -115,10 +116,17 @@ size_definition_option = click.option(
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 
 
-def output_options(f):
-    """--out, --count, --seed, --size, --size-definition, --format, --overwrite, --printer."""
+def output_options(f=None, *, printer: bool = True):
+    """--out, --count, --seed, --size, --size-definition, --format, --overwrite and (``printer=True``) --printer.
+
+    Use as ``@output_options`` or ``@output_options(printer=False)`` (methods
+    without an icosphere ``subdivisions`` parameter: resolution matching does
+    not apply to them, so the option is not offered).
+    """
+    if f is None:
+        return lambda g: output_options(g, printer=printer)
     opts = [
-        click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
+        click.option("--out", "out", required=True, type=OutPath(file_okay=False),
                      help="Folder to write the grains and manifest.csv into."),
         count_option(),
         seed_option,
@@ -128,10 +136,12 @@ def output_options(f):
         click.option("--format", "fmt", default="stl", show_default=True, type=click.Choice(list(FORMATS)),
                      help="Mesh file format (binary STL, OBJ or binary PLY)."),
         overwrite_option,
-        click.option("--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
-                     help="Match the mesh resolution to this printer (a built-in profile or file.toml[#name]) "
-                          "at --size: chooses --subdivisions (fso, cri); see docs/printing.md."),
     ]
+    if printer:
+        opts.append(click.option(
+            "--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
+            help="Match the mesh resolution (--subdivisions) to this printer (a built-in profile or "
+                 "file.toml[#name]) at --size; see docs/printing.md."))
     for opt in reversed(opts):
         f = opt(f)
     return f

@@ -9,6 +9,7 @@ import click
 from ..fabrication.tray import DEFAULT_TRIANGLE_BUDGET
 from ..params import ParameterError
 from .options import bad_parameter, count_option, overwrite_option, seed_option, size_definition_option
+from .paths import OutPath, output_file
 from .progress import progress_bar
 
 
@@ -52,7 +53,7 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @click.argument("inputs", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
               help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
-@click.option("--out", required=True, type=click.Path(dir_okay=False, path_type=Path),
+@click.option("--out", required=True, type=OutPath(dir_okay=False),
               help="Print file: .3mf (one named object per grain) or .stl (binary). "
                    "Also writes STEM.csv and STEM-plateK.png.")
 @click.option("--method", default=None, help="Generate grains on the fly with this method (instead of INPUTS).")
@@ -91,6 +92,7 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
     from ..fabrication.printers import get_printer
     from ..fabrication.tray import FileSource, GeneratorSource, build_tray, files_from
 
+    output_file(out, overwrite=True, option="--out", suffixes=(".3mf", ".stl"))  # existing outputs: build_tray
     printer = get_printer(printer_spec)
     if method is not None:
         if inputs:

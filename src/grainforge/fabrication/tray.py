@@ -276,7 +276,7 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
         name = f"{task['method']}-{task['index']:05d}"
         return name, f"seed {task['seed']}", g.vertices * k, g.faces, getattr(task["params"], "subdivisions", None)
     from ..solid import solid_problems
-    from .threemf import read_parts
+    from ..io import read_parts
 
     path = Path(task["path"])
     parts = read_parts(path)

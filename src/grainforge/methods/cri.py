@@ -39,7 +39,7 @@ from ..contours import (
 from ..geodesic import icosphere
 from ..params import ParameterError, param, validate
 
-__all__ = ["Params", "build", "cri", "construct", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
+__all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
 
 NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
@@ -392,7 +392,14 @@ def _image_contour(path: str, mtime_ns: int, size: int) -> Contour:
     return Contour.from_image(path)
 
 
-def _load_image_contour(path: str) -> Contour:
+def load_image_contour(path: str) -> Contour:
+    """The outline of the grain in image ``path`` (cached by path, modification time and size).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``images`` when the file does not exist or holds no grain outline.
+    """
     p = Path(path)
     if not p.is_file():
         raise ParameterError("images", f"{path}: no such image file")
@@ -405,7 +412,7 @@ def input_contours(p: Params, rng: np.random.Generator) -> tuple[Contour, Contou
     if p.contour == "given":
         return p.sections
     if p.contour == "image":
-        return tuple(_load_image_contour(x) for x in p.images.split(","))
+        return tuple(load_image_contour(x) for x in p.images.split(","))
     if p.contour == "fractal":
         return tuple(
             Contour.from_fractal(
@@ -582,39 +589,3 @@ def cri(
         sections=None if contours is None else tuple(contours),
     )
     return generate(NAME, p, rng)
-
-
-# ------------------------------------------------------------------ CLI
-def cli_command(run_generate):
-    """``grainforge generate cri``: the Params options plus ``--aspect L:I:S``."""
-    import click
-
-    from ..cli.options import FloatList, build_params, output_options, param_options
-
-    class AspectType(FloatList):
-        name = "L:I:S"
-
-        def convert(self, value, param, ctx):
-            if isinstance(value, str):
-                value = value.replace(":", ",")
-            return super().convert(value, param, ctx)
-
-    @click.command(name=NAME, help=(__doc__ or "").strip().splitlines()[0] + (
-        "\n\nContours from Fourier descriptors (--descriptors D2,D3,D8 or --preset), fractal profiles "
-        "(--contour fractal) or three grain images (--images A.png,B.png,C.png)."))
-    @output_options
-    @param_options(Params, exclude=("aspect",))
-    @click.option("--aspect", "aspect", type=AspectType(3), default=None,
-                  help="Target ratio L:I:S of the principal dimensions, e.g. 2:1.5:1.")
-    def command(out, count, seed, size, size_definition, fmt, overwrite, **values):
-        params = build_params(Params, values)
-        if params.contour == "image":
-            for path in params.images.split(","):
-                try:
-                    _load_image_contour(path)
-                except ValueError as exc:
-                    raise click.BadParameter(str(exc), param_hint="'--images'") from None
-        run_generate(NAME, params, out=out, count=count, seed=seed, size=size,
-                     size_definition=size_definition, fmt=fmt, overwrite=overwrite)
-
-    return command
