@@ -8,7 +8,7 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "MESH_SUFFIXES"]
+__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "MESH_SUFFIXES"]
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
 
@@ -58,6 +58,51 @@ def grain_paths(inputs: Iterable[str | Path]) -> list[Path]:
     return out
 
 
+def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
+    """What stops a mesh from enclosing one solid with a well-defined inside (empty if nothing).
+
+    Weaker than :func:`grainforge.solid.solid_problems` in one respect only:
+    an edge may be shared by four faces (two touching cubes of a DPA
+    aggregate, once coincident vertices are merged), as long as every directed
+    edge is matched by as many reverse edges. The winding number — hence the
+    inside, the volume integrals and the voxelisation used here — is then
+    well defined. Open boundaries, inconsistent orientation, degenerate
+    faces, several bodies and non-positive volume are refused.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> b = trimesh.creation.box()
+    >>> enclosure_problems(b.vertices, b.faces)
+    []
+    >>> enclosure_problems(b.vertices, b.faces[:-1])
+    ['open boundary or inconsistent orientation']
+    """
+    from ..solid import face_components, signed_volume
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0 or len(v) == 0:
+        return ["empty mesh"]
+    if not np.isfinite(v).all():
+        return ["non-finite vertex coordinates"]
+    if f.min() < 0 or f.max() >= len(v):
+        return ["face index out of range"]
+    if ((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])).any():
+        return ["degenerate faces (repeated vertex)"]
+    a = f.ravel()
+    b = np.roll(f, -1, axis=1).ravel()
+    n = np.int64(len(v))
+    if not np.array_equal(np.sort(a * n + b), np.sort(b * n + a)):
+        return ["open boundary or inconsistent orientation"]
+    bodies = len(np.unique(face_components(f, len(v))))
+    if bodies != 1:
+        return [f"{bodies} separate bodies"]
+    if not signed_volume(v, f) > 0:
+        return ["non-positive volume (inward orientation)"]
+    return []
+
+
 def read_grain(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of a mesh file, vertices merged by position (as any reader sees it).
 
@@ -67,14 +112,13 @@ def read_grain(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         If the file is unreadable or the mesh is not a valid solid.
     """
     from ..io import read_mesh
-    from ..solid import solid_problems
 
     mesh = read_mesh(path)
     v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
     f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
-    problems = solid_problems(v, f)
+    problems = enclosure_problems(v, f)
     if problems:
-        raise ValueError(f"{path}: not a valid solid ({'; '.join(problems)})")
+        raise ValueError(f"{path}: not a closed solid ({'; '.join(problems)})")
     return v, f
 
 
