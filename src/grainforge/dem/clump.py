@@ -258,7 +258,7 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     >>> import trimesh
     >>> box = trimesh.creation.box((1.0, 1.0, 2.0))
     >>> c = clump(box.vertices, box.faces, spheres=8, rng=0)
-    >>> c.count, c.coverage > 0.8, c.spill < 0.05
+    >>> c.count, c.coverage > 0.75, c.spill < 0.05
     (8, True, True)
     """
     from scipy import ndimage
