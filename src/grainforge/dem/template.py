@@ -136,7 +136,7 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     >>> round(t.mass, 9), t.clump.count      # 8 cm³ of water
     (0.008, 8)
     """
-    from .inputs import enclosure_problems
+    from .enclosure import enclosure_problems
 
     if not (np.isfinite(density) and density > 0):
         raise ValueError(f"density must be > 0 kg/m³, got {density!r}")
