@@ -14,8 +14,10 @@ from .methods.angular import angular
 from .methods.cri import cri
 from .calibration import dpa
 from .methods.fso import fso
+from .methods.rf import rf
 from .params import ParameterError
 from .population import load_recipe, run_batch
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "angular", "Contour", "load_recipe", "run_batch",
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "angular", "rf", "Contour", "load_recipe",
+           "run_batch",
            "get_printer", "check_mesh", "build_tray"]

@@ -58,8 +58,8 @@ def _json_value(v):
 @click.option("--primary-volume", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
-@click.option("--workers", default=None, type=click.IntRange(min=1),
-              help="Processes measuring files [default: one per CPU, at most one per file]; rows do not depend on it.")
+@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
+              help="Processes measuring files; rows do not depend on it.")
 def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite, workers):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.
 

@@ -30,8 +30,8 @@ def calibrate():
               help="Aggregates (seeds) per ε.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Root seed (aggregate k uses SeedSequence(seed).spawn(...)[k]).")
-@click.option("--workers", default=None, type=click.IntRange(min=1),
-              help="Worker processes [default: one per CPU]; results do not depend on it.")
+@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU",
+              help="Worker processes; results do not depend on it.")
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for calibration.csv and calibration.png.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")

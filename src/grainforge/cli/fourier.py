@@ -42,7 +42,7 @@ COLUMNS = ["image", "grain", "x", "y", "area", "r0", "star_shaped", "elongation"
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
 @click.option("--min-area", default=50, show_default=True, type=click.IntRange(min=0),
               help="Skip specks smaller than this many pixels.")
-@click.option("--threshold", type=float, default=None, help="Grey level separating grains and background [default: Otsu].")
+@click.option("--threshold", type=float, default=None, show_default="Otsu", help="Grey level separating grains and background.")
 @click.option("--foreground", type=click.Choice(["auto", "dark", "bright"]), default="auto", show_default=True,
               help="Which side of the threshold the grains are; auto: the side covering fewer border pixels.")
 @click.option("--rays", default=128, show_default=True, type=click.IntRange(min=2 * N_MAX + 2),

@@ -69,6 +69,8 @@ def cli():
 
 
 def _register():
+    from .options import apply_help_style
+
     from . import analyse, batch, calibrate, check, demo, figures, fourier, generate, plot, render, tray
 
     for command in (
@@ -76,6 +78,7 @@ def _register():
         fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate,
     ):
         cli.add_command(command)
+    apply_help_style(cli)
 
 
 _register()

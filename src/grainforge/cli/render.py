@@ -16,8 +16,8 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--out", required=True, type=OutPath(dir_okay=False),
               help="Image to write: .png, or .jpg/.jpeg (JPEG).")
-@click.option("--columns", type=click.IntRange(min=1), default=None,
-              help="Panels per row [default: about square; at most the number of panels].")
+@click.option("--columns", type=click.IntRange(min=1), default=None, show_default="about square",
+              help="Panels per row (at most the number of panels).")
 @click.option("--title", default=None, help="Title above the panels.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
 def render(files, out, columns, title, overwrite):

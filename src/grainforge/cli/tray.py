@@ -63,12 +63,13 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @count_option("Number of generated grains; grain i uses seed S + i.")
 @seed_option
 @click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="Grain size in mm (generated grains: default 10; files: keep their size unless given).")
+              show_default="10 for generated grains; files keep their size",
+              help="Grain size in mm (see --size-definition).")
 @size_definition_option
 @click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
-              help="Minimum distance between grains in mm [default: two printer resolutions].")
+              show_default="two printer resolutions", help="Minimum distance between grains in mm.")
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
-              help="Finest mesh level resolution matching may choose [default 6].")
+              show_default="6", help="Finest mesh level resolution matching may choose.")
 @click.option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
               help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
 @click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),

@@ -29,6 +29,7 @@ METHODS: dict[str, str] = {
     "cri": "grainforge.methods.cri",
     "dpa": "grainforge.methods.dpa",
     "angular": "grainforge.methods.angular",
+    "rf": "grainforge.methods.rf",
 }
 
 

@@ -45,8 +45,8 @@ class Params:
 
     primitive: str = param("cube", "primary particle shape", kind="str", choices=PRIMITIVES)
     exponent: float | None = param(
-        None, f"parent-choice exponent ε of Eq. 4 (default {DEFAULT_EXPONENT}; low: compact, high: branching)",
-        low=0.01, high=100.0,
+        None, "parent-choice exponent ε of Eq. 4 (low: compact, high: branching)",
+        low=0.01, high=100.0, shown_default=f"{DEFAULT_EXPONENT:g}",
     )
     primaries: int = param(200, "number of primary particles N", kind="int", low=1, high=100_000)
     smooth: int = param(

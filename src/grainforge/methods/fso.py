@@ -70,9 +70,14 @@ class Params:
         low=0.0, low_open=True, high=1000.0,
     )
     amplitude: float | None = param(
-        None, f"RMS of (R − R0)/R0 (default {DEFAULT_AMPLITUDE}; exclusive with k)", low=0.0, high=1.0
+        None, "RMS of (R − R0)/R0, measured on the sphere; exclusive with k.  A value is refused when the "
+        "smallest radius would fall below 0.05·R0 (the grain would no longer be star-shaped)",
+        low=0.0, high=1.0, shown_default=f"{DEFAULT_AMPLITUDE:g}",
     )
-    k: float | None = param(None, "the paper's raw amplitude scaling K (exclusive with amplitude)", low=0.0)
+    k: float | None = param(
+        None, "the paper's amplitude scaling K of Eq. 2, R = R0 + K·Σ_m Σ_n w_n{...} with R0 = 1 (K is in "
+        "units of R0): sets the overlay's size directly instead of through its RMS; exclusive with amplitude", low=0.0,
+    )
     ridges: int = param(40, "number of superimposed ridges M", kind="int", low=1, high=400)
     frequencies: int = param(40, "number of frequencies n_max", kind="int", low=1, high=400)
     gamma: float = param(1.5, "frequency density γ", low=1.0, low_open=True, high=10.0)
