@@ -136,7 +136,7 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     >>> round(t.mass, 12), t.clump.count      # a 2 mm cube (file units mm) of water: 8 mg
     (8e-06, 8)
     """
-    from .inputs import enclosure_problems
+    from .enclosure import enclosure_problems
 
     if not (np.isfinite(density) and density > 0):
         raise ValueError(f"density must be > 0 kg/m³, got {density!r}")
