@@ -8,7 +8,9 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "MESH_SUFFIXES"]
+from .enclosure import enclosure_problems
+
+__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "MESH_SUFFIXES"]
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
 
@@ -67,14 +69,13 @@ def read_grain(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
         If the file is unreadable or the mesh is not a valid solid.
     """
     from ..io import read_mesh
-    from ..solid import solid_problems
 
     mesh = read_mesh(path)
     v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
     f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
-    problems = solid_problems(v, f)
+    problems = enclosure_problems(v, f)
     if problems:
-        raise ValueError(f"{path}: not a valid solid ({'; '.join(problems)})")
+        raise ValueError(f"{path}: not a closed solid ({'; '.join(problems)})")
     return v, f
 
 

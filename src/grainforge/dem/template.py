@@ -133,10 +133,10 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     >>> import trimesh
     >>> box = trimesh.creation.box((2.0, 2.0, 2.0))
     >>> t = prepare(box.vertices, box.faces, "box", density=1000.0, spheres=8)
-    >>> round(t.mass, 9), t.clump.count      # 8 cm³ of water
-    (0.008, 8)
+    >>> round(t.mass, 12), t.clump.count      # a 2 mm cube (file units mm) of water: 8 mg
+    (8e-06, 8)
     """
-    from ..solid import solid_problems
+    from .enclosure import enclosure_problems
 
     if not (np.isfinite(density) and density > 0):
         raise ValueError(f"density must be > 0 kg/m³, got {density!r}")
@@ -148,9 +148,9 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         raise ValueError(f"count must be ≥ 1, got {count!r}")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    problems = solid_problems(v, f)
+    problems = enclosure_problems(v, f)
     if problems:
-        raise ValueError(f"{source or name}: not a valid solid ({'; '.join(problems)})")
+        raise ValueError(f"{source or name}: not a closed solid ({'; '.join(problems)})")
     v = v * unit
     mp = mass_properties(v, f)
     v = v - mp.centroid

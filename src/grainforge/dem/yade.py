@@ -161,7 +161,7 @@ def pour():
     rnd.shuffle(population)
     n = len(population)
     cell = 2.2 * max(t["bounding_radius"] for t in grains)
-    side = max(1, int(math.ceil(n ** (1.0 / 3.0))))
+    side = max(1, int(math.ceil(math.sqrt(n / 6.0))))  # a column about 6 grains high
     width = side * cell
     O.bodies.append([
         utils.wall(0.0, axis=2, sense=1, material=contact_material()),
@@ -206,7 +206,7 @@ def pour():
             break
     final = grain_report(ids, names)
     lost = [r["id"] for r in final
-            if not (-0.01 * cell < r["pos"][2] < (side + 2) * cell
+            if not (-0.01 * cell < r["pos"][2] < (n // (side * side) + 2) * cell
                     and 0 <= r["pos"][0] <= width and 0 <= r["pos"][1] <= width)]
     report = {"engine": "yade", "grains": n, "inserted": inserted, "final": final, "lost": lost,
               "kinetic_energy": ke, "ke_threshold": threshold, "settled": ke < threshold,
@@ -229,7 +229,7 @@ def pour_settings(**kw) -> dict:
     >>> pour_settings(seed=3)["seed"]
     3
     """
-    s = {"seed": 0, "young": 5e6, "poisson": 0.3, "friction_deg": 30.0, "damping": 0.5,
+    s = {"seed": 0, "young": 1e6, "poisson": 0.3, "friction_deg": 30.0, "damping": 0.7,
          "dt_safety": 0.3, "max_steps": 150000, "check_every": 1000, "min_time": 0.05,
          "ke_ratio": 1e-4, "vtk_every": 5000}
     unknown = set(kw) - set(s)
