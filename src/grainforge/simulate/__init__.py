@@ -50,7 +50,7 @@ class Settings:
     The same settings apply to every shape in a comparison.
     """
 
-    grains: int = param(300, "grains in the test (drawn from the population's templates)", kind="int",
+    grains: int = param(200, "grains in the test (drawn from the population's templates)", kind="int",
                         low=2, high=20000)
     templates: int = param(40, "distinct grains made into clumps; the test draws from them with replacement "
                            "and random orientations", kind="int", low=1, high=20000)
@@ -61,7 +61,7 @@ class Settings:
                                optional=True)
     density: float = param(1180.0, "grain density (default: a PolyJet photopolymer, as the paper's printed "
                            "grains)", unit="kg/m³", low=1.0, high=30000.0)
-    young: float = param(5e6, "contact modulus E: normal stiffness k_n = E·r of a sphere contact", unit="Pa",
+    young: float = param(1e6, "contact modulus E: normal stiffness k_n = E·r of a sphere contact", unit="Pa",
                          low=1e3, high=1e11)
     poisson: float = param(0.3, "tangential/normal stiffness ratio k_s/k_n", low=0.0, high=1.0, low_open=True)
     friction: float = param(0.5, "contact friction coefficient μ (the same for grains, base and walls)",
@@ -105,7 +105,7 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
     --------
     >>> s = scene_settings(Settings(), "repose", 4)
     >>> s["seed"], s["grains"], round(s["friction_deg"], 2)
-    (4, 300, 26.57)
+    (4, 200, 26.57)
     """
     if test not in TESTS:
         raise ValueError(f"test must be one of {', '.join(TESTS)}, got {test!r}")
@@ -113,7 +113,7 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
         "test": test, "seed": int(seed), "grains": settings.grains, "young": settings.young,
         "poisson": settings.poisson, "friction_deg": math.degrees(math.atan(settings.friction)),
         "damping": settings.damping, "gravity": 9.81, "dt_safety": 0.3, "check_every": 500,
-        "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": 0.3,
+        "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": 0.5,
         "max_time_factor": 8.0, "tilt_step_deg": settings.tilt_step, "tilt_start_deg": settings.tilt_start,
         "tilt_hold": 8.0, "failure_displacement": 0.5, "layer_depth": 4.0,
     }
@@ -257,7 +257,7 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
     env = dict(os.environ, OMP_NUM_THREADS="1")
     from ..workers import die_with_parent
 
-    with open(log_path, "w") as log:
+    with open(log_path, "w", buffering=1) as log:
         proc = _track(subprocess.Popen([exe, "-n", "-x", "run.py"], cwd=deck, stdout=subprocess.PIPE,
                                 stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, env=env,
                                 start_new_session=True, preexec_fn=die_with_parent))
