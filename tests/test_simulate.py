@@ -138,7 +138,7 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
     out = tmp_path / test
     r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick"])
     assert r.exit_code == 0, r.output
-    rows = list(csv.DictReader(open(out / "results.csv")))
+    rows = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
     assert len(rows) == QUICK["seeds"]
     row = rows[0]
     assert int(row["inserted"]) == QUICK["grains"] and int(row["lost"]) == 0

@@ -81,7 +81,7 @@ class Settings:
 
 
 #: settings of ``--quick``: a few tens of grains, seconds per run (plumbing, not a measurement)
-QUICK = dict(grains=30, templates=6, spheres=6, seeds=1)
+QUICK = dict(grains=30, templates=6, spheres=6, seeds=1, tilt_step=1.0, tilt_start=15.0)
 
 
 def yade_executable() -> str:
@@ -272,6 +272,7 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
             _kill(proc)
             raise
         finally:
+            proc.stdout.close()
             _RUNNING.discard(proc)
     if rc != 0 or not (deck / "result.json").is_file():
         tail = [ln.strip() for ln in log_path.read_text(errors="replace").splitlines() if ln.strip()]

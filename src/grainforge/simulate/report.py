@@ -82,13 +82,14 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
         for k, (res, row) in enumerate(zip(results, rows)):
             hist = np.asarray(res["history"])
-            ax.plot(hist[:, 0], hist[:, 1], "o-", ms=3, color=f"C{k}",
+            ax.plot(hist[:, 0], np.maximum(hist[:, 1], 1e-4), "o-", ms=3, color=f"C{k}",
                     label=f"seed {row['seed']}: fails at {row['angle_deg']:.1f}°"
                     if math.isfinite(row["angle_deg"]) else f"seed {row['seed']}: no failure")
         ax.axhline(0.5, color="0.3", ls="--", lw=1, label="failure: 0.5 grain diameters")
         ax.set_xlabel("tilt angle (°)")
         ax.set_ylabel("mean downslope displacement (grain diameters)")
-        ax.set_yscale("symlog", linthresh=0.01)
+        ax.set_yscale("log")
+        ax.set_ylim(1e-4, 2.0)
         ax.set_title("tilt table: a periodic layer on a rough plate")
         ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
