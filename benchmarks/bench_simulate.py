@@ -20,6 +20,7 @@ out/bench-simulate/<test>-comparison.csv and docs/img/simulate-<test>-comparison
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import resource
 import sys
@@ -40,7 +41,7 @@ PAPER = {"rough spheres (0, 0, 0.02)": (38.0, 38.0), "rough angular (0.15, 0.10,
 
 def main(argv=None) -> int:
     from grainforge.io import save_figure, write_csv
-    from grainforge.simulate import Settings, build_population, run_test, summarise
+    from grainforge.simulate import Settings, build_population, measure_result, run_test, summarise
     from grainforge.simulate.report import write_report
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
@@ -51,6 +52,8 @@ def main(argv=None) -> int:
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--out", type=Path, default=ROOT / "out/bench-simulate")
     ap.add_argument("--figure", action="store_true", help="write docs/img/simulate-<test>-comparison.png")
+    ap.add_argument("--remeasure", action="store_true",
+                    help="do not run Yade: measure the runs already in --out again (after a change of the measurement)")
     args = ap.parse_args(argv)
     frictions = [float(x) for x in args.frictions.split(",")]
     table = []
@@ -64,8 +67,14 @@ def main(argv=None) -> int:
             out.mkdir(parents=True, exist_ok=True)
             t0 = time.time()
             c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            templates = build_population([recipe], settings, as_spheres=as_spheres)
-            rows = run_test(args.test, templates, settings, out, label=label, overwrite=True, workers=args.workers)
+            if args.remeasure:
+                rows = [{"label": label, "seed": settings.seed + k,
+                         **measure_result(json.loads((out / f"{args.test}-seed{settings.seed + k}" / "result.json")
+                                                     .read_text()))} for k in range(settings.seeds)]
+            else:
+                templates = build_population([recipe], settings, as_spheres=as_spheres)
+                rows = run_test(args.test, templates, settings, out, label=label, overwrite=True,
+                                workers=args.workers)
             c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             write_report(rows, out, args.test, settings)
             s = summarise(rows)

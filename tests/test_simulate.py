@@ -35,8 +35,10 @@ def test_heap_angle_of_a_cone(angle):
     h = heap_angle(cone(angle), bin_width=0.5, grain_size=1.0)
     assert h.angle == pytest.approx(angle, abs=1.0)
     assert h.spread < 1.5
-    # the foot is where the surface stands one grain (1.0) above the base, to within a ring
+    # the foot is where the surface falls to one grain (1.0) above the base, to within a ring
     assert h.foot == pytest.approx(20.0 - 1.0 / np.tan(np.radians(angle)), abs=0.5)
+    # the fitted slope starts where the cone is at 80 % of its height (r = 4), to within three rings
+    assert h.fitted[0] == pytest.approx(4.0, abs=1.5)
 
 
 def test_heap_angle_is_independent_of_where_the_heap_stands():
@@ -45,6 +47,14 @@ def test_heap_angle_is_independent_of_where_the_heap_stands():
     shifted[:, :2] += 100.0
     shifted[:, 2] += 5.0
     assert heap_angle(shifted, bin_width=0.5, grain_size=1.0, base=5.0).angle == pytest.approx(a, abs=1e-9)
+
+
+def test_heap_angle_leaves_out_a_flat_top():
+    # a truncated cone (the flat top a lifted cylinder leaves): the plateau must not lower the angle
+    pts = cone(35.0)
+    cap = 0.7 * 20.0 * np.tan(np.radians(35.0))
+    pts[:, 2] = np.minimum(pts[:, 2], cap - pts[:, 3])
+    assert heap_angle(pts, bin_width=0.5, grain_size=1.0).angle == pytest.approx(35.0, abs=1.0)
 
 
 def test_heap_angle_refuses_a_flat_layer():

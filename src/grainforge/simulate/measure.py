@@ -3,9 +3,9 @@
 The heap of a repose test is measured as a person with a protractor would, but
 in every direction: the top surface of the grains (the highest sphere top in
 each ring of width ``bin_width`` around the heap's axis, per azimuthal
-sector) is fitted with a straight line between ``inner`` and ``outer``
-fractions of the heap's foot radius; the angle of repose is the arctangent of
-the slope, averaged over the sectors (their spread is reported too).
+sector) is fitted with one straight line on the slope between 20 % and 80 % of
+the heap's height; the angle of repose is the arctangent of its slope.  The
+sectors are also fitted one by one: their spread says how round the heap is.
 """
 
 from __future__ import annotations
@@ -24,9 +24,9 @@ class HeapAngle:
     Attributes
     ----------
     angle : float
-        Mean over sectors, degrees.
+        Degrees: the slope of one line fitted to every sector's surface points on the slope.
     spread : float
-        Standard deviation over sectors, degrees.
+        Standard deviation of the sectors' own angles, degrees (how round the heap is).
     sectors : (S,) float64
         Angle per azimuthal sector, degrees (NaN where a sector had too few points).
     foot : float
@@ -37,6 +37,8 @@ class HeapAngle:
         Ring radius and mean surface height over sectors, for plotting.
     fit : tuple of float
         Intercept and slope of the line fitted to all sectors' points (height = a + b r).
+    fitted : tuple of float
+        Innermost and outermost ring radius of the fitted slope.
     """
 
     angle: float
@@ -46,11 +48,19 @@ class HeapAngle:
     height: float
     profile: np.ndarray
     fit: tuple
+    fitted: tuple
 
 
 def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sectors: int = 8,
-               inner: float = 0.2, outer: float = 0.75, base: float = 0.0) -> HeapAngle:
-    """Angle of repose of a heap of spheres standing on ``z = base`` around the z axis.
+               band: tuple[float, float] = (0.2, 0.8), base: float = 0.0) -> HeapAngle:
+    """Angle of repose of a heap of spheres standing on ``z = base`` around its own vertical axis.
+
+    The heap's top surface is the highest sphere top in each ring of width
+    ``bin_width`` around the axis (through the heap's centroid), per azimuthal
+    sector.  The slope is fitted on the rings outside the crest whose mean
+    surface height lies in ``band`` (fractions of the heap height, and never
+    below one grain): the flat top a lifted cylinder leaves and the toe of
+    single grains are left out.
 
     Parameters
     ----------
@@ -59,13 +69,13 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     bin_width : float
         Width of the radial rings (about half a grain diameter).
     grain_size : float
-        Mean grain diameter: the heap's foot is the outermost ring whose
-        surface stands more than one grain above the base.
+        Mean grain diameter.  The foot of the heap is where its surface falls
+        to one grain above the base.
     sectors : int
         Number of azimuthal sectors measured separately (≥ 1).
-    inner, outer : float
-        The fitted part of the slope, as fractions of the foot radius
-        (0 ≤ inner < outer ≤ 1): the rounded top and the toe are left out.
+    band : (float, float)
+        Lower and upper surface heights of the fitted slope, as fractions of the
+        heap's height (0 ≤ low < high ≤ 1).
     base : float
         Height of the base the heap stands on.
 
@@ -93,8 +103,9 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     s = np.asarray(spheres, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] < 4 or len(s) == 0:
         raise ValueError("spheres must be an (N, 4) array of x, y, z, r with N ≥ 1")
-    if not (bin_width > 0 and grain_size > 0 and sectors >= 1 and 0 <= inner < outer <= 1):
-        raise ValueError("need bin_width > 0, grain_size > 0, sectors ≥ 1 and 0 ≤ inner < outer ≤ 1")
+    lo_f, hi_f = band
+    if not (bin_width > 0 and grain_size > 0 and sectors >= 1 and 0 <= lo_f < hi_f <= 1):
+        raise ValueError("need bin_width > 0, grain_size > 0, sectors ≥ 1 and 0 ≤ band[0] < band[1] ≤ 1")
     xy = s[:, :2] - np.average(s[:, :2], axis=0, weights=s[:, 3] ** 3)
     rad = np.hypot(xy[:, 0], xy[:, 1])
     top = s[:, 2] + s[:, 3] - base
@@ -105,16 +116,29 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     np.maximum.at(surface, (sector, ring), top)
     surface[~np.isfinite(surface)] = np.nan
     centres = (np.arange(nr) + 0.5) * bin_width
-    mean_profile = np.nanmean(np.where(np.isnan(surface), np.nan, surface), axis=0)
+    filled = np.isfinite(surface).any(axis=0)
+    mean_profile = np.full(nr, np.nan)
+    mean_profile[filled] = np.nanmean(surface[:, filled], axis=0)
     height = float(np.nanmax(mean_profile))
-    # the foot: the outermost ring whose mean surface stands more than one grain above the base
-    above = np.nonzero(mean_profile > grain_size)[0]
-    if len(above) < 3:
-        raise ValueError("the heap is too flat or too small to measure an angle")
-    foot = float(centres[above[-1]] + 0.5 * bin_width)
-    sel = (centres >= inner * foot) & (centres <= outer * foot)
+    crest = int(np.nanargmax(mean_profile))
+    lo, hi = max(grain_size, lo_f * height), hi_f * height
+    if not hi > lo:
+        raise ValueError("the heap is too flat or too small to measure an angle (lower than two grains)")
+    # the slope: from the first ring past the crest below hi, outwards while the surface stays above lo
+    outside = np.arange(nr) > crest
+    start = np.nonzero(outside & (mean_profile <= hi))[0]
+    if len(start) == 0:
+        raise ValueError("the heap is too flat or too small to measure an angle (no slope)")
+    i1 = int(start[0])
+    below = np.nonzero((np.arange(nr) >= i1) & ~(mean_profile >= lo))[0]
+    i2 = int(below[0]) if len(below) else nr
+    sel = np.zeros(nr, dtype=bool)
+    sel[i1:i2] = True
     if sel.sum() < 2:
-        raise ValueError("too few rings on the slope: use a smaller bin_width")
+        raise ValueError("the heap is too flat or too small to measure an angle (fewer than two rings "
+                         "on the slope: use a smaller bin_width)")
+    feet = np.nonzero(outside & ~(mean_profile > grain_size))[0]
+    foot = float(centres[feet[0]] - 0.5 * bin_width) if len(feet) else float(centres[-1] + 0.5 * bin_width)
     per_sector = np.full(sectors, np.nan)
     for k in range(sectors):
         ok = sel & np.isfinite(surface[k])
@@ -125,9 +149,9 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     rr = np.broadcast_to(centres, surface.shape)[ok_all]
     b, a = np.polyfit(rr, surface[ok_all], 1)
     prof = np.column_stack([centres, mean_profile])
-    return HeapAngle(angle=float(np.nanmean(per_sector)), spread=float(np.nanstd(per_sector)),
+    return HeapAngle(angle=float(np.degrees(np.arctan(-b))), spread=float(np.nanstd(per_sector)),
                      sectors=per_sector, foot=foot, height=height, profile=prof[np.isfinite(prof[:, 1])],
-                     fit=(float(a), float(b)))
+                     fit=(float(a), float(b)), fitted=(float(centres[i1]), float(centres[i2 - 1])))
 
 
 def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> float:

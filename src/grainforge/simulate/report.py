@@ -59,7 +59,7 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
         ax0.autoscale_view()
         ax0.axhline(0.0, color="k", lw=1)
         a, b = h.fit
-        rr = np.linspace(0.2 * h.foot, 0.75 * h.foot, 2)
+        rr = np.array(h.fitted)
         for sgn in (1, -1):
             ax0.plot(sgn * 1e3 * rr, 1e3 * (a + b * rr), "C3-", lw=2)
         ax0.set_title(f"seed {rows[0]['seed']}: final heap, side view; slope {h.angle:.1f}°")
@@ -72,11 +72,11 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
             ax1.plot(1e3 * hk.profile[:, 0], 1e3 * hk.profile[:, 1], "o-", ms=3, color=f"C{k}",
                      label=f"seed {row['seed']}: {row['angle_deg']:.1f}°")
             ak, bk = hk.fit
-            rk = np.linspace(0.2 * hk.foot, 0.75 * hk.foot, 2)
+            rk = np.array(hk.fitted)
             ax1.plot(1e3 * rk, 1e3 * (ak + bk * rk), "-", lw=3, alpha=0.4, color=f"C{k}")
         ax1.set_xlabel("distance from the heap axis (mm)")
         ax1.set_ylabel("surface height, mean of 8 sectors (mm)")
-        ax1.set_title("profiles; thick: slope fitted on 0.2–0.75 of the foot radius", fontsize=10)
+        ax1.set_title("profiles; thick: the slope fitted between 20 % and 80 % of the height", fontsize=10)
         ax1.legend(loc="upper right", fontsize=8)
     else:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
