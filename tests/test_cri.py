@@ -50,7 +50,12 @@ def _sources(images):
 
 @pytest.mark.parametrize("source", ["fourier", "fourier-3-sets", "fractal", "image"])
 def test_principal_sections_reproduce_the_contours(source, three_images):
-    """Each principal section of the mesh is its (corrected) input contour within 1 % of r0."""
+    """Each principal section of the mesh is its (corrected) input contour within 1 % of r0.
+
+    Image contours: 1.5 %.  Their outlines keep sharp corners up to harmonic 2^s = 32 (nothing is
+    stretched any more), so the mesh's chords miss them by up to 1.3 % of r0 at s = 5.
+    """
+    tol = 0.015 if source == "image" else 0.01
     p = _sources(three_images)[source]
     v, f, info = build(p, np.random.default_rng(3))
     con = construct(p, 3)
@@ -64,12 +69,12 @@ def test_principal_sections_reproduce_the_contours(source, three_images):
         pts = v[on]
         r = np.linalg.norm(pts, axis=1)
         expect = section(_ANGLE[plane](pts)) * section.scale
-        assert np.abs(r - expect).max() < 0.01 * r0, plane
+        assert np.abs(r - expect).max() < tol * r0, plane
         # 2. the mesh's planar cross-section, everywhere along it
         cut = mesh.section(plane_origin=(0, 0, 0), plane_normal=_NORMAL[plane])
         cp = np.asarray(cut.vertices)
         err = np.abs(np.linalg.norm(cp, axis=1) - section(_ANGLE[plane](cp)) * section.scale)
-        assert err.max() < 0.01 * r0, plane
+        assert err.max() < tol * r0, plane
     # the corrected contours meet at the six axis points
     s, q = con.sections, GRID // 4
     pairs = [((0, 0), (1, 0)), ((0, 2 * q), (1, 2 * q)), ((0, q), (2, 0)), ((0, 3 * q), (2, 2 * q)),
