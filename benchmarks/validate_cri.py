@@ -124,8 +124,14 @@ def ridges_table(grains: int = 6):
     print(f"\n| grains | separable share f(θ) + g(ψ) of the small-scale relief (mean ± sd, {grains} grains) |")
     print("|---|---|")
     cases = [
-        ("CRI rough-sphere", cri_mod, cri_mod.Params(preset="rough-sphere")),
-        ("CRI rough-angular", cri_mod, cri_mod.Params(preset="rough-angular")),
+        (f"CRI {preset}, {label}", cri_mod, cri_mod.Params(preset=preset, **kw))
+        for preset in ("rough-sphere", "rough-angular")
+        for label, kw in (("2016 (stretch, no twist)", {"consistency": "stretch", "ridge_twist": 0.0}),
+                          ("spectral, no twist", {"ridge_twist": 0.0}),
+                          ("spectral, twist 20° (default)", {}),
+                          ("spectral, twist 30°", {"ridge_twist": 30.0}),
+                          ("spectral, twist 45°", {"ridge_twist": 45.0}))
+    ] + [
         ("FSO (paper, default)", fso_mod, fso_mod.Params()),
         ("FSO (seamless, default)", fso_mod, fso_mod.Params(surface="seamless")),
     ]
@@ -143,7 +149,13 @@ def main(argv=None):
     t0 = time.time()
     if "sections" in parts:
         print(f"\n### Sections through the volume centroid ⊥ the principal inertia axes ({args.grains} grains)")
+        print("\nDefault construction (consistency=spectral, ridge_twist=20):")
         sections_table(PRESET_SETS + RANGE_SETS, args.grains)
+        print("\nThe 2016 reconstruction (consistency=stretch, ridge_twist=0):")
+        sections_table(PRESET_SETS, args.grains, consistency="stretch", ridge_twist=0.0)
+        for tw in (30.0, 45.0):
+            print(f"\nTwist {tw:g}°:")
+            sections_table(PRESET_SETS, args.grains, with_projections=False, ridge_twist=tw)
     if "ridges" in parts:
         ridges_table()
     print(f"\n(total {time.time() - t0:.0f} s wall)", file=sys.stderr)

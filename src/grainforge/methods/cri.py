@@ -107,6 +107,11 @@ class Params:
         kind="floats", low=0.0, low_open=True, high=100.0,
     )
     morph_exponent: float = param(2.0, "exponent p of the morphing weight sin^p(theta)", low=0.5, high=8.0)
+    ridge_twist: float = param(
+        20.0, "largest angle by which each roughness mode (n >= 3) of a contour is turned away from the "
+        "direction the interpolation sweeps it in, as it leaves its plane (0 = the 2016 sweep, parallel ridges)", unit="deg",
+        low=0.0, high=60.0,
+    )
     consistency: str = param(
         "spectral", "how the three contours are given one L:I:S: spectral = set each contour's mode 2 and mean "
         "radius, keep every other mode (the descriptors survive); stretch = stretch each contour linearly "
@@ -251,6 +256,8 @@ class Construction:
     morph_exponent: float
     dims: tuple[float, float, float] = (2.0, 2.0, 2.0)
     axis_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    #: (3, n) tan of the turn of each mode of C1, C2, C3 (None: no twist), see :meth:`radius`
+    twist: np.ndarray | None = None
 
     def section(self, plane: str) -> Contour:
         """The principal section ``"xy"``, ``"xz"`` or ``"yz"`` as a :class:`Contour` (scale kept)."""
@@ -272,11 +279,50 @@ class Construction:
         r3 = _lookup(c3, g.i3, g.w3)
         q = GRID // 4
         mid = g.cos2 * np.where(g.y_pos, c1[q], c1[3 * q]) + g.sin2 * np.where(g.z_pos, c2[q], c2[3 * q])
+        if self.twist is not None:
+            r1, r2, r3 = self._twisted(np.asarray(unit, dtype=np.float64), g, r1, r2, r3)
         blend = g.cos2 * r1 + g.sin2 * r2
         s = r3 / mid
         p = self.morph_exponent
         weight = g.sin_theta**2 if p == 2.0 else g.sin_theta**p
         return blend * (1.0 + (s - 1.0) * weight)
+
+
+    def _twisted(self, unit, g: _Geometry, r1, r2, r3):
+        """C1 and C2 with their roughness modes turned as they leave their planes.
+
+        In the revolution, C1's mode n, 2|c_n| cos(nθ + φ_n), is swept around
+        x into rings (θ fixed): a family of parallel ridges.  Here its phase
+        also advances with the angle δ out of the xy plane,
+        nθ + φ_n + n·t_n·sin θ·δ (t_n = tan of a turn drawn in ±``ridge_twist``),
+        so each mode's ridges run at their own angle to the rings (sin θ makes
+        it an angle on the surface and keeps the x tips single-valued).  At
+        δ = 0 nothing changes: the xy section is still C1.  Likewise C2 with
+        the angle out of the xz plane.  C3, which the morphing sweeps along
+        θ, is turned the same way with the angle out of the yz plane,
+        π/2 − θ, times sin²2ψ, which keeps it unturned on the xy and xz
+        planes (where the morphing factor must stay 1).  Modes 0–2 (the form)
+        are not turned.
+        """
+        ux, uy, uz = unit[:, 0], unit[:, 1], unit[:, 2]
+        st = g.sin_theta
+        sin2psi2 = 4.0 * g.cos2 * g.sin2  # sin²(2ψ)
+        elev = np.arcsin(np.clip(ux, -1.0, 1.0))  # π/2 − θ
+        out = []
+        for k, (r, i, w, off) in enumerate(((r1, g.i1, g.w1, st * np.arctan2(uz, np.abs(uy))),
+                                            (r2, g.i2, g.w2, st * np.arctan2(uy, np.abs(uz))),
+                                            (r3, g.i3, g.w3, elev * sin2psi2))):
+            spec = np.fft.rfft(self.sections[k]) / GRID
+            n = np.arange(3, len(self.twist[k]))
+            amp = 2.0 * np.abs(spec[n])
+            keep = amp > 1e-12 * abs(spec[0])
+            n, amp, phase, t = n[keep], amp[keep], np.angle(spec[n[keep]]), self.twist[k][n[keep]]
+            ang = (i + w) * (2 * np.pi / GRID)
+            base = np.outer(ang, n) + phase
+            turn = np.outer(off, n * t)
+            delta = (np.cos(base + turn) - np.cos(base)) @ amp
+            out.append(r + delta)
+        return out[0], out[1], out[2]
 
 
 def mesh_modes(subdivisions: int) -> int:
@@ -573,7 +619,11 @@ def construct(p: Params, rng: Any = None) -> Construction:
         prepared, dims = _stretch_consistency([_aligned(_fine(c.radii, p.modes)) for c in inputs], p)
     keep = min(p.modes, mesh_modes(p.subdivisions))
     sections, factors = _correct(_best_orientation(list(_band_limit(np.stack(prepared), keep))))
-    con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
+    twist = None
+    if p.ridge_twist > 0:
+        twist = np.tan(np.deg2rad(p.ridge_twist) * rng.uniform(-1.0, 1.0, size=(3, keep + 1)))
+    con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims),
+                       twist=twist)
     if p.aspect is not None:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
         ext = np.ptp(con.points(unit, geom), axis=0)
@@ -628,6 +678,7 @@ def cri(
     contours: Sequence[Contour] | None = None,
     aspect: Sequence[float] | None = None,
     morph_exponent: float = 2.0,
+    ridge_twist: float = 20.0,
     consistency: str = "spectral",
     subdivisions: int = 5,
     rng=None,
@@ -659,6 +710,11 @@ def cri(
         Target ratio of the principal dimensions (L ≥ I ≥ S).
     morph_exponent : float
         p in the morphing weight sin^p θ (default 2).
+    ridge_twist : float
+        Largest turn (degrees, 0–60, default 20) of each roughness mode of a
+        contour away from the direction the interpolation sweeps it in, as it
+        leaves its plane; 0 gives the 2016 reconstruction's parallel ridges.
+        The principal sections are unaffected.
     consistency : {"spectral", "stretch"}
         How the contours are given one L:I:S: ``spectral`` (default) sets
         each contour's mode 2 and mean radius and keeps every other mode;
@@ -707,7 +763,7 @@ def cri(
         descriptors_yz=None if descriptors_yz is None else tuple(descriptors_yz),
         decay=tuple(decay), modes=modes, fractal_dimension=fractal_dimension, length_ratio=length_ratio,
         fractal_amplitude=fractal_amplitude, images=images, aspect=None if aspect is None else tuple(aspect),
-        morph_exponent=morph_exponent, subdivisions=subdivisions,
+        morph_exponent=morph_exponent, ridge_twist=ridge_twist, consistency=consistency, subdivisions=subdivisions,
         sections=None if contours is None else tuple(contours),
     )
     return generate(NAME, p, rng)
