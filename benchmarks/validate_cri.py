@@ -39,26 +39,11 @@ def read_back(grain):
     return trimesh.load(io.BytesIO(export_bytes(grain, "stl")), file_type="stl")
 
 
-def section_descriptors(mesh, n_angles: int = 256, orders=ORDERS) -> np.ndarray:
-    """(3, len(orders)) D_n of the sections through the volume centroid perpendicular to the
-    principal inertia axes (longest first: the section normal to L, to I, to S)."""
-    from grainforge.contours import descriptors_of_radii, polygon_contour
+def section_descriptors(mesh, orders=ORDERS) -> np.ndarray:
+    """(3, len(orders)) D_n of the sections through the volume centroid ⊥ the principal inertia axes."""
+    from grainforge.analysis.sections import section_descriptors as sd
 
-    centre = np.asarray(mesh.center_mass)
-    w, vec = np.linalg.eigh(mesh.moment_inertia)  # smallest moment = longest axis first
-    axes = vec.T
-    out = []
-    for k in range(3):
-        n = axes[k]
-        e1, e2 = axes[(k + 1) % 3], axes[(k + 2) % 3]
-        sec = mesh.section(plane_origin=centre, plane_normal=n)
-        loops = [np.asarray(p) for p in sec.discrete]
-        pts = max(loops, key=len) - centre
-        poly = np.column_stack([pts @ e1, pts @ e2])
-        c = polygon_contour(poly, n_angles=n_angles)
-        D = descriptors_of_radii(c.radii)
-        out.append([D[o] for o in orders])
-    return np.array(out)
+    return sd(mesh, orders)
 
 
 def projection_fds(mesh, orders=ORDERS) -> np.ndarray:
@@ -68,26 +53,10 @@ def projection_fds(mesh, orders=ORDERS) -> np.ndarray:
     return np.array([[r[f"fd_{p}_{o}"] for o in orders] for p in ("LI", "LS", "IS")])
 
 
-def ridge_share(vertices, faces, sigma: float = 0.1, n_theta: int = 64, n_psi: int = 128) -> float:
-    """Share of the variance of the small-scale relief explained by f(θ) + g(ψ).
+def ridge_share(vertices, faces) -> float:
+    from grainforge.analysis.relief import separable_share
 
-    θ = angle from +x, ψ = azimuth about x, both from the construction centre
-    (the origin of ``build``'s vertices); θ ∈ [0.35, π − 0.35] avoids the
-    x poles.  The relief is r − G_σ∗r (``analysis.relief.small_scale_relief``)
-    interpolated linearly on the mesh.
-    """
-    from grainforge.analysis.relief import interpolate_at, small_scale_relief
-
-    z = np.zeros(3)
-    h = small_scale_relief(vertices, faces, sigma, centre=z)
-    t = np.linspace(0.35, np.pi - 0.35, n_theta)
-    p = 2 * np.pi * np.arange(n_psi) / n_psi
-    T, P = np.meshgrid(t, p, indexing="ij")
-    d = np.column_stack([np.cos(T).ravel(), (np.sin(T) * np.cos(P)).ravel(), (np.sin(T) * np.sin(P)).ravel()])
-    H = interpolate_at(vertices, faces, h, d, centre=z).reshape(n_theta, n_psi)
-    H = H - H.mean()
-    fit = H.mean(axis=1, keepdims=True) + H.mean(axis=0, keepdims=True)
-    return float(1.0 - np.var(H - fit) / np.var(H))
+    return separable_share(vertices, faces, centre=np.zeros(3))
 
 
 def sections_table(sets, grains: int, with_projections: bool = True, **kw):

@@ -15,6 +15,9 @@ They work on any closed mesh, knowing nothing of how it was made:
   small-scale relief at polar angles φ0 − δ and φ0 + δ (a mirror seam at φ0
   makes it ≈ 1 for every δ; an isotropic surface gives the same value about
   every φ0);
+* :func:`separable_share` — the share of the small-scale relief explained by
+  a separable pattern f(θ) + g(ψ) in angles about the x axis (parallel
+  ridges around x and along meridians through x make it large);
 * :func:`cap_band_rms` — RMS of the relief r/r̄ − 1 in the two polar caps and
   in an equatorial band.
 
@@ -29,7 +32,7 @@ import numpy as np
 from ..solid import volume_centroid
 from .fractal import radial_function
 
-__all__ = ["radii_along", "vertex_areas", "small_scale_relief", "interpolate_at", "mirror_correlation", "cap_band_rms", "ring"]
+__all__ = ["radii_along", "vertex_areas", "small_scale_relief", "interpolate_at", "mirror_correlation", "cap_band_rms", "ring", "separable_share"]
 
 
 def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
@@ -181,3 +184,27 @@ def cap_band_rms(vertices, faces, cap: float = 0.3, band: float = 0.15, centre=N
     eq = np.abs(polar - np.pi / 2) < band
     rms = [float(np.sqrt(np.average(rel[m] ** 2, weights=w[m]))) for m in (caps, eq)]
     return rms[0], rms[1]
+
+
+def separable_share(vertices, faces, sigma: float = 0.1, n_theta: int = 64, n_psi: int = 128, centre=None) -> float:
+    """Share of the variance of the small-scale relief explained by f(θ) + g(ψ).
+
+    θ = angle from +x, ψ = azimuth about x, from ``centre`` (default the
+    volume centroid); θ ∈ [0.35, π − 0.35] avoids the x poles.  The relief is
+    r − G_σ∗r (:func:`small_scale_relief`) interpolated on the mesh at a
+    regular (θ, ψ) grid; f and g are its row and column means.  An isotropic
+    surface gives a small share (the row and column means of a finite grid
+    are never exactly zero); relief made of rings about x plus meridional
+    ridges gives a large one.
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    c = volume_centroid(v, np.asarray(faces)) if centre is None else np.asarray(centre, dtype=np.float64)
+    h = small_scale_relief(v, faces, sigma, centre=c)
+    t = np.linspace(0.35, np.pi - 0.35, n_theta)
+    p = 2 * np.pi * np.arange(n_psi) / n_psi
+    T, P = np.meshgrid(t, p, indexing="ij")
+    d = np.column_stack([np.cos(T).ravel(), (np.sin(T) * np.cos(P)).ravel(), (np.sin(T) * np.sin(P)).ravel()])
+    H = interpolate_at(v, faces, h, d, centre=c).reshape(n_theta, n_psi)
+    H = H - H.mean()
+    fit = H.mean(axis=1, keepdims=True) + H.mean(axis=0, keepdims=True)
+    return float(1.0 - np.var(H - fit) / np.var(H))

@@ -280,7 +280,7 @@ class Construction:
         q = GRID // 4
         mid = g.cos2 * np.where(g.y_pos, c1[q], c1[3 * q]) + g.sin2 * np.where(g.z_pos, c2[q], c2[3 * q])
         if self.twist is not None:
-            r1, r2, r3 = self._twisted(np.asarray(unit, dtype=np.float64), g, r1, r2, r3)
+            r1, r2, r3, mid = self._twisted(np.asarray(unit, dtype=np.float64), g, r1, r2, r3, mid)
         blend = g.cos2 * r1 + g.sin2 * r2
         s = r3 / mid
         p = self.morph_exponent
@@ -288,8 +288,8 @@ class Construction:
         return blend * (1.0 + (s - 1.0) * weight)
 
 
-    def _twisted(self, unit, g: _Geometry, r1, r2, r3):
-        """C1 and C2 with their roughness modes turned as they leave their planes.
+    def _twisted(self, unit, g: _Geometry, r1, r2, r3, mid):
+        """C1, C2, C3 (and r̃(π/2, ψ)) with their roughness modes turned as they leave their planes.
 
         In the revolution, C1's mode n, 2|c_n| cos(nθ + φ_n), is swept around
         x into rings (θ fixed): a family of parallel ridges.  Here its phase
@@ -301,28 +301,33 @@ class Construction:
         the angle out of the xz plane.  C3, which the morphing sweeps along
         θ, is turned the same way with the angle out of the yz plane,
         π/2 − θ, times sin²2ψ, which keeps it unturned on the xy and xz
-        planes (where the morphing factor must stay 1).  Modes 0–2 (the form)
-        are not turned.
+        planes (where the morphing factor must stay 1).  The morphing's
+        reference r̃(π/2, ψ) is made of the same turned C1 and C2 at θ = π/2,
+        so the yz section is still C3.  Modes 0–2 (the form) are not turned.
         """
         ux, uy, uz = unit[:, 0], unit[:, 1], unit[:, 2]
         st = g.sin_theta
         sin2psi2 = 4.0 * g.cos2 * g.sin2  # sin²(2ψ)
         elev = np.arcsin(np.clip(ux, -1.0, 1.0))  # π/2 − θ
-        out = []
-        for k, (r, i, w, off) in enumerate(((r1, g.i1, g.w1, st * np.arctan2(uz, np.abs(uy))),
-                                            (r2, g.i2, g.w2, st * np.arctan2(uy, np.abs(uz))),
-                                            (r3, g.i3, g.w3, elev * sin2psi2))):
+        off1, off2 = np.arctan2(uz, np.abs(uy)), np.arctan2(uy, np.abs(uz))
+
+        def delta(k, ang, off):
             spec = np.fft.rfft(self.sections[k]) / GRID
             n = np.arange(3, len(self.twist[k]))
             amp = 2.0 * np.abs(spec[n])
             keep = amp > 1e-12 * abs(spec[0])
             n, amp, phase, t = n[keep], amp[keep], np.angle(spec[n[keep]]), self.twist[k][n[keep]]
-            ang = (i + w) * (2 * np.pi / GRID)
             base = np.outer(ang, n) + phase
-            turn = np.outer(off, n * t)
-            delta = (np.cos(base + turn) - np.cos(base)) @ amp
-            out.append(r + delta)
-        return out[0], out[1], out[2]
+            return (np.cos(base + np.outer(off, n * t)) - np.cos(base)) @ amp
+
+        step = 2 * np.pi / GRID
+        r1 = r1 + delta(0, (g.i1 + g.w1) * step, st * off1)
+        r2 = r2 + delta(1, (g.i2 + g.w2) * step, st * off2)
+        r3 = r3 + delta(2, (g.i3 + g.w3) * step, elev * sin2psi2)
+        half = np.pi / 2
+        mid = (mid + g.cos2 * delta(0, np.where(g.y_pos, half, 3 * half), off1)
+               + g.sin2 * delta(1, np.where(g.z_pos, half, 3 * half), off2))
+        return r1, r2, r3, mid
 
 
 def mesh_modes(subdivisions: int) -> int:
