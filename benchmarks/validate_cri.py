@@ -97,8 +97,8 @@ def ridges_table(grains: int = 6):
         for preset in ("rough-sphere", "rough-angular")
         for label, kw in (("2016 (stretch, no twist)", {"consistency": "stretch", "ridge_twist": 0.0}),
                           ("spectral, no twist", {"ridge_twist": 0.0}),
-                          ("spectral, twist 20° (default)", {}),
-                          ("spectral, twist 30°", {"ridge_twist": 30.0}),
+                          ("spectral, twist 15°", {"ridge_twist": 15.0}),
+                          ("spectral, twist 30° (default)", {}),
                           ("spectral, twist 45°", {"ridge_twist": 45.0}))
     ] + [
         ("FSO (paper, default)", fso_mod, fso_mod.Params()),
@@ -118,11 +118,11 @@ def main(argv=None):
     t0 = time.time()
     if "sections" in parts:
         print(f"\n### Sections through the volume centroid ⊥ the principal inertia axes ({args.grains} grains)")
-        print("\nDefault construction (consistency=spectral, ridge_twist=20):")
+        print("\nDefault construction (consistency=spectral, ridge_twist=30):")
         sections_table(PRESET_SETS + RANGE_SETS, args.grains)
         print("\nThe 2016 reconstruction (consistency=stretch, ridge_twist=0):")
         sections_table(PRESET_SETS, args.grains, consistency="stretch", ridge_twist=0.0)
-        for tw in (30.0, 45.0):
+        for tw in (0.0, 45.0):
             print(f"\nTwist {tw:g}°:")
             sections_table(PRESET_SETS, args.grains, with_projections=False, ridge_twist=tw)
     if "ridges" in parts:

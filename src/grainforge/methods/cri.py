@@ -108,7 +108,7 @@ class Params:
     )
     morph_exponent: float = param(2.0, "exponent p of the morphing weight sin^p(theta)", low=0.5, high=8.0)
     ridge_twist: float = param(
-        20.0, "largest angle by which each roughness mode (n >= 3) of a contour is turned away from the "
+        30.0, "largest angle by which each roughness mode (n >= 3) of a contour is turned away from the "
         "direction the interpolation sweeps it in, as it leaves its plane (0 = the 2016 sweep, parallel ridges)", unit="deg",
         low=0.0, high=60.0,
     )
@@ -288,22 +288,23 @@ class Construction:
         return blend * (1.0 + (s - 1.0) * weight)
 
 
-    def _twisted(self, unit, g: _Geometry, r1, r2, r3, mid):
+    def _twisted(self, unit, g: _Geometry, r1, r2, r3, mid):  # noqa: D417
         """C1, C2, C3 (and r̃(π/2, ψ)) with their roughness modes turned as they leave their planes.
 
         In the revolution, C1's mode n, 2|c_n| cos(nθ + φ_n), is swept around
         x into rings (θ fixed): a family of parallel ridges.  Here its phase
         also advances with the angle δ out of the xy plane,
-        nθ + φ_n + n·t_n·sin θ·δ (t_n = tan of a turn drawn in ±``ridge_twist``),
-        so each mode's ridges run at their own angle to the rings (sin θ makes
-        it an angle on the surface and keeps the x tips single-valued).  At
+        nθ + φ_n + n·t_n·sin θ cos²θ·δ (t_n = tan of a turn drawn uniformly in
+        ±``ridge_twist``), so each mode's ridges run at their own angle to the
+        rings.  sin θ keeps the x tips single-valued; cos²θ keeps C1 and C2
+        unturned where they meet the yz plane, so that the morphing (which
+        divides by their values there) still gives C3 as the yz section.  At
         δ = 0 nothing changes: the xy section is still C1.  Likewise C2 with
         the angle out of the xz plane.  C3, which the morphing sweeps along
         θ, is turned the same way with the angle out of the yz plane,
         π/2 − θ, times sin²2ψ, which keeps it unturned on the xy and xz
-        planes (where the morphing factor must stay 1).  The morphing's
-        reference r̃(π/2, ψ) is made of the same turned C1 and C2 at θ = π/2,
-        so the yz section is still C3.  Modes 0–2 (the form) are not turned.
+        planes (where the morphing factor must stay 1).  Modes 0–2 (the form)
+        are not turned.
         """
         ux, uy, uz = unit[:, 0], unit[:, 1], unit[:, 2]
         st = g.sin_theta
@@ -321,12 +322,10 @@ class Construction:
             return (np.cos(base + np.outer(off, n * t)) - np.cos(base)) @ amp
 
         step = 2 * np.pi / GRID
-        r1 = r1 + delta(0, (g.i1 + g.w1) * step, st * off1)
-        r2 = r2 + delta(1, (g.i2 + g.w2) * step, st * off2)
+        fade = st * (1.0 - st * st)  # sin θ cos² θ
+        r1 = r1 + delta(0, (g.i1 + g.w1) * step, fade * off1)
+        r2 = r2 + delta(1, (g.i2 + g.w2) * step, fade * off2)
         r3 = r3 + delta(2, (g.i3 + g.w3) * step, elev * sin2psi2)
-        half = np.pi / 2
-        mid = (mid + g.cos2 * delta(0, np.where(g.y_pos, half, 3 * half), off1)
-               + g.sin2 * delta(1, np.where(g.z_pos, half, 3 * half), off2))
         return r1, r2, r3, mid
 
 
@@ -683,7 +682,7 @@ def cri(
     contours: Sequence[Contour] | None = None,
     aspect: Sequence[float] | None = None,
     morph_exponent: float = 2.0,
-    ridge_twist: float = 20.0,
+    ridge_twist: float = 30.0,
     consistency: str = "spectral",
     subdivisions: int = 5,
     rng=None,
@@ -716,7 +715,7 @@ def cri(
     morph_exponent : float
         p in the morphing weight sin^p θ (default 2).
     ridge_twist : float
-        Largest turn (degrees, 0–60, default 20) of each roughness mode of a
+        Largest turn (degrees, 0–60, default 30) of each roughness mode of a
         contour away from the direction the interpolation sweeps it in, as it
         leaves its plane; 0 gives the 2016 reconstruction's parallel ridges.
         The principal sections are unaffected.
