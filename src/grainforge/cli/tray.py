@@ -61,7 +61,7 @@ def parse_param_values(method: str, pairs, preset: str | None):
               help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
 @count_option("Number of generated grains; grain i uses seed S + i.")
 @seed_option
-@click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
+@click.option("--size", default=None, type=click.FloatRange(min=1e-3, max=1e4),
               help="Grain size in mm (generated grains: default 10; files: keep their size unless given).")
 @size_definition_option
 @click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
