@@ -132,11 +132,49 @@ def test_bad_parameters_are_named(kw, name):
     assert e.value.name == name
 
 
-def test_too_much_roughness_is_named():
+def test_too_small_a_radius_is_named(monkeypatch):
+    """The guard (radius ≤ MIN_RADIUS·R0 after dents and roughness) names roughness.
+
+    Within the declared ranges the smallest radius found is ≈ 0.16 R0 (sweep in
+    docs/methods/angular.md), so the guard is exercised with a raised threshold.
+    """
+    import grainforge.methods.angular as mod
+
+    monkeypatch.setattr(mod, "MIN_RADIUS", 0.9)
     with pytest.raises(ParameterError) as e:
-        grainforge.angular(roughness=0.3, length_ratio=0.05, fractal_dimension=2.0, dents=12, dent_depth=0.5,
-                           subdivisions=4, rng=0)
+        grainforge.angular(roughness=0.1, dents=6, dent_depth=0.5, subdivisions=3, rng=0)
     assert e.value.name == "roughness"
+
+
+def test_radius_matches_brute_force_over_all_features():
+    """The feature filter of radius() never drops the exit feature: same r as max over every capsule."""
+    from grainforge.geodesic import icosphere
+    from grainforge.methods.angular import _polytope
+
+    unit, _ = icosphere(4)
+    cases = [(0.1, 0, 24, (2.0, 1.3, 1.0)), (0.5, 1, 24, (2.0, 1.3, 1.0)), (0.9, 2, 24, (2.0, 1.3, 1.0)),
+             (0.9, 3, 6, (1, 1, 1)), (0.3, 4, 200, (10, 3, 1)), (0.7, 5, 12, (10, 10, 1))]
+    for rounding, seed, k, aspect in cases:
+        c = core(Params(facets=k, aspect=aspect, rounding=rounding), np.random.default_rng(seed))
+        r, flat = radius(unit, c)
+        assert np.all(np.isfinite(r))
+        V = c.vertices
+        b = unit @ V.T
+        disc = b * b - ((V * V).sum(1) - c.rho**2)
+        brute = np.where(disc >= 0, b + np.sqrt(np.maximum(disc, 0)), -np.inf).max(1)
+        for va, vb in c.edges:
+            a, d = V[va], V[vb] - V[va]
+            L = np.linalg.norm(d)
+            d = d / L
+            ud, ua = unit @ d, unit @ a
+            q, B = 1 - ud**2, ua - ud * (a @ d)
+            disc = B * B - q * (a @ a - (a @ d) ** 2 - c.rho**2)
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (B + np.sqrt(np.maximum(disc, 0))) / q
+                s = t * ud - a @ d
+                brute = np.maximum(brute, np.where((disc >= 0) & (q > 1e-12) & (s >= 0) & (s <= L), t, -np.inf))
+        np.testing.assert_allclose(r[~flat], brute[~flat], rtol=1e-12, atol=1e-12)
+        assert np.all(r[flat] >= brute[flat] - 1e-12)
 
 
 def test_declared_ranges_are_accurate():

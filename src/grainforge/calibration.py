@@ -36,6 +36,8 @@ __all__ = [
     "exponent_for_dimension", "DEFAULT_EXPONENTS", "DEFAULT_REPEATS", "COLUMNS",
 ]
 
+#: header units of calibration.csv: R_g of the aggregate of primaries in primary sizes a = V_p^(1/3)
+UNITS = {"R_g_mean": "primary_sizes", "R_g_std": "primary_sizes"}
 #: ε grid of the cached curves: 16 points, log-spaced from 0.05 to 100.
 DEFAULT_EXPONENTS = tuple(float(x) for x in np.round(np.geomspace(0.05, 100.0, 16), 6))
 DEFAULT_REPEATS = 8
@@ -137,7 +139,7 @@ class Calibration:
         """Write ``calibration.csv``-style text atomically."""
         from .io import write_csv
 
-        return write_csv(path, self.rows(), COLUMNS)
+        return write_csv(path, self.rows(), COLUMNS, units=UNITS)
 
     @classmethod
     def read_csv(cls, path: str | os.PathLike) -> "Calibration":
@@ -146,6 +148,8 @@ class Calibration:
             rows = list(csv.DictReader(fh))
         if not rows:
             raise ValueError(f"{path}: empty calibration file")
+        plain = {f"{c}_{u}": c for c, u in UNITS.items()}
+        rows = [{plain.get(k, k): v for k, v in r.items()} for r in rows]
         r0 = rows[0]
         col = lambda k: np.array([float(r[k]) for r in rows]) if k in r0 else None  # noqa: E731
         return cls(

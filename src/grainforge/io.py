@@ -146,8 +146,15 @@ def _cell(v: Any) -> str:
     return str(v)
 
 
-def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> str:
-    """Rows as CSV text (floats written with full precision, ``None`` empty)."""
+def csv_text(
+    rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None, *,
+    units: bool | Mapping[str, str] = False,
+) -> str:
+    """Rows as CSV text (floats written with full precision, ``None`` empty).
+
+    With ``units=True`` every header states its unit (``volume_mm3``; see :mod:`grainforge.units`);
+    ``units`` may also be a ``{column: unit suffix}`` mapping of the file's own.
+    """
     rows = list(rows)
     if columns is None:
         columns = []
@@ -155,15 +162,23 @@ def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = 
             columns.extend(k for k in r if k not in columns)
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
+    if units:
+        from .units import UNITS, headers
+
+        w.writerow(headers(columns, UNITS if units is True else units))
+    else:
+        w.writerow(columns)
     for r in rows:
         w.writerow([_cell(r.get(c)) for c in columns])
     return buf.getvalue()
 
 
-def write_csv(path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> Path:
-    """Write rows of dicts to a CSV file atomically."""
-    return atomic_write(path, csv_text(rows, columns))
+def write_csv(
+    path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None,
+    *, units: bool | Mapping[str, str] = False,
+) -> Path:
+    """Write rows of dicts to a CSV file atomically (``units``: see :func:`csv_text`)."""
+    return atomic_write(path, csv_text(rows, columns, units=units))
 
 
 #: first bytes of common non-mesh files, to say what a misnamed file is

@@ -649,7 +649,7 @@ def run_batch(
         _record(out, res)
         rows[res.index] = res.row
     ordered = [rows[i] for i in range(recipe.count)]
-    write_csv(out / MANIFEST, ordered, manifest_columns(recipe.method, ("sha256",)))
+    write_csv(out / MANIFEST, ordered, manifest_columns(recipe.method, ("sha256",)), units=True)
     summary = None
     if report:
         from .report import population_report

@@ -8,13 +8,14 @@ from pathlib import Path
 
 import click
 
+from ..units import with_unit
 from .paths import OutPath, mesh_inputs, output_file
 
 #: columns of the terminal table (all columns go to --csv and --json)
 TABLE = (
     ("file", "file", "{}"), ("body", "body", "{}"), ("faces", "faces", "{}"), ("flags", "flags", "{}"),
-    ("volume", "V", "{:.4g}"), ("equivalent_diameter", "d_eq", "{:.4g}"), ("sphericity", "sph", "{:.3f}"),
-    ("convexity", "conv", "{:.3f}"), ("L", "L", "{:.4g}"), ("I", "I", "{:.4g}"), ("S", "S", "{:.4g}"),
+    ("volume", "V_mm3", "{:.4g}"), ("equivalent_diameter", "d_eq_mm", "{:.4g}"), ("sphericity", "sph", "{:.3f}"),
+    ("convexity", "conv", "{:.3f}"), ("L", "L_mm", "{:.4g}"), ("I", "I_mm", "{:.4g}"), ("S", "S_mm", "{:.4g}"),
     ("krumbein_sphericity", "krumb", "{:.3f}"), ("roughness", "rough", "{:.4f}"),
     ("fractal_dimension", "D_s", "{:.2f}"), ("fd_LI_2", "FD2", "{:.3f}"), ("fd_LI_3", "FD3", "{:.3f}"),
     ("fd_LI_8", "FD8", "{:.4f}"),
@@ -89,10 +90,10 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite
         rows += file_rows
     columns = ANALYSE_COLUMNS(fourier)
     if csv_out is not None:
-        write_csv(csv_out, rows, columns)
+        write_csv(csv_out, rows, columns, units=True)
         click.echo(f"wrote {len(rows)} row(s) to {csv_out}", err=True)
     if as_json:
-        click.echo(json.dumps([{c: _json_value(r.get(c)) for c in columns} for r in rows], indent=1))
+        click.echo(json.dumps([{with_unit(c): _json_value(r.get(c)) for c in columns} for r in rows], indent=1))
     else:
         click.echo(table_text(rows))
     flagged = [r for r in rows if r["flags"]]

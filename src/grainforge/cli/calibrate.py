@@ -39,7 +39,7 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
     """Mean and spread of D_A (Eq. 5) and porosity over seeds, for each ε of a grid.
 
     Writes calibration.csv (exponent, D_A_mean, D_A_std, porosity_mean,
-    porosity_std, R_g_mean, R_g_std, D_A_scaling_mean, D_A_scaling_std, ...)
+    porosity_std, R_g_mean_primary_sizes, R_g_std_primary_sizes, D_A_scaling_mean, D_A_scaling_std, ...)
     and calibration.png (the curves with ±1 s.d. bands).
     """
     from ..calibration import calibrate as run_calibration

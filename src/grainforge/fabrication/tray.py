@@ -543,7 +543,7 @@ def build_tray(
             _preview(path, footprints[k], layers_of[k], printer.build_volume,
                      f"{out.name} plate {k + 1}/{len(previews)}: {n} grains, {layer_count[k]} layer(s), "
                      f"{printer.name}, gap {gap * 1000:.0f} µm")
-        write_csv(csv_path, rows)
+        write_csv(csv_path, rows, units=True)
     except BaseException:
         if writer is not None:
             writer.abort()

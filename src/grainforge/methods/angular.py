@@ -20,16 +20,18 @@ icosphere like FSO and CRI grains:
    spheres of radius ρ.  Its radius function is evaluated exactly: on a facet,
    r = h_i / (n_i·u) for the first plane the ray meets, kept where the point
    lies over the shrunk facet; elsewhere the ray leaves through an edge cylinder
-   or corner sphere, and r is the largest exit distance over the capsules
-   (segment ⊕ ball) of the shrunk core's edges.
+   or corner sphere, and r is the largest exit distance over the edge
+   cylinders and corner spheres of the shrunk core (evaluated only for the
+   features whose planes pass close enough to the ray's exit point).
 3. **Dents** (concavities): ``dents`` smooth radial dips at random directions,
    r ← r · (1 − depth · (1 − Π_j (1 − g_j))), g_j = exp((u·d_j − 1) / w²),
    w = ``dent_width``: one dent is a Gaussian dip of the given depth, and
    overlapping dents merge rather than deepen, so r never falls below
    (1 − depth) times the core's radius.
-4. **Roughness**: the FSO overlay (Eqs. 2–3; ``fractal_dimension``,
-   ``length_ratio``) with RMS ``roughness``, applied along the radius:
-   r ← r · (1 + K·S(u)).
+4. **Roughness**: the FSO overlay (:func:`grainforge.methods.fso.overlay`;
+   ``fractal_dimension``, ``length_ratio``, ``surface`` — by default its
+   seamless form, the double sum of Eqs. 2–3 on the 3D unit vector) with RMS
+   ``roughness``, applied along the radius: r ← r · (1 + K·S(u)).
 
 The sampled mesh of a positive radius function on the icosphere is always a
 valid star-shaped solid.  With ``rounding`` = 0 the facets are exact planes
@@ -85,11 +87,13 @@ class Params:
     dent_width: float = param(0.45, "angular width w of each dent (Gaussian in angle)", unit="rad",
                               low=0.1, high=1.2)
     roughness: float = param(0.0, "RMS of the FSO overlay, relative to the radius (0 = smooth facets)",
-                             low=0.0, high=0.3)
+                             low=0.0, high=0.15)
     fractal_dimension: float = param(2.4, "FSO overlay: fractal dimension D", low=2.0, high=3.0,
                                      high_open=True)
     length_ratio: float = param(1.0, "FSO overlay: stochastic length L/R0 (small = fine texture)",
                                 low=0.05, high=20.0)
+    surface: str = param("seamless", "FSO overlay form: seamless (3D unit vector, no special latitude) or "
+                         "paper (Eqs. 2-3, mirror seam at the equator)", kind="str", choices=("seamless", "paper"))
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
 
     def __post_init__(self):
@@ -116,11 +120,13 @@ class Core:
     rho : float
         Edge and corner radius ρ.
     vertices : (m, 3) float64
-        Vertices of the shrunk core (planes at h_i − ρ); empty when ρ = 0.
+        Vertices of the shrunk core (planes at h_i − ρ).
+    vertex_planes : (m, k) bool
+        The planes through each vertex.
     edges : (e, 2) int64
-        Vertex index pairs whose capsules cover the rounded part (every hull
-        triangle edge of the shrunk core: its true edges and, harmlessly,
-        facet diagonals, whose capsules lie inside the grain).
+        End vertices of each edge of the shrunk core.
+    edge_planes : (e, 2) int64
+        The two facets i < j meeting at each edge.
     semi_axes : (3,) float64
     """
 
@@ -128,7 +134,9 @@ class Core:
     offsets: np.ndarray
     rho: float
     vertices: np.ndarray
+    vertex_planes: np.ndarray
     edges: np.ndarray
+    edge_planes: np.ndarray
     semi_axes: np.ndarray
 
 
@@ -174,22 +182,35 @@ def core(p: Params, rng: np.random.Generator) -> Core:
     ax = _semi_axes(p.aspect)
     h = np.linalg.norm(n * ax, axis=1)
     rho = float(p.rounding * ax.min())
-    if rho > 0.0:
-        from scipy.spatial import ConvexHull, HalfspaceIntersection
+    return Core(n, h, rho, *_polytope(n, h - rho), ax)
 
-        hs = HalfspaceIntersection(np.column_stack([n, -(h - rho)]), np.zeros(3))
-        verts = np.asarray(hs.intersections, dtype=np.float64)
-        tri = ConvexHull(verts).simplices
-        e = np.sort(np.concatenate([tri[:, [0, 1]], tri[:, [1, 2]], tri[:, [2, 0]]]), axis=1)
-        edges = np.unique(e, axis=0)
-    else:
-        verts = np.zeros((0, 3))
-        edges = np.zeros((0, 2), dtype=np.int64)
-    return Core(n, h, rho, verts, edges, ax)
+
+def _polytope(normals: np.ndarray, offsets: np.ndarray):
+    """Vertices, vertex-plane incidence, edges and edge planes of {x : n_i·x ≤ offsets_i} (origin inside)."""
+    from scipy.spatial import HalfspaceIntersection
+
+    hs = HalfspaceIntersection(np.column_stack([normals, -offsets]), np.zeros(3))
+    verts = np.asarray(hs.intersections, dtype=np.float64)
+    on = np.abs(verts @ normals.T - offsets) <= 1e-8 * (1.0 + np.abs(offsets))
+    # merge numerically coincident vertices (qhull reports a degenerate vertex once per simplex)
+    key = np.round(verts, 9)
+    _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+    inverse = inverse.ravel()
+    merged = np.zeros((len(first), len(offsets)), dtype=bool)
+    np.logical_or.at(merged, inverse, on)
+    verts, on = verts[first], merged
+    shared = on.T.astype(np.int64) @ on.astype(np.int64)  # vertices on both planes
+    ii, jj = np.nonzero(np.triu(shared >= 2, 1))
+    edges = np.empty((len(ii), 2), dtype=np.int64)
+    for e, (i, j) in enumerate(zip(ii, jj)):
+        idx = np.flatnonzero(on[:, i] & on[:, j])
+        s = verts[idx] @ np.cross(normals[i], normals[j])
+        edges[e] = idx[np.argmin(s)], idx[np.argmax(s)]
+    return verts, on, edges, np.column_stack([ii, jj]).astype(np.int64)
 
 
 def core_edges(c: Core) -> list[tuple[np.ndarray, np.ndarray, float, int, int]]:
-    """The true edges of the shrunk core (planes at h_i − ρ; the core itself when ρ = 0).
+    """The edges of the shrunk core (planes at h_i − ρ; the core itself when ρ = 0).
 
     Returns
     -------
@@ -202,56 +223,76 @@ def core_edges(c: Core) -> list[tuple[np.ndarray, np.ndarray, float, int, int]]:
     >>> len(core_edges(c)) == 3 * 8 - 6   # a simple polyhedron: E = 3F − 6
     True
     """
-    from scipy.spatial import HalfspaceIntersection
-
-    off = c.offsets - c.rho
-    hs = HalfspaceIntersection(np.column_stack([c.normals, -off]), np.zeros(3))
-    verts = np.asarray(hs.intersections)
-    active = np.abs(verts @ c.normals.T - off) < 1e-9 * (1.0 + np.abs(off))
     out = []
-    k = len(off)
-    for i in range(k):
-        for j in range(i + 1, k):
-            on = np.flatnonzero(active[:, i] & active[:, j])
-            if len(on) < 2:
-                continue
-            pts = verts[on]
-            d = np.cross(c.normals[i], c.normals[j])
-            d /= np.linalg.norm(d)
-            s = pts @ d
-            a, b = pts[np.argmin(s)], pts[np.argmax(s)]
-            length = float(s.max() - s.min())
-            if length > 1e-9:
-                out.append(((a + b) / 2, d, length, i, j))
+    for (va, vb), (i, j) in zip(c.edges, c.edge_planes):
+        a, b = c.vertices[va], c.vertices[vb]
+        length = float(np.linalg.norm(b - a))
+        if length > 1e-9:
+            out.append(((a + b) / 2, (b - a) / length, length, int(i), int(j)))
     return out
 
 
-def _capsule_exit(unit: np.ndarray, c: Core) -> np.ndarray:
-    """Largest exit distance of the rays t·u (t > 0) from the capsules of the shrunk core's edges."""
+def _feature_planes(c: Core) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Per corner and per edge: its planes (padded by repetition) and the smallest n_i·x on each of them.
+
+    On the rounded surface over a feature F of the shrunk core, x = p + ρν with
+    ν in F's normal cone (spanned by the normals n_j, j ∈ F), so for i ∈ F
+    n_i·x = h_i − ρ + ρ n_i·ν ≥ h_i − ρ (1 − min_{j∈F} n_i·n_j).
+    """
+    NN = c.normals @ c.normals.T
+    deg = max(1, int(c.vertex_planes.sum(axis=1).max(initial=1)))
+    v_idx = np.empty((len(c.vertices), deg), dtype=np.int64)
+    for m, row in enumerate(c.vertex_planes):
+        idx = np.flatnonzero(row)
+        v_idx[m] = np.resize(idx, deg)
+    v_min = np.take_along_axis(NN[v_idx], v_idx[:, None, :].repeat(deg, 1), axis=2).min(axis=2)
+    v_tau = c.offsets[v_idx] - c.rho * (1.0 - v_min)
+    e_idx = c.edge_planes
+    cij = NN[e_idx[:, 0], e_idx[:, 1]]
+    e_tau = c.offsets[e_idx] - c.rho * (1.0 - np.minimum(cij, 1.0))[:, None]
+    return v_idx, v_tau, e_idx, e_tau
+
+
+def _capsule_exit(unit: np.ndarray, c: Core, along: np.ndarray) -> np.ndarray:
+    """Largest exit distance of the rays t·u (t > 0) from the shrunk core's edge cylinders and corner spheres.
+
+    ``along`` (n, k) bounds n_i·x from above for the ray's exit point x
+    (r_h n_i·u where n_i·u ≥ 0, r' n_i·u elsewhere, with r' ≤ r ≤ r_h the
+    radii of the shrunk core and of the sharp one).  A feature is
+    evaluated only where every one of its planes passes the bound of
+    :func:`_feature_planes`, which the feature the ray leaves through always
+    does; any other capsule lies inside the grain, so the result is exact.
+    Edge cylinders count where the exit point projects inside the segment.
+    """
     rho2 = c.rho * c.rho
     V = c.vertices
+    tol = 1e-9 * (1.0 + np.abs(c.offsets)).max()
+    v_idx, v_tau, e_idx, e_tau = _feature_planes(c)
+    best = np.full(len(unit), -np.inf)
     # corner spheres: |t u − v| = ρ, far root t = u·v + sqrt((u·v)² − |v|² + ρ²)
-    b = unit @ V.T
-    disc = b * b - (np.einsum("ij,ij->i", V, V) - rho2)
-    best = np.where(disc >= 0.0, b + np.sqrt(np.maximum(disc, 0.0)), -np.inf).max(axis=1)
-    # edge cylinders, kept where the exit point projects inside the segment
+    iu, iv = np.nonzero(np.all(along[:, v_idx] >= v_tau - tol, axis=2))
+    b = np.einsum("ij,ij->i", unit[iu], V[iv])
+    disc = b * b - (np.einsum("ij,ij->i", V[iv], V[iv]) - rho2)
+    hit = disc >= 0.0
+    np.maximum.at(best, iu[hit], b[hit] + np.sqrt(disc[hit]))
+    # edge cylinders
     a = V[c.edges[:, 0]]
     d = V[c.edges[:, 1]] - a
     length = np.linalg.norm(d, axis=1)
-    keep = length > 1e-12
-    a, d, length = a[keep], d[keep] / length[keep, None], length[keep]
+    d = d / np.maximum(length, 1e-300)[:, None]
     ad = np.einsum("ij,ij->i", a, d)
-    ud = unit @ d.T
-    ua = unit @ a.T
+    C_e = np.einsum("ij,ij->i", a, a) - ad * ad - rho2  # |a⊥|² − ρ²
+    iu, ie = np.nonzero(np.all(along[:, e_idx] >= e_tau - tol, axis=2) & (length > 1e-12))
+    u = unit[iu]
+    ud = np.einsum("ij,ij->i", u, d[ie])
     q = 1.0 - ud * ud  # |u⊥|²
-    B = ua - ud * ad  # u⊥·a⊥
-    C = np.einsum("ij,ij->i", a, a) - ad * ad - rho2  # |a⊥|² − ρ²
-    disc = B * B - q * C
+    B = np.einsum("ij,ij->i", u, a[ie]) - ud * ad[ie]  # u⊥·a⊥
+    disc = B * B - q * C_e[ie]
     with np.errstate(divide="ignore", invalid="ignore"):
         t = (B + np.sqrt(np.maximum(disc, 0.0))) / q
-        s = t * ud - ad
-        ok = (disc >= 0.0) & (q > 1e-12) & (s >= 0.0) & (s <= length)
-    best = np.maximum(best, np.where(ok, t, -np.inf).max(axis=1, initial=-np.inf))
+        s = t * ud - ad[ie]
+        ok = (disc >= 0.0) & (q > 1e-12) & (s >= 0.0) & (s <= length[ie])
+    np.maximum.at(best, iu[ok], t[ok])
     return best
 
 
@@ -277,27 +318,33 @@ def radius(unit: np.ndarray, c: Core) -> tuple[np.ndarray, np.ndarray]:
     corner at (1 − ρ)·√3 + ρ.
 
     >>> n = np.vstack([np.eye(3), -np.eye(3)])
-    >>> c = Core(n, np.ones(6), 0.5, np.array([[x, y, z] for x in (-.5, .5) for y in (-.5, .5) for z in (-.5, .5)]),
-    ...          np.array([[0, 1], [0, 2], [0, 4], [1, 3], [1, 5], [2, 3], [2, 6], [3, 7], [4, 5], [4, 6], [5, 7], [6, 7]]),
-    ...          np.ones(3))
+    >>> c = Core(n, np.ones(6), 0.5, *_polytope(n, np.full(6, 0.5)), np.ones(3))
     >>> r, flat = radius(np.array([[1.0, 0, 0], [1, 1, 1] / np.sqrt(3)]), c)
     >>> np.round(r, 6).tolist(), flat.tolist()
     ([1.0, 1.366025], [True, False])
     """
     cos = unit @ c.normals.T  # (V, k)
-    with np.errstate(divide="ignore"):
-        t = np.where(cos > 1e-12, c.offsets / np.where(cos > 1e-12, cos, 1.0), np.inf)
-    i = np.argmin(t, axis=1)
-    r_h = t[np.arange(len(unit)), i]
+    g = cos / c.offsets  # the first plane met along u has the largest (n_i·u)/h_i > 0
+    i = np.argmax(g, axis=1)
+    r_h = 1.0 / g[np.arange(len(unit)), i]
     if c.rho <= 0.0:
         return r_h, np.ones(len(unit), dtype=bool)
     # over the shrunk facet i: y = r_h u − ρ n_i satisfies n_j·y ≤ h_j − ρ for every j
-    lhs = r_h[:, None] * cos - c.rho * (c.normals[i] @ c.normals.T)
+    along = r_h[:, None] * cos  # n_j·x_H
+    lhs = along - c.rho * (c.normals @ c.normals.T)[i]
     flat = np.all(lhs <= c.offsets - c.rho + 1e-9 * (1.0 + c.offsets), axis=1)
     r = r_h.copy()
     rounded = ~flat
     if rounded.any():
-        r[rounded] = np.minimum(r_h[rounded], _capsule_exit(unit[rounded], c))
+        # upper bound of n_j·x at the exit point x = r u, with r' ≤ r ≤ r_h (r' the shrunk core's radius)
+        cr = cos[rounded]
+        r_lo = 1.0 / np.max(cr / (c.offsets - c.rho), axis=1)
+        upper = np.where(cr >= 0.0, along[rounded], r_lo[:, None] * cr)
+        exit_r = _capsule_exit(unit[rounded], c, upper)
+        lost = ~np.isfinite(exit_r)
+        if lost.any():  # pragma: no cover - the bound is proven; this keeps a numerical edge case exact
+            exit_r[lost] = _capsule_exit(unit[rounded][lost], c, np.full((int(lost.sum()), len(c.offsets)), np.inf))
+        r[rounded] = np.minimum(r_h[rounded], exit_r)
     return r, flat
 
 
@@ -311,21 +358,15 @@ def _dent_factor(unit: np.ndarray, p: Params, rng: np.random.Generator) -> np.nd
     return 1.0 - p.dent_depth * (1.0 - np.prod(1.0 - g, axis=1))
 
 
-def _roughness_factor(unit: np.ndarray, p: Params, rng: np.random.Generator) -> tuple[np.ndarray, float]:
-    """1 + K·S(u): the FSO overlay (fso.draw_field / wm_sum), RMS ``roughness`` on the level-3 sphere."""
+def _roughness_factor(unit: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
+    """1 + K·S(u): the FSO overlay (:func:`grainforge.methods.fso.overlay`) with RMS ``roughness``."""
     from . import fso
 
-    fp = fso.Params(fractal_dimension=p.fractal_dimension, length_ratio=p.length_ratio, amplitude=p.roughness)
-    f = fso.draw_field(fp, rng)
+    fp = fso.Params(fractal_dimension=p.fractal_dimension, length_ratio=p.length_ratio, amplitude=p.roughness,
+                    surface=p.surface)
     if p.roughness == 0.0:
-        return np.ones(len(unit)), 0.0
-    S = fso.wm_sum(unit, f)
-    ref, _ = icosphere(fso.REFERENCE_SUBDIVISIONS)
-    nref = len(ref)
-    S_ref = S[:nref] if len(unit) >= nref and np.array_equal(unit[:nref], ref) else fso.wm_sum(ref, f)
-    rms = float(np.sqrt(np.mean(S_ref**2)))
-    K = p.roughness / rms if rms > 0 else 0.0
-    return 1.0 + K * S, K
+        return np.ones(len(unit))
+    return 1.0 + fso.overlay(unit, fp, rng)
 
 
 def build(p: Params, rng: np.random.Generator):
@@ -334,8 +375,7 @@ def build(p: Params, rng: np.random.Generator):
     c = core(p, rng)
     r, flat = radius(unit, c)
     r = r * _dent_factor(unit, p, rng)
-    rough, _ = _roughness_factor(unit, p, rng)
-    r = r * rough
+    r = r * _roughness_factor(unit, p, rng)
     rmin = float(r.min())
     if rmin <= MIN_RADIUS:
         raise ParameterError(
@@ -359,6 +399,7 @@ def angular(
     roughness: float = 0.0,
     fractal_dimension: float = 2.4,
     length_ratio: float = 1.0,
+    surface: str = "seamless",
     subdivisions: int = 5,
     rng=None,
 ):
@@ -377,9 +418,11 @@ def angular(
     dent_depth, dent_width : float
         Relative depth (0–0.5) and angular width in radians (0.1–1.2) of each dent.
     roughness : float
-        RMS of the FSO overlay relative to the radius, 0–0.3 (0 = smooth facets).
+        RMS of the FSO overlay relative to the radius, 0–0.15 (0 = smooth facets).
     fractal_dimension, length_ratio : float
         D and L/R0 of the FSO overlay.
+    surface : {"seamless", "paper"}
+        FSO overlay form (see :func:`grainforge.methods.fso.overlay`).
     subdivisions : int
         Icosphere level 0–8 (default 5: 10,242 vertices).
     rng : None, int or numpy.random.Generator
@@ -413,6 +456,6 @@ def angular(
     p = Params(
         facets=facets, aspect=tuple(aspect), rounding=rounding, dents=dents, dent_depth=dent_depth,
         dent_width=dent_width, roughness=roughness, fractal_dimension=fractal_dimension,
-        length_ratio=length_ratio, subdivisions=subdivisions,
+        length_ratio=length_ratio, surface=surface, subdivisions=subdivisions,
     )
     return generate(NAME, p, rng)

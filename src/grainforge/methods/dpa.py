@@ -21,7 +21,7 @@ from ._polyhedra import (
 
 __all__ = [
     "Params", "Aggregate", "build", "aggregate", "parent_index", "lattice_surface",
-    "union_surface", "smooth_surface", "PRIMITIVES",
+    "union_surface", "smooth_surface", "PRIMITIVES", "physical_info",
 ]
 
 NAME = "dpa"
@@ -516,6 +516,25 @@ def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple
 
 
 # --------------------------------------------------------------------------- the generator
+
+def physical_info(info: dict, scale: float) -> dict:
+    """``info`` of a grain scaled by ``scale`` (mm per model unit) with its lengths in mm.
+
+    :func:`build` gives ``R_g`` in primary sizes, ``cavity_volume`` in primary
+    volumes and ``primary_size`` in model units; a manifest records all three in
+    mm / mm³ (``R_g_mm``, ``cavity_volume_mm3``, ``primary_size_mm``), like
+    ``grainforge analyse`` (``radius_of_gyration_mm``).  R_g/a, the ratio of
+    the paper's mass–radius relation, is ``R_g_mm / primary_size_mm``.
+
+    Examples
+    --------
+    >>> physical_info({"R_g": 3.0, "cavity_volume": 2.0, "primary_size": 0.5, "D_A": 2.1}, 4.0)
+    {'R_g': 6.0, 'cavity_volume': 16.0, 'primary_size': 2.0, 'D_A': 2.1}
+    """
+    a = float(info["primary_size"]) * float(scale)
+    return {**info, "R_g": float(info["R_g"]) * a, "cavity_volume": float(info["cavity_volume"]) * a**3,
+            "primary_size": a}
+
 
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one DPA grain (scaled to equivalent radius 1, not centred).
