@@ -28,7 +28,7 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
     order = sorted(panels)
     sheet = out.with_suffix(".png")
     contact_sheet([panels[k][0] for k in order], [panels[k][1] for k in order], sheet,
-                  columns=len(values), title=title)
+                  columns=len(values), title=title + " (files at d_eq = 10 mm)", unit="mm")
     return [out, sheet]
 
 
@@ -125,13 +125,21 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
             meshes.append(read_mesh(folder / name / r["file"]))
             labels.append(f"{name}  seed {r['seed']}")
     sheet = contact_sheet(meshes, labels, out / "cri-grains.png", columns=len(seeds),
-                          title="CRI grains by contour source (paper Figs. 4, 8)")
+                          title="CRI grains by contour source (paper Figs. 4, 8; files at d_eq = 10 mm)", unit="mm")
     written += [folder, sheet, cri_sections_figure(out / "cri-sections.png", s)]
     return written
 
 
 def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
-    """Verification figure: a CRI grain's principal sections against its contours."""
+    """Verification figure: a CRI grain's principal sections against its contours (:func:`cri_sections`)."""
+    from .io import save_figure
+
+    return save_figure(cri_sections(subdivisions), path)
+
+
+def cri_sections(subdivisions: int = 5):
+    """The Figure of :func:`cri_sections_figure`: the three panels share one scale (equal axes, same
+    limits), coordinates in units of the mean contour radius r0, legend below the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -140,7 +148,6 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     import trimesh
 
     from .contours import Contour
-    from .io import save_figure
     from .methods.cri import GRID, PLANES, Params, build, construct
 
     p = Params(preset="rough-angular", subdivisions=subdivisions)
@@ -150,25 +157,37 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     normals = {"xy": (0, 0, 1), "xz": (0, 1, 0), "yz": (1, 0, 0)}
     axes2 = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
     t = 2 * np.pi * np.arange(GRID + 1) / GRID
-    fig, axes = plt.subplots(1, 3, figsize=(10, 3.6), dpi=100)
+    fig, axes = plt.subplots(1, 3, figsize=(10, 4.2), dpi=100, sharex=True, sharey=True)
+    reach = 0.0
     for k, (ax, plane) in enumerate(zip(axes, PLANES)):
         before = con.sections[k] / con.factors[k]
         r_in = np.r_[before, before[0]]
         r_sec = np.r_[con.sections[k], con.sections[k][0]]
-        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="before correction")
-        ax.plot(r_sec * np.cos(t), r_sec * np.sin(t), color="C0", lw=1.5, label="stretched + corrected")
+        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="contour before correction")
+        ax.plot(r_sec * np.cos(t), r_sec * np.sin(t), color="C0", lw=1.5, label="contour stretched + corrected")
         cut = np.asarray(mesh.section(plane_origin=(0, 0, 0), plane_normal=normals[plane]).vertices)
         i, j = axes2[plane]
-        ax.plot(cut[:, i], cut[:, j], ".", color="C3", ms=2, label="mesh section")
+        ax.plot(cut[:, i], cut[:, j], ".", color="C3", ms=2, label="section of the mesh")
         sec = Contour(con.sections[k])
         ang = np.arctan2(cut[:, j], cut[:, i])
         err = np.abs(np.hypot(cut[:, i], cut[:, j]) - sec(ang) * sec.scale).max() / con.sections[k].mean()
         ax.set_title(f"{plane} section: max error {100 * err:.2f} % of r0", fontsize=9)
+        ax.set_xlabel(f"{plane[0]} / r0")
+        ax.set_ylabel(f"{plane[1]} / r0")
         ax.set_aspect("equal")
-        ax.tick_params(labelsize=7)
-    axes[0].legend(fontsize=7, loc="lower left")
-    fig.suptitle(f"CRI rough-angular, seed 0, subdivisions {subdivisions}: principal sections", fontsize=10)
-    return save_figure(fig, path)
+        ax.grid(True, color="0.92", lw=0.5)
+        ax.tick_params(labelsize=7, labelleft=True)
+        reach = max(reach, float(np.abs(r_in).max()), float(np.abs(r_sec).max()), float(np.abs(cut).max()))
+    lim = 1.06 * reach
+    for ax in axes:
+        ax.set_xlim(-lim, lim)
+        ax.set_ylim(-lim, lim)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.suptitle(f"CRI rough-angular, seed 0, subdivisions {subdivisions}: principal sections "
+                 "(r0: mean contour radius)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
+    return fig
 
 
 def _analysis_plots(out: Path, quick: bool = False) -> list[Path]:
