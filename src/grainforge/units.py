@@ -23,7 +23,7 @@ from typing import Mapping, Sequence
 __all__ = ["UNITS", "with_unit", "plain", "headers"]
 
 _LENGTHS = ("size", "equivalent_diameter", "L", "I", "S", "L_pca", "I_pca", "S_pca", "radius_of_gyration",
-            "R_g", "primary_size", "chordal_deviation", "deviation_tolerance", "mean_edge", "retained_wavelength",
+            "R_g", "primary_size", "rounding_radius", "chordal_deviation", "deviation_tolerance", "mean_edge", "retained_wavelength",
             "x", "y", "z", "size_x", "size_y", "size_z", "gap")
 
 #: column -> unit suffix, for every column grainforge writes that has a unit
