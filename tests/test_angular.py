@@ -124,7 +124,7 @@ def test_rounding_keeps_the_planes_and_dents_lower_convexity():
 
 @pytest.mark.parametrize("kw, name", [
     ({"rounding": 1.0}, "rounding"), ({"facets": 5}, "facets"), ({"aspect": (1, 2, 3)}, "aspect"),
-    ({"aspect": (11, 1, 1)}, "aspect"), ({"aspect": (2, 1)}, "aspect"), ({"dent_depth": 0.7}, "dent_depth"),
+    ({"aspect": (11, 1, 1)}, "aspect"), ({"aspect": (2, 1)}, "aspect"), ({"dent_depth": 0.75}, "dent_depth"),
 ])
 def test_bad_parameters_are_named(kw, name):
     with pytest.raises(ParameterError) as e:
