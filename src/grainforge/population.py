@@ -14,6 +14,8 @@ root seed and the output format::
     fractal_dimension = { distribution = "uniform", low = 2.2, high = 2.6 }
     length_ratio = 7.0
     subdivisions = 4
+    # a ratio L:I:S = 1 : e : e·f drawn per grain from Zingg ratios e = I/L, f = S/I
+    aspect = { distribution = "zingg", elongation = { distribution = "truncnormal", mean = 0.75, sd = 0.1, low = 0.4, high = 1.0 }, flatness = 0.8 }
 
     [size]
     definition = "sieve"            # equivalent | sieve | longest
@@ -32,7 +34,8 @@ Grain ``i`` owns the stream ``default_rng(SeedSequence(root, spawn_key=(i,)))``
 the root seed and ``i`` alone.  From it, in this order: the grain's own 63-bit
 seed (recorded in the manifest; ``grainforge.generate(method, params, seed)``
 regenerates the grain), then one draw for each distributed parameter in the
-order of the method's ``Params`` fields, then the size.  So outputs do not
+order of the method's ``Params`` fields (two for a ``zingg`` ratio:
+elongation, then flatness), then the size.  So outputs do not
 depend on the number of workers or on the executor.
 """
 
@@ -72,13 +75,14 @@ __all__ = [
 
 #: hidden folder inside the output folder: recipe copy and one sidecar per finished grain.
 JOURNAL = ".grainforge-batch"
-DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice")
+DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice", "zingg")
 _DIST_KEYS = {
     "uniform": ("low", "high"),
     "normal": ("mean", "sd"),
     "truncnormal": ("mean", "sd", "low", "high"),
     "lognormal": ("median", "sigma"),
     "choice": ("values",),
+    "zingg": ("elongation", "flatness"),
 }
 #: how long ``--scheduler`` waits for the scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
@@ -155,8 +159,21 @@ class Distribution:
 
     ``kind`` is one of ``uniform(low, high)``, ``normal(mean, sd)``,
     ``truncnormal(mean, sd, low, high)``, ``lognormal(median, sigma)`` (sigma
-    of ln x) or ``choice(values, weights)``.  Every draw consumes exactly one
-    uniform variate (inverse CDF), except ``choice`` (one ``Generator.choice``).
+    of ln x), ``choice(values, weights)`` or, for a three-number ratio such
+    as ``aspect``, ``zingg(elongation, flatness)``: the Zingg ratios
+    e = I/L and f = S/I, each a fixed number in (0, 1] or a distribution
+    whose support lies in (0, 1], give the ratio L:I:S = 1 : e : e·f.
+    Every draw consumes exactly one uniform variate (inverse CDF), except
+    ``choice`` (one ``Generator.choice``) and ``zingg`` (elongation's draw,
+    then flatness's).
+
+    Examples
+    --------
+    >>> e = Distribution("uniform", {"low": 0.6, "high": 0.9})
+    >>> z = Distribution("zingg", {"elongation": e, "flatness": 0.8})
+    >>> L, I, S = z.draw(np.random.default_rng(1))
+    >>> L, 0.6 <= I <= 0.9, round(S / I, 12)
+    (1.0, True, 0.8)
 
     Examples
     --------
@@ -191,6 +208,9 @@ class Distribution:
             return min(max(m, a["low"]), a["high"]) if self.kind == "truncnormal" else m
         if self.kind == "lognormal":
             return float(a["median"])
+        if self.kind == "zingg":
+            e, f = (x.typical() if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
+            return (1.0, e, e * f)
         return self.args["values"][0]
 
     def draw(self, rng: np.random.Generator) -> Any:
@@ -198,6 +218,9 @@ class Distribution:
         from scipy.special import ndtr, ndtri
 
         a = self.args
+        if self.kind == "zingg":
+            e, f = (x.draw(rng) if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
+            return (1.0, e, e * f)
         if self.kind == "choice":
             values = a["values"]
             return values[int(rng.choice(len(values), p=a["weights"]))]
@@ -443,9 +466,11 @@ def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
             fail(path + [k], f"is required for a {kind} distribution")
     if kind == "choice":
         return _choice(spec, value, path, fail)
+    if kind == "zingg":
+        return _zingg(spec, value, path, fail)
     if spec.kind in ("str", "floats") or (spec.kind == "int" and kind != "uniform"):
         fail(path + ["distribution"], f"{spec.name} is {spec.kind}-valued: use a fixed value or choice"
-             + (" or uniform" if spec.kind == "int" else ""))
+             + (" or uniform" if spec.kind == "int" else "") + (" or zingg" if spec.kind == "floats" else ""))
     args = {}
     for k in _DIST_KEYS[kind]:
         v = value[k]
@@ -479,6 +504,36 @@ def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
     if kind == "lognormal" and spec.low is not None and spec.low > 0:
         fail(path + ["distribution"], f"lognormal reaches 0 but {spec.name} must be in {spec.range_text()}")
     return dist
+
+
+#: the support of a Zingg ratio (elongation I/L, flatness S/I)
+_RATIO = {"low": 0.0, "high": 1.0, "low_open": True, "kind": "float", "default": None, "help": "Zingg ratio"}
+
+
+def _zingg(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:
+    """``{ distribution = "zingg", elongation = ..., flatness = ... }`` for a three-number ratio L:I:S.
+
+    Each ratio is a number in (0, 1] or a (non-choice) distribution whose
+    support lies in (0, 1]; the extreme ratios 1 : e : e·f are checked
+    against ``spec``'s range before anything is generated.
+    """
+    if spec.kind != "floats":
+        fail(path + ["distribution"], f"zingg gives a ratio L:I:S; {spec.name} is {spec.kind}-valued")
+    parts = {}
+    for key in ("elongation", "flatness"):
+        v = value[key]
+        if isinstance(v, dict) and v.get("distribution") in ("choice", "zingg"):
+            fail(path + [key, "distribution"], f"must be one of uniform, normal, truncnormal, lognormal, got "
+                 f"{v.get('distribution')!r}")
+        parts[key] = _param_value(ParamSpec(name=key, **_RATIO), v, path + [key], fail)
+    bounds = {k: (v.support() if isinstance(v, Distribution) else (v, v)) for k, v in parts.items()}
+    (e_lo, e_hi), (f_lo, f_hi) = bounds["elongation"], bounds["flatness"]
+    for e, f in ((e_lo, f_lo), (e_hi, f_hi), (e_lo, f_hi), (e_hi, f_lo)):
+        try:
+            spec.check((1.0, e, e * f))
+        except ParameterError as exc:
+            fail(path, f"the ratio 1:{e:g}:{e * f:g} reachable from these distributions is invalid: {exc.reason}")
+    return Distribution("zingg", parts)
 
 
 def _choice(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:

@@ -15,7 +15,9 @@ TABLE = (
     ("convexity", "conv", "{:.3f}"), ("L", "L", "{:.4g}"), ("I", "I", "{:.4g}"), ("S", "S", "{:.4g}"),
     ("krumbein_sphericity", "krumb", "{:.3f}"), ("roughness", "rough", "{:.4f}"),
     ("fractal_dimension", "D_s", "{:.2f}"), ("fd_LI_2", "FD2", "{:.3f}"), ("fd_LI_3", "FD3", "{:.3f}"),
-    ("fd_LI_8", "FD8", "{:.4f}"),
+    ("fd_LI_8", "FD8", "{:.4f}"), ("atlas_voxels_across", "vox/d", "{:.3g}"),
+    ("atlas_sphericity", "a_sph", "{:.3f}"), ("atlas_convexity", "a_conv", "{:.3f}"),
+    ("atlas_flatness", "a_flat", "{:.3f}"), ("atlas_elongation", "a_elong", "{:.3f}"),
 )
 
 
@@ -55,8 +57,13 @@ def _json_value(v):
               help="Fourier descriptors D2…D16 of the three principal projections.")
 @click.option("--primary-volume", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
+@click.option("--voxel-size", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
+                   "(file units); see docs/validation.md.")
+@click.option("--voxels-across", type=click.FloatRange(min=2), default=None,
+              help="As --voxel-size, with the voxel size set to d_eq / this number.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
-def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite):
+def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, overwrite):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF), one row per body.
 
     Volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S (minimum-volume
@@ -71,10 +78,17 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite
 
     if csv_out is not None and csv_out.exists() and not overwrite:
         raise click.UsageError(f"{csv_out} exists; use --overwrite")
+    if voxel_size is not None and voxels_across is not None:
+        raise click.UsageError("give --voxel-size or --voxels-across, not both")
+    atlas = None
+    if voxel_size is not None:
+        atlas = {"voxel_size": voxel_size}
+    elif voxels_across is not None:
+        atlas = {"voxels_across": voxels_across}
     rows = []
     for f in files:
-        rows += analyse_file(f, fractal=fractal, fourier=fourier, primary_volume=primary_volume)
-    columns = ANALYSE_COLUMNS(fourier)
+        rows += analyse_file(f, fractal=fractal, fourier=fourier, primary_volume=primary_volume, atlas=atlas)
+    columns = ANALYSE_COLUMNS(fourier, atlas=atlas is not None)
     if csv_out is not None:
         write_csv(csv_out, rows, columns)
         click.echo(f"wrote {len(rows)} row(s) to {csv_out}", err=True)
