@@ -257,3 +257,15 @@ def test_zingg_only_for_ratio_parameters():
     with pytest.raises(RecipeError, match="zingg gives a ratio"):
         parse_recipe(ZINGG.replace("preset = \"rough-sphere\"",
                                    'morph_exponent = { distribution = "zingg", elongation = 0.5, flatness = 0.5 }'))
+
+
+def test_list_parameters_are_drawn_element_by_element():
+    text = ZINGG.replace('preset = "rough-sphere"',
+                         'descriptors = [0.0, { distribution = "uniform", low = 0.05, high = 0.15 }, 0.01]')
+    r = parse_recipe(text)
+    d = np.array([draw_grain(r, i)[1].descriptors for i in range(30)])
+    assert np.all(d[:, 0] == 0.0) and np.all(d[:, 2] == 0.01)
+    assert np.all((d[:, 1] >= 0.05) & (d[:, 1] <= 0.15)) and d[:, 1].std() > 0.02
+    bad = text.replace("high = 0.15", "high = 1.5")
+    with pytest.raises(RecipeError, match=r"params\.descriptors\.1\.high: must be in \[0, 1\]"):
+        parse_recipe(bad)

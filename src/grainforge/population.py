@@ -41,6 +41,7 @@ depend on the number of workers or on the executor.
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -165,7 +166,10 @@ class Distribution:
     whose support lies in (0, 1], give the ratio L:I:S = 1 : e : e·f.
     Every draw consumes exactly one uniform variate (inverse CDF), except
     ``choice`` (one ``Generator.choice``) and ``zingg`` (elongation's draw,
-    then flatness's).
+    then flatness's).  A list of numbers (``descriptors``, ``aspect``) may
+    also be drawn element by element: kind ``each`` with ``items``, each a
+    fixed number or a scalar distribution (written in a recipe as a list whose
+    elements are numbers or distribution tables); drawn in order.
 
     Examples
     --------
@@ -211,6 +215,8 @@ class Distribution:
         if self.kind == "zingg":
             e, f = (x.typical() if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
             return (1.0, e, e * f)
+        if self.kind == "each":
+            return tuple(x.typical() if isinstance(x, Distribution) else x for x in a["items"])
         return self.args["values"][0]
 
     def draw(self, rng: np.random.Generator) -> Any:
@@ -221,6 +227,8 @@ class Distribution:
         if self.kind == "zingg":
             e, f = (x.draw(rng) if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
             return (1.0, e, e * f)
+        if self.kind == "each":
+            return tuple(x.draw(rng) if isinstance(x, Distribution) else x for x in a["items"])
         if self.kind == "choice":
             values = a["values"]
             return values[int(rng.choice(len(values), p=a["weights"]))]
@@ -449,6 +457,8 @@ def _number(v) -> bool:
 
 
 def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
+    if spec.kind == "floats" and isinstance(value, list) and any(isinstance(x, dict) for x in value):
+        return _each(spec, value, path, fail)
     if not isinstance(value, dict):
         try:
             return spec.check(value)
@@ -534,6 +544,18 @@ def _zingg(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distributi
         except ParameterError as exc:
             fail(path, f"the ratio 1:{e:g}:{e * f:g} reachable from these distributions is invalid: {exc.reason}")
     return Distribution("zingg", parts)
+
+
+def _each(spec: ParamSpec, value: list, path: list[str], fail) -> Distribution:
+    """A list of numbers drawn element by element: each a number or a scalar distribution in ``spec``'s range."""
+    items = []
+    for i, v in enumerate(value):
+        if isinstance(v, dict) and v.get("distribution") in ("choice", "zingg"):
+            fail(path + [str(i), "distribution"], "an element must be one of uniform, normal, truncnormal, lognormal, "
+                 f"got {v.get('distribution')!r}")
+        element = dataclasses.replace(spec, name=f"{spec.name}[{i}]", kind="float", default=None)
+        items.append(_param_value(element, v, path + [str(i)], fail))
+    return Distribution("each", {"items": tuple(items)})
 
 
 def _choice(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:

@@ -67,6 +67,10 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
                 k: ({"distribution": d.kind, **dict(d.args), "achieved": _stats(ratios[k])}
                     if isinstance(d, Distribution) else {"fixed": d})
                 for k, d in v.args.items()}}
+        elif isinstance(v, Distribution) and v.kind == "each":
+            out["parameters"][name] = {"distribution": "each", "items": [
+                {"distribution": d.kind, **dict(d.args), "achieved": _stats([x[i] for x in vals])}
+                if isinstance(d, Distribution) else {"fixed": d} for i, d in enumerate(v.args["items"])]}
         elif isinstance(v, Distribution):
             out["parameters"][name] = {"distribution": v.kind, **dict(v.args), "achieved": _stats(vals)}
         else:
@@ -155,6 +159,12 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
                 bins = np.linspace(0.0, 1.0, 41)
                 ax.hist(ratios["elongation"], bins=bins, color=colour, alpha=0.7, label="elongation I/L")
                 ax.hist(ratios["flatness"], bins=bins, color="tab:blue", alpha=0.5, label="flatness S/I")
+                ax.legend(fontsize=7)
+            elif name in recipe.params and recipe.params[name].kind == "each":
+                items = recipe.params[name].args["items"]
+                for i, d in enumerate(items):
+                    if isinstance(d, Distribution):
+                        ax.hist([x[i] for x in vals], bins=30, alpha=0.6, label=f"{name}[{i}]")
                 ax.legend(fontsize=7)
             elif name in recipe.params and recipe.params[name].kind == "choice":
                 labels = [_label(x) for x in vals]
