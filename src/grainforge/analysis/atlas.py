@@ -293,8 +293,9 @@ def atlas_descriptors(
         if not (math.isfinite(h) and h > 0):
             raise ValueError(f"voxel size must be a positive number, got {voxel_size!r}")
     if rotation is not None:
-        R = np.asarray(rotation, dtype=np.float64)
-        if R.shape != (3, 3):
+        if isinstance(rotation, (np.ndarray, list, tuple)) and np.shape(rotation) == (3, 3):
+            R = np.asarray(rotation, dtype=np.float64)
+        else:
             R = random_rotation(rotation)
         v = v @ R.T
     mask, _ = voxelise(v, f, h)

@@ -56,11 +56,11 @@ def cli():
 
 
 def _register():
-    from . import analyse, batch, calibrate, check, demo, figures, fourier, generate, plot, render, tray
+    from . import analyse, batch, calibrate, check, demo, figures, fit, fourier, generate, plot, render, tray
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
-        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate,
+        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, fit.fit,
     ):
         cli.add_command(command)
 
