@@ -148,7 +148,7 @@ def figure4(out: Path, subdivisions: int = 5) -> Path:
 
 def _dpa_sheet(out: Path, primitive: str, rows: list[tuple[int, str]], title: str) -> Path:
     _method("dpa")
-    from .methods.dpa import dpa
+    from .calibration import dpa
     from .render import contact_sheet
 
     grains, labels = [], []

@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "save_figure"]
+__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -114,14 +114,17 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
 
 
 def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
-    """Write a matplotlib figure as PNG (atomically) and close it.
+    """Write a matplotlib figure (atomically) and close it: JPEG for ``.jpg``/``.jpeg``, PNG otherwise.
 
     No "Software" metadata is written, so the same figure gives the same bytes.
     """
     import matplotlib.pyplot as plt
 
     buf = _io.BytesIO()
-    fig.savefig(buf, format="png", dpi="figure" if dpi is None else dpi, metadata={"Software": None})
+    if Path(path).suffix.lower() in (".jpg", ".jpeg"):
+        fig.savefig(buf, format="jpeg", dpi="figure" if dpi is None else dpi, pil_kwargs={"quality": 92})
+    else:
+        fig.savefig(buf, format="png", dpi="figure" if dpi is None else dpi, metadata={"Software": None})
     plt.close(fig)
     return atomic_write(path, buf.getvalue())
 
@@ -143,8 +146,15 @@ def _cell(v: Any) -> str:
     return str(v)
 
 
-def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> str:
-    """Rows as CSV text (floats written with full precision, ``None`` empty)."""
+def csv_text(
+    rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None, *,
+    units: bool | Mapping[str, str] = False,
+) -> str:
+    """Rows as CSV text (floats written with full precision, ``None`` empty).
+
+    With ``units=True`` every header states its unit (``volume_mm3``; see :mod:`grainforge.units`);
+    ``units`` may also be a ``{column: unit suffix}`` mapping of the file's own.
+    """
     rows = list(rows)
     if columns is None:
         columns = []
@@ -152,15 +162,97 @@ def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = 
             columns.extend(k for k in r if k not in columns)
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
+    if units:
+        from .units import UNITS, headers
+
+        w.writerow(headers(columns, UNITS if units is True else units))
+    else:
+        w.writerow(columns)
     for r in rows:
         w.writerow([_cell(r.get(c)) for c in columns])
     return buf.getvalue()
 
 
-def write_csv(path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> Path:
-    """Write rows of dicts to a CSV file atomically."""
-    return atomic_write(path, csv_text(rows, columns))
+def write_csv(
+    path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None,
+    *, units: bool | Mapping[str, str] = False,
+) -> Path:
+    """Write rows of dicts to a CSV file atomically (``units``: see :func:`csv_text`)."""
+    return atomic_write(path, csv_text(rows, columns, units=units))
+
+
+#: first bytes of common non-mesh files, to say what a misnamed file is
+_MAGIC = (
+    (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
+    (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a zip archive"), (b"PK\x05\x06", "an empty zip archive"),
+    (b"\x1f\x8b", "a gzip archive"), (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"),
+)
+
+
+def _what_is(head: bytes) -> str | None:
+    for magic, name in _MAGIC:
+        if head.startswith(magic):
+            return name
+    return None
+
+
+def check_stl(path: str | os.PathLike) -> None:
+    """Refuse an STL file whose bytes are neither a consistent binary STL nor ASCII STL.
+
+    A binary STL is an 80-byte header, a facet count ``n`` and ``n`` records
+    of 50 bytes: the file size must be ``84 + 50 n``.  An ASCII STL starts with
+    ``solid`` and holds ``facet``/``vertex`` lines.
+
+    Raises
+    ------
+    ValueError
+        Saying what is wrong with the file (truncated, wrong facet count,
+        another kind of file, empty).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.stl"
+    >>> _ = p.write_bytes(b"x" * 80 + (3).to_bytes(4, "little") + b"y" * 60)
+    >>> check_stl(p)
+    Traceback (most recent call last):
+    ...
+    ValueError: ...t.stl: truncated binary STL: the header announces 3 facets (234 bytes) but the file has 144 bytes
+    """
+    path = Path(path)
+    size = path.stat().st_size
+    with path.open("rb") as fh:
+        head = fh.read(1024)
+    if size == 0:
+        raise ValueError(f"{path}: empty file")
+    other = _what_is(head)
+    if other is not None:
+        raise ValueError(f"{path}: not an STL file (it is {other})")
+    if size >= 84:
+        n = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
+        if size == 84 + 50 * n:
+            if n == 0:
+                raise ValueError(f"{path}: binary STL with no facets")
+            return
+    if head.lstrip()[:5].lower() == b"solid":
+        try:
+            text = head.decode("ascii")
+        except UnicodeDecodeError:
+            text = ""
+        if "facet" in text or "endsolid" in text or size < 1024:
+            return  # ASCII STL (trimesh parses and validates it)
+    if size < 84:
+        raise ValueError(f"{path}: not an STL file ({size} bytes: too short for a binary STL, and not ASCII STL)")
+    n = int.from_bytes(head[80:84], "little")
+    expected = 84 + 50 * n
+    if expected > size and n < (1 << 31):
+        raise ValueError(f"{path}: truncated binary STL: the header announces {n} facets "
+                         f"({expected} bytes) but the file has {size} bytes")
+    if (size - 84) % 50 == 0:
+        raise ValueError(f"{path}: corrupt binary STL: the header announces {n} facets but the file holds "
+                         f"{(size - 84) // 50}")
+    raise ValueError(f"{path}: not an STL file (neither ASCII STL nor a binary STL: facet count {n} in the "
+                     f"header does not match the file size of {size} bytes)")
 
 
 def read_mesh(path: str | os.PathLike):
@@ -169,17 +261,67 @@ def read_mesh(path: str | os.PathLike):
     Raises
     ------
     ValueError
-        If the file is missing, unreadable, corrupt or holds no triangles.
+        If the file is missing, unreadable, corrupt, holds no triangles or
+        non-finite coordinates; the message says what is wrong with the file.
     """
     import trimesh
 
     path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"{path}: is a folder, not a mesh file")
     if not path.is_file():
         raise ValueError(f"{path}: no such file")
+    suffix = path.suffix.lower()
     try:
-        loaded = trimesh.load(path, force="mesh", process=False)
+        if suffix == ".stl":
+            check_stl(path)
+        if suffix == ".3mf":
+            from .fabrication.threemf import read_3mf_file
+
+            parts = read_3mf_file(path)
+            loaded = trimesh.util.concatenate(
+                [trimesh.Trimesh(p.vertices, p.faces, process=False, validate=False) for p in parts])
+        else:
+            with path.open("rb") as fh:
+                head = fh.read(16)
+            other = _what_is(head)
+            if other is not None:
+                raise ValueError(f"{path}: not a {suffix.lstrip('.').upper()} mesh file (it is {other})")
+            loaded = trimesh.load(path, force="mesh", process=False)
+    except ValueError:
+        raise
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # trimesh raises many types for corrupt input
-        raise ValueError(f"{path}: cannot read mesh ({type(exc).__name__}: {exc})") from None
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        raise ValueError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise ValueError(f"{path}: holds no triangles")
+    if not np.isfinite(np.asarray(loaded.vertices)).all():
+        raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
     return loaded
+
+
+def read_parts(path: str | os.PathLike) -> list:
+    """The parts of a mesh file: every build item of a 3MF, the single mesh of an STL/OBJ/PLY.
+
+    Returns
+    -------
+    list of grainforge.fabrication.threemf.Part
+        Named parts; an STL's triangle soup has its exactly coincident vertices merged.
+
+    Raises
+    ------
+    ValueError
+        If the file is missing, unreadable or holds no triangles.
+    """
+    from .fabrication.threemf import Part, read_3mf_file
+
+    path = Path(path)
+    if path.suffix.lower() == ".3mf":
+        return read_3mf_file(path)
+    mesh = read_mesh(path)
+    # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
+    v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
+    return [Part(path.stem, v, f)]

@@ -39,7 +39,10 @@ def read_manifest(path: str | Path) -> dict[str, list[str]]:
         raise ValueError(f"{path}: not a CSV manifest ({exc})") from None
     if not rows:
         raise ValueError(f"{path}: holds no rows")
-    return {k: [r.get(k) or "" for r in rows] for k in rows[0] if k is not None}
+    from .units import plain
+
+    # headers state their unit (volume_mm3); the plots use the plain names
+    return {plain(k): [r.get(k) or "" for r in rows] for k in rows[0] if k is not None}
 
 
 def _numeric(table: dict, column: str, path) -> np.ndarray:
@@ -51,6 +54,9 @@ def _numeric(table: dict, column: str, path) -> np.ndarray:
             out[i] = float(s)
         except ValueError:
             pass
+    if len(out) and not np.isfinite(out).any():
+        bad = next((s for s in table[column] if s.strip()), "")
+        raise ValueError(f"{path}: column {column!r} holds no numbers" + (f" (e.g. {bad!r})" if bad else ""))
     return out
 
 
@@ -234,11 +240,11 @@ def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:
             n = len(next(iter(t.values())))
             rows += [{k: t[k][i] for k in t} for i in range(n)]
             meshes += [m.parent / f for f in t.get("file", []) if f and (m.parent / f).is_file()]
-        pooled.append(write_csv(dest / f"{name}.csv", rows))
+        pooled.append(write_csv(dest / f"{name}.csv", rows, units=True))
         if meshes:
             pick = [meshes[i] for i in np.linspace(0, len(meshes) - 1, min(per_group, len(meshes))).astype(int)]
             mrows = [r for p in pick for r in analyse_file(p, fractal=False)]
-            measured.append(write_csv(dest / f"{name}-measured.csv", mrows, ANALYSE_COLUMNS(True)))
+            measured.append(write_csv(dest / f"{name}-measured.csv", mrows, ANALYSE_COLUMNS(True), units=True))
     written = [
         plot("zingg", pooled, dest / "zingg.png"),
         plot("sphericity-convexity", pooled, dest / "sphericity-convexity.png"),

@@ -19,6 +19,7 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
+from .distributions import Distribution, GradingCurve
 from .io import atomic_write, save_figure
 
 __all__ = ["summary", "population_report", "achieved_sizes", "SUMMARY", "FIGURE"]
@@ -43,8 +44,6 @@ def achieved_sizes(rows: Sequence[Mapping[str, Any]], definition: str) -> np.nda
 
 def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     """Summary statistics of a population (the content of ``manifest.json``)."""
-    from .population import Distribution, GradingCurve
-
     out: dict[str, Any] = {
         "recipe": Path(recipe.source).name,
         "recipe_sha256": recipe.digest,
@@ -125,8 +124,6 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .population import Distribution
 
     drawn = [n for n, v in recipe.params.items() if isinstance(v, Distribution)]
     panels = ["size"] + drawn + ["sphericity", "convexity"]

@@ -8,16 +8,27 @@ Two habits every pool shares:
   parent (open files, threads) leaks into them;
 - workers run NumPy's BLAS single-threaded (unless the user set the thread
   variables): OpenBLAS otherwise starts one thread per core in *every*
-  worker, so N workers would run N × cores busy threads on the cores.
+  worker, so N workers would run N × cores busy threads on the cores;
+- workers exit when the process that made the pool dies, even by SIGKILL
+  (a watcher thread in each worker; on Linux also ``PR_SET_PDEATHSIG``), so a
+  killed command leaves no processes behind.
 """
 
 from __future__ import annotations
 
 import os
+import signal
+import sys
+import threading
+import time
+from collections import deque
 from contextlib import contextmanager
-from typing import Iterator, Sequence
+from typing import Any, Callable, Iterable, Iterator, Sequence
 
-__all__ = ["process_pool", "single_threaded_children", "THREAD_VARS"]
+__all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive"]
+
+#: seconds between a worker's checks that the process that made its pool is alive
+WATCH_INTERVAL = 0.25
 
 #: BLAS/OpenMP thread limits given to pool workers (unless the user set them): one worker = one core.
 THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
@@ -53,8 +64,58 @@ def single_threaded_children() -> Iterator[None]:
                 os.environ.pop(k, None)
 
 
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, dead but not yet reaped, counts as dead).
+
+    Examples
+    --------
+    >>> pid_alive(os.getpid())
+    True
+    """
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            state = fh.read().rsplit(b")", 1)[1].split()[0]
+        return state not in (b"Z", b"X")
+    except (OSError, IndexError):
+        return True
+
+
+def watch_parent(owner: int) -> None:
+    """Pool-worker initializer: exit as soon as process ``owner`` (the pool's maker) is gone.
+
+    On Linux the kernel also sends SIGKILL when the worker's parent dies
+    (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
+    server, not the owner, so a daemon thread polls the owner as well.
+    """
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+
+    def watch():
+        while pid_alive(owner):
+            time.sleep(WATCH_INTERVAL)
+        os._exit(1)
+
+    if not pid_alive(owner):
+        os._exit(1)
+    threading.Thread(target=watch, name="grainforge-watch-parent", daemon=True).start()
+
+
 def process_pool(workers: int, preload: Sequence[str] = ()):
     """A ``ProcessPoolExecutor`` of ``workers`` processes started from a fork server.
+
+    Workers exit by themselves when this process dies (see :func:`watch_parent`).
 
     Parameters
     ----------
@@ -70,4 +131,45 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
         ctx.set_forkserver_preload(list(preload))
     else:
         ctx = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx)
+    return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=watch_parent,
+                               initargs=(os.getpid(),))
+
+
+def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, preload: Sequence[str] = (),
+                inflight: int = 3) -> Iterator[Any]:
+    """``map(fn, items)`` on ``workers`` processes, results in input order, memory bounded.
+
+    At most ``inflight × workers`` items are submitted ahead of the one being
+    yielded, so ``items`` may be a long generator.  ``workers <= 1`` runs in
+    this process.  An exception in ``fn`` is raised here, for its item, and
+    the pool is shut down (pending work cancelled).
+
+    Examples
+    --------
+    >>> list(ordered_map(abs, [-1, 2, -3], workers=1))
+    [1, 2, 3]
+    """
+    if workers <= 1:
+        for item in items:
+            yield fn(item)
+        return
+    pool = process_pool(workers, preload)
+    try:
+        pending: deque = deque()
+        it = iter(items)
+        with single_threaded_children():  # the workers start with the first submissions
+            for item in it:
+                pending.append(pool.submit(fn, item))
+                if len(pending) >= inflight * workers:
+                    break
+        while pending:
+            result = pending.popleft().result()
+            nxt = next(it, _END)
+            if nxt is not _END:
+                pending.append(pool.submit(fn, nxt))
+            yield result
+    finally:
+        pool.shutdown(wait=True, cancel_futures=True)
+
+
+_END = object()

@@ -41,7 +41,7 @@ def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
     """
     path = Path(path)
     if path.suffix.lower() == ".3mf":
-        from ..fabrication.threemf import read_parts
+        from ..io import read_parts
 
         parts = read_parts(path)
         v = np.concatenate([p.vertices for p in parts])
@@ -122,3 +122,22 @@ def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
             row["flags"] = " ".join(x for x in ("multi-body", row["flags"]) if x)
         rows.append(row)
     return rows
+
+
+def _analyse_task(task: tuple[str, dict[str, Any]]) -> list[dict[str, Any]]:
+    path, options = task
+    return analyse_file(path, **options)
+
+
+def analyse_files(paths, *, workers: int = 1, **options):
+    """Rows of :func:`analyse_file` for each of ``paths``, in order, on ``workers`` processes.
+
+    Yields one list of rows per file as it is done (memory bounded: a few
+    files are in flight).  The rows do not depend on ``workers``.
+    """
+    from ..workers import ordered_map
+
+    tasks = ((str(p), options) for p in paths)
+    yield from ordered_map(_analyse_task, tasks, workers,
+                           preload=["grainforge.analysis.measure", "grainforge.analysis.descriptors",
+                                    "grainforge.analysis.fractal", "grainforge.analysis.fourier", "trimesh"])

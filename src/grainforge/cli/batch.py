@@ -6,15 +6,16 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, output_dir
 from .progress import progress_bar
 
 
 @click.command()
 @click.argument("recipe", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for the grains, manifest.csv, manifest.json and population.png.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Local worker processes [default: the CPU count].")
+@click.option("--workers", type=click.IntRange(min=1), default=None, show_default="the CPU count",
+              help="Local worker processes.")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
                    "(needs grainforge[dask]; workers must import the same grainforge).")
@@ -32,6 +33,7 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
         raise click.UsageError("--resume and --overwrite exclude each other")
     if scheduler and workers:
         raise click.UsageError("--workers is for the local pool; the Dask cluster decides its own workers")
+    output_dir(out)  # run_batch decides what may be replaced (--resume, --overwrite)
     r = load_recipe(recipe)
     try:
         result = run_batch(r, out, workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,

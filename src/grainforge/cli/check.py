@@ -6,8 +6,10 @@ from pathlib import Path
 
 import click
 
+#: every column states its unit (``_mm``, ``_%``) or is a count or a word; ``*_status`` says whether the
+#: number next to it was measured or is the measuring horizon (``thicker``: a lower bound).
 COLUMNS = ("file", "part", "status", "faces", "d_eq_mm", "solid", "self_intersections", "min_wall_mm",
-           "thin_area_%", "min_neck_mm", "problems")
+           "min_wall_status", "thin_area_%", "min_neck_mm", "min_neck_status", "problems")
 
 
 def _table(rows: list[dict]) -> str:
@@ -24,7 +26,7 @@ def _table(rows: list[dict]) -> str:
               help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
 @click.option("--csv", "as_csv", is_flag=True, help="Print the table as CSV instead of aligned text.")
 def check(files, printer_spec, as_csv):
-    """Check mesh FILES (STL, OBJ, PLY, 3MF; every object of a 3MF) against a printer.
+    """Check mesh FILES (STL, OBJ, PLY, 3MF, or folders of them; every object of a 3MF) against a printer.
 
     Checks: watertight, manifold, one body, no self-intersection, wall
     thickness / minimum feature and thin necks against the printer's minimum
@@ -34,11 +36,13 @@ def check(files, printer_spec, as_csv):
     """
     from ..fabrication.printability import check_mesh
     from ..fabrication.printers import get_printer
-    from ..fabrication.threemf import read_parts
+    from ..io import read_parts
     from ..io import csv_text
+    from .paths import mesh_inputs
     from .progress import progress_bar
 
     printer = get_printer(printer_spec)
+    files = mesh_inputs(files)
     parts = [(path, part) for path in files for part in read_parts(path)]  # ValueError -> exit 2
     rows = []
     for path, part in progress_bar(total=len(parts), desc="check")(parts):

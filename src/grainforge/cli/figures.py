@@ -6,9 +6,11 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, output_dir
+
 
 @click.command()
-@click.option("--out", required=True, type=click.Path(file_okay=False, path_type=Path), help="Folder for the PNGs.")
+@click.option("--out", required=True, type=OutPath(file_okay=False), help="Folder for the PNGs.")
 @click.option("--only", "only", multiple=True, type=click.IntRange(1, 6), help="Only this figure (repeatable).")
 @click.option("--subdivisions", type=click.IntRange(2, 6), default=5, show_default=True,
               help="Icosphere level of the FSO and CRI grains (lower is faster).")
@@ -21,10 +23,7 @@ def figures(out, only, subdivisions, overwrite):
     from ..figures import FIGURES, make_figures
 
     numbers = tuple(sorted(set(only))) or tuple(FIGURES)
-    if not overwrite:
-        existing = [out / FIGURES[n][0] for n in numbers if (out / FIGURES[n][0]).exists()]
-        if existing:
-            raise click.UsageError(f"{existing[0]} exists; use --overwrite")
+    output_dir(out, overwrite=overwrite, files=[out / FIGURES[n][0] for n in numbers])
     written, skipped = make_figures(out, numbers, subdivisions=subdivisions,
                                     echo=lambda msg: click.echo(msg, err=True))
     for n, reason in skipped:

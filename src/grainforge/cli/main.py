@@ -29,6 +29,12 @@ class GrainforgeGroup(click.Group):
         except (ParameterError, FileExistsError, FileNotFoundError, ValueError) as exc:
             click.echo(f"Error: {_one_line(exc)}", err=True)
             sys.exit(2)
+        except OSError as exc:  # permission denied, not a directory, disk full, ...: name the path
+            click.echo(f"Error: {_os_error(exc)}", err=True)
+            sys.exit(2)
+        except MemoryError:
+            click.echo("Error: not enough memory for this request; ask for fewer or smaller grains", err=True)
+            sys.exit(2)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
             sys.exit(130)
@@ -39,6 +45,13 @@ class GrainforgeGroup(click.Group):
 
 def _one_line(exc: BaseException) -> str:
     return " ".join(str(exc).split())
+
+
+def _os_error(exc: OSError) -> str:
+    """``cannot write out/x.png: permission denied`` rather than ``[Errno 13] ...``."""
+    reason = (exc.strerror or type(exc).__name__).lower()
+    name = exc.filename if exc.filename is not None else None
+    return f"{name}: {reason}" if name is not None else _one_line(exc) or reason
 
 
 @click.group(cls=GrainforgeGroup, context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100})
@@ -56,13 +69,16 @@ def cli():
 
 
 def _register():
-    from . import analyse, batch, calibrate, check, demo, figures, fit, fourier, generate, plot, render, tray
+    from .options import apply_help_style
+
+    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, tray
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
-        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, fit.fit,
+        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit,
     ):
         cli.add_command(command)
+    apply_help_style(cli)
 
 
 _register()

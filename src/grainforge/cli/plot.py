@@ -7,12 +7,13 @@ from pathlib import Path
 import click
 
 from ..plots import KINDS
+from .paths import OutPath, output_file
 
 
 @click.command()
 @click.argument("kind", type=click.Choice(tuple(KINDS)))
 @click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="PNG to write.")
+@click.option("-o", "--out", required=True, type=OutPath(dir_okay=False), help="PNG to write.")
 @click.option("--title", default=None, help="Plot title.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
 def plot(kind, manifests, out, title, overwrite):
@@ -27,7 +28,6 @@ def plot(kind, manifests, out, title, overwrite):
     """
     from ..plots import plot as draw
 
-    if out.exists() and not overwrite:
-        raise click.UsageError(f"{out} exists; use --overwrite")
+    out = output_file(out, overwrite=overwrite, option="-o", suffixes=(".png",))
     draw(kind, manifests, out, title=title)
     click.echo(f"wrote {out}", err=True)

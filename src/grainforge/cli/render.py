@@ -6,17 +6,29 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, mesh_inputs, output_file
+
+#: image formats the sheet can be written in (by the suffix of -o)
+IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
+
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--out", required=True, type=click.Path(dir_okay=False, path_type=Path), help="PNG to write.")
-@click.option("--columns", type=click.IntRange(min=1), default=None, help="Panels per row.")
+@click.option("-o", "--out", required=True, type=OutPath(dir_okay=False),
+              help="Image to write: .png, or .jpg/.jpeg (JPEG).")
+@click.option("--columns", type=click.IntRange(min=1), default=None, show_default="about square",
+              help="Panels per row (at most the number of panels).")
 @click.option("--title", default=None, help="Title above the panels.")
-def render(files, out, columns, title):
-    """Render mesh FILES (STL, OBJ, PLY, 3MF) as a labelled contact sheet PNG."""
+@click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
+def render(files, out, columns, title, overwrite):
+    """Render mesh FILES (STL, OBJ, PLY, 3MF, or folders of them) as a labelled contact sheet."""
     from ..io import read_mesh
     from ..render import contact_sheet
 
+    out = output_file(out, overwrite=overwrite, option="-o", suffixes=IMAGE_SUFFIXES)
+    files = mesh_inputs(files)
     meshes = [read_mesh(f) for f in files]  # ValueError -> one line, exit 2
+    if columns is not None:
+        columns = min(columns, len(meshes))  # more columns than panels would only be empty space
     contact_sheet(meshes, [f.name for f in files], out, columns=columns, title=title)
     click.echo(f"wrote {out}", err=True)

@@ -276,7 +276,7 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
         name = f"{task['method']}-{task['index']:05d}"
         return name, f"seed {task['seed']}", g.vertices * k, g.faces, getattr(task["params"], "subdivisions", None)
     from ..solid import solid_problems
-    from .threemf import read_parts
+    from ..io import read_parts
 
     path = Path(task["path"])
     parts = read_parts(path)
@@ -543,7 +543,7 @@ def build_tray(
             _preview(path, footprints[k], layers_of[k], printer.build_volume,
                      f"{out.name} plate {k + 1}/{len(previews)}: {n} grains, {layer_count[k]} layer(s), "
                      f"{printer.name}, gap {gap * 1000:.0f} µm")
-        write_csv(csv_path, rows)
+        write_csv(csv_path, rows, units=True)
     except BaseException:
         if writer is not None:
             writer.abort()

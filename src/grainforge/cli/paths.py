@@ -1,0 +1,207 @@
+"""The CLI contract for paths, shared by every command that reads or writes files.
+
+Call these at the *start* of a command, before any work, so a mistake costs
+the user nothing and no file is written:
+
+- :func:`output_file` / :func:`output_dir`: empty path, an existing output
+  without ``--overwrite``, a file where a folder is needed (or the reverse),
+  a folder that cannot be written into, an unsupported extension;
+- :func:`mesh_inputs`: mesh files and folders of them (their mesh files, sorted);
+- :func:`remove_stale_temps`: temporary files of our own naming that a killed
+  run left behind.
+
+Each raises :class:`click.UsageError` / :class:`click.BadParameter`, which the
+``grainforge`` group prints as one line with exit code 2.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> d = pathlib.Path(tempfile.mkdtemp())
+>>> output_file(d / "a.png", overwrite=False, suffixes=(".png",)).name
+'a.png'
+>>> (d / "a.png").write_bytes(b"x")
+1
+>>> output_file(d / "a.png", overwrite=False)
+Traceback (most recent call last):
+...
+click.exceptions.UsageError: ... exists; use --overwrite
+"""
+
+from __future__ import annotations
+
+import os
+import tempfile
+import time
+from pathlib import Path
+from typing import Iterable, Sequence
+
+import click
+
+__all__ = ["MESH_SUFFIXES", "OutPath", "output_file", "output_dir", "check_writable", "mesh_inputs", "remove_stale_temps",
+           "refuse_existing"]
+
+#: suffixes of the mesh files a folder argument expands to
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf")
+
+
+class OutPath(click.Path):
+    """``click.Path`` that refuses an empty string (click would turn ``""`` into ``.``, the current folder).
+
+    Use it for every output option: ``type=OutPath(dir_okay=False)`` for a
+    file, ``OutPath(file_okay=False)`` for a folder.
+    """
+
+    def __init__(self, **kwargs):
+        kwargs.setdefault("path_type", Path)
+        super().__init__(**kwargs)
+
+    def convert(self, value, param, ctx):
+        if isinstance(value, str) and value.strip() == "":
+            self.fail("the path is empty; give a file or folder name", param, ctx)
+        return super().convert(value, param, ctx)
+
+
+def _hint(option: str | None) -> str:
+    return f"{option}: " if option else ""
+
+
+def _non_empty(path, option: str | None) -> Path:
+    if path is None or str(path).strip() == "":
+        raise click.UsageError(f"{_hint(option)}the path is empty; give a file or folder name")
+    return Path(path)
+
+
+def _first_existing(path: Path) -> Path:
+    """``path`` or its nearest existing ancestor (the folder a write would have to create things in)."""
+    p = path if path.is_absolute() else Path.cwd() / path
+    while not p.exists() and not p.is_symlink():
+        p = p.parent
+    return p
+
+
+def check_writable(path: str | os.PathLike, option: str | None = None) -> None:
+    """Refuse when ``path`` (a file or folder to be created or replaced) cannot be written.
+
+    Walks up to the nearest existing ancestor: a *file* there means a folder
+    is needed where a file is (``NotADirectoryError`` otherwise, later); a
+    folder there must accept a new file (probed by creating and removing a
+    temporary file, which also catches read-only mounts and, as root,
+    immutable folders).
+    """
+    path = Path(path)
+    target = path if path.is_dir() else path.parent
+    base = _first_existing(target)
+    if not base.is_dir():
+        raise click.UsageError(f"{_hint(option)}cannot write {path}: {base} is a file, not a folder")
+    try:
+        fd, probe = tempfile.mkstemp(prefix=".grainforge-probe-", dir=base)
+    except OSError as exc:
+        reason = exc.strerror or type(exc).__name__
+        raise click.UsageError(f"{_hint(option)}cannot write into {base} ({reason.lower()})") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def refuse_existing(paths: Iterable[Path], overwrite: bool) -> None:
+    """Refuse (one line) when any of ``paths`` exists and ``overwrite`` is false."""
+    if overwrite:
+        return
+    existing = [p for p in paths if p.exists()]
+    if existing:
+        more = f" ({len(existing)} output files would be replaced)" if len(existing) > 1 else ""
+        raise click.UsageError(f"{existing[0]} exists{more}; use --overwrite")
+
+
+def output_file(
+    path, *, overwrite: bool, option: str | None = "--out", suffixes: Sequence[str] | None = None,
+    also: Iterable[Path] = (),
+) -> Path:
+    """Validate an output *file* before any work; return it as a Path.
+
+    Parameters
+    ----------
+    path : path-like
+        The file the command will write.
+    overwrite : bool
+        The command's ``--overwrite``.  Without it an existing ``path`` (or any of ``also``) is refused.
+    option : str, optional
+        The option name for the message.
+    suffixes : sequence of str, optional
+        Allowed extensions (lower case, with the dot), e.g. ``(".png",)``.
+    also : iterable of Path
+        Further files the command writes next to ``path`` (checked for existence too).
+    """
+    path = _non_empty(path, option)
+    if suffixes is not None and path.suffix.lower() not in suffixes:
+        raise click.UsageError(
+            f"{_hint(option)}{path.name!r} must end in {' or '.join(suffixes)} (the format written)")
+    if path.is_dir():
+        raise click.UsageError(f"{_hint(option)}{path} is a folder; give a file name")
+    refuse_existing([path, *also], overwrite)
+    check_writable(path, option)
+    return path
+
+
+def output_dir(path, *, overwrite: bool | None = None, option: str | None = "--out",
+               files: Iterable[Path] = ()) -> Path:
+    """Validate an output *folder* before any work; return it as a Path.
+
+    ``files`` are outputs the command will write into it (paths inside the
+    folder); without ``overwrite`` an existing one is refused.  Pass
+    ``overwrite=None`` when the command checks existence itself.
+    """
+    path = _non_empty(path, option)
+    if path.exists() and not path.is_dir():
+        raise click.UsageError(f"{_hint(option)}{path} is a file, not a folder")
+    if overwrite is not None:
+        refuse_existing(files, overwrite)
+    check_writable(path if path.is_dir() else path / "x", option)
+    return path
+
+
+def mesh_inputs(paths: Iterable[str | os.PathLike], what: str = "FILES") -> list[Path]:
+    """Mesh files named by ``paths``: files as given, folders expanded to their mesh files (sorted).
+
+    Hidden files (ours are temporaries) are skipped.  A missing path, or a
+    folder without mesh files, is refused in one line.
+    """
+    out: list[Path] = []
+    for item in paths:
+        p = Path(item)
+        if str(item).strip() == "":
+            raise click.BadParameter("an empty path", param_hint=what)
+        if p.is_dir():
+            found = sorted(q for q in p.iterdir()
+                           if q.suffix.lower() in MESH_SUFFIXES and q.is_file() and not q.name.startswith("."))
+            if not found:
+                raise click.BadParameter(
+                    f"{p} is a folder without mesh files ({', '.join(MESH_SUFFIXES)})", param_hint=what)
+            out += found
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise click.BadParameter(f"{p}: no such file or folder", param_hint=what)
+    return out
+
+
+def remove_stale_temps(folder: str | os.PathLike, prefix: str, suffix: str = ".tmp",
+                       min_age: float = 0.0) -> list[Path]:
+    """Remove temporary files (``prefix*suffix``) a killed earlier run left in ``folder``.
+
+    Only names of grainforge's own making are passed here (e.g. ``.tray.3mf.``
+    + ``.tmp``, as :func:`grainforge.io.atomic_write` makes them).  Files
+    younger than ``min_age`` seconds are kept (a run still writing them).
+    """
+    folder = Path(folder)
+    removed = []
+    if not folder.is_dir():
+        return removed
+    now = time.time()
+    for p in folder.glob(f"{prefix}*{suffix}"):
+        try:
+            if p.is_file() and now - p.stat().st_mtime >= min_age:
+                p.unlink()
+                removed.append(p)
+        except OSError:
+            pass
+    return removed
