@@ -222,17 +222,33 @@ def truncnormal(mean: float, sd: float, low: float, high: float) -> dict:
             "low": float(low), "high": float(high)}
 
 
-register(MethodFit(
-    "cri",
-    knobs=(Knob("irregularity", 0.09, 0.0, 0.3, 0.02), Knob("roughness", 0.006, 0.0, 0.05, 0.004),
-           Knob("irregularity_sd", 0.03, 0.002, 0.15, 0.015), Knob("roughness_sd", 0.004, 0.0005, 0.03, 0.003)),
-    targets=("mean sphericity", "mean convexity", "sd sphericity", "sd convexity"),
+def _descriptor_knobs(irregularity: float, roughness: float, high: float) -> tuple[Knob, ...]:
+    """Irregularity D3 and roughness D8, each drawn per grain (mean and sd fitted)."""
+    return (Knob("irregularity", irregularity, 0.0, high, 0.02), Knob("roughness", roughness, 0.0, 0.05, 0.004),
+            Knob("irregularity_sd", 0.04, 0.002, 0.15, 0.015), Knob("roughness_sd", 0.004, 0.0005, 0.03, 0.003))
+
+
+def _descriptor_params(k: Mapping[str, float], high: float) -> dict:
     # D2 = 0: the aspect alone sets the form; D3 (irregularity) and D8 (roughness) drawn per grain
-    params=lambda k: {
-        "descriptors": [0.0, truncnormal(k["irregularity"], k["irregularity_sd"], 0.0, 0.4),
-                        truncnormal(k["roughness"], k["roughness_sd"], 0.0, 0.1)],
-        "subdivisions": 5,
-    },
+    return {"descriptors": [0.0, truncnormal(k["irregularity"], k["irregularity_sd"], 0.0, high),
+                            truncnormal(k["roughness"], k["roughness_sd"], 0.0, 0.1)],
+            "subdivisions": 5}
+
+
+_SHAPE_TARGETS = ("mean sphericity", "mean convexity", "sd sphericity", "sd convexity")
+
+register(MethodFit("cri", knobs=_descriptor_knobs(0.10, 0.006, 0.4), targets=_SHAPE_TARGETS,
+                   params=lambda k: _descriptor_params(k, 0.4)))
+register(MethodFit("rf", knobs=_descriptor_knobs(0.06, 0.006, 0.3), targets=_SHAPE_TARGETS,
+                   params=lambda k: _descriptor_params(k, 0.3)))
+register(MethodFit(
+    "fso",
+    knobs=(Knob("amplitude", 0.06, 0.0, 0.3, 0.01), Knob("fractal_dimension", 2.3, 2.0, 2.9, 0.1),
+           Knob("amplitude_sd", 0.015, 0.001, 0.1, 0.008), Knob("fractal_dimension_sd", 0.05, 0.005, 0.3, 0.05)),
+    targets=_SHAPE_TARGETS,
+    params=lambda k: {"amplitude": truncnormal(k["amplitude"], k["amplitude_sd"], 0.0, 0.3),
+                      "fractal_dimension": truncnormal(k["fractal_dimension"], k["fractal_dimension_sd"], 2.0, 2.9),
+                      "surface": "seamless", "subdivisions": 5},
 ))
 
 
@@ -507,14 +523,16 @@ def fit_sand(
     with _Pool(max(1, int(workers))) as pool:
         gen, st = evaluate(x, aspect, pilot, "pilot 0 (start)")
         best = (st["score"], x.copy(), dict(aspect))
-        y0 = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
+        # finite-difference Jacobian on the first half of the pilot (same grains: differences, not noise)
+        nj = max(2, pilot // 2)
+        y0 = np.array([_stat(gen[:nj, 1:], t) for t in spec.targets])
         J = np.zeros((len(spec.targets), len(spec.knobs)))
-        for i, k in enumerate(spec.knobs):  # finite-difference Jacobian, aspect held
+        for i, k in enumerate(spec.knobs):  # aspect held
             xi = x.copy()
             xi[i] = xi[i] + steps[i] if xi[i] + steps[i] <= hi_b[i] else xi[i] - steps[i]
-            gi, _ = evaluate(xi, aspect, pilot, f"jacobian {i + 1}/{len(spec.knobs)} ({k.name})")
+            gi, _ = evaluate(xi, aspect, nj, f"jacobian {i + 1}/{len(spec.knobs)} ({k.name})")
             J[:, i] = (np.array([_stat(gi[:, 1:], t) for t in spec.targets]) - y0) / (xi[i] - x[i])
-        y_prev = y0
+        y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
         for r in range(1, rounds + 1):
             x_new = knob_step(x, J, gen)
             aspect = aspect_step(aspect, st)

@@ -145,22 +145,27 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
     return inside.reshape(shape[0], shape[1], shape[2]), origin
 
 
-def _hull_count(idx: np.ndarray) -> int:
-    """Lattice points inside or on the convex hull of integer points ``idx`` (N, 3)."""
+def _column_ends(mask: np.ndarray) -> np.ndarray:
+    """(2m, 3) lattice points: the lowest and highest voxel of each of the m non-empty z columns."""
+    filled = mask.any(axis=2)
+    ij = np.argwhere(filled)
+    col = mask[ij[:, 0], ij[:, 1]]  # (m, nz)
+    first = np.argmax(col, axis=1)
+    last = mask.shape[2] - 1 - np.argmax(col[:, ::-1], axis=1)
+    return np.concatenate([np.column_stack([ij, first]), np.column_stack([ij, last])])
+
+
+def _hull_count(mask: np.ndarray) -> int:
+    """Lattice points inside or on the convex hull of the voxel centres of ``mask`` (3D bool)."""
     from scipy.spatial import ConvexHull, QhullError
 
-    # the hull of a column-convex set is the hull of each column's end points
-    key = idx[:, 0] * (idx[:, 1].max() + 1) + idx[:, 1]
-    order = np.lexsort((idx[:, 2], key))
-    s = idx[order]
-    ks = key[order]
-    starts = np.flatnonzero(np.r_[True, ks[1:] != ks[:-1]])
-    ends = np.r_[starts[1:] - 1, len(s) - 1]
-    pts = np.concatenate([s[starts], s[ends]]).astype(np.float64)
+    mask = np.asarray(mask, dtype=bool)
+    # the hull of the voxel centres is the hull of each column's end points
+    pts = _column_ends(mask).astype(np.float64)
     try:
         hull = ConvexHull(pts)
     except QhullError:  # flat (one voxel thick): every lattice point of the hull is a voxel
-        return len(idx)
+        return int(mask.sum())
     eq = np.unique(np.round(hull.equations, 12), axis=0)  # coplanar triangles share one plane
     nz = eq[:, 2]
     up, down, flat = nz > 1e-12, nz < -1e-12, np.abs(nz) <= 1e-12
@@ -207,19 +212,29 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
     from skimage.measure import marching_cubes, mesh_surface_area
 
     mask = np.asarray(mask, dtype=bool)
-    idx = np.argwhere(mask)
-    n = len(idx)
+    n = int(np.count_nonzero(mask))
     if n == 0:
         raise ValueError("the voxel image is empty (the grain is smaller than a voxel)")
     h = float(voxel_size)
     V = n * h**3
-    # inertia-equivalent ellipsoid from the voxel centres' covariance
-    c = idx - idx.mean(0)
-    lam = np.sort(np.linalg.eigvalsh(np.einsum("ni,nj->ij", c, c) / n))[::-1]
+    # inertia-equivalent ellipsoid from the voxel centres' covariance (moments from the image's projections)
+    pxy = mask.sum(axis=2, dtype=np.float64)
+    pxz = mask.sum(axis=1, dtype=np.float64)
+    pyz = mask.sum(axis=0, dtype=np.float64)
+    x, y, z = (np.arange(k, dtype=np.float64) for k in mask.shape)
+    px, py, pz = pxy.sum(1), pxy.sum(0), pxz.sum(0)
+    m = np.array([px @ x, py @ y, pz @ z]) / n
+    c = np.empty((3, 3))
+    c[0, 0], c[1, 1], c[2, 2] = px @ x**2 / n, py @ y**2 / n, pz @ z**2 / n
+    c[0, 1] = c[1, 0] = x @ pxy @ y / n
+    c[0, 2] = c[2, 0] = x @ pxz @ z / n
+    c[1, 2] = c[2, 1] = y @ pyz @ z / n
+    c -= np.outer(m, m)
+    lam = np.sort(np.linalg.eigvalsh(c))[::-1]
     major, middle, minor = 2.0 * np.sqrt(5.0 * np.maximum(lam, 0.0)) * h
+    lo = np.array([np.flatnonzero(p)[0] for p in (px, py, pz)])
+    hi = np.array([np.flatnonzero(p)[-1] + 1 for p in (px, py, pz)])
     # true sphericity: Gaussian-smoothed image, marching cubes at 0.5 (crop + pad so the filter has room)
-    lo = idx.min(0)
-    hi = idx.max(0) + 1
     pad = int(math.ceil(4 * SIGMA)) + 1
     sub = np.zeros(tuple(hi - lo + 2 * pad), dtype=np.float32)
     sub[tuple(slice(pad, pad + e) for e in hi - lo)] = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
@@ -227,7 +242,7 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
     verts, tris, _, _ = marching_cubes(smooth, level=0.5)
     area = mesh_surface_area(verts, tris) * h**2
     sph = math.pi ** (1 / 3) * (6 * V) ** (2 / 3) / area if area > 0 else math.nan
-    conv = n / _hull_count(idx)
+    conv = n / _hull_count(mask)
     return {
         "voxels": int(n), "volume": V, "equivalent_diameter": (6 * V / math.pi) ** (1 / 3),
         "major": float(major), "middle": float(middle), "minor": float(minor),
