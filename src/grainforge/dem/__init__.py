@@ -12,6 +12,6 @@ __all__ = ["MassProperties", "mass_properties", "ENGINES", "SUPPORTED"]
 SUPPORTED = {
     "yade": ("clump",),
     "liggghts": ("clump",),
-    "lammps": (),
+    "lammps": ("clump",),
 }
 ENGINES = tuple(SUPPORTED)
