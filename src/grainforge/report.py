@@ -134,7 +134,7 @@ def population_figure(recipe, rows, info: Mapping[str, Any]):
     units = {s.name: s.unit for s in specs(get(recipe.method).Params)}
     drawn = [n for n, v in recipe.params.items() if isinstance(v, Distribution)]
     panels = ["size"] + drawn + ["sphericity", "convexity"]
-    cols = min(3, len(panels))
+    cols = 2 if len(panels) == 4 else min(3, len(panels))
     nrows = (len(panels) + cols - 1) // cols
     fig = plt.figure(figsize=(4.2 * cols, 3.4 * nrows))
     grid = fig.add_gridspec(nrows, 2 * cols)
