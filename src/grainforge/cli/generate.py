@@ -79,8 +79,13 @@ def _match_resolution(method, params, seeds, size, size_definition, printer):
 
     res = match_subdivisions(method, params, size, size_definition, printer, seeds[:3])
     click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): {res.describe()}", err=True)
+    warning = res.shape_warning(size)
+    if warning is not None:
+        click.echo(f"WARNING: {warning}  Print larger or on a finer printer, or give --subdivisions (without "
+                   "--printer) to keep the detail in the file; recorded in manifest.csv (resolution_warning).", err=True)
     extras = {"printer": printer.name, "chordal_deviation": res.deviation, "deviation_tolerance": res.tolerance,
-              "mean_edge": res.edge, "resolution_limited_by": res.limited_by}
+              "mean_edge": res.edge, "resolution_limited_by": res.limited_by,
+              "retained_wavelength": res.retained_wavelength(), "resolution_warning": warning or ""}
     return dataclasses.replace(params, subdivisions=res.subdivisions), extras
 
 

@@ -135,7 +135,7 @@ def clump_quality(vertices: np.ndarray, faces: np.ndarray, centres: np.ndarray, 
     union = union_mask(centres, radii, grid)
     both = np.count_nonzero(grain & union)
     nu = np.count_nonzero(union)
-    return both / max(np.count_nonzero(grain), 1), (nu - both) / max(nu, 1)
+    return float(both / max(np.count_nonzero(grain), 1)), float((nu - both) / max(nu, 1))
 
 
 def _lens(r1, r2, d):

@@ -71,8 +71,9 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
     >>> import trimesh
     >>> s = trimesh.creation.icosphere(4)
     >>> ls = level_set(s.vertices, s.faces, spacing=0.2)
-    >>> bool(ls.distance.min() < -0.9), bool(abs(ls.distance.min() + 1) < 0.2)
-    (True, True)
+    >>> nodes = np.stack(np.meshgrid(*ls.grid.axes(), indexing="ij"), axis=-1)
+    >>> bool(np.abs(ls.distance - (np.linalg.norm(nodes, axis=-1) - 1.0)).max() < 0.01)
+    True
     """
     import trimesh
 

@@ -133,10 +133,10 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     >>> import trimesh
     >>> box = trimesh.creation.box((2.0, 2.0, 2.0))
     >>> t = prepare(box.vertices, box.faces, "box", density=1000.0, spheres=8)
-    >>> round(t.mass, 9), t.clump.count      # 8 cm³ of water
-    (0.008, 8)
+    >>> round(t.mass, 12), t.clump.count      # a 2 mm cube (file units mm) of water: 8 mg
+    (8e-06, 8)
     """
-    from .inputs import enclosure_problems
+    from .enclosure import enclosure_problems
 
     if not (np.isfinite(density) and density > 0):
         raise ValueError(f"density must be > 0 kg/m³, got {density!r}")
