@@ -10,7 +10,8 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "print_tray"]
+__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
+           "sample_micrograph", "write_fourier_csv"]
 
 
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
@@ -218,6 +219,39 @@ def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     return written
 
 
+#: the angular gallery: columns from sharp to rounded, rows from smooth to rough
+ANGULAR_ROUNDING = (0.0, 0.1, 0.25, 0.5, 0.8)
+ANGULAR_ROUGHNESS = (0.0, 0.01, 0.03)
+
+
+def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
+    """Angular (crushed-rock) grains: sharp to rounded (columns) and smooth to rough (rows), one seed.
+
+    A last row shows dented grains (lower convexity), also sharp to rounded.
+    """
+    from .io import read_mesh
+    from .methods.angular import Params
+    from .render import contact_sheet
+    from .run import write_run
+
+    s = 4 if quick else 5
+    folder = out / "angular"
+    meshes, labels = [], []
+    rows = [(f"roughness {q:g}", dict(roughness=q)) for q in ANGULAR_ROUGHNESS]
+    rows.append(("6 dents, roughness 0.01", dict(roughness=0.01, dents=6, dent_depth=0.35)))
+    for name, extra in rows:
+        for rounding in ANGULAR_ROUNDING:
+            params = Params(facets=18, aspect=(1.6, 1.25, 1.0), rounding=rounding, subdivisions=s, **extra)
+            sub = folder / f"{name.replace(' ', '-').replace(',', '')}-rounding={rounding:g}"
+            written = write_run("angular", params, [3], sub, overwrite=True)
+            meshes.append(read_mesh(sub / written[0]["file"]))
+            labels.append(f"rounding {rounding:g}, {name}")
+    sheet = contact_sheet(meshes, labels, out / "angular-gallery.png", columns=len(ANGULAR_ROUNDING),
+                          title="Angular grains (18 facets, aspect 1.6:1.25:1, seed 3): sharp to rounded "
+                                "(left to right), smooth to rough (top to bottom), dented (last row)")
+    return [folder, sheet]
+
+
 POPULATION_RECIPE = """\
 # demo: a rough-angular CRI sand graded like ASTM C778 graded sand (by mass, sieve sizes)
 method = "cri"
@@ -246,6 +280,79 @@ def population_demo(out: Path, quick: bool = False) -> list[Path]:
 
 
 
+def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int = 1) -> Path:
+    """A synthetic micrograph of a sand sample: ``rows × columns`` separate grains, blurred and speckled.
+
+    There are no real micrographs in this repository; the grains are Fourier
+    contours whose descriptors vary from grain to grain as a natural sand's
+    do (D2 ~ U(0.04, 0.25), D3 ~ U(0.02, 0.10), D8 ~ U(0.008, 0.03), decay
+    exponents ~ U(−2.2, −1.2)), drawn at radius 55 px on a 160 px grid,
+    blurred (σ = 1.5 px) and given sensor noise (σ = 10 grey levels), so that
+    ``grainforge fourier`` reads them as it would a real image.
+    """
+    import io as _io
+
+    import numpy as np
+    from PIL import Image
+    from skimage.filters import gaussian
+
+    from .contours import Contour, draw_contours
+    from .io import atomic_write
+
+    rng = np.random.default_rng(seed)
+    items = []
+    for i in range(rows * columns):
+        d = (rng.uniform(0.04, 0.25), rng.uniform(0.02, 0.10), rng.uniform(0.008, 0.03))
+        decay = tuple(rng.uniform(-2.2, -1.2, 2))
+        c = Contour.from_descriptors(d, decay=decay, rng=rng)
+        items.append((c, (100 + 160 * (i % columns), 100 + 160 * (i // columns)), 55.0))
+    img = draw_contours((40 + 160 * rows, 40 + 160 * columns), items, background=35, fill=205).astype(float)
+    img = gaussian(img, sigma=1.5, preserve_range=True)
+    img += rng.normal(0.0, 10.0, img.shape)
+    buf = _io.BytesIO()
+    Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
+    return atomic_write(path, buf.getvalue())
+
+
+def write_fourier_csv(images, path: Path) -> Path:
+    """The D2..D16 table ``grainforge fourier IMAGE... --csv path`` writes (same scan, 128 rays).
+
+    Only the ``image``, ``grain`` and ``D2``..``D16`` columns, which is what
+    the ``spectrum`` inputs of rf and CRI read.
+    """
+    from .contours import scan_image
+    from .io import write_csv
+
+    rows = []
+    for image in images:
+        scan = scan_image(str(image), n_angles=128)
+        for i, c in enumerate(scan.contours):
+            D = c.descriptors(16)
+            rows.append({"image": str(image), "grain": i, **{f"D{n}": float(D[n]) for n in range(2, 17)}})
+    return write_csv(path, rows, ["image", "grain"] + [f"D{n}" for n in range(2, 17)])
+
+
+def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
+    """rf grains from a measured spectrum: a sample micrograph → its D2..D16 table → one rf grain per seed."""
+    from .io import read_mesh
+    from .methods.rf import Params
+    from .render import contact_sheet
+    from .run import write_run
+
+    folder = out / "rf"
+    folder.mkdir(parents=True, exist_ok=True)
+    image = sample_micrograph(folder / "sample-micrograph.png")
+    table = write_fourier_csv([image], folder / "fd.csv")
+    seeds = list(range(6 if quick else 12))
+    p = Params(spectrum=str(table), subdivisions=4 if quick else 5)
+    rows = write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
+    labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
+    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2,
+                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph)")
+    return [folder, sheet]
+
+
 def print_tray(out: Path, quick: bool = False) -> list[Path]:
     """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains."""
     from .fabrication.printability import check_mesh
@@ -267,9 +374,11 @@ SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("FSO sweeps (Figs. 1-2)", fso_sweeps),
     ("CRI contours and grains (Figs. 3-4)", cri_gallery),
     ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
+    ("Angular grains: sharp to rounded, smooth to rough", angular_gallery),
     ("Population: CRI sand graded like ASTM C778", population_demo),
     ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
     ("Print tray: 2 mm rough-angular CRI grains on the paper's PolyJet, checked", print_tray),
+    ("rf grains from the spectra of a sample micrograph", rf_gallery),
 ]
 
 

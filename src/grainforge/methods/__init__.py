@@ -4,7 +4,14 @@ Each generator lives in its own module exposing
 
 - ``NAME`` : str, the method name used by the CLI, manifests and recipes;
 - ``Params`` : a frozen dataclass declared with :func:`grainforge.params.param`;
-- ``build(params, rng) -> (vertices, faces, info)`` : the pure geometry.
+- ``build(params, rng) -> (vertices, faces, info)`` : the pure geometry;
+
+and optionally ``INFO_COLUMNS`` (the ``info`` keys a manifest records) and
+``physical_info(info, scale) -> info`` (info values in model units converted
+to mm for the manifest, e.g. DPA's R_g in primary sizes).  Method modules
+never import click or :mod:`grainforge.cli`: ``grainforge generate NAME`` is
+derived from ``Params`` by :mod:`grainforge.cli.generate`, and options that
+are not plain parameters go in a hook ``grainforge/cli/generate_<name>.py``.
 
 :func:`generate` turns a (method, params, seed) triple into a checked,
 centred :class:`~grainforge.grain.Grain`.
