@@ -41,7 +41,7 @@ def read_back(grain):
 
 def section_descriptors(mesh, orders=ORDERS) -> np.ndarray:
     """(3, len(orders)) D_n of the sections through the volume centroid ⊥ the principal inertia axes."""
-    from grainforge.analysis.sections import section_descriptors as sd
+    from grainforge.analysis.principal_sections import section_descriptors as sd
 
     return sd(mesh, orders)
 

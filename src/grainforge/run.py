@@ -41,11 +41,20 @@ def manifest_columns(method: str, extra: Sequence[str] = ()) -> list[str]:
 
 
 def manifest_row(grain, file: str, size: float, size_definition: str) -> dict[str, Any]:
-    """One manifest row for a grain already scaled to physical units (mm)."""
+    """One manifest row for a grain already scaled to physical units (mm).
+
+    Lengths, areas and volumes are in mm, mm², mm³ (the CSV headers say so:
+    :mod:`grainforge.units`); a method's ``physical_info(info, scale)``, if it
+    has one, converts its info values from model units.
+    """
     row: dict[str, Any] = {"file": file, "method": grain.method, "seed": grain.seed}
     row.update(as_dict(grain.params))
     row.update({"size": size, "size_definition": size_definition, "scale": grain.info.get("scale", 1.0)})
-    row.update({k: v for k, v in grain.info.items() if k != "scale"})
+    info = {k: v for k, v in grain.info.items() if k != "scale"}
+    physical = getattr(get(grain.method), "physical_info", None)
+    if physical is not None:  # info in model units -> mm (e.g. DPA: R_g in primary sizes)
+        info = physical(info, row["scale"])
+    row.update(info)
     row.update(basic_descriptors(grain))
     row["version"] = grain.version
     return row
@@ -125,7 +134,7 @@ def write_run(
             rows.append({**row, **(row_extra or {})})
         for row in rows:
             (stage / row["file"]).replace(out / row["file"])
-        write_csv(out / MANIFEST, rows, manifest_columns(method, extra_columns))
+        write_csv(out / MANIFEST, rows, manifest_columns(method, extra_columns), units=True)
     finally:  # on success the stage is empty; on failure nothing new is left behind
         shutil.rmtree(stage, ignore_errors=True)
         if created and not any(out.iterdir()):

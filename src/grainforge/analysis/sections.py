@@ -1,73 +1,123 @@
-"""Planar sections of a grain through its volume centroid, perpendicular to its principal axes.
+"""Fourier descriptors of planar sections of a closed mesh.
 
-What a thin section (or a cut) of the grain would show, measured with no
-knowledge of how the grain was made: the mesh is cut by the three planes
-through its volume centroid perpendicular to the principal axes of its
-inertia tensor (trimesh ``section``), and each section's outline is described
-by its radius function about its own area centroid
-(:func:`grainforge.contours.polygon_contour`, ALGORITHMS.md §2b), giving
-D_n = 2|c_n|/c_0.
+A plane through a point (by default the volume centroid) cuts the mesh in a
+closed outline (``trimesh.intersections.mesh_plane``); as for silhouettes
+(:mod:`grainforge.analysis.fourier`, ALGORITHMS.md §2b) the outline's radii
+are taken along ``n_rays`` rays from its area centroid (outermost crossing)
+and D_n = 2|c_n|/c_0.  Used to check what the generators put into the
+grains (``docs/validation.md``): any orientation (:func:`random_normals`)
+or perpendicular to chosen axes.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["inertia_sections", "section_descriptors"]
+from .fourier import FD_ORDERS, N_RAYS, _outline_radii, _polygon_area_centroid_of_radii, descriptors_from_radii
+
+__all__ = ["plane_basis", "section_radii", "section_descriptors", "random_normals"]
+
+#: rays used to find the outline's area centroid
+CENTROID_RAYS = 1024
 
 
-def inertia_sections(mesh, n_angles: int = 256):
-    """The three sections (⊥ longest, ⊥ intermediate, ⊥ shortest axis) as Contours.
+def plane_basis(normal) -> np.ndarray:
+    """Two orthonormal in-plane axes (rows) for a plane with ``normal`` (right-handed with it).
+
+    Examples
+    --------
+    >>> plane_basis((0.0, 0.0, 1.0)).round(12).tolist()
+    [[0.0, 1.0, 0.0], [-1.0, 0.0, 0.0]]
+    """
+    n = np.asarray(normal, dtype=np.float64)
+    n = n / np.linalg.norm(n)
+    helper = np.eye(3)[int(np.argmin(np.abs(n)))]
+    e1 = np.cross(n, helper)
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(n, e1)
+    return np.stack([e1, e2])
+
+
+def _trimesh(mesh):
+    import trimesh
+
+    if isinstance(mesh, trimesh.Trimesh):
+        return mesh
+    return trimesh.Trimesh(np.asarray(mesh.vertices, dtype=np.float64), np.asarray(mesh.faces, dtype=np.int64),
+                           process=False)
+
+
+def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS) -> tuple[np.ndarray, np.ndarray]:
+    """Radii of the section through ``origin`` with ``normal``, from the outline's area centroid.
 
     Parameters
     ----------
-    mesh : trimesh.Trimesh
-        A closed mesh with positive volume.
-    n_angles : int
-        Rays per outline.
+    mesh : trimesh.Trimesh, Grain or anything with ``vertices`` and ``faces``
+    normal : (3,) float
+    origin : (3,) float, optional
+        A point of the plane (default: the volume centroid of the mesh; pass
+        it when cutting one mesh many times).
+    n_rays : int
 
     Returns
     -------
-    list of grainforge.contours.Contour
-        The largest closed loop of each section, about its own area centroid.
+    r : (n_rays,) float64
+        Outermost crossing along θ_j = 2πj/n_rays, measured in ``plane_basis(normal)``.
+    centre : (3,) float64
+        The outline's area centroid (the rays' origin) in 3D.
+
+    Raises
+    ------
+    ValueError
+        If the plane misses the mesh or the outline does not surround its centroid.
+    """
+    from trimesh.intersections import mesh_plane
+
+    mesh = _trimesh(mesh)
+    o = np.asarray(mesh.center_mass if origin is None else origin, dtype=np.float64)
+    n = np.asarray(normal, dtype=np.float64)
+    seg = mesh_plane(mesh, n, o)
+    if len(seg) == 0:
+        raise ValueError("the plane does not cut the mesh")
+    basis = plane_basis(n)
+    q = (seg.reshape(-1, 3) - o) @ basis.T
+    edges = np.arange(len(q)).reshape(-1, 2)
+    r, _ = _outline_radii(q, edges, CENTROID_RAYS)
+    if not np.isfinite(r).all():
+        raise ValueError("the section does not surround the plane's origin")
+    c = _polygon_area_centroid_of_radii(r, np.zeros(2))
+    r, _ = _outline_radii(q - c, edges, n_rays)
+    if not np.isfinite(r).all():
+        raise ValueError("the section does not surround its area centroid")
+    return r, o + c @ basis
+
+
+def section_descriptors(mesh, normal, origin=None, orders=FD_ORDERS, n_rays: int = N_RAYS) -> np.ndarray:
+    """D_n (for ``orders``) of the section through ``origin`` (default the volume centroid) with ``normal``.
+
+    ``mesh`` as in :func:`section_radii`.
 
     Examples
     --------
     >>> import trimesh
-    >>> e = trimesh.creation.icosphere(4)
-    >>> _ = e.apply_scale((3.0, 2.0, 1.0))
-    >>> [round(float(c.descriptors(2)[2]), 2) for c in inertia_sections(e)]  # ellipses 2:1, 3:1, 3:2
-    [0.34, 0.52, 0.2]
+    >>> e = trimesh.creation.icosphere(5)
+    >>> _ = e.apply_scale((2.0, 1.0, 1.0))
+    >>> d = section_descriptors(e, (0, 0, 1), orders=(2, 3))
+    >>> np.round(d, 3).tolist()  # a 2:1 ellipse: D2 = 0.338, D3 = 0
+    [0.338, 0.0]
     """
-    from ..contours import polygon_contour
-
-    centre = np.asarray(mesh.center_mass, dtype=np.float64)
-    _, vec = np.linalg.eigh(np.asarray(mesh.moment_inertia, dtype=np.float64))
-    axes = vec.T  # smallest moment first: the longest axis
-    size = float(np.ptp(np.asarray(mesh.vertices), axis=0).max())
-    out = []
-    for k in range(3):
-        e1, e2 = axes[(k + 1) % 3], axes[(k + 2) % 3]
-        # a plane through mesh vertices can leave the outline in pieces: nudge it off them
-        for nudge in (0.0, 1e-7, -1e-7, 1e-5):
-            sec = mesh.section(plane_origin=centre + nudge * size * axes[k], plane_normal=axes[k])
-            if sec is None:
-                continue
-            pts = max((np.asarray(p) for p in sec.discrete), key=len) - centre
-            try:
-                out.append(polygon_contour(np.column_stack([pts @ e1, pts @ e2]), n_angles=n_angles,
-                                           source="section"))
-                break
-            except ValueError:
-                continue
-        else:
-            raise ValueError("no closed outline around the centroid in the section through the volume centroid")
-    return out
+    r, _ = section_radii(mesh, normal, origin, n_rays)
+    return descriptors_from_radii(r, orders)
 
 
-def section_descriptors(mesh, orders=(2, 3, 8), n_angles: int = 256) -> np.ndarray:
-    """(3, len(orders)) Fourier descriptors of :func:`inertia_sections`."""
-    from ..contours import descriptors_of_radii
+def random_normals(count: int, rng=None) -> np.ndarray:
+    """``count`` unit vectors uniform on the sphere (normalised Gaussian triples).
 
-    D = np.array([descriptors_of_radii(c.radii) for c in inertia_sections(mesh, n_angles)])
-    return D[:, list(orders)]
+    Examples
+    --------
+    >>> n = random_normals(4, rng=0)
+    >>> n.shape, np.allclose(np.linalg.norm(n, axis=1), 1.0)
+    ((4, 3), True)
+    """
+    g = np.random.default_rng(rng).standard_normal((int(count), 3))
+    return g / np.linalg.norm(g, axis=1, keepdims=True)

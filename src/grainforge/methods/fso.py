@@ -41,6 +41,8 @@ __all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "d
 
 NAME = "fso"
 VALIDITY_PARAMETER = "amplitude"
+#: vertices are unit directions times a positive radius: the solid contract's star certificate applies
+STAR_SHAPED = True
 #: generation outputs recorded in manifests (K actually used, extreme radii / R0)
 INFO_COLUMNS = ("K", "min_radius", "max_radius", "axis_scale")
 DEFAULT_AMPLITUDE = 0.1
@@ -70,9 +72,14 @@ class Params:
         low=0.0, low_open=True, high=1000.0,
     )
     amplitude: float | None = param(
-        None, f"RMS of (R − R0)/R0 (default {DEFAULT_AMPLITUDE}; exclusive with k)", low=0.0, high=1.0
+        None, "RMS of (R − R0)/R0, measured on the sphere; exclusive with k.  A value is refused when the "
+        "smallest radius would fall below 0.05·R0 (the grain would no longer be star-shaped)",
+        low=0.0, high=1.0, shown_default=f"{DEFAULT_AMPLITUDE:g}",
     )
-    k: float | None = param(None, "the paper's raw amplitude scaling K (exclusive with amplitude)", low=0.0)
+    k: float | None = param(
+        None, "the paper's amplitude scaling K of Eq. 2, R = R0 + K·Σ_m Σ_n w_n{...} with R0 = 1 (K is in "
+        "units of R0): sets the overlay's size directly instead of through its RMS; exclusive with amplitude", low=0.0,
+    )
     ridges: int = param(40, "number of superimposed ridges M", kind="int", low=1, high=400)
     frequencies: int = param(40, "number of frequencies n_max", kind="int", low=1, high=400)
     gamma: float = param(1.5, "frequency density γ", low=1.0, low_open=True, high=10.0)
@@ -100,8 +107,10 @@ class Params:
             raise ParameterError("amplitude", "cannot be combined with k: give one of them")
         if self.amplitude is None and self.k is None:
             object.__setattr__(self, "amplitude", DEFAULT_AMPLITUDE)
-        turns = self.gamma**self.frequencies * (np.pi / 2) / self.length_ratio
-        if turns > MAX_TURNS:
+        # in logs: gamma**frequencies overflows a float for large gamma and n_max (10**400)
+        log_turns = self.frequencies * np.log(self.gamma) + np.log(np.pi / 2) - np.log(self.length_ratio)
+        turns = float(np.exp(min(log_turns, 700.0)))
+        if log_turns > np.log(MAX_TURNS):
             raise ParameterError(
                 "frequencies",
                 f"too large for gamma={self.gamma} and length_ratio={self.length_ratio}: "
