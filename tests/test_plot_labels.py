@@ -161,3 +161,14 @@ def test_tray_preview_is_labelled_in_mm_with_a_layer_scale():
     ax = fig.axes[0]
     assert ax.get_xlabel() == "x (mm)" and ax.get_ylabel() == "y (mm)"
     assert any(a.get_label() == "<colorbar>" and "layer" in a.get_ylabel() for a in fig.axes)
+
+
+def test_figure3_traces_the_whole_grain_not_its_lit_half():
+    from grainforge.figures import _traced_micrograph
+
+    image, traced = _traced_micrograph(subdivisions=2)
+    grain = image > 0.11  # every pixel brighter than the 0.08-0.10 background
+    p = traced.points(physical=True)
+    x, y = p[:, 0], p[:, 1]
+    area = 0.5 * abs(np.dot(x, np.roll(y, -1)) - np.dot(y, np.roll(x, -1)))
+    assert area == pytest.approx(grain.sum(), rel=0.03)

@@ -404,6 +404,22 @@ def preview_figure(footprints: list[np.ndarray], layer_of: list[int], volume, ti
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_title(title, fontsize=9)
+    if footprints:
+        pts = np.concatenate([np.asarray(fp, dtype=np.float64) for fp in footprints])
+        lo, hi = pts.min(0), pts.max(0)
+        if np.prod(hi - lo) < 0.1 * W * D:  # grains fill a small corner: zoom on them (inset, same mm)
+            pad = 0.04 * float(max(hi - lo))
+            ins = ax.inset_axes([0.42, 0.36, 0.55, 0.55])
+            ins.add_collection(PolyCollection(footprints, facecolors=colors, edgecolors="none"))
+            span = float(max(hi - lo)) + 2 * pad
+            ins.set_xlim(lo[0] - pad, lo[0] - pad + span)
+            ins.set_ylim(lo[1] - pad, lo[1] - pad + span)
+            ins.set_aspect("equal")
+            ins.tick_params(labelsize=6)
+            ins.set_xlabel("x (mm)", fontsize=7)
+            ins.set_ylabel("y (mm)", fontsize=7)
+            ins.set_title("enlarged", fontsize=7)
+            ax.indicate_inset_zoom(ins, edgecolor="0.4")
     if top:
         from matplotlib.cm import ScalarMappable
         from matplotlib.colors import BoundaryNorm, ListedColormap
