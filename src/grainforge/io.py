@@ -181,6 +181,11 @@ def _what_is(head: bytes) -> str | None:
     return None
 
 
+#: a binary STL whose header announces at most this many times the file's size is called truncated;
+#: beyond, the count is taken as noise (random bytes, another kind of file)
+TRUNCATED_FACTOR = 64
+
+
 def check_stl(path: str | os.PathLike) -> None:
     """Refuse an STL file whose bytes are neither a consistent binary STL nor ASCII STL.
 
@@ -230,7 +235,7 @@ def check_stl(path: str | os.PathLike) -> None:
         raise ValueError(f"{path}: not an STL file ({size} bytes: too short for a binary STL, and not ASCII STL)")
     n = int.from_bytes(head[80:84], "little")
     expected = 84 + 50 * n
-    if expected > size and n < (1 << 31):
+    if size < expected <= TRUNCATED_FACTOR * size:  # plausibly the start of a real binary STL
         raise ValueError(f"{path}: truncated binary STL: the header announces {n} facets "
                          f"({expected} bytes) but the file has {size} bytes")
     if (size - 84) % 50 == 0:

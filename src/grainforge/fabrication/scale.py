@@ -24,6 +24,11 @@ def _current_size(grain, definition: str) -> float:
     return I if definition == "sieve" else L
 
 
+#: sizes a grain may be given, mm (1 nm to 1 km: float32 mesh files keep the shape throughout)
+MIN_SIZE_MM = 1e-6
+MAX_SIZE_MM = 1e6
+
+
 def check_size(size: float, definition: str = "equivalent") -> float:
     """Validate a size in mm and its definition; return the size as a float.
 
@@ -40,6 +45,8 @@ def check_size(size: float, definition: str = "equivalent") -> float:
         value = float("nan")
     if not np.isfinite(value) or value <= 0:
         raise ValueError(f"size must be a positive number of millimetres, got {size!r}")
+    if not MIN_SIZE_MM <= value <= MAX_SIZE_MM:
+        raise ValueError(f"size must be in [{MIN_SIZE_MM:g}, {MAX_SIZE_MM:g}] mm, got {size!r}")
     return value
 
 
