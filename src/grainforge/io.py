@@ -186,6 +186,24 @@ def _what_is(head: bytes) -> str | None:
 TRUNCATED_FACTOR = 64
 
 
+def _binary_stl(path: Path):
+    """A binary STL as a triangle-soup trimesh (what ``trimesh.load(..., process=False)`` gives), read with
+    NumPy in one pass; ``None`` if the file is not a consistent binary STL (ASCII, for instance)."""
+    import trimesh
+
+    data = path.read_bytes()
+    if len(data) < 84:
+        return None
+    n = int.from_bytes(data[80:84], "little")
+    if len(data) != 84 + 50 * n or n == 0 or data[:5].lower() == b"solid" and b"facet normal" in data[:400]:
+        return None
+    rec = np.frombuffer(data, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), count=n,
+                        offset=84)
+    vertices = rec["v"].reshape(-1, 3).astype(np.float64)
+    faces = np.arange(3 * n, dtype=np.int64).reshape(-1, 3)
+    return trimesh.Trimesh(vertices, faces, process=False, validate=False)
+
+
 def check_stl(path: str | os.PathLike) -> None:
     """Refuse an STL file whose bytes are neither a consistent binary STL nor ASCII STL.
 
@@ -263,9 +281,13 @@ def read_mesh(path: str | os.PathLike):
         raise ValueError(f"{path}: no such file")
     suffix = path.suffix.lower()
     try:
+        loaded = None
         if suffix == ".stl":
             check_stl(path)
-        if suffix == ".3mf":
+            loaded = _binary_stl(path)
+        if loaded is not None:
+            pass
+        elif suffix == ".3mf":
             from .fabrication.threemf import read_parts
 
             parts = read_parts(path)

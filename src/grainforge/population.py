@@ -762,6 +762,7 @@ def check_extremes(recipe: Recipe) -> None:
     if not varying:
         return
     for index in range(min(PILOTS, recipe.count)):
+        make_grain(recipe, index)  # the grain as drawn: its own error (fixed parameters) names it
         seed, params, _ = draw_grain(recipe, index)
         for name, dist in varying.items():
             ends = dist.args["values"] if dist.kind == "choice" else dist.support()

@@ -333,6 +333,8 @@ def read_parts(path) -> list[Part]:
 
     mesh = read_mesh(path)
     # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
-    v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
-    f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
+    from ..solid import unique_rows
+
+    v, inv = unique_rows(np.asarray(mesh.vertices, dtype=np.float64))
+    f = inv[np.asarray(mesh.faces, dtype=np.int64)]
     return [Part(path.stem, v, f)]
