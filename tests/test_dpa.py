@@ -325,7 +325,12 @@ def test_cli_generate_writes_grains_and_manifest(runner, tmp_path):
     assert [r["seed"] for r in rows] == ["4", "5"]
     for r in rows:
         assert float(r["exponent"]) == 3.0 and int(r["primaries"]) == 30
-        assert 1.0 < float(r["D_A"]) < 3.0 and 0 < float(r["porosity"]) < 1 and float(r["R_g"]) > 0
+        assert 1.0 < float(r["D_A"]) < 3.0 and 0 < float(r["porosity"]) < 1
+        # R_g in mm, like analyse's radius_of_gyration_mm; R_g/a from the two mm columns
+        assert 1.0 < float(r["R_g_mm"]) / float(r["primary_size_mm"]) < 30
+        # the converted columns agree with the measured volume: V = N a³ + sealed cavities (all in mm³)
+        a = float(r["primary_size_mm"])
+        assert float(r["volume_mm3"]) == pytest.approx(30 * a**3 + float(r["cavity_volume_mm3"]), rel=1e-5)
     first = (out / "dpa-0000.stl").read_bytes()
     res = runner.invoke(cli, ["generate", "dpa", "--out", str(out), "--count", "1", "--primitive", "octahedron",
                               "--primaries", "30", "--exponent", "3", "--seed", "4", "--overwrite"])

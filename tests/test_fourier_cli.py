@@ -41,7 +41,7 @@ def test_fourier_one_row_per_grain(runner, field):
     rows = _rows(res.stdout)
     assert len(rows) == 4
     assert "4 grain(s) measured in 1 image(s); skipped 2 touching the border, 1 below 50 px" in res.stderr
-    assert list(rows[0])[:10] == ["image", "grain", "x", "y", "area", "r0", "star_shaped", "elongation",
+    assert list(rows[0])[:10] == ["image", "grain", "x_px", "y_px", "area_px2", "r0_px", "star_shaped", "elongation",
                                   "irregularity", "roughness"]
     assert list(rows[0])[-1] == "D16"
     # label order is row-major: the grains come out in the order they were drawn
@@ -51,7 +51,7 @@ def test_fourier_one_row_per_grain(runner, field):
         assert float(row["irregularity"]) == pytest.approx(known[3], rel=0.05)
         assert float(row["D2"]) == float(row["elongation"]) and float(row["D8"]) == float(row["roughness"])
         assert abs(float(row["roughness"]) - known[8]) < 0.004
-        assert float(row["r0"]) == pytest.approx(90 * truth.recentred().scale, rel=0.02)
+        assert float(row["r0_px"]) == pytest.approx(90 * truth.recentred().scale, rel=0.02)
 
 
 def test_fourier_csv_and_min_area(runner, field, tmp_path):
@@ -99,7 +99,7 @@ def test_generate_cri_files_and_manifest(runner, tmp_path):
     assert float(rows[0]["contour_yz_D8"]) == pytest.approx(0.03)
     for plane in ("xy", "xz", "yz"):
         assert 0 < float(rows[0][f"section_{plane}_D8"]) < 0.1
-    assert float(rows[0]["equivalent_diameter"]) == pytest.approx(2.0)
+    assert float(rows[0]["equivalent_diameter_mm"]) == pytest.approx(2.0)
     first = (out / "cri-0000.stl").read_bytes()
     # byte-identical again
     res = runner.invoke(cli, args + ["--overwrite"])

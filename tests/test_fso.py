@@ -34,12 +34,14 @@ def assert_valid_solid(g):
     gamma=st.floats(1.1, 2.5),
     s=st.integers(0, 4),
     seed=st.integers(0, 2**32),
+    surface=st.sampled_from(fso_mod.SURFACES),
+    aspect=st.tuples(st.floats(0.2, 4.0), st.floats(0.2, 4.0), st.floats(0.2, 4.0)),
 )
-def test_invariants_over_parameter_space(D, L, amp, M, N, gamma, s, seed):
+def test_invariants_over_parameter_space(D, L, amp, M, N, gamma, s, seed, surface, aspect):
     try:
         g = grainforge.fso(
             fractal_dimension=D, length_ratio=L, amplitude=amp, ridges=M, frequencies=N,
-            gamma=gamma, subdivisions=s, rng=seed,
+            gamma=gamma, subdivisions=s, surface=surface, aspect=aspect, rng=seed,
         )
     except ParameterError as exc:  # documented refusals only
         assert exc.name in ("amplitude", "frequencies")

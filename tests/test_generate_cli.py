@@ -24,16 +24,16 @@ def test_generate_writes_files_and_manifest(runner, tmp_path):
     rows = read_manifest(out)
     assert [r["seed"] for r in rows] == ["5", "6", "7"]
     for col in ("file", "method", "fractal_dimension", "length_ratio", "amplitude", "k", "ridges", "frequencies",
-                "gamma", "subdivisions", "volume", "surface_area", "equivalent_diameter", "sphericity",
-                "convexity", "L", "I", "S", "K"):
+                "gamma", "subdivisions", "volume_mm3", "surface_area_mm2", "equivalent_diameter_mm", "sphericity",
+                "convexity", "L_mm", "I_mm", "S_mm", "K", "size_mm", "scale_mm_per_unit"):
         assert col in rows[0]
     for r in rows:
         mesh = trimesh.load(out / r["file"])
         assert mesh.is_watertight
         # default size: equivalent-sphere diameter of 10 mm
-        assert float(r["equivalent_diameter"]) == pytest.approx(10.0, rel=1e-9)
-        assert float(r["volume"]) == pytest.approx(mesh.volume, rel=1e-5)  # STL stores float32
-        assert float(r["L"]) >= float(r["I"]) >= float(r["S"]) > 0
+        assert float(r["equivalent_diameter_mm"]) == pytest.approx(10.0, rel=1e-9)
+        assert float(r["volume_mm3"]) == pytest.approx(mesh.volume, rel=1e-5)  # STL stores float32
+        assert float(r["L_mm"]) >= float(r["I_mm"]) >= float(r["S_mm"]) > 0
         assert 0 < float(r["sphericity"]) <= 1 and 0 < float(r["convexity"]) <= 1
 
 
@@ -58,7 +58,7 @@ def test_other_formats(runner, tmp_path, fmt):
 
 
 def test_size_definitions(runner, tmp_path):
-    for definition, col in (("equivalent", "equivalent_diameter"), ("longest", "L"), ("sieve", "I")):
+    for definition, col in (("equivalent", "equivalent_diameter_mm"), ("longest", "L_mm"), ("sieve", "I_mm")):
         out = tmp_path / definition
         res = runner.invoke(cli, ["generate", "fso", "--out", str(out), "--size", "2", "--size-definition", definition, *SMALL])
         assert res.exit_code == 0, res.output
@@ -172,8 +172,8 @@ def test_printer_matches_resolution_and_records_it(runner, tmp_path):
     expected = match_subdivisions("fso", Params(), 10.0, "equivalent", "generic-fdm", [0, 1])
     assert int(row["subdivisions"]) == expected.subdivisions
     assert row["printer"] == "generic-fdm"
-    assert float(row["chordal_deviation"]) == pytest.approx(expected.deviation)
-    assert float(row["deviation_tolerance"]) == pytest.approx(0.2)  # half the 0.4 mm nozzle
+    assert float(row["chordal_deviation_mm"]) == pytest.approx(expected.deviation)
+    assert float(row["deviation_tolerance_mm"]) == pytest.approx(0.2)  # half the 0.4 mm nozzle
     assert row["resolution_limited_by"] == expected.limited_by
     assert len(trimesh.load(tmp_path / "fso-0000.stl").faces) == 20 * 4 ** expected.subdivisions
 

@@ -59,7 +59,7 @@ def test_bad_sizes():
             scale_factor(BOX, bad)
 
 
-@pytest.mark.parametrize("definition, column", [("equivalent", "equivalent_diameter"), ("sieve", "I"), ("longest", "L")])
+@pytest.mark.parametrize("definition, column", [("equivalent", "equivalent_diameter_mm"), ("sieve", "I_mm"), ("longest", "L_mm")])
 def test_generate_size_options(runner, tmp_path, definition, column):
     out = tmp_path / definition
     res = runner.invoke(cli, ["generate", "fso", "--subdivisions", "2", "--count", "2", "--size", "2",

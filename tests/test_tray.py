@@ -81,9 +81,9 @@ def test_polyjet_tray_gap_bodies_and_round_trip(tmp_path, small_polyjet):
         plate_rows = [r for r in rows if int(r["plate"]) == k + 1]
         assert [p.name for p in plate] == [r["name"] for r in plate_rows]
         for part, r in zip(plate, plate_rows):
-            assert part.vertices.min(axis=0) == pytest.approx([float(r["x"]), float(r["y"]), float(r["z"])], abs=1e-4)
-            assert part.mesh.volume == pytest.approx(float(r["volume"]), rel=1e-5)
-            assert float(r["equivalent_diameter"]) == pytest.approx(2.0, rel=1e-4)
+            assert part.vertices.min(axis=0) == pytest.approx([float(r["x_mm"]), float(r["y_mm"]), float(r["z_mm"])], abs=1e-4)
+            assert part.mesh.volume == pytest.approx(float(r["volume_mm3"]), rel=1e-5)
+            assert float(r["equivalent_diameter_mm"]) == pytest.approx(2.0, rel=1e-4)
         d = min_mesh_distance(plate, within=3 * gap)
         assert gap <= d < 3 * gap  # never closer than the gap, and the packing is tight
     assert len({p.name for plate in parts for p in plate}) == n
@@ -179,7 +179,7 @@ def test_cli_tray(runner, tmp_path):
     rows = _rows(tmp_path / "t.csv")
     assert [int(r["subdivisions"]) for r in rows] == [2] * 4  # a 2 mm sphere at 32 µm: sagitta rule
     assert all(r["resolution_limited_by"] == "tolerance" for r in rows)
-    assert float(rows[0]["chordal_deviation"]) <= 0.016
+    assert float(rows[0]["chordal_deviation_mm"]) <= 0.016
     assert len(read_3mf(out)) == 4 and (tmp_path / "t-plate1.png").is_file()
     res = runner.invoke(cli, args)
     assert res.exit_code == 2 and "exists" in res.output

@@ -10,11 +10,14 @@ from .contours import Contour
 from .fabrication import build_tray, check_mesh, get_printer
 from .grain import Grain
 from .methods import generate
+from .methods.angular import angular
 from .methods.cri import cri
-from .methods.dpa import dpa
+from .calibration import dpa
 from .methods.fso import fso
+from .methods.rf import rf
 from .params import ParameterError
 from .population import load_recipe, run_batch
 
-__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "Contour", "load_recipe", "run_batch",
+__all__ = ["__version__", "Grain", "ParameterError", "generate", "fso", "cri", "dpa", "angular", "rf", "Contour", "load_recipe",
+           "run_batch",
            "get_printer", "check_mesh", "build_tray"]

@@ -11,6 +11,11 @@ Aggregate ``k`` of the grid (ε index i, repeat r, k = i·repeats + r) is grown
 from ``SeedSequence(seed).spawn(...)[k]``, so the numbers do not depend on
 the number of worker processes.  Curves used by ``dpa(target_fractal_dimension=...)``
 are cached as CSV under :func:`cache_dir`.
+
+:func:`dpa` (exported as ``grainforge.dpa``) lives here rather than in
+:mod:`grainforge.methods.dpa` because choosing ε for a target D_A needs the
+calibration, which grows aggregates with :mod:`grainforge.methods.dpa`: the
+method module stays free of this dependency (no import cycle).
 """
 
 from __future__ import annotations
@@ -27,10 +32,12 @@ import numpy as np
 from .params import ParameterError
 
 __all__ = [
-    "Calibration", "calibrate", "parse_exponents", "cache_dir", "cached_calibration",
+    "dpa", "Calibration", "calibrate", "parse_exponents", "cache_dir", "cached_calibration",
     "exponent_for_dimension", "DEFAULT_EXPONENTS", "DEFAULT_REPEATS", "COLUMNS",
 ]
 
+#: header units of calibration.csv: R_g of the aggregate of primaries in primary sizes a = V_p^(1/3)
+UNITS = {"R_g_mean": "primary_sizes", "R_g_std": "primary_sizes"}
 #: ε grid of the cached curves: 16 points, log-spaced from 0.05 to 100.
 DEFAULT_EXPONENTS = tuple(float(x) for x in np.round(np.geomspace(0.05, 100.0, 16), 6))
 DEFAULT_REPEATS = 8
@@ -142,7 +149,7 @@ class Calibration:
         """Write ``calibration.csv``-style text atomically."""
         from .io import write_csv
 
-        return write_csv(path, self.rows(), COLUMNS)
+        return write_csv(path, self.rows(), COLUMNS, units=UNITS)
 
     @classmethod
     def read_csv(cls, path: str | os.PathLike) -> "Calibration":
@@ -151,6 +158,8 @@ class Calibration:
             rows = list(csv.DictReader(fh))
         if not rows:
             raise ValueError(f"{path}: empty calibration file")
+        plain = {f"{c}_{u}": c for c, u in UNITS.items()}
+        rows = [{plain.get(k, k): v for k, v in r.items()} for r in rows]
         r0 = rows[0]
         col = lambda k: np.array([float(r[k]) for r in rows]) if k in r0 else None  # noqa: E731
         return cls(
@@ -198,15 +207,19 @@ class Calibration:
 
     def plot(self, path: str | os.PathLike) -> Path:
         """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."""
+        from .io import save_figure
+
+        return save_figure(self.figure(), path)
+
+    def figure(self):
+        """The Figure of :meth:`plot`; the legend sits below the axes, clear of every curve."""
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from .io import save_figure
-
         e = np.asarray(self.exponent)
-        fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
+        fig, ax = plt.subplots(figsize=(6.0, 4.8), dpi=110)
         ax.fill_between(e, self.D_A_mean - self.D_A_std, self.D_A_mean + self.D_A_std, color="C0", alpha=0.25,
                         label="D_A ± 1 s.d.")
         ax.plot(e, self.D_A_mean, "o-", color="C0", ms=3, label="mean D_A (Eq. 5)")
@@ -219,15 +232,17 @@ class Calibration:
         if e.max() / e.min() > 20:
             ax.set_xscale("log")
         ax2 = ax.twinx()
-        ax2.plot(e, self.porosity_mean, "s--", color="C3", ms=3, label="porosity")
+        ax2.plot(e, self.porosity_mean, "s--", color="C3", ms=3, label="mean porosity (right axis)")
         ax2.set_ylabel("porosity 1 − V/V_hull", color="C3")
         lines = ax.get_legend_handles_labels()
         lines2 = ax2.get_legend_handles_labels()
-        ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8, loc="best")
+        # below the axes: inside, "best" only avoids the left-axis curves and covered the porosity
+        ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8, loc="upper center",
+                  bbox_to_anchor=(0.5, -0.17), ncol=2, frameon=False)
         ax.set_title(f"DPA calibration: {self.primitive}, N = {self.primaries}, {self.repeats} seeds per ε",
                      fontsize=9)
         fig.tight_layout()
-        return save_figure(fig, path)
+        return fig
 
 
 def _measure(task) -> tuple[float, float, float, float]:
@@ -398,3 +413,77 @@ def exponent_for_dimension(
     Params(primitive=primitive, exponent=1.0, primaries=primaries, target_fractal_dimension=target)
     cal = cached_calibration(primitive, primaries, progress=progress)
     return cal.exponent_for(target)
+
+
+def dpa(
+    *,
+    primitive: str = "cube",
+    exponent: float | None = None,
+    primaries: int = 200,
+    smooth: int = 0,
+    target_fractal_dimension: float | None = None,
+    rng=None,
+):
+    """Generate one aggregate grain by Directed Polyhedra Aggregation (paper §2.3).
+
+    Parameters
+    ----------
+    primitive : str
+        ``cube`` (lattice), ``octahedron`` (as in the paper), or ``tetrahedron``,
+        ``dodecahedron``, ``icosahedron``, ``truncated-octahedron``.
+    exponent : float, optional
+        ε of Eq. 4 in [0.01, 100] (default 1.0).  Exclusive with
+        ``target_fractal_dimension``.
+    primaries : int
+        Number of primaries N in [1, 100000] (default 200).
+    smooth : int
+        0 keeps sharp corners; K in 1..4 rounds them by K steps of Loop
+        subdivision (each step multiplies the triangles by four).
+    target_fractal_dimension : float, optional
+        Ask for an aggregate fractal dimension D_A instead of ε: ε is read
+        from the (cached, computed on first use) calibration curve of this
+        primitive and N, see :func:`exponent_for_dimension`.
+    rng : None, int or numpy.random.Generator
+        Seed or generator.
+
+    Returns
+    -------
+    Grain
+        Centred, scaled so that the primaries' total volume is a unit-radius
+        sphere's; ``info`` holds D_A, porosity, R_g, cavity_volume and
+        primary_size.
+
+    Raises
+    ------
+    ValueError
+        For an out-of-range parameter, an unknown primitive, or a target
+        D_A outside the calibrated range.
+
+    References
+    ----------
+    Hanaor et al., *3D printable geomaterials*, Géotechnique (2016), Eqs. 4–5.
+
+    Examples
+    --------
+    >>> from grainforge import dpa
+    >>> g = dpa(primitive="cube", exponent=0.5, primaries=27, rng=3)
+    >>> g.method, round(float(g.mesh.volume / g.info["primary_size"] ** 3), 9)
+    ('dpa', 27.0)
+    >>> dpa(exponent=0)
+    Traceback (most recent call last):
+    ...
+    grainforge.params.ParameterError: exponent must be in [0.01, 100], got 0.0
+    """
+    from .methods import generate, get
+
+    P = get("dpa").Params  # the registered module's class (robust to the module being imported twice)
+
+    if target_fractal_dimension is not None and exponent is not None:
+        raise ParameterError("target_fractal_dimension", "cannot be combined with exponent: give one of them")
+    if target_fractal_dimension is not None:
+        P(primitive=primitive, exponent=1.0, primaries=primaries, smooth=smooth,
+          target_fractal_dimension=target_fractal_dimension)  # validate first
+        exponent = exponent_for_dimension(target_fractal_dimension, primitive=primitive, primaries=primaries)
+    p = P(primitive=primitive, exponent=exponent, primaries=primaries, smooth=smooth,
+          target_fractal_dimension=target_fractal_dimension)
+    return generate("dpa", p, rng)

@@ -338,6 +338,37 @@ class Contour:
         return cls(_radii_from_spectrum(D, delta, n_angles), source="fourier")
 
     @classmethod
+    def from_spectrum(cls, D: Sequence[float], *, n_angles: int = DEFAULT_ANGLES, rng=None) -> "Contour":
+        """A random contour with a full amplitude spectrum D_0…D_N (D_0, D_1 ignored).
+
+        r(θ) = 1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n), δ_n ~ U(0, 2π) drawn as in
+        :meth:`from_descriptors`; e.g. a measured spectrum continued by
+        :func:`grainforge.spectra.extend_spectrum`.
+
+        Raises
+        ------
+        ParameterError
+            ``spectrum`` when some radius would fall to 5 % of the mean or below.
+
+        Examples
+        --------
+        >>> D = descriptor_spectrum(0.15, 0.1, 0.03)
+        >>> a, b = Contour.from_spectrum(D, rng=1), Contour.from_descriptors((0.15, 0.1, 0.03), rng=1)
+        >>> bool(np.array_equal(a.radii, b.radii))
+        True
+        """
+        D = np.asarray(D, dtype=np.float64)
+        modes = len(D) - 1
+        if modes < 2 or n_angles <= 2 * modes:
+            raise ParameterError("spectrum", f"needs 2 <= N < n_angles/2 orders, got N = {modes}")
+        delta = np.random.default_rng(rng).uniform(0.0, TWO_PI, size=modes - 1)
+        try:
+            radii = _radii_from_spectrum(D, delta, n_angles)
+        except ParameterError as exc:
+            raise ParameterError("spectrum", exc.reason) from None
+        return cls(radii, source="spectrum")
+
+    @classmethod
     def from_fractal(
         cls,
         *,

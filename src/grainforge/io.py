@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "check_stl", "save_figure"]
+__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -146,8 +146,15 @@ def _cell(v: Any) -> str:
     return str(v)
 
 
-def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> str:
-    """Rows as CSV text (floats written with full precision, ``None`` empty)."""
+def csv_text(
+    rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None, *,
+    units: bool | Mapping[str, str] = False,
+) -> str:
+    """Rows as CSV text (floats written with full precision, ``None`` empty).
+
+    With ``units=True`` every header states its unit (``volume_mm3``; see :mod:`grainforge.units`);
+    ``units`` may also be a ``{column: unit suffix}`` mapping of the file's own.
+    """
     rows = list(rows)
     if columns is None:
         columns = []
@@ -155,15 +162,23 @@ def csv_text(rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = 
             columns.extend(k for k in r if k not in columns)
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
-    w.writerow(columns)
+    if units:
+        from .units import UNITS, headers
+
+        w.writerow(headers(columns, UNITS if units is True else units))
+    else:
+        w.writerow(columns)
     for r in rows:
         w.writerow([_cell(r.get(c)) for c in columns])
     return buf.getvalue()
 
 
-def write_csv(path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None) -> Path:
-    """Write rows of dicts to a CSV file atomically."""
-    return atomic_write(path, csv_text(rows, columns))
+def write_csv(
+    path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None,
+    *, units: bool | Mapping[str, str] = False,
+) -> Path:
+    """Write rows of dicts to a CSV file atomically (``units``: see :func:`csv_text`)."""
+    return atomic_write(path, csv_text(rows, columns, units=units))
 
 
 #: first bytes of common non-mesh files, to say what a misnamed file is
@@ -288,9 +303,9 @@ def read_mesh(path: str | os.PathLike):
         if loaded is not None:
             pass
         elif suffix == ".3mf":
-            from .fabrication.threemf import read_parts
+            from .fabrication.threemf import read_3mf_file
 
-            parts = read_parts(path)
+            parts = read_3mf_file(path)
             loaded = trimesh.util.concatenate(
                 [trimesh.Trimesh(p.vertices, p.faces, process=False, validate=False) for p in parts])
         else:
@@ -312,3 +327,30 @@ def read_mesh(path: str | os.PathLike):
     if not np.isfinite(np.asarray(loaded.vertices)).all():
         raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
     return loaded
+
+
+def read_parts(path: str | os.PathLike) -> list:
+    """The parts of a mesh file: every build item of a 3MF, the single mesh of an STL/OBJ/PLY.
+
+    Returns
+    -------
+    list of grainforge.fabrication.threemf.Part
+        Named parts; an STL's triangle soup has its exactly coincident vertices merged.
+
+    Raises
+    ------
+    ValueError
+        If the file is missing, unreadable or holds no triangles.
+    """
+    from .fabrication.threemf import Part, read_3mf_file
+
+    path = Path(path)
+    if path.suffix.lower() == ".3mf":
+        return read_3mf_file(path)
+    mesh = read_mesh(path)
+    # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
+    from .solid import unique_rows
+
+    v, inv = unique_rows(np.asarray(mesh.vertices, dtype=np.float64))
+    f = inv[np.asarray(mesh.faces, dtype=np.int64)]
+    return [Part(path.stem, v, f)]

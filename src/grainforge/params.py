@@ -36,6 +36,7 @@ __all__ = [
     "validate",
     "specs",
     "as_dict",
+    "format_number",
 ]
 
 _KEY = "grainforge"
@@ -75,11 +76,31 @@ class ParamSpec:
     choices: tuple[str, ...] | None = None
     optional: bool = False
     cli: bool = True
+    shown_default: str | None = None
 
     @property
     def option(self) -> str:
         """The CLI option name, e.g. ``--fractal-dimension``."""
         return "--" + self.name.replace("_", "-")
+
+    def default_text(self) -> str:
+        """The default as help text: ``2.4``, ``-5/3,-5/3``, ``cube``; ``shown_default`` when the field's
+        default is None but a value applies (e.g. ``amplitude``: 0.1 unless ``k`` is given); ``""`` if none.
+
+        Examples
+        --------
+        >>> ParamSpec("decay", (-5 / 3, -5 / 3), "").default_text()
+        '-5/3,-5/3'
+        >>> ParamSpec("d", 2.4, "").default_text(), ParamSpec("n", 40, "", kind="int").default_text()
+        ('2.4', '40')
+        """
+        if self.shown_default is not None:
+            return self.shown_default
+        if self.default is None:
+            return ""
+        if isinstance(self.default, tuple):
+            return ",".join(format_number(v) for v in self.default)
+        return format_number(self.default)
 
     def range_text(self) -> str:
         """Human-readable valid range, e.g. ``[2, 3)``."""
@@ -139,6 +160,32 @@ def _fmt(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else repr(float(x))
 
 
+def format_number(x: Any) -> str:
+    """A value as a person would write it: ``2.4``, ``10``, ``-5/3`` (a simple fraction when that is exact).
+
+    Examples
+    --------
+    >>> [format_number(v) for v in (2.4, 10.0, -5 / 3, 1e-9, 0.1 + 0.2, "cube", 7)]
+    ['2.4', '10', '-5/3', '1e-09', '0.3', 'cube', '7']
+    """
+    if isinstance(x, bool) or not isinstance(x, numbers.Real):
+        return str(x)
+    x = float(x)
+    if not math.isfinite(x):
+        return str(x)
+    if x.is_integer() and abs(x) < 1e15:
+        return str(int(x))
+    short = f"{x:.6g}"
+    if math.isclose(float(short), x, rel_tol=1e-12):
+        return short
+    from fractions import Fraction
+
+    frac = Fraction(x).limit_denominator(12)
+    if math.isclose(float(frac), x, rel_tol=1e-12):
+        return f"{frac.numerator}/{frac.denominator}"
+    return short
+
+
 def param(
     default: Any,
     help: str,
@@ -152,6 +199,7 @@ def param(
     choices: tuple[str, ...] | None = None,
     optional: bool = False,
     cli: bool = True,
+    shown_default: str | None = None,
 ) -> Any:
     """Declare a parameter field with its metadata.
 
@@ -173,11 +221,14 @@ def param(
         Whether ``None`` is allowed.
     cli : bool
         Whether the CLI exposes the parameter as an option.
+    shown_default : str, optional
+        The default to show in help when ``default`` is None but a value
+        applies unless another parameter is given (``amplitude`` vs ``k``).
     """
     spec = dict(
         default=default, help=help, unit=unit, kind=kind, low=low, high=high,
         low_open=low_open, high_open=high_open, choices=choices,
-        optional=optional or default is None, cli=cli,
+        optional=optional or default is None, cli=cli, shown_default=shown_default,
     )
     return field(default=default, metadata={_KEY: spec})
 

@@ -14,6 +14,8 @@ root seed and the output format::
     fractal_dimension = { distribution = "uniform", low = 2.2, high = 2.6 }
     length_ratio = 7.0
     subdivisions = 4
+    # a ratio L:I:S = 1 : e : e·f drawn per grain from Zingg ratios e = I/L, f = S/I
+    aspect = { distribution = "zingg", elongation = { distribution = "truncnormal", mean = 0.75, sd = 0.1, low = 0.4, high = 1.0 }, flatness = 0.8 }
 
     [size]
     definition = "sieve"            # equivalent | sieve | longest
@@ -32,12 +34,14 @@ Grain ``i`` owns the stream ``default_rng(SeedSequence(root, spawn_key=(i,)))``
 the root seed and ``i`` alone.  From it, in this order: the grain's own 63-bit
 seed (recorded in the manifest; ``grainforge.generate(method, params, seed)``
 regenerates the grain), then one draw for each distributed parameter in the
-order of the method's ``Params`` fields, then the size.  So outputs do not
+order of the method's ``Params`` fields (two for a ``zingg`` ratio:
+elongation, then flatness), then the size.  So outputs do not
 depend on the number of workers or on the executor.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -51,6 +55,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from .distributions import Distribution, FixedSize, GradingCurve, LognormalSize
 from .fabrication.scale import SIZE_DEFINITIONS
 from .io import FORMATS, atomic_write, export_bytes, write_csv
 from .params import ParameterError, ParamSpec, specs
@@ -73,13 +78,14 @@ __all__ = [
 
 #: hidden folder inside the output folder: recipe copy and one sidecar per finished grain.
 JOURNAL = ".grainforge-batch"
-DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice")
+DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice", "zingg")
 _DIST_KEYS = {
     "uniform": ("low", "high"),
     "normal": ("mean", "sd"),
     "truncnormal": ("mean", "sd", "low", "high"),
     "lognormal": ("median", "sigma"),
     "choice": ("values",),
+    "zingg": ("elongation", "flatness"),
 }
 #: how long ``--scheduler`` waits for the scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
@@ -147,162 +153,6 @@ def field_line(text: str, path: Sequence[str]) -> int | None:
         if n > best_len and path[:n] == full:
             best, best_len = no, n
     return best
-
-
-# --------------------------------------------------------------------------- distributions
-@dataclass(frozen=True)
-class Distribution:
-    """A parameter drawn per grain.
-
-    ``kind`` is one of ``uniform(low, high)``, ``normal(mean, sd)``,
-    ``truncnormal(mean, sd, low, high)``, ``lognormal(median, sigma)`` (sigma
-    of ln x) or ``choice(values, weights)``.  Every draw consumes exactly one
-    uniform variate (inverse CDF), except ``choice`` (one ``Generator.choice``).
-
-    Examples
-    --------
-    >>> d = Distribution("truncnormal", {"mean": 2.4, "sd": 0.2, "low": 2.2, "high": 2.6})
-    >>> x = d.draw(np.random.default_rng(0))
-    >>> 2.2 <= x <= 2.6
-    True
-    """
-
-    kind: str
-    args: Mapping[str, Any]
-    integer: bool = False
-
-    def support(self) -> tuple[float, float]:
-        a = self.args
-        if self.kind in ("uniform", "truncnormal"):
-            return float(a["low"]), float(a["high"])
-        if self.kind == "normal":
-            return -math.inf, math.inf
-        if self.kind == "lognormal":
-            return 0.0, math.inf
-        raise ValueError("choice has no interval support")
-
-    def typical(self) -> Any:
-        """A representative value (used to check cross-parameter rules up front)."""
-        a = self.args
-        if self.kind == "uniform":
-            mid = 0.5 * (a["low"] + a["high"])
-            return int(round(mid)) if self.integer else mid
-        if self.kind in ("normal", "truncnormal"):
-            m = float(a["mean"])
-            return min(max(m, a["low"]), a["high"]) if self.kind == "truncnormal" else m
-        if self.kind == "lognormal":
-            return float(a["median"])
-        return self.args["values"][0]
-
-    def draw(self, rng: np.random.Generator) -> Any:
-        """One value from ``rng``."""
-        from scipy.special import ndtr, ndtri
-
-        a = self.args
-        if self.kind == "choice":
-            values = a["values"]
-            return values[int(rng.choice(len(values), p=a["weights"]))]
-        if self.kind == "uniform" and self.integer:
-            return int(rng.integers(int(a["low"]), int(a["high"]) + 1))
-        u = float(rng.random())
-        if self.kind == "uniform":
-            return float(a["low"] + u * (a["high"] - a["low"]))
-        if self.kind == "normal":
-            return float(a["mean"] + a["sd"] * ndtri(u if u > 0 else 2.0**-60))
-        if self.kind == "truncnormal":
-            lo = ndtr((a["low"] - a["mean"]) / a["sd"])
-            hi = ndtr((a["high"] - a["mean"]) / a["sd"])
-            x = float(a["mean"] + a["sd"] * ndtri(lo + u * (hi - lo)))
-            return min(max(x, a["low"]), a["high"])
-        return float(a["median"] * math.exp(a["sigma"] * ndtri(u if u > 0 else 2.0**-60)))
-
-
-# --------------------------------------------------------------------------- sizes
-@dataclass(frozen=True)
-class FixedSize:
-    """Every grain has the same size (mm)."""
-
-    mm: float
-
-    def sample(self, u: float) -> float:
-        return self.mm
-
-
-@dataclass(frozen=True)
-class LognormalSize:
-    """ln(size) ~ N(ln median_mm, sigma²)."""
-
-    median_mm: float
-    sigma: float
-
-    def sample(self, u: float) -> float:
-        from scipy.special import ndtri
-
-        return float(self.median_mm * math.exp(self.sigma * ndtri(min(max(u, 2.0**-60), 1 - 2.0**-53))))
-
-
-@dataclass(frozen=True)
-class GradingCurve:
-    """A grading curve: sieve apertures (mm) and percent passing, linear in log-size.
-
-    Between two sieves the passing fraction is taken as linear in ln(size)
-    (the way grading curves are drawn).  With ``basis="mass"`` (what a sieve
-    analysis reports) the curve is a mass fraction and is converted to a
-    number fraction with mass ∝ size³, so that a population of grains of
-    similar shape reproduces it by mass; with ``basis="count"`` it is a number
-    fraction directly.
-
-    Examples
-    --------
-    >>> g = GradingCurve((0.1, 1.0), (0.0, 100.0), basis="count")
-    >>> [round(g.sample(q), 6) for q in (0.0, 0.5, 1.0)]
-    [0.1, 0.316228, 1.0]
-    """
-
-    sieves_mm: tuple[float, ...]
-    percent_passing: tuple[float, ...]
-    basis: str = "mass"
-
-    def _number_cdf(self) -> tuple[np.ndarray, np.ndarray]:
-        """Log sizes and the number CDF at each sieve."""
-        u = np.log(np.asarray(self.sieves_mm, dtype=np.float64))
-        P = np.asarray(self.percent_passing, dtype=np.float64) / 100.0
-        if self.basis == "count":
-            return u, P
-        dP = np.diff(P)
-        du = np.diff(u)
-        # number weight of bin i: ∫ (dP/du) e^{-3u} du over the bin
-        w = dP / du * (np.exp(-3 * u[:-1]) - np.exp(-3 * u[1:])) / 3.0
-        return u, np.concatenate([[0.0], np.cumsum(w) / w.sum()])
-
-    def number_percent_passing(self) -> np.ndarray:
-        """Percent passing *by count* at each sieve implied by the curve (equal to it for ``basis="count"``)."""
-        return 100.0 * self._number_cdf()[1]
-
-    def sample(self, q: float) -> float:
-        """The size (mm) at number quantile ``q`` in [0, 1] (inverse CDF)."""
-        return float(self.sample_many(np.array([q]))[0])
-
-    def sample_many(self, q: np.ndarray) -> np.ndarray:
-        u, F = self._number_cdf()
-        q = np.clip(np.asarray(q, dtype=np.float64), 0.0, 1.0)
-        i = np.clip(np.searchsorted(F, q, side="right") - 1, 0, len(u) - 2)
-        # skip empty bins (equal F on both sides)
-        while np.any(nz := (F[i + 1] <= F[i]) & (i < len(u) - 2)):
-            i = np.where(nz, i + 1, i)
-        t = np.where(F[i + 1] > F[i], (q - F[i]) / np.where(F[i + 1] > F[i], F[i + 1] - F[i], 1.0), 0.0)
-        t = np.clip(t, 0.0, 1.0)
-        if self.basis == "count":
-            return np.exp(u[i] + t * (u[i + 1] - u[i]))
-        a, b = np.exp(-3 * u[i]), np.exp(-3 * u[i + 1])
-        return np.exp(-np.log(a - t * (a - b)) / 3.0)
-
-    def passing(self, sizes: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-        """Achieved percent passing at each sieve for ``sizes`` (weighted, e.g. by volume)."""
-        sizes = np.asarray(sizes, dtype=np.float64)
-        w = np.ones_like(sizes) if weights is None else np.asarray(weights, dtype=np.float64)
-        total = w.sum()
-        return np.array([100.0 * w[sizes <= s].sum() / total for s in self.sieves_mm])
 
 
 # --------------------------------------------------------------------------- recipe
@@ -427,6 +277,8 @@ def _number(v) -> bool:
 
 
 def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
+    if spec.kind == "floats" and isinstance(value, list) and any(isinstance(x, dict) for x in value):
+        return _each(spec, value, path, fail)
     if not isinstance(value, dict):
         try:
             return spec.check(value)
@@ -444,9 +296,11 @@ def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
             fail(path + [k], f"is required for a {kind} distribution")
     if kind == "choice":
         return _choice(spec, value, path, fail)
+    if kind == "zingg":
+        return _zingg(spec, value, path, fail)
     if spec.kind in ("str", "floats") or (spec.kind == "int" and kind != "uniform"):
         fail(path + ["distribution"], f"{spec.name} is {spec.kind}-valued: use a fixed value or choice"
-             + (" or uniform" if spec.kind == "int" else ""))
+             + (" or uniform" if spec.kind == "int" else "") + (" or zingg" if spec.kind == "floats" else ""))
     args = {}
     for k in _DIST_KEYS[kind]:
         v = value[k]
@@ -480,6 +334,48 @@ def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
     if kind == "lognormal" and spec.low is not None and spec.low > 0:
         fail(path + ["distribution"], f"lognormal reaches 0 but {spec.name} must be in {spec.range_text()}")
     return dist
+
+
+#: the support of a Zingg ratio (elongation I/L, flatness S/I)
+_RATIO = {"low": 0.0, "high": 1.0, "low_open": True, "kind": "float", "default": None, "help": "Zingg ratio"}
+
+
+def _zingg(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:
+    """``{ distribution = "zingg", elongation = ..., flatness = ... }`` for a three-number ratio L:I:S.
+
+    Each ratio is a number in (0, 1] or a (non-choice) distribution whose
+    support lies in (0, 1]; the extreme ratios 1 : e : e·f are checked
+    against ``spec``'s range before anything is generated.
+    """
+    if spec.kind != "floats":
+        fail(path + ["distribution"], f"zingg gives a ratio L:I:S; {spec.name} is {spec.kind}-valued")
+    parts = {}
+    for key in ("elongation", "flatness"):
+        v = value[key]
+        if isinstance(v, dict) and v.get("distribution") in ("choice", "zingg"):
+            fail(path + [key, "distribution"], f"must be one of uniform, normal, truncnormal, lognormal, got "
+                 f"{v.get('distribution')!r}")
+        parts[key] = _param_value(ParamSpec(name=key, **_RATIO), v, path + [key], fail)
+    bounds = {k: (v.support() if isinstance(v, Distribution) else (v, v)) for k, v in parts.items()}
+    (e_lo, e_hi), (f_lo, f_hi) = bounds["elongation"], bounds["flatness"]
+    for e, f in ((e_lo, f_lo), (e_hi, f_hi), (e_lo, f_hi), (e_hi, f_lo)):
+        try:
+            spec.check((1.0, e, e * f))
+        except ParameterError as exc:
+            fail(path, f"the ratio 1:{e:g}:{e * f:g} reachable from these distributions is invalid: {exc.reason}")
+    return Distribution("zingg", parts)
+
+
+def _each(spec: ParamSpec, value: list, path: list[str], fail) -> Distribution:
+    """A list of numbers drawn element by element: each a number or a scalar distribution in ``spec``'s range."""
+    items = []
+    for i, v in enumerate(value):
+        if isinstance(v, dict) and v.get("distribution") in ("choice", "zingg"):
+            fail(path + [str(i), "distribution"], "an element must be one of uniform, normal, truncnormal, lognormal, "
+                 f"got {v.get('distribution')!r}")
+        element = dataclasses.replace(spec, name=f"{spec.name}[{i}]", kind="float", default=None)
+        items.append(_param_value(element, v, path + [str(i)], fail))
+    return Distribution("each", {"items": tuple(items)})
 
 
 def _choice(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:
@@ -912,7 +808,7 @@ def _run_batch(recipe, out, names, *, workers, scheduler, resume, overwrite, pro
     finally:
         stream.close()  # on an error or interrupt: stop the workers now
     ordered = [rows[i] for i in range(recipe.count)]
-    write_csv(out / MANIFEST, ordered, manifest_columns(recipe.method, ("sha256",)))
+    write_csv(out / MANIFEST, ordered, manifest_columns(recipe.method, ("sha256",)), units=True)
     summary = None
     if report:
         from .report import population_report

@@ -45,11 +45,20 @@ def manifest_columns(method: str, extra: Sequence[str] = ()) -> list[str]:
 
 
 def manifest_row(grain, file: str, size: float, size_definition: str) -> dict[str, Any]:
-    """One manifest row for a grain already scaled to physical units (mm)."""
+    """One manifest row for a grain already scaled to physical units (mm).
+
+    Lengths, areas and volumes are in mm, mm², mm³ (the CSV headers say so:
+    :mod:`grainforge.units`); a method's ``physical_info(info, scale)``, if it
+    has one, converts its info values from model units.
+    """
     row: dict[str, Any] = {"file": file, "method": grain.method, "seed": grain.seed}
     row.update(as_dict(grain.params))
     row.update({"size": size, "size_definition": size_definition, "scale": grain.info.get("scale", 1.0)})
-    row.update({k: v for k, v in grain.info.items() if k != "scale"})
+    info = {k: v for k, v in grain.info.items() if k != "scale"}
+    physical = getattr(get(grain.method), "physical_info", None)
+    if physical is not None:  # info in model units -> mm (e.g. DPA: R_g in primary sizes)
+        info = physical(info, row["scale"])
+    row.update(info)
     row.update(basic_descriptors(grain))
     row["version"] = grain.version
     return row
@@ -185,7 +194,9 @@ def write_run(
     try:
         with open(stage / MANIFEST, "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh, lineterminator="\n")
-            writer.writerow(columns)
+            from .units import UNITS, headers
+
+            writer.writerow(headers(columns, UNITS))  # every header states its unit, as write_csv(units=True)
             iterator = enumerate(seeds)
             if progress is not None:
                 iterator = progress(iterator)

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..solid import is_closed
+from .mass import mass_properties
 
 __all__ = [
     "basic_descriptors", "principal_dimensions", "describe", "BASIC_COLUMNS", "DESCRIPTOR_COLUMNS",
@@ -37,58 +38,6 @@ DESCRIPTOR_COLUMNS = BASIC_COLUMNS + (
 def _arrays(obj) -> tuple[np.ndarray, np.ndarray]:
     """(V, 3) float64 vertices and (F, 3) int64 faces of a Grain, trimesh or anything with both."""
     return np.asarray(obj.vertices, dtype=np.float64), np.asarray(obj.faces, dtype=np.int64)
-
-
-def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
-    """Volume, area, centroid and second central moments of a closed triangle mesh.
-
-    Signed tetrahedra from the vertex mean: ∫x xᵀ dV over a tetrahedron
-    (0, a, b, c) is (V/20)(aaᵀ + bbᵀ + ccᵀ + ssᵀ) with s = a + b + c.
-
-    Returns
-    -------
-    dict
-        ``volume``, ``area``, ``centroid`` (3,), ``covariance`` (3, 3): the
-        second central moment per unit volume (its trace is R_g²), and
-        ``face_areas`` (F,).
-    """
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    o = v.mean(0)
-    a, b, c = v[f[:, 0]] - o, v[f[:, 1]] - o, v[f[:, 2]] - o
-    cr = np.cross(b - a, c - a)
-    face_areas = 0.5 * np.linalg.norm(cr, axis=1)
-    vol6 = np.einsum("ij,ij->i", a, np.cross(b, c))
-    V = vol6.sum() / 6.0
-    s = a + b + c
-    if V != 0:
-        centroid_o = (vol6[:, None] * s).sum(0) / (24.0 * V)
-        w = vol6 / 120.0
-        X = np.concatenate([a, b, c, s])
-        # einsum, not BLAS: a threaded BLAS call on this skinny product is slow on a busy machine
-        second = np.einsum("ti,tj->ij", X * np.tile(w, 4)[:, None], X)
-        cov = second / V - np.outer(centroid_o, centroid_o)
-    else:
-        centroid_o = np.zeros(3)
-        cov = np.zeros((3, 3))
-    return {
-        "volume": float(V), "area": float(face_areas.sum()), "centroid": centroid_o + o,
-        "covariance": cov, "face_areas": face_areas,
-    }
-
-
-def _moments(v: np.ndarray, f: np.ndarray, mp: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and covariance for principal axes: the solid's if it has volume, else the surface's."""
-    if mp is None:
-        mp = mass_properties(v, f)
-    if mp["volume"] > 0 and np.all(np.linalg.eigvalsh(mp["covariance"]) > 0):
-        return mp["centroid"], mp["covariance"]
-    fa = mp["face_areas"]
-    cen = v[f].mean(1)
-    wsum = fa.sum() or 1.0
-    c0 = (fa[:, None] * cen).sum(0) / wsum
-    d = cen - c0
-    return c0, np.einsum("t,ti,tj->ij", fa, d, d) / wsum
 
 
 def principal_dimensions(obj) -> tuple[float, float, float]:

@@ -79,7 +79,7 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
     For a closed mesh with positive volume the axes are those of the solid's
     second moments; otherwise of the area-weighted surface.
 
-    ``mass`` may pass precomputed :func:`~grainforge.analysis.descriptors.mass_properties`.
+    ``mass`` may pass precomputed :func:`~grainforge.analysis.mass.mass_properties`.
 
     Returns
     -------
@@ -87,9 +87,9 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
     axes : (3, 3) float64
         Orthonormal rows, in order of decreasing spread (right-handed).
     """
-    from .descriptors import _moments
+    from .mass import principal_moments
 
-    centre, cov = _moments(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), mass)
+    centre, cov = principal_moments(np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64), mass)
     w, vec = np.linalg.eigh(cov)
     axes = vec[:, ::-1].T.copy()
     # deterministic signs: each axis points towards its farthest vertex

@@ -14,8 +14,8 @@ from .progress import progress_bar
 @click.argument("recipe", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for the grains, manifest.csv, manifest.json and population.png.")
-@click.option("--workers", type=click.IntRange(min=1), default=None,
-              help="Local worker processes [default: the CPU count].")
+@click.option("--workers", type=click.IntRange(min=1), default=None, show_default="the CPU count",
+              help="Local worker processes.")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
                    "(needs grainforge[dask]; workers must import the same grainforge).")

@@ -30,8 +30,8 @@ def calibrate():
               help="Aggregates (seeds) per ε.")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
               help="Root seed (aggregate k uses SeedSequence(seed).spawn(...)[k]).")
-@click.option("--workers", default=None, type=click.IntRange(min=1),
-              help="Worker processes [default: one per CPU]; results do not depend on it.")
+@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU",
+              help="Worker processes; results do not depend on it.")
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for calibration.csv and calibration.png.")
 @click.option("--overwrite", is_flag=True, help="Replace existing output files.")
@@ -39,7 +39,7 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
     """Mean and spread of D_A (Eq. 5) and porosity over seeds, for each ε of a grid.
 
     Writes calibration.csv (exponent, D_A_mean, D_A_std, porosity_mean,
-    porosity_std, R_g_mean, R_g_std, D_A_scaling_mean, D_A_scaling_std, ...)
+    porosity_std, R_g_mean_primary_sizes, R_g_std_primary_sizes, D_A_scaling_mean, D_A_scaling_std, ...)
     and calibration.png (the curves with ±1 s.d. bands).
     """
     from ..calibration import calibrate as run_calibration

@@ -6,8 +6,10 @@ from pathlib import Path
 
 import click
 
+#: every column states its unit (``_mm``, ``_%``) or is a count or a word; ``*_status`` says whether the
+#: number next to it was measured or is the measuring horizon (``thicker``: a lower bound).
 COLUMNS = ("file", "part", "status", "faces", "d_eq_mm", "solid", "self_intersections", "min_wall_mm",
-           "thin_area_%", "min_neck_mm", "problems")
+           "min_wall_status", "thin_area_%", "min_neck_mm", "min_neck_status", "problems")
 
 
 def _table(rows: list[dict]) -> str:
@@ -34,7 +36,7 @@ def check(files, printer_spec, as_csv):
     """
     from ..fabrication.printability import check_mesh
     from ..fabrication.printers import get_printer
-    from ..fabrication.threemf import read_parts
+    from ..io import read_parts
     from ..io import csv_text
     from .paths import mesh_inputs
     from .progress import progress_bar

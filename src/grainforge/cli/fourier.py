@@ -12,8 +12,13 @@ from .paths import OutPath, output_file
 N_MAX = 16
 
 
-def descriptor_rows(path: str, *, min_area: int, threshold, foreground: str, rays: int):
-    """Rows (dicts) for every grain of one image, and the scan summary."""
+def descriptor_rows(path: str, *, min_area: int, threshold, foreground: str, rays: int,
+                    pixel_size: float | None = None):
+    """Rows (dicts) for every grain of one image, and the scan summary.
+
+    Positions and sizes are in pixels (``x_px``, ``area_px2``, ...) and, with
+    ``pixel_size`` (µm per pixel), also in millimetres (``x_mm``, ``area_mm2``, ...).
+    """
     from ..contours import scan_image
 
     scan = scan_image(path, min_area=min_area, threshold=threshold, foreground=foreground, n_angles=rays)
@@ -21,18 +26,24 @@ def descriptor_rows(path: str, *, min_area: int, threshold, foreground: str, ray
     for i, (c, area) in enumerate(zip(scan.contours, scan.areas)):
         D = c.descriptors(N_MAX)
         row = {
-            "image": path, "grain": i, "x": round(float(c.centroid[0]), 3), "y": round(float(-c.centroid[1]), 3),
-            "area": area, "r0": round(c.scale, 4), "star_shaped": c.star_shaped,
+            "image": path, "grain": i, "x_px": round(float(c.centroid[0]), 3), "y_px": round(float(-c.centroid[1]), 3),
+            "area_px2": area, "r0_px": round(c.scale, 4), "star_shaped": c.star_shaped,
             "elongation": float(D[2]), "irregularity": float(D[3]), "roughness": float(D[8]),
         }
         row.update({f"D{n}": float(D[n]) for n in range(2, N_MAX + 1)})
+        if pixel_size is not None:
+            mm = pixel_size / 1000.0
+            row.update({"x_mm": row["x_px"] * mm, "y_mm": row["y_px"] * mm, "area_mm2": area * mm * mm,
+                        "r0_mm": c.scale * mm})
         rows.append(row)
     return rows, scan
 
 
-COLUMNS = ["image", "grain", "x", "y", "area", "r0", "star_shaped", "elongation", "irregularity", "roughness"] + [
-    f"D{n}" for n in range(2, N_MAX + 1)
-]
+#: positions and sizes state their unit: pixels (y upwards, x to the right, from the top-left corner) and,
+#: with --pixel-size, millimetres (PHYSICAL); descriptors are dimensionless.
+COLUMNS = ["image", "grain", "x_px", "y_px", "area_px2", "r0_px", "star_shaped", "elongation", "irregularity",
+           "roughness"] + [f"D{n}" for n in range(2, N_MAX + 1)]
+PHYSICAL = ["x_mm", "y_mm", "area_mm2", "r0_mm"]
 
 
 @click.command()
@@ -42,12 +53,14 @@ COLUMNS = ["image", "grain", "x", "y", "area", "r0", "star_shaped", "elongation"
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
 @click.option("--min-area", default=50, show_default=True, type=click.IntRange(min=0),
               help="Skip specks smaller than this many pixels.")
-@click.option("--threshold", type=float, default=None, help="Grey level separating grains and background [default: Otsu].")
+@click.option("--threshold", type=float, default=None, show_default="Otsu", help="Grey level separating grains and background.")
 @click.option("--foreground", type=click.Choice(["auto", "dark", "bright"]), default="auto", show_default=True,
               help="Which side of the threshold the grains are; auto: the side covering fewer border pixels.")
+@click.option("--pixel-size", type=click.FloatRange(min=0, min_open=True), default=None, metavar="UM",
+              help="Micrometres per pixel: adds x_mm, y_mm, area_mm2 and r0_mm (physical) columns.")
 @click.option("--rays", default=128, show_default=True, type=click.IntRange(min=2 * N_MAX + 2),
               help="Rays cast from each grain's area centroid.")
-def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays):
+def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, pixel_size):
     """Fourier descriptors D2..D16 of every grain in IMAGE... (one CSV row per grain).
 
     Grains are segmented by thresholding (holes filled); D_n = 2|c_n|/c_0 of the
@@ -63,6 +76,8 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays):
 
     if threshold is not None and not math.isfinite(threshold):
         raise click.BadParameter(f"must be a finite grey level, got {threshold}", param_hint="'--threshold'")
+    if pixel_size is not None and not math.isfinite(pixel_size):
+        raise click.BadParameter(f"must be a finite number of µm per pixel, got {pixel_size}", param_hint="'--pixel-size'")
     if csv_path is not None:
         output_file(csv_path, overwrite=overwrite, option="--csv", suffixes=(".csv",))
     _check_rays(rays)
@@ -72,7 +87,7 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays):
     for path in images:
         try:
             rows, scan = descriptor_rows(path, min_area=min_area, threshold=threshold,
-                                         foreground=foreground, rays=rays)
+                                         foreground=foreground, rays=rays, pixel_size=pixel_size)
         except ValueError as exc:
             message = " ".join(str(exc).split())
             failed.append(path)
@@ -94,7 +109,7 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays):
             f"no grain measured in {len(images)} image(s) (skipped {border} touching the border, "
             f"{small} below {min_area} px" + (f", {len(failed)} image(s) unreadable or empty" if failed else "") + ")"
         )
-    text = csv_text(all_rows, COLUMNS)
+    text = csv_text(all_rows, COLUMNS[:2] + (PHYSICAL if pixel_size is not None else []) + COLUMNS[2:])
     if csv_path is not None:
         atomic_write(csv_path, text)
     else:

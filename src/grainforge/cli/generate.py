@@ -1,6 +1,37 @@
-"""``grainforge generate METHOD``: write grains and a manifest into a folder."""
+"""``grainforge generate METHOD``: write grains and a manifest into a folder.
+
+One command per registered method (:data:`grainforge.methods.METHODS`), built
+by :func:`make_command` from the method's ``Params`` dataclass alone: one
+option per declared parameter (help, unit, default and range from
+:func:`grainforge.params.param`), plus the output options.  A new generator
+needs nothing here.
+
+A method that needs options which are not plain parameters (``--aspect
+L:I:S``, ``--target-fractal-dimension``) gets a *hook*: a module
+``grainforge/cli/generate_<name>.py`` (see ``generate_cri.py`` and
+``generate_dpa.py``) that may define
+
+``HELP`` : str
+    Text appended to the command's help (the method module's first docstring
+    line).
+``EXCLUDE`` : tuple of str
+    Parameters whose derived option the hook replaces.
+``OPTIONS`` : list of click options
+    Extra options; their values reach ``prepare`` with the parameter values.
+``prepare(values: dict) -> dict``
+    Turns the option values into ``Params`` field values (``None`` = not
+    given); may raise :class:`click.UsageError` / :class:`click.BadParameter`.
+``check(params) -> None``
+    Extra validation of the built ``Params`` before any work.
+
+Method modules (``grainforge.methods.*``) never import click or this package.
+"""
 
 from __future__ import annotations
+
+import importlib
+import importlib.util
+from types import ModuleType, SimpleNamespace
 
 import click
 
@@ -64,40 +95,55 @@ def _match_resolution(method, params, seeds, size, size_definition, printer):
     """Choose ``subdivisions`` for ``printer`` at ``size``; report it; return (params, manifest extras)."""
     import dataclasses
 
-    from ..fabrication.resolution import match_subdivisions, supports_matching
+    from ..fabrication.resolution import match_subdivisions
 
-    if not supports_matching(method):
-        raise click.BadParameter(
-            f"resolution matching applies to methods with --subdivisions (fso, cri), not {method}",
-            param_hint="'--printer'",
-        )
     res = match_subdivisions(method, params, size, size_definition, printer, seeds[:3])
     click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): {res.describe()}", err=True)
+    warning = res.shape_warning(size)
+    if warning is not None:
+        click.echo(f"WARNING: {warning}  Print larger or on a finer printer, or give --subdivisions (without "
+                   "--printer) to keep the detail in the file; recorded in manifest.csv (resolution_warning).", err=True)
     extras = {"printer": printer.name, "chordal_deviation": res.deviation, "deviation_tolerance": res.tolerance,
-              "mean_edge": res.edge, "resolution_limited_by": res.limited_by}
+              "mean_edge": res.edge, "resolution_limited_by": res.limited_by,
+              "retained_wavelength": res.retained_wavelength(), "resolution_warning": warning or ""}
     return dataclasses.replace(params, subdivisions=res.subdivisions), extras
 
 
+_NO_HOOK = SimpleNamespace()
+
+
+def hook(method: str) -> ModuleType | SimpleNamespace:
+    """The CLI hook module ``grainforge.cli.generate_<method>``, or an empty namespace if there is none."""
+    name = f"{__package__}.generate_{method}"
+    if importlib.util.find_spec(name) is None:
+        return _NO_HOOK
+    return importlib.import_module(name)
+
+
 def make_command(method: str) -> click.Command:
-    """A ``generate METHOD`` command whose options come from the method's Params.
+    """The ``generate METHOD`` command: options from the method's Params, plus its hook's (if any)."""
+    from ..fabrication.resolution import supports_matching
 
-    A method module may define ``cli_command(run_generate)`` to build its own
-    command (for options that are not plain parameters).
-    """
     module = get(method)
-    custom = getattr(module, "cli_command", None)
-    if custom is not None:
-        return custom(run_generate)
+    extra = hook(method)
+    help_text = (module.__doc__ or "").strip().splitlines()[0] + getattr(extra, "HELP", "")
 
-    @click.command(name=method, help=(module.__doc__ or "").strip().splitlines()[0])
-    @output_options
-    @param_options(module.Params)
     def command(out, count, seed, size, size_definition, fmt, overwrite, **values):
+        prepare = getattr(extra, "prepare", None)
+        if prepare is not None:
+            values = prepare(values)
         params = build_params(module.Params, values)
+        check = getattr(extra, "check", None)
+        if check is not None:
+            check(params)
         run_generate(method, params, out=out, count=count, seed=seed, size=size,
                      size_definition=size_definition, fmt=fmt, overwrite=overwrite)
 
-    return command
+    for option in reversed(getattr(extra, "OPTIONS", ())):
+        command = option(command)
+    command = param_options(module.Params, exclude=tuple(getattr(extra, "EXCLUDE", ())))(command)
+    command = output_options(command, printer=supports_matching(method))
+    return click.command(name=method, help=help_text)(command)
 
 
 for _name in METHODS:

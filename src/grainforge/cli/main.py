@@ -98,13 +98,16 @@ def cli():
 
 
 def _register():
-    from . import analyse, batch, calibrate, check, demo, figures, fourier, generate, plot, render, tray
+    from .options import apply_help_style
+
+    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, tray
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
-        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate,
+        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit,
     ):
         cli.add_command(command)
+    apply_help_style(cli)
 
 
 _register()

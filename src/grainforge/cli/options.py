@@ -9,12 +9,12 @@ import click
 
 from ..fabrication.scale import SIZE_DEFINITIONS
 from ..io import FORMATS
-from ..params import ParameterError, ParamSpec, specs
+from ..params import ParameterError, ParamSpec, format_number, specs
 from .paths import OutPath
 
 
 class FloatList(click.ParamType):
-    """Comma-separated numbers, e.g. ``0.15,0.10,0.03``."""
+    """Comma-separated numbers, e.g. ``0.15,0.10,0.03`` (also accepted: ``;`` or ``:``, as in ``2:1.5:1``)."""
 
     name = "LIST"
 
@@ -25,7 +25,7 @@ class FloatList(click.ParamType):
         if isinstance(value, (tuple, list)):
             return tuple(float(v) for v in value)
         try:
-            vals = tuple(float(x) for x in str(value).replace(";", ",").split(",") if x.strip())
+            vals = tuple(float(x) for x in str(value).replace(";", ",").replace(":", ",").split(",") if x.strip())
         except ValueError:
             self.fail(f"expected comma-separated numbers, got {value!r}", param, ctx)
         if self.length is not None and len(vals) != self.length:
@@ -43,27 +43,97 @@ def _click_type(spec: ParamSpec):
     return click.FLOAT
 
 
+class HelpOption(click.Option):
+    """An option whose help ends in one style everywhere: ``[default: 2.4; range: [2, 3); required]``.
+
+    Defaults are written as a person would (``10``, ``-5/3``), ranges as
+    intervals (``[1, inf)``, ``(0, 100]``), for parameter-derived options and
+    for click's own ranges alike.  :func:`apply_help_style` gives every option
+    of the CLI this class.
+    """
+
+    #: set by :func:`param_options` (parameter-derived options have no click default)
+    default_text: str | None = None
+    interval_text: str | None = None
+
+    def get_help_record(self, ctx):
+        if self.hidden:
+            return None
+        extra = self.get_help_extra(ctx)
+        items = []
+        default = self.default_text
+        if default is None and isinstance(self.show_default, str):
+            default = self.show_default
+        elif default is None and "default" in extra:
+            value = self.default
+            if isinstance(value, (int, float)) and not isinstance(value, bool):
+                default = format_number(value)
+            else:
+                default = str(extra["default"])
+        if default:
+            items.append(f"default: {default}")
+        interval = self.interval_text if self.interval_text is not None else interval_of(self.type)
+        if interval:
+            items.append(f"range: {interval}")
+        if self.required:
+            items.append("required")
+        text = self.help or ""
+        if items:
+            text = f"{text}  [{'; '.join(items)}]" if text else f"[{'; '.join(items)}]"
+        return self.get_help_spec(ctx), text
+
+
+def interval_of(type_) -> str:
+    """``[1, inf)`` for ``click.IntRange(min=1)``; ``""`` for types without a range."""
+    if not isinstance(type_, click.types._NumberRangeBase):
+        return ""
+    lo = "-inf" if type_.min is None else format_number(type_.min)
+    hi = "inf" if type_.max is None else format_number(type_.max)
+    lb = "(" if (type_.min is None or type_.min_open) else "["
+    rb = ")" if (type_.max is None or type_.max_open) else "]"
+    return f"{lb}{lo}, {hi}{rb}"
+
+
+def _first_sentence(text: str) -> str:
+    """The first sentence of a help text, not cut inside parentheses (``(Eq. 5)``)."""
+    para = " ".join(text.strip().split("\n\n")[0].split())
+    depth = 0
+    for i, ch in enumerate(para):
+        depth += (ch == "(") - (ch == ")")
+        if ch == "." and depth == 0 and (i + 1 == len(para) or para[i + 1] == " "):
+            return para[: i + 1]
+    return para
+
+
+def apply_help_style(command: click.Command) -> None:
+    """Give every option under ``command`` the :class:`HelpOption` style, and every subcommand a
+    short help that is its first whole sentence (click cuts at the first period, e.g. inside ``(Eq. 5)``)."""
+    for param in command.params:
+        if type(param) is click.Option:
+            param.__class__ = HelpOption
+    if isinstance(command, click.Group):
+        for sub in command.commands.values():
+            if sub.short_help is None and sub.help:
+                sub.short_help = _first_sentence(sub.help)
+            apply_help_style(sub)
+
+
 def param_options(params_cls, exclude: tuple[str, ...] = ()) -> Callable:
     """Decorator adding one option per declared parameter of ``params_cls``.
 
     Defaults are *not* given to click (so only what the user typed is passed
-    on); the dataclass defaults apply and are shown in the help text.
+    on); the dataclass defaults apply and are shown in the help text, with the
+    valid range and the unit, from the parameter's declaration.
     """
 
     def deco(f):
         for spec in reversed(specs(params_cls)):
             if not spec.cli or spec.name in exclude:
                 continue
-            extra = []
-            if spec.default is not None:
-                d = ",".join(map(str, spec.default)) if isinstance(spec.default, tuple) else spec.default
-                extra.append(f"default {d}")
-            if spec.range_text() and not spec.choices:
-                extra.append(f"range {spec.range_text()}")
-            if spec.unit:
-                extra.append(spec.unit)
-            text = spec.help + (f" [{'; '.join(extra)}]" if extra else "")
-            f = click.option(spec.option, spec.name, type=_click_type(spec), default=None, help=text)(f)
+            text = spec.help + (f" (in {spec.unit})" if spec.unit else "")
+            f = click.option(spec.option, spec.name, type=_click_type(spec), default=None, help=text, cls=HelpOption)(f)
+            f.__click_params__[-1].default_text = spec.default_text()
+            f.__click_params__[-1].interval_text = "" if spec.choices else spec.range_text()
         return f
 
     return deco
@@ -116,8 +186,15 @@ size_definition_option = click.option(
 overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 
 
-def output_options(f):
-    """--out, --count, --seed, --size, --size-definition, --format, --overwrite, --printer."""
+def output_options(f=None, *, printer: bool = True):
+    """--out, --count, --seed, --size, --size-definition, --format, --overwrite and (``printer=True``) --printer.
+
+    Use as ``@output_options`` or ``@output_options(printer=False)`` (methods
+    without an icosphere ``subdivisions`` parameter: resolution matching does
+    not apply to them, so the option is not offered).
+    """
+    if f is None:
+        return lambda g: output_options(g, printer=printer)
     opts = [
         click.option("--out", "out", required=True, type=OutPath(file_okay=False),
                      help="Folder to write the grains and manifest.csv into."),
@@ -129,10 +206,12 @@ def output_options(f):
         click.option("--format", "fmt", default="stl", show_default=True, type=click.Choice(list(FORMATS)),
                      help="Mesh file format (binary STL, OBJ or binary PLY)."),
         overwrite_option,
-        click.option("--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
-                     help="Match the mesh resolution to this printer (a built-in profile or file.toml[#name]) "
-                          "at --size: chooses --subdivisions (fso, cri); see docs/printing.md."),
     ]
+    if printer:
+        opts.append(click.option(
+            "--printer", "printer", default=None, expose_value=False, callback=_remember_printer,
+            help="Match the mesh resolution (--subdivisions) to this printer (a built-in profile or "
+                 "file.toml[#name]) at --size; see docs/printing.md."))
     for opt in reversed(opts):
         f = opt(f)
     return f

@@ -16,8 +16,8 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--out", required=True, type=OutPath(dir_okay=False),
               help="Image to write: .png, or .jpg/.jpeg (JPEG).")
-@click.option("--columns", type=click.IntRange(min=1), default=None,
-              help="Panels per row [default: about square; at most the number of panels].")
+@click.option("--columns", type=click.IntRange(min=1), default=None, show_default="about square",
+              help="Panels per row (at most the number of panels).")
 @click.option("--title", default=None, help="Title above the panels.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
 def render(files, out, columns, title, overwrite):
@@ -30,5 +30,6 @@ def render(files, out, columns, title, overwrite):
     meshes = [read_mesh(f) for f in files]  # ValueError -> one line, exit 2
     if columns is not None:
         columns = min(columns, len(meshes))  # more columns than panels would only be empty space
-    contact_sheet(meshes, [f.name for f in files], out, columns=columns, title=title)
+    # mesh files are in mm (what grainforge writes; STL carries no unit): each panel gets a scale bar
+    contact_sheet(meshes, [f.name for f in files], out, columns=columns, title=title, unit="mm")
     click.echo(f"wrote {out}", err=True)

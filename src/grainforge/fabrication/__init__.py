@@ -5,7 +5,8 @@ from .printability import CheckResult, check_mesh
 from .printers import PRINTERS, Printer, get_printer, load_printers
 from .resolution import Resolution, match_subdivisions
 from .scale import SIZE_DEFINITIONS, scale_factor, to_size
-from .threemf import read_3mf, read_parts
+from ..io import read_parts
+from .threemf import read_3mf
 from .tray import FileSource, GeneratorSource, TrayResult, build_tray
 
 __all__ = [

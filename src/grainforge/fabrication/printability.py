@@ -57,6 +57,8 @@ class CheckResult:
     min_neck: float
     failures: list[str] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
+    #: walls are measured up to this thickness (mm); inf when not measured (not a valid solid)
+    horizon: float = np.inf
 
     @property
     def ok(self) -> bool:
@@ -72,11 +74,22 @@ class CheckResult:
             "d_eq_mm": round(self.equivalent_diameter, 4),
             "solid": "yes" if not self.solid else "no",
             "self_intersections": self.self_intersections,
-            "min_wall_mm": round(self.min_thickness, 4) if np.isfinite(self.min_thickness) else "thick",
+            **self._thickness("min_wall", self.min_thickness),
             "thin_area_%": round(100 * self.thin_area, 2),
-            "min_neck_mm": round(self.min_neck, 4) if np.isfinite(self.min_neck) else "thick",
+            **self._thickness("min_neck", self.min_neck),
             "problems": "; ".join(self.failures + self.warnings),
         }
+
+
+    def _thickness(self, name: str, value: float) -> dict[str, Any]:
+        """``{name}_mm`` as a number and ``{name}_status``: ``measured``; ``thicker`` (nothing thinner
+        than the measuring horizon, which ``{name}_mm`` then holds: a lower bound); ``not measured``
+        (empty ``{name}_mm``: the mesh is not a valid solid)."""
+        if np.isfinite(value):
+            return {f"{name}_mm": round(float(value), 4), f"{name}_status": "measured"}
+        if np.isfinite(self.horizon):
+            return {f"{name}_mm": round(float(self.horizon), 4), f"{name}_status": "thicker"}
+        return {f"{name}_mm": "", f"{name}_status": "not measured"}
 
 
 def self_intersections(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9) -> int:
@@ -261,7 +274,8 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "pa
         res.failures.append(f"equivalent diameter {d_eq:.3g} mm < reliable size {printer.min_size:g} mm")
     if not problems:
         mesh = trimesh.Trimesh(v, f, process=False, validate=False)
-        idx, t = local_thickness(mesh, max_distance=THICKNESS_HORIZON * printer.min_wall)
+        res.horizon = THICKNESS_HORIZON * printer.min_wall
+        idx, t = local_thickness(mesh, max_distance=res.horizon)
         area = mesh.area_faces[idx]
         thin = t < printer.min_wall
         res.min_thickness = float(t.min())

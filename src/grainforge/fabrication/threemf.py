@@ -41,7 +41,7 @@ import numpy as np
 from .._version import __version__
 
 __all__ = [
-    "ThreeMFWriter", "STLWriter", "mesh_xml", "stl_triangles", "read_3mf", "read_stl_parts", "read_parts", "Part",
+    "ThreeMFWriter", "STLWriter", "mesh_xml", "stl_triangles", "read_3mf", "read_stl_parts", "read_3mf_file", "Part",
 ]
 
 _NS = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
@@ -301,40 +301,33 @@ def read_stl_parts(path) -> list[Part]:
     return [Part(f"body-{k}", v, f) for k, (v, f) in enumerate(bodies)]
 
 
-def read_parts(path) -> list[Part]:
-    """The parts of a mesh file: every build item of a 3MF, the single mesh of an STL/OBJ/PLY.
+def read_3mf_file(path) -> list[Part]:
+    """The parts (build items) of the 3MF file ``path``, checked.
+
+    :func:`grainforge.io.read_parts` reads any mesh file as parts; this is its 3MF branch
+    (kept here, so that this module does not import :mod:`grainforge.io`, which imports it).
 
     Raises
     ------
     ValueError
-        If the file is missing, unreadable or holds no triangles.
+        If the file is missing, unreadable, corrupt, holds no objects or non-finite coordinates.
     """
     from pathlib import Path
 
     path = Path(path)
-    if path.suffix.lower() == ".3mf":
-        if not path.is_file():
-            raise ValueError(f"{path}: no such file")
-        try:
-            parts = read_3mf(path)
-        except (ValueError, ElementTree.ParseError) as exc:
-            raise ValueError(f"{path}: {exc}") from None
-        except OSError as exc:
-            raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
-        except Exception as exc:  # a malformed package: missing elements or attributes, bad indices
-            raise ValueError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
-        if not parts:
-            raise ValueError(f"{path}: holds no objects")
-        for part in parts:
-            if not np.isfinite(part.vertices).all():
-                raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
-        return parts
-    from ..io import read_mesh
-
-    mesh = read_mesh(path)
-    # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
-    from ..solid import unique_rows
-
-    v, inv = unique_rows(np.asarray(mesh.vertices, dtype=np.float64))
-    f = inv[np.asarray(mesh.faces, dtype=np.int64)]
-    return [Part(path.stem, v, f)]
+    if not path.is_file():
+        raise ValueError(f"{path}: no such file")
+    try:
+        parts = read_3mf(path)
+    except (ValueError, ElementTree.ParseError) as exc:
+        raise ValueError(f"{path}: {exc}") from None
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
+    except Exception as exc:  # a malformed package: missing elements or attributes, bad indices
+        raise ValueError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+    if not parts:
+        raise ValueError(f"{path}: holds no objects")
+    for part in parts:
+        if not np.isfinite(part.vertices).all():
+            raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
+    return parts

@@ -28,6 +28,8 @@ METHODS: dict[str, str] = {
     "fso": "grainforge.methods.fso",
     "cri": "grainforge.methods.cri",
     "dpa": "grainforge.methods.dpa",
+    "angular": "grainforge.methods.angular",
+    "rf": "grainforge.methods.rf",
 }
 
 

@@ -38,14 +38,16 @@ from ..contours import (
 )
 from ..geodesic import icosphere
 from ..params import ParameterError, param, validate
+from ..spectra import extend_spectrum, read_spectra
 
-__all__ = ["Params", "build", "cri", "construct", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
+__all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
 
 NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
-#: contour sources: Fourier descriptors, fractal profiles, image files, or
+#: contour sources: Fourier descriptors, fractal profiles, image files, a
+#: measured spectrum table (``grainforge fourier`` CSV), or
 #: :class:`~grainforge.contours.Contour` objects given from Python.
-SOURCES = ("fourier", "fractal", "image", "given")
+SOURCES = ("fourier", "fractal", "image", "spectrum", "given")
 #: default (D2, D3, D8) when neither descriptors nor a preset is given.
 DEFAULT_PRESET = "rough-angular"
 #: fine grid on which the contours are interpolated (periodic, linear).
@@ -66,8 +68,8 @@ INFO_COLUMNS = tuple(
 
 def _triplet(name):
     return param(
-        None, f"Fourier descriptors D2,D3,D8 of the {name} contour (default: those of --descriptors)",
-        kind="floats", low=0.0, high=1.0,
+        None, f"Fourier descriptors D2,D3,D8 of the {name} contour",
+        kind="floats", low=0.0, high=1.0, shown_default="those of descriptors",
     )
 
 
@@ -76,16 +78,17 @@ class Params:
     """Parameters of the CRI generator (paper §2.2)."""
 
     contour: str | None = param(
-        None, "contour source: fourier, fractal or image (default fourier; image when images are given)",
-        kind="str", choices=SOURCES[:3],
+        None, "contour source: fourier, fractal, image or spectrum",
+        kind="str", choices=SOURCES[:4],
+        shown_default="fourier; image when images are given, spectrum when a spectrum table is",
     )
     preset: str | None = param(
         None, "named descriptors: rough-sphere = 0,0,0.02; rough-angular = 0.15,0.10,0.03",
         kind="str", choices=tuple(PRESETS),
     )
     descriptors: tuple[float, float, float] | None = param(
-        None, f"Fourier descriptors D2,D3,D8 (elongation, irregularity, roughness) of all three contours "
-        f"(default: the {DEFAULT_PRESET} preset)", kind="floats", low=0.0, high=1.0,
+        None, "Fourier descriptors D2,D3,D8 (elongation, irregularity, roughness) of all three contours",
+        kind="floats", low=0.0, high=1.0, shown_default=f"the {DEFAULT_PRESET} preset",
     )
     descriptors_xz: tuple[float, float, float] | None = _triplet("xz")
     descriptors_yz: tuple[float, float, float] | None = _triplet("yz")
@@ -100,9 +103,13 @@ class Params:
     length_ratio: float = param(2.0, "fractal contours: stochastic length L/R0", low=0.0, low_open=True, high=100.0)
     fractal_amplitude: float = param(0.06, "fractal contours: RMS of (r - r0)/r0", low=0.0, high=0.5)
     images: str | None = param(None, "three grain images A,B,C for the xy, xz and yz contours", kind="str")
+    spectrum: str | None = param(
+        None, "a 'grainforge fourier' CSV: each grain takes the D2..D16 of one measured grain, drawn at random, "
+        "for its three contours (above D16: decay B2)", kind="str",
+    )
     aspect: tuple[float, float, float] | None = param(
-        None, "target ratio L:I:S of the principal dimensions (default: from the contours)",
-        kind="floats", low=0.0, low_open=True, high=100.0,
+        None, "target ratio L:I:S of the principal dimensions",
+        kind="floats", low=0.0, low_open=True, high=100.0, shown_default="as the contours give it",
     )
     morph_exponent: float = param(2.0, "exponent p of the morphing weight sin^p(theta)", low=0.5, high=8.0)
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
@@ -119,10 +126,14 @@ class Params:
             object.__setattr__(self, "sections", secs)
             if source is not None:
                 raise ParameterError("contour", f"must be unset when sections are given, got {source!r}")
+            if self.spectrum is not None:
+                raise ParameterError("spectrum", "cannot be combined with sections: give one of them")
             source = "given"
         elif self.images is not None:
             if source not in (None, "image"):
                 raise ParameterError("images", f"cannot be combined with contour={source!r}")
+            if self.spectrum is not None:
+                raise ParameterError("spectrum", "cannot be combined with images: give one of them")
             source = "image"
             paths = tuple(x.strip() for x in self.images.split(",") if x.strip())
             if len(paths) != 3:
@@ -130,6 +141,13 @@ class Params:
             object.__setattr__(self, "images", ",".join(paths))
         elif source == "image":
             raise ParameterError("images", "are required with contour='image'")
+        elif self.spectrum is not None:
+            if source not in (None, "spectrum"):
+                raise ParameterError("spectrum", f"cannot be combined with contour={source!r}")
+            source = "spectrum"
+            read_spectra(self.spectrum)  # fail early on a missing or malformed table
+        elif source == "spectrum":
+            raise ParameterError("spectrum", "is required with contour='spectrum'")
         source = source or "fourier"
         object.__setattr__(self, "contour", source)
 
@@ -392,7 +410,14 @@ def _image_contour(path: str, mtime_ns: int, size: int) -> Contour:
     return Contour.from_image(path)
 
 
-def _load_image_contour(path: str) -> Contour:
+def load_image_contour(path: str) -> Contour:
+    """The outline of the grain in image ``path`` (cached by path, modification time and size).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``images`` when the file does not exist or holds no grain outline.
+    """
     p = Path(path)
     if not p.is_file():
         raise ParameterError("images", f"{path}: no such image file")
@@ -405,7 +430,11 @@ def input_contours(p: Params, rng: np.random.Generator) -> tuple[Contour, Contou
     if p.contour == "given":
         return p.sections
     if p.contour == "image":
-        return tuple(_load_image_contour(x) for x in p.images.split(","))
+        return tuple(load_image_contour(x) for x in p.images.split(","))
+    if p.contour == "spectrum":
+        table = read_spectra(p.spectrum)
+        D = extend_spectrum(table.D[table.draw(rng)], p.decay[1], p.modes)
+        return tuple(Contour.from_spectrum(D, rng=rng) for _ in range(3))
     if p.contour == "fractal":
         return tuple(
             Contour.from_fractal(
@@ -502,6 +531,7 @@ def cri(
     length_ratio: float = 2.0,
     fractal_amplitude: float = 0.06,
     images: str | Sequence[str | Path] | None = None,
+    spectrum: str | Path | None = None,
     contours: Sequence[Contour] | None = None,
     aspect: Sequence[float] | None = None,
     morph_exponent: float = 2.0,
@@ -529,6 +559,10 @@ def cri(
         Fractal-profile contours (2D variant of Eq. 1): D in [2, 3), L/R0, RMS of (r − r0)/r0.
     images : str or sequence of three paths, optional
         Grain images for the xy, xz and yz contours.
+    spectrum : str or Path, optional
+        A CSV written by ``grainforge fourier``: each grain draws one
+        measured grain's D2…D16 (continued above 16 with ``decay[1]``) for
+        its three contours.
     contours : sequence of three Contour, optional
         Contours for the xy, xz and yz planes.
     aspect : (L, I, S), optional
@@ -577,44 +611,9 @@ def cri(
         descriptors_xz=None if descriptors_xz is None else tuple(descriptors_xz),
         descriptors_yz=None if descriptors_yz is None else tuple(descriptors_yz),
         decay=tuple(decay), modes=modes, fractal_dimension=fractal_dimension, length_ratio=length_ratio,
-        fractal_amplitude=fractal_amplitude, images=images, aspect=None if aspect is None else tuple(aspect),
+        fractal_amplitude=fractal_amplitude, images=images,
+        spectrum=None if spectrum is None else str(spectrum), aspect=None if aspect is None else tuple(aspect),
         morph_exponent=morph_exponent, subdivisions=subdivisions,
         sections=None if contours is None else tuple(contours),
     )
     return generate(NAME, p, rng)
-
-
-# ------------------------------------------------------------------ CLI
-def cli_command(run_generate):
-    """``grainforge generate cri``: the Params options plus ``--aspect L:I:S``."""
-    import click
-
-    from ..cli.options import FloatList, build_params, output_options, param_options
-
-    class AspectType(FloatList):
-        name = "L:I:S"
-
-        def convert(self, value, param, ctx):
-            if isinstance(value, str):
-                value = value.replace(":", ",")
-            return super().convert(value, param, ctx)
-
-    @click.command(name=NAME, help=(__doc__ or "").strip().splitlines()[0] + (
-        "\n\nContours from Fourier descriptors (--descriptors D2,D3,D8 or --preset), fractal profiles "
-        "(--contour fractal) or three grain images (--images A.png,B.png,C.png)."))
-    @output_options
-    @param_options(Params, exclude=("aspect",))
-    @click.option("--aspect", "aspect", type=AspectType(3), default=None,
-                  help="Target ratio L:I:S of the principal dimensions, e.g. 2:1.5:1.")
-    def command(out, count, seed, size, size_definition, fmt, overwrite, **values):
-        params = build_params(Params, values)
-        if params.contour == "image":
-            for path in params.images.split(","):
-                try:
-                    _load_image_contour(path)
-                except ValueError as exc:
-                    raise click.BadParameter(str(exc), param_hint="'--images'") from None
-        run_generate(NAME, params, out=out, count=count, seed=seed, size=size,
-                     size_definition=size_definition, fmt=fmt, overwrite=overwrite)
-
-    return command

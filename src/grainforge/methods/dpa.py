@@ -20,8 +20,8 @@ from ._polyhedra import (
 )
 
 __all__ = [
-    "Params", "Aggregate", "build", "dpa", "aggregate", "parent_index", "lattice_surface",
-    "union_surface", "smooth_surface", "PRIMITIVES",
+    "Params", "Aggregate", "build", "aggregate", "parent_index", "lattice_surface",
+    "union_surface", "smooth_surface", "PRIMITIVES", "physical_info",
 ]
 
 NAME = "dpa"
@@ -45,8 +45,8 @@ class Params:
 
     primitive: str = param("cube", "primary particle shape", kind="str", choices=PRIMITIVES)
     exponent: float | None = param(
-        None, f"parent-choice exponent ε of Eq. 4 (default {DEFAULT_EXPONENT}; low: compact, high: branching)",
-        low=0.01, high=100.0,
+        None, "parent-choice exponent ε of Eq. 4 (low: compact, high: branching)",
+        low=0.01, high=100.0, shown_default=f"{DEFAULT_EXPONENT:g}",
     )
     primaries: int = param(200, "number of primary particles N", kind="int", low=1, high=100_000)
     smooth: int = param(
@@ -517,6 +517,25 @@ def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple
 
 # --------------------------------------------------------------------------- the generator
 
+def physical_info(info: dict, scale: float) -> dict:
+    """``info`` of a grain scaled by ``scale`` (mm per model unit) with its lengths in mm.
+
+    :func:`build` gives ``R_g`` in primary sizes, ``cavity_volume`` in primary
+    volumes and ``primary_size`` in model units; a manifest records all three in
+    mm / mm³ (``R_g_mm``, ``cavity_volume_mm3``, ``primary_size_mm``), like
+    ``grainforge analyse`` (``radius_of_gyration_mm``).  R_g/a, the ratio of
+    the paper's mass–radius relation, is ``R_g_mm / primary_size_mm``.
+
+    Examples
+    --------
+    >>> physical_info({"R_g": 3.0, "cavity_volume": 2.0, "primary_size": 0.5, "D_A": 2.1}, 4.0)
+    {'R_g': 6.0, 'cavity_volume': 16.0, 'primary_size': 2.0, 'D_A': 2.1}
+    """
+    a = float(info["primary_size"]) * float(scale)
+    return {**info, "R_g": float(info["R_g"]) * a, "cavity_volume": float(info["cavity_volume"]) * a**3,
+            "primary_size": a}
+
+
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one DPA grain (scaled to equivalent radius 1, not centred).
 
@@ -540,116 +559,3 @@ def build(p: Params, rng: np.random.Generator):
         "cavity_volume": float(cavity), "primary_size": scale,
     }
     return v * scale, f, info
-
-
-def dpa(
-    *,
-    primitive: str = "cube",
-    exponent: float | None = None,
-    primaries: int = 200,
-    smooth: int = 0,
-    target_fractal_dimension: float | None = None,
-    rng=None,
-):
-    """Generate one aggregate grain by Directed Polyhedra Aggregation (paper §2.3).
-
-    Parameters
-    ----------
-    primitive : str
-        ``cube`` (lattice), ``octahedron`` (as in the paper), or ``tetrahedron``,
-        ``dodecahedron``, ``icosahedron``, ``truncated-octahedron``.
-    exponent : float, optional
-        ε of Eq. 4 in [0.01, 100] (default 1.0).  Exclusive with
-        ``target_fractal_dimension``.
-    primaries : int
-        Number of primaries N in [1, 100000] (default 200).
-    smooth : int
-        0 keeps sharp corners; K in 1..4 rounds them by K steps of Loop
-        subdivision (each step multiplies the triangles by four).
-    target_fractal_dimension : float, optional
-        Ask for an aggregate fractal dimension D_A instead of ε: ε is read
-        from the (cached, computed on first use) calibration curve of this
-        primitive and N, see :mod:`grainforge.calibration`.
-    rng : None, int or numpy.random.Generator
-        Seed or generator.
-
-    Returns
-    -------
-    Grain
-        Centred, scaled so that the primaries' total volume is a unit-radius
-        sphere's; ``info`` holds D_A, porosity, R_g, cavity_volume and
-        primary_size.
-
-    Raises
-    ------
-    ValueError
-        For an out-of-range parameter, an unknown primitive, or a target
-        D_A outside the calibrated range.
-
-    References
-    ----------
-    Hanaor et al., *3D printable geomaterials*, Géotechnique (2016), Eqs. 4–5.
-
-    Examples
-    --------
-    >>> from grainforge import dpa
-    >>> g = dpa(primitive="cube", exponent=0.5, primaries=27, rng=3)
-    >>> g.method, round(float(g.mesh.volume / g.info["primary_size"] ** 3), 9)
-    ('dpa', 27.0)
-    >>> dpa(exponent=0)
-    Traceback (most recent call last):
-    ...
-    grainforge.params.ParameterError: exponent must be in [0.01, 100], got 0.0
-    """
-    from . import generate, get
-
-    P = get(NAME).Params  # the registered module's class (robust to the module being imported twice)
-
-    if target_fractal_dimension is not None and exponent is not None:
-        raise ParameterError("target_fractal_dimension", "cannot be combined with exponent: give one of them")
-    if target_fractal_dimension is not None:
-        P(primitive=primitive, exponent=1.0, primaries=primaries, smooth=smooth,
-          target_fractal_dimension=target_fractal_dimension)  # validate first
-        from ..calibration import exponent_for_dimension
-
-        exponent = exponent_for_dimension(target_fractal_dimension, primitive=primitive, primaries=primaries)
-    p = P(primitive=primitive, exponent=exponent, primaries=primaries, smooth=smooth,
-          target_fractal_dimension=target_fractal_dimension)
-    return generate(NAME, p, rng)
-
-
-def cli_command(run_generate):
-    """The ``generate dpa`` command: plain options plus ``--target-fractal-dimension``."""
-    import click
-
-    from ..cli.options import bad_parameter, build_params, output_options, param_options
-
-    @click.command(name=NAME, help=(__doc__ or "").strip().splitlines()[0])
-    @output_options
-    @param_options(Params)
-    @click.option("--target-fractal-dimension", "target", type=float, default=None,
-                  help="Aim at this aggregate fractal dimension D_A: ε is taken from the calibration curve of "
-                       "the primitive and N (cached; computed with a progress bar on first use). "
-                       "Exclusive with --exponent.")
-    def command(out, count, seed, size, size_definition, fmt, overwrite, target, **values):
-        if target is not None:
-            if values.get("exponent") is not None:
-                raise click.UsageError("--target-fractal-dimension cannot be combined with --exponent")
-            probe = build_params(Params, {**values, "exponent": 1.0, "target_fractal_dimension": target})
-            from ..calibration import exponent_for_dimension
-            from ..cli.progress import progress_bar
-
-            try:
-                eps = exponent_for_dimension(
-                    target, primitive=probe.primitive, primaries=probe.primaries,
-                    progress=progress_bar(desc=f"calibrating dpa {probe.primitive} N={probe.primaries}"),
-                )
-            except ParameterError as exc:
-                raise bad_parameter(exc) from None
-            click.echo(f"target D_A = {target:g}: exponent ε = {eps:.4g} (from the calibration curve)", err=True)
-            values = {**values, "exponent": eps, "target_fractal_dimension": target}
-        params = build_params(Params, values)
-        run_generate(NAME, params, out=out, count=count, seed=seed, size=size,
-                     size_definition=size_definition, fmt=fmt, overwrite=overwrite)
-
-    return command

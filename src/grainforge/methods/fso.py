@@ -9,6 +9,22 @@ lower one,
 
 where w_n = (2πγ^(n−1)/L)^(D−3), k_n = 2πγ^n/L, c = cos φ in the upper
 hemisphere and 0 in the lower one (Eq. 3 has no ζ terms).
+
+``surface="seamless"`` evaluates the same double sum (same w_n, k_n, M,
+n_max, γ) as a function of the 3D unit vector u, with ridge family m a
+plane wave along an axis d_m:
+
+    R = R0 + K Σ_m Σ_n w_n {c̄_mn − cos(k_n d_m·u + ψ_mn)},
+
+c̄_mn = cos ψ_mn sin k_n / k_n being the term's mean over the sphere; the
+axes d_m are evenly spread (golden spiral over a hemisphere of axes) and
+turned by one random rotation per grain, so no latitude or pole is special.
+
+``aspect=(A, B, C)`` puts the overlay on an ellipsoidal precursor with
+semi-axes proportional to A, B, C along x, y, z (geometric mean R0): the
+radius in direction u is ``r_e(u)·(1 + K·S(u))``, i.e. the overlay is applied
+along the radius, relative to the precursor's radius.  See
+``docs/methods/fso.md``.
 """
 
 from __future__ import annotations
@@ -20,7 +36,8 @@ import numpy as np
 from ..geodesic import icosphere, spherical
 from ..params import ParameterError, param, validate
 
-__all__ = ["Params", "build", "fso", "wm_sum", "wm_sum_reference", "draw_field", "Field"]
+__all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "draw_field", "Field",
+           "SURFACES", "ellipsoid_radius", "spread_axes", "random_rotation"]
 
 NAME = "fso"
 VALIDITY_PARAMETER = "amplitude"
@@ -35,6 +52,10 @@ MIN_RADIUS = 0.05
 #: largest phase, in turns, the double sum may reach (keeps float64 phases exact to ~1e-6 rad).
 MAX_TURNS = 2.0**32
 TWO_PI = 2.0 * np.pi
+#: overlay forms: Eqs. 2–3 on latitude/longitude ("paper"), or on the 3D unit vector ("seamless")
+SURFACES = ("paper", "seamless")
+#: largest ratio of the longest to the shortest aspect axis
+MAX_ASPECT_RATIO = 20.0
 
 
 @dataclass(frozen=True)
@@ -49,16 +70,37 @@ class Params:
         low=0.0, low_open=True, high=1000.0,
     )
     amplitude: float | None = param(
-        None, f"RMS of (R − R0)/R0 (default {DEFAULT_AMPLITUDE}; exclusive with k)", low=0.0, high=1.0
+        None, "RMS of (R − R0)/R0, measured on the sphere; exclusive with k.  A value is refused when the "
+        "smallest radius would fall below 0.05·R0 (the grain would no longer be star-shaped)",
+        low=0.0, high=1.0, shown_default=f"{DEFAULT_AMPLITUDE:g}",
     )
-    k: float | None = param(None, "the paper's raw amplitude scaling K (exclusive with amplitude)", low=0.0)
+    k: float | None = param(
+        None, "the paper's amplitude scaling K of Eq. 2, R = R0 + K·Σ_m Σ_n w_n{...} with R0 = 1 (K is in "
+        "units of R0): sets the overlay's size directly instead of through its RMS; exclusive with amplitude", low=0.0,
+    )
     ridges: int = param(40, "number of superimposed ridges M", kind="int", low=1, high=400)
     frequencies: int = param(40, "number of frequencies n_max", kind="int", low=1, high=400)
     gamma: float = param(1.5, "frequency density γ", low=1.0, low_open=True, high=10.0)
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
+    surface: str = param(
+        "paper", "overlay form: paper = Eqs. 2-3 in latitude/longitude (mirror seam at the equator, "
+        "poles pinned at R0); seamless = the same sum on the 3D unit vector", kind="str", choices=SURFACES,
+    )
+    aspect: tuple[float, float, float] = param(
+        (1.0, 1.0, 1.0), "ellipsoidal precursor: semi-axes A:B:C along x, y, z (ratios only; longest/shortest "
+        f"at most {MAX_ASPECT_RATIO:g}); the overlay is applied along the radius", kind="floats",
+        low=0.0, low_open=True, high=100.0,
+    )
 
     def __post_init__(self):
         validate(self)
+        if len(self.aspect) != 3:
+            raise ParameterError("aspect", f"must be 3 numbers A:B:C, got {self.aspect!r}")
+        if max(self.aspect) > MAX_ASPECT_RATIO * min(self.aspect):
+            raise ParameterError(
+                "aspect", f"longest/shortest must be at most {MAX_ASPECT_RATIO:g}, got "
+                f"{':'.join(f'{a:g}' for a in self.aspect)}",
+            )
         if self.amplitude is not None and self.k is not None:
             raise ParameterError("amplitude", "cannot be combined with k: give one of them")
         if self.amplitude is None and self.k is None:
@@ -74,28 +116,77 @@ class Params:
 
 @dataclass(frozen=True)
 class Field:
-    """The random field of one grain: phases ψ, ζ (M, n_max) and ridge angles α (M,)."""
+    """The random field of one grain.
+
+    ``surface="paper"``: phases ψ, ζ (M, n_max) and ridge angles α (M,);
+    ``surface="seamless"``: phases ψ (M, n_max) and unit ridge axes d (M, 3)
+    (``zeta`` and ``alpha`` are then None).
+    """
 
     psi: np.ndarray
-    zeta: np.ndarray
-    alpha: np.ndarray
+    zeta: np.ndarray | None
+    alpha: np.ndarray | None
     weights: np.ndarray  # (n_max,) w_n
     wavenumbers: np.ndarray  # (n_max,) k_n
+    directions: np.ndarray | None = None  # (M, 3) d_m, seamless only
+
+    @property
+    def seamless(self) -> bool:
+        """Whether this is the seamless (3D unit-vector) form."""
+        return self.directions is not None
+
+
+def spread_axes(m: int) -> np.ndarray:
+    """``m`` unit axes spread evenly over the hemisphere z > 0 (golden spiral, equal area).
+
+    An axis and its opposite give the same ridge family (ψ is uniform), so a
+    hemisphere of axes covers every orientation once.
+
+    Examples
+    --------
+    >>> d = spread_axes(40)
+    >>> d.shape, bool(np.allclose(np.linalg.norm(d, axis=1), 1.0)), bool((d[:, 2] > 0).all())
+    ((40, 3), True, True)
+    """
+    i = np.arange(m, dtype=np.float64)
+    z = (i + 0.5) / m
+    r = np.sqrt(1.0 - z * z)
+    a = i * np.pi * (3.0 - np.sqrt(5.0))
+    return np.column_stack([r * np.cos(a), r * np.sin(a), z])
+
+
+def random_rotation(rng: np.random.Generator) -> np.ndarray:
+    """A uniformly distributed 3×3 rotation matrix (unit quaternion from four normal draws)."""
+    q = rng.standard_normal(4)
+    w, x, y, z = q / np.linalg.norm(q)
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ])
 
 
 def draw_field(p: Params, rng: np.random.Generator) -> Field:
-    """Draw ψ and ζ ~ U(0, 2π) (in that order) and set α_m = π m / M.
+    """Draw the random field of one grain from ``rng``.
 
+    Paper form: ψ and ζ ~ U(0, 2π) (in that order), α_m = π m / M.
     α_m = πm/M follows Yan & Komvopoulos (1998): ridge directions evenly
     cover all orientations, so the overlay is statistically isotropic.
+
+    Seamless form: ψ ~ U(0, 2π), then one uniform random rotation applied to
+    the evenly spread axes :func:`spread_axes` (M) — the 3D counterpart of
+    α_m = πm/M, with no preferred orientation of the set.
     """
     M, N = p.ridges, p.frequencies
-    psi = rng.uniform(0.0, TWO_PI, size=(M, N))
-    zeta = rng.uniform(0.0, TWO_PI, size=(M, N))
-    alpha = np.pi * np.arange(1, M + 1) / M
     n = np.arange(1, N + 1, dtype=np.float64)
     weights = (TWO_PI * p.gamma ** (n - 1) / p.length_ratio) ** (p.fractal_dimension - 3.0)
     wavenumbers = TWO_PI * p.gamma**n / p.length_ratio
+    psi = rng.uniform(0.0, TWO_PI, size=(M, N))
+    if p.surface == "seamless":
+        directions = spread_axes(M) @ random_rotation(rng).T
+        return Field(psi, None, None, weights, wavenumbers, directions)
+    zeta = rng.uniform(0.0, TWO_PI, size=(M, N))
+    alpha = np.pi * np.arange(1, M + 1) / M
     return Field(psi, zeta, alpha, weights, wavenumbers)
 
 
@@ -106,8 +197,13 @@ def _hemisphere_coords(unit: np.ndarray):
     return theta, phi, phi_eff, upper
 
 
+def _seamless_mean(f: Field) -> np.ndarray:
+    """c̄_mn = cos ψ_mn · sin k_n / k_n: the sphere mean of cos(k_n d·u + ψ_mn)."""
+    return np.cos(f.psi) * (np.sin(f.wavenumbers) / f.wavenumbers)
+
+
 def wm_sum_reference(unit: np.ndarray, f: Field) -> np.ndarray:
-    """The double sum S of Eqs. 2–3, evaluated straightforwardly in float64.
+    """The double sum S, evaluated straightforwardly in float64.
 
     Used as the accuracy reference for :func:`wm_sum` in tests and benchmarks.
 
@@ -116,14 +212,24 @@ def wm_sum_reference(unit: np.ndarray, f: Field) -> np.ndarray:
     unit : (V, 3) float64
         Unit vectors.
     f : Field
+        Paper or seamless form.
 
     Returns
     -------
     (V,) float64
     """
+    unit = np.asarray(unit, dtype=np.float64)
+    out = np.empty(len(unit))
+    if f.seamless:
+        first = float((_seamless_mean(f) * f.weights).sum())
+        for i0 in range(0, len(unit), 256):
+            sl = slice(i0, i0 + 256)
+            u = unit[sl] @ f.directions.T  # (v, M)
+            a = f.wavenumbers[None, None, :] * u[:, :, None] + f.psi[None]
+            out[sl] = first - (np.cos(a) * f.weights).sum(axis=(1, 2))
+        return out
     theta, phi, phi_eff, upper = _hemisphere_coords(unit)
     c = np.where(upper, np.cos(phi), 0.0)
-    out = np.empty(len(unit))
     for i0 in range(0, len(unit), 256):
         sl = slice(i0, i0 + 256)
         u = phi_eff[sl, None] * np.cos(theta[sl, None] - f.alpha[None, :])
@@ -162,6 +268,13 @@ WM_BLOCK_TERMS = 51_200
 _WRAP_TURNS = 3
 
 
+def _magic(tmax: float) -> tuple[int, float]:
+    """Fraction bits fb and the rounding constant 1.5·2^(52−fb) for phases up to ``tmax`` units."""
+    # the magic add is exact-rounding only while |phase| < 2^(51−fb): keep a bit of margin
+    fb = min(32, 50 - int(np.ceil(np.log2(tmax))))
+    return fb, 1.5 * 2.0 ** (52 - fb)
+
+
 def _phase_setup(theta, phi_eff, c, f: Field):
     """Per-vertex coefficients P (V, 4), per-term coefficients Q (4, M·N) and the fraction bits.
 
@@ -181,10 +294,7 @@ def _phase_setup(theta, phi_eff, c, f: Field):
     P[:, 2] = c
     P[:, 3] = 1.0
     # |phase| bound: |u| ≤ φ' ≤ π/2, ζ, ψ < 2π (c ≤ 1)
-    tmax = float(np.max(np.abs(kt))) * (np.pi / 2) + 2.0
-    # the magic add is exact-rounding only while |phase| < 2^(51−fb): keep a bit of margin
-    fb = min(32, 50 - int(np.ceil(np.log2(tmax))))
-    magic = 1.5 * 2.0 ** (52 - fb)
+    fb, magic = _magic(float(np.max(np.abs(kt))) * (np.pi / 2) + 2.0)
     Q = np.empty((4, f.psi.size))
     Q[0] = (np.cos(f.alpha)[:, None] * kt).ravel()
     Q[1] = (np.sin(f.alpha)[:, None] * kt).ravel()
@@ -193,12 +303,29 @@ def _phase_setup(theta, phi_eff, c, f: Field):
     return P, Q, fb
 
 
-def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
-    """Fast evaluation of the double sum S of Eqs. 2–3.
+def _seamless_setup(unit, f: Field):
+    """P (V, 4) = (x, y, z, 1) and Q (4, M·N): the phase k_n d_m·u + ψ_mn in units of 3 turns, as in
+    :func:`_phase_setup` (|d·u| ≤ 1 < π/2, so the same precision bound holds)."""
+    unit_rad = TWO_PI * _WRAP_TURNS
+    kt = f.wavenumbers / unit_rad
+    P = np.empty((len(unit), 4))
+    P[:, :3] = unit
+    P[:, 3] = 1.0
+    fb, magic = _magic(float(np.max(np.abs(kt))) + 2.0)
+    Q = np.empty((4, f.psi.size))
+    for j in range(3):
+        Q[j] = (f.directions[:, j][:, None] * kt).ravel()
+    Q[3] = (f.psi / unit_rad).ravel() + magic
+    return P, Q, fb
 
-    The first term Σ w_n cos(ψ_mn + ζ_mn c) does not depend on θ: it is a
-    constant in the lower hemisphere and a Chebyshev interpolant in c = cos φ
-    in the upper one.  The second term is evaluated per block of ``chunk``
+
+def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
+    """Fast evaluation of the double sum S (paper Eqs. 2–3, or the seamless form).
+
+    Paper form: the first term Σ w_n cos(ψ_mn + ζ_mn c) does not depend on
+    θ: it is a constant in the lower hemisphere and a Chebyshev interpolant in
+    c = cos φ in the upper one.  Seamless form: the first term is the constant
+    Σ w_n c̄_mn.  The second term is evaluated per block of ``chunk``
     vertices in four array passes over the ``chunk × M·n_max`` terms:
 
     1. phases in units of 3 turns, rounded to 2^−fb units, by one float64
@@ -235,23 +362,28 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
     Examples
     --------
     >>> from grainforge.geodesic import icosphere
-    >>> f = draw_field(Params(), np.random.default_rng(0))
     >>> unit, _ = icosphere(2)
-    >>> bool(np.abs(wm_sum(unit, f) - wm_sum_reference(unit, f)).max() < 1e-3)
-    True
+    >>> for surface in SURFACES:
+    ...     f = draw_field(Params(surface=surface), np.random.default_rng(0))
+    ...     print(surface, bool(np.abs(wm_sum(unit, f) - wm_sum_reference(unit, f)).max() < 1e-3))
+    paper True
+    seamless True
     """
     unit = np.asarray(unit, dtype=np.float64)
-    theta, phi, phi_eff, upper = _hemisphere_coords(unit)
-    cosphi = np.cos(phi)
-    c = np.where(upper, cosphi, 0.0)
-    P, Q, fb = _phase_setup(theta, phi_eff, c, f)
+    if f.seamless:
+        P, Q, fb = _seamless_setup(unit, f)
+        first = np.full(len(unit), float((_seamless_mean(f) * f.weights).sum()))
+    else:
+        theta, phi, phi_eff, upper = _hemisphere_coords(unit)
+        cosphi = np.cos(phi)
+        c = np.where(upper, cosphi, 0.0)
+        P, Q, fb = _phase_setup(theta, phi_eff, c, f)
+        first = np.full(len(unit), float((f.weights * np.cos(f.psi)).sum()))
+        if upper.any():
+            first[upper] = _first_term_upper(f)(cosphi[upper])
     shift = 32 - fb if fb < 28 else 0
     scale = np.float32(TWO_PI * _WRAP_TURNS / 2.0 ** (fb + shift))
     w_t = np.tile(f.weights, f.psi.shape[0]).astype(np.float32)  # w_n for the flattened (m, n)
-
-    first = np.full(len(unit), float((f.weights * np.cos(f.psi)).sum()))
-    if upper.any():
-        first[upper] = _first_term_upper(f)(cosphi[upper])
 
     V, T = len(unit), Q.shape[1]
     if chunk is None:
@@ -276,38 +408,105 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
     return out
 
 
+def ellipsoid_radius(unit: np.ndarray, aspect) -> np.ndarray:
+    """Radius in direction ``unit`` of the ellipsoid with semi-axes ∝ ``aspect`` (geometric mean 1).
+
+    Examples
+    --------
+    >>> u = np.eye(3)
+    >>> np.round(ellipsoid_radius(u, (4, 2, 1)), 6).tolist()
+    [2.0, 1.0, 0.5]
+    """
+    a = np.asarray(aspect, dtype=np.float64)
+    a = a / np.exp(np.log(a).mean())
+    return 1.0 / np.sqrt(((np.asarray(unit, dtype=np.float64) / a) ** 2).sum(axis=1))
+
+
+def _scale(p: Params, f: Field, unit: np.ndarray, S: np.ndarray) -> float:
+    """K: ``p.k``, or ``p.amplitude`` over the RMS of S on the level-3 reference sphere."""
+    if p.k is not None:
+        return float(p.k)
+    ref_unit, _ = icosphere(REFERENCE_SUBDIVISIONS)
+    nref = len(ref_unit)
+    if len(unit) >= nref and np.array_equal(unit[:nref], ref_unit):
+        # finer icospheres start with the level-3 vertices, and wm_sum is
+        # evaluated vertex by vertex (bit-identical whatever the block), so
+        # this is exactly wm_sum(ref_unit, f) without evaluating it again
+        S_ref = S[:nref]
+    else:
+        S_ref = wm_sum(ref_unit, f)
+    rms = float(np.sqrt(np.mean(S_ref**2)))
+    return p.amplitude / rms if rms > 0 else 0.0
+
+
+def overlay(unit: np.ndarray, params: Params | None = None, rng=None) -> np.ndarray:
+    """The FSO overlay K·S(u): the relative radius perturbation at unit vectors ``unit``.
+
+    A pure function of its arguments: the field (ψ, ζ or the ridge axes) is
+    drawn from ``rng`` exactly as :func:`build` draws it, and K comes from
+    ``params.k`` or from ``params.amplitude`` (the RMS of K·S on the level-3
+    reference icosphere, whatever ``unit`` is).  So for the same ``params``
+    and seed, ``unit * (1 + overlay(unit, params, seed))[:, None]`` is the
+    vertex set that :func:`build` makes on the same unit vectors with
+    ``aspect=(1, 1, 1)``; with an aspect, multiply by the precursor radius
+    (:func:`ellipsoid_radius`) as well.  ``params.surface`` selects the paper
+    form (Eqs. 2–3, latitude/longitude) or the seamless form (3D unit
+    vector); ``params.aspect`` and ``params.subdivisions`` are not used.
+    No check on the smallest radius is made here (``build`` makes it).
+
+    Parameters
+    ----------
+    unit : (N, 3) array_like
+        Unit vectors (any points on the unit sphere, in any order).
+    params : Params, optional
+        D, L/R0, amplitude or k, M, n_max, γ, surface (default ``Params()``).
+    rng : None, int or numpy.random.Generator
+        Normalised with ``np.random.default_rng``; a Generator is advanced.
+
+    Returns
+    -------
+    (N,) float64
+        (R − R_precursor)/R_precursor at each unit vector.
+
+    Examples
+    --------
+    >>> from grainforge.geodesic import icosphere
+    >>> unit, _ = icosphere(3)
+    >>> d = overlay(unit, Params(surface="seamless", amplitude=0.05), rng=7)
+    >>> d.shape, round(float(np.sqrt(np.mean(d**2))), 6)
+    ((642,), 0.05)
+    """
+    p = Params() if params is None else params
+    if not isinstance(p, Params):
+        raise TypeError(f"params must be fso.Params, got {type(p).__name__}")
+    unit = np.asarray(unit, dtype=np.float64)
+    if unit.ndim != 2 or unit.shape[1] != 3:
+        raise ValueError(f"unit must have shape (N, 3), got {unit.shape}")
+    f = draw_field(p, np.random.default_rng(rng))
+    S = wm_sum(unit, f)
+    return _scale(p, f, unit, S) * S
+
+
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one FSO grain (R0 = 1, not yet centred)."""
     unit, faces = icosphere(p.subdivisions)
     f = draw_field(p, rng)
     S = wm_sum(unit, f)
-    if p.k is not None:
-        K = p.k
-        which = "k"
-    else:
-        ref_unit, _ = icosphere(REFERENCE_SUBDIVISIONS)
-        nref = len(ref_unit)
-        if p.subdivisions >= REFERENCE_SUBDIVISIONS and np.array_equal(unit[:nref], ref_unit):
-            # finer icospheres start with the level-3 vertices, and wm_sum is
-            # evaluated vertex by vertex (bit-identical whatever the block), so
-            # this is exactly wm_sum(ref_unit, f) without evaluating it again
-            S_ref = S[:nref]
-        else:
-            S_ref = wm_sum(ref_unit, f)
-        rms = float(np.sqrt(np.mean(S_ref**2)))
-        K = p.amplitude / rms if rms > 0 else 0.0
-        which = "amplitude"
+    K = _scale(p, f, unit, S)
     R = 1.0 + K * S
     rmin = float(R.min())
     if rmin <= MIN_RADIUS:
-        value = p.k if which == "k" else p.amplitude
+        which = "k" if p.k is not None else "amplitude"
+        value = getattr(p, which)
         raise ParameterError(
             which,
             f"{value} is too large for this grain: the smallest radius would be {rmin:.3f}·R0 "
             f"(must stay above {MIN_RADIUS}·R0 for a star-shaped solid); lower it",
         )
+    if len(set(p.aspect)) > 1:
+        R = R * ellipsoid_radius(unit, p.aspect)
     vertices = unit * R[:, None]
-    info = {"K": float(K), "min_radius": rmin, "max_radius": float(R.max())}
+    info = {"K": float(K), "min_radius": float(R.min()), "max_radius": float(R.max())}
     return vertices, np.array(faces), info
 
 
@@ -321,6 +520,8 @@ def fso(
     frequencies: int = 40,
     gamma: float = 1.5,
     subdivisions: int = 5,
+    surface: str = "paper",
+    aspect=(1.0, 1.0, 1.0),
     rng=None,
 ):
     """Generate one grain by Fractal Surface Overlay (paper §2.1, Eqs. 2–3).
@@ -342,6 +543,15 @@ def fso(
         Frequency density γ > 1 (default 1.5).
     subdivisions : int
         Icosphere level 0–8 (default 5: 10,242 vertices).
+    surface : {"paper", "seamless"}
+        ``paper`` (default): Eqs. 2–3 in latitude/longitude, with their
+        mirror seam at the equator and R = R0 at both poles.  ``seamless``:
+        the same sum as a function of the 3D unit vector (no special
+        latitude or pole); see :func:`wm_sum`.
+    aspect : (A, B, C)
+        Semi-axis ratios along x, y, z of the ellipsoidal precursor (default
+        1:1:1, a sphere).  The overlay is applied along the radius, relative
+        to the precursor radius; longest/shortest at most 20.
     rng : None, int or numpy.random.Generator
         Seed or generator.  An int (or None, which draws one) is recorded
         as ``Grain.seed``.
@@ -378,5 +588,6 @@ def fso(
     p = Params(
         fractal_dimension=fractal_dimension, length_ratio=length_ratio, amplitude=amplitude, k=k,
         ridges=ridges, frequencies=frequencies, gamma=gamma, subdivisions=subdivisions,
+        surface=surface, aspect=tuple(aspect),
     )
     return generate(NAME, p, rng)

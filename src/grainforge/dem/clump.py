@@ -1,0 +1,299 @@
+"""Multi-sphere (clump) approximation of a grain.
+
+The algorithm ("greedy inscribed spheres + SDF refinement", ours):
+
+1. Voxelise the grain (cell size ``d_eq / resolution``) and take the
+   Euclidean distance transform of the inside (scipy): every inside cell
+   centre is the centre of a candidate inscribed sphere of radius
+   ``D(x) − h/2``.
+2. Greedy placement: candidates are enlarged by ``overshoot · d_eq``;
+   repeatedly take the candidate that adds the most uncovered grain volume
+   minus ``spill_weight`` × its new volume outside the grain. The new volume of every candidate is first estimated
+   analytically (sphere volume minus the lens overlaps with the spheres
+   already placed); the best few are then counted exactly on the grid.
+3. Optional refinement (``iterations > 0``, off by default: it costs ~10×
+   the time for a few points of coverage): all centres and radii are optimised together (L-BFGS-B) to
+   maximise the covered grain volume minus ``spill_weight`` × the volume
+   outside the grain, measured on a random sample of cell centres inside the
+   grain and in a band around it, with a smooth (sigmoid) inside-the-union
+   indicator of width ``h/2``.
+
+Quality (:func:`clump_quality`) is measured independently on a finer grid:
+coverage = vol(grain ∩ union)/vol(grain), spill = vol(union \\ grain)/vol(union),
+counting cell centres (ALGORITHMS.md §7). Mass properties for the engine never
+come from the spheres: see :mod:`grainforge.dem.massprops`.
+
+References
+----------
+Favier et al. 1999; Ferellec & McDowell 2010; Amberger et al. 2012;
+Angelidakis et al. 2021 (CLUMP).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .voxel import grid_for, inside_mask
+
+__all__ = ["Clump", "clump", "clump_quality", "union_mask"]
+
+
+@dataclass(frozen=True)
+class Clump:
+    """Spheres approximating a grain, with their measured quality.
+
+    Attributes
+    ----------
+    centres : (N, 3) float64
+        Sphere centres, in the grain's frame and units.
+    radii : (N,) float64
+    coverage : float
+        vol(grain ∩ union) / vol(grain), on the measuring grid.
+    spill : float
+        vol(union outside the grain) / vol(union), on the measuring grid.
+    resolution : int
+        Cells per equivalent diameter of the measuring grid.
+    """
+
+    centres: np.ndarray
+    radii: np.ndarray
+    coverage: float
+    spill: float
+    resolution: int
+
+    @property
+    def count(self) -> int:
+        """Number of spheres."""
+        return int(len(self.radii))
+
+    def translated(self, offset) -> "Clump":
+        """The same clump with every centre moved by ``offset``."""
+        return Clump(self.centres + np.asarray(offset, dtype=np.float64), self.radii, self.coverage,
+                     self.spill, self.resolution)
+
+    def scaled(self, factor: float) -> "Clump":
+        """The clump scaled by ``factor`` about the origin."""
+        return Clump(self.centres * factor, self.radii * factor, self.coverage, self.spill, self.resolution)
+
+
+def _equivalent_diameter(vertices, faces) -> float:
+    from ..solid import signed_volume
+
+    vol = signed_volume(vertices, faces)
+    if not vol > 0:
+        raise ValueError(f"the grain's volume must be positive, got {vol!r}")
+    return float((6.0 * vol / np.pi) ** (1.0 / 3.0))
+
+
+def union_mask(centres: np.ndarray, radii: np.ndarray, grid) -> np.ndarray:
+    """Boolean array ``grid.shape``: which cell centres lie in at least one sphere.
+
+    Each sphere is rasterised in its own bounding block (vectorised per sphere).
+    """
+    out = np.zeros(grid.shape, dtype=bool)
+    h = grid.spacing
+    axes = grid.axes()
+    for c, r in zip(np.asarray(centres, dtype=np.float64), np.asarray(radii, dtype=np.float64)):
+        lo = np.maximum(np.floor((c - r - grid.origin) / h).astype(int), 0)
+        hi = np.minimum(np.ceil((c + r - grid.origin) / h).astype(int) + 1, grid.shape)
+        if np.any(hi <= lo):
+            continue
+        dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
+        dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
+        dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
+        block = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
+        out[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]] |= block
+    return out
+
+
+def clump_quality(vertices: np.ndarray, faces: np.ndarray, centres: np.ndarray, radii: np.ndarray,
+                  *, resolution: int = 100) -> tuple[float, float]:
+    """Coverage and spill of a sphere set against a closed mesh, on a voxel grid.
+
+    Counts cell centres of a grid of ``d_eq / resolution`` covering both the
+    grain and the spheres: coverage = #(grain ∩ union) / #grain, spill =
+    #(union \\ grain) / #union. The grid error is of order one cell over
+    the surface (≈ 1/resolution relative).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(5)
+    >>> cov, spill = clump_quality(s.vertices, s.faces, np.zeros((1, 3)), np.array([1.0]), resolution=60)
+    >>> round(cov, 2), round(spill, 2)
+    (1.0, 0.0)
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    centres = np.asarray(centres, dtype=np.float64).reshape(-1, 3)
+    radii = np.asarray(radii, dtype=np.float64).reshape(-1)
+    d = _equivalent_diameter(v, faces)
+    box = np.vstack([v, centres - radii[:, None], centres + radii[:, None]])
+    grid = grid_for(box, d / resolution, pad=1)
+    grain = inside_mask(v, faces, grid)
+    union = union_mask(centres, radii, grid)
+    both = np.count_nonzero(grain & union)
+    nu = np.count_nonzero(union)
+    return float(both / max(np.count_nonzero(grain), 1)), float((nu - both) / max(nu, 1))
+
+
+def _lens(r1, r2, d):
+    """Volume of the intersection of spheres of radii r1, r2 at distance d (broadcast)."""
+    d = np.maximum(d, 1e-300)
+    full = d <= np.abs(r1 - r2)
+    disjoint = d >= r1 + r2
+    vol = np.pi * (r1 + r2 - d) ** 2 * (d * d + 2 * d * (r1 + r2) - 3 * (r1 - r2) ** 2) / (12 * d)
+    small = np.minimum(r1, r2)
+    vol = np.where(full, 4.0 / 3.0 * np.pi * small**3, vol)
+    return np.where(disjoint, 0.0, vol)
+
+
+def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weight):
+    """Greedy spheres: candidates are inside cell centres, radius depth − h/2 + overshoot."""
+    cand = depth > 1.0 * h
+    cp, cr = points[cand], depth[cand] - 0.5 * h + overshoot
+    cidx = inside_idx[cand]
+    uncovered = np.ones(grid.shape, dtype=bool)
+    axes = grid.axes()
+    est = 4.0 / 3.0 * np.pi * cr**3
+    centres, radii = [], []
+    for _ in range(n):
+        top = np.argpartition(-est, min(8, len(est) - 1))[:8]
+        best, best_gain = -1, -1
+        for t in top:
+            c, r = cp[t], cr[t]
+            lo = np.maximum(cidx[t] - int(np.ceil(r / h)) - 1, 0)
+            hi = np.minimum(cidx[t] + int(np.ceil(r / h)) + 2, grid.shape)
+            dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
+            dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
+            dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
+            blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
+            un = blk & uncovered[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+            ins = inside[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
+            gain = np.count_nonzero(un & ins) - spill_weight * np.count_nonzero(un & ~ins)
+            if gain > best_gain:
+                best, best_gain, best_blk, best_lo, best_hi = t, gain, blk, lo, hi
+        if best_gain <= 0:
+            break
+        c, r = cp[best], cr[best]
+        uncovered[best_lo[0]:best_hi[0], best_lo[1]:best_hi[1], best_lo[2]:best_hi[2]] &= ~best_blk
+        centres.append(c)
+        radii.append(r)
+        dist = np.linalg.norm(cp - c, axis=1)
+        est = est - _lens(cr, r, dist)
+    return np.array(centres).reshape(-1, 3), np.array(radii)
+
+
+def _refine(centres, radii, pin, pout, h, spill_weight, iterations):
+    from scipy.optimize import minimize
+
+    n = len(radii)
+    tau = 0.5 * h
+    pts = np.vstack([pin, pout])
+    w = np.concatenate([-np.ones(len(pin)), spill_weight * np.ones(len(pout))]) / len(pin)
+
+    def fun(x):
+        c = x[: 3 * n].reshape(n, 3)
+        r = x[3 * n:]
+        diff = pts[:, None, :] - c[None, :, :]
+        dist = np.sqrt(np.einsum("pnk,pnk->pn", diff, diff))
+        phi = r[None, :] - dist
+        k = np.argmax(phi, axis=1)
+        rows = np.arange(len(pts))
+        m = phi[rows, k]
+        s = 1.0 / (1.0 + np.exp(-np.clip(m / tau, -40, 40)))
+        loss = float(w @ s)
+        g = w * s * (1 - s) / tau  # dloss/dm
+        gr = np.bincount(k, weights=g, minlength=n)
+        unit = diff[rows, k] / np.maximum(dist[rows, k], 1e-12)[:, None]
+        gc = np.zeros((n, 3))
+        for ax in range(3):
+            gc[:, ax] = np.bincount(k, weights=g * unit[:, ax], minlength=n)
+        return loss, np.concatenate([gc.ravel(), gr])
+
+    x0 = np.concatenate([centres.ravel(), radii])
+    bounds = [(None, None)] * (3 * n) + [(0.5 * h, None)] * n
+    res = minimize(fun, x0, jac=True, method="L-BFGS-B", bounds=bounds,
+                   options={"maxiter": iterations, "gtol": 1e-12, "ftol": 1e-12})
+    return res.x[: 3 * n].reshape(n, 3), res.x[3 * n:]
+
+
+def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolution: int = 40,
+          spill_weight: float = 4.0, samples: int = 3000, iterations: int = 0,
+          measure_resolution: int = 100, overshoot: float = 0.02, rng=None) -> Clump:
+    """A clump of ``spheres`` spheres approximating a closed mesh.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+        A closed, outward-oriented mesh (any units; the clump is in the same).
+    spheres : int
+        The trade-off knob: more spheres, better coverage, more cost in the
+        DEM engine (≥ 1).
+    resolution : int
+        Cells per equivalent diameter of the working grid.
+    spill_weight : float
+        Cost of a unit of volume outside the grain relative to a unit of
+        grain volume covered, in the refinement (> 0; larger → less spill).
+    samples : int
+        Cell centres sampled (inside and around) for the refinement.
+    iterations : int
+        L-BFGS-B iterations of the refinement (0: greedy spheres only).
+    measure_resolution : int
+        Cells per equivalent diameter of the grid that measures the result.
+    overshoot : float
+        Candidate radius = inscribed radius + ``overshoot · d_eq``: lets the
+        spheres cross the surface a little (spill) to cover more of it.
+    rng : int or numpy.random.Generator, optional
+        Seeds the refinement's sample (the result is deterministic for a seed).
+
+    Returns
+    -------
+    Clump
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> box = trimesh.creation.box((1.0, 1.0, 2.0))
+    >>> c = clump(box.vertices, box.faces, spheres=8, rng=0)
+    >>> c.count, c.coverage > 0.75, c.spill < 0.05
+    (8, True, True)
+    """
+    from scipy import ndimage
+
+    spheres = int(spheres)
+    if spheres < 1:
+        raise ValueError(f"spheres must be ≥ 1, got {spheres!r}")
+    if not spill_weight > 0:
+        raise ValueError(f"spill_weight must be positive, got {spill_weight!r}")
+    rng = np.random.default_rng(rng)
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    d = _equivalent_diameter(v, f)
+    h = d / resolution
+    grid = grid_for(v, h, pad=3)
+    inside = inside_mask(v, f, grid)
+    depth = ndimage.distance_transform_edt(inside) * h
+    idx = np.argwhere(inside)
+    pts = grid.points(idx)
+    centres, radii = _greedy(pts, depth[inside], idx, grid, spheres, h, inside, overshoot * d, spill_weight)
+    if iterations > 0 and len(radii):
+        outside_depth = ndimage.distance_transform_edt(~inside) * h
+        band = (~inside) & (outside_depth <= 0.05 * d)
+        near = depth[inside] <= 0.1 * d
+        idx_all = idx
+        idx, pts = idx[near], pts[near]
+        oidx = np.argwhere(band)
+        n_in = min(len(idx), samples)
+        n_out = min(len(oidx), samples // 2)
+        pin = pts[np.sort(rng.choice(len(idx), n_in, replace=False))]
+        pout = grid.points(oidx[np.sort(rng.choice(len(oidx), n_out, replace=False))])
+        # the band sample stands for the band's volume: weight by its share
+        pin_w = len(idx) / n_in
+        idx = idx_all
+        pout_w = len(oidx) / max(n_out, 1)
+        centres, radii = _refine(centres, radii, pin, pout, h, spill_weight * pout_w / pin_w, iterations)
+    cov, spill = clump_quality(v, f, centres, radii, resolution=measure_resolution)
+    return Clump(centres, radii, float(cov), float(spill), int(measure_resolution))

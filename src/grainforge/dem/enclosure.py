@@ -1,0 +1,53 @@
+"""Whether a mesh encloses one solid with a well-defined inside (shared by :mod:`.inputs` and
+:mod:`.template`; a module of its own so that neither imports the other for it)."""
+
+from __future__ import annotations
+
+import numpy as np
+
+__all__ = ["enclosure_problems"]
+
+
+def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
+    """What stops a mesh from enclosing one solid with a well-defined inside (empty if nothing).
+
+    Weaker than :func:`grainforge.solid.solid_problems` in one respect only:
+    an edge may be shared by four faces (two touching cubes of a DPA
+    aggregate, once coincident vertices are merged), as long as every directed
+    edge is matched by as many reverse edges. The winding number — hence the
+    inside, the volume integrals and the voxelisation used here — is then
+    well defined. Open boundaries, inconsistent orientation, degenerate
+    faces, several bodies and non-positive volume are refused.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> b = trimesh.creation.box()
+    >>> enclosure_problems(b.vertices, b.faces)
+    []
+    >>> enclosure_problems(b.vertices, b.faces[:-1])
+    ['open boundary or inconsistent orientation']
+    """
+    from ..solid import face_components, signed_volume
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    if len(f) == 0 or len(v) == 0:
+        return ["empty mesh"]
+    if not np.isfinite(v).all():
+        return ["non-finite vertex coordinates"]
+    if f.min() < 0 or f.max() >= len(v):
+        return ["face index out of range"]
+    if ((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])).any():
+        return ["degenerate faces (repeated vertex)"]
+    a = f.ravel()
+    b = np.roll(f, -1, axis=1).ravel()
+    n = np.int64(len(v))
+    if not np.array_equal(np.sort(a * n + b), np.sort(b * n + a)):
+        return ["open boundary or inconsistent orientation"]
+    bodies = len(np.unique(face_components(f, len(v))))
+    if bodies != 1:
+        return [f"{bodies} separate bodies"]
+    if not signed_volume(v, f) > 0:
+        return ["non-positive volume (inward orientation)"]
+    return []

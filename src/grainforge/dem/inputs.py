@@ -1,0 +1,120 @@
+"""Grain files to templates: resolve inputs (files, run folders, manifests), prepare in parallel."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+from typing import Callable, Iterable, Sequence
+
+import numpy as np
+
+from .enclosure import enclosure_problems
+
+__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "MESH_SUFFIXES"]
+
+MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
+
+
+def _manifest_files(manifest: Path) -> list[Path]:
+    try:
+        with open(manifest, newline="") as fh:
+            rows = list(csv.DictReader(fh))
+    except OSError as exc:
+        raise ValueError(f"{manifest}: cannot read ({exc.strerror})") from None
+    if not rows or "file" not in rows[0]:
+        raise ValueError(f"{manifest}: not a grainforge manifest (no 'file' column)")
+    return [manifest.parent / r["file"] for r in rows]
+
+
+def grain_paths(inputs: Iterable[str | Path]) -> list[Path]:
+    """Mesh files named by ``inputs``: files, run folders (their manifest) or manifests.
+
+    A folder with a ``manifest.csv`` gives the manifest's files in its order; a
+    folder without one gives its mesh files sorted by name.
+
+    Raises
+    ------
+    ValueError
+        For a missing path, or inputs that hold no mesh file.
+    """
+    out: list[Path] = []
+    for p in map(Path, inputs):
+        if p.is_dir():
+            if (p / "manifest.csv").is_file():
+                out += _manifest_files(p / "manifest.csv")
+            else:
+                out += sorted(q for q in p.iterdir() if q.suffix.lower() in MESH_SUFFIXES)
+        elif p.suffix.lower() == ".csv":
+            if not p.is_file():
+                raise ValueError(f"{p}: no such file")
+            out += _manifest_files(p)
+        elif p.is_file():
+            out.append(p)
+        else:
+            raise ValueError(f"{p}: no such file or folder")
+    if not out:
+        raise ValueError("no grain files in the inputs")
+    for p in out:
+        if not p.is_file():
+            raise ValueError(f"{p}: no such file")
+    return out
+
+
+def read_grain(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
+    """Vertices and faces of a mesh file, vertices merged by position (as any reader sees it).
+
+    Raises
+    ------
+    ValueError
+        If the file is unreadable or the mesh is not a valid solid.
+    """
+    from ..io import read_mesh
+
+    mesh = read_mesh(path)
+    v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
+    f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
+    problems = enclosure_problems(v, f)
+    if problems:
+        raise ValueError(f"{path}: not a closed solid ({'; '.join(problems)})")
+    return v, f
+
+
+def load_template(path: str | Path, name: str, kwargs: dict):
+    """Read ``path`` and :func:`~grainforge.dem.template.prepare` it as ``name``."""
+    from .template import prepare
+
+    v, f = read_grain(path)
+    return prepare(v, f, name, source=str(path), **kwargs)
+
+
+def _unique_names(paths: Sequence[Path]) -> list[str]:
+    seen: dict[str, int] = {}
+    names = []
+    for p in paths:
+        stem = "".join(c if c.isalnum() or c in "-_." else "_" for c in p.stem)
+        k = seen.get(stem, 0)
+        seen[stem] = k + 1
+        names.append(stem if k == 0 else f"{stem}_{k}")
+    return names
+
+
+def _load_one(args):
+    return load_template(*args)
+
+
+def build_templates(paths: Sequence[Path], *, workers: int = 1,
+                    progress: Callable[[Iterable], Iterable] | None = None, **kwargs) -> list:
+    """Templates of every grain file, in order (``kwargs`` go to ``prepare``).
+
+    Runs on ``workers`` processes; the result does not depend on the count.
+    """
+    names = _unique_names(paths)
+    tasks = [(p, n, kwargs) for p, n in zip(paths, names)]
+    wrap = progress or (lambda it: it)
+    if workers <= 1 or len(tasks) < 4:
+        return list(wrap(map(_load_one, tasks)))
+    from ..workers import process_pool, single_threaded_children
+
+    with single_threaded_children(), process_pool(workers, preload=["grainforge.dem.template",
+                                                                    "grainforge.dem.clump"]) as pool:
+        return list(wrap(pool.map(_load_one, tasks, chunksize=max(1, min(32, len(tasks) // (8 * workers))))))

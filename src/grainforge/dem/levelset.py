@@ -1,0 +1,96 @@
+"""Signed distance field of a grain on a regular grid (a DEM level set)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .voxel import Grid, grid_for, inside_mask
+
+__all__ = ["LevelSet", "level_set", "surface_nodes"]
+
+
+@dataclass(frozen=True)
+class LevelSet:
+    """A signed distance field: negative inside, positive outside.
+
+    Attributes
+    ----------
+    grid : Grid
+        Node positions ``origin + (i, j, k) · spacing``.
+    distance : (nx, ny, nz) float64
+        Signed distance at the nodes (same length unit as the mesh).
+    nodes : (S, 3) float64
+        Points on the surface (mesh vertices spread over it), for engines that
+        need surface nodes.
+    """
+
+    grid: Grid
+    distance: np.ndarray
+    nodes: np.ndarray
+
+
+def surface_nodes(vertices: np.ndarray, faces: np.ndarray, count: int) -> np.ndarray:
+    """``count`` points on the surface: the mesh vertices nearest to an even spread.
+
+    Farthest-point selection over the vertices (deterministic).
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    count = min(int(count), len(v))
+    chosen = [int(np.argmax(v[:, 2]))]
+    dist = np.linalg.norm(v - v[chosen[0]], axis=1)
+    for _ in range(count - 1):
+        k = int(np.argmax(dist))
+        chosen.append(k)
+        dist = np.minimum(dist, np.linalg.norm(v - v[k], axis=1))
+    return v[np.sort(chosen)]
+
+
+def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05, pad: int = 3,
+              nodes: int = 500) -> LevelSet:
+    """Signed distance to the mesh surface at the nodes of a regular grid.
+
+    Inside/outside is exact at the nodes (scanline parity,
+    :func:`grainforge.dem.voxel.inside_mask`); the distance is the exact
+    Euclidean distance to the nearest triangle (trimesh), signed.
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+    spacing : float
+        Node spacing as a fraction of the equivalent diameter (0 < spacing ≤ 0.5).
+    pad : int
+        Nodes beyond the bounding box on each side (≥ 1).
+    nodes : int
+        Surface nodes to pick.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(4)
+    >>> ls = level_set(s.vertices, s.faces, spacing=0.2)
+    >>> nodes = np.stack(np.meshgrid(*ls.grid.axes(), indexing="ij"), axis=-1)
+    >>> bool(np.abs(ls.distance - (np.linalg.norm(nodes, axis=-1) - 1.0)).max() < 0.01)
+    True
+    """
+    import trimesh
+
+    if not 0 < spacing <= 0.5:
+        raise ValueError(f"spacing must be in (0, 0.5] of d_eq, got {spacing!r}")
+    if int(pad) < 1:
+        raise ValueError(f"pad must be ≥ 1, got {pad!r}")
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    from ..solid import signed_volume
+
+    d = (6 * signed_volume(v, f) / np.pi) ** (1 / 3)
+    grid = grid_for(v, spacing * d, pad=int(pad))
+    inside = inside_mask(v, f, grid)
+    ax = grid.axes()
+    pts = np.stack(np.meshgrid(*ax, indexing="ij"), axis=-1).reshape(-1, 3)
+    mesh = trimesh.Trimesh(v, f, process=False, validate=False)
+    _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
+    sdf = np.where(inside.reshape(-1), -dist, dist).reshape(grid.shape)
+    return LevelSet(grid, sdf, surface_nodes(v, f, nodes))

@@ -1,0 +1,317 @@
+"""Random-field grains (rf): an isotropic Gaussian field of the radius, from a 2D descriptor spectrum.
+
+Mollon & Zhao (2014) style; ALGORITHMS.md §5 and ``docs/methods/rf.md``.  The
+radius on the unit sphere is r(u) = r0 (1 + f(u)), with f a zero-mean,
+isotropic Gaussian random field synthesised with real spherical harmonics
+(:mod:`grainforge.harmonics`) at the vertices of a geodesic sphere:
+
+    f(u) = Σ_{l=2}^{L} Σ_{m=−l}^{l} a_lm Y_lm(u),   a_lm ~ N(0, C_l)
+
+(l = 1 is left out so that the origin stays near the centroid).  The angular
+power spectrum C_l is *derived* (not calibrated) from the requested 2D
+spectrum: a planar section through the centre of an isotropic field has, for
+every orientation, the statistics of the equator, whose circular Fourier
+coefficients are c_n = r0 Σ_{l≥n} a_ln √2 P̄_ln(0) (cosine and sine parts
+alike), so
+
+    E|c_n|² = r0² Σ_{l≥n} C_l P̄_ln(0)²      (P̄_ln(0) = 0 when l + n is odd).
+
+Each part of c_n is Gaussian, so |c_n| is Rayleigh distributed and
+E|c_n| = (√π/2)·(E|c_n|²)^½.  Requiring the *mean* section descriptor
+E[D_n] = E[2|c_n|/c_0] to equal the requested D_n gives the triangular system
+
+    Σ_{l≥n} C_l P̄_ln(0)² = D_n² / π,   n = 2…L,
+
+solved from n = L downwards (:func:`angular_spectrum`).  When a spectrum
+cannot be carried by any isotropic field (the exact solution would need a
+negative C_l — e.g. a large D8 over a zero D3…D7), the closest non-negative
+C_l in relative terms is used (NNLS) and the misfit is recorded
+(``spectrum_misfit``).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from functools import lru_cache
+from typing import Any, Sequence
+
+import numpy as np
+
+from ..contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
+from ..geodesic import icosphere
+from ..harmonics import degree_order, icosphere_synthesis, legendre_equator
+from ..params import ParameterError, param, validate
+from ..spectra import extend_spectrum, read_spectra
+
+__all__ = ["Params", "build", "rf", "angular_spectrum", "section_spectrum", "target_spectrum", "coefficients", "field"]
+
+NAME = "rf"
+VALIDITY_PARAMETER = "descriptors"
+#: default (D2, D3, D8) when neither descriptors, a preset nor a spectrum is given
+DEFAULT_PRESET = "rough-angular"
+#: smallest allowed radius, as a fraction of r0
+MIN_RADIUS = 0.05
+#: icosphere level on which the extents are measured for a requested aspect
+ASPECT_REFERENCE_SUBDIVISIONS = 5
+#: generation outputs recorded in manifests: the measured grain whose spectrum
+#: was used (``spectrum`` input), the RMS of f, the largest relative misfit of
+#: the expected mean section descriptors to the requested ones (0 when the
+#: triangular system has a non-negative solution), the axis scaling of a
+#: requested aspect, and the extreme radii / r0 before it.
+INFO_COLUMNS = ("spectrum_row", "spectrum_grain", "field_rms", "spectrum_misfit", "axis_scale", "min_radius",
+                "max_radius")
+
+
+@dataclass(frozen=True)
+class Params:
+    """Parameters of the random-field generator (Mollon & Zhao 2014 style)."""
+
+    preset: str | None = param(
+        None, "named descriptors: rough-sphere = 0,0,0.02; rough-angular = 0.15,0.10,0.03",
+        kind="str", choices=tuple(PRESETS),
+    )
+    descriptors: tuple[float, float, float] | None = param(
+        None, "mean D2,D3,D8 (elongation, irregularity, roughness) of central sections in any orientation",
+        kind="floats", low=0.0, high=0.3, shown_default=f"the {DEFAULT_PRESET} preset",
+    )
+    spectrum: str | None = param(
+        None, "a 'grainforge fourier' CSV: each grain takes the D2..D16 of one measured grain, drawn at random",
+        kind="str",
+    )
+    decay: tuple[float, float] = param(
+        DEFAULT_DECAY, "decay exponents B1,B2: D_n = D3 (n/3)^B1 for n=4..7, D8 (n/8)^B2 for n>8 "
+        "(with --spectrum, B2 continues the measured spectrum above D16)", kind="floats", low=-10.0, high=0.0,
+    )
+    degree: int = param(32, "highest spherical-harmonic degree L (and descriptor order) of the field",
+                        kind="int", low=8, high=64)
+    aspect: tuple[float, float, float] | None = param(
+        None, "stretch x:y:z so that the grain's extents are in the ratio L:I:S",
+        kind="floats", low=0.0, low_open=True, high=100.0, shown_default="isotropic",
+    )
+    subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
+
+    def __post_init__(self):
+        validate(self)
+        for name, n in (("descriptors", 3), ("decay", 2), ("aspect", 3)):
+            value = getattr(self, name)
+            if value is not None and len(value) != n:
+                raise ParameterError(name, f"must be {n} comma-separated numbers, got {value!r}")
+        if self.spectrum is not None:
+            for name in ("preset", "descriptors"):
+                if getattr(self, name) is not None:
+                    raise ParameterError(name, "cannot be combined with spectrum: give one of them")
+            read_spectra(self.spectrum)  # fail early on a missing or malformed table
+        elif self.preset is not None:
+            wanted = PRESETS[self.preset]
+            if self.descriptors is not None and not np.allclose(self.descriptors, wanted):
+                raise ParameterError(
+                    "preset", f"{self.preset} means descriptors {wanted}, which conflicts with {self.descriptors}"
+                )
+            object.__setattr__(self, "descriptors", wanted)
+        elif self.descriptors is None:
+            object.__setattr__(self, "descriptors", PRESETS[DEFAULT_PRESET])
+        if self.aspect is not None:
+            L, I, S = self.aspect
+            if not L >= I >= S:
+                raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
+
+
+# ------------------------------------------------------------------ spectra
+@lru_cache(maxsize=None)
+def _transfer(degree: int) -> np.ndarray:
+    """M[n, l] = P̄_ln(0)² for n, l = 0..L (upper triangular in (n, l))."""
+    P = legendre_equator(degree)
+    M = (P**2).T.copy()
+    M.setflags(write=False)
+    return M
+
+
+def section_spectrum(C: np.ndarray) -> np.ndarray:
+    """Expected mean descriptor E[D_n] of a central section of the field with spectrum C_l.
+
+    E[D_n] = √(π Σ_{l≥n} C_l P̄_ln(0)²) (to first order in f: c_0 ≈ r0).
+
+    Examples
+    --------
+    >>> C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=16))
+    >>> np.round(section_spectrum(C)[[2, 3, 8]], 6).tolist()
+    [0.15, 0.1, 0.03]
+    """
+    C = np.asarray(C, dtype=np.float64)
+    return np.sqrt(np.pi * (_transfer(len(C) - 1) @ C))
+
+
+def angular_spectrum(D: np.ndarray) -> np.ndarray:
+    """C_l (l = 0…L, L = len(D) − 1) whose central sections have mean descriptors D_n, n = 2…L.
+
+    Solves Σ_{l≥n} C_l P̄_ln(0)² = D_n²/π by back-substitution from n = L
+    downwards; C_0 = C_1 = 0.  Where the target D_n is smaller than what the
+    higher degrees already put into order n (no isotropic field can then
+    carry the spectrum: e.g. D2…D7 = 0 under D8 > 0), C_n is set to 0, so the
+    expected D_n is the smallest possible, above the target; all orders whose
+    targets can be met are met exactly.
+
+    Parameters
+    ----------
+    D : (L + 1,) float64
+        Target mean descriptors D_0…D_L (D_0, D_1 ignored).
+
+    Examples
+    --------
+    >>> C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=32))
+    >>> bool((C[2:] > 0).all()), C[:2].tolist()
+    (True, [0.0, 0.0])
+    >>> C = angular_spectrum(descriptor_spectrum(0.0, 0.0, 0.02, modes=32))  # rough-sphere
+    >>> np.round(section_spectrum(C)[[2, 3, 8, 9]], 4).tolist()
+    [0.0141, 0.0116, 0.02, 0.0164]
+    """
+    D = np.asarray(D, dtype=np.float64)
+    L = len(D) - 1
+    M = _transfer(L)
+    T = D**2 / np.pi
+    C = np.zeros(L + 1)
+    for n in range(L, 1, -1):
+        rest = float(M[n, n + 2 :: 2] @ C[n + 2 :: 2])
+        C[n] = max(0.0, (T[n] - rest) / M[n, n])
+    return C
+
+
+def target_spectrum(p: Params, rng: np.random.Generator) -> tuple[np.ndarray, int | None]:
+    """Target mean section descriptors D_0…D_L of one grain, and the measured row used (if any).
+
+    With ``spectrum`` the row is drawn from ``rng`` first (one integer draw).
+    """
+    if p.spectrum is not None:
+        table = read_spectra(p.spectrum)
+        row = table.draw(rng)
+        return extend_spectrum(table.D[row], p.decay[1], p.degree), row
+    try:
+        return descriptor_spectrum(*p.descriptors, decay=p.decay, modes=p.degree), None
+    except ParameterError as exc:  # pragma: no cover - ranges are validated by Params
+        raise ParameterError("descriptors", exc.reason) from None
+
+
+def coefficients(C: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+    """a_lm = √C_l · N(0, 1), drawn in the order (l, m), l = 2…L, m = −l…l."""
+    C = np.asarray(C, dtype=np.float64)
+    l, _ = degree_order(len(C) - 1, 2)
+    return rng.standard_normal(len(l)) * np.sqrt(C[l])
+
+
+def field(a: np.ndarray, degree: int, subdivisions: int) -> np.ndarray:
+    """f = Σ a_lm Y_lm (l = 2…degree) at the vertices of ``icosphere(subdivisions)``."""
+    return icosphere_synthesis(subdivisions, degree, 2)(a)
+
+
+def _misfit(C: np.ndarray, D: np.ndarray) -> float:
+    want = D[2:]
+    got = section_spectrum(C)[2:]
+    ok = want > 1e-9
+    return float(np.max(np.abs(got[ok] / want[ok] - 1.0))) if ok.any() else 0.0
+
+
+def build(p: Params, rng: np.random.Generator):
+    """Vertices, faces and info of one rf grain (r0 = 1, not yet centred)."""
+    D, row = target_spectrum(p, rng)
+    C = angular_spectrum(D)
+    unit, faces = icosphere(p.subdivisions)
+    a = coefficients(C, rng)
+    f = field(a, p.degree, p.subdivisions)
+    R = 1.0 + f
+    rmin = float(R.min())
+    if not rmin > MIN_RADIUS:
+        if row is not None:
+            table = read_spectra(p.spectrum)
+            raise ParameterError(
+                "spectrum", f"row {row + 2} ({table.labels[row]}) gives a radius of {rmin:.3f}·r0 for this seed "
+                f"(must stay above {MIN_RADIUS}·r0 for a star-shaped solid); remove that grain or lower --degree",
+            )
+        raise ParameterError(
+            "descriptors", f"{p.descriptors} are too large for this grain: the smallest radius would be "
+            f"{rmin:.3f}·r0 (must stay above {MIN_RADIUS}·r0 for a star-shaped solid); lower them",
+        )
+    vertices = unit * R[:, None]
+    scale = (1.0, 1.0, 1.0)
+    if p.aspect is not None:
+        if p.subdivisions == ASPECT_REFERENCE_SUBDIVISIONS:
+            ref = vertices
+        else:
+            # the same field on the reference sphere, so the stretch does not depend on the mesh level
+            ref_unit, _ = icosphere(ASPECT_REFERENCE_SUBDIVISIONS)
+            ref = ref_unit * (1.0 + field(a, p.degree, ASPECT_REFERENCE_SUBDIVISIONS))[:, None]
+        ext = np.ptp(ref, axis=0)
+        k = np.asarray(p.aspect, dtype=np.float64) / ext
+        k /= np.exp(np.log(k).mean())
+        scale = tuple(float(x) for x in k)
+        vertices = vertices * k
+    info = {
+        "spectrum_row": row,
+        "spectrum_grain": None if row is None else read_spectra(p.spectrum).labels[row],
+        "field_rms": float(np.sqrt(np.sum(C * (2 * np.arange(len(C)) + 1)) / (4 * np.pi))),
+        "spectrum_misfit": _misfit(C, D),
+        "axis_scale": scale,
+        "min_radius": rmin,
+        "max_radius": float(R.max()),
+    }
+    return vertices, np.array(faces), info
+
+
+def rf(
+    *,
+    descriptors: Sequence[float] | None = None,
+    preset: str | None = None,
+    spectrum: str | None = None,
+    decay: Sequence[float] = DEFAULT_DECAY,
+    degree: int = 32,
+    aspect: Sequence[float] | None = None,
+    subdivisions: int = 5,
+    rng: Any = None,
+):
+    """Generate one grain whose radius is an isotropic Gaussian random field (Mollon & Zhao 2014 style).
+
+    Parameters
+    ----------
+    descriptors : (D2, D3, D8), optional
+        Mean descriptors of central sections in any orientation (default the
+        ``rough-angular`` preset 0.15, 0.10, 0.03); D4…D7 and D9…D_L follow
+        the CRI regression with ``decay``.
+    preset : {"rough-sphere", "rough-angular"}, optional
+    spectrum : str, optional
+        A CSV written by ``grainforge fourier``: the grain takes the D2…D16
+        of one measured grain, drawn from ``rng``.
+    decay : (β1, β2)
+        Regression exponents (default −5/3, −5/3).
+    degree : int
+        Highest harmonic degree L, 8–64 (default 32).
+    aspect : (L, I, S), optional
+        Stretch x, y, z so that the extents are in this ratio.
+    subdivisions : int
+        Icosphere level 0–8 (default 5: 10,242 vertices).
+    rng : None, int or numpy.random.Generator
+
+    Returns
+    -------
+    Grain
+        Centred on its volume centroid, mean radius about 1.
+
+    Raises
+    ------
+    ValueError
+        For an out-of-range or conflicting parameter (named), an unreadable
+        spectrum table, or a field whose radius reaches 5 % of r0.
+
+    Examples
+    --------
+    >>> import grainforge
+    >>> g = grainforge.rf(descriptors=(0.1, 0.05, 0.02), subdivisions=3, rng=0)
+    >>> len(g.vertices), bool(g.mesh.is_watertight)
+    (642, True)
+    """
+    from . import generate
+
+    p = Params(
+        preset=preset, descriptors=None if descriptors is None else tuple(descriptors), spectrum=spectrum,
+        decay=tuple(decay), degree=degree, aspect=None if aspect is None else tuple(aspect),
+        subdivisions=subdivisions,
+    )
+    return generate(NAME, p, rng)
