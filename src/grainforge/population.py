@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import math
 import os
@@ -592,10 +593,13 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process
                                 "trimesh", "scipy.special"])
     ok = False
     try:
+        it = iter(todo)
+        ahead = 4 * workers  # futures in flight: memory does not grow with the count
         with single_threaded_children():  # workers (and the fork server) start during submit
-            pending = {ex.submit(make_grain, recipe, i) for i in todo}
+            pending = {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, ahead)}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            pending |= {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, len(done))}
             for f in sorted(done, key=lambda f: f.exception() is None):
                 yield f.result()
         ok = True
