@@ -197,15 +197,19 @@ class Calibration:
 
     def plot(self, path: str | os.PathLike) -> Path:
         """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."""
+        from .io import save_figure
+
+        return save_figure(self.figure(), path)
+
+    def figure(self):
+        """The Figure of :meth:`plot`; the legend sits below the axes, clear of every curve."""
         import matplotlib
 
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
 
-        from .io import save_figure
-
         e = np.asarray(self.exponent)
-        fig, ax = plt.subplots(figsize=(6.0, 4.0), dpi=110)
+        fig, ax = plt.subplots(figsize=(6.0, 4.8), dpi=110)
         ax.fill_between(e, self.D_A_mean - self.D_A_std, self.D_A_mean + self.D_A_std, color="C0", alpha=0.25,
                         label="D_A ± 1 s.d.")
         ax.plot(e, self.D_A_mean, "o-", color="C0", ms=3, label="mean D_A (Eq. 5)")
@@ -218,15 +222,17 @@ class Calibration:
         if e.max() / e.min() > 20:
             ax.set_xscale("log")
         ax2 = ax.twinx()
-        ax2.plot(e, self.porosity_mean, "s--", color="C3", ms=3, label="porosity")
+        ax2.plot(e, self.porosity_mean, "s--", color="C3", ms=3, label="mean porosity (right axis)")
         ax2.set_ylabel("porosity 1 − V/V_hull", color="C3")
         lines = ax.get_legend_handles_labels()
         lines2 = ax2.get_legend_handles_labels()
-        ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8, loc="best")
+        # below the axes: inside, "best" only avoids the left-axis curves and covered the porosity
+        ax.legend(lines[0] + lines2[0], lines[1] + lines2[1], fontsize=8, loc="upper center",
+                  bbox_to_anchor=(0.5, -0.17), ncol=2, frameon=False)
         ax.set_title(f"DPA calibration: {self.primitive}, N = {self.primaries}, {self.repeats} seeds per ε",
                      fontsize=9)
         fig.tight_layout()
-        return save_figure(fig, path)
+        return fig
 
 
 def _measure(task) -> tuple[float, float, float, float]:

@@ -376,14 +376,20 @@ def _existing_outputs(out: Path) -> list[Path]:
 
 
 def _preview(path: Path, footprints: list[np.ndarray], layer_of: list[int], volume, title: str) -> None:
+    from ..io import save_figure
+
+    save_figure(preview_figure(footprints, layer_of, volume, title), path)
+
+
+def preview_figure(footprints: list[np.ndarray], layer_of: list[int], volume, title: str):
+    """The plate preview: grain footprints (mm) on the build plate, coloured by layer (with a colour bar
+    when there are several layers)."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
     from matplotlib.patches import Rectangle
-
-    from ..io import save_figure
 
     W, D, _ = volume
     fig, ax = plt.subplots(figsize=(6, 6 * D / W + 0.4), dpi=120)
@@ -398,7 +404,31 @@ def _preview(path: Path, footprints: list[np.ndarray], layer_of: list[int], volu
     ax.set_xlabel("x (mm)")
     ax.set_ylabel("y (mm)")
     ax.set_title(title, fontsize=9)
-    save_figure(fig, path)
+    if footprints:
+        pts = np.concatenate([np.asarray(fp, dtype=np.float64) for fp in footprints])
+        lo, hi = pts.min(0), pts.max(0)
+        if np.prod(hi - lo) < 0.1 * W * D:  # grains fill a small corner: zoom on them (inset, same mm)
+            pad = 0.04 * float(max(hi - lo))
+            ins = ax.inset_axes([0.42, 0.36, 0.55, 0.55])
+            ins.add_collection(PolyCollection(footprints, facecolors=colors, edgecolors="none"))
+            span = float(max(hi - lo)) + 2 * pad
+            ins.set_xlim(lo[0] - pad, lo[0] - pad + span)
+            ins.set_ylim(lo[1] - pad, lo[1] - pad + span)
+            ins.set_aspect("equal")
+            ins.tick_params(labelsize=6)
+            ins.set_xlabel("x (mm)", fontsize=7)
+            ins.set_ylabel("y (mm)", fontsize=7)
+            ins.set_title("enlarged", fontsize=7)
+            ax.indicate_inset_zoom(ins, edgecolor="0.4")
+    if top:
+        from matplotlib.cm import ScalarMappable
+        from matplotlib.colors import BoundaryNorm, ListedColormap
+
+        levels = [cmap(0.15 + 0.7 * k / top) for k in range(top + 1)]
+        sm = ScalarMappable(norm=BoundaryNorm(np.arange(top + 2) + 0.5, top + 1), cmap=ListedColormap(levels))
+        bar = fig.colorbar(sm, ax=ax, fraction=0.04, pad=0.02, ticks=np.arange(1, top + 2))
+        bar.set_label("layer (1 = on the plate)")
+    return fig
 
 
 def _tasks(source, fmt: str, stacking: bool) -> list[dict]:
