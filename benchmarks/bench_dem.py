@@ -1,7 +1,7 @@
 """DEM export benchmarks (issue 15).
 
     .venv/bin/python benchmarks/bench_dem.py clumps [--clump-python /tmp/clumpbench/bin/python]
-    .venv/bin/python benchmarks/bench_dem.py deck --count 10000 [--workers 2]
+    .venv/bin/python benchmarks/bench_dem.py deck --count 10000 [--workers 2]   (several counts: --count 100 300)
 
 ``clumps``: our clump (grainforge.dem.clump) and clump-python's Euclidean
 distance-transform method (GenerateClump_Euclidean_3D, div=102, overlap=0.6 as
@@ -19,7 +19,7 @@ the clump call alone (ours includes voxelising; clump_quality is not timed).
 ``deck``: a batch-like folder of COUNT grain files (FSO/CRI/DPA cycled,
 written by grainforge.io) -> ``grainforge dem --engine liggghts`` (per-grain
 multisphere templates, 30 spheres). Prints wall and CPU time (parent +
-children) and peak RSS of the parent and of the largest worker.
+workers, polled every 0.2 s) and the peak RSS of the whole process tree.
 """
 
 from __future__ import annotations
@@ -27,7 +27,6 @@ from __future__ import annotations
 import argparse
 import json
 import os
-import resource
 import subprocess
 import sys
 import tempfile
@@ -110,29 +109,52 @@ def _write_folder(folder: Path, count: int):
         write_mesh(g, folder / f"{g.method}-{i:05d}.stl")
 
 
+def _run_tree(cmd):
+    """Run ``cmd``; poll its process tree: (wall s, CPU s summed over every process, peak tree RSS MiB)."""
+    import psutil
+
+    w0 = time.perf_counter()
+    proc = subprocess.Popen(cmd, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    root = psutil.Process(proc.pid)
+    cpu, peak = {}, 0
+    while proc.poll() is None:
+        try:
+            procs = [root] + root.children(recursive=True)
+            rss = 0
+            for p in procs:
+                try:
+                    t = p.cpu_times()
+                    cpu[p.pid] = t.user + t.system
+                    rss += p.memory_info().rss
+                except psutil.Error:
+                    pass
+            peak = max(peak, rss)
+        except psutil.Error:
+            pass
+        time.sleep(0.2)
+    out, err = proc.communicate()
+    wall = time.perf_counter() - w0
+    if proc.returncode != 0:
+        print(err)
+        raise SystemExit(1)
+    return wall, sum(cpu.values()), peak / 2**20
+
+
 def bench_deck(args):
     tmp = Path(tempfile.mkdtemp(prefix="bench-dem-deck-"))
-    folder = tmp / "grains"
-    folder.mkdir()
-    t0 = time.perf_counter()
-    _write_folder(folder, args.count)
-    print(f"wrote {args.count} grain files in {time.perf_counter() - t0:.1f} s; load average {os.getloadavg()}")
     exe = Path(sys.executable).parent / "grainforge"
-    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    w0 = time.perf_counter()
-    proc = subprocess.run([str(exe), "dem", str(folder), "--out", str(tmp / "deck"), "--engine", "liggghts",
-                           "--workers", str(args.workers)], capture_output=True, text=True)
-    wall = time.perf_counter() - w0
-    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-    if proc.returncode != 0:
-        print(proc.stderr)
-        raise SystemExit(1)
-    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
-    files = len(list((tmp / "deck").iterdir()))
-    print(f"| {args.count} | {args.workers} | {wall:.1f} | {cpu:.1f} | {wall / args.count * 1000:.1f} | "
-          f"{r1.ru_maxrss / 1024:.0f} | {files} |")
-    print(f"(columns: grains | workers | wall s | CPU s, all processes | wall ms/grain | peak RSS of the largest "
-          f"process MiB | files); deck in {tmp / 'deck'}; load average {os.getloadavg()}")
+    print("| grains | workers | wall s | CPU s (all processes) | CPU ms/grain | peak RSS of the process tree MiB | files |")
+    print("|---:|---:|---:|---:|---:|---:|---:|")
+    for count in args.count:
+        folder = tmp / f"grains{count}"
+        folder.mkdir()
+        _write_folder(folder, count)
+        load = os.getloadavg()
+        wall, cpu, rss = _run_tree([str(exe), "dem", str(folder), "--out", str(tmp / f"deck{count}"),
+                                    "--engine", "liggghts", "--workers", str(args.workers)])
+        files = len(list((tmp / f"deck{count}").iterdir()))
+        print(f"| {count} | {args.workers} | {wall:.1f} | {cpu:.1f} | {1000 * cpu / count:.0f} | {rss:.0f} | {files} |"
+              f"  (load average before/after {load[0]:.1f}/{os.getloadavg()[0]:.1f})", flush=True)
 
 
 def main():
@@ -141,7 +163,7 @@ def main():
     a = sub.add_parser("clumps")
     a.add_argument("--clump-python", default="/tmp/clumpbench/bin/python")
     b = sub.add_parser("deck")
-    b.add_argument("--count", type=int, default=10000)
+    b.add_argument("--count", type=int, nargs="+", default=[10000])
     b.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
     if args.what == "clumps":

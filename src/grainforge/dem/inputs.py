@@ -80,11 +80,11 @@ def read_grain(path: str | Path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def load_template(path: str | Path, name: str, kwargs: dict):
-    """Read ``path`` and :func:`~grainforge.dem.template.prepare` it as ``name``."""
+    """Read ``path`` and :func:`~grainforge.dem.template.prepare` it as ``name`` (mesh dropped)."""
     from .template import prepare
 
     v, f = read_grain(path)
-    return prepare(v, f, name, source=str(path), **kwargs)
+    return prepare(v, f, name, source=str(path), **kwargs).without_mesh()
 
 
 def _unique_names(paths: Sequence[Path]) -> list[str]:
