@@ -23,6 +23,9 @@ __all__ = ["GrainTemplate", "prepare", "SHAPES"]
 #: representations a template can carry
 SHAPES = ("clump", "polyhedron", "levelset")
 
+#: cells per d_eq of the grid on which a deck's clump coverage and spill are measured
+CLUMP_MEASURE_RESOLUTION = 60
+
 
 @dataclass(frozen=True)
 class GrainTemplate:
@@ -162,7 +165,7 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     if shape == "clump":
         from .clump import clump
 
-        kw["clump"] = clump(v, f, spheres=spheres, rng=rng)
+        kw["clump"] = clump(v, f, spheres=spheres, rng=rng, measure_resolution=CLUMP_MEASURE_RESOLUTION)
     elif shape == "polyhedron":
         from .polyhedron import convex_polyhedron
 
