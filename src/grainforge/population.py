@@ -14,6 +14,8 @@ root seed and the output format::
     fractal_dimension = { distribution = "uniform", low = 2.2, high = 2.6 }
     length_ratio = 7.0
     subdivisions = 4
+    # a ratio L:I:S = 1 : e : e·f drawn per grain from Zingg ratios e = I/L, f = S/I
+    aspect = { distribution = "zingg", elongation = { distribution = "truncnormal", mean = 0.75, sd = 0.1, low = 0.4, high = 1.0 }, flatness = 0.8 }
 
     [size]
     definition = "sieve"            # equivalent | sieve | longest
@@ -32,12 +34,14 @@ Grain ``i`` owns the stream ``default_rng(SeedSequence(root, spawn_key=(i,)))``
 the root seed and ``i`` alone.  From it, in this order: the grain's own 63-bit
 seed (recorded in the manifest; ``grainforge.generate(method, params, seed)``
 regenerates the grain), then one draw for each distributed parameter in the
-order of the method's ``Params`` fields, then the size.  So outputs do not
+order of the method's ``Params`` fields (two for a ``zingg`` ratio:
+elongation, then flatness), then the size.  So outputs do not
 depend on the number of workers or on the executor.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import hashlib
 import json
 import math
@@ -73,13 +77,14 @@ __all__ = [
 
 #: hidden folder inside the output folder: recipe copy and one sidecar per finished grain.
 JOURNAL = ".grainforge-batch"
-DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice")
+DISTRIBUTIONS = ("uniform", "normal", "truncnormal", "lognormal", "choice", "zingg")
 _DIST_KEYS = {
     "uniform": ("low", "high"),
     "normal": ("mean", "sd"),
     "truncnormal": ("mean", "sd", "low", "high"),
     "lognormal": ("median", "sigma"),
     "choice": ("values",),
+    "zingg": ("elongation", "flatness"),
 }
 #: how long ``--scheduler`` waits for the scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
@@ -271,6 +276,8 @@ def _number(v) -> bool:
 
 
 def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
+    if spec.kind == "floats" and isinstance(value, list) and any(isinstance(x, dict) for x in value):
+        return _each(spec, value, path, fail)
     if not isinstance(value, dict):
         try:
             return spec.check(value)
@@ -288,9 +295,11 @@ def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
             fail(path + [k], f"is required for a {kind} distribution")
     if kind == "choice":
         return _choice(spec, value, path, fail)
+    if kind == "zingg":
+        return _zingg(spec, value, path, fail)
     if spec.kind in ("str", "floats") or (spec.kind == "int" and kind != "uniform"):
         fail(path + ["distribution"], f"{spec.name} is {spec.kind}-valued: use a fixed value or choice"
-             + (" or uniform" if spec.kind == "int" else ""))
+             + (" or uniform" if spec.kind == "int" else "") + (" or zingg" if spec.kind == "floats" else ""))
     args = {}
     for k in _DIST_KEYS[kind]:
         v = value[k]
@@ -324,6 +333,48 @@ def _param_value(spec: ParamSpec, value: Any, path: list[str], fail) -> Any:
     if kind == "lognormal" and spec.low is not None and spec.low > 0:
         fail(path + ["distribution"], f"lognormal reaches 0 but {spec.name} must be in {spec.range_text()}")
     return dist
+
+
+#: the support of a Zingg ratio (elongation I/L, flatness S/I)
+_RATIO = {"low": 0.0, "high": 1.0, "low_open": True, "kind": "float", "default": None, "help": "Zingg ratio"}
+
+
+def _zingg(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:
+    """``{ distribution = "zingg", elongation = ..., flatness = ... }`` for a three-number ratio L:I:S.
+
+    Each ratio is a number in (0, 1] or a (non-choice) distribution whose
+    support lies in (0, 1]; the extreme ratios 1 : e : e·f are checked
+    against ``spec``'s range before anything is generated.
+    """
+    if spec.kind != "floats":
+        fail(path + ["distribution"], f"zingg gives a ratio L:I:S; {spec.name} is {spec.kind}-valued")
+    parts = {}
+    for key in ("elongation", "flatness"):
+        v = value[key]
+        if isinstance(v, dict) and v.get("distribution") in ("choice", "zingg"):
+            fail(path + [key, "distribution"], f"must be one of uniform, normal, truncnormal, lognormal, got "
+                 f"{v.get('distribution')!r}")
+        parts[key] = _param_value(ParamSpec(name=key, **_RATIO), v, path + [key], fail)
+    bounds = {k: (v.support() if isinstance(v, Distribution) else (v, v)) for k, v in parts.items()}
+    (e_lo, e_hi), (f_lo, f_hi) = bounds["elongation"], bounds["flatness"]
+    for e, f in ((e_lo, f_lo), (e_hi, f_hi), (e_lo, f_hi), (e_hi, f_lo)):
+        try:
+            spec.check((1.0, e, e * f))
+        except ParameterError as exc:
+            fail(path, f"the ratio 1:{e:g}:{e * f:g} reachable from these distributions is invalid: {exc.reason}")
+    return Distribution("zingg", parts)
+
+
+def _each(spec: ParamSpec, value: list, path: list[str], fail) -> Distribution:
+    """A list of numbers drawn element by element: each a number or a scalar distribution in ``spec``'s range."""
+    items = []
+    for i, v in enumerate(value):
+        if isinstance(v, dict) and v.get("distribution") in ("choice", "zingg"):
+            fail(path + [str(i), "distribution"], "an element must be one of uniform, normal, truncnormal, lognormal, "
+                 f"got {v.get('distribution')!r}")
+        element = dataclasses.replace(spec, name=f"{spec.name}[{i}]", kind="float", default=None)
+        items.append(_param_value(element, v, path + [str(i)], fail))
+    return Distribution("each", {"items": tuple(items)})
 
 
 def _choice(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribution:

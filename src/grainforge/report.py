@@ -60,6 +60,16 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             labels = [_label(x) for x in vals]
             counts = {_label(c): labels.count(_label(c)) for c in v.args["values"]}
             out["parameters"][name] = {"distribution": "choice", "counts": counts}
+        elif isinstance(v, Distribution) and v.kind == "zingg":
+            ratios = zingg_ratios(vals)
+            out["parameters"][name] = {"distribution": "zingg", **{
+                k: ({"distribution": d.kind, **dict(d.args), "achieved": _stats(ratios[k])}
+                    if isinstance(d, Distribution) else {"fixed": d})
+                for k, d in v.args.items()}}
+        elif isinstance(v, Distribution) and v.kind == "each":
+            out["parameters"][name] = {"distribution": "each", "items": [
+                {"distribution": d.kind, **dict(d.args), "achieved": _stats([x[i] for x in vals])}
+                if isinstance(d, Distribution) else {"fixed": d} for i, d in enumerate(v.args["items"])]}
         elif isinstance(v, Distribution):
             out["parameters"][name] = {"distribution": v.kind, **dict(v.args), "achieved": _stats(vals)}
         else:
@@ -78,6 +88,18 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             "max_abs_deviation_percent": float(np.max(np.abs(achieved - np.array(g.percent_passing)))),
         }
     return out
+
+
+def zingg_ratios(values) -> dict[str, np.ndarray]:
+    """Elongation I/L and flatness S/I of ratios L:I:S (rows' ``aspect`` values).
+
+    Examples
+    --------
+    >>> {k: v.tolist() for k, v in zingg_ratios([(1.0, 0.5, 0.25)]).items()}
+    {'elongation': [0.5], 'flatness': [0.5]}
+    """
+    a = np.array([[float(x) for x in v] for v in values], dtype=np.float64).reshape(-1, 3)
+    return {"elongation": a[:, 1] / a[:, 0], "flatness": a[:, 2] / a[:, 1]}
 
 
 def _label(v: Any) -> str:
@@ -143,7 +165,19 @@ def population_figure(recipe, rows, info: Mapping[str, Any]):
             ax.set_title("size")
         else:
             vals = [r[name] for r in rows]
-            if name in recipe.params and recipe.params[name].kind == "choice":
+            if name in recipe.params and recipe.params[name].kind == "zingg":
+                ratios = zingg_ratios(vals)
+                bins = np.linspace(0.0, 1.0, 41)
+                ax.hist(ratios["elongation"], bins=bins, color=colour, alpha=0.7, label="elongation I/L")
+                ax.hist(ratios["flatness"], bins=bins, color="tab:blue", alpha=0.5, label="flatness S/I")
+                ax.legend(fontsize=7)
+            elif name in recipe.params and recipe.params[name].kind == "each":
+                items = recipe.params[name].args["items"]
+                for i, d in enumerate(items):
+                    if isinstance(d, Distribution):
+                        ax.hist([x[i] for x in vals], bins=30, alpha=0.6, label=f"{name}[{i}]")
+                ax.legend(fontsize=7)
+            elif name in recipe.params and recipe.params[name].kind == "choice":
                 labels = [_label(x) for x in vals]
                 keys = [_label(c) for c in recipe.params[name].args["values"]]
                 ax.bar(range(len(keys)), [labels.count(k) for k in keys], color=colour)
