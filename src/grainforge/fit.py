@@ -511,13 +511,13 @@ def fit_sand(
             new[f"{k}_sd"] = float(np.clip(asp[f"{k}_sd"] * np.clip(ratio, 0.5, 2.0), 0.005, 0.5))
         return new
 
-    def knob_step(xv, J, gen):
+    def knob_step(xv, J, gen, trust):
         y = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
         # damped least squares in step units (columns scaled by each knob's step)
         Js = J * steps[None, :]
         lam = 1e-3 * np.trace(Js.T @ Js) / len(steps) + 1e-12
         dz = np.linalg.solve(Js.T @ Js + lam * np.eye(len(steps)), Js.T @ (y_star - y))
-        dz = np.clip(dz, -3.0, 3.0)  # at most three steps per knob per round
+        dz = np.clip(dz, -trust, trust)  # at most `trust` steps per knob per round
         return np.clip(xv + dz * steps, lo_b, hi_b)
 
     with _Pool(max(1, int(workers))) as pool:
@@ -533,17 +533,25 @@ def fit_sand(
             gi, _ = evaluate(xi, aspect, nj, f"jacobian {i + 1}/{len(spec.knobs)} ({k.name})")
             J[:, i] = (np.array([_stat(gi[:, 1:], t) for t in spec.targets]) - y0) / (xi[i] - x[i])
         y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
+        trust = 2.0  # trust region, in knob steps: halved after a round that makes things worse
+        best_gen, best_st = gen, st
         for r in range(1, rounds + 1):
-            x_new = knob_step(x, J, gen)
-            aspect = aspect_step(aspect, st)
-            gen, st = evaluate(x_new, aspect, pilot, f"pilot {r}")
-            y = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
+            x_new = knob_step(x, J, gen, trust)
+            aspect_new = aspect_step(aspect, st)
+            gen_new, st_new = evaluate(x_new, aspect_new, pilot, f"pilot {r}")
+            y = np.array([_stat(gen_new[:, 1:], t) for t in spec.targets])
             dx = x_new - x
             if np.any(dx):  # Broyden update (aspect changes count as noise)
                 J += np.outer((y - y_prev) - J @ dx, dx) / float(dx @ dx)
-            x, y_prev = x_new, y
-            if st["score"] < best[0]:
-                best = (st["score"], x.copy(), dict(aspect))
+            if st_new["score"] < best[0]:
+                best = (st_new["score"], x_new.copy(), dict(aspect_new))
+                best_gen, best_st = gen_new, st_new
+                trust = min(1.5 * trust, 3.0)
+            else:  # worse: go back to the best settings with a smaller step
+                trust *= 0.5
+            x, aspect = best[1].copy(), dict(best[2])
+            gen, st = best_gen, best_st
+            y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
             if st["score"] <= 0.7:
                 break
         _, x, aspect = best
@@ -555,7 +563,7 @@ def fit_sand(
             if st["pass"]:
                 break
             # corrections from the final population itself (its own seeds: no sampling noise between rounds)
-            x = knob_step(x, J, gen)
+            x = knob_step(x, J, gen, 1.0)
             aspect = aspect_step(aspect, st)
     gen, st, x, aspect = final
     header = (f"grainforge fit: {method} grains matched to {sand.name} ({sand.count} grains, voxel "
