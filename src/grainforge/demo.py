@@ -10,7 +10,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "print_tray", "rf_gallery",
+__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
            "sample_micrograph", "write_fourier_csv"]
 
 
@@ -219,6 +219,39 @@ def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     return written
 
 
+#: the angular gallery: columns from sharp to rounded, rows from smooth to rough
+ANGULAR_ROUNDING = (0.0, 0.1, 0.25, 0.5, 0.8)
+ANGULAR_ROUGHNESS = (0.0, 0.01, 0.03)
+
+
+def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
+    """Angular (crushed-rock) grains: sharp to rounded (columns) and smooth to rough (rows), one seed.
+
+    A last row shows dented grains (lower convexity), also sharp to rounded.
+    """
+    from .io import read_mesh
+    from .methods.angular import Params
+    from .render import contact_sheet
+    from .run import write_run
+
+    s = 4 if quick else 5
+    folder = out / "angular"
+    meshes, labels = [], []
+    rows = [(f"roughness {q:g}", dict(roughness=q)) for q in ANGULAR_ROUGHNESS]
+    rows.append(("6 dents, roughness 0.01", dict(roughness=0.01, dents=6, dent_depth=0.35)))
+    for name, extra in rows:
+        for rounding in ANGULAR_ROUNDING:
+            params = Params(facets=18, aspect=(1.6, 1.25, 1.0), rounding=rounding, subdivisions=s, **extra)
+            sub = folder / f"{name.replace(' ', '-').replace(',', '')}-rounding={rounding:g}"
+            written = write_run("angular", params, [3], sub, overwrite=True)
+            meshes.append(read_mesh(sub / written[0]["file"]))
+            labels.append(f"rounding {rounding:g}, {name}")
+    sheet = contact_sheet(meshes, labels, out / "angular-gallery.png", columns=len(ANGULAR_ROUNDING),
+                          title="Angular grains (18 facets, aspect 1.6:1.25:1, seed 3): sharp to rounded "
+                                "(left to right), smooth to rough (top to bottom), dented (last row)")
+    return [folder, sheet]
+
+
 POPULATION_RECIPE = """\
 # demo: a rough-angular CRI sand graded like ASTM C778 graded sand (by mass, sieve sizes)
 method = "cri"
@@ -341,6 +374,7 @@ SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("FSO sweeps (Figs. 1-2)", fso_sweeps),
     ("CRI contours and grains (Figs. 3-4)", cri_gallery),
     ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
+    ("Angular grains: sharp to rounded, smooth to rough", angular_gallery),
     ("Population: CRI sand graded like ASTM C778", population_demo),
     ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
     ("Print tray: 2 mm rough-angular CRI grains on the paper's PolyJet, checked", print_tray),
