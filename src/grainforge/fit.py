@@ -305,8 +305,11 @@ def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, .
 
     It is voxelised at ``voxel_size_um`` relative to its drawn equivalent
     diameter, in a random orientation drawn from its own seed.  Returns
-    (d_eq µm, sphericity, convexity, flatness, elongation).
+    (d_eq µm, sphericity, convexity, flatness, elongation, CPU seconds spent).
     """
+    import time
+
+    cpu = time.process_time()
     from .analysis.atlas import atlas_descriptors
     from .methods import generate
     from .population import draw_grain
@@ -316,7 +319,8 @@ def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, .
     grain = generate(recipe.method, params, seed)
     across = size_mm * 1000.0 / voxel_size_um
     d = atlas_descriptors(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]))
-    return (d["equivalent_diameter"] / d["voxel_size"] * voxel_size_um, *(d[k] for k in DESCRIPTORS))
+    return (d["equivalent_diameter"] / d["voxel_size"] * voxel_size_um, *(d[k] for k in DESCRIPTORS),
+            time.process_time() - cpu)
 
 
 class _Pool:
@@ -326,6 +330,8 @@ class _Pool:
         self.workers = workers
         self.ex = None
         self.cache: dict[tuple[str, int], tuple[float, ...]] = {}  # (recipe text, index) -> measurement
+        self.cpu = 0.0  # CPU seconds the workers spent generating and measuring
+        self.grains = 0
 
     def __enter__(self):
         if self.workers > 1:
@@ -356,7 +362,9 @@ class _Pool:
         if progress is not None and todo:
             it = progress(it, len(todo))
         for i, row in it:
-            self.cache[(text, i)] = row
+            self.cache[(text, i)] = row[:5]
+            self.cpu += row[5]
+            self.grains += 1
         for i in range(count):
             out[i] = self.cache[(text, i)]
         return out
@@ -408,7 +416,9 @@ class FitResult:
     knobs: dict[str, float]
     aspect: dict[str, float]
     history: list[dict] = field(default_factory=list)
-    seconds: float = 0.0
+    seconds: float = 0.0  # wall clock
+    cpu_seconds: float = 0.0  # generating and measuring, summed over the workers
+    grains_measured: int = 0
 
 
 def _aspect_table(a: Mapping[str, float], low: float) -> dict:
@@ -556,6 +566,7 @@ def fit_sand(
                 break
         _, x, aspect = best
         final = None
+        cost = pool
         for attempt in range(final_rounds):
             gen, st = evaluate(x, aspect, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
             if final is None or st["score"] < final[1]["score"]:
@@ -577,7 +588,8 @@ def fit_sand(
     text = recipe_text(method, params, sand, count=count, seed=seed, header=header)
     return FitResult(method=method, recipe=text, stats=st, generated=gen,
                      knobs=dict(zip([k.name for k in spec.knobs], map(float, x))), aspect=aspect,
-                     history=history, seconds=time.perf_counter() - t0)
+                     history=history, seconds=time.perf_counter() - t0, cpu_seconds=cost.cpu,
+                     grains_measured=cost.grains)
 
 
 # --------------------------------------------------------------------------- outputs
