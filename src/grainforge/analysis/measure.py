@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import signed_volume, split_bodies
+from ..solid import signed_volume, solid_problems, split_bodies
 
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
@@ -69,7 +69,9 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[
 
     Flags (space separated): ``open`` (not closed or not consistently
     oriented: volume-based values are approximate), ``inverted`` (closed
-    but inside out; measured after flipping).
+    but inside out; measured after flipping), ``not-solid`` (closed but
+    failing the solid contract of :func:`grainforge.solid.solid_problems`,
+    the same definition ``grainforge check`` uses).
 
     Returns
     -------
@@ -86,6 +88,8 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[
     elif signed_volume(v, f) < 0:
         f = f[:, ::-1]
         flags.append("inverted")
+    if "open" not in flags and solid_problems(v, f):
+        flags.append("not-solid")  # fails the solid contract as written (grainforge check says why)
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
     row.update(describe(SimpleNamespace(vertices=v, faces=f), **options))  # describe() reads .vertices and .faces
     if atlas is not None:

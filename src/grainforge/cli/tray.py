@@ -62,9 +62,9 @@ def parse_param_values(method: str, pairs, preset: str | None):
               help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
 @count_option("Number of generated grains; grain i uses seed S + i.")
 @seed_option
-@click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
+@click.option("--size", default=None, type=click.FloatRange(min=1e-3, max=1e4),
               show_default="10 for generated grains; files keep their size",
-              help="Grain size in mm (see --size-definition).")
+              help="Grain size in mm, 0.001 (1 µm) to 10000 (10 m) (see --size-definition).")
 @size_definition_option
 @click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
               show_default="two printer resolutions", help="Minimum distance between grains in mm.")

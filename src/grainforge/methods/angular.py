@@ -391,6 +391,17 @@ def build(p: Params, rng: np.random.Generator):
     return unit * r[:, None], np.array(faces), info
 
 
+def physical_info(info: dict, scale: float) -> dict:
+    """``info`` of a grain scaled by ``scale`` (mm per model unit): ``rounding_radius`` in mm.
+
+    Examples
+    --------
+    >>> physical_info({"rounding_radius": 0.1, "flat_fraction": 0.5}, 5.0)
+    {'rounding_radius': 0.5, 'flat_fraction': 0.5}
+    """
+    return {**info, "rounding_radius": float(info["rounding_radius"]) * float(scale)}
+
+
 def angular(
     *,
     facets: int = 20,

@@ -44,6 +44,15 @@ __all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Constru
 
 NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
+#: vertices are unit directions times a positive radius (times a positive axis scaling): star-shaped
+STAR_SHAPED = True
+
+
+def validity_parameter(p: "Params") -> str:
+    """The option a user changes when the surface is not a valid solid: what shaped the contours."""
+    if p.aspect is not None:
+        return "aspect"
+    return {"fractal": "fractal_amplitude", "image": "images", "given": "sections"}.get(p.contour, "descriptors")
 #: contour sources: Fourier descriptors, fractal profiles, image files, a
 #: measured spectrum table (``grainforge fourier`` CSV), or
 #: :class:`~grainforge.contours.Contour` objects given from Python.
@@ -436,13 +445,16 @@ def input_contours(p: Params, rng: np.random.Generator) -> tuple[Contour, Contou
         D = extend_spectrum(table.D[table.draw(rng)], p.decay[1], p.modes)
         return tuple(Contour.from_spectrum(D, rng=rng) for _ in range(3))
     if p.contour == "fractal":
-        return tuple(
-            Contour.from_fractal(
-                fractal_dimension=p.fractal_dimension, length_ratio=p.length_ratio,
-                amplitude=p.fractal_amplitude, modes=p.modes, rng=rng,
+        try:
+            return tuple(
+                Contour.from_fractal(
+                    fractal_dimension=p.fractal_dimension, length_ratio=p.length_ratio,
+                    amplitude=p.fractal_amplitude, modes=p.modes, rng=rng,
+                )
+                for _ in range(3)
             )
-            for _ in range(3)
-        )
+        except ParameterError as exc:  # Contour names its own argument `amplitude`
+            raise ParameterError("fractal_amplitude" if exc.name == "amplitude" else exc.name, exc.reason) from None
     sets = (p.descriptors, p.descriptors_xz or p.descriptors, p.descriptors_yz or p.descriptors)
     out = []
     for name, d in zip(("descriptors", "descriptors_xz", "descriptors_yz"), sets):
@@ -496,7 +508,7 @@ def build(p: Params, rng: np.random.Generator):
     unit, faces, geom = _sphere(p.subdivisions)
     R = con.radius(unit, geom)
     if not np.isfinite(R).all() or R.min() <= 0:
-        raise ParameterError(VALIDITY_PARAMETER, "give a surface with non-positive radii")
+        raise ParameterError(validity_parameter(p), "gives a surface with non-positive radii")
     vertices = unit * R[:, None]
     if con.axis_scale != (1.0, 1.0, 1.0):
         vertices *= np.asarray(con.axis_scale)

@@ -41,6 +41,8 @@ __all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "d
 
 NAME = "fso"
 VALIDITY_PARAMETER = "amplitude"
+#: vertices are unit directions times a positive radius: the solid contract's star certificate applies
+STAR_SHAPED = True
 #: generation outputs recorded in manifests (K actually used, extreme radii / R0)
 INFO_COLUMNS = ("K", "min_radius", "max_radius")
 DEFAULT_AMPLITUDE = 0.1
@@ -105,8 +107,10 @@ class Params:
             raise ParameterError("amplitude", "cannot be combined with k: give one of them")
         if self.amplitude is None and self.k is None:
             object.__setattr__(self, "amplitude", DEFAULT_AMPLITUDE)
-        turns = self.gamma**self.frequencies * (np.pi / 2) / self.length_ratio
-        if turns > MAX_TURNS:
+        # in logs: gamma**frequencies overflows a float for large gamma and n_max (10**400)
+        log_turns = self.frequencies * np.log(self.gamma) + np.log(np.pi / 2) - np.log(self.length_ratio)
+        turns = float(np.exp(min(log_turns, 700.0)))
+        if log_turns > np.log(MAX_TURNS):
             raise ParameterError(
                 "frequencies",
                 f"too large for gamma={self.gamma} and length_ratio={self.length_ratio}: "
