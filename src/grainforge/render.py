@@ -304,13 +304,14 @@ def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size
         radius = float(np.linalg.norm(v - (v.max(0) + v.min(0)) / 2, axis=1).max()) or 1.0
         per_unit = (size / 2 - 2) / radius  # pixels per mesh unit, as render_image projects
         length = scale_bar_length(size / per_unit)
-        x0, y0 = 0.06 * size, 0.94 * size
+        # in a strip below the picture, so that it never covers the grain
+        x0, y0 = 0.04 * size, 1.07 * size
         ax.plot([x0, x0 + length * per_unit], [y0, y0], color="black", lw=2.5, solid_capstyle="butt",
                 label="scale bar")
-        ax.text(x0 + 0.5 * length * per_unit, y0 - 0.025 * size, f"{length:g} {unit}", ha="center", va="bottom",
+        ax.text(x0 + length * per_unit + 0.03 * size, y0, f"{length:g} {unit}", ha="left", va="center",
                 fontsize=7)
         ax.set_xlim(-0.5, size - 0.5)
-        ax.set_ylim(size - 0.5, -0.5)
+        ax.set_ylim(1.12 * size, -0.5)
 
 
 def scale_bar_length(width: float) -> float:
@@ -391,6 +392,12 @@ def contact_sheet_figure(
         shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit)
         ax.set_title(lab, fontsize=8, pad=2)
     if title:
+        import textwrap
+
+        title = textwrap.fill(title, max(30, int(13 * panel_size * cols)))
+        title_in = 0.22 * (title.count("\n") + 1) + 0.18
+        height = rows * (panel_size + label_in) + title_in
+        fig.set_size_inches(panel_size * cols, height)
         fig.suptitle(title, fontsize=10, y=1 - 0.08 / height)
     fig.subplots_adjust(left=0.005, right=0.995, bottom=0.005, top=1 - (title_in + label_in) / height,
                         wspace=0.02, hspace=label_in / panel_size)

@@ -68,5 +68,6 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
     paths = write_outputs(s, result, out)
     verdict = "PASSES" if result.stats["pass"] else "does NOT pass"
     click.echo(f"{result.method}: {verdict} (KS <= 0.1, |mean diff| <= 0.01 for all four) in "
-               f"{result.seconds:.0f} s; wrote {', '.join(str(p) for p in paths)}", err=True)
+               f"{result.seconds:.0f} s ({result.grains_measured} grains measured, {result.cpu_seconds:.0f} s of "
+               f"worker CPU); wrote {', '.join(str(p) for p in paths)}", err=True)
     sys.stdout.flush()
