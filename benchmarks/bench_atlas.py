@@ -56,8 +56,7 @@ def main():
             tot = timed(lambda: atlas_descriptors(v, f, voxels_across=n), args.repeat)
             vox = timed(lambda: voxelise(v, f, d_eq / n), args.repeat)
             mask, _ = voxelise(v, f, d_eq / n)
-            idx = np.argwhere(mask)
-            hull = timed(lambda: _hull_count(idx), args.repeat)
+            hull = timed(lambda: _hull_count(mask), args.repeat)
             sub = np.pad(mask.astype(np.float32), 4)
 
             def sph():

@@ -102,7 +102,10 @@ def test_compare_passes_identical_samples_and_fails_shifted_ones():
 
 
 def _synthetic_sand(path, n, voxel_um, seed=11):
-    """A 'sand' of CRI rough ellipsoids with known Zingg ratios, measured the Atlas way into an Atlas CSV."""
+    """A 'sand' of CRI rough ellipsoids with known Zingg ratios, measured the Atlas way into an Atlas CSV.
+
+    The aspect means differ from Ottawa's and from the fit's start values on purpose.
+    """
     from grainforge.fit import measure_grain
 
     text = f"""method = "cri"
@@ -126,16 +129,18 @@ sigma = 0.1
 
 
 @pytest.mark.slow
-def test_fit_recovers_the_known_aspects_of_a_synthetic_sand(runner, tmp_path):
+def test_fit_recovers_the_known_aspects_of_a_synthetic_sand(tmp_path):
+    from grainforge.fit import fit_sand, write_outputs
     from grainforge.population import draw_grain
     from grainforge.report import zingg_ratios
 
     voxel = 400 / 30  # about 30 voxels across: the test is about recovery, not resolution
-    truth = _synthetic_sand(tmp_path / "synthetic.csv", 160, voxel)
+    truth = _synthetic_sand(tmp_path / "synthetic.csv", 120, voxel)
+    sand = read_sand(tmp_path / "synthetic.csv", voxel)
+    # modest populations (the CLI insists on >= 500 grains; the library allows fewer)
+    result = fit_sand(sand, "cri", count=300, pilot=60, rounds=2, final_rounds=2, workers=2)
     out = tmp_path / "fit"
-    r = runner.invoke(cli, ["fit", str(tmp_path / "synthetic.csv"), "--voxel-size", str(voxel), "--out", str(out),
-                            "--pilot", "60", "--rounds", "3", "--count", "500", "--workers", "2"])
-    assert r.exit_code == 0, r.output
+    write_outputs(sand, result, out)
     for name in ("recipe.toml", "fit.csv", "fit.png"):
         assert (out / name).stat().st_size > 0
     fitted = parse_recipe((out / "recipe.toml").read_text(encoding="utf-8"))
@@ -143,5 +148,17 @@ def test_fit_recovers_the_known_aspects_of_a_synthetic_sand(runner, tmp_path):
     got = zingg_ratios([draw_grain(fitted, i)[1].aspect for i in range(fitted.count)])
     for k in ("elongation", "flatness"):
         assert got[k].mean() == pytest.approx(want[k].mean(), rel=0.05), k
-    rows = list(csv.DictReader(open(out / "fit.csv", encoding="utf-8")))
+        # and the measured population matches the sand's measured mean
+        assert result.stats["per"][k]["mean_diff"] == pytest.approx(0.0, abs=0.02), k
+    rows = list(csv.DictReader((out / "fit.csv").read_text(encoding="utf-8").splitlines()))
     assert {r["quantity"] for r in rows} >= set(DESCRIPTORS) | {"flatness-elongation"}
+
+
+def test_existing_outputs_are_not_overwritten_without_overwrite(runner, tmp_path):
+    p = _write_sand(tmp_path / "s.csv", _fake_rows(5))
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "fit.csv").write_text("keep", encoding="utf-8")
+    r = runner.invoke(cli, ["fit", str(p), "--voxel-size", "7", "--out", str(out)])
+    assert r.exit_code == 2 and "exists" in r.stderr and "--overwrite" in r.stderr
+    assert (out / "fit.csv").read_text(encoding="utf-8") == "keep"

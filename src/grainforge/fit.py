@@ -252,6 +252,20 @@ register(MethodFit(
 ))
 
 
+register(MethodFit(
+    # angular grains: edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad,
+    # 16 facets, a fine texture); both drawn per grain, mean and sd fitted
+    "angular",
+    knobs=(Knob("rounding", 0.15, 0.0, 0.9, 0.05), Knob("dent_depth", 0.35, 0.0, 0.7, 0.05),
+           Knob("rounding_sd", 0.08, 0.005, 0.4, 0.03), Knob("dent_depth_sd", 0.1, 0.005, 0.3, 0.03)),
+    targets=_SHAPE_TARGETS,
+    params=lambda k: {"facets": 16, "rounding": truncnormal(k["rounding"], k["rounding_sd"], 0.0, 0.9),
+                      "dents": 6, "dent_width": 0.5,
+                      "dent_depth": truncnormal(k["dent_depth"], k["dent_depth_sd"], 0.0, 0.7),
+                      "roughness": 0.005, "length_ratio": 2.0, "subdivisions": 5},
+))
+
+
 # --------------------------------------------------------------------------- recipes
 def _toml(v: Any) -> str:
     if isinstance(v, bool):
@@ -305,8 +319,11 @@ def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, .
 
     It is voxelised at ``voxel_size_um`` relative to its drawn equivalent
     diameter, in a random orientation drawn from its own seed.  Returns
-    (d_eq µm, sphericity, convexity, flatness, elongation).
+    (d_eq µm, sphericity, convexity, flatness, elongation, CPU seconds spent).
     """
+    import time
+
+    cpu = time.process_time()
     from .analysis.atlas import atlas_descriptors
     from .methods import generate
     from .population import draw_grain
@@ -316,7 +333,8 @@ def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, .
     grain = generate(recipe.method, params, seed)
     across = size_mm * 1000.0 / voxel_size_um
     d = atlas_descriptors(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]))
-    return (d["equivalent_diameter"] / d["voxel_size"] * voxel_size_um, *(d[k] for k in DESCRIPTORS))
+    return (d["equivalent_diameter"] / d["voxel_size"] * voxel_size_um, *(d[k] for k in DESCRIPTORS),
+            time.process_time() - cpu)
 
 
 class _Pool:
@@ -326,6 +344,8 @@ class _Pool:
         self.workers = workers
         self.ex = None
         self.cache: dict[tuple[str, int], tuple[float, ...]] = {}  # (recipe text, index) -> measurement
+        self.cpu = 0.0  # CPU seconds the workers spent generating and measuring
+        self.grains = 0
 
     def __enter__(self):
         if self.workers > 1:
@@ -356,7 +376,9 @@ class _Pool:
         if progress is not None and todo:
             it = progress(it, len(todo))
         for i, row in it:
-            self.cache[(text, i)] = row
+            self.cache[(text, i)] = row[:5]
+            self.cpu += row[5]
+            self.grains += 1
         for i in range(count):
             out[i] = self.cache[(text, i)]
         return out
@@ -408,7 +430,9 @@ class FitResult:
     knobs: dict[str, float]
     aspect: dict[str, float]
     history: list[dict] = field(default_factory=list)
-    seconds: float = 0.0
+    seconds: float = 0.0  # wall clock
+    cpu_seconds: float = 0.0  # generating and measuring, summed over the workers
+    grains_measured: int = 0
 
 
 def _aspect_table(a: Mapping[str, float], low: float) -> dict:
@@ -511,13 +535,13 @@ def fit_sand(
             new[f"{k}_sd"] = float(np.clip(asp[f"{k}_sd"] * np.clip(ratio, 0.5, 2.0), 0.005, 0.5))
         return new
 
-    def knob_step(xv, J, gen):
+    def knob_step(xv, J, gen, trust):
         y = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
         # damped least squares in step units (columns scaled by each knob's step)
         Js = J * steps[None, :]
         lam = 1e-3 * np.trace(Js.T @ Js) / len(steps) + 1e-12
         dz = np.linalg.solve(Js.T @ Js + lam * np.eye(len(steps)), Js.T @ (y_star - y))
-        dz = np.clip(dz, -3.0, 3.0)  # at most three steps per knob per round
+        dz = np.clip(dz, -trust, trust)  # at most `trust` steps per knob per round
         return np.clip(xv + dz * steps, lo_b, hi_b)
 
     with _Pool(max(1, int(workers))) as pool:
@@ -533,21 +557,30 @@ def fit_sand(
             gi, _ = evaluate(xi, aspect, nj, f"jacobian {i + 1}/{len(spec.knobs)} ({k.name})")
             J[:, i] = (np.array([_stat(gi[:, 1:], t) for t in spec.targets]) - y0) / (xi[i] - x[i])
         y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
+        trust = 2.0  # trust region, in knob steps: halved after a round that makes things worse
+        best_gen, best_st = gen, st
         for r in range(1, rounds + 1):
-            x_new = knob_step(x, J, gen)
-            aspect = aspect_step(aspect, st)
-            gen, st = evaluate(x_new, aspect, pilot, f"pilot {r}")
-            y = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
+            x_new = knob_step(x, J, gen, trust)
+            aspect_new = aspect_step(aspect, st)
+            gen_new, st_new = evaluate(x_new, aspect_new, pilot, f"pilot {r}")
+            y = np.array([_stat(gen_new[:, 1:], t) for t in spec.targets])
             dx = x_new - x
             if np.any(dx):  # Broyden update (aspect changes count as noise)
                 J += np.outer((y - y_prev) - J @ dx, dx) / float(dx @ dx)
-            x, y_prev = x_new, y
-            if st["score"] < best[0]:
-                best = (st["score"], x.copy(), dict(aspect))
+            if st_new["score"] < best[0]:
+                best = (st_new["score"], x_new.copy(), dict(aspect_new))
+                best_gen, best_st = gen_new, st_new
+                trust = min(1.5 * trust, 3.0)
+            else:  # worse: go back to the best settings with a smaller step
+                trust *= 0.5
+            x, aspect = best[1].copy(), dict(best[2])
+            gen, st = best_gen, best_st
+            y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
             if st["score"] <= 0.7:
                 break
         _, x, aspect = best
         final = None
+        cost = pool
         for attempt in range(final_rounds):
             gen, st = evaluate(x, aspect, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
             if final is None or st["score"] < final[1]["score"]:
@@ -555,7 +588,7 @@ def fit_sand(
             if st["pass"]:
                 break
             # corrections from the final population itself (its own seeds: no sampling noise between rounds)
-            x = knob_step(x, J, gen)
+            x = knob_step(x, J, gen, 1.0)
             aspect = aspect_step(aspect, st)
     gen, st, x, aspect = final
     header = (f"grainforge fit: {method} grains matched to {sand.name} ({sand.count} grains, voxel "
@@ -569,7 +602,8 @@ def fit_sand(
     text = recipe_text(method, params, sand, count=count, seed=seed, header=header)
     return FitResult(method=method, recipe=text, stats=st, generated=gen,
                      knobs=dict(zip([k.name for k in spec.knobs], map(float, x))), aspect=aspect,
-                     history=history, seconds=time.perf_counter() - t0)
+                     history=history, seconds=time.perf_counter() - t0, cpu_seconds=cost.cpu,
+                     grains_measured=cost.grains)
 
 
 # --------------------------------------------------------------------------- outputs
