@@ -431,14 +431,13 @@ class Contour:
         M, Nf = int(ridges), int(frequencies)
         psi = rng.uniform(0.0, TWO_PI, size=(M, Nf))
         n = np.arange(1, Nf + 1, dtype=np.float64)
-        # in logs: a tiny length_ratio makes k overflow; such frequencies are above every kept harmonic
-        log_k = np.log(TWO_PI) + n * np.log(gamma) - np.log(length_ratio)
-        w = np.exp((fractal_dimension - 3.0) * (log_k - np.log(gamma)))
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            w = (TWO_PI * gamma ** (n - 1) / length_ratio) ** (fractal_dimension - 3.0)
+            k = TWO_PI * gamma**n / length_ratio
+        if not (np.isfinite(k).all() and np.isfinite(w).all()):  # e.g. L = 5e-324: 2πγ^n/L overflows
+            raise ParameterError("length_ratio", f"is too small: the wavenumbers 2πγ^n/L overflow (L = {length_ratio!r})")
         alpha = np.pi * np.arange(1, M + 1) / M
-        with np.errstate(over="ignore", invalid="ignore"):
-            k = np.exp(log_k)
-            h = np.rint(np.cos(alpha)[:, None] * k[None, :])
-        h = np.where(np.isfinite(h), h, float(n_angles))  # beyond any kept harmonic
+        h = np.rint(np.cos(alpha)[:, None] * k[None, :])
         H = min(n_angles // 2 - 1, int(modes))
         keep = (np.abs(h) <= H) & (h != 0)
         hk = np.abs(h[keep]).astype(np.int64)
