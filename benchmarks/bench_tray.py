@@ -92,7 +92,9 @@ def main() -> None:
         with open(out.with_suffix(".csv"), newline="") as fh:
             rows = list(csv.DictReader(fh))
         faces = sum(int(r["faces"]) for r in rows)
-        print(res.stderr.strip().splitlines()[-2] if len(res.stderr.strip().splitlines()) > 1 else "")
+        for line in res.stderr.strip().splitlines():  # the resolution choice and any warning
+            if line.startswith(("resolution matching", "WARNING")):
+                print(line)
         print(f"grains: {len(rows)}  plates: {len({r['plate'] for r in rows})}  "
               f"subdivisions: {sorted({r['subdivisions'] for r in rows})}  triangles: {faces:,}")
         print(f"file: {out.stat().st_size / 1e6:.1f} MB")

@@ -99,6 +99,52 @@ def radius_table(n: int, subdivisions: int) -> None:
               f"| {len(meas)} | {grains} |", flush=True)
 
 
+#: settings of the range table, from near-spherical convex to angular-sand shapes
+RANGE = [
+    ("near-spherical: 40 facets, rounding 0.8", Params(facets=40, aspect=(1, 1, 1), rounding=0.8)),
+    ("default (20 facets, 1.3:1.1:1, rounding 0.1)", Params()),
+    ("sharp, rough: 16 facets, 1.8:1.3:1, rounding 0, roughness 0.02", Params(
+        facets=16, aspect=(1.8, 1.3, 1.0), rounding=0.0, roughness=0.02)),
+    ("Hostun-like: 16 facets, 2:1.4:1, 6 dents 0.5/0.5, roughness 0.01", Params(
+        facets=16, aspect=(2.0, 1.4, 1.0), rounding=0.1, dents=6, dent_depth=0.5, dent_width=0.5,
+        roughness=0.01, length_ratio=2.0)),
+    ("angular corner: 12 facets, 2.4:1.6:1, 10 dents 0.65/0.5, roughness 0.01", Params(
+        facets=12, aspect=(2.4, 1.6, 1.0), rounding=0.1, dents=10, dent_depth=0.65, dent_width=0.5,
+        roughness=0.01, length_ratio=2.0)),
+]
+
+
+def range_table(n: int) -> None:
+    from grainforge.analysis.descriptors import basic_descriptors
+    from grainforge.fabrication.printability import check_mesh
+
+    try:
+        from grainforge.analysis import atlas
+    except ImportError:  # the Atlas-style (voxel) descriptors are not in this build
+        atlas = None
+    kind = "Atlas-style voxel" if atlas is not None else "mesh"
+    print(f"\n### Range reached ({kind} sphericity and convexity; printability at {SIZE_MM:g} mm, objet-eden-250)\n")
+    print("| setting | grains | sphericity mean (min–max) | convexity mean (min–max) "
+          "| printable (OK or WARN) | grains with sph ≤ 0.70 and conv ≤ 0.78, printable |")
+    print("|---|---|---|---|---|---|")
+    for label, p in RANGE:
+        sph, conv, ok, corner = [], [], 0, 0
+        for seed in range(n):
+            mesh, _, _, g = written(p, seed)
+            if atlas is not None:
+                d = atlas.describe(mesh)  # pragma: no cover - depends on the analysis build
+            else:
+                d = basic_descriptors(mesh)
+            chk = check_mesh(mesh.vertices, mesh.faces, "objet-eden-250")
+            sph.append(d["sphericity"])
+            conv.append(d["convexity"])
+            ok += chk.ok
+            corner += chk.ok and d["sphericity"] <= 0.70 and d["convexity"] <= 0.78
+        sph, conv = np.array(sph), np.array(conv)
+        print(f"| {label} | {n} | {sph.mean():.3f} ({sph.min():.3f}–{sph.max():.3f}) | {conv.mean():.3f} "
+              f"({conv.min():.3f}–{conv.max():.3f}) | {ok}/{n} | {corner}/{n} |", flush=True)
+
+
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--grains", type=int, default=20)
@@ -111,6 +157,8 @@ def main(argv=None) -> None:
         flatness_table(a.grains)
     if "radius" in parts:
         radius_table(a.grains, a.subdivisions)
+    if "range" in parts:
+        range_table(a.grains)
     print(f"\n({time.time() - t0:.0f} s)", file=sys.stderr)
 
 

@@ -341,7 +341,7 @@ def test_cli_analyse_table_csv_json(runner, tmp_path, grain):
     assert res.exit_code == 2 and "exists" in res.output
     res = runner.invoke(cli, ["analyse", str(p), "--json", "--no-fourier"])
     rows = json.loads(res.stdout)
-    assert rows[0]["volume"] == pytest.approx(grain.mesh.volume)
+    assert rows[0]["volume_mm3"] == pytest.approx(grain.mesh.volume)
     assert "fd_LI_2" not in rows[0]
 
 

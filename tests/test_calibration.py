@@ -143,13 +143,18 @@ def test_old_calibration_files_without_scaling_columns_still_read(tmp_path):
     path = c.write_csv(tmp_path / "new.csv")
     again = Calibration.read_csv(path)
     assert np.array_equal(again.D_A_scaling_mean, c.D_A_scaling_mean)
-    # a file written before the scaling columns existed
+    # a file written before the scaling columns existed (and before headers stated units: R_g_mean)
+    from grainforge.calibration import UNITS
+    from grainforge.units import with_unit
+
     old = [col for col in COLUMNS if not col.startswith("D_A_scaling")]
     lines = path.read_text().splitlines()
     header = lines[0].split(",")
-    keep = [header.index(col) for col in old]
-    (tmp_path / "old.csv").write_text("\n".join(",".join(row.split(",")[i] for i in keep) for row in lines) + "\n")
+    assert "R_g_mean_primary_sizes" in header and "R_g_mean" not in header
+    keep = [header.index(with_unit(col, UNITS)) for col in old]
+    body = [",".join(row.split(",")[i] for i in keep) for row in lines[1:]]
+    (tmp_path / "old.csv").write_text("\n".join([",".join(old)] + body) + "\n")
     legacy = Calibration.read_csv(tmp_path / "old.csv")
     assert np.all(np.isnan(legacy.D_A_scaling_mean))
-    assert np.array_equal(legacy.D_A_mean, c.D_A_mean)
+    assert np.array_equal(legacy.D_A_mean, c.D_A_mean) and np.array_equal(legacy.R_g_mean, c.R_g_mean)
     legacy.plot(tmp_path / "old.png")  # the plot copes without them

@@ -49,7 +49,7 @@ def test_solid_problems_detects_defects():
     two_v = np.vstack([v, v + 5])
     two_f = np.vstack([f, f + len(v)])
     assert any("bodies" in p for p in solid_problems(two_v, two_f))
-    with pytest.raises(ValueError, match="^amplitude: "):
+    with pytest.raises(ValueError, match="^amplitude "):
         require_solid(v, f[:-1], "amplitude")
 
 

@@ -50,7 +50,13 @@ def _sources(images):
 
 @pytest.mark.parametrize("source", ["fourier", "fourier-3-sets", "fractal", "image"])
 def test_principal_sections_reproduce_the_contours(source, three_images):
-    """Each principal section of the mesh is its (corrected) input contour within 1 % of r0."""
+    """Each principal section of the mesh is its (corrected) input contour within 1 % of r0.
+
+    Image contours: 2 %.  Their outlines keep sharp corners up to harmonic 2^s = 32 (nothing is
+    stretched any more), so the mesh's chords miss them by up to 1.3 % of r0 at s = 5, and 1.7 %
+    with the default ridge twist (the cut crosses edges whose off-plane ends are turned).
+    """
+    tol = 0.02 if source == "image" else 0.01
     p = _sources(three_images)[source]
     v, f, info = build(p, np.random.default_rng(3))
     con = construct(p, 3)
@@ -64,12 +70,12 @@ def test_principal_sections_reproduce_the_contours(source, three_images):
         pts = v[on]
         r = np.linalg.norm(pts, axis=1)
         expect = section(_ANGLE[plane](pts)) * section.scale
-        assert np.abs(r - expect).max() < 0.01 * r0, plane
+        assert np.abs(r - expect).max() < tol * r0, plane
         # 2. the mesh's planar cross-section, everywhere along it
         cut = mesh.section(plane_origin=(0, 0, 0), plane_normal=_NORMAL[plane])
         cp = np.asarray(cut.vertices)
         err = np.abs(np.linalg.norm(cp, axis=1) - section(_ANGLE[plane](cp)) * section.scale)
-        assert err.max() < 0.01 * r0, plane
+        assert err.max() < tol * r0, plane
     # the corrected contours meet at the six axis points
     s, q = con.sections, GRID // 4
     pairs = [((0, 0), (1, 0)), ((0, 2 * q), (1, 2 * q)), ((0, q), (2, 0)), ((0, 3 * q), (2, 2 * q)),
@@ -143,10 +149,15 @@ def test_presets_from_python_and_defaults():
 def test_given_contours_and_images(three_images):
     cs = [Contour.from_image(p) for p in three_images]
     a = grainforge.cri(contours=cs, subdivisions=3, rng=0)
-    b = grainforge.cri(images=three_images, subdivisions=3, rng=5)  # images: no randomness at all
+    b = grainforge.cri(images=three_images, subdivisions=3, rng=0)
     c = grainforge.cri(images=",".join(three_images), subdivisions=3, rng=0)
     assert export_bytes(a) == export_bytes(c)
     assert a.vertices.tobytes() == b.vertices.tobytes()
+    # image contours use no randomness: without the ridge twist (whose turns the seed draws) every seed
+    # gives the same grain
+    d0 = grainforge.cri(images=three_images, subdivisions=3, ridge_twist=0.0, rng=0)
+    d5 = grainforge.cri(images=three_images, subdivisions=3, ridge_twist=0.0, rng=5)
+    assert d0.vertices.tobytes() == d5.vertices.tobytes()
     assert a.params.contour == "given" and b.params.contour == "image"
     assert b.info["contour_xy_D2"] == pytest.approx(cs[0].descriptors()[2])
 

@@ -212,3 +212,60 @@ basis = "mass"
     by_count = r.size.passing(sizes)
     assert np.abs(by_count - r.size.number_percent_passing()).max() <= 0.25
     assert (tmp_path / "pop" / "population.png").stat().st_size > 10_000
+
+
+ZINGG = """\
+method = "cri"
+count = 40
+seed = 3
+[params]
+preset = "rough-sphere"
+subdivisions = 2
+aspect = { distribution = "zingg", elongation = { distribution = "truncnormal", mean = 0.7, sd = 0.1, low = 0.4, high = 1.0 }, flatness = 0.8 }
+[size]
+mm = 1.0
+"""
+
+
+def test_zingg_aspect_is_drawn_per_grain_within_its_support():
+    r = parse_recipe(ZINGG)
+    z = r.params["aspect"]
+    assert z.kind == "zingg" and z.typical() == pytest.approx((1.0, 0.7, 0.56))
+    aspects = np.array([draw_grain(r, i)[1].aspect for i in range(40)])
+    e, f = aspects[:, 1] / aspects[:, 0], aspects[:, 2] / aspects[:, 1]
+    assert np.all(aspects[:, 0] == 1.0) and np.all((e >= 0.4) & (e <= 1.0))
+    assert np.allclose(f, 0.8) and e.std() > 0.05 and abs(e.mean() - 0.7) < 0.05
+    assert np.array_equal(aspects[7], np.array(draw_grain(r, 7)[1].aspect))
+
+
+@pytest.mark.parametrize("new, words", [
+    ('elongation = { distribution = "normal", mean = 0.7, sd = 0.1 }', "unbounded"),
+    ('elongation = { distribution = "uniform", low = 0.0, high = 0.9 }', "(0, 1]"),
+    ('elongation = { distribution = "uniform", low = 0.5, high = 1.2 }', "(0, 1]"),
+    ('elongation = { distribution = "choice", values = [0.5] }', "must be one of"),
+    ('elongation = 1.5', "(0, 1]"),
+])
+def test_zingg_support_is_validated_before_any_work(new, words):
+    text = ZINGG.replace('elongation = { distribution = "truncnormal", mean = 0.7, sd = 0.1, low = 0.4, high = 1.0 }',
+                         new)
+    with pytest.raises(RecipeError) as e:
+        parse_recipe(text)
+    assert "params.aspect.elongation" in str(e.value) and words in str(e.value) and e.value.line == 7
+
+
+def test_zingg_only_for_ratio_parameters():
+    with pytest.raises(RecipeError, match="zingg gives a ratio"):
+        parse_recipe(ZINGG.replace("preset = \"rough-sphere\"",
+                                   'morph_exponent = { distribution = "zingg", elongation = 0.5, flatness = 0.5 }'))
+
+
+def test_list_parameters_are_drawn_element_by_element():
+    text = ZINGG.replace('preset = "rough-sphere"',
+                         'descriptors = [0.0, { distribution = "uniform", low = 0.05, high = 0.15 }, 0.01]')
+    r = parse_recipe(text)
+    d = np.array([draw_grain(r, i)[1].descriptors for i in range(30)])
+    assert np.all(d[:, 0] == 0.0) and np.all(d[:, 2] == 0.01)
+    assert np.all((d[:, 1] >= 0.05) & (d[:, 1] <= 0.15)) and d[:, 1].std() > 0.02
+    bad = text.replace("high = 0.15", "high = 1.5")
+    with pytest.raises(RecipeError, match=r"params\.descriptors\.1\.high: must be in \[0, 1\]"):
+        parse_recipe(bad)

@@ -5,6 +5,8 @@ import io
 import numpy as np
 import pytest
 import trimesh
+from hypothesis import given
+from hypothesis import strategies as st
 
 import grainforge
 from grainforge.analysis.sections import random_normals, section_descriptors
@@ -177,6 +179,7 @@ def test_too_rough_a_field_names_the_parameter():
         (dict(descriptors=(0.1, 0.1, 0.5)), "descriptors", r"\[0, 0.3\]"),
         (dict(degree=4), "degree", r"\[8, 64\]"),
         (dict(aspect=(1.0, 2.0, 3.0)), "aspect", "L >= I >= S"),
+        (dict(aspect=(80.0, 50.0, 1.0)), "aspect", "at most 50"),
         (dict(spectrum="no-such.csv"), "spectrum", "no such file"),
         (dict(decay=(1.0, -1.0)), "decay", r"\[-10, 0\]"),
     ],
@@ -286,3 +289,38 @@ def test_cli_generate_rf(runner, tmp_path, spectrum_csv):
 def test_figure_like_use_from_python():
     g = generate("rf", Params(preset="rough-sphere", subdivisions=2), 0)
     assert g.method == "rf" and g.info["spectrum_row"] is None and g.info["field_rms"] > 0
+
+
+@given(
+    d=st.tuples(st.floats(0, 0.3), st.floats(0, 0.3), st.floats(0, 0.3)),
+    decay=st.tuples(st.floats(-10, 0), st.floats(-10, 0)),
+    degree=st.integers(8, 64),
+    aspect=st.none() | st.tuples(st.floats(1, 3), st.floats(0.3, 1), st.floats(0.3, 1)).map(
+        lambda t: (t[0], t[0] * t[1], t[0] * t[1] * t[2])),
+    s=st.integers(0, 3),
+    seed=st.integers(0, 2**32 - 1),
+)
+def test_any_declared_parameters_give_a_valid_solid_or_a_named_refusal(d, decay, degree, aspect, s, seed):
+    p = Params(descriptors=d, decay=decay, degree=degree, aspect=aspect, subdivisions=s)
+    try:
+        g = generate("rf", p, seed)
+    except ParameterError as exc:
+        assert exc.name == "descriptors" and "smallest radius" in exc.reason
+        return
+    m = _read_back(g)
+    assert solid_problems(m.vertices, m.faces) == []
+    assert m.is_watertight and m.volume > 0 and len(m.vertices) == 10 * 4**s + 2
+
+
+@pytest.mark.slow
+def test_demo_section(tmp_path):
+    """The demo's rf section: a sample micrograph, its D2..D16 table, grains and a contact sheet."""
+    from grainforge.demo import SECTIONS, rf_gallery
+    from grainforge.spectra import read_spectra
+
+    assert rf_gallery in [f for _, f in SECTIONS]
+    written = rf_gallery(tmp_path, quick=True)
+    assert {p.name for p in written} == {"rf", "rf-grains.png"}
+    assert len(read_spectra(tmp_path / "rf" / "fd.csv")) == 30  # every drawn grain is measured
+    assert len((tmp_path / "rf" / "from-spectrum" / "manifest.csv").read_text().splitlines()) == 7
+    assert (tmp_path / "rf-grains.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

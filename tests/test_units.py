@@ -107,3 +107,25 @@ def test_analyse_table_and_json_state_units(runner, tmp_path):
     assert {"V_mm3", "d_eq_mm", "L_mm", "I_mm", "S_mm"} <= set(header)
     row = json.loads(runner.invoke(cli, ["analyse", str(path), "--no-fractal", "--no-fourier", "--json"]).stdout)[0]
     assert row["equivalent_diameter_mm"] == pytest.approx(4.0, rel=0.02) and "volume" not in row
+
+
+#: small, fast runs of each method (a new generator with no entry runs with its defaults at level 1)
+SMALL = {"dpa": ["--primaries", "6"], "rf": ["--subdivisions", "1"]}
+#: info columns of the methods that are dimensionless ratios, indices or labels
+RATIOS = {"flat_fraction", "field_rms", "spectrum_misfit", "spectrum_row", "spectrum_grain"}
+
+
+@pytest.mark.parametrize("method", sorted(__import__("grainforge.methods", fromlist=["METHODS"]).METHODS))
+def test_every_method_manifest_header_states_units(runner, tmp_path, method):
+    from grainforge.fabrication.resolution import supports_matching
+    from grainforge.methods import get
+    from grainforge.params import specs
+
+    args = SMALL.get(method, ["--subdivisions", "1"] if supports_matching(method) else [])
+    res = runner.invoke(cli, ["generate", method, "--out", str(tmp_path / method), "--size", "2", *args])
+    assert res.exit_code == 0, res.output
+    with open(tmp_path / method / "manifest.csv", newline="") as fh:
+        header = next(csv.reader(fh))
+    params = {s.name for s in specs(get(method).Params)}
+    bad = [h for h in header if not (_unit_ok(h, params) or h in RATIOS)]
+    assert bad == [], f"{method}: columns without a unit: {bad}"

@@ -10,24 +10,26 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Callable
 
-__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "print_tray"]
+__all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
+           "sample_micrograph", "write_fourier_csv"]
 
 
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
     from .io import read_mesh
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
     for j, value in enumerate(values):
         folder = out / f"{label}={value:g}"
-        rows = write_run(method, make_params(value), seeds, folder, overwrite=True)
+        write_run(method, make_params(value), seeds, folder, overwrite=True)
+        rows = manifest_rows(folder)
         for i, r in enumerate(rows):
             panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
     order = sorted(panels)
     sheet = out.with_suffix(".png")
     contact_sheet([panels[k][0] for k in order], [panels[k][1] for k in order], sheet,
-                  columns=len(values), title=title)
+                  columns=len(values), title=title + " (files at d_eq = 10 mm)", unit="mm")
     return [out, sheet]
 
 
@@ -64,7 +66,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     from .io import atomic_write, read_mesh, save_figure
     from .methods.cri import Params
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     seeds = [0, 1] if quick else [0, 1, 2]
     s = 3 if quick else 5
@@ -119,18 +121,27 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     meshes, labels = [], []
     for name, params in runs:
         run_seeds = seeds[:1] if name == "micrographs" else seeds  # images: no randomness
-        rows = write_run("cri", params, run_seeds, folder / name, overwrite=True)
+        write_run("cri", params, run_seeds, folder / name, overwrite=True)
+        rows = manifest_rows(folder / name)
         for r in rows:
             meshes.append(read_mesh(folder / name / r["file"]))
             labels.append(f"{name}  seed {r['seed']}")
     sheet = contact_sheet(meshes, labels, out / "cri-grains.png", columns=len(seeds),
-                          title="CRI grains by contour source (paper Figs. 4, 8)")
+                          title="CRI grains by contour source (paper Figs. 4, 8; files at d_eq = 10 mm)", unit="mm")
     written += [folder, sheet, cri_sections_figure(out / "cri-sections.png", s)]
     return written
 
 
 def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
-    """Verification figure: a CRI grain's principal sections against its contours."""
+    """Verification figure: a CRI grain's principal sections against its contours (:func:`cri_sections`)."""
+    from .io import save_figure
+
+    return save_figure(cri_sections(subdivisions), path)
+
+
+def cri_sections(subdivisions: int = 5):
+    """The Figure of :func:`cri_sections_figure`: the three panels share one scale (equal axes, same
+    limits), coordinates in units of the mean contour radius r0, legend below the panels."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -139,7 +150,6 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     import trimesh
 
     from .contours import Contour
-    from .io import save_figure
     from .methods.cri import GRID, PLANES, Params, build, construct
 
     p = Params(preset="rough-angular", subdivisions=subdivisions)
@@ -149,25 +159,37 @@ def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     normals = {"xy": (0, 0, 1), "xz": (0, 1, 0), "yz": (1, 0, 0)}
     axes2 = {"xy": (0, 1), "xz": (0, 2), "yz": (1, 2)}
     t = 2 * np.pi * np.arange(GRID + 1) / GRID
-    fig, axes = plt.subplots(1, 3, figsize=(10, 3.6), dpi=100)
+    fig, axes = plt.subplots(1, 3, figsize=(10, 4.2), dpi=100, sharex=True, sharey=True)
+    reach = 0.0
     for k, (ax, plane) in enumerate(zip(axes, PLANES)):
         before = con.sections[k] / con.factors[k]
         r_in = np.r_[before, before[0]]
         r_sec = np.r_[con.sections[k], con.sections[k][0]]
-        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="before correction")
-        ax.plot(r_sec * np.cos(t), r_sec * np.sin(t), color="C0", lw=1.5, label="stretched + corrected")
+        ax.plot(r_in * np.cos(t), r_in * np.sin(t), color="0.6", lw=1, label="contour before correction")
+        ax.plot(r_sec * np.cos(t), r_sec * np.sin(t), color="C0", lw=1.5, label="contour stretched + corrected")
         cut = np.asarray(mesh.section(plane_origin=(0, 0, 0), plane_normal=normals[plane]).vertices)
         i, j = axes2[plane]
-        ax.plot(cut[:, i], cut[:, j], ".", color="C3", ms=2, label="mesh section")
+        ax.plot(cut[:, i], cut[:, j], ".", color="C3", ms=2, label="section of the mesh")
         sec = Contour(con.sections[k])
         ang = np.arctan2(cut[:, j], cut[:, i])
         err = np.abs(np.hypot(cut[:, i], cut[:, j]) - sec(ang) * sec.scale).max() / con.sections[k].mean()
         ax.set_title(f"{plane} section: max error {100 * err:.2f} % of r0", fontsize=9)
+        ax.set_xlabel(f"{plane[0]} / r0")
+        ax.set_ylabel(f"{plane[1]} / r0")
         ax.set_aspect("equal")
-        ax.tick_params(labelsize=7)
-    axes[0].legend(fontsize=7, loc="lower left")
-    fig.suptitle(f"CRI rough-angular, seed 0, subdivisions {subdivisions}: principal sections", fontsize=10)
-    return save_figure(fig, path)
+        ax.grid(True, color="0.92", lw=0.5)
+        ax.tick_params(labelsize=7, labelleft=True)
+        reach = max(reach, float(np.abs(r_in).max()), float(np.abs(r_sec).max()), float(np.abs(cut).max()))
+    lim = 1.06 * reach
+    for ax in axes:
+        ax.set_xlim(-lim, lim)
+        ax.set_ylim(-lim, lim)
+    handles, labels = axes[0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="lower center", ncol=3, fontsize=8, frameon=False)
+    fig.suptitle(f"CRI rough-angular, seed 0, subdivisions {subdivisions}: principal sections "
+                 "(r0: mean contour radius)", fontsize=10)
+    fig.tight_layout(rect=(0, 0.08, 1, 0.95))
+    return fig
 
 
 def _analysis_plots(out: Path, quick: bool = False) -> list[Path]:
@@ -199,6 +221,39 @@ def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     return written
 
 
+#: the angular gallery: columns from sharp to rounded, rows from smooth to rough
+ANGULAR_ROUNDING = (0.0, 0.1, 0.25, 0.5, 0.8)
+ANGULAR_ROUGHNESS = (0.0, 0.01, 0.03)
+
+
+def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
+    """Angular (crushed-rock) grains: sharp to rounded (columns) and smooth to rough (rows), one seed.
+
+    A last row shows dented grains (lower convexity), also sharp to rounded.
+    """
+    from .io import read_mesh
+    from .methods.angular import Params
+    from .render import contact_sheet
+    from .run import write_run
+
+    s = 4 if quick else 5
+    folder = out / "angular"
+    meshes, labels = [], []
+    rows = [(f"roughness {q:g}", dict(roughness=q)) for q in ANGULAR_ROUGHNESS]
+    rows.append(("6 dents, roughness 0.01", dict(roughness=0.01, dents=6, dent_depth=0.35)))
+    for name, extra in rows:
+        for rounding in ANGULAR_ROUNDING:
+            params = Params(facets=18, aspect=(1.6, 1.25, 1.0), rounding=rounding, subdivisions=s, **extra)
+            sub = folder / f"{name.replace(' ', '-').replace(',', '')}-rounding={rounding:g}"
+            written = write_run("angular", params, [3], sub, overwrite=True)
+            meshes.append(read_mesh(sub / written[0]["file"]))
+            labels.append(f"rounding {rounding:g}, {name}")
+    sheet = contact_sheet(meshes, labels, out / "angular-gallery.png", columns=len(ANGULAR_ROUNDING),
+                          title="Angular grains (18 facets, aspect 1.6:1.25:1, seed 3): sharp to rounded "
+                                "(left to right), smooth to rough (top to bottom), dented (last row)")
+    return [folder, sheet]
+
+
 POPULATION_RECIPE = """\
 # demo: a rough-angular CRI sand graded like ASTM C778 graded sand (by mass, sieve sizes)
 method = "cri"
@@ -227,6 +282,79 @@ def population_demo(out: Path, quick: bool = False) -> list[Path]:
 
 
 
+def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int = 1) -> Path:
+    """A synthetic micrograph of a sand sample: ``rows × columns`` separate grains, blurred and speckled.
+
+    There are no real micrographs in this repository; the grains are Fourier
+    contours whose descriptors vary from grain to grain as a natural sand's
+    do (D2 ~ U(0.04, 0.25), D3 ~ U(0.02, 0.10), D8 ~ U(0.008, 0.03), decay
+    exponents ~ U(−2.2, −1.2)), drawn at radius 55 px on a 160 px grid,
+    blurred (σ = 1.5 px) and given sensor noise (σ = 10 grey levels), so that
+    ``grainforge fourier`` reads them as it would a real image.
+    """
+    import io as _io
+
+    import numpy as np
+    from PIL import Image
+    from skimage.filters import gaussian
+
+    from .contours import Contour, draw_contours
+    from .io import atomic_write
+
+    rng = np.random.default_rng(seed)
+    items = []
+    for i in range(rows * columns):
+        d = (rng.uniform(0.04, 0.25), rng.uniform(0.02, 0.10), rng.uniform(0.008, 0.03))
+        decay = tuple(rng.uniform(-2.2, -1.2, 2))
+        c = Contour.from_descriptors(d, decay=decay, rng=rng)
+        items.append((c, (100 + 160 * (i % columns), 100 + 160 * (i // columns)), 55.0))
+    img = draw_contours((40 + 160 * rows, 40 + 160 * columns), items, background=35, fill=205).astype(float)
+    img = gaussian(img, sigma=1.5, preserve_range=True)
+    img += rng.normal(0.0, 10.0, img.shape)
+    buf = _io.BytesIO()
+    Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
+    return atomic_write(path, buf.getvalue())
+
+
+def write_fourier_csv(images, path: Path) -> Path:
+    """The D2..D16 table ``grainforge fourier IMAGE... --csv path`` writes (same scan, 128 rays).
+
+    Only the ``image``, ``grain`` and ``D2``..``D16`` columns, which is what
+    the ``spectrum`` inputs of rf and CRI read.
+    """
+    from .contours import scan_image
+    from .io import write_csv
+
+    rows = []
+    for image in images:
+        scan = scan_image(str(image), n_angles=128)
+        for i, c in enumerate(scan.contours):
+            D = c.descriptors(16)
+            rows.append({"image": str(image), "grain": i, **{f"D{n}": float(D[n]) for n in range(2, 17)}})
+    return write_csv(path, rows, ["image", "grain"] + [f"D{n}" for n in range(2, 17)])
+
+
+def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
+    """rf grains from a measured spectrum: a sample micrograph → its D2..D16 table → one rf grain per seed."""
+    from .io import read_mesh
+    from .methods.rf import Params
+    from .render import contact_sheet
+    from .run import write_run
+
+    folder = out / "rf"
+    folder.mkdir(parents=True, exist_ok=True)
+    image = sample_micrograph(folder / "sample-micrograph.png")
+    table = write_fourier_csv([image], folder / "fd.csv")
+    seeds = list(range(6 if quick else 12))
+    p = Params(spectrum=str(table), subdivisions=4 if quick else 5)
+    rows = write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
+    labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
+    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2,
+                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph)")
+    return [folder, sheet]
+
+
 def print_tray(out: Path, quick: bool = False) -> list[Path]:
     """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains."""
     from .fabrication.printability import check_mesh
@@ -248,9 +376,11 @@ SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
     ("FSO sweeps (Figs. 1-2)", fso_sweeps),
     ("CRI contours and grains (Figs. 3-4)", cri_gallery),
     ("DPA exponent sweeps (Figs. 5-6)", dpa_sweeps),
+    ("Angular grains: sharp to rounded, smooth to rough", angular_gallery),
     ("Population: CRI sand graded like ASTM C778", population_demo),
     ("Shape analysis: Zingg, sphericity-convexity, size and FD plots of the runs above", _analysis_plots),
     ("Print tray: 2 mm rough-angular CRI grains on the paper's PolyJet, checked", print_tray),
+    ("rf grains from the spectra of a sample micrograph", rf_gallery),
 ]
 
 

@@ -25,11 +25,24 @@ class Distribution:
 
     ``kind`` is one of ``uniform(low, high)``, ``normal(mean, sd)``,
     ``truncnormal(mean, sd, low, high)``, ``lognormal(median, sigma)`` (sigma
-    of ln x) or ``choice(values, weights)``.  Every draw consumes exactly one
-    uniform variate (inverse CDF), except ``choice`` (one ``Generator.choice``).
+    of ln x), ``choice(values, weights)`` or, for a three-number ratio such
+    as ``aspect``, ``zingg(elongation, flatness)``: the Zingg ratios
+    e = I/L and f = S/I, each a fixed number in (0, 1] or a distribution
+    whose support lies in (0, 1], give the ratio L:I:S = 1 : e : e·f.
+    Every draw consumes exactly one uniform variate (inverse CDF), except
+    ``choice`` (one ``Generator.choice``) and ``zingg`` (elongation's draw,
+    then flatness's).  A list of numbers (``descriptors``, ``aspect``) may
+    also be drawn element by element: kind ``each`` with ``items``, each a
+    fixed number or a scalar distribution (written in a recipe as a list whose
+    elements are numbers or distribution tables); drawn in order.
 
     Examples
     --------
+    >>> e = Distribution("uniform", {"low": 0.6, "high": 0.9})
+    >>> z = Distribution("zingg", {"elongation": e, "flatness": 0.8})
+    >>> L, I, S = z.draw(np.random.default_rng(1))
+    >>> L, 0.6 <= I <= 0.9, round(S / I, 12)
+    (1.0, True, 0.8)
     >>> d = Distribution("truncnormal", {"mean": 2.4, "sd": 0.2, "low": 2.2, "high": 2.6})
     >>> x = d.draw(np.random.default_rng(0))
     >>> 2.2 <= x <= 2.6
@@ -61,6 +74,11 @@ class Distribution:
             return min(max(m, a["low"]), a["high"]) if self.kind == "truncnormal" else m
         if self.kind == "lognormal":
             return float(a["median"])
+        if self.kind == "zingg":
+            e, f = (x.typical() if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
+            return (1.0, e, e * f)
+        if self.kind == "each":
+            return tuple(x.typical() if isinstance(x, Distribution) else x for x in a["items"])
         return self.args["values"][0]
 
     def draw(self, rng: np.random.Generator) -> Any:
@@ -68,6 +86,11 @@ class Distribution:
         from scipy.special import ndtr, ndtri
 
         a = self.args
+        if self.kind == "zingg":
+            e, f = (x.draw(rng) if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
+            return (1.0, e, e * f)
+        if self.kind == "each":
+            return tuple(x.draw(rng) if isinstance(x, Distribution) else x for x in a["items"])
         if self.kind == "choice":
             values = a["values"]
             return values[int(rng.choice(len(values), p=a["weights"]))]

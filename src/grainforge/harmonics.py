@@ -215,7 +215,7 @@ def synthesis(unit: np.ndarray, degree: int, lmin: int = 0) -> Synthesis:
     return Synthesis(int(degree), int(lmin), basis, columns, rep, signs)
 
 
-@lru_cache(maxsize=4)
+@lru_cache(maxsize=2)
 def _cached(subdivisions: int, degree: int, lmin: int) -> Synthesis:
     from .geodesic import icosphere
 

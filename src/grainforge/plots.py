@@ -11,13 +11,14 @@ CRI manifest's ``descriptors``/``decay``/``modes``, drawn as the input spectrum)
 from __future__ import annotations
 
 import csv
+import textwrap
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
 __all__ = [
-    "KINDS", "read_manifest", "plot", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution", "demo_plots",
+    "KINDS", "read_manifest", "plot", "figure", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution", "demo_plots",
 ]
 
 
@@ -74,7 +75,7 @@ def zingg(ax, tables) -> None:
     ax.axhline(2 / 3, color="0.6", lw=0.8)
     for x, y, name in ((1 / 3, 1 / 3, "blade"), (5 / 6, 1 / 3, "disc"), (1 / 3, 5 / 6, "rod"), (5 / 6, 5 / 6, "equant")):
         ax.text(x, y, name, ha="center", va="center", color="0.5", fontsize=9)
-    ax.set(xlim=(0, 1), ylim=(0, 1), xlabel="elongation I/L", ylabel="flatness S/I", title="Zingg diagram")
+    ax.set(xlim=(0, 1.02), ylim=(0, 1.02), xlabel="elongation I/L", ylabel="flatness S/I", title="Zingg diagram")
     ax.set_aspect("equal")
 
 
@@ -135,24 +136,55 @@ def fd_spectrum(ax, tables) -> None:
         )
     ax.set_xscale("log")
     ax.set_yscale("log")
-    ax.set(xlabel="order n", ylabel="D_n", title="Fourier descriptor spectrum (principal projections)")
+    ax.set(xlabel="harmonic order n", ylabel="Fourier descriptor D_n = 2|c_n|/c_0",
+           title="Fourier descriptor spectrum (principal projections)")
     ax.set_xticks([2, 3, 4, 6, 8, 12, 16])
     ax.set_xticklabels(["2", "3", "4", "6", "8", "12", "16"])
 
 
 def size_distribution(ax, tables) -> None:
-    """Grading curve: percentage finer by volume (mass) against equivalent diameter (log scale)."""
-    for (path, t), color in zip(tables, _colors()):
+    """Grading curve: percentage finer by volume (mass) against equivalent diameter (mm, log scale).
+
+    Populations with identical sizes (e.g. several runs all generated at
+    10 mm) give the same curve: it is drawn once, with every population named
+    in its legend entry, rather than as lines hiding each other.  A single-size
+    population is a vertical step, marked at its size.
+    """
+    curves: list[tuple[np.ndarray, np.ndarray, list[str]]] = []
+    for path, t in tables:
         d = _numeric(t, "equivalent_diameter", path)
         w = _numeric(t, "volume", path) if "volume" in t else d**3
         ok = np.isfinite(d) & np.isfinite(w)
         d, w = d[ok], w[ok]
-        o = np.argsort(d)
+        d = np.round(d, 6)  # sizes equal to a micrometre are one size (10 mm written as 9.999999999)
+        o = np.argsort(d, kind="stable")
         finer = 100 * np.cumsum(w[o]) / w.sum()
-        ax.step(d[o], finer, where="post", color=color, label=f"{_label(path)} (n={len(d)})")
+        # the curve as drawn: % finer after each distinct size
+        ud = np.unique(d[o])
+        uf = finer[np.searchsorted(d[o], ud, side="right") - 1]
+        name = f"{_label(path)} (n={len(d)})"
+        for cd, cf, names in curves:
+            if len(cd) == len(ud) and np.allclose(cd, ud, rtol=1e-6) and np.allclose(cf, uf, atol=1e-6):
+                names.append(name)
+                break
+        else:
+            curves.append((ud, uf, [name]))
+    lo = min(float(c[0][0]) for c in curves)
+    hi = max(float(c[0][-1]) for c in curves)
+    for (d, finer, names), color, marker in zip(curves, _colors(), _markers()):
+        x = np.concatenate([[d[0]], d])
+        y = np.concatenate([[0.0], finer])
+        single = np.ptp(d) <= 1e-9 * d[0]
+        label = textwrap.fill(", ".join(names) + (f": all {d[0]:.3g} mm" if single else ""), 70)
+        ax.step(x, y, where="post", color=color, lw=1.4, label=label, marker=marker if single else None,
+                markevery=[len(x) - 1] if single else None, ms=5)
     ax.set_xscale("log")
-    ax.set(xlabel="equivalent diameter d_eq", ylabel="% finer by volume", ylim=(0, 100), title="Size distribution")
+    ax.set_xlim(lo / 1.6, hi * 1.6)
+    ax.set(xlabel="equivalent diameter d_eq (mm)", ylabel="% finer by volume", ylim=(0, 102),
+           title="Size distribution")
     ax.grid(True, which="both", color="0.9", lw=0.5)
+    # below the axes: any corner inside may hold a curve (tight_layout makes room for it)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.17), ncol=1, frameon=False)
 
 
 def _markers():
@@ -174,6 +206,35 @@ KINDS = {
 }
 
 
+def figure(kind: str, manifests: Sequence[str | Path], *, title: str | None = None):
+    """The matplotlib Figure of plot ``kind`` for one or more manifests (see :func:`plot`)."""
+    if kind not in KINDS:
+        raise ValueError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    if not manifests:
+        raise ValueError("at least one manifest is needed")
+    tables = [(Path(p), read_manifest(p)) for p in manifests]
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    n_entries = len(manifests)
+    fig, ax = plt.subplots(figsize=(6.0, 4.8 + 0.16 * n_entries) if kind != "zingg" else (5.4, 5.8 + 0.16 * n_entries),
+                           dpi=130)
+    try:
+        KINDS[kind](ax, tables)
+        if title:
+            ax.set_title(title)
+        if ax.get_legend() is None:
+            # below the axes: inside, a legend may cover points or bands
+            ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, frameon=False)
+        fig.tight_layout()
+    except BaseException:
+        plt.close(fig)  # also when drawing fails
+        raise
+    return fig
+
+
 def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: str | None = None) -> Path:
     """Draw plot ``kind`` for one or more manifests into a PNG (atomically).
 
@@ -185,28 +246,9 @@ def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: 
     >>> plot("zingg", [d / "m.csv"], d / "z.png").name
     'z.png'
     """
-    if kind not in KINDS:
-        raise ValueError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
-    if not manifests:
-        raise ValueError("at least one manifest is needed")
-    tables = [(Path(p), read_manifest(p)) for p in manifests]
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from .io import save_figure
 
-    fig, ax = plt.subplots(figsize=(6.0, 4.6) if kind != "zingg" else (5.4, 5.4), dpi=130)
-    try:
-        KINDS[kind](ax, tables)
-        if title:
-            ax.set_title(title)
-        ax.legend(fontsize=7, loc="best")
-        fig.tight_layout()
-        return save_figure(fig, out)
-    finally:
-        plt.close(fig)  # also when drawing fails
+    return save_figure(figure(kind, manifests, title=title), out)
 
 
 def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:

@@ -21,7 +21,8 @@ from typing import Sequence
 
 import numpy as np
 
-__all__ = ["rasterize", "silhouette", "render_image", "shade", "contact_sheet", "view_rotation"]
+__all__ = ["rasterize", "silhouette", "render_image", "shade", "contact_sheet", "contact_sheet_figure", "view_rotation",
+           "scale_bar_length"]
 
 #: a corner whose vertex normal is further than this from its face normal is shaded flat
 CREASE_DEGREES = 50.0
@@ -289,18 +290,65 @@ def render_image(
     return img
 
 
-def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size: int = 400) -> None:
-    """Draw a shaded picture of ``mesh`` on a (2D) matplotlib axis."""
+def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size: int = 400,
+          unit: str | None = None) -> None:
+    """Draw a shaded picture of ``mesh`` on a (2D) matplotlib axis.
+
+    With ``unit`` (the unit of the mesh coordinates, e.g. ``"mm"``) a scale bar
+    is drawn in the lower left corner (:func:`scale_bar_length`).
+    """
     ax.imshow(render_image(mesh, size=size, color=color, elev=elev, azim=azim), interpolation="antialiased")
     ax.set_axis_off()
+    if unit:
+        v = np.asarray(mesh.vertices, dtype=np.float64)
+        radius = float(np.linalg.norm(v - (v.max(0) + v.min(0)) / 2, axis=1).max()) or 1.0
+        per_unit = (size / 2 - 2) / radius  # pixels per mesh unit, as render_image projects
+        length = scale_bar_length(size / per_unit)
+        # in a strip below the picture, so that it never covers the grain
+        x0, y0 = 0.04 * size, 1.07 * size
+        ax.plot([x0, x0 + length * per_unit], [y0, y0], color="black", lw=2.5, solid_capstyle="butt",
+                label="scale bar")
+        ax.text(x0 + length * per_unit + 0.03 * size, y0, f"{length:g} {unit}", ha="left", va="center",
+                fontsize=7)
+        ax.set_xlim(-0.5, size - 0.5)
+        ax.set_ylim(1.12 * size, -0.5)
+
+
+def scale_bar_length(width: float) -> float:
+    """A round scale-bar length (1, 2 or 5 × 10^k) of at most 30 % of a picture ``width`` wide.
+
+    Examples
+    --------
+    >>> scale_bar_length(10.0), scale_bar_length(2.4), scale_bar_length(0.7)
+    (2.0, 0.5, 0.2)
+    """
+    target = 0.3 * float(width)
+    k = np.floor(np.log10(target))
+    for m in (5.0, 2.0, 1.0):
+        if m * 10**k <= target:
+            return float(m * 10**k)
+    return float(10**k)  # pragma: no cover - m = 1 always fits
 
 
 def contact_sheet(
     meshes: Sequence, labels: Sequence[str], out: str | Path, *, columns: int | None = None,
     title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
-    elev: float = 20.0, azim: float = -60.0, color=SAND,
+    elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None,
 ) -> Path:
-    """Write a PNG with one shaded, labelled panel per mesh.
+    """Write a PNG with one shaded, labelled panel per mesh (:func:`contact_sheet_figure`)."""
+    from .io import save_figure
+
+    fig = contact_sheet_figure(meshes, labels, columns=columns, title=title, panel_size=panel_size, dpi=dpi,
+                               elev=elev, azim=azim, color=color, unit=unit)
+    return save_figure(fig, out)
+
+
+def contact_sheet_figure(
+    meshes: Sequence, labels: Sequence[str], *, columns: int | None = None,
+    title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
+    elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None,
+):
+    """A matplotlib Figure with one shaded, labelled panel per mesh.
 
     Parameters
     ----------
@@ -317,13 +365,14 @@ def contact_sheet(
         Panel edge in inches.
     dpi : int
         Output resolution.
+    unit : str, optional
+        Unit of the mesh coordinates (``"mm"`` for files): each panel gets a
+        scale bar.  Without it (grains in model units) there is none.
     """
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-
-    from .io import save_figure
 
     if len(meshes) != len(labels):
         raise ValueError("one label per mesh is needed")
@@ -340,10 +389,16 @@ def contact_sheet(
     fig = plt.figure(figsize=(panel_size * cols, height), dpi=dpi)
     for i, (m, lab) in enumerate(zip(meshes, labels)):
         ax = fig.add_subplot(rows, cols, i + 1)
-        shade(ax, m, color=color, elev=elev, azim=azim, size=px)
+        shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit)
         ax.set_title(lab, fontsize=8, pad=2)
     if title:
+        import textwrap
+
+        title = textwrap.fill(title, max(30, int(13 * panel_size * cols)))
+        title_in = 0.22 * (title.count("\n") + 1) + 0.18
+        height = rows * (panel_size + label_in) + title_in
+        fig.set_size_inches(panel_size * cols, height)
         fig.suptitle(title, fontsize=10, y=1 - 0.08 / height)
     fig.subplots_adjust(left=0.005, right=0.995, bottom=0.005, top=1 - (title_in + label_in) / height,
                         wspace=0.02, hspace=label_in / panel_size)
-    return save_figure(fig, out)
+    return fig

@@ -22,7 +22,7 @@ import numpy as np
 from .distributions import Distribution, GradingCurve
 from .io import atomic_write, save_figure
 
-__all__ = ["summary", "population_report", "achieved_sizes", "SUMMARY", "FIGURE"]
+__all__ = ["summary", "population_report", "population_figure", "achieved_sizes", "SUMMARY", "FIGURE"]
 
 SUMMARY = "manifest.json"
 FIGURE = "population.png"
@@ -60,6 +60,16 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
             labels = [_label(x) for x in vals]
             counts = {_label(c): labels.count(_label(c)) for c in v.args["values"]}
             out["parameters"][name] = {"distribution": "choice", "counts": counts}
+        elif isinstance(v, Distribution) and v.kind == "zingg":
+            ratios = zingg_ratios(vals)
+            out["parameters"][name] = {"distribution": "zingg", **{
+                k: ({"distribution": d.kind, **dict(d.args), "achieved": _stats(ratios[k])}
+                    if isinstance(d, Distribution) else {"fixed": d})
+                for k, d in v.args.items()}}
+        elif isinstance(v, Distribution) and v.kind == "each":
+            out["parameters"][name] = {"distribution": "each", "items": [
+                {"distribution": d.kind, **dict(d.args), "achieved": _stats([x[i] for x in vals])}
+                if isinstance(d, Distribution) else {"fixed": d} for i, d in enumerate(v.args["items"])]}
         elif isinstance(v, Distribution):
             out["parameters"][name] = {"distribution": v.kind, **dict(v.args), "achieved": _stats(vals)}
         else:
@@ -80,6 +90,18 @@ def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
     return out
 
 
+def zingg_ratios(values) -> dict[str, np.ndarray]:
+    """Elongation I/L and flatness S/I of ratios L:I:S (rows' ``aspect`` values).
+
+    Examples
+    --------
+    >>> {k: v.tolist() for k, v in zingg_ratios([(1.0, 0.5, 0.25)]).items()}
+    {'elongation': [0.5], 'flatness': [0.5]}
+    """
+    a = np.array([[float(x) for x in v] for v in values], dtype=np.float64).reshape(-1, 3)
+    return {"elongation": a[:, 1] / a[:, 0], "flatness": a[:, 2] / a[:, 1]}
+
+
 def _label(v: Any) -> str:
     """A choice value as text (lists and tuples as ``a,b,c``)."""
     if isinstance(v, (list, tuple)):
@@ -97,21 +119,34 @@ def _hist(ax, vals, colour) -> None:
     ax.hist(x, bins=np.linspace(lo, hi, bins + 1), color=colour)
 
 
-def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
+def population_figure(recipe, rows, info: Mapping[str, Any]):
+    """The population figure (a matplotlib Figure): grading curve or size histogram, then one panel per
+    drawn parameter and sphericity and convexity.  Every panel has both axes labelled (units where
+    there are any); the last row is centred, so there are no empty panels."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from .methods import get
+    from .params import specs
+
+    units = {s.name: s.unit for s in specs(get(recipe.method).Params)}
     drawn = [n for n, v in recipe.params.items() if isinstance(v, Distribution)]
     panels = ["size"] + drawn + ["sphericity", "convexity"]
-    cols = min(3, len(panels))
+    cols = 2 if len(panels) == 4 else min(3, len(panels))
     nrows = (len(panels) + cols - 1) // cols
-    fig, axes = plt.subplots(nrows, cols, figsize=(4.2 * cols, 3.3 * nrows), squeeze=False)
-    for ax in axes.flat[len(panels):]:
-        ax.set_visible(False)
+    fig = plt.figure(figsize=(4.2 * cols, 3.4 * nrows))
+    grid = fig.add_gridspec(nrows, 2 * cols)
+    axes = []
+    for k in range(len(panels)):
+        r, c = divmod(k, cols)
+        in_row = min(cols, len(panels) - r * cols)
+        start = c * 2 + (cols - in_row)  # centre a short last row
+        axes.append(fig.add_subplot(grid[r, start:start + 2]))
     colour = (0.70, 0.58, 0.40)
-    for ax, name in zip(axes.flat, panels):
+    xlabels = {"sphericity": "Wadell sphericity", "convexity": "convexity V/V_hull"}
+    for ax, name in zip(axes, panels):
         if name == "size" and "grading" in info:
             g = info["grading"]
             ax.semilogx(g["sieves_mm"], g["target_percent_passing"], "k-o", ms=3, label="target")
@@ -126,21 +161,42 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
         elif name == "size":
             _hist(ax, achieved_sizes(rows, recipe.size_definition), colour)
             ax.set_xlabel(f"{recipe.size_definition} size (mm)")
+            ax.set_ylabel("number of grains")
             ax.set_title("size")
         else:
             vals = [r[name] for r in rows]
-            if name in recipe.params and recipe.params[name].kind == "choice":
+            if name in recipe.params and recipe.params[name].kind == "zingg":
+                ratios = zingg_ratios(vals)
+                bins = np.linspace(0.0, 1.0, 41)
+                ax.hist(ratios["elongation"], bins=bins, color=colour, alpha=0.7, label="elongation I/L")
+                ax.hist(ratios["flatness"], bins=bins, color="tab:blue", alpha=0.5, label="flatness S/I")
+                ax.legend(fontsize=7)
+            elif name in recipe.params and recipe.params[name].kind == "each":
+                items = recipe.params[name].args["items"]
+                for i, d in enumerate(items):
+                    if isinstance(d, Distribution):
+                        ax.hist([x[i] for x in vals], bins=30, alpha=0.6, label=f"{name}[{i}]")
+                ax.legend(fontsize=7)
+            elif name in recipe.params and recipe.params[name].kind == "choice":
                 labels = [_label(x) for x in vals]
                 keys = [_label(c) for c in recipe.params[name].args["values"]]
                 ax.bar(range(len(keys)), [labels.count(k) for k in keys], color=colour)
                 ax.set_xticks(range(len(keys)), keys, rotation=20 if len(keys) > 3 else 0)
+                ax.set_xlabel(f"{name} (value drawn)")
             else:
                 _hist(ax, vals, colour)
-            ax.set_title(name)
+                unit = units.get(name, "")
+                ax.set_xlabel(xlabels.get(name, name.replace("_", " ")) + (f" ({unit})" if unit else ""))
+            ax.set_ylabel("number of grains")
+            ax.set_title(name.replace("_", " ") if name in drawn else xlabels.get(name, name))
         ax.tick_params(labelsize=7)
     fig.suptitle(f"{recipe.method} population: {len(rows)} grains, root seed {recipe.seed}", fontsize=10)
     fig.tight_layout()
-    save_figure(fig, path, dpi=90)
+    return fig
+
+
+def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
+    save_figure(population_figure(recipe, rows, info), path, dpi=90)
 
 
 def population_report(recipe, rows: Sequence[Mapping[str, Any]], out: str | Path) -> dict[str, Any]:

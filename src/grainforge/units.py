@@ -23,13 +23,15 @@ from typing import Mapping, Sequence
 __all__ = ["UNITS", "with_unit", "plain", "headers"]
 
 _LENGTHS = ("size", "equivalent_diameter", "L", "I", "S", "L_pca", "I_pca", "S_pca", "radius_of_gyration",
-            "R_g", "primary_size", "chordal_deviation", "deviation_tolerance", "mean_edge",
-            "x", "y", "z", "size_x", "size_y", "size_z", "gap")
+            "R_g", "primary_size", "rounding_radius", "chordal_deviation", "deviation_tolerance", "mean_edge",
+            "retained_wavelength", "x", "y", "z", "size_x", "size_y", "size_z", "gap",
+            # analyse --voxel-size/--voxels-across (Sand-Atlas voxel measures)
+            "atlas_voxel_size", "atlas_equivalent_diameter", "atlas_major", "atlas_middle", "atlas_minor")
 
 #: column -> unit suffix, for every column grainforge writes that has a unit
 UNITS: dict[str, str] = {
     **{c: "mm" for c in _LENGTHS},
-    "volume": "mm3", "surface_area": "mm2", "cavity_volume": "mm3",
+    "volume": "mm3", "surface_area": "mm2", "cavity_volume": "mm3", "atlas_volume": "mm3",
     # model coordinates (before scaling) x scale = millimetres
     "scale": "mm_per_unit",
     # extreme radii of a generated grain relative to its mean radius R0 (FSO) or r0 (CRI)

@@ -25,7 +25,8 @@ from collections import deque
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
-__all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive"]
+__all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive",
+           "close_pool"]
 
 #: seconds between a worker's checks that the process that made its pool is alive
 WATCH_INTERVAL = 0.25
@@ -92,6 +93,7 @@ def die_with_parent() -> None:
     Also used as ``preexec_fn`` of engine subprocesses (Yade), so a killed
     ``grainforge`` leaves no engine running.
     """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the owner decides
     if sys.platform.startswith("linux"):
         try:
             import ctypes
@@ -163,6 +165,7 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
             yield fn(item)
         return
     pool = process_pool(workers, preload)
+    ok = False
     try:
         pending: deque = deque()
         it = iter(items)
@@ -177,8 +180,26 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
             if nxt is not _END:
                 pending.append(pool.submit(fn, nxt))
             yield result
+        ok = True
     finally:
+        close_pool(pool, abort=not ok)
+
+
+def close_pool(pool, abort: bool = False) -> None:
+    """Shut a pool down; with ``abort`` (an error, Ctrl-C, SIGTERM) stop its workers now instead of
+    letting them finish the tasks they hold."""
+    if not abort:
         pool.shutdown(wait=True, cancel_futures=True)
+        return
+    processes = list(getattr(pool, "_processes", {}).values())
+    for p in processes:
+        try:
+            p.terminate()
+        except (OSError, AttributeError):
+            pass
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        p.join(timeout=5)
 
 
 _END = object()

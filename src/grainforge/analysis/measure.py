@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import signed_volume, split_bodies
+from ..solid import signed_volume, solid_problems, split_bodies
 
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
@@ -16,14 +16,17 @@ __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALY
 ID_COLUMNS = ("file", "body", "bodies", "faces", "flags")
 
 
-def ANALYSE_COLUMNS(fourier: bool = True) -> list[str]:  # noqa: N802 (a column list builder)
-    """Every column ``analyse`` writes, in order."""
+def ANALYSE_COLUMNS(fourier: bool = True, atlas: bool = False) -> list[str]:  # noqa: N802 (a column list builder)
+    """Every column ``analyse`` writes, in order (``atlas``: the ``atlas_*`` voxel columns too)."""
+    from .atlas import ATLAS_COLUMNS
     from .descriptors import DESCRIPTOR_COLUMNS
     from .fourier import fd_columns
 
     cols = list(ID_COLUMNS) + list(DESCRIPTOR_COLUMNS)
     if fourier:
         cols += fd_columns() + ["fd_star_shaped"]
+    if atlas:
+        cols += ["atlas_" + c for c in ATLAS_COLUMNS]
     return cols
 
 
@@ -57,12 +60,18 @@ def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
     return bodies
 
 
-def analyse_mesh(vertices, faces, **options) -> dict[str, Any]:
+def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[str, Any]:
     """Describe one body and flag what limits the result.
+
+    ``atlas`` (``{"voxel_size": h}`` or ``{"voxels_across": n}``) adds the
+    Sand-Atlas voxel descriptors (:func:`~grainforge.analysis.atlas.atlas_descriptors`)
+    as ``atlas_*`` columns; they are NaN for a body that is not closed.
 
     Flags (space separated): ``open`` (not closed or not consistently
     oriented: volume-based values are approximate), ``inverted`` (closed
-    but inside out; measured after flipping).
+    but inside out; measured after flipping), ``not-solid`` (closed but
+    failing the solid contract of :func:`grainforge.solid.solid_problems`,
+    the same definition ``grainforge check`` uses).
 
     Returns
     -------
@@ -79,8 +88,17 @@ def analyse_mesh(vertices, faces, **options) -> dict[str, Any]:
     elif signed_volume(v, f) < 0:
         f = f[:, ::-1]
         flags.append("inverted")
+    if "open" not in flags and solid_problems(v, f):
+        flags.append("not-solid")  # fails the solid contract as written (grainforge check says why)
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
     row.update(describe(SimpleNamespace(vertices=v, faces=f), **options))  # describe() reads .vertices and .faces
+    if atlas is not None:
+        from .atlas import ATLAS_COLUMNS, atlas_descriptors
+
+        if "open" in flags:
+            row.update({"atlas_" + c: float("nan") for c in ATLAS_COLUMNS})
+        else:
+            row.update({"atlas_" + k: val for k, val in atlas_descriptors(v, f, **atlas).items()})
     return row
 
 
@@ -124,6 +142,9 @@ def analyse_files(paths, *, workers: int = 1, **options):
     from ..workers import ordered_map
 
     tasks = ((str(p), options) for p in paths)
-    yield from ordered_map(_analyse_task, tasks, workers,
-                           preload=["grainforge.analysis.measure", "grainforge.analysis.descriptors",
-                                    "grainforge.analysis.fractal", "grainforge.analysis.fourier", "trimesh"])
+    yield from ordered_map(_analyse_task, tasks, workers, preload=PRELOAD)
+
+
+#: modules the analysis workers' fork server imports once
+PRELOAD = ["grainforge.analysis.measure", "grainforge.analysis.descriptors", "grainforge.analysis.fractal",
+           "grainforge.analysis.fourier", "trimesh"]

@@ -18,7 +18,9 @@ TABLE = (
     ("convexity", "conv", "{:.3f}"), ("L", "L_mm", "{:.4g}"), ("I", "I_mm", "{:.4g}"), ("S", "S_mm", "{:.4g}"),
     ("krumbein_sphericity", "krumb", "{:.3f}"), ("roughness", "rough", "{:.4f}"),
     ("fractal_dimension", "D_s", "{:.2f}"), ("fd_LI_2", "FD2", "{:.3f}"), ("fd_LI_3", "FD3", "{:.3f}"),
-    ("fd_LI_8", "FD8", "{:.4f}"),
+    ("fd_LI_8", "FD8", "{:.4f}"), ("atlas_voxels_across", "vox/d", "{:.3g}"),
+    ("atlas_sphericity", "a_sph", "{:.3f}"), ("atlas_convexity", "a_conv", "{:.3f}"),
+    ("atlas_flatness", "a_flat", "{:.3f}"), ("atlas_elongation", "a_elong", "{:.3f}"),
 )
 
 
@@ -58,10 +60,16 @@ def _json_value(v):
               help="Fourier descriptors D2…D16 of the three principal projections.")
 @click.option("--primary-volume", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
+@click.option("--voxel-size", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
+                   "(mm, the file's units); see docs/validation.md.")
+@click.option("--voxels-across", type=click.FloatRange(min=2), default=None,
+              help="As --voxel-size, with the voxel size set to d_eq / this number.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
 @click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
               help="Processes measuring files; rows do not depend on it.")
-def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite, workers):
+def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, overwrite,
+            workers):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.
 
     Volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S (minimum-volume
@@ -79,6 +87,13 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite
 
     if primary_volume is not None and not math.isfinite(primary_volume):
         raise click.BadParameter(f"must be a finite volume, got {primary_volume}", param_hint="'--primary-volume'")
+    if voxel_size is not None and voxels_across is not None:
+        raise click.UsageError("give --voxel-size or --voxels-across, not both")
+    atlas = None
+    if voxel_size is not None:
+        atlas = {"voxel_size": voxel_size}
+    elif voxels_across is not None:
+        atlas = {"voxels_across": voxels_across}
     if csv_out is not None:
         output_file(csv_out, overwrite=overwrite, option="--csv", suffixes=(".csv",))
     files = mesh_inputs(files)
@@ -86,9 +101,9 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, overwrite
     rows = []
     bar = progress_bar(total=len(files), desc="analyse", unit="file")
     for file_rows in bar(analyse_files(files, workers=n, fractal=fractal, fourier=fourier,
-                                       primary_volume=primary_volume)):
+                                       primary_volume=primary_volume, atlas=atlas)):
         rows += file_rows
-    columns = ANALYSE_COLUMNS(fourier)
+    columns = ANALYSE_COLUMNS(fourier, atlas=atlas is not None)
     if csv_out is not None:
         write_csv(csv_out, rows, columns, units=True)
         click.echo(f"wrote {len(rows)} row(s) to {csv_out}", err=True)

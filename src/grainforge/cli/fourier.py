@@ -39,7 +39,7 @@ def descriptor_rows(path: str, *, min_area: int, threshold, foreground: str, ray
     return rows, scan
 
 
-#: positions and sizes state their unit: pixels (y upwards, x to the right, from the top-left corner) and,
+#: positions and sizes state their unit: pixels (x to the right from the left edge, y = −row: up) and,
 #: with --pixel-size, millimetres (PHYSICAL); descriptors are dimensionless.
 COLUMNS = ["image", "grain", "x_px", "y_px", "area_px2", "r0_px", "star_shaped", "elongation", "irregularity",
            "roughness"] + [f"D{n}" for n in range(2, N_MAX + 1)]

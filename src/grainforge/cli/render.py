@@ -30,5 +30,6 @@ def render(files, out, columns, title, overwrite):
     meshes = [read_mesh(f) for f in files]  # ValueError -> one line, exit 2
     if columns is not None:
         columns = min(columns, len(meshes))  # more columns than panels would only be empty space
-    contact_sheet(meshes, [f.name for f in files], out, columns=columns, title=title)
+    # mesh files are in mm (what grainforge writes; STL carries no unit): each panel gets a scale bar
+    contact_sheet(meshes, [f.name for f in files], out, columns=columns, title=title, unit="mm")
     click.echo(f"wrote {out}", err=True)

@@ -62,9 +62,9 @@ def parse_param_values(method: str, pairs, preset: str | None):
               help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
 @count_option("Number of generated grains; grain i uses seed S + i.")
 @seed_option
-@click.option("--size", default=None, type=click.FloatRange(min=0, min_open=True),
+@click.option("--size", default=None, type=click.FloatRange(min=1e-3, max=1e4),
               show_default="10 for generated grains; files keep their size",
-              help="Grain size in mm (see --size-definition).")
+              help="Grain size in mm, 0.001 (1 µm) to 10000 (10 m) (see --size-definition).")
 @size_definition_option
 @click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
               show_default="two printer resolutions", help="Minimum distance between grains in mm.")
@@ -99,7 +99,7 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
         if inputs:
             raise click.UsageError("give either INPUTS or --method, not both")
         p, given = parse_param_values(method, params, preset)
-        source = GeneratorSource(method, p, tuple(range(seed, seed + count)), 10.0 if size is None else size,
+        source = GeneratorSource(method, p, range(seed, seed + count), 10.0 if size is None else size,
                                  size_definition)
         match = "subdivisions" not in given
     else:
@@ -118,10 +118,27 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
         raise bad_parameter(exc) from None
     except FileExistsError as exc:
         raise click.UsageError(str(exc)) from None
-    if result.resolution is not None:
-        click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): "
-                   f"{result.resolution.describe()}", err=True)
+    warnings = []
+    res = result.resolution
+    if res is not None:
+        click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): {res.describe()}", err=True)
+        if not res.converged:
+            cause = (f"the triangle budget (--max-triangles {max_triangles} for {len(result.rows)} grains: "
+                     f"{max(20, max_triangles // len(result.rows))} faces per grain)" if res.limited_by == "budget"
+                     else "--max-subdivisions")
+            need = len(result.rows) * 20 * 4 ** (res.subdivisions + 1)
+            warnings.append(
+                f"{cause} caps the mesh at level {res.subdivisions}: its chordal deviation "
+                f"{res.deviation * 1000:.1f} µm exceeds the printer tolerance {res.tolerance * 1000:.1f} µm, so the "
+                f"printed surface will show the mesh facets"
+                + (f"; --max-triangles {need} allows the next level" if res.limited_by == "budget" else ""))
+        shape = res.shape_warning(source.size)
+        if shape is not None:
+            warnings.append(shape + ("" if res.limited_by == "budget" else
+                                     "  Print larger or on a finer printer, or give --param subdivisions=N."))
     layers = ", ".join(str(n) for n in result.layers)
     click.echo(f"wrote {len(result.rows)} grains on {result.plates} plate(s) ({layers} layer(s)), "
                f"gap {result.gap * 1000:g} µm: {', '.join(map(str, result.files))}; "
-               f"positions in {result.csv}; previews {', '.join(p.name for p in result.previews)}", err=True)
+               f"positions in {result.csv}; previews {', '.join(map(str, result.previews))}", err=True)
+    for w in warnings:  # last, so that they are seen
+        click.echo(f"WARNING: {w}", err=True)

@@ -11,7 +11,7 @@ __all__ = ["MassProperties", "mass_properties", "ENGINES", "SUPPORTED"]
 #: engine name -> shapes its deck writer supports
 SUPPORTED = {
     "yade": ("clump",),
-    "liggghts": (),
-    "lammps": (),
+    "liggghts": ("clump",),
+    "lammps": ("clump",),
 }
 ENGINES = tuple(SUPPORTED)

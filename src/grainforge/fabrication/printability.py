@@ -80,7 +80,6 @@ class CheckResult:
             "problems": "; ".join(self.failures + self.warnings),
         }
 
-
     def _thickness(self, name: str, value: float) -> dict[str, Any]:
         """``{name}_mm`` as a number and ``{name}_status``: ``measured``; ``thicker`` (nothing thinner
         than the measuring horizon, which ``{name}_mm`` then holds: a lower bound); ``not measured``
@@ -92,12 +91,10 @@ class CheckResult:
         return {f"{name}_mm": "", f"{name}_status": "not measured"}
 
 
-def self_intersections(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-9) -> int:
-    """Number of pairs of triangles without a shared vertex whose interiors cross.
+def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
+    """Number of self-intersecting triangle pairs of the mesh as written (float32, vertices merged).
 
-    Candidate pairs come from a k-d tree on triangle centroids (bounding-sphere
-    overlap); each pair is tested exactly by intersecting the three edges of
-    each triangle with the other (vectorised Möller–Trumbore).
+    The same test as the solid contract (:func:`grainforge.solid.self_intersections`).
 
     Examples
     --------
@@ -110,28 +107,10 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray, tol: float = 1e-
     >>> self_intersections(both.vertices, both.faces) > 0
     True
     """
-    from scipy.spatial import cKDTree
+    from ..solid import as_written
+    from ..solid import self_intersections as count
 
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    tri = v[f]
-    cen = tri.mean(axis=1)
-    rad = np.linalg.norm(tri - cen[:, None], axis=2).max(axis=1)
-    pairs = cKDTree(cen).query_pairs(2 * rad.max() + tol, output_type="ndarray")
-    if len(pairs) == 0:
-        return 0
-    i, j = pairs[:, 0], pairs[:, 1]
-    near = np.linalg.norm(cen[i] - cen[j], axis=1) <= rad[i] + rad[j] + tol
-    share = (f[i][:, :, None] == f[j][:, None, :]).any(axis=(1, 2))
-    keep = near & ~share
-    i, j = i[keep], j[keep]
-    hit = np.zeros(len(i), dtype=bool)
-    for a, b in ((i, j), (j, i)):
-        for k in range(3):
-            p0 = tri[a, k]
-            p1 = tri[a, (k + 1) % 3]
-            hit |= _segment_hits_triangle(p0, p1, tri[b])
-    return int(hit.sum())
+    return count(*as_written(vertices, faces))
 
 
 def _moller_trumbore(p0, d, tri, det_min):
@@ -189,13 +168,13 @@ def local_thickness(mesh, max_rays: int = MAX_RAYS, max_distance: float | None =
     """
     from trimesh.ray.ray_triangle import RayMeshIntersector
 
-    nf = len(mesh.faces)
-    if nf <= max_rays:
-        idx = np.arange(nf)
+    area = np.asarray(mesh.area_faces)
+    usable = np.flatnonzero(area > 0)  # zero-area faces have no normal (and rng.choice needs p > 0)
+    if len(usable) <= max_rays:
+        idx = usable
     else:
         rng = np.random.default_rng(0)
-        p = mesh.area_faces / mesh.area_faces.sum()
-        idx = np.sort(rng.choice(nf, size=max_rays, replace=False, p=p))
+        idx = np.sort(rng.choice(usable, size=max_rays, replace=False, p=area[usable] / area[usable].sum()))
     normals = np.asarray(mesh.face_normals)[idx]
     scale = float(np.ptp(mesh.vertices, axis=0).max())
     eps = 1e-7 * scale
@@ -256,13 +235,13 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "pa
     printer = get_printer(printer)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    problems = solid_problems(v, f)
+    problems = solid_problems(v, f, intersections=False)  # the solid contract; intersections counted below
     vol = signed_volume(v, f) if len(f) else 0.0
     d_eq = float(np.cbrt(6 * abs(vol) / np.pi))
     res = CheckResult(name, len(f), d_eq, problems, 0, np.inf, 0.0, np.inf)
     if problems:
         res.failures.append("not a valid solid: " + "; ".join(problems))
-    if len(f) == 0:
+    if len(f) == 0 or not np.isfinite(v).all():
         return res
     res.self_intersections = self_intersections(v, f)
     if res.self_intersections:

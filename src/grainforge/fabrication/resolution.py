@@ -33,6 +33,9 @@ __all__ = ["Resolution", "chordal_deviation", "match_subdivisions", "supports_ma
 
 #: finest level resolution matching will choose (level 6: 40,962 vertices).
 MAX_MATCHED = 6
+#: a chosen mesh whose mean edge exceeds this fraction of the printed size no longer carries the
+#: grain's shape (levels 0-2); :meth:`Resolution.shape_warning` says so.
+COARSE_EDGE_FRACTION = 0.1
 
 
 @dataclass(frozen=True)
@@ -67,6 +70,39 @@ class Resolution:
     faces: int
     converged: bool
     limited_by: str = "tolerance"
+
+    def retained_wavelength(self) -> float:
+        """The shortest surface wavelength the chosen mesh can carry, mm: two mean edges (Nyquist)."""
+        return 2.0 * self.edge
+
+    def shape_warning(self, size: float) -> str | None:
+        """A warning when the chosen mesh is too coarse to keep the grain's shape, else None.
+
+        That is when the mean edge exceeds :data:`COARSE_EDGE_FRACTION` of the
+        printed ``size`` (levels 0–2 of a geodesic sphere: 12 to 162 surface
+        points); the message states the detail that is kept.
+
+        Examples
+        --------
+        >>> r = Resolution(0, 0.0886, 0.2, 0.311, 20, True)
+        >>> print(r.shape_warning(0.5))  # doctest: +NORMALIZE_WHITESPACE
+        resolution matching keeps only 12 surface points (level 0, 20 faces, mean edge 311 µm = 62% of
+        the 0.5 mm size): the printed grain is a polyhedron with the grain's radii at its vertices;
+        surface detail finer than 0.622 mm (two mean edges) is removed, because the printer cannot
+        reproduce it at this size.
+        >>> Resolution(4, 0.01, 0.016, 0.1, 5120, True).shape_warning(2.0) is None
+        True
+        """
+        if self.edge <= COARSE_EDGE_FRACTION * size:
+            return None
+        points = 10 * 4**self.subdivisions + 2
+        why = ("the triangle budget allows no finer mesh" if self.limited_by == "budget"
+               else "the printer cannot reproduce it at this size")
+        return (f"resolution matching keeps only {points} surface points (level {self.subdivisions}, "
+                f"{self.faces} faces, mean edge {self.edge * 1000:.0f} µm = {100 * self.edge / size:.0f}% of the "
+                f"{size:g} mm size): the printed grain is a polyhedron with the grain's radii at its vertices; "
+                f"surface detail finer than {self.retained_wavelength():.3g} mm (two mean edges) is removed, "
+                f"because {why}.")
 
     def describe(self) -> str:
         cmp = "≤" if self.converged else f"> (level capped by the {self.limited_by})"

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..params import ParameterError
+
 __all__ = ["SIZE_DEFINITIONS", "check_size", "scale_factor", "to_size"]
 
 #: definition -> description
@@ -24,6 +26,12 @@ def _current_size(grain, definition: str) -> float:
     return I if definition == "sieve" else L
 
 
+#: physical sizes a grain may be given, in mm: 1 µm to 10 m (beyond them float32 files lose the shape or
+#: the slicer's units overflow).
+SIZE_RANGE_MM = (1e-3, 1e4)
+MIN_SIZE_MM, MAX_SIZE_MM = SIZE_RANGE_MM
+
+
 def check_size(size: float, definition: str = "equivalent") -> float:
     """Validate a size in mm and its definition; return the size as a float.
 
@@ -38,8 +46,10 @@ def check_size(size: float, definition: str = "equivalent") -> float:
         value = float(size)
     except (TypeError, ValueError):
         value = float("nan")
-    if not np.isfinite(value) or value <= 0:
-        raise ValueError(f"size must be a positive number of millimetres, got {size!r}")
+    if not np.isfinite(value) or not SIZE_RANGE_MM[0] <= value <= SIZE_RANGE_MM[1]:
+        raise ParameterError(
+            "size", f"must be between {SIZE_RANGE_MM[0]:g} and {SIZE_RANGE_MM[1]:g} mm (1 µm to 10 m), got {size!r}"
+        )
     return value
 
 

@@ -4,7 +4,14 @@ Each generator lives in its own module exposing
 
 - ``NAME`` : str, the method name used by the CLI, manifests and recipes;
 - ``Params`` : a frozen dataclass declared with :func:`grainforge.params.param`;
-- ``build(params, rng) -> (vertices, faces, info)`` : the pure geometry.
+- ``build(params, rng) -> (vertices, faces, info)`` : the pure geometry;
+
+and optionally ``INFO_COLUMNS`` (the ``info`` keys a manifest records) and
+``physical_info(info, scale) -> info`` (info values in model units converted
+to mm for the manifest, e.g. DPA's R_g in primary sizes).  Method modules
+never import click or :mod:`grainforge.cli`: ``grainforge generate NAME`` is
+derived from ``Params`` by :mod:`grainforge.cli.generate`, and options that
+are not plain parameters go in a hook ``grainforge/cli/generate_<name>.py``.
 
 :func:`generate` turns a (method, params, seed) triple into a checked,
 centred :class:`~grainforge.grain.Grain`.
@@ -19,7 +26,8 @@ from typing import Any
 import numpy as np
 
 from ..grain import Grain
-from ..solid import require_solid, volume_centroid
+from ..params import ParameterError
+from ..solid import index_problems, require_solid, volume_centroid
 
 __all__ = ["METHODS", "get", "generate", "resolve_rng"]
 
@@ -69,8 +77,11 @@ def resolve_rng(rng: Any) -> tuple[np.random.Generator, int | None]:
 def generate(name: str, params: Any, rng: Any = None) -> Grain:
     """Generate one grain of method ``name`` with ``params``.
 
-    The mesh is checked (closed, oriented, one body, positive volume) and
-    translated so that its volume centroid is at the origin.
+    The mesh is checked by the solid contract as a reader will see it
+    (:func:`grainforge.solid.solid_problems`: float32, vertices merged by
+    position, closed 2-manifold, no near-zero-area face, one body, positive
+    volume, no self-intersection) and translated so that its volume centroid
+    is at the origin.
 
     Raises
     ------
@@ -82,6 +93,20 @@ def generate(name: str, params: Any, rng: Any = None) -> Grain:
         raise TypeError(f"params must be {module.Params.__name__}, got {type(params).__name__}")
     generator, seed = resolve_rng(rng)
     vertices, faces, info = module.build(params, generator)
-    require_solid(vertices, faces, getattr(module, "VALIDITY_PARAMETER", "parameters"))
+    if hasattr(module, "validity_parameter"):
+        parameter = module.validity_parameter(params)
+    else:
+        parameter = getattr(module, "VALIDITY_PARAMETER", "parameters")
+    # star-shaped generators (radius function on a sphere about the origin) may prove no self-intersection
+    star = np.zeros(3) if getattr(module, "STAR_SHAPED", False) else None
+    legacy = getattr(module, "index_contract_only", None)
+    if legacy is not None and legacy(params):
+        problems = index_problems(vertices, faces)
+        if problems:
+            raise ParameterError(parameter, f"gives a mesh that is not a valid solid ({'; '.join(problems)})")
+    else:
+        if star is None:
+            vertices = vertices - volume_centroid(vertices, faces)  # checked where it will be written
+        require_solid(vertices, faces, parameter, star_centre=star)
     vertices = vertices - volume_centroid(vertices, faces)
     return Grain(vertices=vertices, faces=faces, method=module.NAME, params=params, seed=seed, info=info)

@@ -23,11 +23,12 @@ icosphere like FSO and CRI grains:
    or corner sphere, and r is the largest exit distance over the edge
    cylinders and corner spheres of the shrunk core (evaluated only for the
    features whose planes pass close enough to the ray's exit point).
-3. **Dents** (concavities): ``dents`` smooth radial dips at random directions,
-   r ← r · (1 − depth · (1 − Π_j (1 − g_j))), g_j = exp((u·d_j − 1) / w²),
-   w = ``dent_width``: one dent is a Gaussian dip of the given depth, and
-   overlapping dents merge rather than deepen, so r never falls below
-   (1 − depth) times the core's radius.
+3. **Dents** (concavities): ``dents`` dips at uniformly random directions
+   d_j with flat bottoms and steep walls,
+   r ← r · (1 − depth · (1 − Π_j (1 − g_j))), g_j = exp(−2 x_j²),
+   x_j = (1 − u·d_j) / w² ≈ θ²/(2w²), w = ``dent_width``: g is 1 at the
+   centre and e^(−1/2) at θ = w; overlapping dents merge rather than deepen,
+   so r never falls below (1 − depth) times the core's radius.
 4. **Roughness**: the FSO overlay (:func:`grainforge.methods.fso.overlay`;
    ``fractal_dimension``, ``length_ratio``, ``surface`` — by default its
    seamless form, the double sum of Eqs. 2–3 on the 3D unit vector) with RMS
@@ -56,7 +57,7 @@ VALIDITY_PARAMETER = "roughness"
 #: generation outputs recorded in manifests
 INFO_COLUMNS = ("rounding_radius", "flat_fraction", "min_radius", "max_radius")
 #: largest ratio of the longest to the shortest aspect axis
-MAX_ASPECT_RATIO = 10.0
+MAX_ASPECT_RATIO = 20.0
 #: every direction lies within this angle of some facet normal (bounds corner sharpness)
 MAX_COVER_ANGLE = np.deg2rad(70.0)
 #: no two facet normals closer than this fraction of the mean spacing sqrt(8π/(√3 k))
@@ -75,7 +76,7 @@ class Params:
     facets: int = param(20, "number of facets of the polyhedral core", kind="int", low=6, high=200)
     aspect: tuple[float, float, float] = param(
         (1.3, 1.1, 1.0), "semi-axes L:I:S (along x, y, z) of the ellipsoid the facets are tangent to "
-        f"(ratios only; L/S at most {MAX_ASPECT_RATIO:g})", kind="floats", low=0.1, high=10.0,
+        f"(ratios only; L/S at most {MAX_ASPECT_RATIO:g})", kind="floats", low=0.0, low_open=True, high=100.0,
     )
     rounding: float = param(
         0.1, "edge and corner radius relative to the smallest semi-axis (≈ Wadell roundness; 0 = sharp)",
@@ -83,7 +84,7 @@ class Params:
     )
     dents: int = param(0, "number of smooth concavities", kind="int", low=0, high=12)
     dent_depth: float = param(0.25, "relative depth of each dent (radius × (1 − depth) at its centre)",
-                              low=0.0, high=0.5)
+                              low=0.0, high=0.7)
     dent_width: float = param(0.45, "angular width w of each dent (Gaussian in angle)", unit="rad",
                               low=0.1, high=1.2)
     roughness: float = param(0.0, "RMS of the FSO overlay, relative to the radius (0 = smooth facets)",
@@ -349,11 +350,13 @@ def radius(unit: np.ndarray, c: Core) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _dent_factor(unit: np.ndarray, p: Params, rng: np.random.Generator) -> np.ndarray:
+    """Dents at uniformly random directions: flat-bottomed dips with steep walls (super-Gaussian in angle)."""
     if p.dents == 0:
         return np.ones(len(unit))
     centres = rng.normal(size=(p.dents, 3))
     centres /= np.linalg.norm(centres, axis=1, keepdims=True)
-    g = np.exp((unit @ centres.T - 1.0) / (p.dent_width**2))
+    x = (1.0 - unit @ centres.T) / (p.dent_width**2)  # ≈ θ² / (2w²)
+    g = np.exp(-2.0 * x * x)  # = exp(−θ⁴ / (2w⁴)): 1 at the centre, e^(−1/2) at θ = w
     # overlapping dents merge ("or"), they do not deepen: the factor stays in [1 − depth, 1]
     return 1.0 - p.dent_depth * (1.0 - np.prod(1.0 - g, axis=1))
 
@@ -388,6 +391,17 @@ def build(p: Params, rng: np.random.Generator):
     return unit * r[:, None], np.array(faces), info
 
 
+def physical_info(info: dict, scale: float) -> dict:
+    """``info`` of a grain scaled by ``scale`` (mm per model unit): ``rounding_radius`` in mm.
+
+    Examples
+    --------
+    >>> physical_info({"rounding_radius": 0.1, "flat_fraction": 0.5}, 5.0)
+    {'rounding_radius': 0.5, 'flat_fraction': 0.5}
+    """
+    return {**info, "rounding_radius": float(info["rounding_radius"]) * float(scale)}
+
+
 def angular(
     *,
     facets: int = 20,
@@ -416,7 +430,7 @@ def angular(
     dents : int
         Number of smooth concavities, 0–12.
     dent_depth, dent_width : float
-        Relative depth (0–0.5) and angular width in radians (0.1–1.2) of each dent.
+        Relative depth (0–0.7) and angular width in radians (0.1–1.2) of each dent.
     roughness : float
         RMS of the FSO overlay relative to the radius, 0–0.15 (0 = smooth facets).
     fractal_dimension, length_ratio : float

@@ -44,6 +44,15 @@ __all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Constru
 
 NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
+#: vertices are unit directions times a positive radius (times a positive axis scaling): star-shaped
+STAR_SHAPED = True
+
+
+def validity_parameter(p: "Params") -> str:
+    """The option a user changes when the surface is not a valid solid: what shaped the contours."""
+    if p.aspect is not None:
+        return "aspect"
+    return {"fractal": "fractal_amplitude", "image": "images", "given": "sections"}.get(p.contour, "descriptors")
 #: contour sources: Fourier descriptors, fractal profiles, image files, a
 #: measured spectrum table (``grainforge fourier`` CSV), or
 #: :class:`~grainforge.contours.Contour` objects given from Python.
@@ -53,6 +62,8 @@ DEFAULT_PRESET = "rough-angular"
 #: fine grid on which the contours are interpolated (periodic, linear).
 GRID = 2048
 PLANES = ("xy", "xz", "yz")
+#: ways of making the three contours share one L:I:S (see :func:`construct`)
+CONSISTENCY = ("spectral", "stretch")
 #: icosphere level on which the extents are measured for a requested aspect
 ASPECT_REFERENCE_SUBDIVISIONS = 5
 MEASURED = (2, 3, 8)
@@ -112,6 +123,16 @@ class Params:
         kind="floats", low=0.0, low_open=True, high=100.0, shown_default="as the contours give it",
     )
     morph_exponent: float = param(2.0, "exponent p of the morphing weight sin^p(theta)", low=0.5, high=8.0)
+    ridge_twist: float = param(
+        30.0, "largest angle by which each roughness mode (n >= 3) of a contour is turned away from the "
+        "direction the interpolation sweeps it in, as it leaves its plane (0 = the 2016 sweep, parallel ridges)", unit="deg",
+        low=0.0, high=60.0,
+    )
+    consistency: str = param(
+        "spectral", "how the three contours are given one L:I:S: spectral = set each contour's mode 2 and mean "
+        "radius, keep every other mode (the descriptors survive); stretch = stretch each contour linearly "
+        "(the 2016 reconstruction; lowers D8 by ~15 %)", kind="str", choices=CONSISTENCY,
+    )
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
     #: three :class:`~grainforge.contours.Contour` (xy, xz, yz) given from Python
     sections: tuple[Contour, Contour, Contour] | None = field(default=None, compare=False, repr=False)
@@ -262,6 +283,8 @@ class Construction:
     morph_exponent: float
     dims: tuple[float, float, float] = (2.0, 2.0, 2.0)
     axis_scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    #: (3, n) tan of the turn of each mode of C1, C2, C3 (None: no twist), see :meth:`radius`
+    twist: np.ndarray | None = None
 
     def section(self, plane: str) -> Contour:
         """The principal section ``"xy"``, ``"xz"`` or ``"yz"`` as a :class:`Contour` (scale kept)."""
@@ -283,11 +306,54 @@ class Construction:
         r3 = _lookup(c3, g.i3, g.w3)
         q = GRID // 4
         mid = g.cos2 * np.where(g.y_pos, c1[q], c1[3 * q]) + g.sin2 * np.where(g.z_pos, c2[q], c2[3 * q])
+        if self.twist is not None:
+            r1, r2, r3, mid = self._twisted(np.asarray(unit, dtype=np.float64), g, r1, r2, r3, mid)
         blend = g.cos2 * r1 + g.sin2 * r2
         s = r3 / mid
         p = self.morph_exponent
         weight = g.sin_theta**2 if p == 2.0 else g.sin_theta**p
         return blend * (1.0 + (s - 1.0) * weight)
+
+
+    def _twisted(self, unit, g: _Geometry, r1, r2, r3, mid):  # noqa: D417
+        """C1, C2, C3 (and r̃(π/2, ψ)) with their roughness modes turned as they leave their planes.
+
+        In the revolution, C1's mode n, 2|c_n| cos(nθ + φ_n), is swept around
+        x into rings (θ fixed): a family of parallel ridges.  Here its phase
+        also advances with the angle δ out of the xy plane,
+        nθ + φ_n + n·t_n·sin θ cos²θ·δ (t_n = tan of a turn drawn uniformly in
+        ±``ridge_twist``), so each mode's ridges run at their own angle to the
+        rings.  sin θ keeps the x tips single-valued; cos²θ keeps C1 and C2
+        unturned where they meet the yz plane, so that the morphing (which
+        divides by their values there) still gives C3 as the yz section.  At
+        δ = 0 nothing changes: the xy section is still C1.  Likewise C2 with
+        the angle out of the xz plane.  C3, which the morphing sweeps along
+        θ, is turned the same way with the angle out of the yz plane,
+        π/2 − θ, times sin²2ψ, which keeps it unturned on the xy and xz
+        planes (where the morphing factor must stay 1).  Modes 0–2 (the form)
+        are not turned.
+        """
+        ux, uy, uz = unit[:, 0], unit[:, 1], unit[:, 2]
+        st = g.sin_theta
+        sin2psi2 = 4.0 * g.cos2 * g.sin2  # sin²(2ψ)
+        elev = np.arcsin(np.clip(ux, -1.0, 1.0))  # π/2 − θ
+        off1, off2 = np.arctan2(uz, np.abs(uy)), np.arctan2(uy, np.abs(uz))
+
+        def delta(k, ang, off):
+            spec = np.fft.rfft(self.sections[k]) / GRID
+            n = np.arange(3, len(self.twist[k]))
+            amp = 2.0 * np.abs(spec[n])
+            keep = amp > 1e-12 * abs(spec[0])
+            n, amp, phase, t = n[keep], amp[keep], np.angle(spec[n[keep]]), self.twist[k][n[keep]]
+            base = np.outer(ang, n) + phase
+            return (np.cos(base + np.outer(off, n * t)) - np.cos(base)) @ amp
+
+        step = 2 * np.pi / GRID
+        fade = st * (1.0 - st * st)  # sin θ cos² θ
+        r1 = r1 + delta(0, (g.i1 + g.w1) * step, fade * off1)
+        r2 = r2 + delta(1, (g.i2 + g.w2) * step, fade * off2)
+        r3 = r3 + delta(2, (g.i3 + g.w3) * step, elev * sin2psi2)
+        return r1, r2, r3, mid
 
 
 def mesh_modes(subdivisions: int) -> int:
@@ -436,13 +502,16 @@ def input_contours(p: Params, rng: np.random.Generator) -> tuple[Contour, Contou
         D = extend_spectrum(table.D[table.draw(rng)], p.decay[1], p.modes)
         return tuple(Contour.from_spectrum(D, rng=rng) for _ in range(3))
     if p.contour == "fractal":
-        return tuple(
-            Contour.from_fractal(
-                fractal_dimension=p.fractal_dimension, length_ratio=p.length_ratio,
-                amplitude=p.fractal_amplitude, modes=p.modes, rng=rng,
+        try:
+            return tuple(
+                Contour.from_fractal(
+                    fractal_dimension=p.fractal_dimension, length_ratio=p.length_ratio,
+                    amplitude=p.fractal_amplitude, modes=p.modes, rng=rng,
+                )
+                for _ in range(3)
             )
-            for _ in range(3)
-        )
+        except ParameterError as exc:  # Contour names its own argument `amplitude`
+            raise ParameterError("fractal_amplitude" if exc.name == "amplitude" else exc.name, exc.reason) from None
     sets = (p.descriptors, p.descriptors_xz or p.descriptors, p.descriptors_yz or p.descriptors)
     out = []
     for name, d in zip(("descriptors", "descriptors_xz", "descriptors_yz"), sets):
@@ -451,6 +520,131 @@ def input_contours(p: Params, rng: np.random.Generator) -> tuple[Contour, Contou
         except ParameterError as exc:
             raise ParameterError(name, exc.reason) from None
     return tuple(out)
+
+
+def _stretch_consistency(fines, p: Params):
+    """2016 reconstruction: each aligned contour stretched linearly to least-squares X:Y:Z diameters."""
+    h, q = GRID // 2, GRID // 4
+    # diameters through the origin along each contour's first and second axis
+    ext = np.array([[f[0] + f[h], f[q] + f[3 * q]] for f in fines])
+    if p.aspect is not None:
+        logs = np.log(np.asarray(p.aspect, dtype=np.float64))
+    else:
+        # least-squares X:Y:Z consistent with the three contours' own axis-diameter ratios
+        a, b, c = np.log(ext[:, 0] / ext[:, 1])
+        logs = np.array([a + b, c - a, -b - c]) / 3.0
+    dims = 2.0 * np.exp(logs - logs.mean())  # geometric mean 2: equal-volume diameter about 2
+    X, Y, Z = dims
+    stretched = [_stretch(f, u / e[0], v / e[1]) for f, e, (u, v) in zip(fines, ext, ((X, Y), (X, Z), (Y, Z)))]
+    return stretched, dims
+
+
+#: the planes' (first, second) axes among x, y, z
+_PLANE_AXES = ((0, 1), (0, 2), (1, 2))
+
+
+#: passes of :func:`_own_centre`
+CENTRE_PASSES = 4
+
+
+def _own_centre(fine: np.ndarray, spec: np.ndarray) -> np.ndarray:
+    """The contour re-described about its own area centroid, with its descriptors kept.
+
+    Descriptors are measured about a contour's area centroid (ALGORITHMS.md
+    §2b), which is not the origin a Fourier contour is synthesised about; the
+    shift alone lowers D3 and D8 by ~10 % for D2 = 0.3.  So the radii are
+    re-cast from the area centroid (``contours.polygon_contour``), every mode
+    n ≥ 2 gets back its amplitude |c_n| (keeping the new phase; mode 2 is
+    kept real, on the first axis) and c_0 its value; mode 1 is left free.
+    A few passes make the area centroid the origin to ~1e-4 r0.  A contour
+    that stops being star-shaped about its centroid (extreme descriptors) is
+    left as synthesised.
+    """
+    from ..contours import polygon_contour
+
+    target = np.abs(spec)
+    n = len(spec)
+    for _ in range(CENTRE_PASSES):
+        try:
+            c = polygon_contour(np.column_stack([fine * _COS, fine * _SIN]), n_angles=GRID)
+        except ValueError:
+            break
+        if not c.star_shaped:
+            break
+        cur = np.fft.rfft(c.radii * c.scale) / GRID
+        mag = np.abs(cur[2:n])
+        cur[2:n] = np.where(mag > 0, cur[2:n] * (target[2:] / np.where(mag > 0, mag, 1.0)), target[2:])
+        cur[2] = spec[2]
+        cur[0] = spec[0]
+        cur[n:] = 0.0
+        new = np.fft.irfft(cur * GRID, GRID)
+        if new.min() <= 0:
+            break
+        fine = new
+    return fine
+
+
+def _spectral_consistency(inputs, p: Params):
+    """Contours that share one L:I:S while keeping every Fourier mode but 0 and 2.
+
+    Each contour's spectrum c_n (radii over their mean) is turned so that its
+    mode 2 is real and positive (elongation along the first axis; a rotation,
+    so every |c_n| is kept).  The three elongations give log-ratios
+    ℓ = ln((1 + D2)/(1 − D2)) of x/y, x/z, y/z; their least-squares
+    consistent values (ℓ_xz = ℓ_xy + ℓ_yz) are scaled by the factor t that
+    keeps the mean D2 of the three contours (least squares alone shrinks it
+    by ~10 %), unless an ``aspect`` fixes them.  Each contour then gets mode 2
+    = tanh(ℓ'/2) and the mean radius that gives it the diameters of the
+    consistent X:Y:Z along its two axes (to first order in the other modes).
+    Modes ≥ 3 — D3, D8 and the roughness — are the contour's own: nothing
+    is stretched, so no angle is remapped (a linear stretch frequency-modulates
+    mode n by ~n·ℓ/4 rad, which took ~15 % off D8).
+    """
+    n_keep = p.modes
+    specs = []
+    for c in inputs:
+        r = np.asarray(c.radii, dtype=np.float64)
+        spec = np.fft.rfft(r) / len(r)
+        spec = spec[: min(n_keep, (len(r) - 1) // 2) + 1] / spec[0].real
+        if len(spec) > 2 and abs(spec[2]) > 0:
+            phi0 = -np.angle(spec[2]) / 2.0  # r'(θ) = r(θ + φ0) has c'_n = c_n e^{i n φ0}
+            spec = spec * np.exp(1j * np.arange(len(spec)) * phi0)
+        specs.append(spec)
+    d2 = np.array([2.0 * abs(sp[2]) if len(sp) > 2 else 0.0 for sp in specs])
+    if p.aspect is not None:
+        logs = np.log(np.asarray(p.aspect, dtype=np.float64))
+    else:
+        a, b, c = np.log((1.0 + d2) / (1.0 - d2))
+        logs = np.array([a + b, c - a, -b - c]) / 3.0
+        pair = np.array([logs[i] - logs[j] for i, j in _PLANE_AXES])
+        target = d2.mean()
+        if target > 0 and np.abs(pair).max() > 0:
+            lo, hi = 0.0, 1.0
+            while np.mean(np.abs(np.tanh(hi * pair / 2.0))) < target and hi < 64:
+                hi *= 2.0
+            for _ in range(60):
+                mid = 0.5 * (lo + hi)
+                lo, hi = (mid, hi) if np.mean(np.abs(np.tanh(mid * pair / 2.0))) < target else (lo, mid)
+            logs = logs * 0.5 * (lo + hi)
+    logs = logs - logs.mean()
+    dims = 2.0 * np.exp(logs)  # diameters, geometric mean 2
+    out = []
+    for sp, (i, j) in zip(specs, _PLANE_AXES):
+        e = np.tanh((logs[i] - logs[j]) / 2.0)
+        r0 = (dims[i] + dims[j]) / 4.0
+        full = np.zeros(GRID // 2 + 1, dtype=np.complex128)
+        full[: len(sp)] = sp
+        full[0] = 1.0
+        full[1] = 0.0 if len(sp) < 2 else sp[1]
+        if len(sp) > 2:
+            full[2] = e / 2.0
+        fine = np.fft.irfft(full * (GRID * r0), GRID)
+        if fine.min() > 0:
+            fine = _own_centre(fine, full * r0)
+        out.append(fine)
+    if min(float(f.min()) for f in out) <= 0:
+        raise ParameterError(VALIDITY_PARAMETER, "give a contour with non-positive radii after the L:I:S step")
+    return out, dims
 
 
 def construct(p: Params, rng: Any = None) -> Construction:
@@ -464,22 +658,17 @@ def construct(p: Params, rng: Any = None) -> Construction:
     """
     rng = np.random.default_rng(rng)
     inputs = input_contours(p, rng)
-    fines = [_aligned(_fine(c.radii, p.modes)) for c in inputs]
-    h, q = GRID // 2, GRID // 4
-    # diameters through the origin along each contour's first and second axis
-    ext = np.array([[f[0] + f[h], f[q] + f[3 * q]] for f in fines])
-    if p.aspect is not None:
-        logs = np.log(np.asarray(p.aspect, dtype=np.float64))
+    if p.consistency == "spectral":
+        prepared, dims = _spectral_consistency(inputs, p)
     else:
-        # least-squares X:Y:Z consistent with the three contours' own axis-diameter ratios
-        a, b, c = np.log(ext[:, 0] / ext[:, 1])
-        logs = np.array([a + b, c - a, -b - c]) / 3.0
-    dims = 2.0 * np.exp(logs - logs.mean())  # geometric mean 2: equal-volume diameter about 2
-    X, Y, Z = dims
-    stretched = [_stretch(f, u / e[0], v / e[1]) for f, e, (u, v) in zip(fines, ext, ((X, Y), (X, Z), (Y, Z)))]
+        prepared, dims = _stretch_consistency([_aligned(_fine(c.radii, p.modes)) for c in inputs], p)
     keep = min(p.modes, mesh_modes(p.subdivisions))
-    sections, factors = _correct(_best_orientation(list(_band_limit(np.stack(stretched), keep))))
-    con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims))
+    sections, factors = _correct(_best_orientation(list(_band_limit(np.stack(prepared), keep))))
+    twist = None
+    if p.ridge_twist > 0:
+        twist = np.tan(np.deg2rad(p.ridge_twist) * rng.uniform(-1.0, 1.0, size=(3, keep + 1)))
+    con = Construction(tuple(inputs), sections, factors, p.morph_exponent, tuple(float(d) for d in dims),
+                       twist=twist)
     if p.aspect is not None:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
         ext = np.ptp(con.points(unit, geom), axis=0)
@@ -496,7 +685,7 @@ def build(p: Params, rng: np.random.Generator):
     unit, faces, geom = _sphere(p.subdivisions)
     R = con.radius(unit, geom)
     if not np.isfinite(R).all() or R.min() <= 0:
-        raise ParameterError(VALIDITY_PARAMETER, "give a surface with non-positive radii")
+        raise ParameterError(validity_parameter(p), "gives a surface with non-positive radii")
     vertices = unit * R[:, None]
     if con.axis_scale != (1.0, 1.0, 1.0):
         vertices *= np.asarray(con.axis_scale)
@@ -535,6 +724,8 @@ def cri(
     contours: Sequence[Contour] | None = None,
     aspect: Sequence[float] | None = None,
     morph_exponent: float = 2.0,
+    ridge_twist: float = 30.0,
+    consistency: str = "spectral",
     subdivisions: int = 5,
     rng=None,
 ):
@@ -569,6 +760,16 @@ def cri(
         Target ratio of the principal dimensions (L ≥ I ≥ S).
     morph_exponent : float
         p in the morphing weight sin^p θ (default 2).
+    ridge_twist : float
+        Largest turn (degrees, 0–60, default 30) of each roughness mode of a
+        contour away from the direction the interpolation sweeps it in, as it
+        leaves its plane; 0 gives the 2016 reconstruction's parallel ridges.
+        The principal sections are unaffected.
+    consistency : {"spectral", "stretch"}
+        How the contours are given one L:I:S: ``spectral`` (default) sets
+        each contour's mode 2 and mean radius and keeps every other mode;
+        ``stretch`` stretches each contour linearly (the earlier
+        reconstruction, which lowers D8 by about 15 %).
     subdivisions : int
         Icosphere level 0–8 (default 5: 10,242 vertices).
     rng : None, int or numpy.random.Generator
@@ -613,7 +814,7 @@ def cri(
         decay=tuple(decay), modes=modes, fractal_dimension=fractal_dimension, length_ratio=length_ratio,
         fractal_amplitude=fractal_amplitude, images=images,
         spectrum=None if spectrum is None else str(spectrum), aspect=None if aspect is None else tuple(aspect),
-        morph_exponent=morph_exponent, subdivisions=subdivisions,
+        morph_exponent=morph_exponent, ridge_twist=ridge_twist, consistency=consistency, subdivisions=subdivisions,
         sections=None if contours is None else tuple(contours),
     )
     return generate(NAME, p, rng)

@@ -41,8 +41,10 @@ __all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "d
 
 NAME = "fso"
 VALIDITY_PARAMETER = "amplitude"
+#: vertices are unit directions times a positive radius: the solid contract's star certificate applies
+STAR_SHAPED = True
 #: generation outputs recorded in manifests (K actually used, extreme radii / R0)
-INFO_COLUMNS = ("K", "min_radius", "max_radius")
+INFO_COLUMNS = ("K", "min_radius", "max_radius", "axis_scale")
 DEFAULT_AMPLITUDE = 0.1
 #: icosphere level on which the ``amplitude`` RMS is measured (642 points),
 #: so that K, and therefore the grain, does not depend on the mesh resolution.
@@ -105,8 +107,10 @@ class Params:
             raise ParameterError("amplitude", "cannot be combined with k: give one of them")
         if self.amplitude is None and self.k is None:
             object.__setattr__(self, "amplitude", DEFAULT_AMPLITUDE)
-        turns = self.gamma**self.frequencies * (np.pi / 2) / self.length_ratio
-        if turns > MAX_TURNS:
+        # in logs: gamma**frequencies overflows a float for large gamma and n_max (10**400)
+        log_turns = self.frequencies * np.log(self.gamma) + np.log(np.pi / 2) - np.log(self.length_ratio)
+        turns = float(np.exp(min(log_turns, 700.0)))
+        if log_turns > np.log(MAX_TURNS):
             raise ParameterError(
                 "frequencies",
                 f"too large for gamma={self.gamma} and length_ratio={self.length_ratio}: "
@@ -503,11 +507,57 @@ def build(p: Params, rng: np.random.Generator):
             f"{value} is too large for this grain: the smallest radius would be {rmin:.3f}·R0 "
             f"(must stay above {MIN_RADIUS}·R0 for a star-shaped solid); lower it",
         )
-    if len(set(p.aspect)) > 1:
-        R = R * ellipsoid_radius(unit, p.aspect)
+    faces = np.array(faces)
     vertices = unit * R[:, None]
-    info = {"K": float(K), "min_radius": float(R.min()), "max_radius": float(R.max())}
-    return vertices, np.array(faces), info
+    scale = (1.0, 1.0, 1.0)
+    if len(set(p.aspect)) > 1:
+        vertices = unit * (R * ellipsoid_radius(unit, p.aspect))[:, None]
+        scale = aspect_scale(vertices, faces, p.aspect)
+        vertices = vertices * np.asarray(scale)
+    radii = np.linalg.norm(vertices, axis=1)
+    info = {"K": float(K), "min_radius": float(radii.min()), "max_radius": float(radii.max()),
+            "axis_scale": tuple(round(float(x), 9) for x in scale)}
+    return vertices, faces, info
+
+
+#: passes of :func:`aspect_scale`'s fixed-point iteration
+ASPECT_PASSES = 3
+
+
+def _axis_sizes(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """Per axis x, y, z: √(extent · inertia diameter), the inertia diameter being 2√(5·C_ii) (C the
+    solid's second central moment per unit volume; exact, 2a, for an aligned ellipsoid)."""
+    a, b, c = vertices[faces[:, 0]], vertices[faces[:, 1]], vertices[faces[:, 2]]
+    vol6 = np.einsum("ij,ij->i", a, np.cross(b, c))
+    V = vol6.sum() / 6.0
+    s = a + b + c
+    centroid = (vol6[:, None] * s).sum(0) / (24.0 * V)
+    second = (vol6[:, None] * (a * a + b * b + c * c + s * s)).sum(0) / (120.0 * V)
+    var = second - centroid**2
+    return np.sqrt(np.ptp(vertices, axis=0) * 2.0 * np.sqrt(5.0 * var))
+
+
+def aspect_scale(vertices: np.ndarray, faces: np.ndarray, aspect) -> tuple[float, float, float]:
+    """Axis factors (geometric mean 1) that give the grain the requested x:y:z proportions.
+
+    Relief changes the proportions a little, and differently for the two usual
+    measures: the extremes (a box) gain more on the blunt sides of the
+    ellipsoid than at its sharp tips, the bulk (the inertia ellipsoid) hardly
+    changes.  So the size along each axis is taken as the geometric mean of
+    the extent and of the inertia diameter (:func:`_axis_sizes`), and x, y, z
+    are scaled until those sizes are in the ratio A:B:C (fixed-point
+    iteration, ``ASPECT_PASSES`` passes; the factors stay within a few % of 1
+    at the default amplitude).  Both measures then track the request (the box
+    slightly above, the inertia ellipsoid slightly below; docs/validation.md).
+    """
+    want = np.asarray(aspect, dtype=np.float64)
+    want = want / np.exp(np.log(want).mean())
+    k = np.ones(3)
+    for _ in range(ASPECT_PASSES):
+        m = _axis_sizes(vertices * k, faces)
+        k = k * want / (m / np.exp(np.log(m).mean()))
+        k /= np.exp(np.log(k).mean())
+    return tuple(float(x) for x in k)
 
 
 def fso(

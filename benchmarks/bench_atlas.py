@@ -1,0 +1,73 @@
+"""Timing of the Sand-Atlas voxel descriptors (issue 14): target ≤ 25 ms per grain per core at 60 voxels across.
+
+One process, BLAS single-threaded (as in a worker).  Prints best and median
+wall clock and CPU time (time.process_time, which also counts Embree's
+threads) per stage and in total, for a CRI grain (20,480 faces) and a
+sphere, at 30, 60 and 69 voxels across.  Usage:
+``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_atlas.py [--repeat N]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+import os
+import time
+
+import numpy as np
+
+
+def timed(fn, repeat):
+    wall, cpu = [], []
+    for _ in range(repeat):
+        t, c = time.perf_counter(), time.process_time()
+        fn()
+        wall.append(time.perf_counter() - t)
+        cpu.append(time.process_time() - c)
+    return min(wall) * 1e3, float(np.median(wall)) * 1e3, min(cpu) * 1e3, float(np.median(cpu)) * 1e3
+
+
+def main():
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--repeat", type=int, default=7)
+    args = ap.parse_args()
+    import trimesh
+    from scipy import ndimage
+    from skimage.measure import marching_cubes
+
+    import grainforge
+    from grainforge.analysis.atlas import _hull_count, atlas_descriptors, random_rotation, voxelise
+    from grainforge.methods import get
+    from grainforge.solid import signed_volume
+
+    print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
+          f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")
+    cri = grainforge.generate("cri", get("cri").Params(descriptors=(0, 0.09, 0.006), aspect=(1, 0.76, 0.58)), 1)
+    ball = trimesh.creation.icosphere(subdivisions=5)
+    print("| grain | voxels across | total best / median ms (CPU best / median) | voxelise | hull count "
+          "| Gaussian + marching cubes |")
+    print("|---|---|---|---|---|---|")
+    for label, m in (("CRI (20,480 faces)", cri), ("sphere (20,480 faces)", ball)):
+        v = np.asarray(m.vertices) @ random_rotation(3).T
+        f = np.asarray(m.faces)
+        d_eq = (6 * abs(signed_volume(v, f)) / math.pi) ** (1 / 3)
+        for n in (30, 60, 69):
+            atlas_descriptors(v, f, voxels_across=n)  # warm-up
+            tot = timed(lambda: atlas_descriptors(v, f, voxels_across=n), args.repeat)
+            vox = timed(lambda: voxelise(v, f, d_eq / n), args.repeat)
+            mask, _ = voxelise(v, f, d_eq / n)
+            hull = timed(lambda: _hull_count(mask), args.repeat)
+            sub = np.pad(mask.astype(np.float32), 4)
+
+            def sph():
+                s = ndimage.gaussian_filter(sub, 0.75, mode="constant", truncate=4.0)
+                marching_cubes(s, 0.5)
+
+            mc = timed(sph, args.repeat)
+            print(f"| {label} | {n} | {tot[0]:.1f} / {tot[1]:.1f} ({tot[2]:.1f} / {tot[3]:.1f}) "
+                  f"| {vox[0]:.1f} ({vox[2]:.1f}) | {hull[0]:.1f} ({hull[2]:.1f}) | {mc[0]:.1f} ({mc[2]:.1f}) |",
+                  flush=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,69 @@
+"""``grainforge fit SAND.csv --out DIR``: a recipe whose grains match a real sand's measured shapes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import click
+
+from .paths import OutPath, output_dir
+
+from .progress import progress_bar
+
+
+@click.command()
+@click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
+@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
+              help="Folder for recipe.toml, fit.csv and fit.png.")
+@click.option("--voxel-size", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Voxel size of the sand's scan (µm); required unless the CSV has a 'Voxel Size (µm)' column.")
+@click.option("--method", default="cri", show_default=True,
+              help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best.")
+@click.option("--count", type=click.IntRange(min=500), default=500, show_default=True,
+              help="Grains of the verification population and of the recipe (>= 500).")
+@click.option("--pilot", type=click.IntRange(min=20), default=200, show_default=True,
+              help="Grains of each search round: the first grains of the final population (same seeds every round).")
+@click.option("--rounds", type=click.IntRange(min=1, max=20), default=6, show_default=True,
+              help="Search rounds after the finite-difference Jacobian.")
+@click.option("--final-rounds", type=click.IntRange(min=1, max=10), default=3, show_default=True,
+              help="Measurements of the whole population, each corrected from the last; the best is kept.")
+@click.option("--seed", type=click.IntRange(min=0), default=2024, show_default=True, help="Root seed of the recipe.")
+@click.option("--workers", type=click.IntRange(min=1), default=None, help="Worker processes [default: CPU count].")
+@click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv and fit.png in --out.")
+def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed, workers, overwrite):
+    """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
+
+    Every generated grain is voxelised at the sand's voxel size relative to
+    its size and measured as the Atlas measures (true sphericity, convexity,
+    flatness, elongation); the search stops when a population of --count
+    grains has, for each, KS <= 0.1 and mean within 0.01 of the sand's.
+    Writes DIR/recipe.toml (runs with `grainforge batch` as is), DIR/fit.csv
+    and DIR/fit.png.  See docs/fit.md.
+    """
+    import os
+    import sys
+
+    from ..fit import FITS, OUTPUTS, fit_sand, read_sand, write_outputs
+
+    if method != "auto" and method not in FITS:
+        raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
+                                 param_hint="--method")
+    output_dir(out, overwrite=overwrite, files=[out / n for n in OUTPUTS])  # before any work
+    s = read_sand(sand, voxel_size)
+    state = {"desc": "fit"}
+
+    def progress(it, total):
+        return progress_bar(total=total, desc=state["desc"])(it)
+
+    click.echo(f"{s.name}: {s.count} grains, voxel {s.voxel_size:g} µm, d_eq {s.equivalent_diameter.mean():.0f} "
+               f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
+               "across)", err=True)
+    result = fit_sand(s, method, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds, seed=seed,
+                      workers=workers or os.cpu_count() or 1, progress=progress,
+                      log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
+    paths = write_outputs(s, result, out)
+    verdict = "PASSES" if result.stats["pass"] else "does NOT pass"
+    click.echo(f"{result.method}: {verdict} (KS <= 0.1, |mean diff| <= 0.01 for all four) in "
+               f"{result.seconds:.0f} s ({result.grains_measured} grains measured, {result.cpu_seconds:.0f} s of "
+               f"worker CPU); wrote {', '.join(str(p) for p in paths)}", err=True)
+    sys.stdout.flush()

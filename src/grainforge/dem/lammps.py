@@ -1,0 +1,236 @@
+"""LAMMPS deck: molecule templates as rigid/small bodies with the grain's exact mass properties.
+
+``write_deck(templates, out)`` writes, run from inside ``out`` with
+``lmp -in in.run``:
+
+- ``<grain>.xyzr`` and ``<grain>.clump.vtk`` per grain (as for the other engines);
+- ``<grain>.mol``: a LAMMPS molecule file (Coords, Types, Diameters, Masses;
+  ``com`` 0 0 0 = the mesh centroid, ``mass`` and ``inertia`` of the mesh);
+- ``in.insert``: one ``create_atoms ... single x y z mol <grain> ... rotate θ axis``
+  per population member (lattice above the box, seeded random orientation);
+- ``rigid.infile``: the rigid/small ``infile`` — per body the mesh's mass,
+  the centre of mass where it was placed, and the inertia tensor rotated into
+  the box frame (LAMMPS otherwise sums the overlapping member spheres);
+- ``in.run``: the example pour — ``pair_style gran/hooke/history`` with the
+  rigid bodies' masses, walls, gravity applied through ``fix rigid/small ...
+  gravity`` on the bodies' mesh masses (the ``fix gravity`` group is empty),
+  a settle loop on the rigid kinetic energy, body read-back files
+  (``bodies-initial.txt``, ``bodies-final.txt``, ``atoms-initial.txt``,
+  ``settle.txt``) and text dumps in ``post/`` converted to VTK by
+  ``dump2vtk.py`` (run by ``in.run`` through ``shell``).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .deck import clump_vtk_text, fmt, json_text, template_record, write_files, xyzr_text
+
+__all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
+
+DUMP2VTK = r'''"""Convert LAMMPS text dumps post/grains.*.dump (id mol x y z vx vy vz radius) to legacy VTK."""
+import glob
+import os
+
+for path in sorted(glob.glob(os.path.join("post", "grains.*.dump"))):
+    lines = open(path).read().splitlines()
+    start = next(i for i, l in enumerate(lines) if l.startswith("ITEM: ATOMS")) + 1
+    rows = [l.split() for l in lines[start:] if l.strip()]
+    n = len(rows)
+    out = ["# vtk DataFile Version 3.0", "grainforge LAMMPS " + os.path.basename(path), "ASCII",
+           "DATASET POLYDATA", "POINTS %d double" % n]
+    out += [" ".join(r[2:5]) for r in rows]
+    out += ["VERTICES %d %d" % (n, 2 * n)] + ["1 %d" % i for i in range(n)]
+    out += ["POINT_DATA %d" % n, "SCALARS radius double 1", "LOOKUP_TABLE default"] + [r[8] for r in rows]
+    out += ["SCALARS mol int 1", "LOOKUP_TABLE default"] + [r[1] for r in rows]
+    out += ["VECTORS velocity double"] + [" ".join(r[5:8]) for r in rows]
+    with open(path[:-5] + ".vtk", "w") as fh:
+        fh.write("\n".join(out) + "\n")
+'''
+
+
+def pour_settings(**kw) -> dict:
+    """Default settings of the example pour (SI), updated with ``kw``."""
+    s = {"seed": 0, "kn_weight_overlap": 0.005, "restitution": 0.3, "friction": 0.5, "dt_fraction": 0.02,
+         "check_every": 1000, "max_checks": 100, "ke_ratio": 1e-4, "dump_every": 5000}
+    unknown = set(kw) - set(s)
+    if unknown:
+        raise ValueError(f"unknown pour settings: {', '.join(sorted(unknown))}")
+    s.update(kw)
+    return s
+
+
+def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
+    """Right-handed rotation by ``theta`` radians about ``axis`` (Rodrigues).
+
+    Examples
+    --------
+    >>> np.round(rotation_matrix(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
+    [0.0, 1.0, 0.0]
+    """
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
+
+
+def molecule_text(t) -> str:
+    """A LAMMPS molecule file of the clump (com at the origin, mesh mass and inertia)."""
+    c, r = t.clump.centres, t.clump.radii
+    I = t.inertia
+    lines = [f"# grainforge: {t.name} ({t.source or 'mesh'}), SI units, centroid at the origin", "",
+             f"{len(r)} atoms", f"{fmt(t.mass)} mass", "0.0 0.0 0.0 com",
+             " ".join(fmt(x) for x in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])) + " inertia",
+             "", "Coords", ""]
+    lines += [f"{i + 1} " + " ".join(fmt(x) for x in p) for i, p in enumerate(c)]
+    lines += ["", "Types", ""] + [f"{i + 1} 1" for i in range(len(r))]
+    lines += ["", "Diameters", ""] + [f"{i + 1} {fmt(2 * x)}" for i, x in enumerate(r)]
+    member = t.density * 4.0 / 3.0 * np.pi * r**3  # per-atom masses: overridden by the infile for the body
+    lines += ["", "Masses", ""] + [f"{i + 1} {fmt(m)}" for i, m in enumerate(member)]
+    return "\n".join(lines) + "\n"
+
+
+def mol_id(name: str) -> str:
+    """A LAMMPS molecule-template ID for a grain name (alphanumerics and underscores only)."""
+    return "g_" + "".join(c if c.isalnum() else "_" for c in name)
+
+
+def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
+    """``{relative path: text}`` of a LAMMPS deck (nothing written)."""
+    s = settings or pour_settings()
+    files: dict[str, str] = {}
+    for t in templates:
+        if t.shape != "clump" or t.clump is None:
+            raise ValueError(f"the LAMMPS deck writes rigid clumps; {t.name} has shape {t.shape!r}")
+        head = (f"grainforge clump of {t.source or t.name}: x y z r (m), centroid at the origin\n"
+                f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
+        files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=head)
+        files[f"{t.name}.clump.vtk"] = clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")
+        files[f"{t.name}.mol"] = molecule_text(t)
+
+    population = [k for k, t in enumerate(templates) for _ in range(t.count)]
+    rng = np.random.default_rng(s["seed"])
+    order = rng.permutation(len(population))
+    population = [population[i] for i in order]
+    n = len(population)
+    cell = 2.2 * max(t.bounding_radius for t in templates)
+    side = max(1, math.ceil(math.sqrt(n / 6.0)))
+    width = side * cell
+    layers = math.ceil(n / (side * side))
+    mmin = min(t.mass for t in templates)
+    mean_d = sum(templates[k].d_eq for k in population) / n
+    total_mass = sum(templates[k].mass for k in population)
+    # Hooke stiffness: a grain's weight compresses a contact by kn_weight_overlap · d_eq
+    kn = max(t.mass for t in templates) * 9.81 / (s["kn_weight_overlap"] * mean_d)
+    m_eff = 0.5 * mmin
+    omega = math.sqrt(kn / m_eff)
+    dt = s["dt_fraction"] * 2 * math.pi / omega
+    lne = math.log(s["restitution"])
+    zeta = -lne / math.sqrt(math.pi**2 + lne**2)
+    gamman = 2 * zeta * omega
+    ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
+
+    ins = ["# grainforge: one rigid grain per line (molecule IDs 1..N in this order)"]
+    infile = ["# grainforge rigid/small infile: ID mass xcm ycm zcm ixx iyy izz ixy ixz iyz vxcm vycm vzcm lx ly lz"
+              " ixcm iycm izcm (SI, box frame)", str(n)]
+    placements = []
+    for slot, k in enumerate(population):
+        t = templates[k]
+        i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
+        pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        theta = float(rng.uniform(0, 360))
+        R = rotation_matrix(axis, math.radians(theta))
+        # create_atoms puts the molecule's geometric centre (mean of the atom coordinates) at the
+        # point and rotates about it: aim it so that the centroid (file origin) lands on pos
+        point = pos + R @ t.clump.centres.mean(axis=0)
+        ins.append(f"create_atoms 0 single {fmt(point[0])} {fmt(point[1])} {fmt(point[2])} mol {mol_id(t.name)} "
+                   f"{1000003 + slot} rotate {fmt(theta)} {fmt(axis[0])} {fmt(axis[1])} {fmt(axis[2])} units box")
+        placements.append({"mol": slot + 1, "name": t.name, "xcm": pos.tolist(), "axis": axis.tolist(),
+                           "theta_deg": theta})
+        I = R @ t.inertia @ R.T
+        infile.append(" ".join([str(slot + 1), fmt(t.mass), *(fmt(x) for x in pos),
+                                *(fmt(x) for x in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])),
+                                *["0"] * 9]))
+    files["in.insert"] = "\n".join(ins) + "\n"
+    files["rigid.infile"] = "\n".join(infile) + "\n"
+    mols = "\n".join(f"molecule {mol_id(t.name)} {t.name}.mol" for t in templates)
+    top = (layers + 2) * cell
+    walls = "hooke/history {kn} NULL {g} NULL {mu} 1".format(kn=fmt(kn), g=fmt(gamman), mu=fmt(s["friction"]))
+    run = f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
+# Units: SI (m, kg, s). Grains are rigid/small bodies with the mesh's exact mass, centre and inertia.
+units si
+atom_style sphere
+atom_modify map array
+dimension 3
+boundary f f f
+newton off
+comm_modify vel yes
+region domain block {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
+create_box 1 domain
+fix molprop all property/atom mol ghost yes
+{mols}
+include in.insert
+
+pair_style gran/hooke/history {fmt(kn)} NULL {fmt(gamman)} NULL {fmt(s["friction"])} 1
+pair_coeff * *
+neighbor {fmt(0.2 * cell)} bin
+neigh_modify delay 0 exclude molecule/intra all
+timestep {fmt(dt)}
+
+group nothing empty
+fix grav nothing gravity 9.81 vector 0 0 -1
+fix rb all rigid/small molecule infile rigid.infile gravity grav
+fix floor all wall/gran {walls} zplane 0.0 NULL
+fix wallx all wall/gran {walls} xplane 0.0 {fmt(width)}
+fix wally all wall/gran {walls} yplane 0.0 {fmt(width)}
+
+compute kr all ke/rigid rb
+compute er all erotate/rigid rb
+variable ke equal c_kr+c_er
+variable kethr equal {fmt(ke_threshold)}
+compute body all rigid/local rb mol mass x y z inertiax inertiay inertiaz vx vy vz
+thermo_style custom step atoms c_kr c_er
+thermo {s["check_every"]}
+
+dump b0 all local 1 bodies-initial.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8]
+dump_modify b0 format float %.17g
+dump a0 all custom 1 atoms-initial.txt id mol x y z radius
+dump_modify a0 format float %.17g
+run 0
+undump b0
+undump a0
+
+shell mkdir post
+dump vtk all custom {s["dump_every"]} post/grains.*.dump id mol x y z vx vy vz radius
+variable i loop {s["max_checks"]}
+label settle
+run {s["check_every"]}
+if "${{ke}} < ${{kethr}}" then "jump SELF settled"
+next i
+jump SELF settle
+label settled
+print "ke ${{ke}} threshold ${{kethr}}" file settle.txt
+dump b1 all local 1 bodies-final.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8] c_body[9] c_body[10] c_body[11]
+dump_modify b1 format float %.17g
+run 0
+shell python3 dump2vtk.py
+"""
+    files["in.run"] = run
+    files["dump2vtk.py"] = DUMP2VTK
+    deck = {"units": "SI (m, kg, s)", "grains": [template_record(t) for t in templates],
+            "placements": placements, "box": [width, width],
+            "ke_threshold": ke_threshold, "dt": dt, "kn": kn, "scene": s}
+    files["grains.json"] = json_text(deck)
+    return files
+
+
+def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = None,
+               overwrite: bool = False) -> list[Path]:
+    """Write a LAMMPS deck for ``templates`` into ``out`` (see the module text)."""
+    return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)

@@ -1,0 +1,164 @@
+"""grainforge fit: reading Atlas CSVs, the fit's plumbing, and recovering a synthetic sand's known aspects."""
+
+from __future__ import annotations
+
+import csv
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from grainforge.cli.main import cli
+from grainforge.fit import COLUMNS, DESCRIPTORS, FITS, compare, read_sand, recipe_text
+from grainforge.population import parse_recipe
+
+HEADER = ["Particle ID", "Volume (µm³)", "Equivalent Diameter (µm)", "Major Axis Length (µm)",
+          "Middle Axis Length (µm)", "Minor Axis Length (µm)", "True Sphericity (-)", "Convexity (-)",
+          "Flatness (-)", "Elongation (-)", "Compactness (-)"]
+
+
+def _write_sand(path, rows):
+    """An Atlas-format CSV from dicts with d_eq (µm) and the four descriptors."""
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(HEADER)
+        for i, r in enumerate(rows, start=1):
+            d = r["equivalent_diameter"]
+            w.writerow([i, math.pi / 6 * d**3, d, 1.2 * d, d, 0.8 * d, r["sphericity"], r["convexity"],
+                        r["flatness"], r["elongation"], 0.1])
+    return path
+
+
+def _fake_rows(n=30, seed=0):
+    rng = np.random.default_rng(seed)
+    return [{"equivalent_diameter": float(rng.uniform(300, 500)), "sphericity": float(rng.uniform(0.8, 0.95)),
+             "convexity": float(rng.uniform(0.9, 0.99)), "flatness": float(rng.uniform(0.6, 0.9)),
+             "elongation": float(rng.uniform(0.6, 0.9))} for _ in range(n)]
+
+
+OTTAWA = Path(__file__).resolve().parents[1] / "examples" / "sand-atlas" / "ottawa-7.3um.csv"
+
+
+def test_read_sand_reads_the_shipped_ottawa_file():
+    s = read_sand(OTTAWA, 7.3)
+    assert s.count == 3367
+    assert s.values["sphericity"].mean() == pytest.approx(0.885, abs=0.001)
+    assert s.values["flatness"].mean() == pytest.approx(0.768, abs=0.001)
+    assert (s.equivalent_diameter / s.voxel_size).mean() == pytest.approx(503 / 7.3, rel=0.01)
+
+
+@pytest.mark.parametrize("content, words", [
+    ("", "empty file"),
+    ("a,b,c\n1,2,3\n", "missing column(s)"),
+    (",".join(HEADER) + "\n", "no grains"),
+    (",".join(HEADER) + "\n1,2,300,4,5,6,0.9,0.9,abc,0.8,0.1\n", "line 2, column 'Flatness (-)': not a number"),
+    (",".join(HEADER) + "\n1,2,300,4,5,6,0.9,0.9,1.7,0.8,0.1\n", "out of range"),
+    ("file,method,seed,volume,sphericity\nfso-0000.stl,fso,1,2.0,0.9\n", "not a Sand Atlas CSV"),
+])
+def test_bad_sand_files_give_one_line_and_exit_2(runner, tmp_path, content, words):
+    p = tmp_path / "sand.csv"
+    p.write_text(content, encoding="utf-8")
+    r = runner.invoke(cli, ["fit", str(p), "--voxel-size", "7", "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2, r.output
+    assert words in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
+    assert not (tmp_path / "o").exists()
+
+
+def test_voxel_size_is_required_unless_a_column_gives_it(runner, tmp_path):
+    p = _write_sand(tmp_path / "s.csv", _fake_rows(5))
+    r = runner.invoke(cli, ["fit", str(p), "--out", str(tmp_path / "o")])
+    assert r.exit_code == 2 and "--voxel-size" in r.stderr
+    text = p.read_text(encoding="utf-8").splitlines()
+    text = [text[0] + ",Voxel Size (μm)"] + [t + ",5.0" for t in text[1:]]  # Greek mu is accepted too
+    p.write_text("\n".join(text) + "\n", encoding="utf-8")
+    assert read_sand(p).voxel_size == 5.0
+    r = runner.invoke(cli, ["fit", str(p), "--out", str(tmp_path / "o"), "--method", "nope"])
+    assert r.exit_code == 2 and "--method" in r.stderr
+
+
+def test_recipe_text_is_a_valid_batch_recipe_with_the_sand_grading(tmp_path):
+    s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
+    spec = FITS["cri"]
+    params = spec.params({k.name: k.start for k in spec.knobs})
+    params["aspect"] = {"distribution": "zingg", "elongation": 0.8,
+                        "flatness": {"distribution": "uniform", "low": 0.6, "high": 0.9}}
+    r = parse_recipe(recipe_text("cri", params, s, count=500, seed=1, header="a\nb"))
+    assert r.count == 500 and r.size_definition == "equivalent" and r.size.basis == "count"
+    assert r.size.sieves_mm[0] == pytest.approx(s.equivalent_diameter.min() / 1000, rel=1e-5)
+    assert r.size.sieves_mm[-1] == pytest.approx(s.equivalent_diameter.max() / 1000, rel=1e-5)
+    assert r.params["descriptors"].kind == "each" and r.params["aspect"].kind == "zingg"
+
+
+def test_compare_passes_identical_samples_and_fails_shifted_ones():
+    rng = np.random.default_rng(1)
+    a = rng.uniform(0.6, 0.9, size=(400, 4))
+    assert compare(a, a.copy())["pass"] and compare(a, a.copy())["score"] == 0
+    b = a.copy()
+    b[:, 1] += 0.02
+    st = compare(a, b)
+    assert not st["pass"] and st["per"]["convexity"]["mean_diff"] == pytest.approx(0.02)
+    assert st["per"]["sphericity"]["pass"] and set(st["corr"]) >= {"flatness-elongation"}
+
+
+def _synthetic_sand(path, n, voxel_um, seed=11):
+    """A 'sand' of CRI rough ellipsoids with known Zingg ratios, measured the Atlas way into an Atlas CSV.
+
+    The aspect means differ from Ottawa's and from the fit's start values on purpose.
+    """
+    from grainforge.fit import measure_grain
+
+    text = f"""method = "cri"
+count = {n}
+seed = {seed}
+[params]
+descriptors = [0.0, 0.06, 0.008]
+subdivisions = 4
+aspect = {{ distribution = "zingg", elongation = {{ distribution = "truncnormal", mean = 0.65, sd = 0.08, low = 0.4, high = 0.95 }}, flatness = {{ distribution = "truncnormal", mean = 0.75, sd = 0.08, low = 0.4, high = 0.95 }} }}
+[size]
+distribution = "lognormal"
+median_mm = 0.4
+sigma = 0.1
+"""
+    rows = []
+    for i in range(n):
+        d = measure_grain(text, i, voxel_um)
+        rows.append(dict(zip(("equivalent_diameter",) + DESCRIPTORS, d)))
+    _write_sand(path, rows)
+    return parse_recipe(text)
+
+
+@pytest.mark.slow
+def test_fit_recovers_the_known_aspects_of_a_synthetic_sand(tmp_path):
+    from grainforge.fit import fit_sand, write_outputs
+    from grainforge.population import draw_grain
+    from grainforge.report import zingg_ratios
+
+    voxel = 400 / 30  # about 30 voxels across: the test is about recovery, not resolution
+    truth = _synthetic_sand(tmp_path / "synthetic.csv", 120, voxel)
+    sand = read_sand(tmp_path / "synthetic.csv", voxel)
+    # modest populations (the CLI insists on >= 500 grains; the library allows fewer)
+    result = fit_sand(sand, "cri", count=300, pilot=60, rounds=2, final_rounds=2, workers=2)
+    out = tmp_path / "fit"
+    write_outputs(sand, result, out)
+    for name in ("recipe.toml", "fit.csv", "fit.png"):
+        assert (out / name).stat().st_size > 0
+    fitted = parse_recipe((out / "recipe.toml").read_text(encoding="utf-8"))
+    want = zingg_ratios([draw_grain(truth, i)[1].aspect for i in range(truth.count)])
+    got = zingg_ratios([draw_grain(fitted, i)[1].aspect for i in range(fitted.count)])
+    for k in ("elongation", "flatness"):
+        assert got[k].mean() == pytest.approx(want[k].mean(), rel=0.05), k
+        # and the measured population matches the sand's measured mean
+        assert result.stats["per"][k]["mean_diff"] == pytest.approx(0.0, abs=0.02), k
+    rows = list(csv.DictReader((out / "fit.csv").read_text(encoding="utf-8").splitlines()))
+    assert {r["quantity"] for r in rows} >= set(DESCRIPTORS) | {"flatness-elongation"}
+
+
+def test_existing_outputs_are_not_overwritten_without_overwrite(runner, tmp_path):
+    p = _write_sand(tmp_path / "s.csv", _fake_rows(5))
+    out = tmp_path / "o"
+    out.mkdir()
+    (out / "fit.csv").write_text("keep", encoding="utf-8")
+    r = runner.invoke(cli, ["fit", str(p), "--voxel-size", "7", "--out", str(out)])
+    assert r.exit_code == 2 and "exists" in r.stderr and "--overwrite" in r.stderr
+    assert (out / "fit.csv").read_text(encoding="utf-8") == "keep"

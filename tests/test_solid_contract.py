@@ -1,0 +1,161 @@
+"""Issue 11: the solid contract as readers see it, and the repros of the issue (each fails on the old code)."""
+
+import numpy as np
+import pytest
+import trimesh
+
+import grainforge
+from grainforge.cli.main import cli
+from grainforge.params import ParameterError
+from grainforge.solid import AREA_TOLERANCE, require_solid, self_intersections, solid_problems, star_certificate
+
+
+def _two_boxes(offset):
+    a = trimesh.creation.box()
+    b = trimesh.creation.box().apply_translation(offset)
+    both = trimesh.util.concatenate([a, b])
+    return both.vertices, both.faces
+
+
+def test_edge_contact_with_split_indices_is_caught_by_position():
+    # the old check worked on indices: two cubes touching along an edge, kept apart by index, passed
+    v, f = _two_boxes((1, 1, 0))
+    assert solid_problems(v, f) == ["1 edges shared by more than two faces"]
+
+
+def test_vertex_contact_is_a_pinch():
+    v, f = _two_boxes((1, 1, 1))
+    assert any("pinches" in p for p in solid_problems(v, f))
+
+
+def test_sliver_below_float32_collapses():
+    box = trimesh.creation.box()
+    v = np.concatenate([box.vertices, box.vertices[:1] + 1e-10])  # a vertex 1e-10 from another
+    f = box.faces.copy()
+    f[0, 0] = len(v) - 1 if f[0, 0] == 0 else f[0, 0]
+    sliver = np.array([[0, len(v) - 1, 1]])
+    problems = solid_problems(v, np.concatenate([f, sliver]))
+    assert any("collapse when written" in p for p in problems)
+
+
+def test_near_zero_area_face_threshold_is_relative_to_size():
+    box = trimesh.creation.box()
+    v = np.concatenate([box.vertices, [[0.5, 0.5, -0.5 + 1e-9]]])  # a needle tent on the bottom face
+    f = box.faces[box.faces[:, :].min(axis=1) >= 0]
+    for scale in (1.0, 1000.0):
+        problems = solid_problems(v * scale, np.concatenate([f, [[0, 1, 8]]]))
+        assert any("near-zero area" in p or "open edges" in p for p in problems)
+    assert AREA_TOLERANCE == 1e-12
+
+
+def test_self_intersection_is_found():
+    v, f = _two_boxes((0.5, 0.3, 0.2))
+    assert self_intersections(v, f) > 0
+    box = trimesh.creation.box()
+    assert self_intersections(box.vertices, box.faces) == 0
+
+
+def test_star_certificate_is_a_proof_and_fails_off_centre():
+    v, f = trimesh.creation.icosphere(3).vertices, trimesh.creation.icosphere(3).faces
+    assert star_certificate(v, f) and self_intersections(v, f) == 0
+    assert not star_certificate(v, f, centre=(0, 0, 1.5))
+    # a folded surface around the centre: wraps twice -> certificate refuses
+    assert not star_certificate(np.concatenate([v, v * 1.5]), np.concatenate([f, f + len(v)]))
+
+
+def test_require_solid_raises_parameter_error_naming_the_parameter():
+    v, f = _two_boxes((1, 1, 0))
+    with pytest.raises(ParameterError) as exc:
+        require_solid(v, f, "smooth")
+    assert exc.value.name == "smooth"
+
+
+@pytest.mark.parametrize("kwargs", [
+    dict(primitive="cube", exponent=1.0, primaries=200),  # README example (issue repro)
+    dict(primitive="cube", primaries=200),  # `generate dpa --primitive cube --seed 0`
+])
+def test_dpa_cube_repros_are_valid_as_written(kwargs, tmp_path):
+    g = grainforge.dpa(**kwargs, rng=0)
+    path = tmp_path / "g.stl"
+    grainforge.io.write_mesh(g, path)
+    m = trimesh.load(path)  # merges vertices by position
+    assert m.is_watertight and m.is_winding_consistent and m.body_count == 1 and m.volume > 0
+    assert solid_problems(m.vertices, m.faces) == []
+
+
+def test_dpa_cube_pinch_separation_volume_effect():
+    from grainforge.methods import dpa as D
+
+    for seed in range(3):
+        agg = D.aggregate("cube", 300, 1.0, np.random.default_rng(seed))
+        v, f, cav = D.lattice_surface(agg.cells)
+        pinch_points = int((np.unique(v, axis=0, return_counts=True)[1] > 1).sum())
+        w = D.separate_pinches(v, f)
+        assert solid_problems(w, f) == []
+        from grainforge.solid import signed_volume
+
+        removed = 300 + cav - signed_volume(w, f)
+        # documented in docs/validation.md: about 4e-4 primary volumes per pinch point, never more than 1e-3
+        assert 0 <= removed <= 1e-3 * max(pinch_points, 1)
+
+
+def test_fso_gamma_overflow_is_a_parameter_error():
+    with pytest.raises(ParameterError) as exc:
+        grainforge.fso(gamma=10, frequencies=400)
+    assert exc.value.name == "frequencies"
+
+
+def test_cri_fractal_errors_name_fractal_amplitude(monkeypatch):
+    from grainforge import contours
+
+    def boom(**kw):
+        raise ParameterError("amplitude", "gives a contour with non-positive radii")
+
+    monkeypatch.setattr(contours.Contour, "from_fractal", staticmethod(boom))
+    with pytest.raises(ParameterError) as exc:
+        grainforge.cri(contour="fractal", rng=0)
+    assert exc.value.name == "fractal_amplitude"
+
+
+def test_cri_validity_parameter_follows_the_input():
+    from grainforge.methods import cri
+
+    assert cri.validity_parameter(cri.Params(aspect=(3, 2, 1))) == "aspect"
+    assert cri.validity_parameter(cri.Params(contour="fractal")) == "fractal_amplitude"
+    assert cri.validity_parameter(cri.Params()) == "descriptors"
+
+
+@pytest.mark.parametrize("size", ["1e-300", "1e308", "0.0005", "20000"])
+def test_size_outside_physical_range_is_refused(size, tmp_path, runner):
+    res = runner.invoke(cli, ["generate", "fso", "--subdivisions", "1", "--size", size, "--out", str(tmp_path / "o")])
+    assert res.exit_code == 2
+    assert "--size" in res.output
+    assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
+
+
+def test_check_size_range():
+    from grainforge.fabrication.scale import check_size
+
+    assert check_size(1e-3) == 1e-3 and check_size(1e4) == 1e4
+    with pytest.raises(ParameterError):
+        check_size(1e-300)
+
+
+def test_check_does_not_crash_on_zero_area_faces(tmp_path, runner):
+    # a readable mesh with many zero-area faces (the 3MF repro's cause: rng.choice with p = 0 entries)
+    s = trimesh.creation.icosphere(3)  # 1280 faces with area, fewer than MAX_RAYS = 4000 ...
+    v = np.concatenate([s.vertices, s.vertices[:1]])
+    extra = np.array([[0, 0, len(v) - 1]] * 3000)  # ... plus 3000 of zero area: 4280 faces in all
+    m = trimesh.Trimesh(v, np.concatenate([s.faces, extra]), process=False)
+    path = tmp_path / "bad.ply"
+    m.export(path)
+    res = runner.invoke(cli, ["check", str(path)])
+    assert res.exit_code in (0, 1), res.output
+    assert "Fewer non-zero" not in res.output
+
+
+def test_cri_fractal_tiny_length_ratio_is_a_parameter_error():
+    # found by the slow sweep: L at the open edge of its range (5e-324) overflowed (RuntimeWarning)
+    with pytest.raises(ParameterError) as exc:
+        grainforge.cri(contour="fractal", length_ratio=5e-324, modes=8, subdivisions=0, rng=0)
+    assert exc.value.name == "length_ratio"
