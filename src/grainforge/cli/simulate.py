@@ -19,7 +19,8 @@ def _command(test: str, doc: str):
                   help="A few tens of grains, seconds per run: checks the set-up, measures nothing meaningful.")
     @click.option("--as-spheres", is_flag=True,
                   help="Replace every grain by its volume-equivalent sphere (the sphere baseline).")
-    @click.option("--label", default=None, help="Name of this population in results.csv (default: the input).")
+    @click.option("--label", default=None, show_default="the inputs' names",
+                  help="Name of this population in results.csv.")
     @click.option("--workers", type=click.IntRange(min=1), default=None,
                   help="Yade runs (seeds) at once, each on one core (default: CPU count).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")

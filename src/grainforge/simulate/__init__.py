@@ -56,11 +56,11 @@ class Settings:
                            "and random orientations", kind="int", low=1, high=20000)
     spheres: int = param(10, "spheres per clump (grainforge.dem.clump; more = closer to the mesh, slower)",
                          kind="int", low=1, high=200)
-    size: float | None = param(None, "equivalent diameter every grain is scaled to (default: the files' size, "
-                               "taken as mm; recipes give their own)", unit="mm", low=0.01, high=1000,
-                               optional=True)
-    density: float = param(1180.0, "grain density (default: a PolyJet photopolymer, as the paper's printed "
-                           "grains)", unit="kg/m³", low=1.0, high=30000.0)
+    size: float | None = param(None, "equivalent diameter every grain is scaled to", unit="mm", low=0.01,
+                               high=1000, optional=True,
+                               shown_default="the files' own size in mm, or the recipe's sizes")
+    density: float = param(1180.0, "grain density; 1180 is a PolyJet photopolymer, as the paper's printed grains",
+                           unit="kg/m³", low=1.0, high=30000.0)
     young: float = param(1e6, "contact modulus E: normal stiffness k_n = E·r of a sphere contact", unit="Pa",
                          low=1e3, high=1e11)
     poisson: float = param(0.3, "tangential/normal stiffness ratio k_s/k_n", low=0.0, high=1.0, low_open=True)
