@@ -127,6 +127,11 @@ def writing_cases() -> list[Case]:
         "figures": (["figures", "--only", "2"], "--out", "dir", None),
         "tray": (["tray", "--method", "fso", "--count", "2", "--size", "5", "--workers", "1"], "--out", "3mf", None),
         "batch": (["batch", "{in}/good.toml", "--workers", "1"], "--out", "dir", None),
+        "dem": (["dem", "{in}/grains", "--workers", "1"], "--out", "dir", None),
+        "fit": (["fit", "{in}/text.csv", "--workers", "1"], "--out", "dir", None),
+        "demo": (["demo", "--quick"], "--out", "dir", None),
+        "generate-angular": (["generate", "angular"], "--out", "dir", None),
+        "generate-rf": (["generate", "rf"], "--out", "dir", None),
     }
     name = {"dir": "out", "png": "o.png", "csv": "o.csv", "3mf": "t.3mf"}
     cases = []

@@ -170,6 +170,9 @@ def _sweep(name: str, examples: int, strategy=None):
     def run(kwargs, seed):
         outcome = check_draw(name, kwargs, seed)
         COUNTS.setdefault(name, {"valid": 0, "error": 0})[outcome] += 1
+        if os.environ.get("GRAINFORGE_SWEEP_LOG"):  # running counts of a long sweep (docs/validation.md)
+            with open(os.environ["GRAINFORGE_SWEEP_LOG"], "a") as log:
+                log.write(f"{name} {outcome} {COUNTS[name]}\n")
 
     run()
 

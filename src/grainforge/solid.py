@@ -287,6 +287,7 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]  # collapsed faces cross nothing
     if len(f) < 2:
         return 0
     tri = v[f]
