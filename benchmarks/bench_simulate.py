@@ -50,6 +50,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--grains", type=int, default=Settings().grains)
     ap.add_argument("--workers", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--tilt-step", type=float, default=Settings().tilt_step, help="degrees (tilt test)")
+    ap.add_argument("--tilt-start", type=float, default=Settings().tilt_start, help="degrees (tilt test)")
     ap.add_argument("--out", type=Path, default=ROOT / "out/bench-simulate")
     ap.add_argument("--figure", action="store_true", help="write docs/img/simulate-<test>-comparison.png")
     ap.add_argument("--remeasure", action="store_true",
@@ -57,10 +59,12 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     frictions = [float(x) for x in args.frictions.split(",")]
     table = []
-    print(f"# {args.test}: {args.grains} grains, {args.seeds} seeds; load average {os.getloadavg()[0]:.1f}")
+    print(f"# {args.test}: {args.grains} grains, {args.seeds} seeds; load average {os.getloadavg()[0]:.1f}"
+          + (f"; tilt from {args.tilt_start:g} deg in {args.tilt_step:g} deg steps" if args.test == "tilt" else ""))
     print(f"{'population':34s} {'mu':>4s} {'mean':>6s} {'sd':>5s}  angles (deg)            cpu s   wall s")
     for mu in frictions:
-        settings = Settings(friction=mu, seeds=args.seeds, grains=args.grains)
+        settings = Settings(friction=mu, seeds=args.seeds, grains=args.grains, tilt_step=args.tilt_step,
+                            tilt_start=args.tilt_start)
         for label, recipe, as_spheres in POPULATIONS:
             tag = label.split(" (")[0].replace(" ", "-")
             out = args.out / f"{args.test}-{tag}-mu{mu:g}"

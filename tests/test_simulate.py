@@ -67,7 +67,8 @@ def test_heap_angle_refuses_a_flat_layer():
 def test_tilt_failure_angle_interpolates_and_reports_no_failure():
     h = np.array([[30.0, 0.0], [31.0, 0.2], [32.0, 0.8]])
     assert tilt_failure_angle(h) == pytest.approx(31.5)
-    assert math.isnan(tilt_failure_angle(h[:2]))
+    assert math.isnan(tilt_failure_angle(h[:2]))      # never failed
+    assert math.isnan(tilt_failure_angle(h[2:]))      # had failed at the first angle: unknown
 
 
 def test_settings_refuse_negative_friction_and_convert_mu_to_an_angle():

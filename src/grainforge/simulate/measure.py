@@ -169,7 +169,8 @@ def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> flo
     -------
     float
         Degrees, interpolated linearly between the two increments that bracket
-        the threshold; NaN if the layer never failed.
+        the threshold; NaN if the layer never failed, or if it had already
+        failed at the first angle (start the tilt lower).
 
     Examples
     --------
@@ -185,7 +186,7 @@ def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> flo
         return float("nan")
     k = int(over[0])
     if k == 0:
-        return float(h[0, 0])
+        return float("nan")
     a0, d0 = h[k - 1, :2]
     a1, d1 = h[k, :2]
     return float(a0 + (a1 - a0) * (displacement - d0) / (d1 - d0))

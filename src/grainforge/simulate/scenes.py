@@ -109,12 +109,15 @@ def settle(ids, threshold, max_time, phase, f0, f1, min_time=0.0):
     """Run until the grains' kinetic energy falls below threshold (J) or max_time (s) passes."""
     t0 = O.time
     ke = kinetic_energy(ids)
+    below = 0
     while O.time - t0 < max_time:
         O.run(SETTINGS["check_every"], True)
         ke = kinetic_energy(ids)
         progress(f0 + (f1 - f0) * (O.time - t0) / max_time, phase)
         print("grainforge-state t=%.4f steps=%d ke=%.3g threshold=%.3g" % (O.time, O.iter, ke, threshold))
-        if O.time - t0 >= min_time and ke < threshold:
+        below = below + 1 if ke < threshold else 0
+        # at rest: past min_time, and below the threshold at three checks in a row
+        if O.time - t0 >= min_time and below >= 3:
             break
     return ke
 
@@ -172,7 +175,8 @@ def repose():
     threshold = SETTINGS["ke_ratio"] * sum(t["mass"] for t in pop) * g * d
     fall = math.sqrt(2.0 * height / g)
     # the fill only needs a packing at rest to the eye: ten times the final threshold
-    settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "fill", 0.0, 0.3, min_time=fall)
+    # (grains start at rest on a lattice: their energy is small before they land, hence min_time)
+    settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "fill", 0.0, 0.3, min_time=3.0 * fall)
     t_fill = O.time
     top = max(O.bodies[i].state.pos[2] for i in ids) + 0.5 * cell
     lift.velocity = SETTINGS["lift_speed"] * math.sqrt(g * d)
@@ -225,7 +229,7 @@ def tilt():
     g = SETTINGS["gravity"]
     threshold = SETTINGS["ke_ratio"] * sum(t["mass"] for t in pop) * g * d
     fall = math.sqrt(2.0 * (z0 + layers * cell) / g)
-    settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "deposit", 0.0, 0.3, min_time=fall)
+    settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "deposit", 0.0, 0.3, min_time=3.0 * fall)
     start = {i: Vector3(O.bodies[i].state.pos) for i in ids}
     rate = math.radians(SETTINGS["tilt_step_deg"])
     hold = SETTINGS["tilt_hold"] * math.sqrt(d / g)
