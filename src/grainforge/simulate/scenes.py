@@ -230,7 +230,9 @@ def tilt():
     threshold = SETTINGS["ke_ratio"] * sum(t["mass"] for t in pop) * g * d
     fall = math.sqrt(2.0 * (z0 + layers * cell) / g)
     settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "deposit", 0.0, 0.3, min_time=3.0 * fall)
-    start = {i: Vector3(O.bodies[i].state.pos) for i in ids}
+    # cumulative downslope travel of each grain, unwrapped across the periodic boundary
+    prev = {i: O.bodies[i].state.pos[0] for i in ids}
+    travel = {i: 0.0 for i in ids}
     rate = math.radians(SETTINGS["tilt_step_deg"])
     hold = SETTINGS["tilt_hold"] * math.sqrt(d / g)
     beta = math.radians(SETTINGS["tilt_start_deg"])
@@ -239,7 +241,11 @@ def tilt():
     while beta < math.radians(89.0):
         newton.gravity = (g * math.sin(beta), 0.0, -g * math.cos(beta))
         O.run(max(1, int(hold / O.dt)), True)
-        dx = sum(O.bodies[i].state.pos[0] - start[i][0] for i in ids) / n
+        for i in ids:
+            x = O.bodies[i].state.pos[0]
+            travel[i] += (x - prev[i] + 0.5 * width) % width - 0.5 * width
+            prev[i] = x
+        dx = sum(travel.values()) / n
         vx = sum(O.bodies[i].state.vel[0] for i in ids) / n
         history.append([math.degrees(beta), dx / d, vx / math.sqrt(g * d)])
         progress(0.3 + 0.7 * (math.degrees(beta) / 60.0), "tilt %.1f deg" % math.degrees(beta))
