@@ -162,8 +162,12 @@ def repose():
     ids = []
     for q, t in enumerate(pop):
         x, y = per_layer[q % len(per_layer)]
-        z = z0 + (q // len(per_layer)) * cell
-        ids.append(add_grain(t, (x + 0.05 * d * rnd.uniform(-1, 1), y + 0.05 * d * rnd.uniform(-1, 1), z),
+        layer = q // len(per_layer)
+        z = z0 + layer * cell
+        # alternate layers turned by 45 degrees and a little jitter: no grain stands on top of another
+        if layer % 2:
+            x, y = (x - y) * 0.7071067811865476, (x + y) * 0.7071067811865476
+        ids.append(add_grain(t, (x + 0.1 * d * rnd.uniform(-1, 1), y + 0.1 * d * rnd.uniform(-1, 1), z),
                              random_rotation(rnd)))
     inserted = len(ids)
     unbound_mass_carriers(ids)
@@ -222,7 +226,11 @@ def tilt():
     ids = []
     for q, t in enumerate(pop):
         i, j, layer = q % per_row, (q // per_row) % per_row, q // (per_row * per_row)
-        ids.append(add_grain(t, ((i + 0.5) * cell, (j + 0.5) * cell, z0 + layer * cell), random_rotation(rnd)))
+        # every other layer shifted by half a cell, and a little jitter: no grain stands on top of
+        # another (a column of spheres is an inverted pendulum that topples much later)
+        shift = 0.5 * cell * (layer % 2) + 0.1 * d * rnd.uniform(-1, 1)
+        ids.append(add_grain(t, ((i + 0.5) * cell + shift, (j + 0.5) * cell + 0.5 * cell * (layer % 2)
+                                 + 0.1 * d * rnd.uniform(-1, 1), z0 + layer * cell), random_rotation(rnd)))
     unbound_mass_carriers(ids)
     O.engines = engines()
     O.dt = stable_dt(pop)
