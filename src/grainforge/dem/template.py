@@ -10,6 +10,7 @@ convex polyhedron or a level set). It is engine-neutral; the writers in
 
 from __future__ import annotations
 
+import dataclasses
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -22,6 +23,9 @@ __all__ = ["GrainTemplate", "prepare", "SHAPES"]
 #: representations a template can carry
 SHAPES = ("clump", "polyhedron", "levelset")
 
+#: cells per d_eq of the grid on which a deck's clump coverage and spill are measured
+CLUMP_MEASURE_RESOLUTION = 60
+
 
 @dataclass(frozen=True)
 class GrainTemplate:
@@ -31,9 +35,10 @@ class GrainTemplate:
     ----------
     name : str
         File stem of the grain (safe for file names).
-    vertices : (V, 3) float64
-        Mesh in metres, volume centroid at the origin, the grain's own orientation.
-    faces : (F, 3) int64
+    vertices : (V, 3) float64 or None
+        Mesh in metres, volume centroid at the origin, the grain's own orientation
+        (``None`` after :meth:`without_mesh`).
+    faces : (F, 3) int64 or None
     props : MassProperties
         Exact, unit density, in SI (m³, m⁵); the centroid is (0, 0, 0).
     density : float
@@ -88,10 +93,11 @@ class GrainTemplate:
     @property
     def bounding_radius(self) -> float:
         """Largest distance of a vertex (or clump sphere surface) from the centroid, m."""
-        r = float(np.linalg.norm(self.vertices, axis=1).max())
-        if self.clump is not None:
-            r = max(r, float((np.linalg.norm(self.clump.centres, axis=1) + self.clump.radii).max()))
-        return r
+        return self.info["bounding_radius"]
+
+    def without_mesh(self) -> "GrainTemplate":
+        """The same template without its mesh (what the decks need; small to keep by the thousand)."""
+        return dataclasses.replace(self, vertices=None, faces=None)
 
 
 def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float = 1e-3,
@@ -159,7 +165,7 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     if shape == "clump":
         from .clump import clump
 
-        kw["clump"] = clump(v, f, spheres=spheres, rng=rng)
+        kw["clump"] = clump(v, f, spheres=spheres, rng=rng, measure_resolution=CLUMP_MEASURE_RESOLUTION)
     elif shape == "polyhedron":
         from .polyhedron import convex_polyhedron
 
@@ -168,5 +174,9 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         from .levelset import level_set
 
         kw["levelset"] = level_set(v, f, spacing=levelset_spacing)
+    radius = float(np.linalg.norm(v, axis=1).max())
+    if "clump" in kw:
+        c = kw["clump"]
+        radius = max(radius, float((np.linalg.norm(c.centres, axis=1) + c.radii).max()))
     return GrainTemplate(name=name, vertices=v, faces=f, props=mp, density=float(density), shape=shape,
-                         source=source, count=int(count), **kw)
+                         source=source, count=int(count), info={"bounding_radius": radius}, **kw)
