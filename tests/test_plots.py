@@ -108,8 +108,23 @@ def test_figures_dpa_written_or_skipped_with_reason(tmp_path):
         assert [p.name for p in written] == ["figure6-dpa-octahedra.png"]
     else:
         assert skipped == [(6, "the DPA generator is not available in this build")]
-    with pytest.raises(ValueError, match="1–6"):
-        make_figures(tmp_path, (7,))
+    with pytest.raises(ValueError, match="1–9"):
+        make_figures(tmp_path, (10,))
+
+
+def test_shape_control_figures(tmp_path):
+    """Figures 7–9 (FSO aspect, paper vs seamless views, CRI before/after) are written as PNGs."""
+    from PIL import Image
+
+    from grainforge.figures import make_figures
+
+    written, skipped = make_figures(tmp_path, (7, 8, 9), subdivisions=2)
+    assert skipped == []
+    assert [p.name for p in written] == ["figure7-fso-aspect.png", "figure8-fso-seamless.png",
+                                         "figure9-cri-before-after.png"]
+    for p in written:
+        with Image.open(p) as im:
+            assert im.size[0] > 800 and im.size[1] > 250
 
 
 def test_demo_plots(tmp_path):

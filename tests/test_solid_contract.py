@@ -143,12 +143,19 @@ def test_check_size_range():
 
 def test_check_does_not_crash_on_zero_area_faces(tmp_path, runner):
     # a readable mesh with many zero-area faces (the 3MF repro's cause: rng.choice with p = 0 entries)
-    s = trimesh.creation.icosphere(5)
+    s = trimesh.creation.icosphere(3)  # 1280 faces with area, fewer than MAX_RAYS = 4000 ...
     v = np.concatenate([s.vertices, s.vertices[:1]])
-    extra = np.array([[0, 0, len(v) - 1]] * 5000)  # degenerate, zero area
+    extra = np.array([[0, 0, len(v) - 1]] * 3000)  # ... plus 3000 of zero area: 4280 faces in all
     m = trimesh.Trimesh(v, np.concatenate([s.faces, extra]), process=False)
     path = tmp_path / "bad.ply"
     m.export(path)
     res = runner.invoke(cli, ["check", str(path)])
     assert res.exit_code in (0, 1), res.output
     assert "Fewer non-zero" not in res.output
+
+
+def test_cri_fractal_tiny_length_ratio_is_a_parameter_error():
+    # found by the slow sweep: L at the open edge of its range (5e-324) overflowed (RuntimeWarning)
+    with pytest.raises(ParameterError) as exc:
+        grainforge.cri(contour="fractal", length_ratio=5e-324, modes=8, subdivisions=0, rng=0)
+    assert exc.value.name == "length_ratio"

@@ -93,9 +93,16 @@ def _dpa(draw_params, primitives=None):
                                        fixed={"primitive": prim, "smooth": sm})))
 
 
+def _angular(draw_params):
+    # the declared ranges as they are, with the aspect ordered L >= I >= S as the parameter requires
+    # (unordered draws would all stop at the aspect check); L/S > 10 still raises, naming aspect
+    return params_strategy("angular", caps={"subdivisions": 5}).map(
+        lambda d: {**d, "aspect": tuple(sorted(d["aspect"], reverse=True))})
+
+
 #: per-method strategy hooks; every other registered method is swept from its ParamSpecs alone
 #: (capped to keep each grain small: subdivisions ≤ 5, ridges/frequencies ≤ 60 for speed).
-HOOKS = {"cri": _cri, "dpa": _dpa}
+HOOKS = {"cri": _cri, "dpa": _dpa, "angular": _angular}
 DEFAULT_CAPS = {"subdivisions": 5, "ridges": 60, "frequencies": 60, "primaries": 300}
 
 
@@ -163,6 +170,9 @@ def _sweep(name: str, examples: int, strategy=None):
     def run(kwargs, seed):
         outcome = check_draw(name, kwargs, seed)
         COUNTS.setdefault(name, {"valid": 0, "error": 0})[outcome] += 1
+        if os.environ.get("GRAINFORGE_SWEEP_LOG"):  # running counts of a long sweep (docs/validation.md)
+            with open(os.environ["GRAINFORGE_SWEEP_LOG"], "a") as log:
+                log.write(f"{name} {outcome} {COUNTS[name]}\n")
 
     run()
 

@@ -50,6 +50,10 @@ COLUMNS = (
 )
 
 
+#: most ε values one calibration may have
+MAX_EXPONENTS = 1000
+
+
 def parse_exponents(text: str) -> np.ndarray:
     """``"A:B:STEP"`` → A, A + STEP, …, B (inclusive); ``"a,b,c"`` → that list.
 
@@ -71,7 +75,10 @@ def parse_exponents(text: str) -> np.ndarray:
             if not (0 < a <= b and step > 0 and np.isfinite([a, b, step]).all()):
                 raise ValueError
             n = int(np.floor((b - a) / step + 1e-9)) + 1
-            values = np.round(a + step * np.arange(n), 12)
+            if n > MAX_EXPONENTS:  # before allocating the grid
+                values = None
+            else:
+                values = np.round(a + step * np.arange(n), 12)
         else:
             values = np.array([float(x) for x in text.split(",") if x.strip()])
             if len(values) == 0 or not (values > 0).all():
@@ -80,8 +87,11 @@ def parse_exponents(text: str) -> np.ndarray:
         raise ParameterError(
             "exponents", f"must be A:B:STEP with 0 < A <= B and STEP > 0, got {text!r}"
         ) from None
-    if len(values) > 1000:
-        raise ParameterError("exponents", f"gives {len(values)} values; at most 1000 are allowed")
+    if values is None:
+        raise ParameterError("exponents", f"{text!r} gives {n} values; at most {MAX_EXPONENTS} are allowed "
+                                          "(use a larger STEP)")
+    if len(values) > MAX_EXPONENTS:
+        raise ParameterError("exponents", f"gives {len(values)} values; at most {MAX_EXPONENTS} are allowed")
     return values
 
 

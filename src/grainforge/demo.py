@@ -17,12 +17,13 @@ __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "a
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
     from .io import read_mesh
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
     for j, value in enumerate(values):
         folder = out / f"{label}={value:g}"
-        rows = write_run(method, make_params(value), seeds, folder, overwrite=True)
+        write_run(method, make_params(value), seeds, folder, overwrite=True)
+        rows = manifest_rows(folder)
         for i, r in enumerate(rows):
             panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
     order = sorted(panels)
@@ -65,7 +66,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     from .io import atomic_write, read_mesh, save_figure
     from .methods.cri import Params
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     seeds = [0, 1] if quick else [0, 1, 2]
     s = 3 if quick else 5
@@ -120,7 +121,8 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     meshes, labels = [], []
     for name, params in runs:
         run_seeds = seeds[:1] if name == "micrographs" else seeds  # images: no randomness
-        rows = write_run("cri", params, run_seeds, folder / name, overwrite=True)
+        write_run("cri", params, run_seeds, folder / name, overwrite=True)
+        rows = manifest_rows(folder / name)
         for r in rows:
             meshes.append(read_mesh(folder / name / r["file"]))
             labels.append(f"{name}  seed {r['seed']}")
@@ -337,7 +339,7 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     from .io import read_mesh
     from .methods.rf import Params
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     folder = out / "rf"
     folder.mkdir(parents=True, exist_ok=True)
@@ -345,11 +347,13 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     table = write_fourier_csv([image], folder / "fd.csv")
     seeds = list(range(6 if quick else 12))
     p = Params(spectrum=str(table), subdivisions=4 if quick else 5)
-    rows = write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    rows = manifest_rows(folder / "from-spectrum")
     meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
     labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
-    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2,
-                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph)")
+    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2, unit="mm",
+                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph; "
+                                "files at d_eq = 10 mm)")
     return [folder, sheet]
 
 

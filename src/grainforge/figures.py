@@ -16,6 +16,14 @@ Hanaor et al., *3D printable geomaterials* (Géotechnique 2016):
    corners, as the paper's Fig. 5 shows).
 6. DPA aggregates of octahedra over ε.
 
+Beyond the paper (issue 13, shape control):
+
+7. FSO aspects: the ellipsoidal precursor (``aspect``), seamless surface.
+8. Paper vs seamless FSO surface, each seen from a pole and from the equator
+   (the paper form's pinned poles and its mirror seam at the equator).
+9. CRI before/after: the 2016 reconstruction (linear stretch, parallel
+   ridges) against the default (spectral consistency, ridge twist).
+
 Each figure is one PNG with fixed seeds, so ``grainforge figures`` is
 reproducible.  A figure whose generator is not available in this build is
 skipped with a message.
@@ -28,7 +36,8 @@ from typing import Callable
 
 import numpy as np
 
-__all__ = ["FIGURES", "make_figures", "figure1", "figure2", "figure3", "figure4", "figure5", "figure6"]
+__all__ = ["FIGURES", "make_figures", "figure1", "figure2", "figure3", "figure4", "figure5", "figure6", "figure7",
+           "figure8", "figure9"]
 
 #: seed used for every panel (one grain per parameter value, same random field)
 SEED = 7
@@ -184,6 +193,71 @@ def figure6(out: Path, subdivisions: int = 5) -> Path:
                       f"Fig. 6  DPA aggregates of {DPA_PRIMARIES} octahedra: exponent ε")
 
 
+#: aspects of Fig. 7
+FIG7_ASPECTS = ((1.0, 1.0, 1.0), (1.0, 0.8, 0.6), (1.0, 0.7, 0.5), (1.0, 0.5, 0.3))
+
+
+def _posed(grain, elev: float, azim: float):
+    """The grain turned so that the contact sheet's default camera sees it from (elev, azim)."""
+    import trimesh
+
+    from .render import view_rotation
+
+    M = view_rotation().T @ view_rotation(elev, azim)
+    return trimesh.Trimesh(np.asarray(grain.vertices) @ M.T, grain.faces, process=False)
+
+
+def figure7(out: Path, subdivisions: int = 5) -> Path:
+    """FSO on ellipsoidal precursors (``aspect``), seamless surface, D = 2.4, L = 7 R."""
+    from .methods.fso import fso
+    from .render import contact_sheet
+
+    grains, labels = [], []
+    for i, asp in enumerate(FIG7_ASPECTS):
+        g = fso(aspect=asp, surface="seamless", subdivisions=subdivisions, rng=SEED)
+        grains.append(_posed(g, 25.0, -60.0))
+        labels.append(f"({chr(97 + i)}) A:B:C = {':'.join(f'{a:g}' for a in asp)}")
+    return contact_sheet(grains, labels, out, columns=4,
+                         title="Fig. 7  FSO aspect: overlay on an ellipsoidal precursor (seamless surface, "
+                               "D = 2.4, L = 7 R, amplitude 0.1)")
+
+
+def figure8(out: Path, subdivisions: int = 5) -> Path:
+    """Paper vs seamless FSO, pole view and equator view (L = 2 R shows more small-scale relief)."""
+    from .methods.fso import fso
+    from .render import contact_sheet
+
+    grains, labels = [], []
+    for surface in ("paper", "seamless"):
+        g = fso(surface=surface, length_ratio=2.0, amplitude=0.12, subdivisions=subdivisions, rng=SEED)
+        for view, (elev, azim) in (("pole (+z) view", (90.0, -90.0)), ("equator view", (0.0, -60.0))):
+            grains.append(_posed(g, elev, azim))
+            labels.append(f"({chr(97 + len(labels))}) {surface}: {view}")
+    return contact_sheet(grains, labels, out, columns=4,
+                         title="Fig. 8  FSO surface forms (D = 2.4, L = 2 R, amplitude 0.12, same seed): the paper's "
+                               "Eqs. 2-3 pin both poles at R0 and mirror the relief about the equator; the seamless "
+                               "form has no special latitude or pole")
+
+
+def figure9(out: Path, subdivisions: int = 5) -> Path:
+    """CRI before (2016 reconstruction) and after (spectral consistency + ridge twist)."""
+    _method("cri")
+    from .methods.cri import cri
+    from .render import contact_sheet
+
+    grains, labels = [], []
+    for name, kw in (("before: stretch, no twist", {"consistency": "stretch", "ridge_twist": 0.0}),
+                     ("after: spectral, twist 30°", {})):
+        for preset in ("rough-sphere", "rough-angular"):
+            for seed in (SEED, SEED + 1):
+                grains.append(cri(preset=preset, subdivisions=subdivisions, rng=seed, **kw))
+                labels.append(f"({chr(97 + len(labels))}) {preset}\n{name}")
+    return contact_sheet(grains, labels, out, columns=4,
+                         title="Fig. 9  CRI before (top: the 2016 reconstruction's linear stretch and sweep, "
+                               "parallel ridges) and after (bottom: contours keep their modes, roughness turned off "
+                               "the sweep direction)")
+
+
 #: number -> (file name, function(out_path, subdivisions) -> path)
 FIGURES: dict[int, tuple[str, Callable[[Path, int], Path]]] = {
     1: ("figure1-fso-length.png", figure1),
@@ -192,6 +266,9 @@ FIGURES: dict[int, tuple[str, Callable[[Path, int], Path]]] = {
     4: ("figure4-cri.png", figure4),
     5: ("figure5-dpa-cubes.png", figure5),
     6: ("figure6-dpa-octahedra.png", figure6),
+    7: ("figure7-fso-aspect.png", figure7),
+    8: ("figure8-fso-seamless.png", figure8),
+    9: ("figure9-cri-before-after.png", figure9),
 }
 
 
@@ -209,7 +286,7 @@ def make_figures(out: str | Path, numbers=tuple(FIGURES), *, subdivisions: int =
     written, skipped = [], []
     for n in numbers:
         if n not in FIGURES:
-            raise ValueError(f"figure numbers are 1–6, got {n!r}")
+            raise ValueError(f"figure numbers are 1–{max(FIGURES)}, got {n!r}")
         name, fn = FIGURES[n]
         try:
             written.append(fn(out / name, subdivisions))

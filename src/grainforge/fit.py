@@ -252,6 +252,20 @@ register(MethodFit(
 ))
 
 
+register(MethodFit(
+    # angular grains: edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad,
+    # 16 facets, a fine texture); both drawn per grain, mean and sd fitted
+    "angular",
+    knobs=(Knob("rounding", 0.15, 0.0, 0.9, 0.05), Knob("dent_depth", 0.35, 0.0, 0.7, 0.05),
+           Knob("rounding_sd", 0.08, 0.005, 0.4, 0.03), Knob("dent_depth_sd", 0.1, 0.005, 0.3, 0.03)),
+    targets=_SHAPE_TARGETS,
+    params=lambda k: {"facets": 16, "rounding": truncnormal(k["rounding"], k["rounding_sd"], 0.0, 0.9),
+                      "dents": 6, "dent_width": 0.5,
+                      "dent_depth": truncnormal(k["dent_depth"], k["dent_depth_sd"], 0.0, 0.7),
+                      "roughness": 0.005, "length_ratio": 2.0, "subdivisions": 5},
+))
+
+
 # --------------------------------------------------------------------------- recipes
 def _toml(v: Any) -> str:
     if isinstance(v, bool):

@@ -196,6 +196,29 @@ def _what_is(head: bytes) -> str | None:
     return None
 
 
+#: a binary STL whose header announces at most this many times the file's size is called truncated;
+#: beyond, the count is taken as noise (random bytes, another kind of file)
+TRUNCATED_FACTOR = 64
+
+
+def _binary_stl(path: Path):
+    """A binary STL as a triangle-soup trimesh (what ``trimesh.load(..., process=False)`` gives), read with
+    NumPy in one pass; ``None`` if the file is not a consistent binary STL (ASCII, for instance)."""
+    import trimesh
+
+    data = path.read_bytes()
+    if len(data) < 84:
+        return None
+    n = int.from_bytes(data[80:84], "little")
+    if len(data) != 84 + 50 * n or n == 0 or data[:5].lower() == b"solid" and b"facet normal" in data[:400]:
+        return None
+    rec = np.frombuffer(data, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), count=n,
+                        offset=84)
+    vertices = rec["v"].reshape(-1, 3).astype(np.float64)
+    faces = np.arange(3 * n, dtype=np.int64).reshape(-1, 3)
+    return trimesh.Trimesh(vertices, faces, process=False, validate=False)
+
+
 def check_stl(path: str | os.PathLike) -> None:
     """Refuse an STL file whose bytes are neither a consistent binary STL nor ASCII STL.
 
@@ -245,7 +268,7 @@ def check_stl(path: str | os.PathLike) -> None:
         raise ValueError(f"{path}: not an STL file ({size} bytes: too short for a binary STL, and not ASCII STL)")
     n = int.from_bytes(head[80:84], "little")
     expected = 84 + 50 * n
-    if expected > size and n < (1 << 31):
+    if size < expected <= TRUNCATED_FACTOR * size:  # plausibly the start of a real binary STL
         raise ValueError(f"{path}: truncated binary STL: the header announces {n} facets "
                          f"({expected} bytes) but the file has {size} bytes")
     if (size - 84) % 50 == 0:
@@ -273,9 +296,13 @@ def read_mesh(path: str | os.PathLike):
         raise ValueError(f"{path}: no such file")
     suffix = path.suffix.lower()
     try:
+        loaded = None
         if suffix == ".stl":
             check_stl(path)
-        if suffix == ".3mf":
+            loaded = _binary_stl(path)
+        if loaded is not None:
+            pass
+        elif suffix == ".3mf":
             from .fabrication.threemf import read_3mf_file
 
             parts = read_3mf_file(path)
@@ -322,6 +349,8 @@ def read_parts(path: str | os.PathLike) -> list:
         return read_3mf_file(path)
     mesh = read_mesh(path)
     # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
-    v, inv = np.unique(np.asarray(mesh.vertices, dtype=np.float64), axis=0, return_inverse=True)
-    f = inv.reshape(-1)[np.asarray(mesh.faces, dtype=np.int64)]
+    from .solid import unique_rows
+
+    v, inv = unique_rows(np.asarray(mesh.vertices, dtype=np.float64))
+    f = inv[np.asarray(mesh.faces, dtype=np.int64)]
     return [Part(path.stem, v, f)]

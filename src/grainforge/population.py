@@ -43,10 +43,12 @@ from __future__ import annotations
 
 import dataclasses
 import hashlib
+import itertools
 import json
 import math
 import os
 import re
+import shutil
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -395,6 +397,10 @@ def _choice(spec: ParamSpec, value: Mapping, path: list[str], fail) -> Distribut
     return Distribution("choice", {"values": tuple(checked), "weights": tuple(float(w) / total for w in weights)})
 
 
+#: largest lognormal sigma of a size distribution (sizes spread over a factor e^(±8.3σ) at the extreme quantiles)
+MAX_SIGMA = 1.5
+
+
 def _size(raw, fail):
     if raw is None:
         return FixedSize(10.0), "equivalent"
@@ -411,9 +417,16 @@ def _size(raw, fail):
     modes = [m for m in ("mm", "distribution", "sieves_mm") if m in raw]
     if len(modes) != 1:
         fail(["size"], "give exactly one of mm (fixed), distribution = \"lognormal\", or sieves_mm + percent_passing")
+    from .fabrication.scale import MAX_SIZE_MM, MIN_SIZE_MM
+
+    def in_size_range(key, value):
+        if not MIN_SIZE_MM <= value <= MAX_SIZE_MM:
+            fail(["size", key], f"must be in [{MIN_SIZE_MM:g}, {MAX_SIZE_MM:g}] mm, got {value!r}")
+
     if "mm" in raw:
         if not (_number(raw["mm"]) and raw["mm"] > 0):
             fail(["size", "mm"], f"must be a positive number of millimetres, got {raw['mm']!r}")
+        in_size_range("mm", raw["mm"])
         return FixedSize(float(raw["mm"])), definition
     if "distribution" in raw:
         if raw["distribution"] != "lognormal":
@@ -423,6 +436,9 @@ def _size(raw, fail):
                 fail(["size", k], "is required for a lognormal size")
             if not (_number(raw[k]) and raw[k] > 0):
                 fail(["size", k], f"must be a positive number, got {raw[k]!r}")
+        in_size_range("median_mm", raw["median_mm"])
+        if raw["sigma"] > MAX_SIGMA:
+            fail(["size", "sigma"], f"must be at most {MAX_SIGMA:g} (a spread of e^sigma), got {raw['sigma']!r}")
         return LognormalSize(float(raw["median_mm"]), float(raw["sigma"])), definition
     sieves, passing = raw["sieves_mm"], raw.get("percent_passing")
     if passing is None:
@@ -431,6 +447,8 @@ def _size(raw, fail):
         fail(["size", "sieves_mm"], f"must be a list of at least 2 positive sizes, got {sieves!r}")
     if any(b <= a for a, b in zip(sieves, sieves[1:])):
         fail(["size", "sieves_mm"], "must be strictly increasing")
+    for v in (sieves[0], sieves[-1]):
+        in_size_range("sieves_mm", v)
     if not isinstance(passing, list) or len(passing) != len(sieves) or not all(_number(p) for p in passing):
         fail(["size", "percent_passing"], f"must be {len(sieves)} numbers, one per sieve, got {passing!r}")
     if any(b < a for a, b in zip(passing, passing[1:])):
@@ -569,19 +587,24 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process
     from concurrent.futures import FIRST_COMPLETED, wait
 
     from .methods import METHODS
-    from .workers import process_pool, single_threaded_children
+    from .workers import close_pool, process_pool, single_threaded_children
 
     ex = process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.run",
                                 "trimesh", "scipy.special"])
+    ok = False
     try:
+        it = iter(todo)
+        ahead = 4 * workers  # futures in flight: memory does not grow with the count
         with single_threaded_children():  # workers (and the fork server) start during submit
-            pending = {ex.submit(make_grain, recipe, i) for i in todo}
+            pending = {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, ahead)}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            pending |= {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, len(done))}
             for f in sorted(done, key=lambda f: f.exception() is None):
                 yield f.result()
+        ok = True
     finally:
-        ex.shutdown(wait=True, cancel_futures=True)
+        close_pool(ex, abort=not ok)
 
 
 def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterable[GrainResult]:
@@ -602,6 +625,63 @@ def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterab
             client.cancel(futures)
     finally:
         client.close()
+
+
+def check_recipe_size(recipe: Recipe, workers: int = 1) -> float:
+    """Refuse a recipe whose population would take more than a day (estimated from grain 0's parameters)."""
+    from .estimate import check_job, grain_seconds
+
+    _, params, _ = draw_grain(recipe, 0)
+    return check_job(recipe.count, grain_seconds(recipe.method, params),
+                     what=f"{recipe.source}: {recipe.count} {recipe.method} grains",
+                     option="count (or split the population into several batches)", workers=workers)
+
+
+#: grains made at the ends of every distribution before a batch starts
+PILOTS = 3
+
+
+def check_extremes(recipe: Recipe) -> None:
+    """Make grains 0, 1, 2 with each distributed parameter at each end of its range (pilot grains, nothing written).
+
+    A parameter's declared range is checked when the recipe is read; some
+    limits depend on the grain itself (e.g. an FSO amplitude too large for
+    the grain to stay star-shaped).  This catches a distribution reaching such
+    values before any work, instead of failing at grain 517.
+
+    Raises
+    ------
+    RecipeError
+        Naming ``params.NAME``, the value and the reason.
+    """
+    import dataclasses
+
+    from .methods import generate
+
+    varying = {k: v for k, v in recipe.params.items() if isinstance(v, Distribution)}
+    if not varying:
+        return
+    for index in range(min(PILOTS, recipe.count)):
+        make_grain(recipe, index)  # the grain as drawn: its own error (fixed parameters) names it
+        seed, params, _ = draw_grain(recipe, index)
+        for name, dist in varying.items():
+            ends = dist.args["values"] if dist.kind == "choice" else dist.support()
+            for value in dict.fromkeys(ends):
+                if isinstance(value, float) and not math.isfinite(value):
+                    continue
+                try:
+                    generate(recipe.method, dataclasses.replace(params, **{name: value}), seed)
+                except ParameterError as exc:
+                    raise RecipeError(recipe.source, f"params.{name}",
+                                      f"the distribution reaches {value!r}, where grain {index} cannot be made "
+                                      f"({exc.reason}); narrow the distribution") from None
+
+
+def existing_grains(out: Path, recipe: Recipe) -> bool:
+    """Whether ``out`` holds a grain file of this recipe's naming (listing the folder, not every name)."""
+    from .run import existing_outputs
+
+    return any(p.name != "manifest.csv" for p in existing_outputs(out, recipe.method, recipe.count, recipe.format))
 
 
 def run_batch(
@@ -656,6 +736,13 @@ def run_batch(
         raise ValueError(f"workers must be >= 1, got {workers}")
     out = Path(out)
     journal = out / JOURNAL
+    n_workers = 1 if scheduler else min(workers or os.cpu_count() or 1, recipe.count)
+    check_recipe_size(recipe, n_workers)  # before anything: a job beyond a day is refused
+    check_extremes(recipe)  # every distribution's range can make a grain (pilot grains, nothing written)
+    if not resume and journal.is_dir() and not any(journal.glob("grain-*.json")) \
+            and not (out / "manifest.csv").exists() \
+            and not existing_grains(out, recipe):
+        shutil.rmtree(journal, ignore_errors=True)  # a failed start recorded nothing: it blocks nothing
     names = [recipe.file_name(i) for i in range(recipe.count)]
     saved = journal / "recipe.toml"
     if resume and saved.exists():
@@ -669,7 +756,28 @@ def run_batch(
             hint = "use --overwrite (no batch journal to resume from)" if resume else "use --resume or --overwrite"
             raise FileExistsError(f"{first} exists (not made by this batch); {hint}" if resume
                                   else f"{first} exists (a batch is already in {out}); {hint}")
+    created = [q for q in [out, *out.parents] if not q.exists()]
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _run_batch(recipe, out, names, workers=workers, scheduler=scheduler, resume=resume,
+                          overwrite=overwrite, progress=progress, report=report, in_process=in_process)
+    except BaseException:
+        # a start that recorded no grain leaves nothing behind, so it never blocks a corrected rerun
+        if not resume and not any(journal.glob("grain-*.json")):
+            shutil.rmtree(journal, ignore_errors=True)
+            for q in created:
+                try:
+                    q.rmdir()
+                except OSError:
+                    break
+        raise
+
+
+def _run_batch(recipe, out, names, *, workers, scheduler, resume, overwrite, progress, report, in_process):
+    from .run import MANIFEST, manifest_columns
+
+    journal = out / JOURNAL
+    saved = journal / "recipe.toml"
     for name in names + [MANIFEST]:  # leftovers of atomic writes interrupted by a kill
         for tmp in out.glob(f".{name}.*.tmp"):
             tmp.unlink(missing_ok=True)
@@ -694,11 +802,15 @@ def run_batch(
         n = workers or os.cpu_count() or 1
         n = min(n, max(len(todo), 1))
         results = _local_results(recipe, todo, n, n == 1 if in_process is None else in_process)
+    stream = results
     if progress is not None:
         results = progress(results)
-    for res in results:
-        _record(out, res)
-        rows[res.index] = res.row
+    try:
+        for res in results:
+            _record(out, res)
+            rows[res.index] = res.row
+    finally:
+        stream.close()  # on an error or interrupt: stop the workers now
     ordered = [rows[i] for i in range(recipe.count)]
     write_csv(out / MANIFEST, ordered, manifest_columns(recipe.method, ("sha256",)), units=True)
     summary = None

@@ -6,6 +6,9 @@ scales, measures and writes, and knows nothing of the command line.
 
 from __future__ import annotations
 
+import csv
+import os
+import re
 import shutil
 import tempfile
 from pathlib import Path
@@ -13,11 +16,12 @@ from typing import Any, Callable, Iterable, Sequence
 
 from .analysis.descriptors import BASIC_COLUMNS, basic_descriptors
 from .fabrication.scale import check_size, to_size
-from .io import FORMATS, export_bytes, write_csv
+from .io import FORMATS, _cell, export_bytes, file_mode
 from .methods import generate, get
 from .params import as_dict, specs
 
-__all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files"]
+__all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files",
+           "existing_outputs", "earlier_run_files", "manifest_rows"]
 
 MANIFEST = "manifest.csv"
 
@@ -73,6 +77,62 @@ def planned_files(out: Path, method: str, count: int, fmt: str) -> list[Path]:
     return [out / grain_file_name(method, i, fmt) for i in range(count)] + [out / MANIFEST]
 
 
+def existing_outputs(out: Path, method: str, count: int, fmt: str) -> list[Path]:
+    """The files a run of ``count`` grains would replace in ``out``: found by listing ``out``, not by
+    building every planned name (memory does not grow with ``count``)."""
+    if not out.is_dir():
+        return []
+    pattern = re.compile(rf"{re.escape(method)}-(\d{{4,}})\.{re.escape(fmt)}")
+    found = []
+    for p in out.iterdir():
+        m = pattern.fullmatch(p.name)
+        if (m and int(m.group(1)) < count and grain_file_name(method, int(m.group(1)), fmt) == p.name) \
+                or p.name == MANIFEST:
+            found.append(p)
+    return sorted(found)
+
+
+def earlier_run_files(out: Path) -> list[Path]:
+    """Files the manifest already in ``out`` lists (an earlier run's grains), existing ones only."""
+    manifest = out / MANIFEST
+    if not manifest.is_file():
+        return []
+    try:
+        with manifest.open(newline="", encoding="utf-8") as fh:
+            names = [row.get("file") or "" for row in csv.DictReader(fh)]
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return []
+    files = []
+    for name in names:
+        p = out / name
+        # only plain names inside ``out`` (a manifest cannot make us delete elsewhere)
+        if name and Path(name).name == name and not name.startswith(".") and p.is_file():
+            files.append(p)
+    return files
+
+
+def manifest_rows(out: str | Path) -> list[dict[str, str]]:
+    """The rows of ``out``/manifest.csv (values as text)."""
+    with (Path(out) / MANIFEST).open(newline="", encoding="utf-8") as fh:
+        return list(csv.DictReader(fh))
+
+
+def remove_stale_staging(out: Path) -> None:
+    """Remove staging folders of runs that were killed (their process is gone)."""
+    from .workers import pid_alive
+
+    if not out.is_dir():
+        return
+    for stage in out.glob(STAGING_PREFIX + "*"):
+        m = re.match(re.escape(STAGING_PREFIX) + r"(\d+)-", stage.name)
+        if stage.is_dir() and m and not pid_alive(int(m.group(1))):
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+#: hidden folder a run stages its files in (``.grainforge-staging-PID-XXXX``)
+STAGING_PREFIX = ".grainforge-staging-"
+
+
 def write_run(
     method: str,
     params: Any,
@@ -86,20 +146,26 @@ def write_run(
     progress: Callable[[Iterable], Iterable] | None = None,
     extra_columns: Sequence[str] = (),
     row_extra: dict[str, Any] | None = None,
-) -> list[dict[str, Any]]:
+) -> int:
     """Generate grain ``i`` with ``seeds[i]``, scale it, write it and the manifest.
 
     Files are staged in a hidden folder inside ``out`` and moved into place
     only when every grain succeeded: a failure (bad parameter, a seed for
-    which the amplitude is too large, ...) leaves no new file behind.
+    which the amplitude is too large, an interrupt) leaves no new file behind.
+    Memory does not grow with the number of grains: ``seeds`` may be a
+    ``range`` of any length, and manifest rows are staged on disk.
+
+    With ``overwrite``, the files an earlier manifest in ``out`` lists are
+    removed when the new run succeeds (a shorter run leaves no grain that its
+    manifest does not list).
 
     ``row_extra`` (e.g. the printer and the chosen resolution) is added to
     every manifest row; list its keys in ``extra_columns``.
 
     Returns
     -------
-    list of dict
-        The manifest rows.
+    int
+        The number of grains written.
 
     Raises
     ------
@@ -112,31 +178,47 @@ def write_run(
         raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     check_size(size, size_definition)  # before anything is generated or written
     out = Path(out)
-    targets = planned_files(out, method, len(seeds), fmt)
+    count = len(seeds)
     if not overwrite:
-        existing = [p for p in targets if p.exists()]
+        existing = existing_outputs(out, method, count, fmt)
         if existing:
             raise FileExistsError(
                 f"{existing[0]} exists ({len(existing)} output file(s) would be replaced); use --overwrite"
             )
     created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
-    stage = Path(tempfile.mkdtemp(prefix=".grainforge-staging-", dir=out))
-    rows: list[dict[str, Any]] = []
+    remove_stale_staging(out)
+    stage = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
+    columns = manifest_columns(method, extra_columns)
+    written = 0
     try:
-        iterator = enumerate(seeds)
-        if progress is not None:
-            iterator = progress(iterator)
-        for i, seed in iterator:
+        with open(stage / MANIFEST, "w", newline="", encoding="utf-8") as fh:
+            writer = csv.writer(fh, lineterminator="\n")
+            from .units import UNITS, headers
+
+            writer.writerow(headers(columns, UNITS))  # every header states its unit, as write_csv(units=True)
+            iterator = enumerate(seeds)
+            if progress is not None:
+                iterator = progress(iterator)
+            for i, seed in iterator:
+                name = grain_file_name(method, i, fmt)
+                data, row = encode_grain(method, params, seed, name, fmt=fmt, size=size,
+                                         size_definition=size_definition)
+                (stage / name).write_bytes(data)
+                row = {**row, **(row_extra or {})}
+                writer.writerow([_cell(row.get(c)) for c in columns])
+                written += 1
+        earlier = set(earlier_run_files(out)) if overwrite else set()
+        os.chmod(stage / MANIFEST, file_mode())
+        for i in range(count):
             name = grain_file_name(method, i, fmt)
-            data, row = encode_grain(method, params, seed, name, fmt=fmt, size=size, size_definition=size_definition)
-            (stage / name).write_bytes(data)
-            rows.append({**row, **(row_extra or {})})
-        for row in rows:
-            (stage / row["file"]).replace(out / row["file"])
-        write_csv(out / MANIFEST, rows, manifest_columns(method, extra_columns), units=True)
+            (stage / name).replace(out / name)
+            earlier.discard(out / name)
+        (stage / MANIFEST).replace(out / MANIFEST)
+        for p in sorted(earlier):  # the earlier run's grains that this run did not replace
+            p.unlink(missing_ok=True)
     finally:  # on success the stage is empty; on failure nothing new is left behind
         shutil.rmtree(stage, ignore_errors=True)
-        if created and not any(out.iterdir()):
+        if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()
-    return rows
+    return written

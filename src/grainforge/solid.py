@@ -287,6 +287,7 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
+    f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 0] != f[:, 2])]  # collapsed faces cross nothing
     if len(f) < 2:
         return 0
     tri = v[f]
@@ -430,6 +431,32 @@ def require_solid(vertices: np.ndarray, faces: np.ndarray, parameter: str, *, st
         raise ParameterError(parameter, f"gives a mesh that is not a valid solid when written ({'; '.join(problems)})")
 
 
+def unique_rows(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """``np.unique(points, axis=0, return_inverse=True)`` for (N, 3) points, several times faster.
+
+    Rows are sorted by x, then y, then z (numeric order, as ``np.unique``
+    sorts them) with ``np.lexsort`` instead of a sort of structured rows.
+
+    Examples
+    --------
+    >>> p = np.array([[1.0, 0, 0], [0, 1, 0], [1, 0, 0]])
+    >>> u, inv = unique_rows(p)
+    >>> u.tolist(), inv.tolist()
+    ([[0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], [1, 0, 1])
+    """
+    p = np.asarray(points)
+    if len(p) == 0:
+        return p.copy(), np.zeros(0, dtype=np.int64)
+    order = np.lexsort(p.T[::-1])
+    s = p[order]
+    new = np.empty(len(s), dtype=bool)
+    new[0] = True
+    np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+    inverse = np.empty(len(p), dtype=np.int64)
+    inverse[order] = np.cumsum(new) - 1
+    return s[new], inverse
+
+
 def split_bodies(
     vertices: np.ndarray, faces: np.ndarray, drop_degenerate: bool = True
 ) -> list[tuple[np.ndarray, np.ndarray]]:
@@ -451,8 +478,8 @@ def split_bodies(
     >>> [len(f) for _, f in split_bodies(both.vertices, both.faces)]
     [12, 12]
     """
-    v, inv = np.unique(np.asarray(vertices, dtype=np.float64), axis=0, return_inverse=True)
-    f = inv.reshape(-1)[np.asarray(faces, dtype=np.int64)]
+    v, inv = unique_rows(np.asarray(vertices, dtype=np.float64))
+    f = inv[np.asarray(faces, dtype=np.int64)]
     if drop_degenerate:
         f = f[(f[:, 0] != f[:, 1]) & (f[:, 1] != f[:, 2]) & (f[:, 2] != f[:, 0])]
     if len(f) == 0:

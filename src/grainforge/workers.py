@@ -25,7 +25,8 @@ from collections import deque
 from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
-__all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive"]
+__all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive",
+           "close_pool"]
 
 #: seconds between a worker's checks that the process that made its pool is alive
 WATCH_INTERVAL = 0.25
@@ -86,13 +87,13 @@ def pid_alive(pid: int) -> bool:
         return True
 
 
-def watch_parent(owner: int) -> None:
-    """Pool-worker initializer: exit as soon as process ``owner`` (the pool's maker) is gone.
+def die_with_parent() -> None:
+    """Ask the kernel to SIGKILL this process when its parent dies (Linux ``PR_SET_PDEATHSIG``; elsewhere nothing).
 
-    On Linux the kernel also sends SIGKILL when the worker's parent dies
-    (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
-    server, not the owner, so a daemon thread polls the owner as well.
+    Also used as ``preexec_fn`` of engine subprocesses (Yade), so a killed
+    ``grainforge`` leaves no engine running.
     """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the owner decides
     if sys.platform.startswith("linux"):
         try:
             import ctypes
@@ -101,6 +102,16 @@ def watch_parent(owner: int) -> None:
             libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):
             pass
+
+
+def watch_parent(owner: int) -> None:
+    """Pool-worker initializer: exit as soon as process ``owner`` (the pool's maker) is gone.
+
+    On Linux the kernel also sends SIGKILL when the worker's parent dies
+    (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
+    server, not the owner, so a daemon thread polls the owner as well.
+    """
+    die_with_parent()
 
     def watch():
         while pid_alive(owner):
@@ -154,6 +165,7 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
             yield fn(item)
         return
     pool = process_pool(workers, preload)
+    ok = False
     try:
         pending: deque = deque()
         it = iter(items)
@@ -168,8 +180,26 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
             if nxt is not _END:
                 pending.append(pool.submit(fn, nxt))
             yield result
+        ok = True
     finally:
+        close_pool(pool, abort=not ok)
+
+
+def close_pool(pool, abort: bool = False) -> None:
+    """Shut a pool down; with ``abort`` (an error, Ctrl-C, SIGTERM) stop its workers now instead of
+    letting them finish the tasks they hold."""
+    if not abort:
         pool.shutdown(wait=True, cancel_futures=True)
+        return
+    processes = list(getattr(pool, "_processes", {}).values())
+    for p in processes:
+        try:
+            p.terminate()
+        except (OSError, AttributeError):
+            pass
+    pool.shutdown(wait=False, cancel_futures=True)
+    for p in processes:
+        p.join(timeout=5)
 
 
 _END = object()

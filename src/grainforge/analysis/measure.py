@@ -142,6 +142,9 @@ def analyse_files(paths, *, workers: int = 1, **options):
     from ..workers import ordered_map
 
     tasks = ((str(p), options) for p in paths)
-    yield from ordered_map(_analyse_task, tasks, workers,
-                           preload=["grainforge.analysis.measure", "grainforge.analysis.descriptors",
-                                    "grainforge.analysis.fractal", "grainforge.analysis.fourier", "trimesh"])
+    yield from ordered_map(_analyse_task, tasks, workers, preload=PRELOAD)
+
+
+#: modules the analysis workers' fork server imports once
+PRELOAD = ["grainforge.analysis.measure", "grainforge.analysis.descriptors", "grainforge.analysis.fractal",
+           "grainforge.analysis.fourier", "trimesh"]

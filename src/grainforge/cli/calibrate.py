@@ -51,6 +51,7 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
         raise bad_parameter(exc) from None
     csv_path, png_path = out / "calibration.csv", out / "calibration.png"
     output_dir(out, overwrite=overwrite, files=[csv_path, png_path])
+    _estimate(primitive, primaries, len(grid) * repeats, workers)
     try:
         cal = run_calibration(
             primitive, primaries, grid, repeats, seed=seed, workers=workers,
@@ -65,3 +66,18 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
     if len(m):
         click.echo(f"mean D_A from {m.max():.3f} (ε = {e[0]:g}) to {m.min():.3f} (ε = {e[-1]:g})", err=True)
     click.echo(f"wrote {csv_path} and {png_path}", err=True)
+
+
+def _estimate(primitive: str, primaries: int, count: int, workers) -> None:
+    """Refuse a calibration beyond a day before any work (option: --repeats, or --primaries)."""
+    import os
+
+    from ..estimate import TooLargeError
+    from ..methods.dpa import Params
+    from .generate import announce_estimate
+
+    try:
+        announce_estimate("dpa", Params(primitive=primitive, primaries=primaries), count,
+                          workers=workers or os.cpu_count() or 1, count_option="--repeats (or the --exponents grid)")
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None

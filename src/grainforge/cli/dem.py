@@ -7,12 +7,14 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, output_dir
+
 ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run", "lammps": "lmp -in in.run"}
 
 
 @click.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder of the deck.")
 @click.option("--engine", type=click.Choice(["yade", "liggghts", "lammps"]), default="yade", show_default=True)
 @click.option("--shape", type=click.Choice(["clump", "polyhedron", "levelset"]), default="clump",
@@ -44,6 +46,7 @@ def dem(inputs, out, engine, shape, density, spheres, unit, count, workers, over
         raise click.BadParameter(f"must be > 0 kg/m³, got {density}", param_hint="--density")
     if not (unit > 0):
         raise click.BadParameter(f"must be > 0, got {unit}", param_hint="--unit")
+    output_dir(out)  # writable, not a file: before any work (write_deck applies the overwrite rule)
     paths = grain_paths(inputs)
     workers = workers or os.cpu_count() or 1
     templates = build_templates(paths, workers=workers, progress=progress_bar(len(paths), "dem"),

@@ -7,14 +7,17 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, output_dir
+
 
 @click.command()
-@click.option("--out", default=Path("out/demo"), show_default=True, type=click.Path(file_okay=False, path_type=Path))
+@click.option("--out", default=Path("out/demo"), show_default=True, type=OutPath(file_okay=False))
 @click.option("--quick", is_flag=True, help="Fewer, coarser grains (for a fast check).")
 def demo(out, quick):
     """Generate the paper-style galleries (grains, manifests, contact sheets) into OUT."""
     from ..demo import run_demo
 
+    output_dir(out)  # demo always replaces its own outputs
     t0 = time.perf_counter()
     written = run_demo(out, quick=quick, echo=lambda s: click.echo(s, err=True))
     click.echo(f"\nDemo finished in {time.perf_counter() - t0:.0f} s. Results in {out.resolve()}:")

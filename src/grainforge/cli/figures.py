@@ -1,4 +1,4 @@
-"""``grainforge figures --out DIR``: the paper's Figures 1–6 as PNGs."""
+"""``grainforge figures --out DIR``: the paper's Figures 1–6 and the shape-control Figures 7–9 as PNGs."""
 
 from __future__ import annotations
 
@@ -11,14 +11,15 @@ from .paths import OutPath, output_dir
 
 @click.command()
 @click.option("--out", required=True, type=OutPath(file_okay=False), help="Folder for the PNGs.")
-@click.option("--only", "only", multiple=True, type=click.IntRange(1, 6), help="Only this figure (repeatable).")
+@click.option("--only", "only", multiple=True, type=click.IntRange(1, 9), help="Only this figure (repeatable).")
 @click.option("--subdivisions", type=click.IntRange(2, 6), default=5, show_default=True,
               help="Icosphere level of the FSO and CRI grains (lower is faster).")
 @click.option("--overwrite", is_flag=True, help="Replace existing figure files.")
 def figures(out, only, subdivisions, overwrite):
-    """Regenerate the paper's Figures 1-6 (FSO, contours, CRI, DPA) into OUT.
+    """Regenerate the paper's Figures 1-6 (FSO, contours, CRI, DPA) into OUT, plus 7-9.
 
-    Same panels and parameters as the paper's captions, fixed seeds.
+    Same panels and parameters as the paper's captions, fixed seeds.  7: FSO aspects; 8: paper vs
+    seamless FSO (pole and equator views); 9: CRI before/after the shape-control changes.
     """
     from ..figures import FIGURES, make_figures
 

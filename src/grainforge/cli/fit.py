@@ -6,12 +6,14 @@ from pathlib import Path
 
 import click
 
+from .paths import OutPath, output_dir
+
 from .progress import progress_bar
 
 
 @click.command()
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", "out", required=True, type=click.Path(file_okay=False, path_type=Path),
+@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for recipe.toml, fit.csv and fit.png.")
 @click.option("--voxel-size", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Voxel size of the sand's scan (µm); required unless the CSV has a 'Voxel Size (µm)' column.")
@@ -46,14 +48,8 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
                                  param_hint="--method")
-    existing = [out / n for n in OUTPUTS if (out / n).exists()]
-    if existing and not overwrite:
-        raise click.UsageError(f"{existing[0]} exists; use --overwrite")
-    if out.exists() and not out.is_dir():
-        raise click.UsageError(f"{out} is not a folder")
+    output_dir(out, overwrite=overwrite, files=[out / n for n in OUTPUTS])  # before any work
     s = read_sand(sand, voxel_size)
-    if not os.access(out if out.exists() else out.parent if out.parent.exists() else Path("."), os.W_OK):
-        raise click.UsageError(f"{out} is not writable")
     state = {"desc": "fit"}
 
     def progress(it, total):

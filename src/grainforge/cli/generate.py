@@ -48,17 +48,19 @@ def generate():
 
 def run_generate(method: str, params, *, out, count, seed, size, size_definition, fmt, overwrite, extra_columns=()):
     """Shared body of every ``generate METHOD`` command."""
+    from ..estimate import TooLargeError
     from ..run import write_run
     from .paths import output_dir
 
     output_dir(out)  # write_run refuses existing outputs without --overwrite
-    seeds = [seed + i for i in range(count)]
+    seeds = range(seed, seed + count)  # not a list: memory does not grow with --count
     printer = click.get_current_context().meta.get(PRINTER_KEY)
     row_extra = {}
     try:
         if printer is not None:
             params, row_extra = _match_resolution(method, params, seeds, size, size_definition, printer)
             extra_columns = tuple(extra_columns) + tuple(row_extra)
+        announce_estimate(method, params, count)
         write_run(
             method, params, seeds, out, fmt=fmt, size=size, size_definition=size_definition,
             overwrite=overwrite, progress=progress_bar(total=count, desc=f"{method} grains"),
@@ -66,9 +68,27 @@ def run_generate(method: str, params, *, out, count, seed, size, size_definition
         )
     except ParameterError as exc:
         raise bad_parameter(exc) from None
-    except FileExistsError as exc:
+    except (FileExistsError, TooLargeError) as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"wrote {count} {method} grain(s) and manifest.csv to {out}", err=True)
+
+
+#: options that make one grain of a method cheaper (named when a single grain is too long)
+GRAIN_COST_OPTIONS = {"fso": "--subdivisions, --ridges or --frequencies", "cri": "--subdivisions",
+                      "dpa": "--primaries or --smooth"}
+
+
+def announce_estimate(method: str, params, count: int, workers: int = 1, count_option: str = "--count") -> float:
+    """Refuse a job estimated beyond a day (naming the option that shortens it); announce one over a minute."""
+    from ..estimate import SECONDS_LIMIT, check_job, duration, grain_seconds
+
+    each = grain_seconds(method, params)
+    option = count_option if each * 2 <= SECONDS_LIMIT else GRAIN_COST_OPTIONS.get(method, "--subdivisions")
+    total = check_job(count, each, what=f"{count} {method} grain(s)", option=option, workers=workers)
+    if total > 60:
+        click.echo(f"estimated time: about {duration(total)} for {count} {method} grain(s) "
+                   "(a rough model; the progress bar shows the measured rate)", err=True)
+    return total
 
 
 def _match_resolution(method, params, seeds, size, size_definition, printer):

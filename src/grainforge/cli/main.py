@@ -14,13 +14,42 @@ from .._version import __version__
 from ..params import ParameterError
 
 
+class Terminated(BaseException):
+    """Raised in the main thread on SIGTERM, so every ``finally`` cleans up (staging folders, temp files, pools)."""
+
+
+def _terminate(signum, frame):
+    raise Terminated()
+
+
 class GrainforgeGroup(click.Group):
     """A click group that reports errors as a single line."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
+        import signal
+        import threading
+
+        main_thread = threading.current_thread() is threading.main_thread()
+        previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+        try:
+            rv = self._main(args, prog_name, complete_var, standalone_mode, **extra)
+        finally:
+            if main_thread:
+                signal.signal(signal.SIGTERM, previous)
+        return rv
+
+    def _main(self, args, prog_name, complete_var, standalone_mode, **extra):
+        import signal
+
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
-        except click.exceptions.Abort:
+        except Terminated:
+            click.echo("Terminated.", err=True)
+            sys.exit(128 + signal.SIGTERM)
+        except click.exceptions.Abort as exc:
+            if isinstance(exc.__cause__, KeyboardInterrupt):  # click turns Ctrl-C into Abort
+                click.echo("Interrupted.", err=True)
+                sys.exit(130)
             click.echo("Aborted.", err=True)
             sys.exit(1)
         except click.ClickException as exc:
@@ -71,11 +100,11 @@ def cli():
 def _register():
     from .options import apply_help_style
 
-    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, tray
+    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, simulate, tray
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
-        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit,
+        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit, simulate.simulate,
     ):
         cli.add_command(command)
     apply_help_style(cli)

@@ -99,7 +99,7 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
         if inputs:
             raise click.UsageError("give either INPUTS or --method, not both")
         p, given = parse_param_values(method, params, preset)
-        source = GeneratorSource(method, p, tuple(range(seed, seed + count)), 10.0 if size is None else size,
+        source = GeneratorSource(method, p, range(seed, seed + count), 10.0 if size is None else size,
                                  size_definition)
         match = "subdivisions" not in given
     else:

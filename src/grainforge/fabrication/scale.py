@@ -29,6 +29,7 @@ def _current_size(grain, definition: str) -> float:
 #: physical sizes a grain may be given, in mm: 1 µm to 10 m (beyond them float32 files lose the shape or
 #: the slicer's units overflow).
 SIZE_RANGE_MM = (1e-3, 1e4)
+MIN_SIZE_MM, MAX_SIZE_MM = SIZE_RANGE_MM
 
 
 def check_size(size: float, definition: str = "equivalent") -> float:

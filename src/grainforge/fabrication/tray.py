@@ -35,7 +35,6 @@ from __future__ import annotations
 import dataclasses
 import os
 import tempfile
-from collections import deque
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Iterable, Iterator, Sequence
@@ -314,29 +313,27 @@ def _prepare_chunk(tasks: list[dict]) -> list[Prepared]:
     return [prepare(t) for t in tasks]
 
 
-def _prepared_in_order(tasks: list[dict], workers: int, chunk: int = 16) -> Iterator[Prepared]:
-    """Prepared grains in index order; at most a few chunks in flight, so memory stays bounded."""
-    chunks = [tasks[i : i + chunk] for i in range(0, len(tasks), chunk)]
-    if workers <= 1:
-        for c in chunks:
-            yield from _prepare_chunk(c)
-        return
-    from ..workers import process_pool, single_threaded_children
+def _chunks(tasks: Iterable[dict], chunk: int) -> Iterator[list[dict]]:
+    batch: list[dict] = []
+    for t in tasks:
+        batch.append(t)
+        if len(batch) == chunk:
+            yield batch
+            batch = []
+    if batch:
+        yield batch
 
-    with process_pool(workers, ["grainforge.fabrication.tray", "trimesh", "scipy.special"]) as pool:
-        pending: deque = deque()
-        it = iter(chunks)
-        with single_threaded_children():  # the workers start with the first submissions
-            for c in it:
-                pending.append(pool.submit(_prepare_chunk, c))
-                if len(pending) >= 3 * workers:
-                    break
-        while pending:
-            done = pending.popleft().result()
-            nxt = next(it, None)
-            if nxt is not None:
-                pending.append(pool.submit(_prepare_chunk, nxt))
-            yield from done
+
+def _prepared_in_order(tasks: Iterable[dict], workers: int, chunk: int = 16) -> Iterator[Prepared]:
+    """Prepared grains in index order; at most a few chunks in flight, so memory stays bounded.
+
+    ``tasks`` may be a generator: it is consumed as the work goes.
+    """
+    from ..workers import ordered_map
+
+    for done in ordered_map(_prepare_chunk, _chunks(tasks, chunk), workers,
+                            preload=["grainforge.fabrication.tray", "trimesh", "scipy.special"]):
+        yield from done
 
 
 # --------------------------------------------------------------------------- the tray
@@ -431,14 +428,55 @@ def preview_figure(footprints: list[np.ndarray], layer_of: list[int], volume, ti
     return fig
 
 
-def _tasks(source, fmt: str, stacking: bool) -> list[dict]:
+def _tasks(source, fmt: str, stacking: bool) -> Iterator[dict]:
+    """One task per grain, made as they are consumed (memory does not grow with the count)."""
     common = {"fmt": fmt, "stacking": stacking}
     if isinstance(source, GeneratorSource):
-        return [dict(common, kind="gen", index=i, method=source.method, params=source.params, seed=int(s),
-                     size=float(source.size), size_definition=source.size_definition)
-                for i, s in enumerate(source.seeds)]
-    return [dict(common, kind="file", index=i, path=str(p), size=source.size,
-                 size_definition=source.size_definition) for i, p in enumerate(source.paths)]
+        for i, s in enumerate(source.seeds):
+            yield dict(common, kind="gen", index=i, method=source.method, params=source.params, seed=int(s),
+                       size=float(source.size), size_definition=source.size_definition)
+        return
+    for i, p in enumerate(source.paths):
+        yield dict(common, kind="file", index=i, path=str(p), size=source.size,
+                   size_definition=source.size_definition)
+
+
+def _temp_prefix(out: Path, pid: int) -> str:
+    """Temporary print files are ``.NAME.pidPID.XXXX.tmp``: the next run can tell a killed run's leftovers."""
+    return f".{out.name}.pid{pid}."
+
+
+def remove_stale_temps(out: Path) -> list[Path]:
+    """Remove temporary print files for ``out`` left by killed runs (their process is gone)."""
+    import re
+
+    from ..workers import pid_alive
+
+    removed = []
+    if not out.parent.is_dir():
+        return removed
+    pattern = re.compile(re.escape(f".{out.name}.pid") + r"(\d+)\..*\.tmp")
+    for p in out.parent.iterdir():
+        m = pattern.fullmatch(p.name)
+        if m and p.is_file() and not pid_alive(int(m.group(1))):
+            p.unlink(missing_ok=True)
+            removed.append(p)
+    return removed
+
+
+#: memory kept per grain until the end (CSV row, footprint polygon), bytes
+ROW_BYTES = 2048
+
+
+def _check_size_of_job(source, workers: int) -> None:
+    """Refuse, before any work, a tray that would take more than a day or more memory than the machine has."""
+    from ..estimate import check_job, check_memory, grain_seconds
+
+    n = len(source)
+    check_memory(n * ROW_BYTES, what=f"a tray of {n} grains", option="--count")
+    if isinstance(source, GeneratorSource):
+        check_job(n, grain_seconds(source.method, source.params), what=f"a tray of {n} {source.method} grains",
+                  option="--count", workers=workers)
 
 
 def build_tray(
@@ -520,17 +558,20 @@ def build_tray(
         )
         source = dataclasses.replace(source, params=dataclasses.replace(source.params,
                                                                          subdivisions=resolution.subdivisions))
+    _check_size_of_job(source, workers)
 
+    made = [q for q in [out.parent, *out.parent.parents] if not q.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)
+    remove_stale_temps(out)
     packer = ShelfPacker(printer.build_volume, gap, printer.stacking)
     temps: list[Path] = []
     rows: list[dict[str, Any]] = []
     footprints: list[list[np.ndarray]] = []
     layers_of: list[list[int]] = []
-    writer = fh = None
+    writer = fh = stream = None
     plate = -1
     try:
-        it = _prepared_in_order(_tasks(source, fmt, printer.stacking), workers)
+        it = stream = _prepared_in_order(_tasks(source, fmt, printer.stacking), workers)
         if progress is not None:
             it = progress(it)
         for p in it:
@@ -541,7 +582,7 @@ def build_tray(
                 if writer is not None:
                     writer.close()
                     fh.close()
-                fd, tmp = tempfile.mkstemp(prefix=f".{out.name}.", suffix=".tmp", dir=out.parent)
+                fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(out, os.getpid()), suffix=".tmp", dir=out.parent)
                 temps.append(Path(tmp))
                 os.chmod(tmp, file_mode())
                 fh = os.fdopen(fd, "w+b")
@@ -575,12 +616,19 @@ def build_tray(
                      f"{printer.name}, gap {gap * 1000:.0f} µm")
         write_csv(csv_path, rows, units=True)
     except BaseException:
+        if stream is not None:
+            stream.close()  # stops the workers now (an error, Ctrl-C, SIGTERM), not after their current chunks
         if writer is not None:
             writer.abort()
         if fh is not None and not fh.closed:
             fh.close()
         for t in temps:
             t.unlink(missing_ok=True)
+        for q in made:  # folders this call created, innermost first, if still empty
+            try:
+                q.rmdir()
+            except OSError:
+                break
         raise
     return TrayResult(files, previews, csv_path, rows, len(files), resolution, gap, layer_count)
 

@@ -57,7 +57,7 @@ VALIDITY_PARAMETER = "roughness"
 #: generation outputs recorded in manifests
 INFO_COLUMNS = ("rounding_radius", "flat_fraction", "min_radius", "max_radius")
 #: largest ratio of the longest to the shortest aspect axis
-MAX_ASPECT_RATIO = 10.0
+MAX_ASPECT_RATIO = 20.0
 #: every direction lies within this angle of some facet normal (bounds corner sharpness)
 MAX_COVER_ANGLE = np.deg2rad(70.0)
 #: no two facet normals closer than this fraction of the mean spacing sqrt(8π/(√3 k))
@@ -76,7 +76,7 @@ class Params:
     facets: int = param(20, "number of facets of the polyhedral core", kind="int", low=6, high=200)
     aspect: tuple[float, float, float] = param(
         (1.3, 1.1, 1.0), "semi-axes L:I:S (along x, y, z) of the ellipsoid the facets are tangent to "
-        f"(ratios only; L/S at most {MAX_ASPECT_RATIO:g})", kind="floats", low=0.1, high=10.0,
+        f"(ratios only; L/S at most {MAX_ASPECT_RATIO:g})", kind="floats", low=0.0, low_open=True, high=100.0,
     )
     rounding: float = param(
         0.1, "edge and corner radius relative to the smallest semi-axis (≈ Wadell roundness; 0 = sharp)",
@@ -143,6 +143,7 @@ class Core:
 
 def _semi_axes(aspect) -> np.ndarray:
     a = np.asarray(aspect, dtype=np.float64)
+    a = a / a.max()  # ratios only (and no underflow for tiny values): each in [1/MAX_ASPECT_RATIO, 1]
     return a / np.prod(a) ** (1.0 / 3.0)
 
 

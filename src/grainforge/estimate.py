@@ -1,0 +1,119 @@
+"""Up-front estimates of how long and how much memory a job takes, to refuse what cannot finish.
+
+A request is refused *before any work* when its estimate exceeds a day of
+computing or the memory of the machine, and the message gives the estimate
+and the option that reduces it.  Below that, long jobs run with a progress
+bar and an ETA.  The per-grain costs are rough models fitted to the timings
+in docs/benchmarks.md (one core of the project machine); they are meant to
+tell a two-hour job from a two-year one, not to predict within 10 %.
+
+Examples
+--------
+>>> from grainforge.methods import get
+>>> t = grain_seconds("fso", get("fso").Params())
+>>> 0.005 < t < 1.0
+True
+>>> check_job(10, t, what="10 fso grains", option="--count") == 10 * t  # fine: returns the estimate
+True
+>>> check_job(10**9, t, what="1000000000 fso grains", option="--count")
+Traceback (most recent call last):
+...
+grainforge.estimate.TooLargeError: 1000000000 fso grains would take about 5 years of computing (1.6e+02 ms each; limit 1 day); lower --count
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any
+
+__all__ = ["SECONDS_LIMIT", "grain_seconds", "check_job", "check_memory", "machine_memory", "duration",
+           "TooLargeError", "icosphere_vertices"]
+
+#: longest job accepted (seconds of computing on the given workers)
+SECONDS_LIMIT = 24 * 3600.0
+
+#: FSO kernel cost per vertex and term (s) at the default 40 × 40 terms; docs/benchmarks.md measures 2.3–2.7 ns
+FSO_TERM_SECONDS = 3e-9
+#: growth of the per-term cost with the number of terms T: (T / 1600)^0.6, fitted to 2.7 ns at 1,600 terms and
+#: 43 ns (CPU) at 400 × 400 = 160,000 terms (subdivisions 5, gamma 1.05, measured under load for issue 12)
+FSO_TERM_EXPONENT = 0.6
+#: per-vertex cost of the solid check, centring, scaling, manifest descriptors and export (s)
+VERTEX_SECONDS = 1e-5
+#: fixed cost per grain (s)
+GRAIN_SECONDS = 5e-3
+#: DPA cost per primary particle (s): 100,000 primaries took 31 s (issue 12)
+DPA_PRIMARY_SECONDS = 4e-4
+
+
+class TooLargeError(ValueError):
+    """A request that would take longer than :data:`SECONDS_LIMIT` or more memory than the machine has."""
+
+
+def icosphere_vertices(subdivisions: int) -> int:
+    """10·4^s + 2."""
+    return 10 * 4 ** int(subdivisions) + 2
+
+
+def grain_seconds(method: str, params: Any) -> float:
+    """Rough seconds to generate, measure and encode one grain of ``method`` on one core."""
+    s = getattr(params, "subdivisions", None)
+    v = icosphere_vertices(s) if isinstance(s, int) else 2562
+    t = GRAIN_SECONDS + VERTEX_SECONDS * v
+    if method == "fso":
+        m = getattr(params, "ridges", 40) or 40
+        n = getattr(params, "frequencies", 40) or 40
+        t += FSO_TERM_SECONDS * v * m * n * max(1.0, m * n / 1600) ** FSO_TERM_EXPONENT
+    elif method == "dpa":
+        n = int(getattr(params, "primaries", 200) or 200)
+        smooth = int(getattr(params, "smooth", 0) or 0)
+        t = GRAIN_SECONDS + DPA_PRIMARY_SECONDS * n * 4**smooth
+    return float(t)
+
+
+def duration(seconds: float) -> str:
+    """``"3.2 h"``, ``"41 s"``, ``"1.9e+04 years"``.
+
+    Examples
+    --------
+    >>> duration(41.0), duration(7200.0), duration(3e12)
+    ('41 s', '2 h', '9.5e+4 years')
+    """
+    for unit, size in (("years", 365.25 * 86400), ("days", 86400.0), ("h", 3600.0), ("min", 60.0)):
+        if seconds >= size:
+            x = seconds / size
+            return f"{x:.2g} {unit}" if x < 1e4 else f"{x:.2g} {unit}".replace("e+0", "e+")
+    return f"{seconds:.2g} s"
+
+
+def check_job(count: int, seconds_each: float, *, what: str, option: str, workers: int = 1) -> float:
+    """Total seconds for ``count`` items of ``seconds_each`` on ``workers``; refuse beyond a day.
+
+    Raises
+    ------
+    TooLargeError
+        Naming the estimate and the ``option`` that reduces it.
+    """
+    total = float(count) * float(seconds_each) / max(int(workers), 1)
+    if total > SECONDS_LIMIT:
+        per = f"{duration(seconds_each)} each" if seconds_each >= 1 else f"{seconds_each * 1000:.2g} ms each"
+        raise TooLargeError(
+            f"{what} would take about {duration(total)} of computing ({per}"
+            + (f" on {workers} workers" if workers > 1 else "") + f"; limit 1 day); lower {option}")
+    return total
+
+
+def machine_memory() -> int:
+    """Physical memory of this machine in bytes (24 GiB if it cannot be read)."""
+    try:
+        return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
+    except (ValueError, OSError, AttributeError):
+        return 24 * 1024**3
+
+
+def check_memory(nbytes: float, *, what: str, option: str, fraction: float = 0.5) -> float:
+    """Refuse when ``nbytes`` exceeds ``fraction`` of the machine's memory (the machine is shared)."""
+    limit = machine_memory() * fraction
+    if nbytes > limit:
+        raise TooLargeError(f"{what} would need about {nbytes / 1024**3:.3g} GiB of memory "
+                            f"(limit {limit / 1024**3:.3g} GiB); lower {option}")
+    return float(nbytes)

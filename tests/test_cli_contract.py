@@ -1,0 +1,473 @@
+"""The CLI contract, case by case (issue 12): every bad input, huge request and interrupt.
+
+Every row of :data:`CASES` runs ``grainforge ARGS...`` as a real subprocess
+(in its own session, with a 6 GiB address-space limit so a request that tries
+to allocate too much fails fast instead of swapping the machine) in a fresh
+folder, and asserts the contract:
+
+- the exit code (2 for bad input; 0 or 1 where the row documents it);
+- exactly one line on stderr (or ``lines`` lines where documented), matching ``err``;
+- no ``Traceback``;
+- no file or folder appears or disappears in the case folder or the shared
+  inputs, except the ``creates`` the row documents;
+- no process of the command's session is left afterwards.
+
+Adding a row for a new command
+------------------------------
+Append a :class:`Case` to :data:`CASES` (or build several with a helper
+like :func:`unreadable_mesh_cases`)::
+
+    Case("fit-readonly", ["fit", "{in}/grain.stl", "--out", "ro/fit.csv"], err="cannot write into"),
+
+``{in}`` is the folder of shared inputs made once by :func:`inputs` (a small
+grain, a folder of grains with a manifest, corrupt meshes, images, recipes,
+printer files; add what your command needs there).  The command runs in the
+case folder, which holds ``ro/`` (a folder nobody can write into),
+``afile`` (a plain file, for "not a folder" cases) and ``exists.png``,
+``exists.csv`` (existing outputs, for the overwrite rule).  A command that
+writes should get at least the rows: read-only folder, under ``afile``, empty
+path, existing output without ``--overwrite``.  Interrupt cases (real
+signals) are in :data:`SIGNAL_CASES`.
+
+Run: ``.venv/bin/python -m pytest tests/test_cli_contract.py -q`` (about 2 min idle).
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import signal
+import struct
+import subprocess
+import sys
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+#: the CLI as a user runs it (the package this interpreter imports)
+CLI = [sys.executable, "-c", "from grainforge.cli.main import main; main()"]
+#: address-space limit of every command (bytes): a runaway allocation fails fast
+MEMORY_LIMIT = 6 * 1024**3
+
+
+@dataclass
+class Case:
+    """One CLI invocation and what it must do.
+
+    Attributes
+    ----------
+    id : str
+        Test id.
+    args : list of str
+        Arguments after ``grainforge``; ``{in}`` is the shared inputs folder.
+    code : int
+        Expected exit code (2: refused).
+    err : str
+        Regular expression the stderr must contain (searched).
+    lines : int
+        Lines expected on stderr (one for a refusal).
+    creates : tuple of str
+        Paths (relative to the case folder) the command is documented to create.
+    check : callable, optional
+        ``check(case_folder)`` for more assertions on a documented success.
+    timeout : float
+        Seconds before the command counts as hanging.
+    """
+
+    id: str
+    args: list[str]
+    code: int = 2
+    err: str = ""
+    lines: int = 1
+    creates: tuple[str, ...] = ()
+    check: object = None
+    timeout: float = 60.0
+    readonly: bool = False
+
+
+def _jpeg(d: Path) -> None:
+    assert (d / "r.jpg").read_bytes()[:3] == b"\xff\xd8\xff"
+
+
+def unreadable_mesh_cases() -> list[Case]:
+    """Every mesh-reading command × every kind of unreadable mesh: one line naming what is wrong with the file."""
+    files = {
+        "truncated": ("trunc.stl", r"truncated binary STL"),
+        "random-bytes": ("rand.stl", r"not an STL file \(neither ASCII STL nor a binary STL"),
+        "facet-count-ffffffff": ("ffff.stl", r"header announces 4294967295 facets"),
+        "png-renamed": ("png.stl", r"not an STL file \(it is a PNG image\)"),
+        "empty-zip-3mf": ("empty.3mf", r"not a 3MF file"),
+        "nan-coordinates": ("nan.stl", r"non-finite"),
+        "empty-file": ("empty.stl", r"empty file"),
+    }
+    commands = {
+        "render": lambda f: ["render", f, "-o", "r.png"],
+        "analyse": lambda f: ["analyse", f],
+        "check": lambda f: ["check", f],
+        "tray": lambda f: ["tray", f, "--out", "t.3mf", "--workers", "1"],
+    }
+    return [Case(f"{c}-{k}", make("{in}/" + name), err=re.escape(name) + ": .*" + msg)
+            for c, make in commands.items() for k, (name, msg) in files.items()]
+
+
+def writing_cases() -> list[Case]:
+    """Every command that writes: read-only folder, below a file, empty path, existing output."""
+    small_cal = ["calibrate", "dpa", "--primaries", "3", "--exponents", "1,2", "--repeats", "1", "--workers", "1"]
+    commands = {  # name: (args without the output, output option, output kind, existing output)
+        "generate": (["generate", "fso", "--subdivisions", "2"], "--out", "dir", None),
+        "render": (["render", "{in}/grain.stl"], "-o", "png", "exists.png"),
+        "fourier": (["fourier", "{in}/grain.png"], "--csv", "csv", "exists.csv"),
+        "calibrate": (small_cal, "--out", "dir", None),
+        "analyse": (["analyse", "{in}/grain.stl", "--no-fractal", "--no-fourier"], "--csv", "csv", "exists.csv"),
+        "plot": (["plot", "zingg", "{in}/grains/manifest.csv"], "-o", "png", "exists.png"),
+        "figures": (["figures", "--only", "2"], "--out", "dir", None),
+        "tray": (["tray", "--method", "fso", "--count", "2", "--size", "5", "--workers", "1"], "--out", "3mf", None),
+        "batch": (["batch", "{in}/good.toml", "--workers", "1"], "--out", "dir", None),
+        "dem": (["dem", "{in}/grains", "--workers", "1"], "--out", "dir", None),
+        "fit": (["fit", "{in}/text.csv", "--workers", "1"], "--out", "dir", None),
+        "demo": (["demo", "--quick"], "--out", "dir", None),
+        "generate-angular": (["generate", "angular"], "--out", "dir", None),
+        "generate-rf": (["generate", "rf"], "--out", "dir", None),
+    }
+    name = {"dir": "out", "png": "o.png", "csv": "o.csv", "3mf": "t.3mf"}
+    cases = []
+    for cmd, (args, opt, kind, existing) in commands.items():
+        target = name[kind]
+        cases += [
+            Case(f"{cmd}-readonly-folder", args + [opt, f"ro/{target}"], err=r"cannot write into .*ro",
+                 readonly=True),
+            Case(f"{cmd}-below-a-file", args + [opt, f"afile/{target}"], err=r"afile is a file, not a folder"),
+            Case(f"{cmd}-empty-path", args + [opt, ""], err=r"path is empty"),
+        ]
+        if existing:
+            cases.append(Case(f"{cmd}-existing-output", args + [opt, existing], err=r"exists; use --overwrite"))
+        if kind == "dir":
+            cases.append(Case(f"{cmd}-out-is-a-file", args + [opt, "afile"], err=r"afile'? is a file"))
+    return cases
+
+
+CASES: list[Case] = [
+    *writing_cases(),
+    *unreadable_mesh_cases(),
+    # §1: an unreadable printer file
+    Case("check-printer-is-a-folder", ["check", "{in}/grain.stl", "--printer", "{in}/folder.toml"],
+         err=r"folder\.toml"),
+    Case("check-printer-garbage", ["check", "{in}/grain.stl", "--printer", "{in}/garbage.toml"],
+         err=r"garbage\.toml"),
+    # §1: generate --out below an existing file
+    Case("generate-out-below-stl", ["generate", "fso", "--out", "{in}/grain.stl/sub"], err=r"is a file, not a folder"),
+    # §1: MemoryError / huge values
+    Case("render-columns-1e9", ["render", "{in}/grain.stl", "-o", "r.png", "--columns", "1000000000"],
+         code=0, err=r"wrote r\.png", creates=("r.png",)),
+    Case("calibrate-exponents-1e9", ["calibrate", "dpa", "--exponents", "1:1000000000:1", "--out", "cal"],
+         err=r"--exponents.*1000"),
+    Case("tray-count-1e9", ["tray", "--method", "fso", "--count", "1000000000", "--size", "0.5", "--out", "t.3mf"],
+         err=r"would (take|need) .*--count"),
+    Case("batch-size-mm-1e300", ["batch", "{in}/huge_size.toml", "--out", "b"], err=r"size\.mm: must be in"),
+    Case("batch-median-1e300", ["batch", "{in}/huge_median.toml", "--out", "b"], err=r"median_mm"),
+    # §2: exit 0 on bad input
+    Case("render-nan", ["render", "{in}/nan.stl", "-o", "r.png"], err=r"non-finite"),
+    *[Case(f"plot-{kind}-text-columns", ["plot", kind, "{in}/text.csv", "-o", "p.png"], err=r"holds no numbers")
+      for kind in ("zingg", "sphericity-convexity", "size-distribution")],
+    Case("analyse-primary-volume-inf", ["analyse", "{in}/grain.stl", "--primary-volume", "inf"],
+         err=r"--primary-volume.*finite"),
+    *[Case(f"fourier-threshold-{v}", ["fourier", "{in}/grain.png", "--threshold", v], err=r"--threshold.*finite")
+      for v in ("nan", "inf", "-inf")],
+    # §3: huge requests refused up front with the estimate and the option that reduces it
+    Case("generate-fso-count-1e9", ["generate", "fso", "--count", "1000000000", "--out", "g"],
+         err=r"would take .*--count"),
+    Case("generate-cri-count-1e9", ["generate", "cri", "--count", "1000000000", "--out", "g"],
+         err=r"would take .*--count"),
+    Case("batch-count-2**63-1", ["batch", "{in}/huge_count.toml", "--out", "b"], err=r"would take .*count"),
+    Case("fourier-rays-1e8", ["fourier", "{in}/grain.png", "--rays", "100000000"], err=r"GiB.*--rays|--rays.*GiB"),
+    Case("calibrate-repeats-1e9", ["calibrate", "dpa", "--primaries", "100000", "--repeats", "1000000000",
+                                   "--out", "cal"], err=r"would take .*--repeats"),
+    Case("fso-subdivisions-8-400-terms", ["generate", "fso", "--subdivisions", "8", "--ridges", "400",
+                                          "--frequencies", "400", "--gamma", "1.05", "--count", "1000", "--out", "g"],
+         err=r"would take .*--(subdivisions|count)"),
+    Case("tray-max-triangles-1e12", ["tray", "--method", "fso", "--count", "100000", "--max-triangles",
+                                     "1000000000000", "--max-subdivisions", "7", "--out", "t.3mf"],
+         err=r"would take .*--count", timeout=240),  # resolution matching's pilot grains come first
+    # §4: a batch whose parameter draws reach invalid values is refused before any work
+    Case("batch-amplitude-support", ["batch", "{in}/bad_amplitude.toml", "--out", "b", "--workers", "1"],
+         err=r"amplitude"),
+    # §5: one overwrite rule; real JPEG
+    Case("render-jpeg", ["render", "{in}/grain.stl", "-o", "r.jpg"], code=0, err=r"wrote r\.jpg",
+         creates=("r.jpg",), check=_jpeg),
+    Case("render-gif-refused", ["render", "{in}/grain.stl", "-o", "r.gif"], err=r"must end in \.png"),
+    # §6: folders as inputs; fourier goes on past a bad image
+    Case("analyse-folder", ["analyse", "{in}/grains", "--no-fractal", "--no-fourier", "--workers", "2"], code=0,
+         lines=0),
+    Case("check-folder", ["check", "{in}/grains", "--printer", "generic-sla"], code=0, err=r"2 part\(s\)"),
+    Case("fourier-skips-white", ["fourier", "{in}/grain.png", "{in}/white.png", "{in}/grain.png"], code=1, lines=3,
+         err=r"skipped .*white\.png(.|\n)*skipped 1 of 3 image\(s\): .*white\.png"),
+]
+
+
+# --------------------------------------------------------------------------- inputs
+
+def _binary_stl(vertices: np.ndarray, faces: np.ndarray) -> bytes:
+    tri = vertices[faces].astype("<f4")
+    rec = np.zeros(len(faces), dtype=[("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")])
+    rec["v"] = tri
+    return b"x" * 80 + struct.pack("<I", len(faces)) + rec.tobytes()
+
+
+def _recipe(extra: str = "", count: int = 2, size: str = "mm = 1.0") -> str:
+    return (f'method = "fso"\ncount = {count}\nseed = 1\n[params]\nsubdivisions = 2\n{extra}\n'
+            f"[size]\n{size}\n")
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    """The shared inputs every case may read (made once, never written by a case)."""
+    import zipfile
+
+    from PIL import Image
+
+    import grainforge
+    from grainforge.io import write_mesh
+    from grainforge.run import write_run
+
+    d = tmp_path_factory.mktemp("inputs")
+    g = grainforge.fso(subdivisions=2, rng=0)
+    write_mesh(g, d / "grain.stl")
+    write_run("fso", grainforge.methods.get("fso").Params(subdivisions=2), [0, 1], d / "grains", size=5.0)
+    data = (d / "grain.stl").read_bytes()
+    (d / "trunc.stl").write_bytes(data[: len(data) // 2])
+    (d / "rand.stl").write_bytes(np.random.default_rng(0).bytes(3000))
+    (d / "ffff.stl").write_bytes(data[:80] + struct.pack("<I", 0xFFFFFFFF) + data[84:])
+    (d / "empty.stl").write_bytes(b"")
+    v = np.asarray(g.vertices, dtype=np.float64).copy()
+    v[0] = np.nan
+    (d / "nan.stl").write_bytes(_binary_stl(v, np.asarray(g.faces)))
+    zipfile.ZipFile(d / "empty.3mf", "w").close()
+    from grainforge.contours import Contour, draw_contours
+
+    img = draw_contours((160, 160), [(Contour.from_descriptors("rough-sphere", rng=0), (80, 80), 50.0)])
+    Image.fromarray(img).save(d / "grain.png")
+    Image.fromarray(np.full((64, 64), 255, np.uint8)).save(d / "white.png")
+    (d / "png.stl").write_bytes((d / "grain.png").read_bytes())
+    (d / "text.csv").write_text("file,L,I,S,sphericity,convexity,equivalent_diameter,volume\n"
+                                "a,x,y,z,high,low,big,much\nb,x,y,z,high,low,big,much\n")
+    (d / "folder.toml").mkdir()
+    (d / "garbage.toml").write_bytes(b"\xff\xfe\x00garbage = = [\n")
+    (d / "good.toml").write_text(_recipe())
+    (d / "huge_size.toml").write_text(_recipe(size="mm = 1e300"))
+    (d / "huge_median.toml").write_text(_recipe(size='distribution = "lognormal"\nmedian_mm = 1e300\nsigma = 0.3'))
+    (d / "huge_count.toml").write_text(_recipe(count=2**63 - 1))
+    (d / "bad_amplitude.toml").write_text(  # 0.45 is valid for some grains, not for grain 1
+        _recipe('amplitude = { distribution = "uniform", low = 0.2, high = 0.45 }', count=4))
+    return d
+
+
+# --------------------------------------------------------------------------- the harness
+
+def _snapshot(*folders: Path) -> set[str]:
+    out = set()
+    for f in folders:
+        for p in f.rglob("*"):
+            out.add(str(p))
+    return out
+
+
+def _session_processes(sid: int) -> list[int]:
+    """Processes (not zombies) whose session is ``sid``."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[3]) == sid and fields[0] not in ("Z", "X"):  # fields[3]: session id
+            pids.append(int(entry.name))
+    return pids
+
+
+def _limit_memory():
+    import resource
+
+    resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
+
+
+def start(args: list[str], cwd: Path, inputs: Path) -> subprocess.Popen:
+    """``grainforge ARGS`` in ``cwd``, in its own session, memory limited, stderr captured."""
+    argv = CLI + [a.replace("{in}", str(inputs)) for a in args]
+    env = dict(os.environ, COLUMNS="200")
+    return subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, start_new_session=True, preexec_fn=_limit_memory, env=env)
+
+
+def assert_no_processes_left(sid: int, grace: float = 5.0) -> None:
+    """No process of session ``sid`` may outlive the command (``grace`` seconds to exit)."""
+    deadline = time.monotonic() + grace
+    while (left := _session_processes(sid)) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    for pid in left:  # clean up before failing
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not left, f"processes left behind: {left}"
+
+
+def _readonly(folder: Path) -> bool:
+    """Make ``folder`` unwritable (immutable as root, mode 555 otherwise); False if impossible."""
+    if os.geteuid() == 0:
+        if shutil.which("chattr") is None:
+            return False
+        ok = subprocess.run(["chattr", "+i", str(folder)], capture_output=True).returncode == 0
+    else:
+        folder.chmod(0o555)
+        ok = True
+    try:
+        (folder / ".probe").touch()
+    except OSError:
+        return ok
+    (folder / ".probe").unlink()
+    return False
+
+
+def _writable(folder: Path) -> None:
+    if os.geteuid() == 0:
+        subprocess.run(["chattr", "-i", str(folder)], capture_output=True)
+    else:
+        folder.chmod(0o755)
+
+
+@pytest.fixture
+def case_dir(tmp_path):
+    """The folder a case runs in: ro/ (unwritable), afile, exists.png, exists.csv."""
+    (tmp_path / "ro").mkdir()
+    (tmp_path / "afile").write_text("a file\n")
+    (tmp_path / "exists.png").write_bytes(b"old")
+    (tmp_path / "exists.csv").write_text("old\n")
+    readonly = _readonly(tmp_path / "ro")
+    yield tmp_path, readonly
+    _writable(tmp_path / "ro")
+
+
+def run_case(case: Case, d: Path, inputs: Path) -> tuple[int, str]:
+    proc = start(case.args, d, inputs)
+    try:
+        _, err = proc.communicate(timeout=case.timeout)
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail(f"grainforge {' '.join(case.args)} still ran after {case.timeout} s")
+    assert_no_processes_left(proc.pid)
+    return proc.returncode, err.decode("utf-8", "replace")
+
+
+@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def test_cli_contract(case: Case, case_dir, inputs):
+    d, readonly = case_dir
+    if case.readonly and not readonly:
+        pytest.skip("cannot make a folder unwritable here (needs chattr as root)")
+    before = _snapshot(d, inputs)
+    code, err = run_case(case, d, inputs)
+    assert "Traceback" not in err, err
+    lines = err.strip().splitlines()
+    assert len(lines) == case.lines, f"expected {case.lines} line(s) on stderr, got:\n{err}"
+    assert code == case.code, f"exit {code} (expected {case.code}); stderr:\n{err}"
+    if case.err:
+        assert re.search(case.err, err), f"stderr does not match {case.err!r}:\n{err}"
+    after = _snapshot(d, inputs)
+    expected = before | {str(d / c) for c in case.creates}
+    assert after == expected, f"new: {sorted(after - expected)}; gone: {sorted(expected - after)}"
+    if case.check is not None:
+        case.check(d)
+
+
+# --------------------------------------------------------------------------- sequences
+
+def test_generate_overwrite_removes_the_earlier_runs_files(case_dir, inputs):
+    """§5: a shorter run with --overwrite leaves only the files its own manifest lists."""
+    d, _ = case_dir
+    base = ["generate", "fso", "--subdivisions", "2", "--out", "g"]
+    assert run_case(Case("first", base + ["--count", "4"]), d, inputs)[0] == 0
+    code, err = run_case(Case("second", base + ["--count", "2"]), d, inputs)
+    assert code == 2 and "--overwrite" in err and len(err.strip().splitlines()) == 1
+    code, err = run_case(Case("third", base + ["--count", "2", "--overwrite"]), d, inputs)
+    assert code == 0, err
+    assert sorted(p.name for p in (d / "g").iterdir()) == ["fso-0000.stl", "fso-0001.stl", "manifest.csv"]
+
+
+def test_failed_batch_does_not_block_the_fixed_rerun(case_dir, inputs):
+    """§4: a batch refused for its recipe leaves nothing; the corrected recipe then runs without --resume."""
+    d, _ = case_dir
+    code, err = run_case(Case("bad", ["batch", "{in}/bad_amplitude.toml", "--out", "b", "--workers", "1"]), d, inputs)
+    assert code == 2 and "amplitude" in err and not (d / "b").exists(), err
+    code, err = run_case(Case("fixed", ["batch", "{in}/good.toml", "--out", "b", "--workers", "1"]), d, inputs)
+    assert code == 0, err
+    assert (d / "b" / "manifest.csv").is_file()
+
+
+# --------------------------------------------------------------------------- interrupts
+
+def _wait_for(predicate, timeout: float, proc: subprocess.Popen) -> None:
+    deadline = time.monotonic() + timeout
+    while not predicate():
+        if proc.poll() is not None:
+            pytest.fail(f"the command ended before the signal: {proc.communicate()[1].decode()}")
+        if time.monotonic() > deadline:
+            os.killpg(proc.pid, signal.SIGKILL)
+            proc.communicate()
+            pytest.fail("the command never reached the point to interrupt")
+        time.sleep(0.05)
+
+
+def _has(d: Path, pattern: str):
+    return lambda: any(d.glob(pattern))
+
+
+def test_sigterm_on_generate_leaves_no_staging_folder(case_dir, inputs):
+    d, _ = case_dir
+    before = _snapshot(d)
+    proc = start(["generate", "fso", "--count", "2000", "--subdivisions", "3", "--out", "g"], d, inputs)
+    _wait_for(_has(d, "g/.grainforge-staging-*/*.stl"), 60, proc)
+    proc.send_signal(signal.SIGTERM)
+    _, err = proc.communicate(timeout=20)
+    err = err.decode()
+    assert proc.returncode == 128 + signal.SIGTERM and "Traceback" not in err
+    assert len(err.strip().splitlines()) == 1 and "Terminated" in err, err
+    assert_no_processes_left(proc.pid)
+    assert _snapshot(d) == before
+
+
+TRAY = ["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "3000", "--size", "5",
+        "--workers", "2", "--out", "t.3mf"]
+
+
+def test_sigkill_on_tray_leaves_no_process_and_the_next_run_cleans_up(case_dir, inputs):
+    d, _ = case_dir
+    before = _snapshot(d)
+    proc = start(TRAY, d, inputs)
+    _wait_for(_has(d, ".t.3mf.*.tmp"), 90, proc)
+    time.sleep(0.5)
+    proc.kill()
+    proc.communicate(timeout=20)
+    assert_no_processes_left(proc.pid)  # the pool's workers notice their owner died
+    code, err = run_case(Case("rerun", TRAY[:-6] + ["--count", "2", "--workers", "1", "--out", "t.3mf"]), d, inputs)
+    assert code == 0, err
+    assert _snapshot(d) == before | {str(d / n) for n in ("t.3mf", "t.csv", "t-plate1.png")}
+
+
+def test_ctrl_c_on_tray_is_quick_and_leaves_nothing(case_dir, inputs):
+    d, _ = case_dir
+    before = _snapshot(d)
+    proc = start(["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "3000", "--size", "5",
+                  "--workers", "2", "--out", "sub/t.3mf"], d, inputs)
+    _wait_for(_has(d, "sub/.t.3mf.*.tmp"), 90, proc)
+    proc.send_signal(signal.SIGINT)
+    _, err = proc.communicate(timeout=30)  # a hang guard, not a timing assertion (see docs/benchmarks.md)
+    err = err.decode()
+    assert proc.returncode == 130 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert_no_processes_left(proc.pid)
+    assert _snapshot(d) == before
