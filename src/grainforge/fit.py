@@ -283,9 +283,20 @@ def _toml(v: Any) -> str:
     raise TypeError(f"cannot write {v!r} to TOML")
 
 
-def grading(d_eq_um: np.ndarray, points: int = 21) -> tuple[list[float], list[float]]:
-    """Sieves (mm) and count percent passing at ``points`` quantiles of the sizes (duplicates dropped)."""
-    q = np.linspace(0, 100, points)
+#: percent passing at which the sand's size quantiles become the recipe's sieves (finer in the tails,
+#: where a log-linear grading between few sieves would spread grains over sizes the sand barely has)
+GRADING_PERCENTS = (0, 0.5, 1, 2, 3, 5, 7.5, *range(10, 95, 5), 92.5, 95, 97, 98, 99, 99.5, 100)
+
+
+def grading(d_eq_um: np.ndarray, percents: Sequence[float] = GRADING_PERCENTS) -> tuple[list[float], list[float]]:
+    """Sieves (mm) and count percent passing at the sizes' quantiles ``percents`` (duplicates dropped).
+
+    Examples
+    --------
+    >>> grading(np.array([100.0, 200.0, 300.0, 400.0, 500.0]), (0, 50, 100))
+    ([0.1, 0.3, 0.5], [0.0, 50.0, 100.0])
+    """
+    q = np.asarray(percents, dtype=np.float64)
     sieves = np.percentile(np.asarray(d_eq_um) / 1000.0, q)
     keep = np.r_[True, np.diff(sieves) > 1e-9 * sieves[-1]]
     sieves, q = sieves[keep], q[keep]
