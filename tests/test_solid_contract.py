@@ -152,3 +152,10 @@ def test_check_does_not_crash_on_zero_area_faces(tmp_path, runner):
     res = runner.invoke(cli, ["check", str(path)])
     assert res.exit_code in (0, 1), res.output
     assert "Fewer non-zero" not in res.output
+
+
+def test_cri_fractal_tiny_length_ratio_is_a_parameter_error():
+    # found by the slow sweep: L at the open edge of its range (5e-324) overflowed (RuntimeWarning)
+    with pytest.raises(ParameterError) as exc:
+        grainforge.cri(contour="fractal", length_ratio=5e-324, modes=8, subdivisions=0, rng=0)
+    assert exc.value.name == "length_ratio"

@@ -431,8 +431,11 @@ class Contour:
         M, Nf = int(ridges), int(frequencies)
         psi = rng.uniform(0.0, TWO_PI, size=(M, Nf))
         n = np.arange(1, Nf + 1, dtype=np.float64)
-        w = (TWO_PI * gamma ** (n - 1) / length_ratio) ** (fractal_dimension - 3.0)
-        k = TWO_PI * gamma**n / length_ratio
+        with np.errstate(over="ignore", divide="ignore", invalid="ignore"):
+            w = (TWO_PI * gamma ** (n - 1) / length_ratio) ** (fractal_dimension - 3.0)
+            k = TWO_PI * gamma**n / length_ratio
+        if not (np.isfinite(k).all() and np.isfinite(w).all()):  # e.g. L = 5e-324: 2πγ^n/L overflows
+            raise ParameterError("length_ratio", f"is too small: the wavenumbers 2πγ^n/L overflow (L = {length_ratio!r})")
         alpha = np.pi * np.arange(1, M + 1) / M
         h = np.rint(np.cos(alpha)[:, None] * k[None, :])
         H = min(n_angles // 2 - 1, int(modes))

@@ -351,8 +351,9 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     rows = manifest_rows(folder / "from-spectrum")
     meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
     labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
-    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2,
-                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph)")
+    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2, unit="mm",
+                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph; "
+                                "files at d_eq = 10 mm)")
     return [folder, sheet]
 
 
