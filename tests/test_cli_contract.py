@@ -296,12 +296,35 @@ def _limit_memory():
     resource.setrlimit(resource.RLIMIT_AS, (MEMORY_LIMIT, MEMORY_LIMIT))
 
 
+#: sessions started by the current test (cleaned up after it, whatever happened)
+_SESSIONS: list[subprocess.Popen] = []
+
+
 def start(args: list[str], cwd: Path, inputs: Path) -> subprocess.Popen:
     """``grainforge ARGS`` in ``cwd``, in its own session, memory limited, stderr captured."""
     argv = CLI + [a.replace("{in}", str(inputs)) for a in args]
     env = dict(os.environ, COLUMNS="200")
-    return subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+    proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
                             stderr=subprocess.PIPE, start_new_session=True, preexec_fn=_limit_memory, env=env)
+    _SESSIONS.append(proc)
+    return proc
+
+
+@pytest.fixture(autouse=True)
+def _no_strays():
+    """After each test, even a failed one: kill whatever its commands left running (a failing case must not
+    leave processes on the machine)."""
+    yield
+    while _SESSIONS:
+        proc = _SESSIONS.pop()
+        for pid in _session_processes(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
 
 
 def assert_no_processes_left(sid: int, grace: float = 5.0) -> None:
