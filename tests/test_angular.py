@@ -95,7 +95,7 @@ def test_measured_edge_radius_tracks_the_requested_one():
     {}, {"rounding": 0.0}, {"rounding": 0.9, "aspect": (20, 1, 1)}, {"facets": 6}, {"facets": 200},
     {"dents": 12, "dent_depth": 0.5, "dent_width": 1.2}, {"dents": 12, "dent_depth": 0.5, "dent_width": 0.1},
     {"roughness": 0.1, "length_ratio": 0.05, "fractal_dimension": 2.9}, {"subdivisions": 0},
-    {"aspect": (1, 0.1, 0.1), "rounding": 0.0, "roughness": 0.05},
+    {"aspect": (1, 0.1, 0.1), "rounding": 0.0, "roughness": 0.05}, {"aspect": (5e-324, 5e-324, 5e-324)},
 ])
 def test_valid_solid_as_read_back(kw):
     g = grainforge.angular(subdivisions=kw.pop("subdivisions", 4), rng=3, **kw)

@@ -179,6 +179,7 @@ def test_too_rough_a_field_names_the_parameter():
         (dict(descriptors=(0.1, 0.1, 0.5)), "descriptors", r"\[0, 0.3\]"),
         (dict(degree=4), "degree", r"\[8, 64\]"),
         (dict(aspect=(1.0, 2.0, 3.0)), "aspect", "L >= I >= S"),
+        (dict(aspect=(80.0, 50.0, 1.0)), "aspect", "at most 50"),
         (dict(spectrum="no-such.csv"), "spectrum", "no such file"),
         (dict(decay=(1.0, -1.0)), "decay", r"\[-10, 0\]"),
     ],

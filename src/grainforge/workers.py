@@ -87,12 +87,11 @@ def pid_alive(pid: int) -> bool:
         return True
 
 
-def watch_parent(owner: int) -> None:
-    """Pool-worker initializer: exit as soon as process ``owner`` (the pool's maker) is gone.
+def die_with_parent() -> None:
+    """Ask the kernel to SIGKILL this process when its parent dies (Linux ``PR_SET_PDEATHSIG``; elsewhere nothing).
 
-    On Linux the kernel also sends SIGKILL when the worker's parent dies
-    (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
-    server, not the owner, so a daemon thread polls the owner as well.
+    Also used as ``preexec_fn`` of engine subprocesses (Yade), so a killed
+    ``grainforge`` leaves no engine running.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the owner decides
     if sys.platform.startswith("linux"):
@@ -103,6 +102,16 @@ def watch_parent(owner: int) -> None:
             libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):
             pass
+
+
+def watch_parent(owner: int) -> None:
+    """Pool-worker initializer: exit as soon as process ``owner`` (the pool's maker) is gone.
+
+    On Linux the kernel also sends SIGKILL when the worker's parent dies
+    (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
+    server, not the owner, so a daemon thread polls the owner as well.
+    """
+    die_with_parent()
 
     def watch():
         while pid_alive(owner):

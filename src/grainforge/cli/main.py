@@ -100,11 +100,11 @@ def cli():
 def _register():
     from .options import apply_help_style
 
-    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, tray
+    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, simulate, tray
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
-        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit,
+        fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit, simulate.simulate,
     ):
         cli.add_command(command)
     apply_help_style(cli)

@@ -143,6 +143,7 @@ class Core:
 
 def _semi_axes(aspect) -> np.ndarray:
     a = np.asarray(aspect, dtype=np.float64)
+    a = a / a.max()  # ratios only (and no underflow for tiny values): each in [1/MAX_ASPECT_RATIO, 1]
     return a / np.prod(a) ** (1.0 / 3.0)
 
 

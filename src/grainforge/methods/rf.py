@@ -51,6 +51,8 @@ VALIDITY_PARAMETER = "descriptors"
 DEFAULT_PRESET = "rough-angular"
 #: smallest allowed radius, as a fraction of r0
 MIN_RADIUS = 0.05
+#: largest L/S of a requested aspect
+MAX_ASPECT = 50.0
 #: icosphere level on which the extents are measured for a requested aspect
 ASPECT_REFERENCE_SUBDIVISIONS = 5
 #: generation outputs recorded in manifests: the measured grain whose spectrum
@@ -114,6 +116,8 @@ class Params:
             L, I, S = self.aspect
             if not L >= I >= S:
                 raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
+            if L > MAX_ASPECT * S:
+                raise ParameterError("aspect", f"L/S must be at most {MAX_ASPECT:g}, got {L:g}:{I:g}:{S:g}")
 
 
 # ------------------------------------------------------------------ spectra
@@ -240,8 +244,8 @@ def build(p: Params, rng: np.random.Generator):
             ref_unit, _ = icosphere(ASPECT_REFERENCE_SUBDIVISIONS)
             ref = ref_unit * (1.0 + field(a, p.degree, ASPECT_REFERENCE_SUBDIVISIONS))[:, None]
         ext = np.ptp(ref, axis=0)
-        k = np.asarray(p.aspect, dtype=np.float64) / ext
-        k /= np.exp(np.log(k).mean())
+        logk = np.log(np.asarray(p.aspect, dtype=np.float64)) - np.log(ext)  # in logs: any scale of L:I:S
+        k = np.exp(logk - logk.mean())
         scale = tuple(float(x) for x in k)
         vertices = vertices * k
     info = {

@@ -1,0 +1,96 @@
+"""results.csv and the figure of a virtual bulk test."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from ..io import save_figure, write_csv
+from ..params import as_dict
+from .measure import heap_angle
+
+__all__ = ["write_report", "figure"]
+
+
+def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> list[Path]:
+    """Write ``out/results.csv`` (one row per seed, the settings in every row) and ``out/<test>.png``."""
+    out = Path(out)
+    extra = {f"setting_{k}": v for k, v in as_dict(settings).items()}
+    table = [{**r, **extra} for r in rows]
+    paths = [write_csv(out / "results.csv", table)]
+    results = [json.loads((out / f"{test}-seed{r['seed']}" / "result.json").read_text()) for r in rows]
+    paths.append(save_figure(figure(test, results, rows), out / f"{test}.png"))
+    return paths
+
+
+def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
+    """The figure of a finished test: the final heap (or the tilt record) and the measured angle.
+
+    Repose: left, a side view of the first seed's heap (every contact sphere,
+    height against distance from the heap's axis, in mm) with the fitted slope;
+    right, each seed's surface profile with its angle.  Tilt: the layer's mean
+    downslope displacement against the tilt angle, per seed, with the failure
+    threshold and the failure angles.
+    """
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    if test == "repose":
+        fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.2), dpi=120)
+        r0 = results[0]
+        s = np.asarray(r0["spheres"])
+        d = r0["d_mean"]
+        base = r0["base_top"]
+        h = heap_angle(s, bin_width=0.5 * d, grain_size=d, base=base)
+        xy = s[:, :2] - np.average(s[:, :2], axis=0, weights=s[:, 3] ** 3)
+        side = np.hypot(xy[:, 0], xy[:, 1]) * np.sign(xy[:, 0] + 1e-30)
+        from matplotlib.collections import EllipseCollection
+
+        ax0.add_collection(EllipseCollection(2e3 * s[:, 3], 2e3 * s[:, 3], 0.0, units="xy",
+                                             offsets=np.column_stack([1e3 * side, 1e3 * (s[:, 2] - base)]),
+                                             offset_transform=ax0.transData, facecolors="0.6",
+                                             edgecolors="0.3", linewidths=0.2, alpha=0.6))
+        ax0.autoscale_view()
+        ax0.axhline(0.0, color="k", lw=1)
+        a, b = h.fit
+        rr = np.array(h.fitted)
+        for sgn in (1, -1):
+            ax0.plot(sgn * 1e3 * rr, 1e3 * (a + b * rr), "C3-", lw=2)
+        ax0.set_title(f"seed {rows[0]['seed']}: final heap, side view; slope {h.angle:.1f}°")
+        ax0.set_xlabel("distance from the heap axis, signed by side (mm)")
+        ax0.set_ylabel("height above the rough base (mm)")
+        ax0.set_aspect("equal", adjustable="datalim")
+        for k, (res, row) in enumerate(zip(results, rows)):
+            hk = heap_angle(np.asarray(res["spheres"]), bin_width=0.5 * res["d_mean"], grain_size=res["d_mean"],
+                            base=res["base_top"])
+            ax1.plot(1e3 * hk.profile[:, 0], 1e3 * hk.profile[:, 1], "o-", ms=3, color=f"C{k}",
+                     label=f"seed {row['seed']}: {row['angle_deg']:.1f}°")
+            ak, bk = hk.fit
+            rk = np.array(hk.fitted)
+            ax1.plot(1e3 * rk, 1e3 * (ak + bk * rk), "-", lw=3, alpha=0.4, color=f"C{k}")
+        ax1.set_xlabel("distance from the heap axis (mm)")
+        ax1.set_ylabel("surface height, mean of 8 sectors (mm)")
+        ax1.set_title("profiles; thick: the slope fitted between 20 % and 80 % of the height", fontsize=10)
+        ax1.legend(loc="upper right", fontsize=8)
+    else:
+        fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
+        for k, (res, row) in enumerate(zip(results, rows)):
+            hist = np.asarray(res["history"])
+            ax.plot(hist[:, 0], np.maximum(hist[:, 1], 1e-4), "o-", ms=3, color=f"C{k}",
+                    label=f"seed {row['seed']}: fails at {row['angle_deg']:.1f}°"
+                    if math.isfinite(row["angle_deg"]) else f"seed {row['seed']}: no failure")
+        ax.axhline(0.5, color="0.3", ls="--", lw=1, label="failure: 0.5 grain diameters")
+        ax.set_xlabel("tilt angle (°)")
+        ax.set_ylabel("mean downslope displacement (grain diameters)")
+        ax.set_yscale("log")
+        ax.set_ylim(1e-4, 2.0)
+        ax.set_title("tilt table: a periodic layer on a rough plate")
+        ax.legend(loc="upper left", fontsize=8)
+    fig.tight_layout()
+    return fig

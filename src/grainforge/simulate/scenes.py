@@ -1,0 +1,255 @@
+"""Yade scene texts of the virtual bulk tests.
+
+Each scene is Python text for Yade's own interpreter, appended to the grain
+library of :mod:`grainforge.dem.yade` (``load_deck``, ``add_grain``,
+``kinetic_energy``, ...), so every grain enters the simulation as a clump
+with the mesh's exact mass, centre and inertia.  Settings come from
+``grains.json["scene"]`` (:data:`SETTINGS` inside Yade).  A scene prints
+``grainforge-progress <fraction> <phase>`` lines (read by
+:func:`grainforge.simulate.run_yade`) and writes ``result.json``: the contact
+spheres of every grain at the end (x, y, z, r in metres, clump id), the
+phases' step counts and times, and the test's own record.  The angle itself
+is measured afterwards, in grainforge, from that file
+(:mod:`grainforge.simulate.measure`).
+
+These texts run inside Yade (its Python, its numpy); they never import
+grainforge.
+"""
+
+from __future__ import annotations
+
+__all__ = ["COMMON", "REPOSE", "TILT"]
+
+COMMON = r'''
+
+# ---- grainforge virtual bulk test: helpers shared by the scenes -------------------------
+import sys
+
+from yade import geom
+
+
+def progress(fraction, phase):
+    print("grainforge-progress %.4f %s" % (min(max(fraction, 0.0), 1.0), phase))
+    sys.stdout.flush()
+
+
+def population(grains, n, rnd):
+    """n templates drawn (with replacement, weighted by count) from the deck's grains."""
+    weights = [t["count"] for t in grains]
+    return [rnd.choices(grains, weights)[0] for _ in range(n)]
+
+
+def random_rotation(rnd):
+    return Quaternion(Vector3(rnd.gauss(0, 1), rnd.gauss(0, 1), rnd.gauss(0, 1)).normalized(),
+                      rnd.uniform(0, 2 * math.pi))
+
+
+def engines(extra_geoms=(), extra_bounds=()):
+    """The same contact model for every shape: linear spring + Coulomb friction (Cundall-Strack)."""
+    return [
+        ForceResetter(),
+        InsertionSortCollider([Bo1_Sphere_Aabb()] + list(extra_bounds)),
+        InteractionLoop(
+            [Ig2_Sphere_Sphere_ScGeom()] + list(extra_geoms),
+            [Ip2_FrictMat_FrictMat_FrictPhys()],
+            [Law2_ScGeom_FrictPhys_CundallStrack()],
+        ),
+        NewtonIntegrator(gravity=(0, 0, -SETTINGS["gravity"]), damping=SETTINGS["damping"], label="newton"),
+    ]
+
+
+def stable_dt(grains):
+    """Time step from the stability rule of a mass on a linear spring.
+
+    dt = safety * sqrt(m_min / k_max), with m_min the lightest grain and
+    k_max = E * r_max the stiffest sphere contact (Ip2_FrictMat_FrictMat_FrictPhys
+    gives k_n = E r for two equal spheres); for clumps this is the grain's
+    own mass on its stiffest contact, not a member sphere's.
+    """
+    m_min = min(t["mass"] for t in grains)
+    r_max = max(max(row[3] for row in t["rows"]) for t in grains)
+    return SETTINGS["dt_safety"] * math.sqrt(m_min / (SETTINGS["young"] * r_max))
+
+
+def rough_base(x0, x1, y0, y1, r, rnd, periodic=False):
+    """Fixed spheres of radius r on a square grid with a little height jitter (a rough plate)."""
+    ids = []
+    step = 2.0 * r
+    nx = int(round((x1 - x0) / step)) if periodic else int(math.ceil((x1 - x0) / step))
+    ny = int(round((y1 - y0) / step)) if periodic else int(math.ceil((y1 - y0) / step))
+    mat = contact_material()
+    for i in range(nx):
+        for j in range(ny):
+            c = (x0 + (i + 0.5) * (x1 - x0) / nx, y0 + (j + 0.5) * (y1 - y0) / ny, r * (1.0 + 0.3 * rnd.random()))
+            ids.append(O.bodies.append(utils.sphere(c, r, fixed=True, material=mat)))
+    return ids
+
+
+def unbound_mass_carriers(ids):
+    """Take the mass-carrying member spheres (mask 0: no contacts) out of the collider (they never touch)."""
+    for i in ids:
+        for m in O.bodies[i].shape.members:
+            if O.bodies[m].mask == 0:
+                O.bodies[m].bounded = False
+
+
+def contact_spheres(ids):
+    """[x, y, z, r, clump id] of every contact sphere (mask != 0) of clumps ids."""
+    out = []
+    for i in ids:
+        for m in O.bodies[i].shape.members:
+            b = O.bodies[m]
+            if b.mask != 0:
+                p = b.state.pos
+                out.append([p[0], p[1], p[2], b.shape.radius, i])
+    return out
+
+
+def settle(ids, threshold, max_time, phase, f0, f1, min_time=0.0):
+    """Run until the grains' kinetic energy falls below threshold (J) or max_time (s) passes."""
+    t0 = O.time
+    ke = kinetic_energy(ids)
+    while O.time - t0 < max_time:
+        O.run(SETTINGS["check_every"], True)
+        ke = kinetic_energy(ids)
+        progress(f0 + (f1 - f0) * (O.time - t0) / max_time, phase)
+        print("grainforge-state t=%.4f steps=%d ke=%.3g threshold=%.3g" % (O.time, O.iter, ke, threshold))
+        if O.time - t0 >= min_time and ke < threshold:
+            break
+    return ke
+
+
+def write_result(record):
+    with open("result.json", "w") as fh:
+        json.dump(record, fh)
+'''
+
+REPOSE = COMMON + r'''
+
+# ---- scene: angle of repose, lifted cylinder on a rough base -----------------------------
+def repose():
+    rnd = random.Random(SETTINGS["seed"])
+    grains = load_deck()
+    pop = population(grains, SETTINGS["grains"], rnd)
+    n = len(pop)
+    d = sum(t["d_eq"] for t in pop) / n
+    volume = sum(t["volume"] for t in pop)
+    # cylinder holding the grains at a loose packing 0.5, filled to 2 radii high
+    R = (volume / (0.5 * 2.0 * math.pi)) ** (1.0 / 3.0) + d
+    cell = 2.05 * max(t["bounding_radius"] for t in pop)
+    per_layer = []
+    k = int(R / cell)
+    for i in range(-k, k + 1):
+        for j in range(-k, k + 1):
+            if math.hypot(i * cell, j * cell) + 0.5 * cell <= R - 0.05 * d:
+                per_layer.append((i * cell, j * cell))
+    if not per_layer:
+        per_layer = [(0.0, 0.0)]
+    layers = int(math.ceil(n / len(per_layer)))
+    r_base = SETTINGS["base_roughness"] * d
+    z0 = 2.2 * r_base + 0.5 * cell
+    height = z0 + layers * cell + cell
+    # rough base: a disc of fixed spheres wide enough for a 15-degree heap, over a plane wall
+    foot = (3.0 * volume / 0.55 / (math.pi * math.tan(math.radians(15.0)))) ** (1.0 / 3.0)
+    half = max(foot, R) + 2.0 * d
+    O.bodies.append(utils.wall(0.0, axis=2, sense=1, material=contact_material()))
+    base = rough_base(-half, half, -half, half, r_base, rnd)
+    cylinder = O.bodies.append(geom.facetCylinder((0, 0, 0.5 * height + 0.5 * r_base), radius=R, height=height,
+                                                  segmentsNumber=32, wallMask=4, material=contact_material()))
+    ids = []
+    for q, t in enumerate(pop):
+        x, y = per_layer[q % len(per_layer)]
+        z = z0 + (q // len(per_layer)) * cell
+        ids.append(add_grain(t, (x + 0.05 * d * rnd.uniform(-1, 1), y + 0.05 * d * rnd.uniform(-1, 1), z),
+                             random_rotation(rnd)))
+    inserted = len(ids)
+    unbound_mass_carriers(ids)
+    O.engines = engines([Ig2_Facet_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
+                        [Bo1_Facet_Aabb(), Bo1_Wall_Aabb()])
+    O.engines = O.engines + [TranslationEngine(ids=cylinder, translationAxis=(0, 0, 1), velocity=0.0, label="lift")]
+    O.dt = stable_dt(pop)
+    g = SETTINGS["gravity"]
+    threshold = SETTINGS["ke_ratio"] * sum(t["mass"] for t in pop) * g * d
+    fall = math.sqrt(2.0 * height / g)
+    # the fill only needs a packing at rest to the eye: ten times the final threshold
+    settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "fill", 0.0, 0.3, min_time=fall)
+    t_fill = O.time
+    top = max(O.bodies[i].state.pos[2] for i in ids) + 0.5 * cell
+    lift.velocity = SETTINGS["lift_speed"] * math.sqrt(g * d)
+    while O.time - t_fill < (top + d) / lift.velocity:
+        O.run(SETTINGS["check_every"], True)
+        if O.iter % (20 * SETTINGS["check_every"]) == 0:
+            print("grainforge-state t=%.4f steps=%d ke=%.3g" % (O.time, O.iter, kinetic_energy(ids)))
+        progress(0.3 + 0.4 * (O.time - t_fill) / ((top + d) / lift.velocity), "lift")
+    for i in cylinder:
+        O.bodies.erase(i)
+    t_lift = O.time
+    ke = settle(ids, threshold, SETTINGS["max_time_factor"] * fall, "collapse", 0.7, 1.0, min_time=0.5 * fall)
+    progress(1.0, "done")
+    lost = [i for i in ids if O.bodies[i].state.pos[2] < 0.0]
+    write_result({"test": "repose", "grains": n, "inserted": inserted, "lost": len(lost),
+                  "d_mean": d, "base_top": 1.3 * r_base + r_base, "cylinder_radius": R, "base_half_width": half, "base_sphere_radius": r_base,
+                  "kinetic_energy": ke, "ke_threshold": threshold, "settled": ke < threshold,
+                  "steps": O.iter, "time": O.time, "dt": O.dt, "t_fill": t_fill, "t_lift": t_lift,
+                  "spheres": contact_spheres(ids)})
+
+
+repose()
+'''
+
+TILT = COMMON + r'''
+
+# ---- scene: tilt table, a periodic layer on a rough plate tilted until it slides ----------
+def tilt():
+    rnd = random.Random(SETTINGS["seed"])
+    grains = load_deck()
+    pop = population(grains, SETTINGS["grains"], rnd)
+    n = len(pop)
+    d = sum(t["d_eq"] for t in pop) / n
+    cell = 2.05 * max(t["bounding_radius"] for t in pop)
+    per_row = max(2, int(round(math.sqrt(n / SETTINGS["layer_depth"]))))
+    width = per_row * cell
+    layers = int(math.ceil(n / (per_row * per_row)))
+    r_base = SETTINGS["base_roughness"] * d
+    z0 = 2.2 * r_base + 0.5 * cell
+    O.periodic = True
+    O.cell.setBox(width, width, z0 + (layers + 4) * cell)
+    base = rough_base(0.0, width, 0.0, width, r_base, rnd, periodic=True)
+    ids = []
+    for q, t in enumerate(pop):
+        i, j, layer = q % per_row, (q // per_row) % per_row, q // (per_row * per_row)
+        ids.append(add_grain(t, ((i + 0.5) * cell, (j + 0.5) * cell, z0 + layer * cell), random_rotation(rnd)))
+    unbound_mass_carriers(ids)
+    O.engines = engines()
+    O.dt = stable_dt(pop)
+    g = SETTINGS["gravity"]
+    threshold = SETTINGS["ke_ratio"] * sum(t["mass"] for t in pop) * g * d
+    fall = math.sqrt(2.0 * (z0 + layers * cell) / g)
+    settle(ids, 10.0 * threshold, SETTINGS["max_time_factor"] * fall, "deposit", 0.0, 0.3, min_time=fall)
+    start = {i: Vector3(O.bodies[i].state.pos) for i in ids}
+    rate = math.radians(SETTINGS["tilt_step_deg"])
+    hold = SETTINGS["tilt_hold"] * math.sqrt(d / g)
+    beta = math.radians(SETTINGS["tilt_start_deg"])
+    history = []
+    failed = None
+    while beta < math.radians(89.0):
+        newton.gravity = (g * math.sin(beta), 0.0, -g * math.cos(beta))
+        O.run(max(1, int(hold / O.dt)), True)
+        dx = sum(O.bodies[i].state.pos[0] - start[i][0] for i in ids) / n
+        vx = sum(O.bodies[i].state.vel[0] for i in ids) / n
+        history.append([math.degrees(beta), dx / d, vx / math.sqrt(g * d)])
+        progress(0.3 + 0.7 * (math.degrees(beta) / 60.0), "tilt %.1f deg" % math.degrees(beta))
+        if dx > SETTINGS["failure_displacement"] * d:
+            failed = math.degrees(beta)
+            break
+        beta += rate
+    progress(1.0, "done")
+    lost = [i for i in ids if O.bodies[i].state.pos[2] < 0.0]
+    write_result({"test": "tilt", "grains": n, "inserted": len(ids), "lost": len(lost), "d_mean": d,
+                  "base_top": 1.3 * r_base + r_base, "width": width,
+                  "base_sphere_radius": r_base, "failure_angle": failed, "history": history,
+                  "steps": O.iter, "time": O.time, "dt": O.dt, "spheres": contact_spheres(ids)})
+
+
+tilt()
+'''

@@ -1,0 +1,161 @@
+"""Virtual bulk tests (grainforge simulate): the angle measurement, settings, CLI errors, and a
+quick run in the real Yade.
+
+Without Yade the engine test is skipped with the reason; with GRAINFORGE_REQUIRE_ENGINES=1
+(set by .ci/run) a missing Yade is a failure.
+"""
+
+import csv
+import math
+import os
+import re
+import shutil
+
+import numpy as np
+import pytest
+
+from grainforge.cli.main import cli
+from grainforge.params import ParameterError
+from grainforge.simulate import QUICK, Settings, scene_settings, summarise
+from grainforge.simulate.measure import heap_angle, tilt_failure_angle
+
+
+def cone(angle_deg, n=30000, foot=20.0, r=0.1, seed=0):
+    """Spheres filling a cone of the given angle (the heap's top surface is the cone)."""
+    rng = np.random.default_rng(seed)
+    rad = np.sqrt(rng.random(n)) * foot
+    az = rng.random(n) * 2 * np.pi
+    top = (foot - rad) * np.tan(np.radians(angle_deg))
+    z = top * rng.random(n) ** 0.1 - r
+    return np.column_stack([rad * np.cos(az) + 3.0, rad * np.sin(az) - 1.0, z, np.full(n, r)])
+
+
+@pytest.mark.parametrize("angle", [18.0, 27.0, 38.0, 48.0])
+def test_heap_angle_of_a_cone(angle):
+    h = heap_angle(cone(angle), bin_width=0.5, grain_size=1.0)
+    assert h.angle == pytest.approx(angle, abs=1.0)
+    assert h.spread < 1.5
+    # the foot is where the surface falls to one grain (1.0) above the base, to within a ring
+    assert h.foot == pytest.approx(20.0 - 1.0 / np.tan(np.radians(angle)), abs=0.5)
+    # the fitted slope starts where the cone is at 80 % of its height (r = 4), to within three rings
+    assert h.fitted[0] == pytest.approx(4.0, abs=1.5)
+
+
+def test_heap_angle_is_independent_of_where_the_heap_stands():
+    a = heap_angle(cone(30.0), bin_width=0.5, grain_size=1.0).angle
+    shifted = cone(30.0)
+    shifted[:, :2] += 100.0
+    shifted[:, 2] += 5.0
+    assert heap_angle(shifted, bin_width=0.5, grain_size=1.0, base=5.0).angle == pytest.approx(a, abs=1e-9)
+
+
+def test_heap_angle_leaves_out_a_flat_top():
+    # a truncated cone (the flat top a lifted cylinder leaves): the plateau must not lower the angle
+    pts = cone(35.0)
+    cap = 0.7 * 20.0 * np.tan(np.radians(35.0))
+    pts[:, 2] = np.minimum(pts[:, 2], cap - pts[:, 3])
+    assert heap_angle(pts, bin_width=0.5, grain_size=1.0).angle == pytest.approx(35.0, abs=1.0)
+
+
+def test_heap_angle_refuses_a_flat_layer():
+    flat = cone(30.0)
+    flat[:, 2] = 0.0
+    with pytest.raises(ValueError, match="too flat"):
+        heap_angle(flat, bin_width=0.5, grain_size=1.0)
+
+
+def test_tilt_failure_angle_interpolates_and_reports_no_failure():
+    h = np.array([[30.0, 0.0], [31.0, 0.2], [32.0, 0.8]])
+    assert tilt_failure_angle(h) == pytest.approx(31.5)
+    assert math.isnan(tilt_failure_angle(h[:2]))
+
+
+def test_settings_refuse_negative_friction_and_convert_mu_to_an_angle():
+    with pytest.raises(ParameterError, match="friction"):
+        Settings(friction=-0.1)
+    assert scene_settings(Settings(friction=1.0), "tilt", 0)["friction_deg"] == pytest.approx(45.0)
+    with pytest.raises(ValueError, match="test must be"):
+        scene_settings(Settings(), "triaxial", 0)
+
+
+def test_summarise_over_seeds():
+    s = summarise([{"angle_deg": 30.0}, {"angle_deg": 34.0}, {"angle_deg": float("nan")}])
+    assert s["runs"] == 2 and s["angle_mean_deg"] == 32.0 and s["angle_sd_deg"] == pytest.approx(2 ** 1.5)
+
+
+def _one_line_exit_2(result):
+    assert result.exit_code == 2, result.output
+    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
+    assert len(lines) == 1 and "Traceback" not in result.output
+
+
+@pytest.fixture
+def grains(tmp_path, runner):
+    out = tmp_path / "g"
+    r = runner.invoke(cli, ["generate", "cri", "--out", str(out), "--count", "3", "--size", "2",
+                            "--subdivisions", "3", "--preset", "rough-angular"])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--friction", "-0.2"], "friction"),
+    (["--grains", "1"], "grains"),
+    (["--density", "0"], "density"),
+])
+def test_bad_settings_give_one_line_and_exit_2(runner, grains, tmp_path, args, message):
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *args])
+    _one_line_exit_2(r)
+    assert message in r.stderr
+    assert not out.exists()
+
+
+def test_a_folder_without_grains_is_refused(runner, tmp_path):
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    r = runner.invoke(cli, ["simulate", "tilt", str(empty), "--out", str(tmp_path / "sim")])
+    _one_line_exit_2(r)
+    assert "no grain files" in r.stderr
+    assert not (tmp_path / "sim").exists()
+
+
+def test_a_mesh_yade_cannot_load_is_refused(runner, tmp_path):
+    if shutil.which("yade") is None:
+        pytest.skip("the refusal comes after the Yade check; Yade not installed")
+    bad = tmp_path / "open.stl"
+    import trimesh
+
+    box = trimesh.creation.box()
+    trimesh.Trimesh(box.vertices, box.faces[:-1]).export(bad)
+    r = runner.invoke(cli, ["simulate", "repose", str(bad), "--out", str(tmp_path / "sim"), "--quick"])
+    _one_line_exit_2(r)
+    assert "open.stl" in r.stderr and re.search("not a (closed|valid) solid", r.stderr)
+    assert not (tmp_path / "sim").exists()
+
+
+def require_yade():
+    if shutil.which("yade") is None:
+        reason = "yade not installed (apt-get install yade python3-yade)"
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip(reason)
+
+
+@pytest.mark.parametrize("test", ["repose", "tilt"])
+def test_quick_run_in_yade(runner, grains, tmp_path, test):
+    require_yade()
+    out = tmp_path / test
+    r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick"])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
+    assert len(rows) == QUICK["seeds"]
+    row = rows[0]
+    assert int(row["inserted"]) == QUICK["grains"] and int(row["lost"]) == 0
+    assert row["setting_friction"] == "0.5"
+    if test == "repose":
+        assert row["settled"] == "True"
+        assert 0.0 < float(row["angle_deg"]) < 60.0
+    assert (out / f"{test}.png").stat().st_size > 10_000
+    assert (out / f"{test}-seed0" / "run.py").is_file()
+    assert "angle" in r.stderr + r.stdout
