@@ -39,6 +39,21 @@ def require(executable: str) -> str:
     return path
 
 
+@pytest.fixture
+def yade():
+    return require("yade")
+
+
+@pytest.fixture
+def liggghts():
+    return require("liggghts")
+
+
+@pytest.fixture
+def lmp():
+    return require("lmp")
+
+
 @pytest.fixture(scope="module")
 def population(tmp_path_factory):
     """20 grains, 10 mm: 7 fso, 7 cri, 6 dpa, written by `grainforge generate`."""
@@ -93,8 +108,7 @@ def check_report(report, truth):
     assert len(report["final"]) == 20
 
 
-def test_yade_deck_runs(population, tmp_path):
-    yade = require("yade")
+def test_yade_deck_runs(yade, population, tmp_path):  # the engine first: skip before generating grains
     out, truth = make_deck(population, tmp_path, "yade")
     run([yade, "-n", "-x", "run.py"], cwd=out)
     check_report(json.loads((out / "results-yade.json").read_text()), truth)
@@ -133,8 +147,7 @@ def check_centres(bodies, atoms, deck, truth, type_col=1, x_cols=(3, 4, 5)):
             assert match.any(), f"{t['name']}: no sphere of radius {r} at {np.linalg.norm((x, y, z))} from xcm"
 
 
-def test_liggghts_deck_runs(population, tmp_path):
-    liggghts = require("liggghts")
+def test_liggghts_deck_runs(liggghts, population, tmp_path):
     out, truth = make_deck(population, tmp_path, "liggghts")
     run([liggghts, "-in", "in.run"], cwd=out)
     deck = json.loads((out / "grains.json").read_text())
@@ -158,10 +171,9 @@ def test_liggghts_deck_runs(population, tmp_path):
     assert any((out / "post").glob("*.vtk"))
 
 
-def test_lammps_deck_runs(population, tmp_path):
+def test_lammps_deck_runs(lmp, population, tmp_path):
     from grainforge.dem.lammps import rotation_matrix
 
-    lmp = require("lmp")
     out, truth = make_deck(population, tmp_path, "lammps")
     run([lmp, "-in", "in.run"], cwd=out)
     deck = json.loads((out / "grains.json").read_text())

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import os
 from pathlib import Path
 
 import numpy as np
@@ -129,6 +130,9 @@ sigma = 0.1
 
 
 @pytest.mark.slow
+@pytest.mark.skipif(os.environ.get("GRAINFORGE_FIT_RECOVERY") != "1",
+                    reason="statistical profile (~30 min on the loaded 2-core machine): GRAINFORGE_FIT_RECOVERY=1 "
+                           "pytest tests/test_fit.py -m slow; see docs/fit.md for its last result")
 def test_fit_recovers_the_known_aspects_of_a_synthetic_sand(tmp_path):
     from grainforge.fit import fit_sand, write_outputs
     from grainforge.population import draw_grain

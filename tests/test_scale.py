@@ -55,7 +55,7 @@ def test_bad_sizes():
     with pytest.raises(ValueError, match="size_definition must be one of"):
         scale_factor(BOX, 1.0, "diameter")
     for bad in (0.0, -1.0, float("nan"), float("inf")):
-        with pytest.raises(ValueError, match="size must be a positive number"):
+        with pytest.raises(ValueError, match="size must be between"):
             scale_factor(BOX, bad)
 
 

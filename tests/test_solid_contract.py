@@ -159,3 +159,10 @@ def test_cri_fractal_tiny_length_ratio_is_a_parameter_error():
     with pytest.raises(ParameterError) as exc:
         grainforge.cri(contour="fractal", length_ratio=5e-324, modes=8, subdivisions=0, rng=0)
     assert exc.value.name == "length_ratio"
+
+
+def test_cri_extreme_aspect_is_a_parameter_error():
+    # found by the slow sweep: S at the open edge of its range (5e-324) overflowed in the stretching
+    with pytest.raises(ParameterError) as exc:
+        grainforge.cri(aspect=(88.0, 88.0, 5e-324), subdivisions=0, rng=0)
+    assert exc.value.name == "aspect"

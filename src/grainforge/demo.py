@@ -234,7 +234,7 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
     from .io import read_mesh
     from .methods.angular import Params
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     s = 4 if quick else 5
     folder = out / "angular"
@@ -245,8 +245,8 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
         for rounding in ANGULAR_ROUNDING:
             params = Params(facets=18, aspect=(1.6, 1.25, 1.0), rounding=rounding, subdivisions=s, **extra)
             sub = folder / f"{name.replace(' ', '-').replace(',', '')}-rounding={rounding:g}"
-            written = write_run("angular", params, [3], sub, overwrite=True)
-            meshes.append(read_mesh(sub / written[0]["file"]))
+            write_run("angular", params, [3], sub, overwrite=True)
+            meshes.append(read_mesh(sub / manifest_rows(sub)[0]["file"]))
             labels.append(f"rounding {rounding:g}, {name}")
     sheet = contact_sheet(meshes, labels, out / "angular-gallery.png", columns=len(ANGULAR_ROUNDING),
                           title="Angular grains (18 facets, aspect 1.6:1.25:1, seed 3): sharp to rounded "
@@ -339,7 +339,7 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     from .io import read_mesh
     from .methods.rf import Params
     from .render import contact_sheet
-    from .run import write_run
+    from .run import manifest_rows, write_run
 
     folder = out / "rf"
     folder.mkdir(parents=True, exist_ok=True)
@@ -347,11 +347,13 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     table = write_fourier_csv([image], folder / "fd.csv")
     seeds = list(range(6 if quick else 12))
     p = Params(spectrum=str(table), subdivisions=4 if quick else 5)
-    rows = write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    rows = manifest_rows(folder / "from-spectrum")
     meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
     labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
-    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2,
-                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph)")
+    sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2, unit="mm",
+                          title="rf grains, each from one measured grain's D2..D16 (sample micrograph; "
+                                "files at d_eq = 10 mm)")
     return [folder, sheet]
 
 

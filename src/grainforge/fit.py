@@ -283,9 +283,20 @@ def _toml(v: Any) -> str:
     raise TypeError(f"cannot write {v!r} to TOML")
 
 
-def grading(d_eq_um: np.ndarray, points: int = 21) -> tuple[list[float], list[float]]:
-    """Sieves (mm) and count percent passing at ``points`` quantiles of the sizes (duplicates dropped)."""
-    q = np.linspace(0, 100, points)
+#: percent passing at which the sand's size quantiles become the recipe's sieves (finer in the tails,
+#: where a log-linear grading between few sieves would spread grains over sizes the sand barely has)
+GRADING_PERCENTS = (0, 0.5, 1, 2, 3, 5, 7.5, *range(10, 95, 5), 92.5, 95, 97, 98, 99, 99.5, 100)
+
+
+def grading(d_eq_um: np.ndarray, percents: Sequence[float] = GRADING_PERCENTS) -> tuple[list[float], list[float]]:
+    """Sieves (mm) and count percent passing at the sizes' quantiles ``percents`` (duplicates dropped).
+
+    Examples
+    --------
+    >>> grading(np.array([100.0, 200.0, 300.0, 400.0, 500.0]), (0, 50, 100))
+    ([0.1, 0.3, 0.5], [0.0, 50.0, 100.0])
+    """
+    q = np.asarray(percents, dtype=np.float64)
     sieves = np.percentile(np.asarray(d_eq_um) / 1000.0, q)
     keep = np.r_[True, np.diff(sieves) > 1e-9 * sieves[-1]]
     sieves, q = sieves[keep], q[keep]
@@ -535,12 +546,17 @@ def fit_sand(
             new[f"{k}_sd"] = float(np.clip(asp[f"{k}_sd"] * np.clip(ratio, 0.5, 2.0), 0.005, 0.5))
         return new
 
-    def knob_step(xv, J, gen, trust):
+    def knob_step(xv, J, gen, trust, means_only=False):
         y = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
-        # damped least squares in step units (columns scaled by each knob's step)
+        # in step units (columns scaled by each knob's step)
         Js = J * steps[None, :]
-        lam = 1e-3 * np.trace(Js.T @ Js) / len(steps) + 1e-12
-        dz = np.linalg.solve(Js.T @ Js + lam * np.eye(len(steps)), Js.T @ (y_star - y))
+        r = y_star - y
+        if means_only:  # the smallest step that fixes the means (the criteria's hardest part)
+            rows = [i for i, t in enumerate(spec.targets) if t.startswith("mean ")]
+            dz = np.linalg.lstsq(Js[rows], r[rows], rcond=1e-3)[0]
+        else:  # damped least squares on every target
+            lam = 1e-3 * np.trace(Js.T @ Js) / len(steps) + 1e-12
+            dz = np.linalg.solve(Js.T @ Js + lam * np.eye(len(steps)), Js.T @ r)
         dz = np.clip(dz, -trust, trust)  # at most `trust` steps per knob per round
         return np.clip(xv + dz * steps, lo_b, hi_b)
 
@@ -588,7 +604,7 @@ def fit_sand(
             if st["pass"]:
                 break
             # corrections from the final population itself (its own seeds: no sampling noise between rounds)
-            x = knob_step(x, J, gen, 1.0)
+            x = knob_step(x, J, gen, 1.5, means_only=True)
             aspect = aspect_step(aspect, st)
     gen, st, x, aspect = final
     header = (f"grainforge fit: {method} grains matched to {sand.name} ({sand.count} grains, voxel "

@@ -46,6 +46,8 @@ NAME = "cri"
 VALIDITY_PARAMETER = "descriptors"
 #: vertices are unit directions times a positive radius (times a positive axis scaling): star-shaped
 STAR_SHAPED = True
+#: largest L/S of a requested aspect (the declared values run over (0, 100])
+MAX_ASPECT_RATIO = 100.0
 
 
 def validity_parameter(p: "Params") -> str:
@@ -195,6 +197,8 @@ class Params:
             L, I, S = self.aspect
             if not L >= I >= S:
                 raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
+            if L > MAX_ASPECT_RATIO * S:  # e.g. S = 5e-324 overflowed the stretching (found by the sweep)
+                raise ParameterError("aspect", f"L/S must be at most {MAX_ASPECT_RATIO:g}, got {L:g}:{I:g}:{S:g}")
 
 
 # ------------------------------------------------------------------ geometry
