@@ -156,7 +156,9 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
     assert row["setting_friction"] == "0.5"
     if test == "repose":
         assert row["settled"] == "True"
-        assert 0.0 < float(row["angle_deg"]) < 60.0
+        # a heap of 30 grains may be too small to have a slope: then the angle is NaN and the note says why
+        angle = float(row["angle_deg"])
+        assert 0.0 < angle < 60.0 or (math.isnan(angle) and "too flat" in row["note"])
     assert (out / f"{test}.png").stat().st_size > 10_000
     assert (out / f"{test}-seed0" / "run.py").is_file()
     assert "angle" in r.stderr + r.stdout

@@ -82,8 +82,11 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     sd = summary["angle_sd_deg"]
     spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"
     name = "angle of repose" if test == "repose" else "tilt failure angle"
-    click.echo(f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; "
-               f"{out / 'results.csv'}, {out / (test + '.png')}")
+    if summary["runs"] == 0:
+        click.echo(f"{label}: no {name} measured ({rows[0].get('note', '')}); {out / 'results.csv'}")
+    else:
+        click.echo(f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; "
+                   f"{out / 'results.csv'}, {out / (test + '.png')}")
 
 
 repose = _command("repose", """Angle of repose: a cylinder of grains on a rough base is lifted and the heap measured.

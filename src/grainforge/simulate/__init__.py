@@ -307,22 +307,29 @@ def _kill(proc: subprocess.Popen) -> None:
 def measure_result(result: dict) -> dict:
     """The measured angle of one finished run (``result.json`` of a scene).
 
-    Returns a dict with ``angle`` (degrees), ``spread`` (over the heap's
-    sectors, repose only), the number of grains inserted and lost, and the
-    engine's step count and time step.
+    Returns a dict with ``angle_deg``, ``sector_sd_deg`` (over the heap's
+    sectors, repose only), the number of grains inserted and lost, the
+    engine's step count and time step, and a ``note`` saying why the angle is
+    NaN when it could not be measured (a heap of a few grains).
     """
     d = float(result["d_mean"])
     row = {"test": result["test"], "grains": result["grains"], "inserted": result["inserted"],
            "lost": result["lost"], "steps": result["steps"], "dt_s": result["dt"],
            "simulated_time_s": result["time"]}
     if result["test"] == "repose":
-        h = heap_angle(np.asarray(result["spheres"]), bin_width=0.5 * d, grain_size=d, base=result["base_top"])
-        row.update(angle_deg=h.angle, sector_sd_deg=h.spread, heap_height_mm=1e3 * h.height,
-                   heap_foot_radius_mm=1e3 * h.foot, settled=bool(result["settled"]))
+        try:
+            h = heap_angle(np.asarray(result["spheres"]), bin_width=0.5 * d, grain_size=d, base=result["base_top"])
+        except ValueError as exc:  # a heap of a few grains (--quick): no slope to measure
+            row.update(angle_deg=float("nan"), sector_sd_deg=float("nan"), heap_height_mm=float("nan"),
+                       heap_foot_radius_mm=float("nan"), settled=bool(result["settled"]), note=str(exc))
+        else:
+            row.update(angle_deg=h.angle, sector_sd_deg=h.spread, heap_height_mm=1e3 * h.height,
+                       heap_foot_radius_mm=1e3 * h.foot, settled=bool(result["settled"]), note="")
     else:
         hist = np.asarray(result["history"], dtype=np.float64)
-        row.update(angle_deg=tilt_failure_angle(hist[:, :2], displacement=0.5), sector_sd_deg=float("nan"),
-                   settled=result["failure_angle"] is not None)
+        angle = tilt_failure_angle(hist[:, :2], displacement=0.5)
+        row.update(angle_deg=angle, sector_sd_deg=float("nan"), settled=result["failure_angle"] is not None,
+                   note="" if np.isfinite(angle) else "the layer did not fail, or had failed at the first angle")
     return row
 
 

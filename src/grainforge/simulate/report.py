@@ -27,6 +27,15 @@ def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> 
     return paths
 
 
+def _heap(result: dict):
+    """The measured heap of a repose result, or None when it is too small to have a slope."""
+    d = result["d_mean"]
+    try:
+        return heap_angle(np.asarray(result["spheres"]), bin_width=0.5 * d, grain_size=d, base=result["base_top"])
+    except ValueError:
+        return None
+
+
 def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
     """The figure of a finished test: the final heap (or the tilt record) and the measured angle.
 
@@ -47,7 +56,7 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
         s = np.asarray(r0["spheres"])
         d = r0["d_mean"]
         base = r0["base_top"]
-        h = heap_angle(s, bin_width=0.5 * d, grain_size=d, base=base)
+        h = _heap(r0)
         xy = s[:, :2] - np.average(s[:, :2], axis=0, weights=s[:, 3] ** 3)
         side = np.hypot(xy[:, 0], xy[:, 1]) * np.sign(xy[:, 0] + 1e-30)
         from matplotlib.collections import EllipseCollection
@@ -58,17 +67,20 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
                                              edgecolors="0.3", linewidths=0.2, alpha=0.6))
         ax0.autoscale_view()
         ax0.axhline(0.0, color="k", lw=1)
-        a, b = h.fit
-        rr = np.array(h.fitted)
-        for sgn in (1, -1):
-            ax0.plot(sgn * 1e3 * rr, 1e3 * (a + b * rr), "C3-", lw=2)
-        ax0.set_title(f"seed {rows[0]['seed']}: final heap, side view; slope {h.angle:.1f}°")
+        if h is not None:
+            a, b = h.fit
+            rr = np.array(h.fitted)
+            for sgn in (1, -1):
+                ax0.plot(sgn * 1e3 * rr, 1e3 * (a + b * rr), "C3-", lw=2)
+        slope = f"slope {h.angle:.1f}°" if h is not None else "too small to measure a slope"
+        ax0.set_title(f"seed {rows[0]['seed']}: final heap, side view; {slope}")
         ax0.set_xlabel("distance from the heap axis, signed by side (mm)")
         ax0.set_ylabel("height above the rough base (mm)")
         ax0.set_aspect("equal", adjustable="datalim")
         for k, (res, row) in enumerate(zip(results, rows)):
-            hk = heap_angle(np.asarray(res["spheres"]), bin_width=0.5 * res["d_mean"], grain_size=res["d_mean"],
-                            base=res["base_top"])
+            hk = _heap(res)
+            if hk is None:
+                continue
             ax1.plot(1e3 * hk.profile[:, 0], 1e3 * hk.profile[:, 1], "o-", ms=3, color=f"C{k}",
                      label=f"seed {row['seed']}: {row['angle_deg']:.1f}°")
             ak, bk = hk.fit
@@ -77,7 +89,11 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
         ax1.set_xlabel("distance from the heap axis (mm)")
         ax1.set_ylabel("surface height, mean of 8 sectors (mm)")
         ax1.set_title("profiles; thick: the slope fitted between 20 % and 80 % of the height", fontsize=10)
-        ax1.legend(loc="upper right", fontsize=8)
+        if ax1.get_lines():
+            ax1.legend(loc="upper right", fontsize=8)
+        else:
+            ax1.text(0.5, 0.5, "no heap with a slope to measure\n(too few grains: use more --grains)",
+                     ha="center", va="center", transform=ax1.transAxes)
     else:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
         for k, (res, row) in enumerate(zip(results, rows)):
