@@ -465,7 +465,7 @@ def test_sigterm_on_generate_leaves_no_staging_folder(case_dir, inputs):
     assert _snapshot(d) == before
 
 
-TRAY = ["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "3000", "--size", "5",
+TRAY = ["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "30000", "--size", "5",
         "--workers", "2", "--out", "t.3mf"]
 
 
@@ -486,7 +486,7 @@ def test_sigkill_on_tray_leaves_no_process_and_the_next_run_cleans_up(case_dir, 
 def test_ctrl_c_on_tray_is_quick_and_leaves_nothing(case_dir, inputs):
     d, _ = case_dir
     before = _snapshot(d)
-    proc = start(["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "3000", "--size", "5",
+    proc = start(["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "30000", "--size", "5",
                   "--workers", "2", "--out", "sub/t.3mf"], d, inputs)
     _wait_for(_has(d, "sub/.t.3mf.*.tmp"), 90, proc)
     proc.send_signal(signal.SIGINT)
