@@ -5,11 +5,13 @@ particle on its binary voxel image.  :func:`atlas_descriptors` does the same
 to a mesh:
 
 1. **Voxelise** at voxel size ``h``: a voxel belongs to the grain when its
-   centre is inside the mesh.  The inside test is ray parity: one ray per
-   voxel column along +z, cast with trimesh's ray engine (Embree through
-   ``embreex`` when installed), and a voxel centre is inside when an odd
-   number of surface crossings lies below it.  Columns with an odd number of
-   crossings (a ray grazing an edge) are cast again a little to the side.
+   centre is inside the mesh.  The inside test is parity along z, by
+   scanline: every triangle is projected on the xy plane, the voxel columns
+   whose centre it covers are found in one vectorised pass (a centre on a
+   shared edge or vertex goes to exactly one triangle), and each crossing
+   toggles every voxel centre above it (:func:`voxelise`).  A column with an
+   odd number of crossings (an open or degenerate mesh) is cast again as a
+   ray with trimesh, slightly to the side.
 2. ``V = n h³`` for ``n`` voxels, ``d_eq = (6V/π)^(1/3)``.
 3. **True sphericity** ``π^(1/3) (6V)^(2/3) / A`` with ``A`` the area of the
    marching-cubes surface (:func:`skimage.measure.marching_cubes`) at level
@@ -18,7 +20,9 @@ to a mesh:
 4. **Convexity** = ``n`` / the number of voxel centres inside (or on) the
    convex hull of the grain's voxel centres (:class:`scipy.spatial.ConvexHull`)
    — ``spam``'s ``convexVolume``.  The lattice points in the hull are counted
-   column by column from the hull's facet planes.
+   column by column between the hull's lower and upper facets, whose planes
+   are taken with integer normals from the lattice points themselves
+   (:func:`_hull_count`).
 5. **Inertia-equivalent ellipsoid**: full axis lengths ``2·√(5 λ_i)`` for the
    eigenvalues ``λ_i`` of the covariance of the voxel centres (a solid
    ellipsoid of semi-axes a has variance a²/5 along it); flatness =
