@@ -750,8 +750,10 @@ def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, 
     lo = np.minimum(a0, a0 + da)
     hi = np.maximum(a0, a0 + da)
     step = TWO_PI / n_angles
-    k0 = np.ceil(lo / step).astype(np.int64)
-    k1 = np.ceil(hi / step).astype(np.int64)  # rays k with lo <= kΔ < hi
+    # rays k with lo <= kΔ < hi; the 1e-9 keeps a ray through a vertex (a vertex angle that is a
+    # multiple of Δ, e.g. a centred circle sampled at the ray angles) from being missed by both edges
+    k0 = np.ceil(lo / step - 1e-9).astype(np.int64)
+    k1 = np.ceil(hi / step - 1e-9).astype(np.int64)
     count = np.maximum(k1 - k0, 0)
     edge = np.repeat(np.arange(len(x)), count)
     k = np.repeat(k0 - np.cumsum(count) + count, count) + np.arange(int(count.sum()))
