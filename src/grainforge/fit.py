@@ -16,19 +16,24 @@ What is fitted
   voxelised at the sand's resolution for its size.
 - **Aspect** (every method with an ``aspect`` L:I:S parameter): drawn per
   grain as ``{ distribution = "zingg" }`` with truncated-normal elongation
-  I/L and flatness S/I, whose (mean, sd) are corrected each round by the
-  difference between the sand's and the population's measured mean and the
-  ratio of their standard deviations.
+  I/L and flatness S/I.  Their means are unknowns of the search (below);
+  their standard deviations are corrected each round by the ratio of the
+  sand's and the population's measured spreads.
 - **Surface knobs** (per method, :data:`FITS`): a few numbers that steer
   named statistics (e.g. CRI's irregularity and roughness descriptors, mean
   and spread, steer the means and spreads of sphericity and convexity).
-  They are solved by Newton steps on a finite-difference Jacobian (measured
-  once, then Broyden updates), on a *pilot* population whose grains keep
-  their seeds from round to round (common random numbers), so that the
-  statistics change smoothly with the knobs.
+
+The knobs and the two aspect means are solved jointly for the knobs'
+targets plus the measured mean elongation and flatness (a rougher grain also
+measures less elongated; a flatter one less spherical): damped Gauss–Newton
+steps in a trust region, on a finite-difference Jacobian (measured once,
+then Broyden updates), on a *pilot* population whose grains keep their seeds
+from round to round (common random numbers), so that the statistics change
+smoothly with the settings.
 
 A final population of ``count`` (≥ 500) grains verifies the fit; if it
-misses, one more correction is made from it and it is measured again.
+misses, a correction is made from it and it is measured again
+(``final_rounds`` times at most; the best is kept).
 
 Adding a method is a few lines: :func:`register` a :class:`MethodFit` that
 names its knobs and turns knob values into the recipe's ``[params]`` table.
@@ -66,6 +71,8 @@ VOXEL_COLUMN = "Voxel Size (µm)"
 #: acceptance: two-sample KS statistic and |mean difference| per descriptor
 KS_MAX = 0.1
 MEAN_TOL = 0.01
+#: finite-difference step (and trust-region unit) of the fitted aspect means
+ASPECT_STEP = 0.03
 
 
 # --------------------------------------------------------------------------- the sand
@@ -514,110 +521,156 @@ def fit_sand(
     low = float(max(0.05, min(sv["elongation"].min(), sv["flatness"].min()) - 0.1))
     aspect = {"elongation_mean": float(sv["elongation"].mean()), "elongation_sd": float(sv["elongation"].std()),
               "flatness_mean": float(sv["flatness"].mean()), "flatness_sd": float(sv["flatness"].std())}
-    x = np.array([k.start for k in spec.knobs])
-    lo_b, hi_b = np.array([k.low for k in spec.knobs]), np.array([k.high for k in spec.knobs])
-    steps = np.array([k.step for k in spec.knobs])
-    y_star = np.array([_stat(target, t) for t in spec.targets])
+    # The settings: the method's knobs and the two aspect means (the aspect sds are corrected directly by
+    # the ratio of measured spreads).  The four measured means are solved for by Gauss-Newton steps on the
+    # knobs that steer a mean and the aspect means (a rougher grain also measures less elongated, a flatter
+    # one less spherical: one joint system); a knob that steers a spread is corrected by the ratio of the
+    # sand's and the population's spread of its statistic, as the aspect sds are.
+    nk = len(spec.knobs)
+    knames = [k.name for k in spec.knobs]
+    x = np.array([k.start for k in spec.knobs] + [aspect["elongation_mean"], aspect["flatness_mean"]])
+    lo_b = np.array([k.low for k in spec.knobs] + [low, low])
+    hi_b = np.array([k.high for k in spec.knobs] + [1.0, 1.0])
+    steps = np.array([k.step for k in spec.knobs] + [ASPECT_STEP, ASPECT_STEP])
+    mean_idx = [i for i, t in enumerate(spec.targets) if t.startswith("mean ")] + [nk, nk + 1]
+    targets = tuple(spec.targets[i] for i in mean_idx[:-2]) + ("mean elongation", "mean flatness")
+    spread = [(i, t.split()[1]) for i, t in enumerate(spec.targets) if t.startswith("sd ")]
+    y_star = np.array([_stat(target, t) for t in targets])
+    sds = (aspect["elongation_sd"], aspect["flatness_sd"])
     history: list[dict] = []
 
-    def text_for(xv, asp, n, s=seed):
-        params = spec.params(dict(zip([k.name for k in spec.knobs], map(float, xv))))
+    def unpack(xv, sd):
+        knobs = dict(zip(knames, map(float, xv[:nk])))
+        asp = {"elongation_mean": float(xv[nk]), "elongation_sd": float(sd[0]),
+               "flatness_mean": float(xv[nk + 1]), "flatness_sd": float(sd[1])}
+        return knobs, asp
+
+    def text_for(xv, sd, n, s=seed):
+        knobs, asp = unpack(xv, sd)
+        params = spec.params(knobs)
         params["aspect"] = _aspect_table(asp, low)
         return recipe_text(method, params, sand, count=n, seed=s)
 
-    def evaluate(xv, asp, n, label):
+    def stats(gen):
+        return np.array([_stat(gen[:, 1:], t) for t in targets])
+
+    def evaluate(xv, sd, n, label):
         # always the final recipe: a pilot is its first n grains (same seeds, sizes and draws)
         name(label)
-        gen = pool.run(text_for(xv, asp, count), n, sand.voxel_size, progress)
+        gen = pool.run(text_for(xv, sd, count), n, sand.voxel_size, progress)
         st = compare(target, gen[:, 1:])
-        history.append({"label": label, "knobs": dict(zip([k.name for k in spec.knobs], map(float, xv))),
-                        "aspect": dict(asp), "score": st["score"],
+        knobs, asp = unpack(xv, sd)
+        history.append({"label": label, "knobs": knobs, "aspect": asp, "score": st["score"],
                         **{f"{k}_{q}": st["per"][k][q] for k in DESCRIPTORS for q in ("gen_mean", "ks")}})
         say(f"{label}: score {st['score']:.2f} (<= 1 passes); "
-            + ", ".join(f"{k[:5]} {st['per'][k]['gen_mean']:.3f} KS {st['per'][k]['ks']:.2f}" for k in DESCRIPTORS))
+            + ", ".join(f"{k[:5]} {st['per'][k]['gen_mean']:.3f} KS {st['per'][k]['ks']:.2f}" for k in DESCRIPTORS)
+            + "; " + ", ".join(f"{k} {v:.4g}" for k, v in knobs.items())
+            + f", aspect means {asp['elongation_mean']:.3f} {asp['flatness_mean']:.3f}")
         return gen, st
 
-    def aspect_step(asp, st):
-        new = dict(asp)
-        for k in ("elongation", "flatness"):
-            p = st["per"][k]
-            new[f"{k}_mean"] = float(np.clip(asp[f"{k}_mean"] + (p["sand_mean"] - p["gen_mean"]), low, 1.0))
-            ratio = p["sand_sd"] / max(p["gen_sd"], 1e-6)
-            new[f"{k}_sd"] = float(np.clip(asp[f"{k}_sd"] * np.clip(ratio, 0.5, 2.0), 0.005, 0.5))
-        return new
+    def merit(st):
+        # what a round is judged by: mean and spread misfits (a KS statistic of a pilot is mostly noise)
+        return float(sum((p["mean_diff"] / MEAN_TOL) ** 2 + ((p["gen_sd"] - p["sand_sd"]) / (2 * MEAN_TOL)) ** 2
+                         for p in st["per"].values()))
 
-    def knob_step(xv, J, gen, trust, means_only=False):
-        y = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
-        # in step units (columns scaled by each knob's step)
-        Js = J * steps[None, :]
-        r = y_star - y
-        if means_only:  # the smallest step that fixes the means (the criteria's hardest part)
-            rows = [i for i, t in enumerate(spec.targets) if t.startswith("mean ")]
-            dz = np.linalg.lstsq(Js[rows], r[rows], rcond=1e-3)[0]
-        else:  # damped least squares on every target
-            lam = 1e-3 * np.trace(Js.T @ Js) / len(steps) + 1e-12
-            dz = np.linalg.solve(Js.T @ Js + lam * np.eye(len(steps)), Js.T @ r)
-        dz = np.clip(dz, -trust, trust)  # at most `trust` steps per knob per round
-        return np.clip(xv + dz * steps, lo_b, hi_b)
+    def ratio(st, k):
+        p = st["per"][k]
+        return float(np.clip(p["sand_sd"] / max(p["gen_sd"], 1e-6), 0.5, 2.0))
+
+    def spread_step(xv, sd, st):
+        xv = xv.copy()
+        for i, k in spread:
+            xv[i] = float(np.clip(xv[i] * ratio(st, k), lo_b[i], hi_b[i]))
+        sd = tuple(float(np.clip(s0 * ratio(st, k), 0.005, 0.5)) for s0, k in zip(sd, ("elongation", "flatness")))
+        return xv, sd
+
+    def newton(xv, J, gen, trust):
+        # bounded, damped least squares in step units: each unknown moves at most `trust` steps and stays
+        # within its range (a bound is honoured in the solve, not by clipping its result afterwards,
+        # which would throw away the compensation the other unknowns were making); the damping keeps
+        # the step small along nearly singular directions (irregularity and roughness both lower
+        # sphericity and convexity, in similar proportions)
+        from scipy.optimize import lsq_linear
+
+        u = xv[mean_idx]
+        Js = J * steps[mean_idx][None, :]
+        r = y_star - stats(gen)
+        lam = 0.05 * np.trace(Js.T @ Js) / len(mean_idx) + 1e-12
+        A = np.vstack([Js, math.sqrt(lam) * np.eye(len(mean_idx))])
+        b = np.concatenate([r, np.zeros(len(mean_idx))])
+        lo = np.maximum(-trust, (lo_b[mean_idx] - u) / steps[mean_idx])
+        hi = np.minimum(trust, (hi_b[mean_idx] - u) / steps[mean_idx])
+        hi = np.maximum(hi, lo + 1e-12)
+        dz = lsq_linear(A, b, bounds=(lo, hi)).x
+        out = xv.copy()
+        out[mean_idx] = np.clip(u + dz * steps[mean_idx], lo_b[mean_idx], hi_b[mean_idx])
+        return out
+
+    def broyden(J, dx, dy):
+        dx = dx[mean_idx]
+        if np.any(dx):
+            J += np.outer(dy - J @ dx, dx) / float(dx @ dx)
 
     with _Pool(max(1, int(workers))) as pool:
-        gen, st = evaluate(x, aspect, pilot, "pilot 0 (start)")
-        best = (st["score"], x.copy(), dict(aspect))
+        gen, st = evaluate(x, sds, pilot, "pilot 0 (start)")
         # finite-difference Jacobian on the first half of the pilot (same grains: differences, not noise)
         nj = max(2, pilot // 2)
-        y0 = np.array([_stat(gen[:nj, 1:], t) for t in spec.targets])
-        J = np.zeros((len(spec.targets), len(spec.knobs)))
-        for i, k in enumerate(spec.knobs):  # aspect held
+        y0 = stats(gen[:nj])
+        J = np.zeros((len(targets), len(mean_idx)))
+        labels = knames + ["elongation_mean", "flatness_mean"]
+        for c, i in enumerate(mean_idx):
             xi = x.copy()
             xi[i] = xi[i] + steps[i] if xi[i] + steps[i] <= hi_b[i] else xi[i] - steps[i]
-            gi, _ = evaluate(xi, aspect, nj, f"jacobian {i + 1}/{len(spec.knobs)} ({k.name})")
-            J[:, i] = (np.array([_stat(gi[:, 1:], t) for t in spec.targets]) - y0) / (xi[i] - x[i])
-        y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
-        trust = 2.0  # trust region, in knob steps: halved after a round that makes things worse
-        best_gen, best_st = gen, st
+            gi, _ = evaluate(xi, sds, nj, f"jacobian {c + 1}/{len(mean_idx)} ({labels[i]})")
+            J[:, c] = (stats(gi) - y0) / (xi[i] - x[i])
+        trust = 2.0  # trust region, in steps: halved after a round that makes things worse
+        best = (merit(st), x.copy(), sds, gen, st)
         for r in range(1, rounds + 1):
-            x_new = knob_step(x, J, gen, trust)
-            aspect_new = aspect_step(aspect, st)
-            gen_new, st_new = evaluate(x_new, aspect_new, pilot, f"pilot {r}")
-            y = np.array([_stat(gen_new[:, 1:], t) for t in spec.targets])
-            dx = x_new - x
-            if np.any(dx):  # Broyden update (aspect changes count as noise)
-                J += np.outer((y - y_prev) - J @ dx, dx) / float(dx @ dx)
-            if st_new["score"] < best[0]:
-                best = (st_new["score"], x_new.copy(), dict(aspect_new))
-                best_gen, best_st = gen_new, st_new
-                trust = min(1.5 * trust, 3.0)
+            x_new = newton(x, J, gen, trust)
+            x_new, sd_new = spread_step(x_new, sds, st)
+            gen_new, st_new = evaluate(x_new, sd_new, pilot, f"pilot {r}")
+            broyden(J, x_new - x, stats(gen_new) - stats(gen))  # (spread changes count as noise)
+            if merit(st_new) < best[0]:
+                best = (merit(st_new), x_new.copy(), sd_new, gen_new, st_new)
+                trust = min(1.5 * trust, 4.0)
             else:  # worse: go back to the best settings with a smaller step
                 trust *= 0.5
-            x, aspect = best[1].copy(), dict(best[2])
-            gen, st = best_gen, best_st
-            y_prev = np.array([_stat(gen[:, 1:], t) for t in spec.targets])
-            if st["score"] <= 0.7:
+            _, x, sds, gen, st = best
+            x = x.copy()
+            if st["score"] <= 0.6:
                 break
-        _, x, aspect = best
         final = None
         cost = pool
+        prev = None
+        trust = 1.5
         for attempt in range(final_rounds):
-            gen, st = evaluate(x, aspect, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
+            gen, st = evaluate(x, sds, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
+            if prev is not None:  # secant from two measurements of the same grains
+                broyden(J, x - prev[0], stats(gen) - stats(prev[1]))
             if final is None or st["score"] < final[1]["score"]:
-                final = (gen, st, x.copy(), dict(aspect))
+                final = (gen, st, x.copy(), sds)
+            else:
+                trust *= 0.5
             if st["pass"]:
                 break
-            # corrections from the final population itself (its own seeds: no sampling noise between rounds)
-            x = knob_step(x, J, gen, 1.5, means_only=True)
-            aspect = aspect_step(aspect, st)
-    gen, st, x, aspect = final
+            # corrections from the best final population (its own seeds: no sampling noise between rounds)
+            gen, st, x, sds = final[0], final[1], final[2].copy(), final[3]
+            prev = (x.copy(), gen)
+            x = newton(x, J, gen, trust)
+            x, sds = spread_step(x, sds, st)
+    gen, st, x, sds = final
+    knobs, aspect = unpack(x, sds)
     header = (f"grainforge fit: {method} grains matched to {sand.name} ({sand.count} grains, voxel "
               f"{sand.voxel_size:g} µm)\n" + "\n".join(
                   f"{k}: sand {st['per'][k]['sand_mean']:.3f} generated {st['per'][k]['gen_mean']:.3f} "
                   f"KS {st['per'][k]['ks']:.3f}" for k in DESCRIPTORS)
               + f"\n{'passes' if st['pass'] else 'does NOT pass'}: KS <= {KS_MAX} and |mean diff| <= {MEAN_TOL} "
               f"on {count} grains")
-    params = spec.params(dict(zip([k.name for k in spec.knobs], map(float, x))))
+    params = spec.params(knobs)
     params["aspect"] = _aspect_table(aspect, low)
     text = recipe_text(method, params, sand, count=count, seed=seed, header=header)
     return FitResult(method=method, recipe=text, stats=st, generated=gen,
-                     knobs=dict(zip([k.name for k in spec.knobs], map(float, x))), aspect=aspect,
+                     knobs=knobs, aspect=aspect,
                      history=history, seconds=time.perf_counter() - t0, cpu_seconds=cost.cpu,
                      grains_measured=cost.grains)
 
