@@ -374,9 +374,13 @@ class _Pool:
                                                   "skimage.measure"])
         return self
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, exc, tb):
         if self.ex is not None:
-            self.ex.shutdown(wait=True, cancel_futures=True)
+            from .workers import close_pool
+
+            # an error, Ctrl-C or SIGTERM: stop the workers now (waiting for them from inside an
+            # interrupted as_completed could hang; seen with SIGTERM during a fit)
+            close_pool(self.ex, abort=exc_type is not None)
 
     def run(self, text: str, count: int, voxel: float, progress) -> np.ndarray:
         out = np.empty((count, 5))
