@@ -1,8 +1,9 @@
 """Timing of the Sand-Atlas voxel descriptors (issue 14): target ≤ 25 ms per grain per core at 60 voxels across.
 
 One process, BLAS single-threaded (as in a worker).  Prints best and median
-wall clock and CPU time (time.process_time, which also counts Embree's
-threads) per stage and in total, for a CRI grain (20,480 faces) and a
+wall clock and CPU time (time.process_time, all threads) per stage and in
+total (stages: scanline voxelising, lattice hull count, Gaussian filter +
+marching cubes on the grain's box + 1 voxel), for a CRI grain (20,480 faces) and a
 sphere, at 30, 60 and 69 voxels across.  Usage:
 ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_atlas.py [--repeat N]``.
 """
