@@ -8,7 +8,21 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt"]
+__all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings"]
+
+
+def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> dict:
+    """``defaults`` updated with ``kw``; an unknown key raises ``ValueError`` naming it.
+
+    Examples
+    --------
+    >>> updated_settings({"seed": 0, "dt": 1.0}, {"seed": 3})
+    {'seed': 3, 'dt': 1.0}
+    """
+    unknown = set(kw) - set(defaults)
+    if unknown:
+        raise ValueError(f"unknown {what}: {', '.join(sorted(unknown))}")
+    return {**defaults, **kw}
 
 
 def fmt(x: float) -> str:

@@ -28,7 +28,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, template_record, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
@@ -57,11 +57,7 @@ def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"seed": 0, "kn_weight_overlap": 0.005, "restitution": 0.3, "friction": 0.5, "dt_fraction": 0.02,
          "check_every": 1000, "max_checks": 100, "ke_ratio": 1e-4, "dump_every": 5000}
-    unknown = set(kw) - set(s)
-    if unknown:
-        raise ValueError(f"unknown pour settings: {', '.join(sorted(unknown))}")
-    s.update(kw)
-    return s
+    return updated_settings(s, kw, "pour settings")
 
 
 def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:

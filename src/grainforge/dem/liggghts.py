@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, template_record, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "pour_settings"]
 
@@ -38,11 +38,7 @@ def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
          "check_every": 1000, "max_checks": 150, "ke_ratio": 1e-4, "vtk_every": 5000}
-    unknown = set(kw) - set(s)
-    if unknown:
-        raise ValueError(f"unknown pour settings: {', '.join(sorted(unknown))}")
-    s.update(kw)
-    return s
+    return updated_settings(s, kw, "pour settings")
 
 
 def _seed(k: int) -> int:
