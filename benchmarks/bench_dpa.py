@@ -36,6 +36,19 @@ def main() -> None:
     D.aggregate("octahedron", 20, 1.0, np.random.default_rng(0))  # imports, caches
     grainforge.dpa(primaries=20, rng=0)
 
+    print("\n300 octahedra (issue 11; seeds 0, 1; wall s / CPU s, one run each)")
+    for eps in (1.0, 3.0):
+        for seed in (0, 1):
+            t0, c0 = time.perf_counter(), time.process_time()
+            agg = D.aggregate("octahedron", 300, eps, np.random.default_rng(seed))
+            t1, c1 = time.perf_counter(), time.process_time()
+            D.union_surface(agg)
+            t2, c2 = time.perf_counter(), time.process_time()
+            grainforge.dpa(primitive="octahedron", exponent=eps, primaries=300, rng=seed)
+            t3, c3 = time.perf_counter(), time.process_time()
+            print(f"ε = {eps:g}, seed {seed}: aggregate {t1 - t0:.3f} / {c1 - c0:.3f}, surface {t2 - t1:.3f} / "
+                  f"{c2 - c1:.3f}, grain {t3 - t2:.3f} / {c3 - c2:.3f}")
+
     print("\n1,000 primaries (seeds 0..; best of repeats)")
     print(f"{'primitive':22s} {'ε':>5s} {'aggregate s':>12s} {'surface s':>10s} {'grain s':>9s}")
     for name in ("cube", "octahedron", "tetrahedron", "dodecahedron", "icosahedron", "truncated-octahedron"):

@@ -275,7 +275,7 @@ def sat_gap(a, a_normals, a_edges, b, b_normals, b_edges, reach: float) -> np.nd
     >>> a = np.broadcast_to(v, b.shape)
     >>> sat_gap(a, face_normals(s, a), edge_directions(s, a), b, face_normals(s, b),
     ...         edge_directions(s, b), 1.0).round(3).tolist()
-    [0.0, 0.5, -0.25]
+    [-0.0, 0.5, -0.25]
     """
     P = len(b)
     if P == 0:

@@ -293,8 +293,9 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
     open_[0] = True
     R, r_in = s.circumradius, s.inradius
     r_face = float(h0.max())
-    h = 2.0 * R + clearance
-    reach2 = (2.0 * R + 2.0 * r_face + clearance) ** 2  # a child's centre lies twice its face distance away
+    margin = max(clearance, 0.0)
+    h = 2.0 * R + margin
+    reach2 = (2.0 * R + 2.0 * r_face + margin) ** 2  # a child's centre lies twice its face distance away
     grid: dict[tuple[int, int, int], list[int]] = {(0, 0, 0): [0]}
     cell = float(np.sqrt(reach2))  # hash-grid cell: every primary within reach is in the 27 cells around
     offsets = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]
@@ -392,7 +393,8 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
 
 
 def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Generator,
-              tol: float = INTRUSION_TOLERANCE, clearance: float = CONTACT_CLEARANCE) -> Aggregate:
+              tol: float = INTRUSION_TOLERANCE, clearance: float = CONTACT_CLEARANCE,
+              min_notch: float = MIN_NOTCH) -> Aggregate:
     """Grow an aggregate of ``primaries`` unit-volume primaries (no mesh).
 
     Cubes grow on the integer lattice (a face is occupied when the
@@ -400,7 +402,16 @@ def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Ge
     chosen face of the parent, turned about the face normal into one of the
     face's distinct orientations; a placement that intrudes into an existing
     primary (exact separating-axis test, overlap > ``tol``) is rejected and
-    another face/orientation of the same parent is tried.
+    another face/orientation of the same parent is tried.  So is a placement
+    that comes within ``clearance`` (separating-axis gap, in primary sizes)
+    of a primary other than its parent, unless the two touch only at
+    vertices of the contact face that they share bit for bit (edge and
+    vertex contacts inherited through the parent), and one that leaves less
+    than ``min_notch`` radians empty around an edge shared by several
+    primaries.  Together these keep the exact face-cancellation union
+    (:func:`union_surface`) a 2-manifold as written, also after smoothing
+    (docs/methods/dpa.md, "Contacts"); ``clearance=-1, min_notch=-1``
+    turns them off (growth as before issue 11, for comparison).
 
     Examples
     --------
@@ -413,7 +424,7 @@ def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Ge
         cells = _aggregate_cubes(primaries, exponent, rng)
         verts = cells[:, None, :] + (s.vertices[None] + 0.5)
         return Aggregate(s, verts, cells + 0.5, cells)
-    verts, centres, tried = _aggregate_polyhedra(s, primaries, exponent, rng, tol, clearance)
+    verts, centres, tried = _aggregate_polyhedra(s, primaries, exponent, rng, tol, clearance, min_notch)
     return Aggregate(s, verts, centres, None, tuple(int(t) for t in tried))
 
 
