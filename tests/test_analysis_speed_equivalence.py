@@ -136,3 +136,55 @@ def test_smooth_fit_matches_design_matrix_lstsq(grain):
     sw = np.sqrt(w)
     coef = np.linalg.lstsq(B * sw[:, None], (s / r) ** 2 * sw, rcond=None)[0]
     np.testing.assert_allclose(fractal.smooth_fit(u, r, w), s / np.sqrt(B @ coef), rtol=1e-10)
+
+
+def _variogram_ref(u, h, bins, neighbours=16, subset=1000):
+    """The per-pair variogram the grid version replaced: gather both ends of every pair, bin, sum."""
+    from scipy.spatial import cKDTree
+
+    n = len(u)
+    k = min(neighbours + 1, n)
+    _, j = cKDTree(u).query(u, k=k)
+    i = np.repeat(np.arange(n), k - 1)
+    j = j[:, 1:].ravel()
+    idx = np.unique(np.linspace(0, n - 1, min(subset, n)).round().astype(np.int64))
+    a, b = np.triu_indices(len(idx), 1)
+    i, j = np.concatenate([i, idx[a]]), np.concatenate([j, idx[b]])
+    sep = np.arccos(np.clip(np.einsum("ij,ij->i", u[i], u[j]), -1.0, 1.0))
+    which = np.digitize(sep, bins) - 1
+    good = (which >= 0) & (which < len(bins) - 1)
+    counts = np.bincount(which[good], minlength=len(bins) - 1)
+    with np.errstate(invalid="ignore"):  # empty bins: NaN, as in variogram
+        gamma = np.bincount(which[good], 0.5 * (h[i] - h[j])[good] ** 2, minlength=len(bins) - 1) / counts
+        centres = np.bincount(which[good], sep[good], minlength=len(bins) - 1) / counts
+    return centres, gamma, counts
+
+
+@pytest.mark.parametrize("subdivisions", [3, 5])
+def test_variogram_matches_per_pair_reference(subdivisions):
+    g = fso(subdivisions=subdivisions, rng=3)
+    u, r = fractal.radial_function(g.vertices, g.vertices.mean(axis=0))
+    h = r - r.mean()
+    bins = np.geomspace(0.04 if subdivisions == 5 else 0.12, 0.35, 9)
+    centres, gamma, counts = fractal.variogram(u, h, bins)
+    rc, rg, rn = _variogram_ref(u, h, bins)
+    # binning on −cos instead of the angle can move a pair lying within rounding of a bin edge: none here
+    np.testing.assert_array_equal(counts, rn)
+    np.testing.assert_allclose(gamma, rg, rtol=1e-12)
+    np.testing.assert_allclose(centres, rc, rtol=1e-12)
+
+
+def test_analyse_not_solid_flag_same_with_the_star_certificate():
+    """analyse proves star-shaped bodies free of self-intersections in O(F); the flag is the pair test's."""
+    from grainforge.analysis.measure import analyse_mesh
+    from grainforge.geodesic import icosphere
+    from grainforge.solid import self_intersections
+
+    v, f = icosphere(2)
+    poked = v.copy()
+    poked[0] = -1.6 * poked[0]  # one vertex pulled through the far side: its faces cross the surface there
+    grain = fso(subdivisions=3, rng=0)
+    for verts, faces, crossing in ((grain.vertices, grain.faces, False), (v, f, False), (poked, f, True)):
+        assert (self_intersections(verts, faces) > 0) == crossing
+        flags = analyse_mesh(verts, faces, fractal=False, fourier=False)["flags"]
+        assert ("not-solid" in flags) == crossing, flags

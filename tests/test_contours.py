@@ -187,6 +187,22 @@ def test_image_non_star_shaped_is_reported():
     assert Contour.from_image(np.hypot(xx - 100, yy - 120) < 60).star_shaped
 
 
+@pytest.mark.parametrize("a, b, centre", [(80, 50, (150, 150)), (60, 60, (100, 120)), (90, 45, (150.5, 140))])
+def test_binary_ellipse_rays_through_pixel_corners(tmp_path, a, b, centre):
+    """A binary (0/255) ellipse PNG: its traced outline has vertices exactly on rays (θ = 0, π, ...).
+    Every ray must still meet the boundary (issue 12: "no grain measured"), at the ellipse's radius."""
+    yy, xx = np.mgrid[:300, :300]
+    cx, cy = centre
+    img = ((((xx - cx) / a) ** 2 + ((yy - cy) / b) ** 2 <= 1) * 255).astype(np.uint8)
+    scan = scan_image(load_image(save_png(tmp_path / "ellipse.png", img)))
+    assert len(scan.contours) == 1 and scan.unmeasurable == 0
+    c = scan.contours[0]
+    assert c.star_shaped
+    theta = 2 * np.pi * np.arange(len(c.radii)) / len(c.radii)
+    r_true = a * b / np.hypot(b * np.cos(theta), a * np.sin(theta))
+    np.testing.assert_allclose(c.radii * c.scale, r_true, atol=1.0)  # the outline is traced through pixel edges
+
+
 def test_image_errors(tmp_path):
     with pytest.raises(ValueError, match="no such image"):
         load_image(tmp_path / "missing.png")
@@ -211,3 +227,16 @@ def test_scan_image_counts_border_and_specks():
         known = truth.recentred().descriptors()
         np.testing.assert_allclose(c.descriptors()[[2, 3]], known[[2, 3]], rtol=0.05)
         assert abs(c.descriptors()[8] - known[8]) < 0.005
+
+
+def test_recentred_circle_and_symmetric_contours():
+    """A centred circle sampled at the ray angles puts vertices exactly on rays: none may be missed."""
+    import numpy as np
+
+    from grainforge.contours import Contour
+
+    th = 2 * np.pi * np.arange(256) / 256
+    for r in (np.ones(256), 1 + 0.05 * np.cos(3 * th)):
+        D = Contour(r).recentred().descriptors(4)
+        np.testing.assert_allclose(D[[1, 2, 4]], 0.0, atol=1e-12)
+        assert abs(D[3] - (0.05 if np.ptp(r) > 0 else 0.0)) < 1e-9

@@ -85,6 +85,17 @@ def test_fourier_bad_images(runner, tmp_path, kind):
 
 
 # ---------------------------------------------------------------- generate cri
+def test_fourier_binary_ellipse(runner, tmp_path):
+    """A binary ellipse image (outline vertices exactly on the rays at 0 and π) gives one grain (issue 12)."""
+    yy, xx = np.mgrid[:300, :300]
+    img = ((((xx - 150) / 80) ** 2 + ((yy - 150) / 50) ** 2 <= 1) * 255).astype(np.uint8)
+    res = runner.invoke(cli, ["fourier", _save(tmp_path / "ellipse.png", img)])
+    assert res.exit_code == 0, res.output
+    (row,) = _rows(res.stdout)
+    assert row["star_shaped"] == "True"
+    assert float(row["elongation"]) > 0.1  # an 80 x 50 ellipse is elongated
+
+
 def test_generate_cri_files_and_manifest(runner, tmp_path):
     out = tmp_path / "run"
     args = ["generate", "cri", "--out", str(out), "--count", "2", "--seed", "4", "--preset", "rough-angular",

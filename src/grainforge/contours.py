@@ -743,15 +743,40 @@ def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, 
     Each edge is intersected only with the rays inside its angular span
     (θ in [lo, hi), usually zero or one ray per edge), so the cost is
     O(edges + crossings) rather than O(edges × rays).
+
+    The angle is unwrapped along the polygon, in units of the ray step, and
+    the end of each edge is *the same number* as the start of the next (the
+    closing vertex is the first one plus whole turns), so a ray that passes
+    exactly through a vertex (common for outlines traced through pixel
+    corners, e.g. at θ = 0 or π) belongs to exactly one of its two edges.
+
+    Examples
+    --------
+    >>> diamond = np.array([[2.0, 0.0], [0.0, 1.0], [-2.0, 0.0], [0.0, -1.0]])  # vertices on the rays 0, π/2, …
+    >>> r, star = _ray_cast(diamond[:, 0], diamond[:, 1], 8)
+    >>> np.round(r, 4).tolist(), star
+    ([2.0, 0.9428, 1.0, 0.9428, 2.0, 0.9428, 1.0, 0.9428], True)
+    >>> r2, _ = _ray_cast(diamond[::-1, 0], -diamond[::-1, 1] + 0.0, 8)  # clockwise, y = -0.0 on the x axis
+    >>> bool(np.allclose(r2, r))
+    True
     """
     x1, y1 = np.roll(x, -1), np.roll(y, -1)
-    a0 = np.arctan2(y, x)
-    da = np.mod(np.arctan2(y1, x1) - a0 + np.pi, TWO_PI) - np.pi  # signed angular step of each edge
-    lo = np.minimum(a0, a0 + da)
-    hi = np.maximum(a0, a0 + da)
     step = TWO_PI / n_angles
-    k0 = np.ceil(lo / step).astype(np.int64)
-    k1 = np.ceil(hi / step).astype(np.int64)  # rays k with lo <= kΔ < hi
+    a0 = np.arctan2(y, x)
+    du = (np.mod(np.arctan2(y1, x1) - a0 + np.pi, TWO_PI) - np.pi) / step  # signed step of each edge, in rays
+    u = np.empty(len(x) + 1)
+    u[0] = a0[0] / step
+    if abs(u[0] - np.rint(u[0])) < 1e-9:
+        # on a ray (to rounding): make it exactly so, else u[0] + turns·n_angles can round onto the
+        # ray while u[0] stays just past it, and that ray is missed by both the first and last edge
+        u[0] = np.rint(u[0])
+    u[1:] = u[0] + np.cumsum(du)
+    turns = np.rint((u[-1] - u[0]) / n_angles)
+    u[-1] = u[0] + turns * n_angles  # the polygon closes: the last edge ends where the first begins
+    lo = np.minimum(u[:-1], u[1:])
+    hi = np.maximum(u[:-1], u[1:])
+    k0 = np.ceil(lo).astype(np.int64)
+    k1 = np.ceil(hi).astype(np.int64)  # rays k with lo <= k < hi
     count = np.maximum(k1 - k0, 0)
     edge = np.repeat(np.arange(len(x)), count)
     k = np.repeat(k0 - np.cumsum(count) + count, count) + np.arange(int(count.sum()))

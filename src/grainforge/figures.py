@@ -50,6 +50,17 @@ FIG4_SAME = (0.15, 0.10, 0.03)
 #: exponents ε of Figs. 5 and 6
 DPA_EXPONENTS = (0.2, 1.0, 3.0, 10.0)
 DPA_PRIMARIES = 100
+#: equivalent diameter (mm) every 3D grain of the figures is scaled to, as printed by default
+#: (``grainforge tray`` makes generated grains 10 mm); each panel has a scale bar in mm
+PRINTED_SIZE = 10.0
+SIZE_NOTE = f"; each grain scaled to d_eq = {PRINTED_SIZE:g} mm"
+
+
+def _printed(grain):
+    """``grain`` scaled to the figures' printed size, d_eq = :data:`PRINTED_SIZE` mm."""
+    from .fabrication.scale import to_size
+
+    return to_size(grain, PRINTED_SIZE)
 
 
 class Unavailable(Exception):
@@ -68,10 +79,11 @@ def figure1(out: Path, subdivisions: int = 5) -> Path:
     from .methods.fso import fso
     from .render import contact_sheet
 
-    grains = [fso(fractal_dimension=2.4, length_ratio=L, subdivisions=subdivisions, rng=SEED) for L in FIG1_LENGTHS]
+    grains = [_printed(fso(fractal_dimension=2.4, length_ratio=L, subdivisions=subdivisions, rng=SEED))
+              for L in FIG1_LENGTHS]
     labels = [f"({chr(97 + i)}) L = {L:g} R" for i, L in enumerate(FIG1_LENGTHS)]
-    return contact_sheet(grains, labels, out, columns=4,
-                         title="Fig. 1  FSO grains: stochastic length L from 0.1 R to 10 R, D = 2.4")
+    return contact_sheet(grains, labels, out, columns=4, unit="mm",
+                         title="Fig. 1  FSO grains: stochastic length L from 0.1 R to 10 R, D = 2.4" + SIZE_NOTE)
 
 
 def figure2(out: Path, subdivisions: int = 5) -> Path:
@@ -79,10 +91,11 @@ def figure2(out: Path, subdivisions: int = 5) -> Path:
     from .methods.fso import fso
     from .render import contact_sheet
 
-    grains = [fso(fractal_dimension=D, length_ratio=7.0, subdivisions=subdivisions, rng=SEED) for D in FIG2_DIMENSIONS]
+    grains = [_printed(fso(fractal_dimension=D, length_ratio=7.0, subdivisions=subdivisions, rng=SEED))
+              for D in FIG2_DIMENSIONS]
     labels = [f"({chr(97 + i)}) D = {D:.1f}" for i, D in enumerate(FIG2_DIMENSIONS)]
-    return contact_sheet(grains, labels, out, columns=5,
-                         title="Fig. 2  FSO grains: fractal dimension D from 2.0 to 2.8, L = 7 R")
+    return contact_sheet(grains, labels, out, columns=5, unit="mm",
+                         title="Fig. 2  FSO grains: fractal dimension D from 2.0 to 2.8, L = 7 R" + SIZE_NOTE)
 
 
 def _synthetic_micrograph(size: int = 320, subdivisions: int = 5) -> np.ndarray:
@@ -160,8 +173,8 @@ def figure4(out: Path, subdivisions: int = 5) -> Path:
         f"(b) one FD set:\n{fmt(FIG4_SAME)}",
         f"(c) one FD set:\n{fmt(FIG4_SAME)}, another seed",
     ]
-    return contact_sheet([a, b, c], labels, out, columns=3, panel_size=3.0,
-                         title="Fig. 4  CRI grains from three Fourier-descriptor contours")
+    return contact_sheet([_printed(g) for g in (a, b, c)], labels, out, columns=3, panel_size=3.0, unit="mm",
+                         title="Fig. 4  CRI grains from three Fourier-descriptor contours" + SIZE_NOTE)
 
 
 def _dpa_sheet(out: Path, primitive: str, rows: list[tuple[int, str]], title: str) -> Path:
@@ -175,10 +188,11 @@ def _dpa_sheet(out: Path, primitive: str, rows: list[tuple[int, str]], title: st
         for eps in DPA_EXPONENTS:
             g = dpa(primitive=primitive, exponent=eps, primaries=DPA_PRIMARIES, smooth=smooth, rng=SEED)
             DA = g.info.get("D_A")
-            grains.append(g)
+            grains.append(_printed(g))
             labels.append(f"({chr(97 + k)}) ε = {eps:g}{note}" + (f", D_A = {DA:.2f}" if DA is not None else ""))
             k += 1
-    return contact_sheet(grains, labels, out, columns=len(DPA_EXPONENTS), title=title, color=(0.72, 0.70, 0.66))
+    return contact_sheet(grains, labels, out, columns=len(DPA_EXPONENTS), title=title + SIZE_NOTE, unit="mm",
+                         color=(0.72, 0.70, 0.66))
 
 
 def figure5(out: Path, subdivisions: int = 5) -> Path:
@@ -215,11 +229,11 @@ def figure7(out: Path, subdivisions: int = 5) -> Path:
     grains, labels = [], []
     for i, asp in enumerate(FIG7_ASPECTS):
         g = fso(aspect=asp, surface="seamless", subdivisions=subdivisions, rng=SEED)
-        grains.append(_posed(g, 25.0, -60.0))
+        grains.append(_posed(_printed(g), 25.0, -60.0))
         labels.append(f"({chr(97 + i)}) A:B:C = {':'.join(f'{a:g}' for a in asp)}")
-    return contact_sheet(grains, labels, out, columns=4,
+    return contact_sheet(grains, labels, out, columns=4, unit="mm",
                          title="Fig. 7  FSO aspect: overlay on an ellipsoidal precursor (seamless surface, "
-                               "D = 2.4, L = 7 R, amplitude 0.1)")
+                               "D = 2.4, L = 7 R, amplitude 0.1)" + SIZE_NOTE)
 
 
 def figure8(out: Path, subdivisions: int = 5) -> Path:
@@ -229,14 +243,14 @@ def figure8(out: Path, subdivisions: int = 5) -> Path:
 
     grains, labels = [], []
     for surface in ("paper", "seamless"):
-        g = fso(surface=surface, length_ratio=2.0, amplitude=0.12, subdivisions=subdivisions, rng=SEED)
+        g = _printed(fso(surface=surface, length_ratio=2.0, amplitude=0.12, subdivisions=subdivisions, rng=SEED))
         for view, (elev, azim) in (("pole (+z) view", (90.0, -90.0)), ("equator view", (0.0, -60.0))):
             grains.append(_posed(g, elev, azim))
             labels.append(f"({chr(97 + len(labels))}) {surface}: {view}")
-    return contact_sheet(grains, labels, out, columns=4,
+    return contact_sheet(grains, labels, out, columns=4, unit="mm",
                          title="Fig. 8  FSO surface forms (D = 2.4, L = 2 R, amplitude 0.12, same seed): the paper's "
                                "Eqs. 2-3 pin both poles at R0 and mirror the relief about the equator; the seamless "
-                               "form has no special latitude or pole")
+                               "form has no special latitude or pole" + SIZE_NOTE)
 
 
 def figure9(out: Path, subdivisions: int = 5) -> Path:
@@ -250,12 +264,12 @@ def figure9(out: Path, subdivisions: int = 5) -> Path:
                      ("after: spectral, twist 30°", {})):
         for preset in ("rough-sphere", "rough-angular"):
             for seed in (SEED, SEED + 1):
-                grains.append(cri(preset=preset, subdivisions=subdivisions, rng=seed, **kw))
+                grains.append(_printed(cri(preset=preset, subdivisions=subdivisions, rng=seed, **kw)))
                 labels.append(f"({chr(97 + len(labels))}) {preset}\n{name}")
-    return contact_sheet(grains, labels, out, columns=4,
+    return contact_sheet(grains, labels, out, columns=4, unit="mm",
                          title="Fig. 9  CRI before (top: the 2016 reconstruction's linear stretch and sweep, "
                                "parallel ridges) and after (bottom: contours keep their modes, roughness turned off "
-                               "the sweep direction)")
+                               "the sweep direction)" + SIZE_NOTE)
 
 
 #: number -> (file name, function(out_path, subdivisions) -> path)

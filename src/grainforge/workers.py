@@ -26,7 +26,7 @@ from contextlib import contextmanager
 from typing import Any, Callable, Iterable, Iterator, Sequence
 
 __all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive",
-           "close_pool"]
+           "close_pool", "stop_forkserver"]
 
 #: seconds between a worker's checks that the process that made its pool is alive
 WATCH_INTERVAL = 0.25
@@ -63,6 +63,26 @@ def single_threaded_children() -> Iterator[None]:
         for k, v in saved.items():
             if v is None:
                 os.environ.pop(k, None)
+
+
+@contextmanager
+def sigint_blocked() -> Iterator[None]:
+    """Block SIGINT in this thread (POSIX), so processes started meanwhile inherit it blocked; a Ctrl-C
+    that arrives meanwhile is delivered when the block ends.
+
+    Examples
+    --------
+    >>> with sigint_blocked():
+    ...     pass
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
 
 
 def pid_alive(pid: int) -> bool:
@@ -138,8 +158,17 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
     from concurrent.futures import ProcessPoolExecutor
 
     if "forkserver" in multiprocessing.get_all_start_methods():
+        from multiprocessing import forkserver, resource_tracker
+
         ctx = multiprocessing.get_context("forkserver")
         ctx.set_forkserver_preload(list(preload))
+        # Ctrl-C reaches the whole process group: the fork server (its imports take seconds) and the
+        # workers it forks must not die of it with a traceback. Started with SIGINT blocked, it and
+        # they never see it (they inherit the mask); the owner decides and stops them. (The resource
+        # tracker first: starting it unblocks SIGINT in this thread.)
+        resource_tracker.ensure_running()
+        with sigint_blocked():
+            forkserver.ensure_running()
     else:
         ctx = multiprocessing.get_context("spawn")
     return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=watch_parent,
@@ -197,9 +226,70 @@ def close_pool(pool, abort: bool = False) -> None:
             p.terminate()
         except (OSError, AttributeError):
             pass
+    if len(processes) < getattr(pool, "_max_workers", 0) and _uses_forkserver(pool):
+        # start-up was cut short: a worker may be on its way from the fork server (the request sent,
+        # its pid not yet known here); it would start after this process is gone and print a
+        # traceback. Stop the fork server and every process it forked.
+        stop_forkserver()
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         p.join(timeout=5)
+
+
+def _uses_forkserver(pool) -> bool:
+    ctx = getattr(pool, "_mp_context", None)
+    try:
+        return ctx is not None and ctx.get_start_method() == "forkserver"
+    except (AttributeError, ValueError):
+        return False
+
+
+def _children_of(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (Linux ``/proc``; empty elsewhere)."""
+    found = []
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return found
+    for name in entries:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", "rb") as fh:
+                fields = fh.read().rsplit(b")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[1]) == pid:
+            found.append(int(name))
+    return found
+
+
+def stop_forkserver() -> None:
+    """Kill this process's multiprocessing fork server and every process it forked (workers, also
+    half-started ones); the next pool starts a new fork server.
+
+    The fork server is stopped (SIGSTOP) first, so it cannot fork while its children are listed.
+    """
+    from multiprocessing import forkserver
+
+    server = getattr(forkserver, "_forkserver", None)
+    pid = getattr(server, "_forkserver_pid", None)
+    if pid is None or not pid_alive(pid):
+        return
+    try:
+        os.kill(pid, signal.SIGSTOP)
+        for child in _children_of(pid):
+            try:
+                os.kill(child, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        os.kill(pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    try:
+        server._stop()  # reaps it and forgets its address, so the next pool starts a new one
+    except (OSError, AttributeError):
+        pass
 
 
 _END = object()

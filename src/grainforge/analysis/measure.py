@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import signed_volume, solid_problems, split_bodies
+from ..solid import signed_volume, solid_problems, split_bodies, volume_centroid
 
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
@@ -88,8 +88,11 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[
     elif signed_volume(v, f) < 0:
         f = f[:, ::-1]
         flags.append("inverted")
-    if "open" not in flags and solid_problems(v, f):
-        flags.append("not-solid")  # fails the solid contract as written (grainforge check says why)
+    # fails the solid contract as written (grainforge check says why).  A grain star-shaped about its
+    # volume centroid is proven free of self-intersections in O(F) (solid.star_certificate); others
+    # get the pairwise test.  The flag is the same either way.
+    if "open" not in flags and solid_problems(v, f, star_centre=volume_centroid(v, f)):
+        flags.append("not-solid")
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
     row.update(describe(SimpleNamespace(vertices=v, faces=f), **options))  # describe() reads .vertices and .faces
     if atlas is not None:

@@ -565,6 +565,7 @@ def build_tray(
     remove_stale_temps(out)
     packer = ShelfPacker(printer.build_volume, gap, printer.stacking)
     temps: list[Path] = []
+    written: list[Path] = []  # outputs already in place: removed again if the run does not complete
     rows: list[dict[str, Any]] = []
     footprints: list[list[np.ndarray]] = []
     layers_of: list[list[int]] = []
@@ -606,15 +607,18 @@ def build_tray(
         fh.close()
         layer_count = [layers[-1] + 1 for layers in layers_of]  # layers only grow within a plate
         files, previews, csv_path = tray_outputs(out, len(temps))
-        for tmp, final in zip(temps, files):
-            os.replace(tmp, final)
-        temps = []
         for k, path in enumerate(previews):
             n = len(footprints[k])
             _preview(path, footprints[k], layers_of[k], printer.build_volume,
                      f"{out.name} plate {k + 1}/{len(previews)}: {n} grains, {layer_count[k]} layer(s), "
                      f"{printer.name}, gap {gap * 1000:.0f} µm")
+            written.append(path)
         write_csv(csv_path, rows, units=True)
+        written.append(csv_path)
+        for tmp, final in zip(temps, files):  # the print files last: all outputs or none
+            os.replace(tmp, final)
+            written.append(final)
+        temps = []
     except BaseException:
         if stream is not None:
             stream.close()  # stops the workers now (an error, Ctrl-C, SIGTERM), not after their current chunks
@@ -622,7 +626,7 @@ def build_tray(
             writer.abort()
         if fh is not None and not fh.closed:
             fh.close()
-        for t in temps:
+        for t in temps + written:
             t.unlink(missing_ok=True)
         for q in made:  # folders this call created, innermost first, if still empty
             try:
