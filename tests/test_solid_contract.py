@@ -229,3 +229,10 @@ def test_dpa_octahedron_tray_repro_checks(tmp_path, runner):
     res = runner.invoke(cli, ["check", str(out)])
     assert res.exit_code == 0, res.output
     assert "Error" not in res.output
+
+
+def test_cri_tiny_equal_aspect_is_scale_free():
+    # found by the slow sweep (spectral consistency): aspect 5e-324:5e-324:5e-324 underflowed to log(0)
+    g = grainforge.cri(aspect=(5e-324, 5e-324, 5e-324), subdivisions=2, rng=65)
+    h = grainforge.cri(aspect=(1.0, 1.0, 1.0), subdivisions=2, rng=65)
+    np.testing.assert_allclose(g.vertices, h.vertices, rtol=1e-9, atol=1e-12)
