@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, template_record, updated_settings, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, settle_loop, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "pour_settings"]
 
@@ -169,14 +169,7 @@ undump bodies0
 undump atoms0
 
 dump vtk all custom/vtk {s["vtk_every"]} post/grains_*.vtk id type x y z vx vy vz radius
-variable i loop {s["max_checks"]}
-label settle
-run {s["check_every"]}
-if "${{ke}} < ${{kethr}}" then "jump SELF settled"
-next i
-jump SELF settle
-label settled
-print "ke ${{ke}} threshold ${{kethr}}" file settle.txt
+{settle_loop(s["check_every"], s["max_checks"])}
 dump bodies1 all local 1 bodies-final.txt c_bid c_btype c_bmass c_bx[1] c_bx[2] c_bx[3] c_bv[1] c_bv[2] c_bv[3]
 dump_modify bodies1 format "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g"
 run 1
