@@ -57,7 +57,7 @@ def main():
             vox = timed(lambda: voxelise(v, f, d_eq / n), args.repeat)
             mask, _ = voxelise(v, f, d_eq / n)
             hull = timed(lambda: _hull_count(mask), args.repeat)
-            sub = np.pad(mask.astype(np.float32), 4)
+            sub = np.pad(mask.astype(np.float32), 1)
 
             def sph():
                 s = ndimage.gaussian_filter(sub, 0.75, mode="constant", truncate=4.0)

@@ -29,6 +29,8 @@ from pathlib import Path
 import numpy as np
 
 ORDERS = np.arange(2, 17)
+#: random sections per grain in the measured-spectrum part
+SPECTRUM_SECTIONS = 16
 
 
 def read_back(g):
@@ -81,13 +83,24 @@ def part_random(n_grains, quick):
     r6 = rand6.mean(0) / want
     sem = rand.reshape(n_grains, -1, 15).mean(1).std(0, ddof=1) / np.sqrt(n_grains) / want
     a = ax.mean(0) / want  # (3, 15)
+    from scipy.stats import friedmanchisquare
+
+    from grainforge.methods.rf import angular_spectrum, centred_section_spectrum
+
+    model = centred_section_spectrum(angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=32)))[2:17] / want
+    # paired by grain: do the three axis sections of the same grains differ more than chance?
+    pval = [friedmanchisquare(ax[:, 0, k], ax[:, 1, k], ax[:, 2, k]).pvalue for k in range(15)]
+    se_axis = ax.std(0, ddof=1).mean(0) / np.sqrt(n_grains) / want  # s.e. of one axis mean
     rows = []
     for k, n in enumerate(ORDERS):
         rows.append([str(n), f"{want[k]:.4f}", f"{rand.mean(0)[k]:.4f}", f"{r[k]:.3f} ± {sem[k]:.3f}",
-                     f"{r6[k]:.3f}", f"{a[0, k]:.3f}", f"{a[1, k]:.3f}", f"{a[2, k]:.3f}",
-                     f"{np.ptp(a[:, k]) / a[:, k].mean() * 100:.1f}"])
-    print(table(["n", "requested D_n", "mean D_n, random", "ratio ± s.e.", "ratio, s = 6 (25 grains)",
-                 "⊥x ratio", "⊥y ratio", "⊥z ratio", "x/y/z spread %"], rows))
+                     f"{model[k]:.3f}", f"{r6[k]:.3f}", f"{a[0, k]:.3f}", f"{a[1, k]:.3f}", f"{a[2, k]:.3f}",
+                     f"{np.ptp(a[:, k]) / a[:, k].mean() * 100:.1f}", f"{100 * se_axis[k]:.1f}", f"{pval[k]:.2f}"])
+    print(table(["n", "requested D_n", "mean D_n, random", "ratio ± s.e.", "model: rays from the centroid",
+                 "ratio, s = 6 (25 grains)", "⊥x ratio", "⊥y ratio", "⊥z ratio", "x/y/z spread %",
+                 "s.e. of one axis mean %", "Friedman p (x = y = z)"], rows))
+    print(f"\nFriedman tests (paired by grain) of equal x, y, z sections: smallest p = {min(pval):.3f} over 15 "
+          f"orders (p < 0.05 expected by chance in {0.05 * 15:.2f} of 15).")
     print(f"\nRandom orientations: {len(rand)} sections; largest |ratio − 1| over n = 2..16: "
           f"{np.abs(r - 1).max() * 100:.1f} % (n = {ORDERS[np.argmax(np.abs(r - 1))]}).")
     print(f"Axis sections, mean ratio over n = 2..16: x {a[0].mean():.3f}, y {a[1].mean():.3f}, z {a[2].mean():.3f}.")
@@ -163,7 +176,7 @@ def part_spectrum(n_grains):
             rows_used.append(g.info["spectrum_row"])
             from grainforge.analysis.sections import random_normals
 
-            rand.append(sections(read_back(g), random_normals(8, rng=20_000 + s)).mean(0))
+            rand.append(sections(read_back(g), random_normals(SPECTRUM_SECTIONS, rng=20_000 + s)).mean(0))
         rand = np.array(rand)
         want = table_.D[rows_used].mean(0)  # the drawn grains' spectra
         pop = table_.D.mean(0)
@@ -172,12 +185,22 @@ def part_spectrum(n_grains):
                  f"{rand.mean(0)[k] / want[k]:.3f} ± {se[k]:.3f}"] for k, n in enumerate(ORDERS)]
         print(f"{len(table_)} measured grains; {len(rows_used)} rf grains made ({fails} seeds refused), "
               f"{len(set(rows_used))} distinct measured grains drawn.\n")
-        print(table(["n", "table mean", "mean of the drawn rows", "rf sections (8 random per grain)",
+        print(table(["n", "table mean", "mean of the drawn rows", f"rf sections ({SPECTRUM_SECTIONS} random per grain)",
                      "ratio ± s.e."], rows))
         sd_meas = table_.D.std(0)
         sd_gen = rand.std(0)
         print(f"\nGrain-to-grain s.d. of D2, D3, D8: measured {sd_meas[0]:.3f}, {sd_meas[1]:.3f}, {sd_meas[6]:.3f}; "
               f"rf (per-grain section means) {sd_gen[0]:.3f}, {sd_gen[1]:.3f}, {sd_gen[6]:.3f}.")
+        if len(rand) >= 100:
+            k = len(rand) // 50
+            print(f"\nThe same grains in {k} disjoint sets of 50 (seeds 0–49, 50–99, …): ratio per order\n")
+            W = table_.D[rows_used]
+            sub = [[f"{rand[50 * j:50 * j + 50].mean(0)[i] / W[50 * j:50 * j + 50].mean(0)[i]:.3f}" for j in range(k)]
+                   for i in range(15)]
+            print(table(["n"] + [f"set {j + 1}" for j in range(k)], [[str(n)] + sub[i] for i, n in enumerate(ORDERS)]))
+            worst = [np.max(np.abs(rand[50 * j:50 * j + 50].mean(0) / W[50 * j:50 * j + 50].mean(0) - 1))
+                     for j in range(k)]
+            print("\nLargest |ratio − 1| per set: " + ", ".join(f"{100 * w:.1f} %" for w in worst))
 
 
 def part_aspect(n_grains):
@@ -236,9 +259,7 @@ def main():
     want = part_random(10 if quick else 50, quick)
     part_analytic(40 if quick else 400)
     part_isotropy(40 if quick else 400, want)
-    part_spectrum(10 if quick else 50)
-    if not quick:
-        part_spectrum(200)
+    part_spectrum(10 if quick else 200)
     part_aspect(5 if quick else 20)
     part_validity(20 if quick else 100)
     print(f"\n(total {time.time() - t:.0f} s)")

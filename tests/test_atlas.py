@@ -67,6 +67,33 @@ def test_hull_count_matches_a_brute_force_count():
         assert _hull_count(mask) == brute
 
 
+def test_scanline_voxeliser_equals_ray_parity_and_hull_count_equals_brute_force_on_a_rough_grain():
+    import grainforge
+    from scipy.spatial import ConvexHull, Delaunay
+
+    from grainforge.analysis.atlas import _ray_toggles
+    from grainforge.methods import get
+
+    g = grainforge.generate("cri", get("cri").Params(descriptors=(0, 0.12, 0.012), aspect=(1, 0.7, 0.55),
+                                                     subdivisions=4), 2)
+    v = np.asarray(g.vertices) @ random_rotation(5).T
+    f = np.asarray(g.faces)
+    for h in (0.08, 0.031):  # about 12 and 30 voxels across
+        mask, origin = voxelise(v, f, h)
+        nx, ny, nz = mask.shape
+        cols = np.argwhere(np.ones((nx, ny), bool))
+        # every column cast as a +z ray by trimesh (the independent route kept as the fallback)
+        tog = _ray_toggles(v, f, origin[:2] + cols * h, v[:, 2].min() - h, origin[2], h, nz)
+        rays = (np.cumsum(tog[:, :-1], axis=1) % 2).astype(bool).reshape(mask.shape)
+        assert mask.sum() > 1000 and np.array_equal(mask, rays)
+        vox = np.argwhere(mask)
+        lo, hi = vox.min(0), vox.max(0)
+        grid = np.argwhere(np.ones(tuple(hi - lo + 1), bool)) + lo
+        corners = vox[ConvexHull(vox).vertices]  # Qhull with its default merging, on every voxel centre
+        brute = int(np.sum(Delaunay(corners).find_simplex(grid, tol=1e-9) >= 0))
+        assert _hull_count(mask) == brute and brute > mask.sum()
+
+
 def test_rotation_is_a_rotation_and_is_reproducible():
     R = random_rotation(7)
     assert np.allclose(R @ R.T, np.eye(3)) and np.linalg.det(R) == pytest.approx(1.0)

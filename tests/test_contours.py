@@ -227,3 +227,16 @@ def test_scan_image_counts_border_and_specks():
         known = truth.recentred().descriptors()
         np.testing.assert_allclose(c.descriptors()[[2, 3]], known[[2, 3]], rtol=0.05)
         assert abs(c.descriptors()[8] - known[8]) < 0.005
+
+
+def test_recentred_circle_and_symmetric_contours():
+    """A centred circle sampled at the ray angles puts vertices exactly on rays: none may be missed."""
+    import numpy as np
+
+    from grainforge.contours import Contour
+
+    th = 2 * np.pi * np.arange(256) / 256
+    for r in (np.ones(256), 1 + 0.05 * np.cos(3 * th)):
+        D = Contour(r).recentred().descriptors(4)
+        np.testing.assert_allclose(D[[1, 2, 4]], 0.0, atol=1e-12)
+        assert abs(D[3] - (0.05 if np.ptp(r) > 0 else 0.0)) < 1e-9

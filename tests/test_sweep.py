@@ -18,6 +18,7 @@ and its counts are recorded in docs/validation.md.
 
 from __future__ import annotations
 
+import functools
 import io
 import math
 import os
@@ -100,9 +101,38 @@ def _angular(draw_params):
         lambda d: {**d, "aspect": tuple(sorted(d["aspect"], reverse=True))})
 
 
+@functools.lru_cache(maxsize=None)
+def _spectrum_csv() -> str:
+    """A 'grainforge fourier' table of the synthetic sample micrograph (made once per session)."""
+    import atexit
+    import shutil
+    import tempfile
+    from pathlib import Path
+
+    from grainforge.demo import sample_micrograph, write_fourier_csv
+
+    d = Path(tempfile.mkdtemp(prefix="gf-sweep-"))
+    atexit.register(shutil.rmtree, d, True)
+    return str(write_fourier_csv([sample_micrograph(d / "sample.png")], d / "fd.csv"))
+
+
+def _rf(draw_params):
+    # half the draws take a measured spectrum (a file, which the ParamSpec cannot draw) instead of
+    # preset/descriptors; the aspect ordered L >= I >= S as the parameter requires
+    def finish(d, measured):
+        if d.get("aspect") is not None:
+            d = {**d, "aspect": tuple(sorted(d["aspect"], reverse=True))}
+        if measured:
+            d = {**d, "spectrum": _spectrum_csv(), "preset": None, "descriptors": None}
+        return d
+
+    return params_strategy("rf", caps={"subdivisions": 5}).flatmap(
+        lambda d: st.booleans().map(lambda measured: finish(d, measured)))
+
+
 #: per-method strategy hooks; every other registered method is swept from its ParamSpecs alone
 #: (capped to keep each grain small: subdivisions ≤ 5, ridges/frequencies ≤ 60 for speed).
-HOOKS = {"cri": _cri, "dpa": _dpa, "angular": _angular}
+HOOKS = {"cri": _cri, "dpa": _dpa, "angular": _angular, "rf": _rf}
 DEFAULT_CAPS = {"subdivisions": 5, "ridges": 60, "frequencies": 60, "primaries": 300}
 
 

@@ -58,7 +58,7 @@ def test_fourier_pixel_size_adds_physical_columns(runner, tmp_path):
 UNITLESS = {
     "file", "method", "seed", "size_definition", "version", "sha256", "printer", "resolution_limited_by",
     "K", "D_A", "D_A_scaling", "porosity", "sphericity", "convexity", "modes_used", "correction",
-    "target_aspect", "axis_scale", "target_fractal_dimension",
+    "target_aspect", "axis_scale", "target_fractal_dimension", "aspect_residual",
 }
 
 

@@ -766,6 +766,10 @@ def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, 
     du = (np.mod(np.arctan2(y1, x1) - a0 + np.pi, TWO_PI) - np.pi) / step  # signed step of each edge, in rays
     u = np.empty(len(x) + 1)
     u[0] = a0[0] / step
+    if abs(u[0] - np.rint(u[0])) < 1e-9:
+        # on a ray (to rounding): make it exactly so, else u[0] + turns·n_angles can round onto the
+        # ray while u[0] stays just past it, and that ray is missed by both the first and last edge
+        u[0] = np.rint(u[0])
     u[1:] = u[0] + np.cumsum(du)
     turns = np.rint((u[-1] - u[0]) / n_angles)
     u[-1] = u[0] + turns * n_angles  # the polygon closes: the last edge ends where the first begins
