@@ -505,18 +505,22 @@ def _forkserver_started(sid: int):
     return started
 
 
-@pytest.mark.parametrize("phase", ["pool-starting", "writing"])
+@pytest.mark.parametrize("phase", ["starting", "pool-starting", "writing"])
 def test_ctrl_c_on_tray_is_quick_and_leaves_nothing(case_dir, inputs, phase):
-    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while the worker pool starts
-    (its fork server importing), and while grains are written: exit 130, one line, nothing left.
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) 0.3 s after the start (the
+    command line loading its modules), while the worker pool starts (its fork server importing), and
+    while grains are written: exit 130, one line, nothing left.
 
     30,000 grains take minutes even on an idle machine, so the job cannot finish before the signal."""
     d, _ = case_dir
     before = _snapshot(d)
     proc = start(["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "30000", "--size", "5",
                   "--workers", "2", "--out", "sub/t.3mf"], d, inputs)
-    _wait_for(_forkserver_started(proc.pid) if phase == "pool-starting" else _has(d, "sub/.t.3mf.*.tmp"),
-              90, proc)
+    if phase == "starting":
+        time.sleep(0.3)
+    else:
+        _wait_for(_forkserver_started(proc.pid) if phase == "pool-starting" else _has(d, "sub/.t.3mf.*.tmp"),
+                  90, proc)
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=120)  # a hang guard, not a timing assertion (see docs/benchmarks.md)
     err = err.decode()

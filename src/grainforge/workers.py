@@ -221,6 +221,7 @@ def close_pool(pool, abort: bool = False) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
         return
     processes = list(getattr(pool, "_processes", {}).values())
+    results = getattr(pool, "_result_queue", None)  # (shutdown forgets it)
     for p in processes:
         try:
             p.terminate()
@@ -234,6 +235,16 @@ def close_pool(pool, abort: bool = False) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         p.join(timeout=5)
+    # A worker stopped while it was sending a result leaves the pool's manager thread reading the
+    # rest of that message for ever (this process holds the pipe's write end as well), and the
+    # interpreter waits for that thread at exit: the command printed "Interrupted." and hung.
+    # Closing our write end lets the read see the end of the pipe (the workers' ends died with them).
+    writer = getattr(results, "_writer", None)
+    if writer is not None:
+        try:
+            writer.close()
+        except OSError:
+            pass
 
 
 def _uses_forkserver(pool) -> bool:
