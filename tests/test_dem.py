@@ -184,3 +184,40 @@ def test_dem_cli_refuses_overwrite(grain_files, tmp_path):
     assert {p: p.read_bytes() for p in out.iterdir()} == before
     assert CliRunner().invoke(cli, args + ["--overwrite"]).exit_code == 0
     assert {p: p.read_bytes() for p in out.iterdir()} == before  # same input, same bytes
+
+
+def test_dem_cli_yade_polyhedron_and_levelset_files(grain_files, tmp_path):
+    """The files of the non-clump Yade decks hold the grain's hull / distance field (metres,
+    centroid at the origin; the level set in the principal frame), with the mesh's mass."""
+    from scipy.spatial.transform import Rotation
+
+    for shape in ("polyhedron", "levelset"):
+        out = tmp_path / shape
+        r = CliRunner().invoke(cli, ["dem", str(grain_files), "--out", str(out), "--shape", shape,
+                                     "--vertices", "30", "--spacing", "0.1", "--workers", "1"])
+        assert r.exit_code == 0, r.output
+        deck = json.loads((out / "grains.json").read_text())
+        assert deck["shape"] == shape
+        for g in deck["grains"]:
+            m = trimesh.load(grain_files / f"{g['name']}.stl")  # independent reader
+            m.apply_scale(1e-3)
+            assert g["mass"] == pytest.approx(2650 * m.volume, rel=1e-6)
+            m.apply_translation(-m.center_mass)
+            if shape == "polyhedron":
+                hull = np.loadtxt(out / g["polyhedron"], comments="#")
+                assert hull.shape == (g["vertices"], 3) and 4 <= len(hull) <= 30
+                # hull vertices are mesh vertices of the centroid-centred grain
+                d = np.linalg.norm(hull[:, None] - m.vertices[None], axis=2).min(axis=1)
+                assert d.max() < 1e-9
+            else:
+                ls = json.loads((out / g["levelset"]).read_text())
+                nx, ny, nz = ls["shape"]
+                dist = np.array(ls["distance"]).reshape(nx, ny, nz)
+                R = Rotation.from_rotvec(np.array(ls["axis"]) * ls["angle"]).as_matrix()
+                # a few nodes: the field's value is the signed distance to the mesh (in the grain
+                # frame x = R x_local), negative inside
+                idx = np.array([[nx // 2, ny // 2, nz // 2], [0, 0, 0], [nx // 3, ny // 2, nz // 2]])
+                local = np.array(ls["origin"]) + ls["spacing"] * idx
+                sd = -trimesh.proximity.signed_distance(m, local @ R.T)  # trimesh: positive inside
+                assert np.allclose(dist[tuple(idx.T)], sd, atol=1e-9)
+                assert dist[tuple(idx[0])] < 0 < dist[0, 0, 0]

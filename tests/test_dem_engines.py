@@ -76,11 +76,11 @@ def mesh_truth(files):
     return truth
 
 
-def make_deck(population, tmp_path, engine):
+def make_deck(population, tmp_path, engine, *extra):
     out = tmp_path / engine
     r = CliRunner().invoke(cli, ["dem", str(population / "fso"), str(population / "cri"), str(population / "dpa"),
                                  "--out", str(out), "--engine", engine, "--density", str(DENSITY),
-                                 "--spheres", "20"])
+                                 "--spheres", "20", *extra])
     assert r.exit_code == 0, r.output
     files = sorted(population.glob("*/*.stl"))
     assert len(files) == 20
@@ -113,6 +113,40 @@ def test_yade_deck_runs(yade, population, tmp_path):  # the engine first: skip b
     run([yade, "-n", "-x", "run.py"], cwd=out)
     check_report(json.loads((out / "results-yade.json").read_text()), truth)
     assert any((out / "vtk").glob("*.vtu"))
+
+
+def grain_frame_meshes(population):
+    """Every grain mesh in metres with its volume centroid at the origin (read by trimesh)."""
+    out = {}
+    for f in sorted(population.glob("*/*.stl")):
+        m = trimesh.load(f)
+        m.apply_scale(UNIT)
+        m.apply_translation(-m.center_mass)
+        out[f.stem] = m
+    return out
+
+
+@pytest.mark.parametrize("shape, extra, tol", [
+    # hull vertices are mesh vertices: they sit on the surface to rounding
+    ("polyhedron", ["--vertices", "24"], 1e-6),
+    # Yade ray-traces its surface nodes on the discrete field (spacing 0.05 d_eq)
+    ("levelset", ["--spacing", "0.05"], 0.05),
+])
+def test_yade_polyhedron_and_levelset_decks_run(yade, population, tmp_path, shape, extra, tol):
+    out, truth = make_deck(population, tmp_path, "yade", "--shape", shape, *extra)
+    run([yade, "-n", "-x", "run.py"], cwd=out)
+    report = json.loads((out / "results-yade.json").read_text())
+    check_report(report, truth)
+    # the contact shape sits where the mesh is: Yade's own vertices / surface nodes, mapped back
+    # into the grain frame with the insertion's position and rotation, lie on the mesh surface
+    meshes = grain_frame_meshes(population)
+    for r in report["inserted"]:
+        pts = np.array(r["contact_points"])
+        assert len(pts) >= 8
+        d_eq = truth[r["name"]][2]
+        sd = trimesh.proximity.signed_distance(meshes[r["name"]], pts)
+        assert np.abs(sd).max() < tol * d_eq, (r["name"], np.abs(sd).max() / d_eq)
+    assert any((out / "vtk").glob("*.vt*"))
 
 
 def read_dump(path):

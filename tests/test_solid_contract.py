@@ -166,3 +166,73 @@ def test_cri_extreme_aspect_is_a_parameter_error():
     with pytest.raises(ParameterError) as exc:
         grainforge.cri(aspect=(88.0, 88.0, 5e-324), subdivisions=0, rng=0)
     assert exc.value.name == "aspect"
+
+
+def _admesh_report(path) -> dict[str, float]:
+    """admesh (an independent STL checker) on ``path``: its statistics by name (final column)."""
+    import re
+    import shutil
+    import subprocess
+
+    if shutil.which("admesh") is None:
+        pytest.skip("admesh is not installed")
+    out = subprocess.run(["admesh", str(path)], capture_output=True, text=True, check=True).stdout
+    stats = {}
+    for name in ("Number of parts", "Degenerate facets", "Edges fixed", "Facets removed", "Facets added",
+                 "Facets reversed", "Backwards edges", "Normals fixed", "Total disconnected facets", "Volume"):
+        m = re.search(rf"{name}\s*:\s*(-?[\d.]+)(?:\s+(-?[\d.]+))?", out)
+        assert m, f"admesh printed no {name!r}"
+        stats[name] = float(m.group(2) or m.group(1))
+    return stats
+
+
+def assert_valid_stl(path, volume=None):
+    """The file as two independent readers see it: trimesh (merging by position) and admesh."""
+    m = trimesh.load(path)
+    assert m.is_watertight and m.is_winding_consistent and m.body_count == 1 and m.volume > 0
+    assert solid_problems(m.vertices, m.faces) == []
+    a = _admesh_report(path)
+    assert a["Number of parts"] == 1
+    for name in ("Degenerate facets", "Edges fixed", "Facets removed", "Facets added", "Facets reversed",
+                 "Backwards edges", "Total disconnected facets"):
+        assert a[name] == 0, (name, a)
+    assert a["Volume"] == pytest.approx(m.volume, rel=1e-4)
+    if volume is not None:
+        assert m.volume == pytest.approx(volume, rel=1e-5)
+
+
+@pytest.mark.parametrize("args", [
+    ["--primitive", "octahedron", "--primaries", "2", "--seed", "1"],  # issue 11 repro: 9 float32 vertices
+    ["--primitive", "octahedron", "--primaries", "4", "--seed", "1"],  # ... read as 2 parts
+    ["--primitive", "octahedron", "--exponent", "3", "--primaries", "300", "--seed", "0"],  # issue 11 repro
+    ["--primitive", "tetrahedron", "--primaries", "150", "--smooth", "1", "--seed", "3"],
+    ["--primitive", "truncated-octahedron", "--primaries", "80", "--exponent", "0.3", "--seed", "2"],
+])
+def test_dpa_polyhedra_repros_are_valid_as_written(args, tmp_path, runner):
+    out = tmp_path / "o"
+    res = runner.invoke(cli, ["generate", "dpa", *args, "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    stl = out / "dpa-0000.stl"
+    size = 10.0  # the default --size: equivalent diameter in mm
+    sharp = "--smooth" not in args
+    assert_valid_stl(stl, volume=np.pi * size**3 / 6.0 if sharp else None)  # N primaries = one sphere of d_eq
+    res = runner.invoke(cli, ["check", str(stl)])
+    assert res.exit_code == 0, res.output
+
+
+def test_dpa_octahedron_tray_repro_checks(tmp_path, runner):
+    # issue 11, points 2-3: the tray of octahedron aggregates is checked part by part without error
+    out = tmp_path / "o3.3mf"
+    res = runner.invoke(cli, ["tray", "--method", "dpa", "--param", "primitive=octahedron", "--param", "primaries=200",
+                              "--param", "exponent=5", "--count", "4", "--size", "2", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    res = runner.invoke(cli, ["check", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "Error" not in res.output
+
+
+def test_cri_tiny_equal_aspect_is_scale_free():
+    # found by the slow sweep (spectral consistency): aspect 5e-324:5e-324:5e-324 underflowed to log(0)
+    g = grainforge.cri(aspect=(5e-324, 5e-324, 5e-324), subdivisions=2, rng=65)
+    h = grainforge.cri(aspect=(1.0, 1.0, 1.0), subdivisions=2, rng=65)
+    np.testing.assert_allclose(g.vertices, h.vertices, rtol=1e-9, atol=1e-12)

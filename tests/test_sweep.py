@@ -80,14 +80,13 @@ def _cri(draw_params):
         lambda src: params_strategy("cri", caps={"subdivisions": 5}, fixed={"contour": src, "images": None}))
 
 
-#: DPA primitives whose union surface does not yet pass the contract as written (docs/validation.md,
-#: "Known gaps"); swept by the strict xfail test below so that the gap stays visible.
-DPA_OPEN = ("dodecahedron", "icosahedron", "octahedron", "tetrahedron", "truncated-octahedron")
+#: DPA primitives built by exact face cancellation (issue 11, point 2), also swept one by one below.
+DPA_POLYHEDRA = ("dodecahedron", "icosahedron", "octahedron", "tetrahedron", "truncated-octahedron")
 
 
 def _dpa(draw_params, primitives=None):
     # every primitive and smoothing level; primaries kept within a face budget (4^smooth triangles each)
-    primitives = primitives or sorted(set(get("dpa").PRIMITIVES) - set(DPA_OPEN))
+    primitives = primitives or sorted(get("dpa").PRIMITIVES)
     return st.sampled_from(primitives).flatmap(
         lambda prim: st.integers(0, 4).flatmap(
             lambda sm: params_strategy("dpa", caps={"primaries": [400, 200, 60, 20, 6][sm]},
@@ -196,7 +195,7 @@ def check_draw(name: str, kwargs: dict, seed: int) -> str:
 def _sweep(name: str, examples: int, strategy=None):
     @settings(max_examples=examples, deadline=None, derandomize=True, database=None, phases=[Phase.generate],
               suppress_health_check=list(HealthCheck))
-    @given(kwargs=strategy or strategy_for(name), seed=st.integers(0, 2**32 - 1))
+    @given(kwargs=strategy if strategy is not None else strategy_for(name), seed=st.integers(0, 2**32 - 1))
     def run(kwargs, seed):
         outcome = check_draw(name, kwargs, seed)
         COUNTS.setdefault(name, {"valid": 0, "error": 0})[outcome] += 1
@@ -215,10 +214,10 @@ def test_sweep_declared_parameter_space(name):
     _sweep(name, FAST_EXAMPLES)
 
 
-@pytest.mark.xfail(strict=True, reason="issue 11 point 2 open: non-cube DPA unions leave slivers and edge contacts")
-@pytest.mark.parametrize("primitive", DPA_OPEN)
-def test_sweep_dpa_polyhedra_known_gap(primitive):
-    _sweep("dpa", 6, _dpa(params_strategy, [primitive]))
+@pytest.mark.parametrize("primitive", DPA_POLYHEDRA)
+def test_sweep_dpa_polyhedra(primitive):
+    # was a strict xfail before the union was rebuilt (slivers and edge contacts, issue 11 point 2)
+    _sweep("dpa", 3, _dpa(params_strategy, [primitive]))
 
 
 @pytest.mark.slow

@@ -403,9 +403,8 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
 def index_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     """The old, weaker check on vertex *indices* (no float32 rounding, no merging, no intersection test).
 
-    Only DPA grains of non-cube primitives still rely on it (see
-    ``docs/validation.md``, "Known gaps"); everything else passes
-    :func:`solid_problems`.
+    No generator relies on it any more (every grain passes :func:`solid_problems`);
+    kept to show, in tests, what the index view misses.
     """
     if len(faces) == 0 or len(vertices) == 0:
         return ["empty mesh"]

@@ -22,13 +22,17 @@ ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run"
 @click.option("--density", type=float, default=2650.0, show_default=True, help="Solid density, kg/m³ (> 0).")
 @click.option("--spheres", type=click.IntRange(1, 1000), default=30, show_default=True,
               help="Spheres per clump (the accuracy/cost knob).")
+@click.option("--vertices", type=click.IntRange(4, 10000), default=100, show_default=True,
+              help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts).")
+@click.option("--spacing", type=click.FloatRange(0.01, 0.5), default=0.05, show_default=True,
+              help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @click.option("--unit", type=float, default=1e-3, show_default=True,
               help="Metres per file unit (grainforge files are in mm: 0.001).")
 @click.option("--count", type=click.IntRange(1), default=1, show_default=True,
               help="Copies of each grain in the example pour.")
 @click.option("--workers", type=click.IntRange(1), default=None, help="Processes (default: CPU count).")
 @click.option("--overwrite", is_flag=True, help="Replace existing deck files.")
-def dem(inputs, out, engine, shape, density, spheres, unit, count, workers, overwrite):
+def dem(inputs, out, engine, shape, density, spheres, vertices, spacing, unit, count, workers, overwrite):
     """Write a DEM deck of the grains in INPUTS (mesh files, generate/batch folders, manifests).
 
     Every grain keeps its exact mass, centroid and inertia from the mesh.  Run
@@ -50,7 +54,8 @@ def dem(inputs, out, engine, shape, density, spheres, unit, count, workers, over
     paths = grain_paths(inputs)
     workers = workers or os.cpu_count() or 1
     templates = build_templates(paths, workers=workers, progress=progress_bar(len(paths), "dem"),
-                                unit=unit, density=density, shape=shape, spheres=spheres, count=count)
+                                unit=unit, density=density, shape=shape, spheres=spheres, count=count,
+                                polyhedron_vertices=vertices, levelset_spacing=spacing)
     from ..dem.decks import write_deck
 
     written = write_deck(engine, templates, out, overwrite=overwrite)

@@ -10,7 +10,7 @@ __all__ = ["MassProperties", "mass_properties", "ENGINES", "SUPPORTED"]
 
 #: engine name -> shapes its deck writer supports
 SUPPORTED = {
-    "yade": ("clump",),
+    "yade": ("clump", "polyhedron", "levelset"),
     "liggghts": ("clump",),
     "lammps": ("clump",),
 }

@@ -180,8 +180,10 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         uncovered[best_lo[0]:best_hi[0], best_lo[1]:best_hi[1], best_lo[2]:best_hi[2]] &= ~best_blk
         centres.append(c)
         radii.append(r)
-        dist = np.linalg.norm(cp - c, axis=1)
-        est = est - _lens(cr, r, dist)
+        diff = cp - c
+        d2 = np.einsum("ij,ij->i", diff, diff)
+        near = d2 < (r + cr) ** 2  # only overlapping candidates lose estimated gain
+        est[near] -= _lens(cr[near], r, np.sqrt(d2[near]))
     return np.array(centres).reshape(-1, 3), np.array(radii)
 
 

@@ -50,7 +50,8 @@ class GrainTemplate:
     polyhedron : (K, 3) float64 or None
         Convex-hull vertices for ``shape == "polyhedron"``.
     levelset : LevelSet or None
-        For ``shape == "levelset"``.
+        For ``shape == "levelset"``: the distance field in the grain's *principal*
+        frame (``x_grain = props.axes @ x_local``), centroid at the origin.
     source : str
         Where the grain came from (file path).
     count : int
@@ -173,7 +174,9 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     else:
         from .levelset import level_set
 
-        kw["levelset"] = level_set(v, f, spacing=levelset_spacing)
+        # in the principal frame (engines such as Yade require an inertial local frame):
+        # x_grain = axes @ x_local
+        kw["levelset"] = level_set(v @ mp.axes, f, spacing=levelset_spacing)
     radius = float(np.linalg.norm(v, axis=1).max())
     if "clump" in kw:
         c = kw["clump"]

@@ -28,12 +28,13 @@ tests (``grainforge simulate``) reuse the grain insertion: it may call
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, json_text, template_record, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "LIBRARY", "POUR_SCENE", "pour_settings"]
 
@@ -53,7 +54,7 @@ SETTINGS = DECK["scene"]
 
 
 def read_xyzr(path):
-    """Rows (x, y, z, r) of a sphere file (metres, centroid frame)."""
+    """Rows of numbers of a sphere file (x y z r) or hull file (x y z); metres, centroid frame."""
     rows = []
     for line in open(path):
         line = line.strip()
@@ -63,11 +64,17 @@ def read_xyzr(path):
 
 
 def load_deck():
-    """The templates of grains.json with their spheres loaded."""
+    """The templates of grains.json with their contact geometry loaded (spheres, hull or level set)."""
     out = []
     for t in DECK["grains"]:
         t = dict(t)
-        t["rows"] = read_xyzr(t["xyzr"])
+        shape = t.get("shape", "clump")
+        if shape == "clump":
+            t["rows"] = read_xyzr(t["xyzr"])
+        elif shape == "polyhedron":
+            t["rows"] = read_xyzr(t["polyhedron"])
+        else:
+            t["field"] = json.load(open(t["levelset"]))
         out.append(t)
     return out
 
@@ -77,11 +84,15 @@ _PHANTOM_MATS = {}
 
 
 def contact_material():
-    """The (massless) contact material of every grain sphere."""
+    """The (massless) contact material of every grain's contact bodies, also used by the walls."""
     if not _CONTACT:
-        _CONTACT.append(O.materials.append(FrictMat(
-            density=0.0, young=SETTINGS["young"], poisson=SETTINGS["poisson"],
-            frictionAngle=math.radians(SETTINGS["friction_deg"]), label="grain")))
+        kw = dict(density=0.0, poisson=SETTINGS["poisson"], frictionAngle=math.radians(SETTINGS["friction_deg"]),
+                  label="grain")
+        if DECK["shape"] == "polyhedron":
+            mat = PolyhedraMat(young=SETTINGS["poly_young"], **kw)
+        else:
+            mat = FrictMat(young=SETTINGS["young"], **kw)
+        _CONTACT.append(O.materials.append(mat))
     return _CONTACT[0]
 
 
@@ -106,14 +117,42 @@ def _phantoms(t):
     return _PHANTOM_MATS[t["name"]]
 
 
+def _contact_bodies(t, pos, rotation):
+    """The massless contact bodies of template ``t`` placed with its centroid at ``pos``."""
+    shape = t.get("shape", "clump")
+    if shape == "clump":
+        mat = contact_material()
+        return [sphere(pos + rotation * Vector3(x, y, z), rr, material=mat) for x, y, z, rr in t["rows"]]
+    if shape == "polyhedron":
+        from yade import polyhedra_utils
+        b = polyhedra_utils.polyhedra(O.materials[contact_material()], v=[Vector3(*row) for row in t["rows"]])
+        # Yade moves the hull to its own centroid and principal frame; place that frame in the box
+        b.state.pos = pos + rotation * b.state.pos
+        b.state.ori = rotation * b.state.ori
+        b.state.mass, b.state.inertia = 0.0, Vector3(0, 0, 0)
+        return [b]
+    # level set: the distance field in the grain's principal frame (centroid at the origin)
+    ls = t["field"]
+    rotation = rotation * Quaternion(Vector3(*ls["axis"]), ls["angle"])
+    grid = RegularGrid(min=Vector3(*ls["origin"]), spacing=ls["spacing"], nGP=Vector3i(*ls["shape"]))
+    nx, ny, nz = ls["shape"]
+    flat = ls["distance"]
+    field = [[flat[(i * ny + j) * nz:(i * ny + j + 1) * nz] for j in range(ny)] for i in range(nx)]
+    b = utils.levelSetBody(grid=grid, distField=field, center=pos, orientation=rotation,
+                           nSurfNodes=SETTINGS["ls_nodes"], nodesPath=2, material=contact_material())
+    b.state.mass, b.state.inertia = 0.0, Vector3(0, 0, 0)
+    return [b]
+
+
 def add_grain(t, position, rotation=Quaternion.Identity):
     """Insert template ``t`` with its centroid at ``position``; returns the clump id.
 
-    The clump's mass, centre of mass and principal inertia are the mesh's.
+    The grain's contact geometry (spheres, a convex polyhedron or a level set)
+    is massless; six mass-carrying member spheres make the clump's mass, centre
+    of mass and principal inertia the mesh's.
     """
     pos = Vector3(*position)
-    mat = contact_material()
-    bodies = [sphere(pos + rotation * Vector3(x, y, z), rr, material=mat) for x, y, z, rr in t["rows"]]
+    bodies = _contact_bodies(t, pos, rotation)
     r, a, mats = _phantoms(t)
     axes = t["principal_axes"]
     for k in range(3):
@@ -122,6 +161,25 @@ def add_grain(t, position, rotation=Quaternion.Identity):
             bodies.append(sphere(pos + e * (sgn * a), r, material=mats[k], mask=0))
     ids = O.bodies.append(bodies)
     return O.bodies.clump(ids)
+
+
+def contact_engines():
+    """(bound functors, Ig2, Ip2, Law2) for the deck's grain shape against grains and walls."""
+    shape = DECK["shape"]
+    if shape == "polyhedron":
+        return ([Bo1_Polyhedra_Aabb(), Bo1_Wall_Aabb(), Bo1_Sphere_Aabb()],
+                [Ig2_Polyhedra_Polyhedra_PolyhedraGeom(), Ig2_Wall_Polyhedra_PolyhedraGeom()],
+                [Ip2_PolyhedraMat_PolyhedraMat_PolyhedraPhys()],
+                [Law2_PolyhedraGeom_PolyhedraPhys_Volumetric()])
+    if shape == "levelset":
+        return ([Bo1_LevelSet_Aabb(), Bo1_Wall_Aabb(), Bo1_Sphere_Aabb()],
+                [Ig2_LevelSet_LevelSet_ScGeom(), Ig2_Wall_LevelSet_ScGeom()],
+                [Ip2_FrictMat_FrictMat_FrictPhys()],
+                [Law2_ScGeom_FrictPhys_CundallStrack()])
+    return ([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()],
+            [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
+            [Ip2_FrictMat_FrictMat_FrictPhys()],
+            [Law2_ScGeom_FrictPhys_CundallStrack()])
 
 
 def kinetic_energy(ids):
@@ -146,9 +204,60 @@ def grain_report(ids, names, targets=None):
 
 
 def time_step(grains):
-    """A stable step for the spheres' contact stiffness and the grains' density."""
+    """A stable step for the grains' contact stiffness and density.
+
+    Spheres and level sets (linear springs k ~ E r): ``dt_safety · r_min · sqrt(ρ/E)``;
+    polyhedra (volumetric law F = k_V · overlap volume, k ~ k_V r²):
+    ``dt_safety · sqrt(ρ r_min / k_V)``.
+    """
     rmin = min(t["r_min"] for t in grains)
-    return SETTINGS["dt_safety"] * rmin * math.sqrt(max(t["density"] for t in grains) / SETTINGS["young"])
+    rho = max(t["density"] for t in grains)
+    if DECK["shape"] == "polyhedron":
+        return SETTINGS["dt_safety"] * math.sqrt(rho * rmin / SETTINGS["poly_young"])
+    return SETTINGS["dt_safety"] * rmin * math.sqrt(rho / SETTINGS["young"])
+
+
+def vtk_engine():
+    """Writes the grains' contact geometry to ``vtk/`` every ``vtk_every`` steps."""
+    os.makedirs("vtk", exist_ok=True)
+    if DECK["shape"] == "polyhedron":  # VTKRecorder has no polyhedra: Yade's legacy-VTK exporter
+        return PyRunner(command="export_polyhedra()", iterPeriod=SETTINGS["vtk_every"], initRun=True)
+    recorders = ["lsBodies", "velocity"] if DECK["shape"] == "levelset" else ["spheres", "velocity", "clumpId"]
+    return VTKRecorder(fileName="vtk/grains-", recorders=recorders, iterPeriod=SETTINGS["vtk_every"], mask=1)
+
+
+_EXPORTER = []
+
+
+def export_polyhedra():
+    """One legacy-VTK snapshot of every polyhedron (with its velocity) in ``vtk/``."""
+    from yade import export
+    if not _EXPORTER:
+        _EXPORTER.append(export.VTKExporter("vtk/grains"))
+    _EXPORTER[0].exportPolyhedra(what=dict(velocity="b.state.vel"))
+
+
+def contact_points(cid, position, rotation, limit=64):
+    """Up to ``limit`` points of a clump's contact geometry, as Yade holds it, mapped back into
+    the grain's frame with the insertion's ``position`` and ``rotation`` (sphere centres, hull
+    vertices or level-set surface nodes): a check that the contact shape sits where the mesh is."""
+    pts = []
+    for mid in O.bodies[cid].shape.members.keys():
+        b = O.bodies[mid]
+        if b.mask == 0:
+            continue
+        sh = b.shape
+        if isinstance(sh, Polyhedra):
+            local = list(sh.v)
+        elif isinstance(sh, LevelSet):
+            local = list(sh.surfNodes)
+        else:
+            local = [Vector3(0, 0, 0)]
+        for x in local:
+            g = rotation.conjugate() * (b.state.pos + b.state.ori * x - Vector3(*position))
+            pts.append([g[0], g[1], g[2]])
+    step = max(1, len(pts) // limit)
+    return pts[::step][:limit]
 '''
 
 POUR_SCENE = r'''
@@ -170,7 +279,7 @@ def pour():
         utils.wall(0.0, axis=1, sense=1, material=contact_material()),
         utils.wall(width, axis=1, sense=-1, material=contact_material()),
     ])
-    ids, names, targets = [], [], []
+    ids, names, targets, points = [], [], [], []
     for k, t in enumerate(population):
         i, j, layer = k % side, (k // side) % side, k // (side * side)
         pos = ((i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell)
@@ -179,19 +288,18 @@ def pour():
         ids.append(add_grain(t, pos, q))
         names.append(t["name"])
         targets.append(pos)
+        points.append(contact_points(ids[-1], pos, q))
     inserted = grain_report(ids, names, targets)
+    for rec, pts in zip(inserted, points):
+        rec["contact_points"] = pts
     os.makedirs("vtk", exist_ok=True)
+    bounds, ig2, ip2, law2 = contact_engines()
     O.engines = [
         ForceResetter(),
-        InsertionSortCollider([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()]),
-        InteractionLoop(
-            [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
-            [Ip2_FrictMat_FrictMat_FrictPhys()],
-            [Law2_ScGeom_FrictPhys_CundallStrack()],
-        ),
+        InsertionSortCollider(bounds),
+        InteractionLoop(ig2, ip2, law2),
         NewtonIntegrator(gravity=(0, 0, -9.81), damping=SETTINGS["damping"]),
-        VTKRecorder(fileName="vtk/grains-", recorders=["spheres", "velocity", "clumpId"],
-                    iterPeriod=SETTINGS["vtk_every"], mask=1),
+        vtk_engine(),
     ]
     O.dt = time_step(grains)
     ref = sum(s["mass"] for s in inserted) * 9.81 * sum(t["d_eq"] for t in population) / n
@@ -231,12 +339,44 @@ def pour_settings(**kw) -> dict:
     """
     s = {"seed": 0, "young": 1e6, "poisson": 0.3, "friction_deg": 30.0, "damping": 0.7,
          "dt_safety": 0.3, "max_steps": 150000, "check_every": 1000, "min_time": 0.05,
-         "ke_ratio": 1e-4, "vtk_every": 5000}
-    unknown = set(kw) - set(s)
-    if unknown:
-        raise ValueError(f"unknown scene settings: {', '.join(sorted(unknown))}")
-    s.update(kw)
-    return s
+         "ke_ratio": 1e-4, "vtk_every": 5000, "poly_young": 1e9, "ls_nodes": 150}
+    return updated_settings(s, kw, "scene settings")
+
+
+def shape_files(t) -> dict:
+    """``{relative path: text}`` of one template's contact geometry (metres, centroid at the origin).
+
+    Clump: ``<grain>.xyzr`` and ``<grain>.clump.vtk``; polyhedron: ``<grain>.poly``
+    (``x y z`` per hull vertex); level set: ``<grain>.levelset.json`` (the field's frame —
+    the grain's principal frame, as a turn of the grain frame —, grid origin, spacing,
+    node counts and the signed distances, x-major: index ``(i·ny + j)·nz + k``).
+    """
+    if t.shape == "clump":
+        if t.clump is None:
+            raise ValueError(f"{t.name}: clump template without spheres")
+        head = (f"grainforge clump of {t.source or t.name}: x y z r (m), centroid at the origin\n"
+                f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
+        return {f"{t.name}.xyzr": xyzr_text(t.clump.centres, t.clump.radii, header=head),
+                f"{t.name}.clump.vtk": clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")}
+    if t.shape == "polyhedron":
+        head = (f"grainforge convex hull of {t.source or t.name}: x y z (m), grain centroid at the origin\n"
+                f"vertices {len(t.polyhedron)}")
+        lines = [f"# {h}" for h in head.splitlines()] + [" ".join(fmt(x) for x in row) for row in t.polyhedron]
+        return {f"{t.name}.poly": "\n".join(lines) + "\n"}
+    if t.shape == "levelset":
+        ls = t.levelset
+        from scipy.spatial.transform import Rotation
+
+        rotvec = Rotation.from_matrix(t.props.axes).as_rotvec()
+        angle = float(np.linalg.norm(rotvec))
+        axis = (rotvec / angle).tolist() if angle > 0 else [1.0, 0.0, 0.0]
+        rec = {"frame": "principal: x_grain = R x_local, R a turn by angle (rad) about axis",
+               "axis": [float(x) for x in axis], "angle": angle,
+               "origin": [float(x) for x in ls.grid.origin], "spacing": float(ls.grid.spacing),
+               "shape": [int(n) for n in ls.grid.shape], "units": "m, signed distance negative inside",
+               "distance": [float(x) for x in np.asarray(ls.distance, dtype=np.float64).reshape(-1)]}
+        return {f"{t.name}.levelset.json": json.dumps(rec) + "\n"}
+    raise ValueError(f"{t.name}: unknown shape {t.shape!r}")
 
 
 def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict | None = None) -> dict:
@@ -245,7 +385,7 @@ def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict 
     Parameters
     ----------
     templates : sequence of GrainTemplate
-        Clump templates (``shape == "clump"``).
+        Templates of one shape: ``"clump"``, ``"polyhedron"`` or ``"levelset"``.
     scene : str, optional
         Python text appended to :data:`LIBRARY` (default :data:`POUR_SCENE`).
     settings : dict, optional
@@ -254,15 +394,19 @@ def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict 
     """
     files: dict[str, str] = {}
     records = []
+    shapes = {t.shape for t in templates}
+    if len(shapes) > 1:
+        raise ValueError(f"a Yade deck holds one grain shape; got {', '.join(sorted(shapes))}")
     for t in templates:
-        if t.shape != "clump" or t.clump is None:
-            raise ValueError(f"the Yade deck writes clumps; {t.name} has shape {t.shape!r}")
-        head = (f"grainforge clump of {t.source or t.name}: x y z r (m), centroid at the origin\n"
-                f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
-        files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=head)
-        files[f"{t.name}.clump.vtk"] = clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")
-        records.append(template_record(t))
-    deck = {"units": "SI (m, kg, s)", "grains": records, "scene": settings or pour_settings()}
+        files.update(shape_files(t))
+        rec = template_record(t)
+        if t.shape == "polyhedron":
+            rec.update({"polyhedron": f"{t.name}.poly", "vertices": len(t.polyhedron), "r_min": 0.5 * t.d_eq})
+        elif t.shape == "levelset":
+            rec.update({"levelset": f"{t.name}.levelset.json", "r_min": 0.5 * t.d_eq})
+        records.append(rec)
+    deck = {"units": "SI (m, kg, s)", "shape": shapes.pop() if shapes else "clump", "grains": records,
+            "scene": settings or pour_settings()}
     files["grains.json"] = json_text(deck)
     files["run.py"] = LIBRARY + (POUR_SCENE if scene is None else scene)
     return files

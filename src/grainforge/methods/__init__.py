@@ -26,8 +26,7 @@ from typing import Any
 import numpy as np
 
 from ..grain import Grain
-from ..params import ParameterError
-from ..solid import index_problems, require_solid, volume_centroid
+from ..solid import require_solid, volume_centroid
 
 __all__ = ["METHODS", "get", "generate", "resolve_rng"]
 
@@ -99,14 +98,8 @@ def generate(name: str, params: Any, rng: Any = None) -> Grain:
         parameter = getattr(module, "VALIDITY_PARAMETER", "parameters")
     # star-shaped generators (radius function on a sphere about the origin) may prove no self-intersection
     star = np.zeros(3) if getattr(module, "STAR_SHAPED", False) else None
-    legacy = getattr(module, "index_contract_only", None)
-    if legacy is not None and legacy(params):
-        problems = index_problems(vertices, faces)
-        if problems:
-            raise ParameterError(parameter, f"gives a mesh that is not a valid solid ({'; '.join(problems)})")
-    else:
-        if star is None:
-            vertices = vertices - volume_centroid(vertices, faces)  # checked where it will be written
-        require_solid(vertices, faces, parameter, star_centre=star)
+    if star is None:
+        vertices = vertices - volume_centroid(vertices, faces)  # checked where it will be written
+    require_solid(vertices, faces, parameter, star_centre=star)
     vertices = vertices - volume_centroid(vertices, faces)
     return Grain(vertices=vertices, faces=faces, method=module.NAME, params=params, seed=seed, info=info)

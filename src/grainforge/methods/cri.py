@@ -677,6 +677,7 @@ def construct(p: Params, rng: Any = None) -> Construction:
         unit, _, geom = _sphere(ASPECT_REFERENCE_SUBDIVISIONS)
         ext = np.ptp(con.points(unit, geom), axis=0)
         want = np.asarray(p.aspect, dtype=np.float64)
+        want = want / want.max()  # a ratio: scale-free (tiny values such as 5e-324 would underflow)
         k = want / ext
         k /= np.exp(np.log(k).mean())
         con = dataclasses.replace(con, axis_scale=tuple(float(x) for x in k))

@@ -16,7 +16,7 @@ import numpy as np
 
 from ..params import ParameterError, param, validate
 from ._polyhedra import (
-    PRIMITIVES, Solid, edge_directions, face_frame, face_normals, rotation_matrix, sat_intrudes, solid,
+    PRIMITIVES, Solid, edge_directions, face_frame, face_normals, rotation_matrix, sat_gap, solid,
 )
 
 __all__ = [
@@ -33,9 +33,13 @@ DEFAULT_EXPONENT = 1.0
 MAX_REDRAWS = 16
 #: overlap depth (in primary sizes) below which two primaries only touch.
 INTRUSION_TOLERANCE = 1e-9
-#: relative growths of each primary tried before the union, so that touching faces overlap and
-#: fuse (changes the union volume by at most 3 × growth, relative).
-UNION_INFLATION = (1e-9, 3e-9, 1e-8, 3e-10, 3e-8)
+#: non-cube growth: a child may come closer than this (in primary sizes, measured as a separating-axis
+#: gap) to a primary other than its parent only where the two share vertices of the child's contact
+#: face exactly (docs/methods/dpa.md, "Contacts").
+CONTACT_CLEARANCE = 1e-3
+#: non-cube growth: the smallest empty angle left around an edge shared by several primaries (radians);
+#: narrower notches fold over when smoothed (docs/methods/dpa.md, "Contacts").
+MIN_NOTCH = np.radians(30.0)
 #: how far (in primary sizes) the two sides of an edge- or vertex-only cube contact are moved apart
 PINCH_GAP = 1e-3
 _DIRS = ((1, 0, 0), (-1, 0, 0), (0, 1, 0), (0, -1, 0), (0, 0, 1), (0, 0, -1))
@@ -148,6 +152,9 @@ class Aggregate:
     vertices: np.ndarray
     centres: np.ndarray
     cells: np.ndarray | None = None
+    #: chosen (face, orientation) slots of non-cube growth: accepted, rejected as intruding, rejected as
+    #: too close to a primary other than the parent without an exact contact (:func:`aggregate`)
+    tried: tuple[int, int, int] = (0, 0, 0)
 
     @property
     def primaries(self) -> int:
@@ -217,7 +224,48 @@ def _templates(name: str):
     return out
 
 
-def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random.Generator, tol: float):
+def _exact_contacts(c, c_normals, c_offsets, q, q_normals, q_offsets, on_face, clearance: float) -> np.ndarray:
+    """Whether each near pair (candidate c, existing q) touches only at exactly shared vertices of the
+    candidate's contact face (see :func:`aggregate`).
+
+    ``c``/``q`` (P, V, 3) vertices, outward face normals (P, F, 3) and plane offsets (P, F);
+    ``on_face`` (P, V) marks the candidate's contact-face vertices.  A vertex is near the other solid
+    when its largest signed face-plane distance (a lower bound on its distance) is below ``clearance``.
+    """
+    near_c = (np.einsum("pvk,pfk->pvf", c, q_normals) - q_offsets[:, None, :]).max(axis=2) < clearance
+    near_q = (np.einsum("pvk,pfk->pvf", q, c_normals) - c_offsets[:, None, :]).max(axis=2) < clearance
+    same = (c[:, :, None, :] == q[:, None, :, :]).all(axis=3)  # bit-exact coincidence
+    return (near_c.any(axis=1) & (~near_c | (same.any(axis=2) & on_face)).all(axis=1)
+            & (~near_q | same.any(axis=1)).all(axis=1))
+
+
+def _dihedrals(s: Solid) -> np.ndarray:
+    """Interior dihedral angle of the solid at each edge of each face: list (per face) of (k,) arrays,
+    entry i for the edge from vertex i to vertex i + 1 of the face."""
+    first = np.array([fc[0] for fc in s.faces])
+    n0 = face_normals(s, s.vertices)
+    n0 = n0 * np.sign((n0 * s.vertices[first]).sum(axis=1))[:, None]
+    owner = {}
+    for k, fc in enumerate(s.faces):
+        for i in range(len(fc)):
+            owner.setdefault(frozenset((int(fc[i]), int(fc[(i + 1) % len(fc)]))), []).append(k)
+    out = []
+    for k, fc in enumerate(s.faces):
+        ang = []
+        for i in range(len(fc)):
+            a, b = owner[frozenset((int(fc[i]), int(fc[(i + 1) % len(fc)])))]
+            ang.append(np.pi - np.arccos(np.clip(np.dot(n0[a], n0[b]), -1.0, 1.0)))
+        out.append(np.array(ang))
+    return out
+
+
+def _edge_key(p: np.ndarray, q: np.ndarray) -> tuple:
+    a, b = p.tobytes(), q.tobytes()
+    return (a, b) if a < b else (b, a)
+
+
+def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random.Generator, tol: float,
+                         clearance: float, min_notch: float = MIN_NOTCH):
     tpl = _templates(s.name)
     F, K = len(s.faces), s.max_orientations
     base = np.zeros((F, K), dtype=bool)
@@ -229,6 +277,9 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
             slot_A[f, q], slot_b[f, q] = A, b
     v0 = s.vertices
     n0 = face_normals(s, v0)
+    first = np.array([fc[0] for fc in s.faces])
+    n0 = n0 * np.sign((n0 * v0[first]).sum(axis=1))[:, None]  # outward (the solid is centred on the origin)
+    h0 = (n0 * v0[first]).sum(axis=1)  # face-plane distances from the centre
     e0 = edge_directions(s, v0)
     verts = np.empty((n_total, len(v0), 3))
     normals = np.empty((n_total, F, 3))
@@ -241,13 +292,24 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
     open_ = np.zeros(n_total, dtype=bool)
     open_[0] = True
     R, r_in = s.circumradius, s.inradius
-    r_face = max(float(np.dot(v0[f[0]], face_frame(v0, f, np.zeros(3))[1])) for f in s.faces)
-    h = 2.0 * R
-    reach2 = (2.0 * R + 2.0 * r_face) ** 2  # a child's centre lies twice its face distance from the parent's
+    r_face = float(h0.max())
+    margin = max(clearance, 0.0)
+    h = 2.0 * R + margin
+    reach2 = (2.0 * R + 2.0 * r_face + margin) ** 2  # a child's centre lies twice its face distance away
     grid: dict[tuple[int, int, int], list[int]] = {(0, 0, 0): [0]}
     cell = float(np.sqrt(reach2))  # hash-grid cell: every primary within reach is in the 27 cells around
     offsets = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]
     face_idx = s.faces
+    on_face = np.zeros((F, len(v0)), dtype=bool)
+    for f, fc in enumerate(face_idx):
+        on_face[f, fc] = True
+    dihedral = _dihedrals(s)
+    around: dict[tuple, float] = {}  # exact edge -> angle taken by the primaries that share it
+    for fc, ang in zip(face_idx, dihedral):
+        for i in range(len(fc)):
+            key = _edge_key(v0[fc[i]], v0[fc[(i + 1) % len(fc)]])
+            around[key] = around.get(key, 0.0) + 0.5 * ang[i]  # each edge is seen from its two faces
+    tried = np.zeros(3, dtype=np.int64)  # chosen slots: accepted, intruding, too close / too narrow a notch
     for n in range(1, n_total):
         placed = None
         while placed is None:
@@ -258,6 +320,8 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
             Rc = Rp @ slot_A[ff, qq]                       # (C, 3, 3)
             tc = slot_b[ff, qq] @ Rp.T + shift[p]          # (C, 3)
             kids = v0 @ Rc.transpose(0, 2, 1) + tc[:, None, :]
+            for c in range(len(ff)):  # contact face: the parent's exact coordinates
+                kids[c, face_idx[ff[c]]] = verts[p][tpl[ff[c]][qq[c]][3]]
             key = np.floor(shift[p] / cell).astype(np.int64)
             near = np.array([i for o in offsets
                              for i in grid.get((key[0] + o[0], key[1] + o[1], key[2] + o[2]), ())], dtype=np.int64)
@@ -270,42 +334,67 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
             ci, mj = ci[~deep], mj[~deep]
             test = ~bad[ci]
             ci, mj = ci[test], near[mj[test]]
+            close = np.zeros(len(ff), dtype=bool)
             if len(ci):
-                hit = sat_intrudes(kids[ci], n0 @ Rc[ci].transpose(0, 2, 1), e0 @ Rc[ci].transpose(0, 2, 1),
-                                   verts[mj], normals[mj], edges[mj], tol)
+                kn = n0 @ Rc[ci].transpose(0, 2, 1)
+                gap = sat_gap(kids[ci], kn, e0 @ Rc[ci].transpose(0, 2, 1), verts[mj], normals[mj], edges[mj],
+                              clearance)
+                hit = gap < -tol
                 bad[ci[hit]] = True
+                # contact with a primary other than the parent: allowed only at exactly shared vertices
+                sel = np.flatnonzero(~hit & (gap < clearance) & (mj != p))
+                if len(sel):
+                    cs, ms = ci[sel], mj[sel]
+                    exact = _exact_contacts(
+                        kids[cs], kn[sel], h0 + np.einsum("pfk,pk->pf", kn[sel], tc[cs]),
+                        verts[ms], normals[ms], h0 + np.einsum("pfk,pk->pf", normals[ms], shift[ms]),
+                        on_face[ff[cs]], clearance)
+                    close[cs[~exact]] = True
+            for c in np.flatnonzero(~(bad | close)):  # the notch left around each edge of the contact face
+                fc, kid = face_idx[ff[c]], kids[c]
+                for i in range(len(fc)):
+                    taken = around.get(_edge_key(kid[fc[i]], kid[fc[(i + 1) % len(fc)]]), 0.0)
+                    if 2.0 * np.pi - taken - dihedral[ff[c]][i] < min_notch:
+                        close[c] = True
+                        break
             ok = np.zeros((F, K), dtype=bool)
-            ok[ff, qq] = ~bad
+            ok[ff, qq] = ~(bad | close)
+            why = np.zeros((F, K), dtype=np.int64)
+            why[ff, qq] = np.where(bad, 1, np.where(close, 2, 0))
             slot_of = np.full((F, K), -1, dtype=np.int64)
             slot_of[ff, qq] = np.arange(len(ff))
-            # the paper's choice: an open face uniformly, then an orientation; intruding ones are dropped
+            # the paper's choice: an open face uniformly, then an orientation; rejected ones are dropped
             while avail[p].any():
                 faces_open = np.flatnonzero(avail[p].any(axis=1))
                 f = int(faces_open[rng.integers(len(faces_open))])
                 slots = np.flatnonzero(avail[p, f])
                 q = int(slots[rng.integers(len(slots))])
+                tried[why[f, q]] += 1
                 if ok[f, q]:
                     avail[p, f] = False
                     c = slot_of[f, q]
-                    kid = kids[c]
-                    kid[face_idx[f]] = verts[p][tpl[f][q][3]]  # contact face: the parent's exact coordinates
-                    placed = (kid, Rc[c], tc[c], f)
+                    placed = (kids[c], Rc[c], tc[c], f)
                     break
                 avail[p, f, q] = False
             if not avail[p].any():
                 open_[p] = False
         kid, Rn, tn, f = placed
+        for fc, ang in zip(face_idx, dihedral):
+            for i in range(len(fc)):
+                key = _edge_key(kid[fc[i]], kid[fc[(i + 1) % len(fc)]])
+                around[key] = around.get(key, 0.0) + 0.5 * ang[i]
         verts[n], rot[n], shift[n] = kid, Rn, tn
         normals[n], edges[n] = n0 @ Rn.T, e0 @ Rn.T
         avail[n] = base
         avail[n, f] = False
         open_[n] = avail[n].any()
         grid.setdefault(tuple(int(x) for x in np.floor(tn / cell)), []).append(n)
-    return verts, shift
+    return verts, shift, tried
 
 
 def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Generator,
-              tol: float = INTRUSION_TOLERANCE) -> Aggregate:
+              tol: float = INTRUSION_TOLERANCE, clearance: float = CONTACT_CLEARANCE,
+              min_notch: float = MIN_NOTCH) -> Aggregate:
     """Grow an aggregate of ``primaries`` unit-volume primaries (no mesh).
 
     Cubes grow on the integer lattice (a face is occupied when the
@@ -313,7 +402,16 @@ def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Ge
     chosen face of the parent, turned about the face normal into one of the
     face's distinct orientations; a placement that intrudes into an existing
     primary (exact separating-axis test, overlap > ``tol``) is rejected and
-    another face/orientation of the same parent is tried.
+    another face/orientation of the same parent is tried.  So is a placement
+    that comes within ``clearance`` (separating-axis gap, in primary sizes)
+    of a primary other than its parent, unless the two touch only at
+    vertices of the contact face that they share bit for bit (edge and
+    vertex contacts inherited through the parent), and one that leaves less
+    than ``min_notch`` radians empty around an edge shared by several
+    primaries.  Together these keep the exact face-cancellation union
+    (:func:`union_surface`) a 2-manifold as written, also after smoothing
+    (docs/methods/dpa.md, "Contacts"); ``clearance=-1, min_notch=-1``
+    turns them off (growth as before issue 11, for comparison).
 
     Examples
     --------
@@ -326,8 +424,8 @@ def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Ge
         cells = _aggregate_cubes(primaries, exponent, rng)
         verts = cells[:, None, :] + (s.vertices[None] + 0.5)
         return Aggregate(s, verts, cells + 0.5, cells)
-    verts, centres = _aggregate_polyhedra(s, primaries, exponent, rng, tol)
-    return Aggregate(s, verts, centres)
+    verts, centres, tried = _aggregate_polyhedra(s, primaries, exponent, rng, tol, clearance, min_notch)
+    return Aggregate(s, verts, centres, None, tuple(int(t) for t in tried))
 
 
 # --------------------------------------------------------------------------- union as one solid
@@ -479,63 +577,105 @@ def separate_pinches(vertices: np.ndarray, faces: np.ndarray, gap: float = PINCH
     return v
 
 
-def _manifold_mesh(m) -> tuple[np.ndarray, np.ndarray]:
-    mesh = m.to_mesh64()
-    return np.asarray(mesh.vert_properties, dtype=np.float64)[:, :3].copy(), np.asarray(mesh.tri_verts, dtype=np.int64)
-
-
 def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]:
-    """The union of the primaries as one closed 2-manifold (manifold3d), cavities filled.
+    """The union of the primaries as one closed 2-manifold, by exact coincident-face cancellation.
+
+    Every primary contributes its polygonal faces (outward; reversed for the
+    mirrored, left-handed primaries).  Vertices are merged by exact position:
+    a child's contact face holds its parent's exact coordinates
+    (:func:`aggregate`), so the two copies of a contact face are the same
+    vertices in opposite order and both are removed.  The remaining polygons
+    are fan-triangulated.  Growth allows no other contact than at exactly
+    shared vertices (``CONTACT_CLEARANCE``), so what remains is the outer
+    surface plus one closed component, of negative volume, per sealed cavity;
+    the cavities are dropped (filled).  No boolean, no tolerance: the union
+    volume is N primary volumes up to rounding.
 
     Returns
     -------
     vertices : (V, 3) float64
     faces : (F, 3) int64
     union_volume : float
-        Volume of the union before filling sealed cavities (equals N when
-        no primary intrudes into another).
+        Volume of the union before filling sealed cavities (N primary volumes).
     cavity : float
         Volume of the sealed cavities that were filled.
-    """
-    import manifold3d as m3
 
-    from ..solid import face_components, signed_volume
+    Raises
+    ------
+    ValueError
+        (naming ``primaries``) if a face is shared by more than two primaries or
+        twice with the same orientation, or the surface is not one body (the
+        growth rule excludes both).
+
+    Examples
+    --------
+    >>> agg = aggregate("octahedron", 2, 1.0, np.random.default_rng(1))
+    >>> v, f, vol, cav = union_surface(agg)
+    >>> len(v), len(f), round(vol, 12), cav
+    (9, 14, 2.0, 0.0)
+    """
+    from ..solid import _edge_components, signed_volume, unique_rows
 
     s = agg.solid
-    tris = s.triangles.astype(np.uint32)
-    flipped = np.ascontiguousarray(tris[:, ::-1])
     V = agg.vertices
+    n, nv = V.shape[0], V.shape[1]
     a, b, c = V[:, s.triangles[:, 0]], V[:, s.triangles[:, 1]], V[:, s.triangles[:, 2]]
     handed = (a * np.cross(b, c)).sum(axis=(1, 2)) > 0  # reflected primaries are left-handed
-    # A touching contact must fuse: grow each primary about its centre by a tiny factor.  Boolean
-    # robustness with such slivers is not guaranteed, so the result is checked (one solid whose
-    # volume is N to within the growth) and the next factor is tried if the check fails.
-    n = agg.primaries
-    for grow in UNION_INFLATION:
-        g = agg.centres[:, None, :] + (V - agg.centres[:, None, :]) * (1.0 + grow)
-        parts = [m3.Manifold(m3.Mesh64(vert_properties=np.ascontiguousarray(v), tri_verts=tris if ok else flipped))
-                 for v, ok in zip(g, handed)]
-        u = m3.Manifold.batch_boolean(parts, m3.OpType.Add) if n > 1 else parts[0]
-        volume = float(u.volume())
-        v, f = _manifold_mesh(u)
-        comp = face_components(f, len(v))
-        keep = np.zeros(len(f), dtype=bool)
-        cavity, bodies = 0.0, 0
-        for k in np.unique(comp):
-            sel = comp == k
-            vol = signed_volume(v, f[sel])
-            if vol > 0:
-                keep |= sel
-                bodies += 1
-            else:
-                cavity -= vol
-        if abs(volume - n) <= 4.0 * grow * n + 1e-9 and bodies == 1:
-            break
-    else:
-        raise ValueError("primaries: manifold3d could not fuse the primaries into one solid")
-    f = f[keep]
-    used, f = np.unique(f, return_inverse=True)
-    return v[used], f.reshape(-1, 3).astype(np.int64), volume, cavity
+    points, inv = unique_rows(V.reshape(-1, 3))
+    ids = inv.reshape(n, nv)
+    tris = []
+    for k in sorted({len(fc) for fc in s.faces}):
+        idx = np.array([fc for fc in s.faces if len(fc) == k], dtype=np.int64)  # (Fk, k)
+        poly = ids[:, idx].reshape(-1, k)
+        poly = np.where(np.repeat(handed, len(idx))[:, None], poly, poly[:, ::-1])
+        key = np.sort(poly, axis=1)
+        _, group, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
+        group = group.reshape(-1)
+        if (count > 2).any():
+            raise ValueError("primaries: a face is shared by more than two primaries")
+        pair = np.flatnonzero(count[group] == 2)
+        if len(pair):
+            # a cancelled pair must run in opposite directions: start both at their smallest vertex
+            mine = poly[pair]
+            other = poly[_partner(group, pair)]
+            r0 = np.argmin(mine, axis=1)
+            r1 = np.argmin(other, axis=1)
+            cols = np.arange(k)
+            m0 = np.take_along_axis(mine, (r0[:, None] + cols) % k, axis=1)
+            m1 = np.take_along_axis(other, (r1[:, None] - cols) % k, axis=1)  # reversed
+            if not (m0 == m1).all():
+                raise ValueError("primaries: two primaries share a face with the same orientation")
+        keep = poly[count[group] == 1]
+        for j in range(1, k - 1):
+            tris.append(keep[:, [0, j, j + 1]])
+    f = np.concatenate(tris)
+    union_volume = signed_volume(points, f)
+    n_comp, label = _edge_components(f)
+    keep = np.zeros(len(f), dtype=bool)
+    cavity, bodies = 0.0, 0
+    for comp in range(n_comp):
+        sel = label == comp
+        vol = signed_volume(points, f[sel])
+        if vol > 0:
+            keep |= sel
+            bodies += 1
+        else:
+            cavity -= vol
+    if bodies != 1:
+        raise ValueError(f"primaries: the union surface has {bodies} outer bodies")
+    used, f = np.unique(f[keep], return_inverse=True)
+    return points[used], f.reshape(-1, 3).astype(np.int64), union_volume, cavity
+
+
+def _partner(group: np.ndarray, rows: np.ndarray) -> np.ndarray:
+    """For rows of a group of two, the index of the other row of the same group."""
+    order = np.argsort(group, kind="stable")
+    pos = np.empty_like(order)
+    pos[order] = np.arange(len(order))
+    # the two members of a group are adjacent in ``order``
+    p = pos[rows]
+    left = (p > 0) & (group[order[np.maximum(p - 1, 0)]] == group[rows])
+    return np.where(left, order[np.maximum(p - 1, 0)], order[np.minimum(p + 1, len(order) - 1)])
 
 
 def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple[np.ndarray, np.ndarray]:
@@ -553,17 +693,6 @@ def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple
 
 
 # --------------------------------------------------------------------------- the generator
-
-def index_contract_only(p: Params) -> bool:
-    """Whether this grain is checked by the old index-based contract only (non-cube primitives).
-
-    The union of non-cube primaries (:func:`union_surface`) still leaves
-    sliver edges and edge contacts that merge when written in float32; until
-    it is rebuilt these grains are checked by
-    :func:`grainforge.solid.index_problems` (``docs/validation.md``, "Known gaps").
-    """
-    return p.primitive != "cube"
-
 
 def physical_info(info: dict, scale: float) -> dict:
     """``info`` of a grain scaled by ``scale`` (mm per model unit) with its lengths in mm.
