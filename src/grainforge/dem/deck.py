@@ -8,7 +8,35 @@ from typing import Mapping
 
 import numpy as np
 
-__all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt"]
+__all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop"]
+
+
+def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> dict:
+    """``defaults`` updated with ``kw``; an unknown key raises ``ValueError`` naming it.
+
+    Examples
+    --------
+    >>> updated_settings({"seed": 0, "dt": 1.0}, {"seed": 3})
+    {'seed': 3, 'dt': 1.0}
+    """
+    unknown = set(kw) - set(defaults)
+    if unknown:
+        raise ValueError(f"unknown {what}: {', '.join(sorted(unknown))}")
+    return {**defaults, **kw}
+
+
+def settle_loop(check_every: int, max_checks: int) -> str:
+    """LIGGGHTS/LAMMPS input lines: run ``check_every`` steps at a time until the variable
+    ``ke`` falls below ``kethr`` (at most ``max_checks`` times), then write ``settle.txt``.
+
+    Examples
+    --------
+    >>> print(settle_loop(1000, 5).splitlines()[0])
+    variable i loop 5
+    """
+    return (f"variable i loop {int(max_checks)}\nlabel settle\nrun {int(check_every)}\n"
+            'if "${ke} < ${kethr}" then "jump SELF settled"\nnext i\njump SELF settle\nlabel settled\n'
+            'print "ke ${ke} threshold ${kethr}" file settle.txt')
 
 
 def fmt(x: float) -> str:

@@ -28,7 +28,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, template_record, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, settle_loop, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
@@ -57,11 +57,7 @@ def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"seed": 0, "kn_weight_overlap": 0.005, "restitution": 0.3, "friction": 0.5, "dt_fraction": 0.02,
          "check_every": 1000, "max_checks": 100, "ke_ratio": 1e-4, "dump_every": 5000}
-    unknown = set(kw) - set(s)
-    if unknown:
-        raise ValueError(f"unknown pour settings: {', '.join(sorted(unknown))}")
-    s.update(kw)
-    return s
+    return updated_settings(s, kw, "pour settings")
 
 
 def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
@@ -208,14 +204,7 @@ undump a0
 
 shell mkdir post
 dump vtk all custom {s["dump_every"]} post/grains.*.dump id mol x y z vx vy vz radius
-variable i loop {s["max_checks"]}
-label settle
-run {s["check_every"]}
-if "${{ke}} < ${{kethr}}" then "jump SELF settled"
-next i
-jump SELF settle
-label settled
-print "ke ${{ke}} threshold ${{kethr}}" file settle.txt
+{settle_loop(s["check_every"], s["max_checks"])}
 dump b1 all local 1 bodies-final.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8] c_body[9] c_body[10] c_body[11]
 dump_modify b1 format float %.17g
 run 0

@@ -27,7 +27,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, template_record, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, settle_loop, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "pour_settings"]
 
@@ -38,11 +38,7 @@ def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
          "check_every": 1000, "max_checks": 150, "ke_ratio": 1e-4, "vtk_every": 5000}
-    unknown = set(kw) - set(s)
-    if unknown:
-        raise ValueError(f"unknown pour settings: {', '.join(sorted(unknown))}")
-    s.update(kw)
-    return s
+    return updated_settings(s, kw, "pour settings")
 
 
 def _seed(k: int) -> int:
@@ -173,14 +169,7 @@ undump bodies0
 undump atoms0
 
 dump vtk all custom/vtk {s["vtk_every"]} post/grains_*.vtk id type x y z vx vy vz radius
-variable i loop {s["max_checks"]}
-label settle
-run {s["check_every"]}
-if "${{ke}} < ${{kethr}}" then "jump SELF settled"
-next i
-jump SELF settle
-label settled
-print "ke ${{ke}} threshold ${{kethr}}" file settle.txt
+{settle_loop(s["check_every"], s["max_checks"])}
 dump bodies1 all local 1 bodies-final.txt c_bid c_btype c_bmass c_bx[1] c_bx[2] c_bx[3] c_bv[1] c_bv[2] c_bv[3]
 dump_modify bodies1 format "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g"
 run 1

@@ -34,7 +34,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, template_record, write_files, xyzr_text
+from .deck import clump_vtk_text, fmt, json_text, template_record, updated_settings, write_files, xyzr_text
 
 __all__ = ["write_deck", "deck_files", "LIBRARY", "POUR_SCENE", "pour_settings"]
 
@@ -340,11 +340,7 @@ def pour_settings(**kw) -> dict:
     s = {"seed": 0, "young": 1e6, "poisson": 0.3, "friction_deg": 30.0, "damping": 0.7,
          "dt_safety": 0.3, "max_steps": 150000, "check_every": 1000, "min_time": 0.05,
          "ke_ratio": 1e-4, "vtk_every": 5000, "poly_young": 1e9, "ls_nodes": 150}
-    unknown = set(kw) - set(s)
-    if unknown:
-        raise ValueError(f"unknown scene settings: {', '.join(sorted(unknown))}")
-    s.update(kw)
-    return s
+    return updated_settings(s, kw, "scene settings")
 
 
 def shape_files(t) -> dict:
