@@ -239,11 +239,12 @@ def _candidate_pairs(tri: np.ndarray) -> np.ndarray:
     left = np.repeat(pos, count)
     right = left + 1 + (np.arange(total) - np.repeat(np.cumsum(count) - count, count))
     i, j = owner[left], owner[right]
-    pairs = np.unique(np.stack([np.minimum(i, j), np.maximum(i, j)], axis=1), axis=0)
-    pairs = pairs[pairs[:, 0] != pairs[:, 1]]
-    i, j = pairs[:, 0], pairs[:, 1]
+    packed = np.unique(np.minimum(i, j) * np.int64(F) + np.maximum(i, j))  # 1-D keys: fast unique
+    i, j = packed // F, packed % F
+    keep = i != j
+    i, j = i[keep], j[keep]
     overlap = ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all(axis=1)
-    return pairs[overlap]
+    return np.stack([i[overlap], j[overlap]], axis=1)
 
 
 def _segments_cross(p0, p1, tri, eps: float = 1e-9) -> np.ndarray:
