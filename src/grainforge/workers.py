@@ -166,8 +166,10 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
         # workers it forks must not die of it with a traceback. Started with SIGINT blocked, it and
         # they never see it (they inherit the mask); the owner decides and stops them. (The resource
         # tracker first: starting it unblocks SIGINT in this thread.)
+        # The fork server imports NumPy (preload) once for all workers: it must start with the
+        # BLAS thread limits of one worker = one core, or every worker inherits multithreaded BLAS.
         resource_tracker.ensure_running()
-        with sigint_blocked():
+        with sigint_blocked(), single_threaded_children():
             forkserver.ensure_running()
     else:
         ctx = multiprocessing.get_context("spawn")
