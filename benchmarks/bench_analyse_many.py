@@ -65,11 +65,13 @@ def main():
     for file_rows, cpu_file in ordered_map(timed_analyse, map(str, files), args.workers, preload=PRELOAD):
         rows += len(file_rows)
         worker_cpu += cpu_file
-    wall, cpu = time.perf_counter() - t, cpu_seconds() - c + worker_cpu
+    main_cpu = cpu_seconds() - c
+    wall, cpu = time.perf_counter() - t, main_cpu + worker_cpu
     load1 = os.getloadavg()
     print(f"analyse: {rows} rows from {len(files)} files ({args.workers} workers), 20,480 faces each")
     print(f"  wall {wall:.1f} s ({wall / len(files) * 1e3:.0f} ms/grain); "
-          f"CPU {cpu:.1f} s ({cpu / len(files) * 1e3:.0f} ms/grain, workers included)")
+          f"CPU {cpu:.1f} s ({cpu / len(files) * 1e3:.0f} ms/grain, workers included: "
+          f"{worker_cpu / len(files) * 1e3:.0f} ms in analyse_file, {main_cpu / len(files) * 1e3:.0f} ms in this process)")
     print(f"  extrapolated to 1,000 grains: wall {wall / len(files) * 1000:.0f} s, "
           f"CPU {cpu / len(files) * 1000:.0f} s (= {cpu / len(files) * 1000 / args.workers:.0f} s "
           f"on {args.workers} idle cores)")

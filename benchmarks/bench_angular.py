@@ -9,31 +9,19 @@ Run: ``.venv/bin/python benchmarks/bench_angular.py [--repeat 9]``.
 
 from __future__ import annotations
 
-import os
+from _timing import load, one_core, samples
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+one_core()
 
 import argparse  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 
 def best(fn, repeat):
-    """Smallest wall time and smallest CPU time (ms) of ``repeat`` calls after one warm-up call."""
-    fn()
-    wall, cpu = [], []
-    for _ in range(repeat):
-        t, c = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
-    return 1e3 * min(wall), 1e3 * min(cpu), 1e3 * float(np.median(cpu))
-
-
-def load():
-    return "load average " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    """Smallest wall time, smallest and median CPU time (ms) of ``repeat`` calls after a warm-up."""
+    wall, cpu = samples(fn, repeat)
+    return 1e3 * wall.min(), 1e3 * cpu.min(), 1e3 * float(np.median(cpu))
 
 
 def main(argv=None):
@@ -65,7 +53,7 @@ def main(argv=None):
         t_rough = best(lambda: angular._roughness_factor(unit, p, np.random.default_rng(0)), a.repeat)[1]
         t_build = best(lambda: angular.build(p, np.random.default_rng(0)), a.repeat)[1]
         v, f, _ = angular.build(p, np.random.default_rng(0))
-        t_check = best(lambda: (require_solid(v, f, "x"), volume_centroid(v, f)), a.repeat)[1]
+        t_check = best(lambda: (require_solid(v, f, "x", star_centre=np.zeros(3)), volume_centroid(v, f)), a.repeat)[1]
         wall, cpu, med = best(lambda: generate("angular", p, 0), a.repeat)
         print(f"| {label} | {t_core:.1f} | {t_rad:.1f} | {t_rough:.1f} | {t_build:.1f} | {t_check:.1f} "
               f"| {wall:.1f} | **{cpu:.1f}** | {med:.1f} |", flush=True)

@@ -15,18 +15,14 @@ import time
 from pathlib import Path
 
 import numpy as np
+from _timing import samples
 
 
 def best(fn, repeat=7, number=10, clock=time.perf_counter):
-    """Best per-call time over ``repeat`` runs of ``number`` calls (wall clock by default)."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t = clock()
-        for _ in range(number):
-            fn()
-        times.append((clock() - t) / number)
-    return min(times)
+    """Best per-call time over ``repeat`` runs of ``number`` calls (wall clock, or CPU time if
+    ``clock`` is ``time.process_time``)."""
+    wall, cpu = samples(fn, repeat, number)
+    return float((cpu if clock is time.process_time else wall).min())
 
 
 def bench_grains():

@@ -17,8 +17,9 @@ from __future__ import annotations
 
 import os
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from _timing import load, one_core, samples
+
+one_core()
 
 import argparse  # noqa: E402
 import resource  # noqa: E402
@@ -37,18 +38,8 @@ def best(fn, repeat):
     On a loaded machine the process is time-sliced: the CPU time (this
     process, one thread) is then the better estimate of the one-core cost.
     """
-    fn()
-    wall, cpu = [], []
-    for _ in range(repeat):
-        t, c = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
-    return min(wall), min(cpu)
-
-
-def load():
-    return "load average " + ", ".join(f"{x:.2f}" for x in os.getloadavg())
+    wall, cpu = samples(fn, repeat)
+    return float(wall.min()), float(cpu.min())
 
 
 def bench_kernel(levels, quick):

@@ -13,24 +13,19 @@ from __future__ import annotations
 
 import os
 
-for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ.setdefault(_var, "1")
+from _timing import one_core, samples
+
+one_core()
 
 import argparse  # noqa: E402
-import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 
 def best(fn, repeat):
-    fn()
-    wall, cpu = [], []
-    for _ in range(repeat):
-        t, c = time.perf_counter(), time.process_time()
-        fn()
-        wall.append(time.perf_counter() - t)
-        cpu.append(time.process_time() - c)
-    return min(wall), min(cpu)
+    """Smallest wall and CPU seconds of ``repeat`` calls after a warm-up call."""
+    wall, cpu = samples(fn, repeat)
+    return float(wall.min()), float(cpu.min())
 
 
 def main(argv=None):

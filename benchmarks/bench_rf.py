@@ -8,25 +8,20 @@ The first call per (level, degree) builds and caches the harmonic basis; its cos
 from __future__ import annotations
 
 import os
+import time
 
-for _v in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
-    os.environ[_v] = "1"  # one core (the synthesis itself uses einsum, not BLAS)
+from _timing import one_core, samples
 
-import time  # noqa: E402
+one_core()  # one core (the synthesis itself uses einsum, not BLAS)
 
 import numpy as np  # noqa: E402
 
 
 def best(fn, repeat=7, number=10, clock=time.perf_counter):
-    """Best per-call time over ``repeat`` runs of ``number`` calls."""
-    fn()
-    times = []
-    for _ in range(repeat):
-        t = clock()
-        for _ in range(number):
-            fn()
-        times.append((clock() - t) / number)
-    return min(times)
+    """Best per-call time over ``repeat`` runs of ``number`` calls (wall clock, or CPU time if
+    ``clock`` is ``time.process_time``)."""
+    wall, cpu = samples(fn, repeat, number)
+    return float((cpu if clock is time.process_time else wall).min())
 
 
 def main():

@@ -193,7 +193,8 @@ def part_spectrum(n_grains):
               f"rf (per-grain section means) {sd_gen[0]:.3f}, {sd_gen[1]:.3f}, {sd_gen[6]:.3f}.")
         if len(rand) >= 100:
             k = len(rand) // 50
-            print(f"\nThe same grains in {k} disjoint sets of 50 (seeds 0–49, 50–99, …): ratio per order\n")
+            print(f"\nThe same grains in {k} disjoint sets of 50 (the made grains in seed order, 50 at a time): "
+                  "ratio per order\n")
             W = table_.D[rows_used]
             sub = [[f"{rand[50 * j:50 * j + 50].mean(0)[i] / W[50 * j:50 * j + 50].mean(0)[i]:.3f}" for j in range(k)]
                    for i in range(15)]

@@ -188,3 +188,43 @@ def test_analyse_not_solid_flag_same_with_the_star_certificate():
         assert (self_intersections(verts, faces) > 0) == crossing
         flags = analyse_mesh(verts, faces, fractal=False, fourier=False)["flags"]
         assert ("not-solid" in flags) == crossing, flags
+
+
+def test_solid_problems_same_answer_with_the_star_certificate():
+    """The certificate short cut (one body, no pinch, positive volume, no crossing) changes no answer."""
+    from grainforge.geodesic import icosphere
+    from grainforge.solid import solid_problems
+
+    v, f = icosphere(2)
+    poked = v.copy()
+    poked[0] = -1.6 * poked[0]
+    twin = 2 * v[0] - v  # a point-reflected copy touching the sphere at vertex 0 only: a pinch when merged
+    pinched = (np.vstack([v, twin]), np.vstack([f, f[:, ::-1] + len(v)]))
+    apart = (np.vstack([v, v + 3.0]), np.vstack([f, f + len(v)]))
+    inside_out = (v, f[:, ::-1])
+    grain = fso(subdivisions=3, rng=1)
+    cases = [(grain.vertices, grain.faces), (v, f), (poked, f), pinched, apart, inside_out]
+    answers = [solid_problems(vv, ff) for vv, ff in cases]
+    assert answers[0] == answers[1] == [] and all(answers[2:]), answers
+    for (vv, ff), plain in zip(cases, answers):
+        for centre in (np.zeros(3), np.asarray(vv, dtype=np.float64).mean(axis=0), np.array([0.9, 0.0, 0.0])):
+            assert solid_problems(vv, ff, star_centre=centre) == plain
+
+
+@pytest.mark.parametrize("dtype", [np.float32, np.float64])
+@pytest.mark.parametrize("exact32", [True, False])
+def test_unique_rows_matches_np_unique(dtype, exact32):
+    """Both sorting paths of unique_rows (packed float32 keys; lexsort) give np.unique's rows and inverse."""
+    from grainforge.solid import unique_rows
+
+    rng = np.random.default_rng(4)
+    p = rng.integers(-3, 4, size=(4000, 3)).astype(np.float64) * 0.5  # many duplicates, negatives
+    p[rng.random(p.shape) < 0.05] = -0.0  # signed zeros equal zeros
+    p = np.vstack([p, [[np.float32(1e30), -np.float32(1e-30), 0.1]]])
+    if not exact32 and dtype == np.float64:
+        p[:, 2] += 1e-12 * rng.random(len(p))  # not representable in float32: the lexsort path
+    p = p.astype(dtype)
+    u, inv = unique_rows(p)
+    ru, rinv = np.unique(p, axis=0, return_inverse=True)
+    np.testing.assert_array_equal(u, ru)
+    np.testing.assert_array_equal(inv, rinv.reshape(-1))

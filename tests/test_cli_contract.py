@@ -23,8 +23,8 @@ like :func:`unreadable_mesh_cases`)::
 grain, a folder of grains with a manifest, corrupt meshes, images, recipes,
 printer files; add what your command needs there).  The command runs in the
 case folder, which holds ``ro/`` (a folder nobody can write into),
-``afile`` (a plain file, for "not a folder" cases) and ``exists.png``,
-``exists.csv`` (existing outputs, for the overwrite rule).  A command that
+``afile`` (a plain file, for "not a folder" cases), ``exists.png``,
+``exists.csv``, ``exists.3mf`` and ``done/`` (existing outputs, for the overwrite rule).  A command that
 writes should get at least the rows: read-only folder, under ``afile``, empty
 path, existing output without ``--overwrite``.  Interrupt cases (real
 signals) are the ``test_sigterm_*``, ``test_sigkill_*`` and ``test_ctrl_c_*`` functions at the end.
@@ -119,15 +119,16 @@ def writing_cases() -> list[Case]:
     """Every command that writes: read-only folder, below a file, empty path, existing output."""
     small_cal = ["calibrate", "dpa", "--primaries", "3", "--exponents", "1,2", "--repeats", "1", "--workers", "1"]
     commands = {  # name: (args without the output, output option, output kind, existing output)
-        "generate": (["generate", "fso", "--subdivisions", "2"], "--out", "dir", None),
+        "generate": (["generate", "fso", "--subdivisions", "2"], "--out", "dir", "done"),
         "render": (["render", "{in}/grain.stl"], "-o", "png", "exists.png"),
         "fourier": (["fourier", "{in}/grain.png"], "--csv", "csv", "exists.csv"),
-        "calibrate": (small_cal, "--out", "dir", None),
+        "calibrate": (small_cal, "--out", "dir", "done"),
         "analyse": (["analyse", "{in}/grain.stl", "--no-fractal", "--no-fourier"], "--csv", "csv", "exists.csv"),
         "plot": (["plot", "zingg", "{in}/grains/manifest.csv"], "-o", "png", "exists.png"),
-        "figures": (["figures", "--only", "2"], "--out", "dir", None),
-        "tray": (["tray", "--method", "fso", "--count", "2", "--size", "5", "--workers", "1"], "--out", "3mf", None),
-        "batch": (["batch", "{in}/good.toml", "--workers", "1"], "--out", "dir", None),
+        "figures": (["figures", "--only", "2"], "--out", "dir", "done"),
+        "tray": (["tray", "--method", "fso", "--count", "2", "--size", "5", "--workers", "1"], "--out", "3mf",
+                 "exists.3mf"),
+        "batch": (["batch", "{in}/good.toml", "--workers", "1"], "--out", "dir", "done"),
         "dem": (["dem", "{in}/grains", "--workers", "1"], "--out", "dir", None),
         "fit": (["fit", "{in}/text.csv", "--workers", "1"], "--out", "dir", None),
         "demo": (["demo", "--quick"], "--out", "dir", None),
@@ -145,7 +146,7 @@ def writing_cases() -> list[Case]:
             Case(f"{cmd}-empty-path", args + [opt, ""], err=r"path is empty"),
         ]
         if existing:
-            cases.append(Case(f"{cmd}-existing-output", args + [opt, existing], err=r"exists; use --overwrite"))
+            cases.append(Case(f"{cmd}-existing-output", args + [opt, existing], err=r"exists.*; use (--resume or )?--overwrite"))
         if kind == "dir":
             cases.append(Case(f"{cmd}-out-is-a-file", args + [opt, "afile"], err=r"afile'? is a file"))
     return cases
@@ -372,11 +373,15 @@ def _writable(folder: Path) -> None:
 
 @pytest.fixture
 def case_dir(tmp_path):
-    """The folder a case runs in: ro/ (unwritable), afile, exists.png, exists.csv."""
+    """The folder a case runs in: ro/ (unwritable), afile, exists.png, exists.csv, exists.3mf, done/."""
     (tmp_path / "ro").mkdir()
     (tmp_path / "afile").write_text("a file\n")
     (tmp_path / "exists.png").write_bytes(b"old")
     (tmp_path / "exists.csv").write_text("old\n")
+    (tmp_path / "exists.3mf").write_bytes(b"old")
+    (tmp_path / "done").mkdir()  # a folder holding one output of each folder-writing command
+    for name in ("fso-0000.stl", "calibration.csv", "figure2-fso-dimension.png"):
+        (tmp_path / "done" / name).write_bytes(b"old")
     readonly = _readonly(tmp_path / "ro")
     yield tmp_path, readonly
     _writable(tmp_path / "ro")
@@ -500,18 +505,22 @@ def _forkserver_started(sid: int):
     return started
 
 
-@pytest.mark.parametrize("phase", ["pool-starting", "writing"])
+@pytest.mark.parametrize("phase", ["starting", "pool-starting", "writing"])
 def test_ctrl_c_on_tray_is_quick_and_leaves_nothing(case_dir, inputs, phase):
-    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) while the worker pool starts
-    (its fork server importing), and while grains are written: exit 130, one line, nothing left.
+    """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) 0.3 s after the start (the
+    command line loading its modules), while the worker pool starts (its fork server importing), and
+    while grains are written: exit 130, one line, nothing left.
 
     30,000 grains take minutes even on an idle machine, so the job cannot finish before the signal."""
     d, _ = case_dir
     before = _snapshot(d)
     proc = start(["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "30000", "--size", "5",
                   "--workers", "2", "--out", "sub/t.3mf"], d, inputs)
-    _wait_for(_forkserver_started(proc.pid) if phase == "pool-starting" else _has(d, "sub/.t.3mf.*.tmp"),
-              90, proc)
+    if phase == "starting":
+        time.sleep(0.3)
+    else:
+        _wait_for(_forkserver_started(proc.pid) if phase == "pool-starting" else _has(d, "sub/.t.3mf.*.tmp"),
+                  90, proc)
     os.killpg(proc.pid, signal.SIGINT)
     _, err = proc.communicate(timeout=120)  # a hang guard, not a timing assertion (see docs/benchmarks.md)
     err = err.decode()

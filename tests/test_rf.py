@@ -139,6 +139,13 @@ def test_sections_carry_the_requested_descriptors_in_every_direction():
     per_axis = (np.mean(axes, axis=0) / want).mean(axis=1)
     assert np.ptp(per_axis) < 0.05, per_axis
     assert np.all(np.abs(per_axis - 1) < 0.10), per_axis
+    # no preferred direction, order by order: a Friedman test (paired by grain) of x = y = z; with 15
+    # orders, p < 0.001 somewhere happens by chance 1.5 % of the time (a fixed seed set: deterministic)
+    from scipy.stats import friedmanchisquare
+
+    axes = np.asarray(axes)
+    p = [friedmanchisquare(*axes[:, :, k].T).pvalue for k in range(15)]
+    assert min(p) > 1e-3, np.round(p, 4)
 
 
 def test_valid_solid_star_shaped_and_deterministic():
@@ -238,6 +245,31 @@ def test_grains_draw_measured_spectra(spectrum_csv):
     assert np.all(got >= table.D[row] * (1 - 1e-9))
     assert np.max(got / table.D[row] - 1) == pytest.approx(g.info["spectrum_misfit"], abs=1e-9) or \
         g.info["spectrum_misfit"] > np.max(got / table.D[row] - 1)
+
+
+def test_sections_carry_measured_spectra(spectrum_csv):
+    """60 grains (level 4) from a measured table, read back from STL, 4 random central sections each:
+    the mean D_n over grains is within 15 % of the mean spectrum of the measured grains they drew,
+    n = 2..12.  The 10 % target of docs/validation.md is for 50 grains at level 5 with 16 sections;
+    here the rows of only 6 measured grains and 4 sections per grain give a standard error of
+    ~5 %, and n = 3 carries a systematic −4 % (sections measured about their area centroid,
+    docs/validation.md rf.1b), so 15 % is the target plus that."""
+    from grainforge.spectra import read_spectra
+
+    table = read_spectra(spectrum_csv)
+    got, want = [], []
+    for s in range(60):
+        try:
+            g = grainforge.rf(spectrum=spectrum_csv, subdivisions=4, rng=3000 + s)
+        except ValueError:
+            continue
+        m = _read_back(g)
+        c = m.center_mass
+        got.append(np.mean([section_descriptors(m, n, c) for n in random_normals(4, rng=s)], axis=0)[:11])
+        want.append(table.D[g.info["spectrum_row"]][:11])
+    assert len(got) >= 55
+    ratio = np.mean(got, axis=0) / np.mean(want, axis=0)
+    assert np.all(np.abs(ratio - 1) < 0.15), np.round(ratio, 3)
 
 
 def test_cri_accepts_the_same_spectrum(spectrum_csv):

@@ -166,8 +166,10 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
         # workers it forks must not die of it with a traceback. Started with SIGINT blocked, it and
         # they never see it (they inherit the mask); the owner decides and stops them. (The resource
         # tracker first: starting it unblocks SIGINT in this thread.)
+        # The fork server imports NumPy (preload) once for all workers: it must start with the
+        # BLAS thread limits of one worker = one core, or every worker inherits multithreaded BLAS.
         resource_tracker.ensure_running()
-        with sigint_blocked():
+        with sigint_blocked(), single_threaded_children():
             forkserver.ensure_running()
     else:
         ctx = multiprocessing.get_context("spawn")
@@ -221,6 +223,7 @@ def close_pool(pool, abort: bool = False) -> None:
         pool.shutdown(wait=True, cancel_futures=True)
         return
     processes = list(getattr(pool, "_processes", {}).values())
+    results = getattr(pool, "_result_queue", None)  # (shutdown forgets it)
     for p in processes:
         try:
             p.terminate()
@@ -234,6 +237,16 @@ def close_pool(pool, abort: bool = False) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         p.join(timeout=5)
+    # A worker stopped while it was sending a result leaves the pool's manager thread reading the
+    # rest of that message for ever (this process holds the pipe's write end as well), and the
+    # interpreter waits for that thread at exit: the command printed "Interrupted." and hung.
+    # Closing our write end lets the read see the end of the pipe (the workers' ends died with them).
+    writer = getattr(results, "_writer", None)
+    if writer is not None:
+        try:
+            writer.close()
+        except OSError:
+            pass
 
 
 def _uses_forkserver(pool) -> bool:

@@ -112,12 +112,11 @@ def roughness(residual: np.ndarray, weights: np.ndarray, mean_radius: float) -> 
 
 
 @functools.lru_cache(maxsize=4)
-def _strided_subset(n: int, subset: int) -> tuple[np.ndarray, np.ndarray]:
-    """The evenly strided subset of ``n`` vertices, and the mask of its pairs a < b (upper triangle)."""
+def _strided_subset(n: int, subset: int) -> np.ndarray:
+    """The evenly strided subset of ``n`` vertices (indices)."""
     idx = np.unique(np.linspace(0, n - 1, min(subset, n)).round().astype(np.int64))
-    upper = np.triu(np.ones((len(idx), len(idx)), dtype=bool), 1)
-    idx.flags.writeable = upper.flags.writeable = False
-    return idx, upper
+    idx.flags.writeable = False
+    return idx
 
 
 def variogram(u: np.ndarray, h: np.ndarray, bins: np.ndarray, *, neighbours: int = 16, subset: int = 1000):
@@ -125,8 +124,9 @@ def variogram(u: np.ndarray, h: np.ndarray, bins: np.ndarray, *, neighbours: int
 
     Pairs: every vertex with its ``neighbours`` nearest neighbours in direction,
     then all pairs a < b of an evenly strided subset of ``subset`` vertices
-    (in that order; the subset's dot products are computed on its grid of
-    pairs, with the same arithmetic as a per-pair dot product).
+    (in that order).  Of the subset's pairs only those within the last bin
+    edge are formed (a k-d tree query); the values are those of a pass over
+    every pair.
 
     Returns
     -------
@@ -153,14 +153,16 @@ def variogram(u: np.ndarray, h: np.ndarray, bins: np.ndarray, *, neighbours: int
         return which[good], 0.5 * (hi[good] - hj[good]) ** 2, negdot[good]
 
     near = binned(-np.einsum("ij,ij->i", u[i], u[j]), h[i], h[j])
-    idx, upper = _strided_subset(n, subset)
-    us, hs = u[idx], h[idx]
-    # summed in the order einsum("ij,ij->i") sums a row of 3 (x·x' + z·z') + y·y', so the values are identical
-    negdot = -((us[:, None, 0] * us[None, :, 0] + us[:, None, 2] * us[None, :, 2]) + us[:, None, 1] * us[None, :, 1])
-    # only pairs whose separation falls in the bins (few of the subset's 500,000), in row-major order
-    inside = upper & (negdot >= edges[0]) & (negdot < edges[-1])
-    a, b = np.nonzero(inside)
-    far = binned(negdot[a, b], hs[a], hs[b])
+    # all pairs a < b of the subset, of which only those closer than the last bin edge can count: found
+    # with a k-d tree (radius with a margin), then binned with the same arithmetic as every other pair,
+    # in the order a pass over all pairs (row-major a < b) would meet them
+    idx = _strided_subset(n, subset)
+    us = u[idx]
+    reach = 2.0 * np.sin(min(float(bins[-1]), np.pi) / 2.0) * (1.0 + 1e-6) + 1e-12  # chord of the last edge
+    ab = cKDTree(us).query_pairs(reach, output_type="ndarray")
+    ab = ab[np.argsort(ab[:, 0] * len(idx) + ab[:, 1])] if len(ab) else np.zeros((0, 2), dtype=np.int64)
+    a, b = idx[ab[:, 0]], idx[ab[:, 1]]
+    far = binned(-np.einsum("ij,ij->i", u[a], u[b]), h[a], h[b])
     which, sq, nd = (np.concatenate(x) for x in zip(near, far))
     counts = np.bincount(which, minlength=nb)
     with np.errstate(invalid="ignore", divide="ignore"):

@@ -6,12 +6,33 @@ ends as one line on stderr and exit code 2; no traceback.
 
 from __future__ import annotations
 
+import os
+import signal
 import sys
+import threading
 
-import click
 
-from .._version import __version__
-from ..params import ParameterError
+def _interrupted_while_starting(signum, frame):  # pragma: no cover - exercised by a real signal
+    """Ctrl-C while the command line loads its modules: nothing is written yet, so leave at once."""
+    try:
+        sys.stderr.write("Interrupted.\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(130)
+
+
+# Loading click and the commands (NumPy, SciPy, ...) takes a second or two: a Ctrl-C meanwhile ends
+# the command with the usual line and code instead of an import traceback. (An inherited *ignored*
+# SIGINT stays ignored, the POSIX convention for background jobs.)
+_STARTING = threading.current_thread() is threading.main_thread() \
+    and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+if _STARTING:
+    signal.signal(signal.SIGINT, _interrupted_while_starting)
+
+import click  # noqa: E402
+
+from .._version import __version__  # noqa: E402
+from ..params import ParameterError  # noqa: E402
 
 
 class Terminated(BaseException):
@@ -111,6 +132,8 @@ def _register():
 
 
 _register()
+if _STARTING and signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # from here on: KeyboardInterrupt, cleaned up
 
 
 def main() -> None:  # console-script entry point

@@ -54,6 +54,8 @@ __all__ = ["Params", "Core", "build", "core", "core_edges", "radius", "angular",
 
 NAME = "angular"
 VALIDITY_PARAMETER = "roughness"
+#: vertices are unit directions times a positive radius: the solid contract's star certificate applies
+STAR_SHAPED = True
 #: generation outputs recorded in manifests
 INFO_COLUMNS = ("rounding_radius", "flat_fraction", "min_radius", "max_radius")
 #: largest ratio of the longest to the shortest aspect axis

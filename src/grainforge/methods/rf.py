@@ -48,6 +48,8 @@ __all__ = ["Params", "build", "rf", "angular_spectrum", "section_spectrum", "tar
 
 NAME = "rf"
 VALIDITY_PARAMETER = "descriptors"
+#: vertices are unit directions times a positive radius: the solid contract's star certificate applies
+STAR_SHAPED = True
 #: default (D2, D3, D8) when neither descriptors, a preset nor a spectrum is given
 DEFAULT_PRESET = "rough-angular"
 #: smallest allowed radius, as a fraction of r0
