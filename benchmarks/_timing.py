@@ -10,7 +10,7 @@ from __future__ import annotations
 import os
 import time
 
-import numpy as np
+# NumPy is imported inside the functions: ``one_core()`` must run before NumPy loads its BLAS.
 
 __all__ = ["one_core", "samples", "load"]
 
@@ -21,11 +21,13 @@ def one_core() -> None:
         os.environ.setdefault(var, "1")
 
 
-def samples(fn, repeat: int, number: int = 1, warmup: bool = True) -> tuple[np.ndarray, np.ndarray]:
-    """Per-call wall and CPU seconds of ``repeat`` runs of ``number`` calls of ``fn``.
+def samples(fn, repeat: int, number: int = 1, warmup: bool = True):
+    """Per-call wall and CPU seconds (two NumPy arrays) of ``repeat`` runs of ``number`` calls of ``fn``.
 
     One call is made first (and not timed) if ``warmup``.
     """
+    import numpy as np
+
     if warmup:
         fn()
     wall, cpu = [], []
