@@ -68,7 +68,7 @@ def load_deck():
     out = []
     for t in DECK["grains"]:
         t = dict(t)
-        shape = t.get("shape", "clump")
+        shape = t["shape"]
         if shape == "clump":
             t["rows"] = read_xyzr(t["xyzr"])
         elif shape == "polyhedron":
@@ -119,7 +119,7 @@ def _phantoms(t):
 
 def _contact_bodies(t, pos, rotation):
     """The massless contact bodies of template ``t`` placed with its centroid at ``pos``."""
-    shape = t.get("shape", "clump")
+    shape = t["shape"]
     if shape == "clump":
         mat = contact_material()
         return [sphere(pos + rotation * Vector3(x, y, z), rr, material=mat) for x, y, z, rr in t["rows"]]
@@ -292,7 +292,6 @@ def pour():
     inserted = grain_report(ids, names, targets)
     for rec, pts in zip(inserted, points):
         rec["contact_points"] = pts
-    os.makedirs("vtk", exist_ok=True)
     bounds, ig2, ip2, law2 = contact_engines()
     O.engines = [
         ForceResetter(),
