@@ -401,10 +401,17 @@ def _misfit(C: np.ndarray, D: np.ndarray, amplitudes: str) -> float:
     return float(np.max(np.abs(got[ok] / want[ok] - 1.0))) if ok.any() else 0.0
 
 
+@lru_cache(maxsize=4096)
+def _solve(key: bytes, amplitudes: str) -> tuple[np.ndarray, float]:
+    """C_l and its misfit for the target spectrum D (as bytes), cached: the κ_n solve takes ~30 ms."""
+    C = _angular_spectrum_cached(key, amplitudes)
+    return C, _misfit(C, np.frombuffer(key, dtype=np.float64), amplitudes)
+
+
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one rf grain (r0 = 1, not yet centred)."""
     D, row = target_spectrum(p, rng)
-    C = angular_spectrum(D, p.amplitudes)
+    C, misfit = _solve(np.ascontiguousarray(D, dtype=np.float64).tobytes(), p.amplitudes)
     unit, faces = icosphere(p.subdivisions)
     a = coefficients(C, rng, p.amplitudes)
     f = field(a, p.degree, p.subdivisions)
@@ -439,7 +446,7 @@ def build(p: Params, rng: np.random.Generator):
         "spectrum_row": row,
         "spectrum_grain": None if row is None else read_spectra(p.spectrum).labels[row],
         "field_rms": float(np.sqrt(np.sum(C * (2 * np.arange(len(C)) + 1)) / (4 * np.pi))),
-        "spectrum_misfit": _misfit(C, D, p.amplitudes),
+        "spectrum_misfit": misfit,
         "axis_scale": scale,
         "min_radius": rmin,
         "max_radius": float(R.max()),
