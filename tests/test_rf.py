@@ -202,10 +202,13 @@ def test_sections_carry_the_requested_descriptors_in_every_direction():
 
     Random orientations: the mean D_n of 4 central sections per grain is within
     10 % of the request for n = 2..16 (statistical: the standard error of the
-    mean is about 4.5 % at n = 2, less for higher n).  Sections perpendicular
-    to x, y and z: their mean of D_n/target over n = 2..16 agree within 5 %
-    (standard error about 2 %); per order they differ by up to ~10 % from
-    sampling alone at 50 grains (docs/validation.md has a 400-grain table).
+    mean is 2–3 % with fixed amplitudes).  Sections perpendicular to x, y and
+    z: their means of D_n/target over n = 2..16 agree within 10 % (the s.e. of
+    one axis's mean, from the grain-to-grain spread, is ≈ 2.3 %; a range of 10 %
+    among three such means is ≈ 4.3 s.e., by chance about 1 % of the time;
+    measured ranges on three seed sets: 3.4, 4.5, 5.3 %); per order they differ
+    by up to ~25 % from sampling alone at 50 grains (docs/validation.md rf.2c:
+    so would any isotropic field's).
     """
     d = (0.15, 0.10, 0.03)
     want = descriptor_spectrum(*d, modes=32)[2:17]
@@ -218,7 +221,7 @@ def test_sections_carry_the_requested_descriptors_in_every_direction():
     ratio = np.mean(rand, axis=0) / want
     assert np.all(np.abs(ratio - 1) < 0.10), np.round(ratio, 3)
     per_axis = (np.mean(axes, axis=0) / want).mean(axis=1)
-    assert np.ptp(per_axis) < 0.05, per_axis
+    assert np.ptp(per_axis) < 0.10, per_axis
     assert np.all(np.abs(per_axis - 1) < 0.10), per_axis
     # no preferred direction, order by order: a Friedman test (paired by grain) of x = y = z; with 15
     # orders, p < 0.001 somewhere happens by chance 1.5 % of the time (a fixed seed set: deterministic)
@@ -332,9 +335,9 @@ def test_sections_carry_measured_spectra(spectrum_csv):
     """60 grains (level 4) from a measured table, read back from STL, 4 random central sections each:
     the mean D_n over grains is within 15 % of the mean spectrum of the measured grains they drew,
     n = 2..12.  The 10 % target of docs/validation.md is for 50 grains at level 5 with 16 sections;
-    here the rows of only 6 measured grains and 4 sections per grain give a standard error of
-    ~5 %, and n = 3 carries a systematic −4 % (sections measured about their area centroid,
-    docs/validation.md rf.1b), so 15 % is the target plus that."""
+    here 4 sections per grain give a standard error of ~4 %, n = 7 carries a systematic +5 %
+    (sections measured about their area centroid, docs/validation.md rf.1b) and level 4 loses a few %
+    at n ≥ 9 (measured: n = 7 +10 %, n = 9 −11 %), so 15 % is the target plus those."""
     from grainforge.spectra import read_spectra
 
     table = read_spectra(spectrum_csv)
