@@ -54,7 +54,7 @@ import numpy as np
 from ..contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
 from ..geodesic import icosphere
 from ..harmonics import degree_order, icosphere_synthesis, legendre_equator
-from ..params import ParameterError, param, validate
+from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
 from ..spectra import extend_spectrum, read_spectra
 
 __all__ = ["Params", "build", "rf", "angular_spectrum", "section_spectrum", "target_spectrum", "coefficients", "field",
@@ -119,30 +119,15 @@ class Params:
 
     def __post_init__(self):
         validate(self)
-        for name, n in (("descriptors", 3), ("decay", 2), ("aspect", 3)):
-            value = getattr(self, name)
-            if value is not None and len(value) != n:
-                raise ParameterError(name, f"must be {n} comma-separated numbers, got {value!r}")
+        check_lengths(self, {"descriptors": 3, "decay": 2, "aspect": 3})
         if self.spectrum is not None:
             for name in ("preset", "descriptors"):
                 if getattr(self, name) is not None:
                     raise ParameterError(name, "cannot be combined with spectrum: give one of them")
             read_spectra(self.spectrum)  # fail early on a missing or malformed table
-        elif self.preset is not None:
-            wanted = PRESETS[self.preset]
-            if self.descriptors is not None and not np.allclose(self.descriptors, wanted):
-                raise ParameterError(
-                    "preset", f"{self.preset} means descriptors {wanted}, which conflicts with {self.descriptors}"
-                )
-            object.__setattr__(self, "descriptors", wanted)
-        elif self.descriptors is None:
-            object.__setattr__(self, "descriptors", PRESETS[DEFAULT_PRESET])
-        if self.aspect is not None:
-            L, I, S = self.aspect
-            if not L >= I >= S:
-                raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
-            if L > MAX_ASPECT * S:
-                raise ParameterError("aspect", f"L/S must be at most {MAX_ASPECT:g}, got {L:g}:{I:g}:{S:g}")
+        else:
+            resolve_descriptors(self, PRESETS, DEFAULT_PRESET)
+        check_aspect(self.aspect, MAX_ASPECT)
 
 
 # ------------------------------------------------------------------ spectra
