@@ -167,3 +167,26 @@ def test_existing_outputs_are_not_overwritten_without_overwrite(runner, tmp_path
     r = runner.invoke(cli, ["fit", str(p), "--voxel-size", "7", "--out", str(out)])
     assert r.exit_code == 2 and "exists" in r.stderr and "--overwrite" in r.stderr
     assert (out / "fit.csv").read_text(encoding="utf-8") == "keep"
+
+
+def test_misfit_weights_predict_the_ks_statistic_of_normal_samples():
+    """_weights: a mean misfit δ costs δ/(σ√(2π)) of KS and a spread misfit ε·σ costs φ(1)·ε (normal laws)."""
+    from scipy.stats import ks_2samp
+
+    from grainforge.fit import KS_MAX, MEAN_TOL, STATISTICS, _weights
+
+    rng = np.random.default_rng(5)
+    sd = np.array([0.03, 0.025, 0.1, 0.1])
+    sand = rng.normal(0.8, sd, size=(50_000, 4))
+    w = dict(zip(STATISTICS, _weights(sand)))
+    z = rng.normal(size=50_000)
+    for j, k in enumerate(("sphericity", "convexity")):
+        delta = 0.3 * sd[j]  # a mean offset: its KS part of the weight, times delta, is the KS statistic
+        ks = ks_2samp(sand[:, j], 0.8 + delta + sd[j] * z).statistic
+        ks_weight = math.sqrt(w[f"mean {k}"] ** 2 - (1 / MEAN_TOL) ** 2)
+        assert ks_weight * delta * KS_MAX == pytest.approx(ks, abs=0.01)
+        eps = 0.2  # a wider spread
+        ks = ks_2samp(sand[:, j], 0.8 + sd[j] * (1 + eps) * z).statistic
+        assert w[f"sd {k}"] * eps * sd[j] * KS_MAX == pytest.approx(ks, abs=0.01)
+    # a narrow descriptor's spread misfit weighs more than a wide one's, in proportion
+    assert w["sd convexity"] / w["sd flatness"] == pytest.approx(0.1 / 0.025, rel=0.02)

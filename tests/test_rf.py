@@ -74,7 +74,7 @@ def test_angular_spectrum_inverts_the_section_relation(d):
     D = descriptor_spectrum(*d, modes=32)
     C = angular_spectrum(D)
     assert C[0] == C[1] == 0 and (C >= 0).all()
-    assert np.allclose(section_spectrum(C)[2:], D[2:], rtol=1e-10, atol=1e-12)
+    assert np.allclose(section_spectrum(C)[2:], D[2:], rtol=1e-9, atol=1e-12)
 
 
 @pytest.mark.parametrize("d", [(0.0, 0.0, 0.02), (0.05, 0.02, 0.01)])
@@ -107,8 +107,89 @@ def test_every_requested_degree_is_in_the_grain():
     assert power[0] < 1e-24 and power[1] < 1e-24  # l = 0, 1 left out
     assert power[L + 1] < 1e-24 and power[L + 2] < 1e-24
     ratio = power[2 : L + 1] / C[2 : L + 1]
-    assert (ratio > 0.1).all(), np.flatnonzero(ratio <= 0.1) + 2  # every degree 2..L is present
-    assert 0.8 < ratio[10:].mean() < 1.2
+    # fixed amplitudes (the default): every degree carries exactly its expected power C_l
+    assert np.allclose(ratio, 1.0, rtol=1e-9), np.round(ratio, 4)
+
+
+def test_fixed_and_gaussian_amplitudes_are_the_same_draws():
+    """One standard-normal draw per coefficient either way: per degree the two differ by one positive factor."""
+    C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=16), "gaussian")
+    a = coefficients(C, np.random.default_rng(1), "fixed")
+    g = coefficients(C, np.random.default_rng(1), "gaussian")
+    l, _ = degree_order(16, 2)
+    for k in range(2, 17):
+        q = a[l == k] / g[l == k]
+        assert np.allclose(q, q[0], rtol=1e-12) and q[0] > 0
+        assert np.sum(a[l == k] ** 2) == pytest.approx((2 * k + 1) * C[k], rel=1e-12)
+    with pytest.raises(ParameterError, match="one of fixed, gaussian") as info:
+        Params(amplitudes="uniform")
+    assert info.value.name == "amplitudes"
+
+
+def _equator_c(a, L, orders):
+    """c_n of the equator of Σ a_lm Y_lm (rows of a: fields), n in orders: (N, len(orders)) complex."""
+    from grainforge.harmonics import legendre_equator
+
+    P = legendre_equator(L)
+    l, m = degree_order(L, 2)
+    out = np.zeros((len(a), len(orders)), complex)
+    for j, n in enumerate(orders):
+        for k in range(n, L + 1, 2):
+            w = np.sqrt(2) * P[k, n] / 2
+            out[:, j] += w * (a[:, (l == k) & (m == n)][:, 0] - 1j * a[:, (l == k) & (m == -n)][:, 0])
+    return out
+
+
+@pytest.mark.parametrize("amplitudes", ["fixed", "gaussian"])
+def test_mean_modulus_factor_matches_monte_carlo(amplitudes):
+    """κ_n = E|c_n|/(E|c_n|²)^½ from the characteristic function, against 20,000 drawn fields (the equator
+    stands for any central section: both kinds of field are isotropic).  E|c_n|² must equal Σ C_l P̄_ln(0)²
+    within 3 % (≈ 4 s.e. of a 20,000-sample mean of an exponential |c|²), and the sample ratio
+    mean|c| / (mean|c|²)^½ must equal κ_n within 0.6 % (its s.e. is ≈ 0.13 %: numerator and denominator
+    move together); the fixed κ_2 differs from √π/2 by 4 %."""
+    from grainforge.methods.rf import _transfer, mean_modulus_factor
+
+    L, orders = 16, [2, 3, 4, 5, 8, 12]
+    C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=L), amplitudes)
+    rng = np.random.default_rng(11)
+    a = np.stack([coefficients(C, rng, amplitudes) for _ in range(20_000)])
+    c = np.abs(_equator_c(a, L, orders))
+    power = (_transfer(L) @ C)[orders]
+    kappa = mean_modulus_factor(C, amplitudes)[orders]
+    assert np.allclose((c**2).mean(0), power, rtol=0.03), ((c**2).mean(0) / power)
+    sample = c.mean(0) / np.sqrt((c**2).mean(0))
+    assert np.allclose(sample, kappa, rtol=0.006), (sample, kappa)
+    if amplitudes == "fixed":
+        assert kappa[0] > 1.03 * np.sqrt(np.pi) / 2  # order 2 is far from Rayleigh, and so is the MC
+
+
+def test_fixed_amplitudes_make_grains_carry_their_spectrum_more_tightly():
+    """Grain to grain, the mean D_2, D_3 over 16 random central sections (no mesh, rays from the origin) varies
+    less with fixed amplitudes: its s.d. over 60 grains is below 0.7 × the Gaussian one (measured ≈ 0.5;
+    the ratio of two 60-sample s.d. has a relative s.e. of ~13 %).  Both means stay within 6 % of the target."""
+    from grainforge.analysis.sections import plane_basis
+
+    L = 32
+    D = descriptor_spectrum(0.15, 0.1, 0.03, modes=L)
+    th = 2 * np.pi * np.arange(128) / 128
+    rings = []
+    for nrm in random_normals(16, rng=5):
+        b = plane_basis(nrm)
+        rings.append(real_harmonics(np.cos(th)[:, None] * b[0] + np.sin(th)[:, None] * b[1], L, 2))
+    Y = np.stack(rings)  # (16, 128, K)
+    sd, mean = {}, {}
+    for amp in ("fixed", "gaussian"):
+        C = angular_spectrum(D, amp)
+        per_grain = []
+        for s in range(60):
+            r = 1 + Y @ coefficients(C, np.random.default_rng(s), amp)
+            c = np.fft.rfft(r, axis=1)
+            per_grain.append((2 * np.abs(c[:, 2:4]) / c[:, :1].real).mean(0))  # random rotation per grain
+        per_grain = np.array(per_grain) / D[2:4]
+        sd[amp], mean[amp] = per_grain.std(0, ddof=1), per_grain.mean(0)
+    assert np.all(sd["fixed"] < 0.7 * sd["gaussian"]), (sd["fixed"], sd["gaussian"])
+    for amp in sd:
+        assert np.all(np.abs(mean[amp] - 1) < 0.06), (amp, mean[amp])
 
 
 def _read_back(g):
@@ -121,10 +202,13 @@ def test_sections_carry_the_requested_descriptors_in_every_direction():
 
     Random orientations: the mean D_n of 4 central sections per grain is within
     10 % of the request for n = 2..16 (statistical: the standard error of the
-    mean is about 4.5 % at n = 2, less for higher n).  Sections perpendicular
-    to x, y and z: their mean of D_n/target over n = 2..16 agree within 5 %
-    (standard error about 2 %); per order they differ by up to ~10 % from
-    sampling alone at 50 grains (docs/validation.md has a 400-grain table).
+    mean is 2–3 % with fixed amplitudes).  Sections perpendicular to x, y and
+    z: their means of D_n/target over n = 2..16 agree within 10 % (the s.e. of
+    one axis's mean, from the grain-to-grain spread, is ≈ 2.3 %; a range of 10 %
+    among three such means is ≈ 4.3 s.e., by chance about 1 % of the time;
+    measured ranges on three seed sets: 3.4, 4.5, 5.3 %); per order they differ
+    by up to ~25 % from sampling alone at 50 grains (docs/validation.md rf.2c:
+    so would any isotropic field's).
     """
     d = (0.15, 0.10, 0.03)
     want = descriptor_spectrum(*d, modes=32)[2:17]
@@ -137,7 +221,7 @@ def test_sections_carry_the_requested_descriptors_in_every_direction():
     ratio = np.mean(rand, axis=0) / want
     assert np.all(np.abs(ratio - 1) < 0.10), np.round(ratio, 3)
     per_axis = (np.mean(axes, axis=0) / want).mean(axis=1)
-    assert np.ptp(per_axis) < 0.05, per_axis
+    assert np.ptp(per_axis) < 0.10, per_axis
     assert np.all(np.abs(per_axis - 1) < 0.10), per_axis
     # no preferred direction, order by order: a Friedman test (paired by grain) of x = y = z; with 15
     # orders, p < 0.001 somewhere happens by chance 1.5 % of the time (a fixed seed set: deterministic)
@@ -251,9 +335,9 @@ def test_sections_carry_measured_spectra(spectrum_csv):
     """60 grains (level 4) from a measured table, read back from STL, 4 random central sections each:
     the mean D_n over grains is within 15 % of the mean spectrum of the measured grains they drew,
     n = 2..12.  The 10 % target of docs/validation.md is for 50 grains at level 5 with 16 sections;
-    here the rows of only 6 measured grains and 4 sections per grain give a standard error of
-    ~5 %, and n = 3 carries a systematic −4 % (sections measured about their area centroid,
-    docs/validation.md rf.1b), so 15 % is the target plus that."""
+    here 4 sections per grain give a standard error of ~4 %, n = 7 carries a systematic +5 %
+    (sections measured about their area centroid, docs/validation.md rf.1b) and level 4 loses a few %
+    at n ≥ 9 (measured: n = 7 +10 %, n = 9 −11 %), so 15 % is the target plus those."""
     from grainforge.spectra import read_spectra
 
     table = read_spectra(spectrum_csv)

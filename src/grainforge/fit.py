@@ -16,20 +16,22 @@ What is fitted
   voxelised at the sand's resolution for its size.
 - **Aspect** (every method with an ``aspect`` L:I:S parameter): drawn per
   grain as ``{ distribution = "zingg" }`` with truncated-normal elongation
-  I/L and flatness S/I.  Their means are unknowns of the search (below);
-  their standard deviations are corrected each round by the ratio of the
-  sand's and the population's measured spreads.
-- **Surface knobs** (per method, :data:`FITS`): a few numbers that steer
-  named statistics (e.g. CRI's irregularity and roughness descriptors, mean
-  and spread, steer the means and spreads of sphericity and convexity).
+  I/L and flatness S/I; their two means and two sds are unknowns.
+- **Surface knobs** (per method, :data:`FITS`): a few numbers, each with a
+  mean and a per-grain spread (e.g. CRI's irregularity and roughness
+  descriptors), that steer the means and spreads of sphericity and convexity.
 
-The knobs and the two aspect means are solved jointly for the knobs'
-targets plus the measured mean elongation and flatness (a rougher grain also
-measures less elongated; a flatter one less spherical): damped Gauss–Newton
-steps in a trust region, on a finite-difference Jacobian (measured once,
-then Broyden updates), on a *pilot* population whose grains keep their seeds
-from round to round (common random numbers), so that the statistics change
-smoothly with the settings.
+All unknowns are solved for jointly against all eight statistics
+(:data:`STATISTICS`: the mean and sd of each descriptor): a rougher grain
+also measures less elongated, a flatter one less spherical, and a per-grain
+spread of irregularity widens sphericity and convexity alike, so no knob can
+be matched to one statistic alone.  Damped Gauss–Newton steps in a trust
+region, on a finite-difference Jacobian (measured once, then Broyden
+updates), with each misfit weighted by what it does to the criteria
+(:func:`_weights`: a spread misfit of a narrow descriptor costs more KS than
+one of a wide descriptor), on a *pilot* population whose grains keep their
+seeds from round to round (common random numbers), so that the statistics
+change smoothly with the settings.
 
 A final population of ``count`` (≥ 500) grains verifies the fit; if it
 misses, a correction is made from it and it is measured again
@@ -53,7 +55,7 @@ import numpy as np
 
 __all__ = [
     "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Knob", "MethodFit", "FITS", "register", "fit_sand",
-    "compare", "recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL",
+    "compare", "recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "STATISTICS",
 ]
 
 #: the four descriptors that are matched
@@ -73,6 +75,11 @@ KS_MAX = 0.1
 MEAN_TOL = 0.01
 #: finite-difference step (and trust-region unit) of the fitted aspect means
 ASPECT_STEP = 0.03
+#: finite-difference step and range of the fitted aspect standard deviations
+ASPECT_SD_STEP = 0.02
+ASPECT_SD_LOW, ASPECT_SD_HIGH = 0.005, 0.5
+#: the statistics the search matches: mean and sd of each descriptor
+STATISTICS = tuple(f"{q} {k}" for k in DESCRIPTORS for q in ("mean", "sd"))
 
 
 # --------------------------------------------------------------------------- the sand
@@ -189,8 +196,9 @@ class MethodFit:
     knobs : tuple of Knob
         Fitted numbers besides the aspect distribution.
     targets : tuple of str
-        The statistics the knobs steer, as many as knobs: ``"mean X"`` or
-        ``"sd X"`` for X in :data:`DESCRIPTORS`.
+        The statistics the knobs mainly steer, as many as knobs: ``"mean X"``
+        or ``"sd X"`` for X in :data:`DESCRIPTORS` (documentation: the search
+        solves every knob against all of :data:`STATISTICS`).
     params : callable
         Knob values (dict) -> the recipe's ``[params]`` table (numbers,
         lists, or distribution tables such as :func:`truncnormal`), without
@@ -434,6 +442,37 @@ def compare(sand: np.ndarray, gen: np.ndarray) -> dict[str, Any]:
     return out
 
 
+def _weights(sand: np.ndarray) -> np.ndarray:
+    """Weight of each of :data:`STATISTICS`' misfits: what it does to the criteria, for sand sds σ.
+
+    For two normal distributions of sd σ whose means differ by δ, the KS
+    statistic is 2Φ(δ/2σ) − 1 ≈ δ/(σ√(2π)); for equal means and sds σ and
+    σ(1 + ε) it is max |Φ(x) − Φ(x/(1 + ε))| ≈ ε·φ(1).  So a mean misfit
+    counts against both its tolerance and the KS limit,
+    ``√(1/MEAN_TOL² + (1/(σ√(2π) KS_MAX))²)``, and a spread misfit against
+    the KS limit, ``φ(1)/(σ KS_MAX)``: a narrow descriptor (Ottawa's
+    convexity, σ = 0.026) is weighted more than a wide one (flatness, 0.107).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> w = dict(zip(STATISTICS, _weights(rng.normal(0.8, [0.025, 0.025, 0.1, 0.1], size=(4000, 4)))))
+    >>> round(float(w["sd convexity"] / w["sd flatness"]), 1), round(float(w["mean convexity"] / w["mean flatness"]), 1)
+    (4.0, 1.8)
+    """
+    sd = np.maximum(np.asarray(sand, dtype=np.float64).std(axis=0, ddof=1), 1e-6)
+    phi1 = math.exp(-0.5) / math.sqrt(2 * math.pi)
+    out = []
+    for t in STATISTICS:
+        kind, desc = t.split()
+        s = float(sd[DESCRIPTORS.index(desc)])
+        if kind == "mean":
+            out.append(math.hypot(1 / MEAN_TOL, 1 / (s * math.sqrt(2 * math.pi) * KS_MAX)))
+        else:
+            out.append(phi1 / (s * KS_MAX))
+    return np.array(out)
+
+
 def _stat(table: np.ndarray, name: str) -> float:
     kind, desc = name.split()
     col = table[:, DESCRIPTORS.index(desc)]
@@ -525,32 +564,31 @@ def fit_sand(
     low = float(max(0.05, min(sv["elongation"].min(), sv["flatness"].min()) - 0.1))
     aspect = {"elongation_mean": float(sv["elongation"].mean()), "elongation_sd": float(sv["elongation"].std()),
               "flatness_mean": float(sv["flatness"].mean()), "flatness_sd": float(sv["flatness"].std())}
-    # The settings: the method's knobs and the two aspect means (the aspect sds are corrected directly by
-    # the ratio of measured spreads).  The four measured means are solved for by Gauss-Newton steps on the
-    # knobs that steer a mean and the aspect means (a rougher grain also measures less elongated, a flatter
-    # one less spherical: one joint system); a knob that steers a spread is corrected by the ratio of the
-    # sand's and the population's spread of its statistic, as the aspect sds are.
+    # The unknowns: the method's knobs (each steering means and/or spreads) and the aspect distribution's
+    # two means and two sds.  All are solved for jointly against all eight measured statistics (the mean
+    # and sd of each descriptor): a rougher grain also measures less elongated, a flatter one less
+    # spherical, and one per-grain spread (irregularity's, say) widens both sphericity and convexity.
+    # Gauss-Newton steps on a finite-difference Jacobian, the residuals weighted by what they do to the
+    # criteria (_weights: a mean error counts against its 0.01 and, with a spread error, against the KS).
     nk = len(spec.knobs)
     knames = [k.name for k in spec.knobs]
-    x = np.array([k.start for k in spec.knobs] + [aspect["elongation_mean"], aspect["flatness_mean"]])
-    lo_b = np.array([k.low for k in spec.knobs] + [low, low])
-    hi_b = np.array([k.high for k in spec.knobs] + [1.0, 1.0])
-    steps = np.array([k.step for k in spec.knobs] + [ASPECT_STEP, ASPECT_STEP])
-    mean_idx = [i for i, t in enumerate(spec.targets) if t.startswith("mean ")] + [nk, nk + 1]
-    targets = tuple(spec.targets[i] for i in mean_idx[:-2]) + ("mean elongation", "mean flatness")
-    spread = [(i, t.split()[1]) for i, t in enumerate(spec.targets) if t.startswith("sd ")]
+    anames = ["elongation_mean", "flatness_mean", "elongation_sd", "flatness_sd"]
+    x = np.array([k.start for k in spec.knobs] + [aspect[a] for a in anames])
+    lo_b = np.array([k.low for k in spec.knobs] + [low, low, ASPECT_SD_LOW, ASPECT_SD_LOW])
+    hi_b = np.array([k.high for k in spec.knobs] + [1.0, 1.0, ASPECT_SD_HIGH, ASPECT_SD_HIGH])
+    steps = np.array([k.step for k in spec.knobs] + [ASPECT_STEP, ASPECT_STEP, ASPECT_SD_STEP, ASPECT_SD_STEP])
+    targets = STATISTICS
     y_star = np.array([_stat(target, t) for t in targets])
-    sds = (aspect["elongation_sd"], aspect["flatness_sd"])
+    weights = _weights(target)
     history: list[dict] = []
 
-    def unpack(xv, sd):
+    def unpack(xv):
         knobs = dict(zip(knames, map(float, xv[:nk])))
-        asp = {"elongation_mean": float(xv[nk]), "elongation_sd": float(sd[0]),
-               "flatness_mean": float(xv[nk + 1]), "flatness_sd": float(sd[1])}
+        asp = dict(zip(anames, map(float, xv[nk:])))
         return knobs, asp
 
-    def text_for(xv, sd, n, s=seed):
-        knobs, asp = unpack(xv, sd)
+    def text_for(xv, n, s=seed):
+        knobs, asp = unpack(xv)
         params = spec.params(knobs)
         params["aspect"] = _aspect_table(asp, low)
         return recipe_text(method, params, sand, count=n, seed=s)
@@ -558,88 +596,75 @@ def fit_sand(
     def stats(gen):
         return np.array([_stat(gen[:, 1:], t) for t in targets])
 
-    def evaluate(xv, sd, n, label):
+    def evaluate(xv, n, label):
         # always the final recipe: a pilot is its first n grains (same seeds, sizes and draws)
         name(label)
-        gen = pool.run(text_for(xv, sd, count), n, sand.voxel_size, progress)
+        gen = pool.run(text_for(xv, count), n, sand.voxel_size, progress)
         st = compare(target, gen[:, 1:])
-        knobs, asp = unpack(xv, sd)
+        knobs, asp = unpack(xv)
         history.append({"label": label, "knobs": knobs, "aspect": asp, "score": st["score"],
-                        **{f"{k}_{q}": st["per"][k][q] for k in DESCRIPTORS for q in ("gen_mean", "ks")}})
-        say(f"{label}: score {st['score']:.2f} (<= 1 passes); "
-            + ", ".join(f"{k[:5]} {st['per'][k]['gen_mean']:.3f} KS {st['per'][k]['ks']:.2f}" for k in DESCRIPTORS)
+                        "merit": merit(gen),
+                        **{f"{k}_{q}": st["per"][k][q] for k in DESCRIPTORS for q in ("gen_mean", "gen_sd", "ks")}})
+        say(f"{label}: score {st['score']:.2f} (<= 1 passes), misfit {merit(gen):.2f}; "
+            + ", ".join(f"{k[:5]} {st['per'][k]['gen_mean']:.3f}±{st['per'][k]['gen_sd']:.3f} KS {st['per'][k]['ks']:.2f}"
+                        for k in DESCRIPTORS)
             + "; " + ", ".join(f"{k} {v:.4g}" for k, v in knobs.items())
-            + f", aspect means {asp['elongation_mean']:.3f} {asp['flatness_mean']:.3f}")
+            + ", aspect " + ", ".join(f"{a} {asp[a]:.3f}" for a in anames))
         return gen, st
 
-    def merit(st):
-        # what a round is judged by: mean and spread misfits (a KS statistic of a pilot is mostly noise)
-        return float(sum((p["mean_diff"] / MEAN_TOL) ** 2 + ((p["gen_sd"] - p["sand_sd"]) / (2 * MEAN_TOL)) ** 2
-                         for p in st["per"].values()))
-
-    def ratio(st, k):
-        p = st["per"][k]
-        return float(np.clip(p["sand_sd"] / max(p["gen_sd"], 1e-6), 0.5, 2.0))
-
-    def spread_step(xv, sd, st):
-        xv = xv.copy()
-        for i, k in spread:
-            xv[i] = float(np.clip(xv[i] * ratio(st, k), lo_b[i], hi_b[i]))
-        sd = tuple(float(np.clip(s0 * ratio(st, k), 0.005, 0.5)) for s0, k in zip(sd, ("elongation", "flatness")))
-        return xv, sd
+    def merit(gen):
+        # what a round is judged by: the weighted misfit of means and spreads (a KS statistic of a pilot
+        # is mostly sampling noise)
+        return float(np.sum((weights * (stats(gen) - y_star)) ** 2))
 
     def newton(xv, J, gen, trust):
-        # bounded, damped least squares in step units: each unknown moves at most `trust` steps and stays
-        # within its range (a bound is honoured in the solve, not by clipping its result afterwards,
-        # which would throw away the compensation the other unknowns were making); the damping keeps
-        # the step small along nearly singular directions (irregularity and roughness both lower
-        # sphericity and convexity, in similar proportions)
+        # bounded, damped weighted least squares in step units: each unknown moves at most `trust` steps
+        # and stays within its range (a bound is honoured in the solve, not by clipping its result
+        # afterwards, which would throw away the compensation the other unknowns were making); the
+        # damping keeps the step small along nearly singular directions (irregularity and roughness, and
+        # their spreads, lower or widen sphericity and convexity in similar proportions)
         from scipy.optimize import lsq_linear
 
-        u = xv[mean_idx]
-        Js = J * steps[mean_idx][None, :]
-        r = y_star - stats(gen)
-        lam = 0.05 * np.trace(Js.T @ Js) / len(mean_idx) + 1e-12
-        A = np.vstack([Js, math.sqrt(lam) * np.eye(len(mean_idx))])
-        b = np.concatenate([r, np.zeros(len(mean_idx))])
-        lo = np.maximum(-trust, (lo_b[mean_idx] - u) / steps[mean_idx])
-        hi = np.minimum(trust, (hi_b[mean_idx] - u) / steps[mean_idx])
+        n = len(xv)
+        Js = weights[:, None] * J * steps[None, :]
+        r = weights * (y_star - stats(gen))
+        lam = 0.05 * np.trace(Js.T @ Js) / n + 1e-12
+        A = np.vstack([Js, math.sqrt(lam) * np.eye(n)])
+        b = np.concatenate([r, np.zeros(n)])
+        lo = np.maximum(-trust, (lo_b - xv) / steps)
+        hi = np.minimum(trust, (hi_b - xv) / steps)
         hi = np.maximum(hi, lo + 1e-12)
         dz = lsq_linear(A, b, bounds=(lo, hi)).x
-        out = xv.copy()
-        out[mean_idx] = np.clip(u + dz * steps[mean_idx], lo_b[mean_idx], hi_b[mean_idx])
-        return out
+        return np.clip(xv + dz * steps, lo_b, hi_b)
 
     def broyden(J, dx, dy):
-        dx = dx[mean_idx]
         if np.any(dx):
             J += np.outer(dy - J @ dx, dx) / float(dx @ dx)
 
     with _Pool(max(1, int(workers))) as pool:
-        gen, st = evaluate(x, sds, pilot, "pilot 0 (start)")
+        gen, st = evaluate(x, pilot, "pilot 0 (start)")
         # finite-difference Jacobian on the first half of the pilot (same grains: differences, not noise)
         nj = max(2, pilot // 2)
         y0 = stats(gen[:nj])
-        J = np.zeros((len(targets), len(mean_idx)))
-        labels = knames + ["elongation_mean", "flatness_mean"]
-        for c, i in enumerate(mean_idx):
+        J = np.zeros((len(targets), len(x)))
+        labels = knames + anames
+        for i in range(len(x)):
             xi = x.copy()
             xi[i] = xi[i] + steps[i] if xi[i] + steps[i] <= hi_b[i] else xi[i] - steps[i]
-            gi, _ = evaluate(xi, sds, nj, f"jacobian {c + 1}/{len(mean_idx)} ({labels[i]})")
-            J[:, c] = (stats(gi) - y0) / (xi[i] - x[i])
+            gi, _ = evaluate(xi, nj, f"jacobian {i + 1}/{len(x)} ({labels[i]})")
+            J[:, i] = (stats(gi) - y0) / (xi[i] - x[i])
         trust = 2.0  # trust region, in steps: halved after a round that makes things worse
-        best = (merit(st), x.copy(), sds, gen, st)
+        best = (merit(gen), x.copy(), gen, st)
         for r in range(1, rounds + 1):
             x_new = newton(x, J, gen, trust)
-            x_new, sd_new = spread_step(x_new, sds, st)
-            gen_new, st_new = evaluate(x_new, sd_new, pilot, f"pilot {r}")
-            broyden(J, x_new - x, stats(gen_new) - stats(gen))  # (spread changes count as noise)
-            if merit(st_new) < best[0]:
-                best = (merit(st_new), x_new.copy(), sd_new, gen_new, st_new)
+            gen_new, st_new = evaluate(x_new, pilot, f"pilot {r}")
+            broyden(J, x_new - x, stats(gen_new) - stats(gen))
+            if merit(gen_new) < best[0]:
+                best = (merit(gen_new), x_new.copy(), gen_new, st_new)
                 trust = min(1.5 * trust, 4.0)
             else:  # worse: go back to the best settings with a smaller step
                 trust *= 0.5
-            _, x, sds, gen, st = best
+            _, x, gen, st = best
             x = x.copy()
             if st["score"] <= 0.6:
                 break
@@ -648,22 +673,21 @@ def fit_sand(
         prev = None
         trust = 1.5
         for attempt in range(final_rounds):
-            gen, st = evaluate(x, sds, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
+            gen, st = evaluate(x, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
             if prev is not None:  # secant from two measurements of the same grains
                 broyden(J, x - prev[0], stats(gen) - stats(prev[1]))
             if final is None or st["score"] < final[1]["score"]:
-                final = (gen, st, x.copy(), sds)
+                final = (gen, st, x.copy())
             else:
                 trust *= 0.5
             if st["pass"]:
                 break
             # corrections from the best final population (its own seeds: no sampling noise between rounds)
-            gen, st, x, sds = final[0], final[1], final[2].copy(), final[3]
+            gen, st, x = final[0], final[1], final[2].copy()
             prev = (x.copy(), gen)
             x = newton(x, J, gen, trust)
-            x, sds = spread_step(x, sds, st)
-    gen, st, x, sds = final
-    knobs, aspect = unpack(x, sds)
+    gen, st, x = final
+    knobs, aspect = unpack(x)
     header = (f"grainforge fit: {method} grains matched to {sand.name} ({sand.count} grains, voxel "
               f"{sand.voxel_size:g} µm)\n" + "\n".join(
                   f"{k}: sand {st['per'][k]['sand_mean']:.3f} generated {st['per'][k]['gen_mean']:.3f} "

@@ -256,6 +256,53 @@ def validate(obj: Any) -> None:
         object.__setattr__(obj, spec.name, value)
 
 
+def check_lengths(obj: Any, lengths: dict[str, int]) -> None:
+    """Raise naming the first field of ``lengths`` that is set with the wrong number of values."""
+    for name, n in lengths.items():
+        value = getattr(obj, name)
+        if value is not None and len(value) != n:
+            raise ParameterError(name, f"must be {n} comma-separated numbers, got {value!r}")
+
+
+def resolve_descriptors(obj: Any, presets: dict, default: str) -> None:
+    """Set ``obj.descriptors`` from ``obj.preset`` (or the ``default`` preset when neither is given).
+
+    Raises
+    ------
+    ParameterError
+        If ``preset`` and ``descriptors`` are both given and disagree.
+    """
+    import numpy as np
+
+    if obj.preset is not None:
+        wanted = presets[obj.preset]
+        if obj.descriptors is not None and not np.allclose(obj.descriptors, wanted):
+            raise ParameterError("preset", f"{obj.preset} means descriptors {wanted}, which conflicts with {obj.descriptors}")
+        object.__setattr__(obj, "descriptors", wanted)
+    elif obj.descriptors is None:
+        object.__setattr__(obj, "descriptors", presets[default])
+
+
+def check_aspect(aspect, max_ratio: float) -> None:
+    """Raise naming ``aspect`` unless it is None or ordered L ≥ I ≥ S with L/S ≤ ``max_ratio``.
+
+    Examples
+    --------
+    >>> check_aspect((1.0, 0.5, 0.3), 100.0)
+    >>> check_aspect((1.0, 0.3, 0.5), 100.0)
+    Traceback (most recent call last):
+    ...
+    grainforge.params.ParameterError: aspect must be ordered L >= I >= S, got 1:0.3:0.5
+    """
+    if aspect is None:
+        return
+    L, I, S = aspect
+    if not L >= I >= S:
+        raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
+    if L > max_ratio * S:  # e.g. S = 5e-324 overflowed the stretching (found by the sweep)
+        raise ParameterError("aspect", f"L/S must be at most {max_ratio:g}, got {L:g}:{I:g}:{S:g}")
+
+
 def as_dict(obj: Any) -> dict[str, Any]:
     """The declared parameters of ``obj`` as a plain ``{name: value}`` dict."""
     return {s.name: getattr(obj, s.name) for s in specs(obj)}

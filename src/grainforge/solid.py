@@ -312,7 +312,7 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
 
 
 def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bool = True,
-                   star_centre=None) -> list[str]:
+                   star_centre=None, merged: bool = False) -> list[str]:
     """What stops the mesh, as a reader sees it, from being a valid solid (empty list if nothing).
 
     Parameters
@@ -327,6 +327,11 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
         proves one body, no pinched vertex, positive volume and no
         self-intersection, so those checks are skipped.  If it does not hold,
         every check runs.  The answer is the same either way, only faster.
+    merged : bool
+        The caller promises the vertices are already as a reader sees them:
+        distinct positions (as :func:`split_bodies` returns them).  If they
+        also hold float32 values exactly, the float32 rounding and merge is
+        skipped (same answer, faster); otherwise the flag is ignored.
 
     Examples
     --------
@@ -355,7 +360,10 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
         v32 = vertices.astype(np.float32)
     if not np.isfinite(v32).all():
         return ["coordinates beyond the float32 range"]
-    v, f = as_written(vertices, faces)
+    if merged and np.array_equal(v32, vertices):  # already float32 and merged: as written as is
+        v, f = vertices, faces
+    else:
+        v, f = as_written(vertices, faces)
     collapsed = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
     if collapsed.any():
         problems.append(f"{int(collapsed.sum())} faces collapse when written (float32, vertices merged)")

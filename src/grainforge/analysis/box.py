@@ -107,9 +107,9 @@ def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     the rectangle's first side in that candidate's plane basis)."""
     B = len(n)
     height = np.ptp(X @ n.T, axis=0)  # (B,)
-    side = (n @ fn.T) > -1e-10  # (B, F): face turned towards n (or edge-on)
-    # silhouette edges, grouped by candidate
-    k, e_idx = np.nonzero(side[:, edge_faces[:, 0]] != side[:, edge_faces[:, 1]])
+    side = (fn @ n.T) > -1e-10  # (F, B): face turned towards n (or edge-on)
+    # silhouette edges, grouped by candidate (rows gathered per edge: contiguous, faster than columns)
+    k, e_idx = np.nonzero((side[edge_faces[:, 0]] != side[edge_faces[:, 1]]).T)
     a, b = _plane_bases(n)
     Y = (X - centre) @ np.concatenate([a, b]).T  # (H, 2B): every hull vertex in every plane
     ends = edges[e_idx]

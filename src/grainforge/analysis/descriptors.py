@@ -116,6 +116,7 @@ def _basic(v: np.ndarray, mp: dict, hull) -> dict[str, float]:
 
 def describe(
     obj, *, fractal: bool = True, fourier: bool = True, primary_volume: float | None = None,
+    closed: bool | None = None,
 ) -> dict[str, float]:
     """Every descriptor of one body (ALGORITHMS.md §4).
 
@@ -135,6 +136,9 @@ def describe(
         the mean edge of the minimum-volume box and a = V_p^(1/3) the primary
         size (ALGORITHMS.md §3, the convention of
         ``grainforge.analysis.aggregate``).  NaN when V ≤ V_p or Ā ≤ a.
+    closed : bool, optional
+        Whether the body is closed (:func:`is_closed`), if the caller already
+        knows; found here otherwise.
 
     Returns
     -------
@@ -159,7 +163,8 @@ def describe(
     v, f = _arrays(obj)
     if len(f) == 0:
         raise ValueError("the mesh holds no triangles")
-    closed = is_closed(f, len(v))
+    if closed is None:
+        closed = is_closed(f, len(v))
     mp = mass_properties(v, f)
     hull = _hull(v)
     out: dict[str, float] = _basic(v, mp, hull)

@@ -141,8 +141,7 @@ def variogram(u: np.ndarray, h: np.ndarray, bins: np.ndarray, *, neighbours: int
     h = np.asarray(h, dtype=np.float64)
     n = len(u)
     k = min(neighbours + 1, n)
-    _, j = cKDTree(u).query(u, k=k)
-    i = np.repeat(np.arange(n), k - 1)
+    chord, j = cKDTree(u).query(u, k=k)
     j = j[:, 1:].ravel()
     edges = -np.cos(bins)  # bin on −cos(separation), which increases with the separation (no arccos per pair)
     nb = len(bins) - 1
@@ -152,7 +151,10 @@ def variogram(u: np.ndarray, h: np.ndarray, bins: np.ndarray, *, neighbours: int
         good = (which >= 0) & (which < nb)
         return which[good], 0.5 * (hi[good] - hj[good]) ** 2, negdot[good]
 
-    near = binned(-np.einsum("ij,ij->i", u[i], u[j]), h[i], h[j])
+    # −cos δ of a neighbour pair from the tree's chord c between unit vectors: c² = 2 − 2 cos δ
+    # (equal to −u_i·u_j to ~1e-16, without gathering both ends of 16 V pairs)
+    c = chord[:, 1:].ravel()
+    near = binned(0.5 * c * c - 1.0, np.repeat(h, k - 1), h[j])
     # all pairs a < b of the subset, of which only those closer than the last bin edge can count: found
     # with a k-d tree (radius with a margin), then binned with the same arithmetic as every other pair,
     # in the order a pass over all pairs (row-major a < b) would meet them

@@ -60,12 +60,14 @@ def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
     return bodies
 
 
-def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[str, Any]:
+def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = False, **options) -> dict[str, Any]:
     """Describe one body and flag what limits the result.
 
     ``atlas`` (``{"voxel_size": h}`` or ``{"voxels_across": n}``) adds the
     Sand-Atlas voxel descriptors (:func:`~grainforge.analysis.atlas.atlas_descriptors`)
     as ``atlas_*`` columns; they are NaN for a body that is not closed.
+    ``merged``: the vertices are distinct positions (a body of :func:`read_bodies`),
+    which spares the solid check its own merge (see :func:`grainforge.solid.solid_problems`).
 
     Flags (space separated): ``open`` (not closed or not consistently
     oriented: volume-based values are approximate), ``inverted`` (closed
@@ -83,7 +85,8 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     flags = []
-    if not is_closed(f, len(v)):
+    closed = is_closed(f, len(v))
+    if not closed:
         flags.append("open")
     elif signed_volume(v, f) < 0:
         f = f[:, ::-1]
@@ -91,10 +94,10 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, **options) -> dict[
     # fails the solid contract as written (grainforge check says why).  A grain star-shaped about its
     # volume centroid is proven free of self-intersections in O(F) (solid.star_certificate); others
     # get the pairwise test.  The flag is the same either way.
-    if "open" not in flags and solid_problems(v, f, star_centre=volume_centroid(v, f)):
+    if "open" not in flags and solid_problems(v, f, star_centre=volume_centroid(v, f), merged=merged):
         flags.append("not-solid")
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
-    row.update(describe(SimpleNamespace(vertices=v, faces=f), **options))  # describe() reads .vertices and .faces
+    row.update(describe(SimpleNamespace(vertices=v, faces=f), closed=closed, **options))  # describe() reads .vertices and .faces
     if atlas is not None:
         from .atlas import ATLAS_COLUMNS, atlas_descriptors
 
@@ -124,7 +127,7 @@ def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
     rows = []
     for k, (v, f) in enumerate(bodies):
         row: dict[str, Any] = {"file": str(path), "body": k, "bodies": len(bodies)}
-        row.update(analyse_mesh(v, f, **options))
+        row.update(analyse_mesh(v, f, merged=True, **options))
         if len(bodies) > 1:
             row["flags"] = " ".join(x for x in ("multi-body", row["flags"]) if x)
         rows.append(row)

@@ -37,7 +37,7 @@ from ..contours import (
     descriptors_of_radii,
 )
 from ..geodesic import icosphere
-from ..params import ParameterError, param, validate
+from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
 from ..spectra import extend_spectrum, read_spectra
 
 __all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
@@ -174,31 +174,14 @@ class Params:
         source = source or "fourier"
         object.__setattr__(self, "contour", source)
 
-        for name, n in (("descriptors", 3), ("descriptors_xz", 3), ("descriptors_yz", 3), ("decay", 2),
-                        ("aspect", 3)):
-            value = getattr(self, name)
-            if value is not None and len(value) != n:
-                raise ParameterError(name, f"must be {n} comma-separated numbers, got {value!r}")
+        check_lengths(self, {"descriptors": 3, "descriptors_xz": 3, "descriptors_yz": 3, "decay": 2, "aspect": 3})
         if source == "fourier":
-            if self.preset is not None:
-                wanted = PRESETS[self.preset]
-                if self.descriptors is not None and not np.allclose(self.descriptors, wanted):
-                    raise ParameterError(
-                        "preset", f"{self.preset} means descriptors {wanted}, which conflicts with {self.descriptors}"
-                    )
-                object.__setattr__(self, "descriptors", wanted)
-            elif self.descriptors is None:
-                object.__setattr__(self, "descriptors", PRESETS[DEFAULT_PRESET])
+            resolve_descriptors(self, PRESETS, DEFAULT_PRESET)
         else:
             for name in ("preset", "descriptors", "descriptors_xz", "descriptors_yz"):
                 if getattr(self, name) is not None:
                     raise ParameterError(name, f"applies to Fourier-descriptor contours, not contour={source!r}")
-        if self.aspect is not None:
-            L, I, S = self.aspect
-            if not L >= I >= S:
-                raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
-            if L > MAX_ASPECT_RATIO * S:  # e.g. S = 5e-324 overflowed the stretching (found by the sweep)
-                raise ParameterError("aspect", f"L/S must be at most {MAX_ASPECT_RATIO:g}, got {L:g}:{I:g}:{S:g}")
+        check_aspect(self.aspect, MAX_ASPECT_RATIO)
 
 
 # ------------------------------------------------------------------ geometry

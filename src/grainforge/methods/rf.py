@@ -27,6 +27,20 @@ cannot be carried by any isotropic field (the exact solution would need a
 negative C_l — e.g. a large D8 over a zero D3…D7), the closest non-negative
 C_l in relative terms is used (NNLS) and the misfit is recorded
 (``spectrum_misfit``).
+
+**Fixed amplitudes** (the default, ``amplitudes="fixed"``; Angulo & Pontzen
+2016): the a_lm of each degree are drawn as above and then scaled together
+so that the grain's own power in that degree, Σ_m a_lm², equals its
+expected value (2l + 1) C_l exactly; the direction of the coefficient
+vector of each degree stays uniformly random, so the field is still
+isotropic, but a grain no longer varies in how much relief it has at each
+scale — only in where and how it is oriented.  E|c_n|² is unchanged; the
+ratio E|c_n|/(E|c_n|²)^½ is no longer the Rayleigh value √π/2 but a
+number κ_n (up to 4 % larger at n = 2) computed exactly from the
+characteristic function of c_n (:func:`mean_modulus_factor`), and the
+system above becomes Σ_{l≥n} C_l P̄_ln(0)² = D_n²/(4κ_n²), solved by a
+fixed-point iteration on κ (:func:`angular_spectrum`).
+``amplitudes="gaussian"`` keeps the independent Gaussian a_lm.
 """
 
 from __future__ import annotations
@@ -40,11 +54,11 @@ import numpy as np
 from ..contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
 from ..geodesic import icosphere
 from ..harmonics import degree_order, icosphere_synthesis, legendre_equator
-from ..params import ParameterError, param, validate
+from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
 from ..spectra import extend_spectrum, read_spectra
 
 __all__ = ["Params", "build", "rf", "angular_spectrum", "section_spectrum", "target_spectrum", "coefficients", "field",
-           "centred_section_spectrum", "centring_shift"]
+           "centred_section_spectrum", "centring_shift", "mean_modulus_factor", "AMPLITUDES"]
 
 NAME = "rf"
 VALIDITY_PARAMETER = "descriptors"
@@ -56,6 +70,9 @@ DEFAULT_PRESET = "rough-angular"
 MIN_RADIUS = 0.05
 #: largest L/S of a requested aspect
 MAX_ASPECT = 50.0
+#: how the coefficients of a degree are drawn: "fixed" (each degree carries exactly its expected
+#: power, random orientation; Angulo & Pontzen 2016) or "gaussian" (independent N(0, C_l))
+AMPLITUDES = ("fixed", "gaussian")
 #: icosphere level on which the extents are measured for a requested aspect
 ASPECT_REFERENCE_SUBDIVISIONS = 5
 #: generation outputs recorded in manifests: the measured grain whose spectrum
@@ -94,33 +111,23 @@ class Params:
         kind="floats", low=0.0, low_open=True, high=100.0, shown_default="isotropic",
     )
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
+    amplitudes: str = param(
+        "fixed", "fixed: every degree l of each grain carries exactly its power (2l+1)C_l in a random "
+        "orientation (Angulo & Pontzen 2016); gaussian: independent a_lm ~ N(0, C_l)",
+        kind="str", choices=AMPLITUDES,
+    )
 
     def __post_init__(self):
         validate(self)
-        for name, n in (("descriptors", 3), ("decay", 2), ("aspect", 3)):
-            value = getattr(self, name)
-            if value is not None and len(value) != n:
-                raise ParameterError(name, f"must be {n} comma-separated numbers, got {value!r}")
+        check_lengths(self, {"descriptors": 3, "decay": 2, "aspect": 3})
         if self.spectrum is not None:
             for name in ("preset", "descriptors"):
                 if getattr(self, name) is not None:
                     raise ParameterError(name, "cannot be combined with spectrum: give one of them")
             read_spectra(self.spectrum)  # fail early on a missing or malformed table
-        elif self.preset is not None:
-            wanted = PRESETS[self.preset]
-            if self.descriptors is not None and not np.allclose(self.descriptors, wanted):
-                raise ParameterError(
-                    "preset", f"{self.preset} means descriptors {wanted}, which conflicts with {self.descriptors}"
-                )
-            object.__setattr__(self, "descriptors", wanted)
-        elif self.descriptors is None:
-            object.__setattr__(self, "descriptors", PRESETS[DEFAULT_PRESET])
-        if self.aspect is not None:
-            L, I, S = self.aspect
-            if not L >= I >= S:
-                raise ParameterError("aspect", f"must be ordered L >= I >= S, got {L:g}:{I:g}:{S:g}")
-            if L > MAX_ASPECT * S:
-                raise ParameterError("aspect", f"L/S must be at most {MAX_ASPECT:g}, got {L:g}:{I:g}:{S:g}")
+        else:
+            resolve_descriptors(self, PRESETS, DEFAULT_PRESET)
+        check_aspect(self.aspect, MAX_ASPECT)
 
 
 # ------------------------------------------------------------------ spectra
@@ -133,10 +140,71 @@ def _transfer(degree: int) -> np.ndarray:
     return M
 
 
-def section_spectrum(C: np.ndarray) -> np.ndarray:
+#: E|Z|/(E|Z|²)^½ of a circular complex Gaussian Z (the Rayleigh mean)
+RAYLEIGH = float(np.sqrt(np.pi) / 2.0)
+#: Gauss–Legendre nodes and the upper limit (in units of 1/RMS) of the integral of mean_modulus_factor
+_KAPPA_NODES, _KAPPA_LIMIT = 64, 30.0
+
+
+def _check_amplitudes(amplitudes: str) -> None:
+    if amplitudes not in AMPLITUDES:
+        raise ValueError(f"amplitudes must be one of {AMPLITUDES}, got {amplitudes!r}")
+
+
+def mean_modulus_factor(C: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
+    """κ_n = E|c_n| / (E|c_n|²)^½ of the order-n coefficient of a central section, n = 0…L.
+
+    With Gaussian a_lm every κ_n is √π/2 (Rayleigh).  With fixed amplitudes
+    the degree-l coefficient vector is a_l = ((2l + 1) C_l)^½ u_l, u_l uniform
+    on the unit sphere of R^(2l+1), and
+
+        c_n = Σ_l (v_l (2l + 1)/2)^½ z_l,   v_l = C_l P̄_ln(0)²,
+
+    with z_l the projection of u_l on two coordinates.  z_l is isotropic in
+    the plane, with characteristic function ₀F₁(; l + ½; −k²/4), so c_n has
+    φ(k) = Π_l ₀F₁(; l + ½; −k² v_l (2l + 1)/8), and for any isotropic 2D
+    variable E|c| = ∫₀^∞ (1 − φ(k)) k⁻² dk (Gaussian φ = e^{−σ²k²/4} gives
+    σ√π/2).  The integral is taken with 64 Gauss–Legendre nodes on
+    [0, 30/σ] plus the tail σ/30 (relative error below 10⁻¹⁰ against 4,000
+    nodes on [0, 200/σ]).  Orders without power get √π/2.
+
+    Examples
+    --------
+    >>> C = np.zeros(9); C[2] = 1.0  # one degree: c_2 is the 2D projection of a uniform 5-vector
+    >>> round(float(mean_modulus_factor(C)[2]), 6)  # E√B/√(E B), B ~ Beta(1, 3/2): (3π/16)/√(2/5)
+    0.931367
+    >>> float(mean_modulus_factor(C, "gaussian")[2]) == RAYLEIGH
+    True
+    """
+    _check_amplitudes(amplitudes)
+    C = np.asarray(C, dtype=np.float64)
+    L = len(C) - 1
+    out = np.full(L + 1, RAYLEIGH)
+    if amplitudes == "gaussian":
+        return out
+    from scipy.special import hyp0f1
+
+    x, w = np.polynomial.legendre.leggauss(_KAPPA_NODES)
+    t = (x + 1.0) * (_KAPPA_LIMIT / 2.0)
+    w = w * (_KAPPA_LIMIT / 2.0)
+    V = _transfer(L) * C[None, :]  # V[n, l] = C_l P̄_ln(0)²
+    degrees = np.arange(L + 1)
+    for n in range(1, L + 1):
+        v = V[n]
+        ls = np.flatnonzero(v > 0.0)
+        if len(ls) == 0:
+            continue
+        q = v[ls] / v[ls].sum() * (2 * degrees[ls] + 1) / 8.0  # k in units of 1/σ
+        phi = np.prod(hyp0f1(degrees[ls, None] + 0.5, -q[:, None] * t[None, :] ** 2), axis=0)
+        out[n] = float(np.sum(w * (1.0 - phi) / t**2) + 1.0 / _KAPPA_LIMIT)
+    return out
+
+
+def section_spectrum(C: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
     """Expected mean descriptor E[D_n] of a central section of the field with spectrum C_l.
 
-    E[D_n] = √(π Σ_{l≥n} C_l P̄_ln(0)²) (to first order in f: c_0 ≈ r0).
+    E[D_n] = 2κ_n (Σ_{l≥n} C_l P̄_ln(0)²)^½ (to first order in f: c_0 ≈ r0),
+    κ_n from :func:`mean_modulus_factor` (√π/2 for Gaussian amplitudes).
 
     Examples
     --------
@@ -145,23 +213,54 @@ def section_spectrum(C: np.ndarray) -> np.ndarray:
     [0.15, 0.1, 0.03]
     """
     C = np.asarray(C, dtype=np.float64)
-    return np.sqrt(np.pi * (_transfer(len(C) - 1) @ C))
+    return 2.0 * mean_modulus_factor(C, amplitudes) * np.sqrt(_transfer(len(C) - 1) @ C)
 
 
-def angular_spectrum(D: np.ndarray) -> np.ndarray:
+def _back_substitute(T: np.ndarray) -> np.ndarray:
+    """Non-negative C_l with Σ_{l≥n} C_l P̄_ln(0)² = T_n from n = L down (C_n = 0 where it cannot be met)."""
+    L = len(T) - 1
+    M = _transfer(L)
+    C = np.zeros(L + 1)
+    for n in range(L, 1, -1):
+        rest = float(M[n, n + 2 :: 2] @ C[n + 2 :: 2])
+        C[n] = max(0.0, (T[n] - rest) / M[n, n])
+    return C
+
+
+@lru_cache(maxsize=4096)
+def _angular_spectrum_cached(key: bytes, amplitudes: str) -> np.ndarray:
+    D = np.frombuffer(key, dtype=np.float64)
+    kappa = np.full(len(D), RAYLEIGH)
+    C = _back_substitute(D**2 / (4.0 * kappa**2))
+    if amplitudes == "fixed":
+        for _ in range(20):  # κ depends weakly on C: stationary to 1e-10 in ~5 steps
+            new = mean_modulus_factor(C, "fixed")
+            C = _back_substitute(D**2 / (4.0 * new**2))
+            if np.max(np.abs(new - kappa)) < 1e-10:
+                break
+            kappa = new
+    C.setflags(write=False)
+    return C
+
+
+def angular_spectrum(D: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
     """C_l (l = 0…L, L = len(D) − 1) whose central sections have mean descriptors D_n, n = 2…L.
 
-    Solves Σ_{l≥n} C_l P̄_ln(0)² = D_n²/π by back-substitution from n = L
-    downwards; C_0 = C_1 = 0.  Where the target D_n is smaller than what the
-    higher degrees already put into order n (no isotropic field can then
-    carry the spectrum: e.g. D2…D7 = 0 under D8 > 0), C_n is set to 0, so the
-    expected D_n is the smallest possible, above the target; all orders whose
-    targets can be met are met exactly.
+    Solves Σ_{l≥n} C_l P̄_ln(0)² = D_n²/(4κ_n²) by back-substitution from
+    n = L downwards; C_0 = C_1 = 0.  κ_n = √π/2 for Gaussian amplitudes;
+    for fixed amplitudes κ_n depends on C itself (:func:`mean_modulus_factor`)
+    and the solve is repeated until κ is stationary.  Where the target D_n is
+    smaller than what the higher degrees already put into order n (no
+    isotropic field can then carry the spectrum: e.g. D2…D7 = 0 under
+    D8 > 0), C_n is set to 0, so the expected D_n is the smallest possible,
+    above the target; all orders whose targets can be met are met exactly.
+    Cached per (D, amplitudes).
 
     Parameters
     ----------
     D : (L + 1,) float64
         Target mean descriptors D_0…D_L (D_0, D_1 ignored).
+    amplitudes : {"fixed", "gaussian"}
 
     Examples
     --------
@@ -172,15 +271,9 @@ def angular_spectrum(D: np.ndarray) -> np.ndarray:
     >>> np.round(section_spectrum(C)[[2, 3, 8, 9]], 4).tolist()
     [0.0141, 0.0116, 0.02, 0.0164]
     """
-    D = np.asarray(D, dtype=np.float64)
-    L = len(D) - 1
-    M = _transfer(L)
-    T = D**2 / np.pi
-    C = np.zeros(L + 1)
-    for n in range(L, 1, -1):
-        rest = float(M[n, n + 2 :: 2] @ C[n + 2 :: 2])
-        C[n] = max(0.0, (T[n] - rest) / M[n, n])
-    return C
+    _check_amplitudes(amplitudes)
+    D = np.ascontiguousarray(D, dtype=np.float64)
+    return _angular_spectrum_cached(D.tobytes(), amplitudes).copy()
 
 
 def _centring_matrix(L: int, s2: float) -> np.ndarray:
@@ -202,7 +295,7 @@ def centring_shift(C: np.ndarray) -> float:
     return float(4.0 * (_transfer(len(C) - 1)[1] @ C))
 
 
-def centred_section_spectrum(C: np.ndarray) -> np.ndarray:
+def centred_section_spectrum(C: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
     """Expected mean descriptor E[D_n] of a central section measured about its *area centroid*.
 
     Rays from the area centroid instead of the field's origin see each
@@ -215,7 +308,8 @@ def centred_section_spectrum(C: np.ndarray) -> np.ndarray:
 
         P'_n = P_n (1 − n²σ²/2) + σ²/4 · ((n−1)² P_{n−1} + (n+1)² P_{n+1}),
 
-    and E[D_n] = √(π P'_n).  This is what ``grainforge fourier`` and
+    and E[D_n] = 2κ_n √P'_n (κ_n of the field's own section,
+    :func:`mean_modulus_factor`; √π/2 for Gaussian amplitudes).  This is what ``grainforge fourier`` and
     ``analysis.sections`` measure (rays from the area centroid).  A model
     for explaining measurements, not used to make grains: it is the
     leading order in n²σ² (σ² ≈ 0.008 for ``rough-angular``, so good to
@@ -232,10 +326,10 @@ def centred_section_spectrum(C: np.ndarray) -> np.ndarray:
     True
     """
     C = np.asarray(C, dtype=np.float64)
-    P = section_spectrum(C) ** 2 / np.pi
+    P = _transfer(len(C) - 1) @ C
     out = np.zeros_like(P)
     out[2:] = _centring_matrix(len(C) - 1, centring_shift(C)) @ P[2:]
-    return np.sqrt(np.pi * np.maximum(out, 0.0))
+    return 2.0 * mean_modulus_factor(C, amplitudes) * np.sqrt(np.maximum(out, 0.0))
 
 
 def target_spectrum(p: Params, rng: np.random.Generator) -> tuple[np.ndarray, int | None]:
@@ -253,11 +347,31 @@ def target_spectrum(p: Params, rng: np.random.Generator) -> tuple[np.ndarray, in
         raise ParameterError("descriptors", exc.reason) from None
 
 
-def coefficients(C: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """a_lm = √C_l · N(0, 1), drawn in the order (l, m), l = 2…L, m = −l…l."""
+def coefficients(C: np.ndarray, rng: np.random.Generator, amplitudes: str = "fixed") -> np.ndarray:
+    """The a_lm in the order (l, m), l = 2…L, m = −l…l, from one standard-normal draw per coefficient.
+
+    Gaussian: a_lm = √C_l · g_lm.  Fixed: the draws g_l of each degree are
+    scaled to a vector of length √((2l + 1) C_l), so Σ_m a_lm² = (2l + 1) C_l
+    exactly and the direction is uniform (the same draws, the same order:
+    the two differ only by one factor per degree).
+
+    Examples
+    --------
+    >>> C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=16))
+    >>> a = coefficients(C, np.random.default_rng(0))
+    >>> l, _ = degree_order(16, 2)
+    >>> bool(np.allclose(np.bincount(l, weights=a**2)[2:], (2 * np.arange(2, 17) + 1) * C[2:]))
+    True
+    """
+    _check_amplitudes(amplitudes)
     C = np.asarray(C, dtype=np.float64)
     l, _ = degree_order(len(C) - 1, 2)
-    return rng.standard_normal(len(l)) * np.sqrt(C[l])
+    g = rng.standard_normal(len(l))
+    if amplitudes == "gaussian":
+        return g * np.sqrt(C[l])
+    norm2 = np.bincount(l, weights=g * g, minlength=len(C))
+    scale = np.sqrt((2 * np.arange(len(C)) + 1) * C / np.where(norm2 > 0.0, norm2, 1.0))
+    return g * scale[l]
 
 
 def field(a: np.ndarray, degree: int, subdivisions: int) -> np.ndarray:
@@ -265,19 +379,26 @@ def field(a: np.ndarray, degree: int, subdivisions: int) -> np.ndarray:
     return icosphere_synthesis(subdivisions, degree, 2)(a)
 
 
-def _misfit(C: np.ndarray, D: np.ndarray) -> float:
+def _misfit(C: np.ndarray, D: np.ndarray, amplitudes: str) -> float:
     want = D[2:]
-    got = section_spectrum(C)[2:]
+    got = section_spectrum(C, amplitudes)[2:]
     ok = want > 1e-9
     return float(np.max(np.abs(got[ok] / want[ok] - 1.0))) if ok.any() else 0.0
+
+
+@lru_cache(maxsize=4096)
+def _solve(key: bytes, amplitudes: str) -> tuple[np.ndarray, float]:
+    """C_l and its misfit for the target spectrum D (as bytes), cached: the κ_n solve takes ~30 ms."""
+    C = _angular_spectrum_cached(key, amplitudes)
+    return C, _misfit(C, np.frombuffer(key, dtype=np.float64), amplitudes)
 
 
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one rf grain (r0 = 1, not yet centred)."""
     D, row = target_spectrum(p, rng)
-    C = angular_spectrum(D)
+    C, misfit = _solve(np.ascontiguousarray(D, dtype=np.float64).tobytes(), p.amplitudes)
     unit, faces = icosphere(p.subdivisions)
-    a = coefficients(C, rng)
+    a = coefficients(C, rng, p.amplitudes)
     f = field(a, p.degree, p.subdivisions)
     R = 1.0 + f
     rmin = float(R.min())
@@ -310,7 +431,7 @@ def build(p: Params, rng: np.random.Generator):
         "spectrum_row": row,
         "spectrum_grain": None if row is None else read_spectra(p.spectrum).labels[row],
         "field_rms": float(np.sqrt(np.sum(C * (2 * np.arange(len(C)) + 1)) / (4 * np.pi))),
-        "spectrum_misfit": _misfit(C, D),
+        "spectrum_misfit": misfit,
         "axis_scale": scale,
         "min_radius": rmin,
         "max_radius": float(R.max()),
@@ -327,6 +448,7 @@ def rf(
     degree: int = 32,
     aspect: Sequence[float] | None = None,
     subdivisions: int = 5,
+    amplitudes: str = "fixed",
     rng: Any = None,
 ):
     """Generate one grain whose radius is an isotropic Gaussian random field (Mollon & Zhao 2014 style).
@@ -349,6 +471,10 @@ def rf(
         Stretch x, y, z so that the extents are in this ratio.
     subdivisions : int
         Icosphere level 0–8 (default 5: 10,242 vertices).
+    amplitudes : {"fixed", "gaussian"}
+        "fixed" (default): each degree of the grain carries exactly its
+        expected power, in a random orientation; "gaussian": independent
+        Gaussian coefficients (the grain's power per degree varies too).
     rng : None, int or numpy.random.Generator
 
     Returns
@@ -374,6 +500,6 @@ def rf(
     p = Params(
         preset=preset, descriptors=None if descriptors is None else tuple(descriptors), spectrum=spectrum,
         decay=tuple(decay), degree=degree, aspect=None if aspect is None else tuple(aspect),
-        subdivisions=subdivisions,
+        subdivisions=subdivisions, amplitudes=amplitudes,
     )
     return generate(NAME, p, rng)
