@@ -281,3 +281,30 @@ def test_dem_cli_lammps_polyhedron_files(grain_files, tmp_path):
     assert r.exit_code == 2 and "--vertices" in r.output and not bad.exists()
     f, e = hull_topology(trimesh.creation.icosphere(1).vertices)
     assert (len(f), len(e)) == (80, 120)
+
+
+def test_dem_cli_clump_refinement(tmp_path):
+    """--refine-iterations: more coverage than the greedy clump on every grain, and the same
+    bytes for one worker or two (4 grains, so that two workers are used)."""
+    src = tmp_path / "grains"
+    src.mkdir()
+    for i, method in enumerate(["fso", "cri", "dpa", "fso"]):
+        grainforge.io.write_mesh(getattr(grainforge, method)(rng=10 + i).scaled(4.0), src / f"{method}-{i:04d}.stl")
+
+    def deck(name, *extra):
+        out = tmp_path / name
+        r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(out), "--engine", "liggghts",
+                                     "--spheres", "10", *extra])
+        assert r.exit_code == 0, r.output
+        return out, {g["name"]: g for g in json.loads((out / "grains.json").read_text())["grains"]}
+
+    _, greedy = deck("greedy", "--workers", "1")
+    one, refined = deck("refined1", "--refine-iterations", "30", "--workers", "1")
+    two, _ = deck("refined2", "--refine-iterations", "30", "--workers", "2")
+    for name, g in refined.items():
+        assert g["spheres"] == greedy[name]["spheres"] == 10
+        assert g["coverage"] > greedy[name]["coverage"] + 0.005, (name, g["coverage"], greedy[name]["coverage"])
+        assert g["spill"] < 0.05
+    assert {p.name: p.read_bytes() for p in one.iterdir()} == {p.name: p.read_bytes() for p in two.iterdir()}
+    r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(tmp_path / "bad"), "--refine-iterations", "-1"])
+    assert r.exit_code == 2 and "--refine-iterations" in r.output and not (tmp_path / "bad").exists()
