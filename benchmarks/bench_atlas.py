@@ -3,7 +3,7 @@
 One process, BLAS single-threaded (as in a worker).  Prints best and median
 wall clock and CPU time (time.process_time, all threads) per stage and in
 total (stages: scanline voxelising, lattice hull count, Gaussian filter +
-marching cubes on the grain's box + 1 voxel), for a CRI grain (20,480 faces) and a
+marching-cubes area (``_mc_area``) on the grain's box + 1 voxel), for a CRI grain (20,480 faces) and a
 sphere, at 30, 60 and 69 voxels across.  Usage:
 ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_atlas.py [--repeat N]``.
 """
@@ -34,10 +34,9 @@ def main():
     args = ap.parse_args()
     import trimesh
     from scipy import ndimage
-    from skimage.measure import marching_cubes
 
     import grainforge
-    from grainforge.analysis.atlas import _hull_count, atlas_descriptors, random_rotation, voxelise
+    from grainforge.analysis.atlas import _hull_count, _mc_area, atlas_descriptors, random_rotation, voxelise
     from grainforge.methods import get
     from grainforge.solid import signed_volume
 
@@ -62,7 +61,7 @@ def main():
 
             def sph():
                 s = ndimage.gaussian_filter(sub, 0.75, mode="constant", truncate=4.0)
-                marching_cubes(s, 0.5)
+                _mc_area(s, 0.5)
 
             mc = timed(sph, args.repeat)
             print(f"| {label} | {n} | {tot[0]:.1f} / {tot[1]:.1f} ({tot[2]:.1f} / {tot[3]:.1f}) "
