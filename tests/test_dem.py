@@ -221,3 +221,90 @@ def test_dem_cli_yade_polyhedron_and_levelset_files(grain_files, tmp_path):
                 sd = -trimesh.proximity.signed_distance(m, local @ R.T)  # trimesh: positive inside
                 assert np.allclose(dist[tuple(idx.T)], sd, atol=1e-9)
                 assert dist[tuple(idx[0])] < 0 < dist[0, 0, 0]
+
+
+def test_dem_cli_lammps_polyhedron_files(grain_files, tmp_path):
+    """The LAMMPS body deck: data.bodies holds each grain's mesh mass and rotated inertia (units
+    micro), its hull vertices (on the mesh) with outward triangles and the hull's edges; the
+    per-body line limits of read_data hold; the same input gives the same bytes."""
+    from grainforge.dem.lammps import rotation_matrix
+    from grainforge.dem.lammps_body import MICRO, hull_topology
+
+    out = tmp_path / "deck"
+    args = ["dem", str(grain_files), "--out", str(out), "--engine", "lammps", "--shape", "polyhedron",
+            "--workers", "1"]
+    r = CliRunner().invoke(cli, args)
+    assert r.exit_code == 0, r.output
+    deck = json.loads((out / "grains.json").read_text())
+    lines = (out / "data.bodies").read_text().splitlines()
+    start = lines.index("Bodies") + 2
+    tokens = " ".join(lines[start:]).split()
+    body_line_counts, k, i = [], 0, start
+    for p in deck["placements"]:
+        g = deck["grains"][p["grain"]]
+        assert g["vertices"] <= 56  # the LAMMPS default
+        m = trimesh.load(grain_files / f"{g['name']}.stl")  # independent reader
+        m.apply_scale(1e-3)
+        m.apply_translation(-m.center_mass)
+        bid, ni, nd = (int(x) for x in tokens[k:k + 3])
+        nv, ne, nf = (int(x) for x in tokens[k + 3:k + 6])
+        d = np.array([float(x) for x in tokens[k + 6:k + 6 + nd]])
+        k += 3 + ni + nd
+        assert (bid, ni, nv) == (p["id"], 3, g["vertices"]) and nd == 6 + 3 * nv + 2 * ne + 4 * nf + 1
+        R = rotation_matrix(np.array(p["axis"]), np.radians(p["theta_deg"]))
+        I = np.array([[d[0], d[3], d[4]], [d[3], d[1], d[5]], [d[4], d[5], d[2]]]) / (MICRO["mass"] * 1e12)
+        assert np.allclose(np.linalg.eigvalsh(I), 2650 * np.sort(m.principal_inertia_components), rtol=1e-9)
+        assert np.allclose(R.T @ I @ R, 2650 * m.moment_inertia, rtol=0, atol=1e-9 * np.abs(I).max())
+        local = d[6:6 + 3 * nv].reshape(nv, 3) / MICRO["length"] @ R
+        assert np.linalg.norm(local[:, None] - m.vertices[None], axis=2).min(axis=1).max() < 1e-9
+        faces = d[6 + 3 * nv + 2 * ne:6 + 3 * nv + 2 * ne + 4 * nf].reshape(nf, 4).astype(int)
+        assert (faces[:, 3] == -1).all() and ne == 3 * nv - 6 and nf == 2 * nv - 4
+        tri = trimesh.Trimesh(local, faces[:, :3], process=False)
+        assert tri.is_watertight and tri.volume > 0  # closed, outward
+        while not lines[i].startswith(f"{bid} 3 "):
+            i += 1
+        j = i + 1
+        while j < len(lines) and lines[j] and not (len(lines[j].split()) == 3 and lines[j].split()[1] == "3"
+                                                  and j > i + 1 and lines[j].split()[0] == str(bid + 1)):
+            j += 1
+        body_line_counts.append(j - i - 1)
+        assert max(len(x) for x in lines[i:j]) < 256
+        i = j
+    assert max(body_line_counts) <= 31
+    first = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert CliRunner().invoke(cli, args + ["--overwrite", "--workers", "2"]).exit_code == 0
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == first
+    # more vertices than LAMMPS reads: one line, exit 2, nothing written
+    bad = tmp_path / "bad"
+    r = CliRunner().invoke(cli, ["dem", str(grain_files), "--out", str(bad), "--engine", "lammps",
+                                 "--shape", "polyhedron", "--vertices", "80"])
+    assert r.exit_code == 2 and "--vertices" in r.output and not bad.exists()
+    f, e = hull_topology(trimesh.creation.icosphere(1).vertices)
+    assert (len(f), len(e)) == (80, 120)
+
+
+def test_dem_cli_clump_refinement(tmp_path):
+    """--refine-iterations: more coverage than the greedy clump on every grain, and the same
+    bytes for one worker or two (4 grains, so that two workers are used)."""
+    src = tmp_path / "grains"
+    src.mkdir()
+    for i, method in enumerate(["fso", "cri", "dpa", "fso"]):
+        grainforge.io.write_mesh(getattr(grainforge, method)(rng=10 + i).scaled(4.0), src / f"{method}-{i:04d}.stl")
+
+    def deck(name, *extra):
+        out = tmp_path / name
+        r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(out), "--engine", "liggghts",
+                                     "--spheres", "10", *extra])
+        assert r.exit_code == 0, r.output
+        return out, {g["name"]: g for g in json.loads((out / "grains.json").read_text())["grains"]}
+
+    _, greedy = deck("greedy", "--workers", "1")
+    one, refined = deck("refined1", "--refine-iterations", "30", "--workers", "1")
+    two, _ = deck("refined2", "--refine-iterations", "30", "--workers", "2")
+    for name, g in refined.items():
+        assert g["spheres"] == greedy[name]["spheres"] == 10
+        assert g["coverage"] > greedy[name]["coverage"] + 0.005, (name, g["coverage"], greedy[name]["coverage"])
+        assert g["spill"] < 0.05
+    assert {p.name: p.read_bytes() for p in one.iterdir()} == {p.name: p.read_bytes() for p in two.iterdir()}
+    r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(tmp_path / "bad"), "--refine-iterations", "-1"])
+    assert r.exit_code == 2 and "--refine-iterations" in r.output and not (tmp_path / "bad").exists()

@@ -240,3 +240,74 @@ def test_lammps_deck_runs(lmp, population, tmp_path):
     assert ((final[:, 2:4] > 0) & (final[:, 2:4] < w)).all() and (final[:, 4] > 0).all()
     assert 0.5 * (final[:, 1] * (final[:, 8:11] ** 2).sum(axis=1)).sum() < thr
     assert any((out / "post").glob("*.vtk"))
+
+
+def read_lammps_body_data(path):
+    """Atoms, velocities and Bodies of a LAMMPS data file of rounded/polyhedron bodies.
+
+    Returns ``{id: {"mass", "x", "v", "angmom", "inertia" (3x3, box frame), "vertices" (K, 3)}}``
+    in the file's units.
+    """
+    lines = path.read_text().splitlines()
+    heads = {l.split("#")[0].strip(): i for i, l in enumerate(lines)
+             if l.strip() and l.split("#")[0].strip() in ("Atoms", "Velocities", "Bodies")}
+    n = int(next(l.split()[0] for l in lines if l.strip().endswith(" atoms")))
+    out = {}
+    for l in lines[heads["Atoms"] + 2: heads["Atoms"] + 2 + n]:  # id type bodyflag mass x y z [images]
+        w = l.split()
+        out[int(w[0])] = {"mass": float(w[3]), "x": np.array([float(x) for x in w[4:7]])}
+    if "Velocities" in heads:
+        for l in lines[heads["Velocities"] + 2: heads["Velocities"] + 2 + n]:  # id vx vy vz lx ly lz
+            w = l.split()
+            out[int(w[0])].update(v=np.array([float(x) for x in w[1:4]]), angmom=np.array([float(x) for x in w[4:7]]))
+    tokens = " ".join(lines[heads["Bodies"] + 1:]).split()
+    k = 0
+    for _ in range(n):
+        bid, ni, nd = (int(x) for x in tokens[k:k + 3])
+        ints = [int(x) for x in tokens[k + 3:k + 3 + ni]]
+        d = np.array([float(x) for x in tokens[k + 3 + ni:k + 3 + ni + nd]])
+        k += 3 + ni + nd
+        nv = ints[0]
+        I = np.array([[d[0], d[3], d[4]], [d[3], d[1], d[5]], [d[4], d[5], d[2]]])
+        out[bid].update(inertia=I, vertices=d[6:6 + 3 * nv].reshape(nv, 3))
+    return out
+
+
+def test_lammps_polyhedron_deck_runs(lmp, population, tmp_path):
+    """LAMMPS rounded/polyhedron bodies: read back with write_data (units micro: µm, pg, µs)."""
+    from grainforge.dem.lammps import rotation_matrix
+    from grainforge.dem.lammps_body import MICRO
+
+    L, M = MICRO["length"], MICRO["mass"]
+    out, truth = make_deck(population, tmp_path, "lammps", "--shape", "polyhedron", "--vertices", "16")
+    run([lmp, "-in", "in.run"], cwd=out, timeout=1800)
+    deck = json.loads((out / "grains.json").read_text())
+    place = {p["id"]: p for p in deck["placements"]}
+    meshes = grain_frame_meshes(population)
+    initial = read_lammps_body_data(out / "data.initial")
+    assert sorted(initial) == list(range(1, 21))  # every grain inserted
+    assert sorted(p["name"] for p in place.values()) == sorted(truth)
+    for bid, b in initial.items():
+        p = place[bid]
+        mass, principal, d_eq = truth[p["name"]]
+        assert b["mass"] / M == pytest.approx(mass, rel=REL)
+        assert np.allclose(np.linalg.eigvalsh(b["inertia"]) / (M * L * L), principal, rtol=REL, atol=0)
+        assert np.allclose(b["x"] / L, p["xcm"], rtol=0, atol=REL * d_eq)
+        # the engine's hull vertices, turned back into the grain frame, lie on the mesh surface
+        R = rotation_matrix(np.array(p["axis"]), np.radians(p["theta_deg"]))
+        local = (b["vertices"] / L) @ R
+        assert len(local) == deck["grains"][p["grain"]]["vertices"] <= 16
+        sd = trimesh.proximity.signed_distance(meshes[p["name"]], local)
+        assert np.abs(sd).max() < REL * d_eq, (p["name"], np.abs(sd).max() / d_eq)
+    ke, thr = (float(v) for v in (out / "settle.txt").read_text().split()[1::2])
+    assert ke < thr
+    final = read_lammps_body_data(out / "data.final")
+    assert sorted(final) == list(range(1, 21))  # no grain lost
+    w = deck["box"][0] * L
+    x = np.array([b["x"] for b in final.values()])
+    assert ((x[:, :2] > 0) & (x[:, :2] < w)).all() and (x[:, 2] > 0).all()
+    # kinetic energy recomputed from the bodies' velocities and angular momenta (L·I⁻¹·L)
+    ke_own = sum(0.5 * b["mass"] * b["v"] @ b["v"] + 0.5 * b["angmom"] @ np.linalg.solve(b["inertia"], b["angmom"])
+                 for b in final.values())
+    assert ke_own < thr
+    assert any((out / "post").glob("*.vtk"))

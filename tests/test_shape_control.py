@@ -174,3 +174,53 @@ def test_cri_twist_reduces_the_separable_ridges():
     on_planes = (np.abs(v0) < 1e-12).any(axis=1)
     np.testing.assert_allclose(v1[on_planes], v0[on_planes], rtol=1e-12, atol=1e-12)
     assert not np.allclose(v1, v0)
+
+
+def test_cri_field_roughness_has_no_separable_ridges():
+    """--roughness field: the contours' form with an isotropic random-field roughness.  Separable share
+    over 4 grains of each preset (measured with benchmarks/validate_cri_field.py: swept 0.33-0.35, field
+    0.10-0.12, FSO 0.08-0.13): below 0.2 and below 0.6 × the swept share of the same seeds."""
+    def share(preset, **kw):
+        return np.mean([separable_share(*cri_mod.build(cri_mod.Params(preset=preset, **kw),
+                                                        np.random.default_rng(s))[:2], centre=np.zeros(3))
+                        for s in range(4)])
+
+    for preset in ("rough-sphere", "rough-angular"):
+        swept, field = share(preset), share(preset, roughness="field")
+        assert field < 0.2 and field < 0.6 * swept, (preset, swept, field)
+
+
+def test_cri_field_roughness_keeps_the_form_and_is_a_valid_solid():
+    """The form (modes 0-2 of the contours) is the swept grain's, smoothed: with the field's relief removed
+    (r / (1 + f)), the radius equals the band-limited construction exactly; the grains are valid, deterministic
+    solids; the default (swept) is not touched by the option."""
+    from grainforge.io import export_bytes
+    from grainforge.solid import solid_problems
+
+    for seed in range(2):
+        g = grainforge.cri(preset="rough-angular", roughness="field", subdivisions=4, rng=seed)
+        m = _read_back(g)
+        assert solid_problems(m.vertices, m.faces) == [] and m.is_watertight and m.volume > 0
+        assert export_bytes(g) == export_bytes(grainforge.cri(preset="rough-angular", roughness="field",
+                                                              subdivisions=4, rng=seed))
+    swept = grainforge.cri(preset="rough-angular", subdivisions=3, rng=5)
+    assert export_bytes(swept) == export_bytes(grainforge.cri(preset="rough-angular", roughness="swept",
+                                                              subdivisions=3, rng=5))
+    # the same draws: the construction is the swept grain's; the field comes after it
+    p = cri_mod.Params(preset="rough-angular", roughness="field", subdivisions=3)
+    rng = np.random.default_rng(7)
+    con = cri_mod.construct(p, rng)
+    unit, _, geom = cri_mod._sphere(3)
+    from grainforge.methods import rf
+
+    L = cri_mod.FIELD_DEGREE
+    spec = np.abs(np.fft.rfft(np.stack(con.sections), axis=1))[:, : L + 1]
+    D = (2.0 * spec / spec[:, :1]).mean(axis=0)
+    D[:3] = 0.0
+    f = rf.field(rf.coefficients(rf.angular_spectrum(D), rng), L, 3)
+    v, _, _ = cri_mod.build(p, np.random.default_rng(7))
+    form = np.linalg.norm(v, axis=1) / (1.0 + f)
+    import dataclasses
+
+    smooth = dataclasses.replace(con, sections=tuple(cri_mod._band_limit(np.stack(con.sections), 2)), twist=None)
+    np.testing.assert_allclose(form, smooth.radius(unit, geom), rtol=1e-10)

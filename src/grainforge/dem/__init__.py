@@ -12,6 +12,6 @@ __all__ = ["MassProperties", "mass_properties", "ENGINES", "SUPPORTED"]
 SUPPORTED = {
     "yade": ("clump", "polyhedron", "levelset"),
     "liggghts": ("clump",),
-    "lammps": ("clump",),
+    "lammps": ("clump", "polyhedron"),
 }
 ENGINES = tuple(SUPPORTED)

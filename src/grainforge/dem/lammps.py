@@ -221,5 +221,13 @@ shell python3 dump2vtk.py
 
 def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = None,
                overwrite: bool = False) -> list[Path]:
-    """Write a LAMMPS deck for ``templates`` into ``out`` (see the module text)."""
+    """Write a LAMMPS deck for ``templates`` into ``out`` (see the module text).
+
+    Templates of shape ``"polyhedron"`` get the rounded/polyhedron body deck of
+    :mod:`grainforge.dem.lammps_body` instead.
+    """
+    if templates and all(t.shape == "polyhedron" for t in templates):
+        from .lammps_body import write_deck as body_deck
+
+        return body_deck(templates, out, settings=settings, overwrite=overwrite)
     return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)

@@ -66,6 +66,12 @@ GRID = 2048
 PLANES = ("xy", "xz", "yz")
 #: ways of making the three contours share one L:I:S (see :func:`construct`)
 CONSISTENCY = ("spectral", "stretch")
+#: where the roughness (modes n >= 3) comes from: "swept" from the contours (the method), or "field":
+#: an isotropic random field with the contours' mean spectrum on the form the contours' modes 0-2 give
+#: (docs/methods/cri.md, "Ridge-free roughness")
+ROUGHNESS = ("swept", "field")
+#: highest harmonic degree of the "field" roughness
+FIELD_DEGREE = 32
 #: icosphere level on which the extents are measured for a requested aspect
 ASPECT_REFERENCE_SUBDIVISIONS = 5
 MEASURED = (2, 3, 8)
@@ -136,6 +142,12 @@ class Params:
         "(the 2016 reconstruction; lowers D8 by ~15 %)", kind="str", choices=CONSISTENCY,
     )
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
+    roughness: str = param(
+        "swept", "swept = every roughness mode (n >= 3) swept from the contours (the method, with its ridges); "
+        "field = the contours' form (modes 0-2) with an isotropic random-field roughness of the contours' mean "
+        "spectrum (no ridges; the sections carry the descriptors on average, not exactly)", kind="str",
+        choices=ROUGHNESS,
+    )
     #: three :class:`~grainforge.contours.Contour` (xy, xz, yz) given from Python
     sections: tuple[Contour, Contour, Contour] | None = field(default=None, compare=False, repr=False)
 
@@ -667,11 +679,40 @@ def construct(p: Params, rng: Any = None) -> Construction:
     return con
 
 
+def _field_roughness(con: Construction, unit: np.ndarray, geom: _Geometry, subdivisions: int,
+                     rng: np.random.Generator) -> np.ndarray:
+    """r = r_form (1 + f): the contours' form with an isotropic random-field roughness instead of the swept one.
+
+    r_form is the same construction from the contours' modes 0–2 only (the
+    form: elongation and the L:I:S, no roughness); f is an isotropic random
+    field (:mod:`grainforge.methods.rf`, fixed amplitudes, degrees 3…32)
+    whose central sections carry on average the three contours' mean
+    D3…D32 (D0…D2 set to 0: the form carries those).  Nothing is swept, so
+    the roughness has no ridges; the principal sections carry the contours'
+    descriptors on average over grains, no longer exactly.
+    """
+    from . import rf
+
+    L = FIELD_DEGREE
+    spec = np.abs(np.fft.rfft(np.stack(con.sections), axis=1))[:, : L + 1]
+    D = (2.0 * spec / spec[:, :1]).mean(axis=0)
+    D[:3] = 0.0
+    C = rf.angular_spectrum(D, "fixed")
+    C[:3] = 0.0
+    f = rf.field(rf.coefficients(C, rng, "fixed"), L, subdivisions)
+    form = dataclasses.replace(con, sections=tuple(_band_limit(np.stack(con.sections), 2)), twist=None,
+                               axis_scale=(1.0, 1.0, 1.0))
+    return form.radius(unit, geom) * (1.0 + f)
+
+
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one CRI grain (not yet centred)."""
     con = construct(p, rng)
     unit, faces, geom = _sphere(p.subdivisions)
-    R = con.radius(unit, geom)
+    if p.roughness == "field":
+        R = _field_roughness(con, unit, geom, p.subdivisions, rng)
+    else:
+        R = con.radius(unit, geom)
     if not np.isfinite(R).all() or R.min() <= 0:
         raise ParameterError(validity_parameter(p), "gives a surface with non-positive radii")
     vertices = unit * R[:, None]
@@ -715,6 +756,7 @@ def cri(
     ridge_twist: float = 30.0,
     consistency: str = "spectral",
     subdivisions: int = 5,
+    roughness: str = "swept",
     rng=None,
 ):
     """Generate one grain by Contour Rotation Interpolation (paper §2.2).
@@ -758,6 +800,11 @@ def cri(
         each contour's mode 2 and mean radius and keeps every other mode;
         ``stretch`` stretches each contour linearly (the earlier
         reconstruction, which lowers D8 by about 15 %).
+    roughness : {"swept", "field"}
+        ``swept`` (default): the method's roughness, swept from the contours.
+        ``field``: the contours' form (modes 0–2) with an isotropic
+        random-field roughness of the contours' mean spectrum: no ridges; the
+        principal sections carry the descriptors on average, not exactly.
     subdivisions : int
         Icosphere level 0–8 (default 5: 10,242 vertices).
     rng : None, int or numpy.random.Generator
@@ -803,6 +850,6 @@ def cri(
         fractal_amplitude=fractal_amplitude, images=images,
         spectrum=None if spectrum is None else str(spectrum), aspect=None if aspect is None else tuple(aspect),
         morph_exponent=morph_exponent, ridge_twist=ridge_twist, consistency=consistency, subdivisions=subdivisions,
-        sections=None if contours is None else tuple(contours),
+        roughness=roughness, sections=None if contours is None else tuple(contours),
     )
     return generate(NAME, p, rng)

@@ -1,0 +1,358 @@
+"""LAMMPS deck of convex polyhedra: ``atom_style body rounded/polyhedron`` with the mesh's mass properties.
+
+``write_deck(templates, out)`` writes, run from inside ``out`` with
+``lmp -in in.run``:
+
+- ``<grain>.poly``: the hull vertices (``x y z`` per line, m, centroid at the
+  origin, the grain's own orientation) and ``<grain>.hull.vtk`` (the hull as a
+  legacy-VTK polygon mesh, m);
+- ``data.bodies``: the ``read_data`` file — per body the mesh's mass at its
+  lattice position (``Atoms``) and in ``Bodies`` the inertia tensor, hull
+  vertices, edges and triangular faces, rotated into the box frame (seeded
+  random orientation), plus the rounded diameter;
+- ``in.run``: the example pour — ``pair_style body/rounded/polyhedron``,
+  ``fix wall/body/polyhedron`` floor and side walls, ``fix gravity``,
+  ``fix nve/body``, a settle loop on translational + rotational kinetic energy,
+  the engine's own state written back (``data.initial``, ``data.final``,
+  ``settle.txt``) and vertex dumps in ``post/`` converted to VTK by
+  ``dump2vtk.py`` (run by ``in.run`` through ``shell``).
+
+Units: the deck runs in LAMMPS ``units micro`` (µm, pg, µs; force nN, energy
+10⁻¹⁵ J). The BODY package's contact code compares lengths with absolute
+tolerances of 10⁻³ (in the input's length unit): in SI that is 1 mm, larger
+than the contacts of millimetre grains, and contacts would be missed. In µm it
+is 1 nm. ``grains.json`` keeps SI values and states the conversion.
+
+LAMMPS's ``read_data`` reads at most 32 lines of at most 255 characters per
+body (``MAXBODY``/``MAXLINE``); a hull that does not fit raises ``ValueError``
+(use fewer ``--vertices``: 56 always fits).
+"""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Sequence
+
+import numpy as np
+
+from .deck import fmt, json_text, settle_loop, template_record, updated_settings, write_files
+
+__all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
+           "MAX_VERTICES"]
+
+#: SI value × factor = LAMMPS ``units micro`` value
+MICRO = {"length": 1e6, "mass": 1e15, "time": 1e6, "velocity": 1.0, "force": 1e9,
+         "energy": 1e15, "inertia": 1e27, "acceleration": 1e-6, "stiffness": 1e3, "damping": 1e9}
+
+#: Boltzmann's constant in LAMMPS units micro (pg µm² µs⁻² K⁻¹), as LAMMPS defines it
+BOLTZ_MICRO = 1.3806504e-8
+
+#: hull vertices that always fit read_data's per-body limits (see :func:`body_lines`)
+MAX_VERTICES = 56
+
+# read_data: lines of one body (integer + double lines) ≤ MAXBODY − 1 = 31; a line < MAXLINE = 256 chars
+_MAX_BODY_LINES = 31
+_MAX_LINE = 250
+
+DUMP2VTK = r'''"""Convert LAMMPS vertex dumps post/vertices.*.dump (compute body/local: id x y z per hull vertex,
+in the order of data.bodies, um) to legacy-VTK polygon meshes in metres, using the hull faces in
+grains.json."""
+import glob
+import json
+import os
+
+deck = json.load(open("grains.json"))
+scale = 1.0 / deck["micro"]["length"]  # the dumps are in um; the VTK files in m
+faces = {p["id"]: deck["grains"][p["grain"]]["faces"] for p in deck["placements"]}
+for path in sorted(glob.glob(os.path.join("post", "vertices.*.dump"))):
+    lines = open(path).read().splitlines()
+    start = next(i for i, l in enumerate(lines) if l.startswith("ITEM: ENTRIES")) + 1
+    rows = [l.split() for l in lines[start:] if l.strip()]
+    bodies = {}
+    for r in rows:
+        bodies.setdefault(int(r[0]), []).append(" ".join(repr(float(x) * scale) for x in r[1:4]))
+    points, polys, ids = [], [], []
+    for bid in sorted(bodies):
+        base = len(points)
+        points += bodies[bid]
+        for f in faces[bid]:
+            polys.append("3 %d %d %d" % (base + f[0], base + f[1], base + f[2]))
+            ids.append(str(bid))
+    out = ["# vtk DataFile Version 3.0", "grainforge LAMMPS bodies " + os.path.basename(path), "ASCII",
+           "DATASET POLYDATA", "POINTS %d double" % len(points)]
+    out += points
+    out += ["POLYGONS %d %d" % (len(polys), 4 * len(polys))] + polys
+    out += ["CELL_DATA %d" % len(polys), "SCALARS body int 1", "LOOKUP_TABLE default"] + ids
+    with open(path[:-5] + ".vtk", "w") as fh:
+        fh.write("\n".join(out) + "\n")
+'''
+
+
+def pour_settings(**kw) -> dict:
+    """Default settings of the example pour (SI), updated with ``kw``."""
+    s = {"seed": 0, "rounded_fraction": 0.05, "impact_overlap": 0.5, "restitution": 0.3,
+         "tangential_damping": 1.0, "viscous_time": 0.05, "dt_fraction": 0.04, "check_every": 1000, "max_checks": 200,
+         "ke_ratio": 1e-4, "dump_every": 10000}
+    return updated_settings(s, kw, "pour settings")
+
+
+def hull_topology(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Outward triangles and unique edges of the convex hull of ``vertices``.
+
+    Parameters
+    ----------
+    vertices : (K, 3) float64
+        Every point a hull vertex (as :func:`grainforge.dem.polyhedron.convex_polyhedron` returns).
+
+    Returns
+    -------
+    faces : (F, 3) int64
+        Counter-clockwise seen from outside, rows sorted (deterministic).
+    edges : (E, 2) int64
+        ``i < j``, sorted.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> f, e = hull_topology(trimesh.creation.box().vertices)
+    >>> len(f), len(e)
+    (12, 18)
+    """
+    from scipy.spatial import ConvexHull
+
+    v = np.asarray(vertices, dtype=np.float64)
+    hull = ConvexHull(v)
+    if len(hull.vertices) != len(v):
+        raise ValueError("every point must be a vertex of the convex hull")
+    f = hull.simplices.astype(np.int64)
+    a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
+    inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a - v.mean(axis=0)) < 0
+    f[inward] = f[inward][:, ::-1]
+    f = _rotate_min_first(f)
+    f = f[np.lexsort(f.T[::-1])]
+    e = np.sort(np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]]), axis=1)
+    e = np.unique(e, axis=0)
+    return f, e
+
+
+def _rotate_min_first(f: np.ndarray) -> np.ndarray:
+    """Each triangle's indices cycled so that its smallest comes first (orientation kept)."""
+    k = np.argmin(f, axis=1)
+    idx = (k[:, None] + np.arange(3)[None, :]) % 3
+    return np.take_along_axis(f, idx, axis=1)
+
+
+def _pack(tokens: Sequence[str]) -> list[str]:
+    """Tokens joined into lines of at most ``_MAX_LINE`` characters."""
+    lines, cur = [], ""
+    for tok in tokens:
+        if cur and len(cur) + 1 + len(tok) > _MAX_LINE:
+            lines.append(cur)
+            cur = tok
+        else:
+            cur = f"{cur} {tok}" if cur else tok
+    if cur:
+        lines.append(cur)
+    return lines
+
+
+def body_lines(body_id: int, vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray,
+               inertia: np.ndarray, rounded_diameter: float) -> list[str]:
+    """The ``Bodies`` lines of one rounded/polyhedron body (values in the deck's units).
+
+    ``vertices`` are displacements from the centre of mass in the box frame and
+    ``inertia`` the tensor about the centre of mass in the box frame.
+
+    Raises
+    ------
+    ValueError
+        If the body needs more than the 31 lines (≤ 250 characters each) that
+        ``read_data`` reads per body.
+    """
+    I = inertia
+    doubles = [fmt(x) for x in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])]
+    doubles += [fmt(x) for x in np.asarray(vertices).ravel()]
+    doubles += [str(int(i)) for i in np.asarray(edges).ravel()]
+    for tri in np.asarray(faces):
+        doubles += [str(int(i)) for i in tri] + ["-1"]
+    doubles.append(fmt(rounded_diameter))
+    body = [f"{len(vertices)} {len(edges)} {len(faces)}"] + _pack(doubles)
+    if len(body) > _MAX_BODY_LINES:
+        raise ValueError(f"a hull of {len(vertices)} vertices needs {len(body)} lines in LAMMPS's read_data "
+                         f"(at most {_MAX_BODY_LINES}); use fewer vertices (≤ {MAX_VERTICES} always fits)")
+    return [f"{body_id} 3 {len(doubles)}"] + body
+
+
+def hull_vtk_text(vertices: np.ndarray, faces: np.ndarray, title: str) -> str:
+    """A legacy-VTK POLYDATA file of a triangle mesh."""
+    lines = ["# vtk DataFile Version 3.0", title[:250], "ASCII", "DATASET POLYDATA",
+             f"POINTS {len(vertices)} double"]
+    lines += [" ".join(fmt(x) for x in p) for p in vertices]
+    lines += [f"POLYGONS {len(faces)} {4 * len(faces)}"] + [f"3 {a} {b} {c}" for a, b, c in faces]
+    return "\n".join(lines) + "\n"
+
+
+def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
+    """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
+    from .lammps import rotation_matrix
+
+    s = settings or pour_settings()
+    L, M, T = MICRO["length"], MICRO["mass"], MICRO["time"]
+    files: dict[str, str] = {}
+    topo = []
+    for t in templates:
+        if t.shape != "polyhedron" or t.polyhedron is None:
+            raise ValueError(f"the LAMMPS body deck writes convex polyhedra; {t.name} has shape {t.shape!r}")
+        f, e = hull_topology(t.polyhedron)
+        topo.append((f, e))
+        head = (f"grainforge convex hull of {t.source or t.name}: x y z (m), centroid at the origin\n"
+                f"vertices {len(t.polyhedron)}")
+        lines = [f"# {h}" for h in head.splitlines()] + [" ".join(fmt(x) for x in row) for row in t.polyhedron]
+        files[f"{t.name}.poly"] = "\n".join(lines) + "\n"
+        files[f"{t.name}.hull.vtk"] = hull_vtk_text(t.polyhedron, f, f"grainforge hull {t.name} (m)")
+
+    population = [k for k, t in enumerate(templates) for _ in range(t.count)]
+    rng = np.random.default_rng(s["seed"])
+    order = rng.permutation(len(population))
+    population = [population[i] for i in order]
+    n = len(population)
+    # contact shape = hull dilated by the rounded radius: cells leave room for it
+    r_round = {k: s["rounded_fraction"] * t.d_eq / 2 for k, t in enumerate(templates)}  # radius, m
+    cell = 2.2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) + r_round[k]
+                     for k, t in enumerate(templates))
+    side = max(1, math.ceil(math.sqrt(n / 2.0)))  # a layer or two: polyhedron contacts are costly
+    width = side * cell
+    layers = math.ceil(n / (side * side))
+    mean_d = sum(templates[k].d_eq for k in population) / n
+    total_mass = sum(templates[k].mass for k in population)
+    # The BODY contacts (and the walls: a vertex that passes the wall plane is pushed the wrong way)
+    # hold only while overlaps stay inside the rounded radius: a linear spring stiff enough that
+    # the heaviest grain, falling from the top of the lattice onto the floor (at most at the
+    # terminal speed g·viscous_time of the background drag), compresses one contact by at most
+    # impact_overlap × the smallest rounded radius (SI)
+    top = (layers + 2) * cell
+    v_impact = min(math.sqrt(2 * 9.81 * top), 9.81 * s["viscous_time"])
+    kn = max(t.mass for t in templates) * (v_impact / (s["impact_overlap"] * min(r_round.values()))) ** 2
+    # the smallest effective mass of a vertex contact between two grains: a push at distance r
+    # from the centre also turns the grain (1/m + r²/I_min); the time step and the damping follow
+    # it, otherwise the viscous contact damping is unstable (c dt / m > 2) and feeds energy in
+    m_eff = min(0.5 / (1.0 / t.mass + float(np.linalg.norm(t.polyhedron, axis=1).max()) ** 2 / t.principal[0])
+                for t in templates)
+    omega = math.sqrt(kn / m_eff)
+    dt = s["dt_fraction"] * 2 * math.pi / omega
+    lne = math.log(s["restitution"])
+    zeta = -lne / math.sqrt(math.pi**2 + lne**2)
+    c_n = 2 * zeta * math.sqrt(kn * m_eff)  # viscous normal damping, kg/s
+    c_t = s["tangential_damping"] * c_n
+    ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
+    cut_inner = 2 * max(r_round.values())
+    gamma = total_mass / n / s["viscous_time"]  # kg/s
+    a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
+
+    atoms, bodies, placements = [], [], []
+    nmax = 1
+    for slot, k in enumerate(population):
+        t = templates[k]
+        f, e = topo[k]
+        i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
+        pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        theta = float(rng.uniform(0, 360))
+        R = rotation_matrix(axis, math.radians(theta))
+        atoms.append(f"{slot + 1} 1 1 {fmt(t.mass * M)} " + " ".join(fmt(x * L) for x in pos))
+        bodies += body_lines(slot + 1, (t.polyhedron @ R.T) * L, f, e, (R @ t.inertia @ R.T) * M * L * L,
+                             2 * r_round[k] * L)
+        nv = len(t.polyhedron)
+        nmax = max(nmax, nv, math.ceil((3 * nv + 2 * len(e) + 4 * len(f)) / 9))
+        placements.append({"id": slot + 1, "grain": k, "name": t.name, "xcm": pos.tolist(), "axis": axis.tolist(),
+                           "theta_deg": theta})
+    lo = [-0.05 * cell, -0.05 * cell, -0.5 * cell]
+    hi = [width + 0.05 * cell, width + 0.05 * cell, top]
+    data = ["LAMMPS data file written by grainforge: rounded/polyhedron bodies, units micro (um, pg, us)", "",
+            f"{n} atoms", f"{n} bodies", "1 atom types", "",
+            f"{fmt(lo[0] * L)} {fmt(hi[0] * L)} xlo xhi", f"{fmt(lo[1] * L)} {fmt(hi[1] * L)} ylo yhi",
+            f"{fmt(lo[2] * L)} {fmt(hi[2] * L)} zlo zhi", "",
+            "Atoms # body: atom-ID atom-type bodyflag mass x y z", ""] + atoms + ["", "Bodies", ""] + bodies
+    files["data.bodies"] = "\n".join(data) + "\n"
+
+    Kn, Cn, Ct = kn * MICRO["stiffness"], c_n * MICRO["damping"], c_t * MICRO["damping"]
+    g = 9.81 * MICRO["acceleration"]
+    wall = f"{fmt(Kn)} {fmt(Cn)} {fmt(Ct)}"
+    run = f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
+# Grains are convex rounded/polyhedron bodies (BODY package) with the mesh's exact mass, centre and
+# inertia. Units: micro (um, pg, us; force nN, energy 1e-15 J): the BODY contact code has absolute
+# length tolerances of 1e-3 input units, far too coarse in SI for millimetre grains (grains.json: SI).
+units micro
+dimension 3
+boundary f f f
+atom_style body rounded/polyhedron 1 {nmax}
+atom_modify map array
+newton on
+comm_modify vel yes
+read_data data.bodies
+
+# contact: linear spring k_n, viscous damping c_n (normal) and c_t (tangential), no cohesion, mu 0.
+# A_ua (the "unit contact area") is set above any contact patch of these grains (pi d_max^2): LAMMPS
+# multiplies contact forces by patch area / A_ua when that exceeds 1, which must not happen here.
+pair_style body/rounded/polyhedron {fmt(Cn)} {fmt(Ct)} 0.0 {fmt(a_ua * L * L)} {fmt(cut_inner * L)}
+pair_coeff * * {fmt(Kn)} 0.0
+neighbor {fmt(0.2 * cell * L)} bin
+neigh_modify every 1 delay 0 check yes
+timestep {fmt(dt * T)}
+
+fix integrate all nve/body
+fix grav all gravity {fmt(g)} vector 0 0 -1
+# background damping of the translational velocity, time constant viscous_time for the mean mass
+fix drag all viscous {fmt(gamma * MICRO["damping"])}
+fix floor all wall/body/polyhedron {wall} zplane 0.0 NULL
+fix wallx all wall/body/polyhedron {wall} xplane 0.0 {fmt(width * L)}
+fix wally all wall/body/polyhedron {wall} yplane 0.0 {fmt(width * L)}
+
+# kinetic energy: translational (compute ke) + rotational; LAMMPS 2021 has no erotate for bodies,
+# so the rotational part is 3/2 N k_B T of compute temp/body (dof rotate, no dof removed)
+compute kt all ke
+compute trot all temp/body dof rotate
+compute_modify trot extra/dof 0
+variable kr equal 1.5*atoms*{BOLTZ_MICRO}*c_trot
+variable ke equal c_kt+v_kr
+variable kethr equal {fmt(ke_threshold * MICRO["energy"])}
+compute vtx all body/local id 1 2 3
+thermo_style custom step atoms c_kt v_kr
+thermo {s["check_every"]}
+
+run 0
+write_data data.initial nocoeff
+
+shell mkdir post
+dump vtk all local {s["dump_every"]} post/vertices.*.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[4]
+dump_modify vtk format float %.17g
+{settle_loop(s["check_every"], s["max_checks"])}
+undump vtk
+write_data data.final nocoeff
+dump last all local 1 post/vertices.final.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[4]
+dump_modify last format float %.17g
+run 0
+shell python3 dump2vtk.py
+"""
+    files["in.run"] = run
+    files["dump2vtk.py"] = DUMP2VTK
+    grains = []
+    for k, (t, (f, e)) in enumerate(zip(templates, topo)):
+        rec = template_record(t)
+        rec.update({"polyhedron": f"{t.name}.poly", "vertices": len(t.polyhedron), "faces": f.tolist(),
+                    "edges": len(e), "rounded_diameter": 2 * r_round[k]})
+        grains.append(rec)
+    deck = {"units": "SI (m, kg, s) here; the LAMMPS files use units micro: SI x factor", "micro": MICRO,
+            "grains": grains, "placements": placements, "box": [width, width],
+            "ke_threshold": ke_threshold, "dt": dt, "kn": kn, "c_n": c_n, "c_t": c_t, "viscous_gamma": gamma,
+            "scene": s}
+    files["grains.json"] = json_text(deck)
+    return files
+
+
+def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = None,
+               overwrite: bool = False) -> list[Path]:
+    """Write a LAMMPS body deck for ``templates`` into ``out`` (see the module text)."""
+    return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)
