@@ -3,12 +3,14 @@
 from __future__ import annotations
 
 import json
+import math
 from pathlib import Path
 from typing import Mapping
 
 import numpy as np
 
-__all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop"]
+__all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop",
+           "rotation_matrix"]
 
 
 def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> dict:
@@ -37,6 +39,20 @@ def settle_loop(check_every: int, max_checks: int) -> str:
     return (f"variable i loop {int(max_checks)}\nlabel settle\nrun {int(check_every)}\n"
             'if "${ke} < ${kethr}" then "jump SELF settled"\nnext i\njump SELF settle\nlabel settled\n'
             'print "ke ${ke} threshold ${kethr}" file settle.txt')
+
+
+def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
+    """Right-handed rotation by ``theta`` radians about ``axis`` (Rodrigues).
+
+    Examples
+    --------
+    >>> np.round(rotation_matrix(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
+    [0.0, 1.0, 0.0]
+    """
+    a = np.asarray(axis, dtype=np.float64)
+    a = a / np.linalg.norm(a)
+    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
+    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
 
 
 def fmt(x: float) -> str:

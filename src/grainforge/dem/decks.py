@@ -21,6 +21,8 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
         from .yade import write_deck as w
     elif engine == "liggghts":
         from .liggghts import write_deck as w
+    elif templates and all(t.shape == "polyhedron" for t in templates):
+        from .lammps_body import write_deck as w
     else:
         from .lammps import write_deck as w
     return w(templates, out, overwrite=overwrite)

@@ -28,7 +28,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, settle_loop, template_record, updated_settings, write_files, xyzr_text
+from .deck import (clump_vtk_text, fmt, json_text, rotation_matrix, settle_loop, template_record, updated_settings,
+                   write_files, xyzr_text)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
@@ -58,20 +59,6 @@ def pour_settings(**kw) -> dict:
     s = {"seed": 0, "kn_weight_overlap": 0.005, "restitution": 0.3, "friction": 0.5, "dt_fraction": 0.02,
          "check_every": 1000, "max_checks": 100, "ke_ratio": 1e-4, "dump_every": 5000}
     return updated_settings(s, kw, "pour settings")
-
-
-def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
-    """Right-handed rotation by ``theta`` radians about ``axis`` (Rodrigues).
-
-    Examples
-    --------
-    >>> np.round(rotation_matrix(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
-    [0.0, 1.0, 0.0]
-    """
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
 
 
 def molecule_text(t) -> str:
@@ -223,11 +210,10 @@ def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = 
                overwrite: bool = False) -> list[Path]:
     """Write a LAMMPS deck for ``templates`` into ``out`` (see the module text).
 
-    Templates of shape ``"polyhedron"`` get the rounded/polyhedron body deck of
-    :mod:`grainforge.dem.lammps_body` instead.
+    Templates of shape ``"polyhedron"`` take the rounded/polyhedron body deck of
+    :func:`grainforge.dem.lammps_body.write_deck` (:func:`grainforge.dem.decks.write_deck`
+    chooses it).
     """
-    if templates and all(t.shape == "polyhedron" for t in templates):
-        from .lammps_body import write_deck as body_deck
-
-        return body_deck(templates, out, settings=settings, overwrite=overwrite)
+    if any(t.shape == "polyhedron" for t in templates):
+        raise ValueError("polyhedron templates take grainforge.dem.lammps_body.write_deck")
     return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)

@@ -36,7 +36,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import fmt, json_text, settle_loop, template_record, updated_settings, write_files
+from .deck import fmt, json_text, rotation_matrix, settle_loop, template_record, updated_settings, write_files
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
            "MAX_VERTICES"]
@@ -195,7 +195,6 @@ def hull_vtk_text(vertices: np.ndarray, faces: np.ndarray, title: str) -> str:
 
 def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
-    from .lammps import rotation_matrix
 
     s = settings or pour_settings()
     L, M, T = MICRO["length"], MICRO["mass"], MICRO["time"]
