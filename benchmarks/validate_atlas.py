@@ -6,11 +6,8 @@
    sphericity against the exact Wadell sphericity (its resolution bias).
 2. The same CRI and FSO grains measured on the mesh (grainforge.analysis.describe)
    and on the voxel image at 69 voxels across (Ottawa's resolution).
-3. The marching-cubes area of grainforge's ``_mc_area`` against scikit-image's
-   surfaces (classic Lorensen table and the default Lewiner variant the Atlas's
-   ``spam`` uses), on the smoothed images of generated grains at 20 and 69 voxels across.
 
-Usage: ``nice python benchmarks/validate_atlas.py [--mesh-only | --mc-only]``; prints Markdown tables.
+Usage: ``nice python benchmarks/validate_atlas.py [--mesh-only]``; prints Markdown tables.
 """
 
 from __future__ import annotations
@@ -89,45 +86,10 @@ def mesh_vs_voxel_table():
               f"| {a[5]:.3f} ({a[6]:.3f}) | {a[7]:.3f} ({a[8]:.3f}) |", flush=True)
 
 
-def mc_area_table():
-    import grainforge
-    from scipy import ndimage
-    from skimage.measure import marching_cubes, mesh_surface_area
-
-    from grainforge.analysis.atlas import SIGMA, _mc_area, random_rotation, voxelise
-    from grainforge.methods import get
-    from grainforge.solid import signed_volume
-
-    cases = [("CRI rough-angular", "cri", dict(preset="rough-angular")),
-             ("CRI D=(0,0.09,0.006) 1:0.76:0.58", "cri", dict(descriptors=(0, 0.09, 0.006), aspect=(1, 0.76, 0.58))),
-             ("CRI rough-sphere", "cri", dict(preset="rough-sphere")), ("FSO default", "fso", dict())]
-    print("| grain (3 seeds) | voxels across | max \\|area / Lorensen − 1\\| | max \\|area / Lewiner − 1\\| |")
-    print("|---|---|---|---|")
-    for label, method, kw in cases:
-        for n in (20, 69):
-            dl, dw = [], []
-            for seed in range(3):
-                g = grainforge.generate(method, get(method).Params(**kw), seed)
-                v = np.asarray(g.vertices) @ random_rotation(seed).T
-                f = np.asarray(g.faces)
-                d = (6 * abs(signed_volume(v, f)) / math.pi) ** (1 / 3)
-                mask, _ = voxelise(v, f, d / n)
-                sm = ndimage.gaussian_filter(np.pad(mask.astype(np.float32), 1), SIGMA, mode="constant", truncate=4.0)
-                a = _mc_area(sm, 0.5)
-                dl.append(abs(a / mesh_surface_area(*marching_cubes(sm, 0.5, method="lorensen")[:2]) - 1))
-                dw.append(abs(a / mesh_surface_area(*marching_cubes(sm, 0.5)[:2]) - 1))
-            print(f"| {label} | {n} | {max(dl):.1e} | {max(dw):.1e} |", flush=True)
-
-
 if __name__ == "__main__":
     import sys
 
-    if "--mc-only" in sys.argv:
-        mc_area_table()
-        sys.exit()
     if "--mesh-only" not in sys.argv:
         analytic_table()
         print()
     mesh_vs_voxel_table()
-    print()
-    mc_area_table()

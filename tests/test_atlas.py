@@ -146,30 +146,3 @@ def test_analyse_cli_adds_atlas_columns(runner, tmp_path):
     assert row["atlas_elongation"] == pytest.approx(0.8, abs=0.03)
     r = runner.invoke(cli, ["analyse", str(p), "--voxels-across", "30", "--voxel-size", "0.1"])
     assert r.exit_code == 2 and "not both" in r.stderr
-
-
-def test_marching_cubes_area_equals_scikit_image_on_a_rough_grain():
-    """_mc_area: the area of scikit-image's marching-cubes surface (same table), without building the mesh."""
-    import grainforge
-    from scipy import ndimage
-    from skimage.measure import marching_cubes, mesh_surface_area
-
-    from grainforge.analysis.atlas import SIGMA, _mc_area
-    from grainforge.methods import get
-
-    g = grainforge.generate("cri", get("cri").Params(preset="rough-angular", subdivisions=4), 3)
-    v = np.asarray(g.vertices) @ random_rotation(2).T
-    for n in (15, 45):
-        mask, _ = voxelise(v, g.faces, 2.0 / n)
-        smooth = ndimage.gaussian_filter(np.pad(mask.astype(np.float32), 1), SIGMA, mode="constant", truncate=4.0)
-        area = _mc_area(smooth, 0.5)
-        classic = mesh_surface_area(*marching_cubes(smooth, 0.5, method="lorensen")[:2])
-        lewiner = mesh_surface_area(*marching_cubes(smooth, 0.5)[:2])  # what the Atlas (spam) uses
-        assert area == pytest.approx(classic, rel=1e-6)
-        assert area == pytest.approx(lewiner, rel=1e-5)
-    # a single voxel: the classic surface around one corner above the level, and no surface at all
-    one = np.zeros((3, 3, 3), np.float32)
-    one[1, 1, 1] = 1.0
-    assert _mc_area(one, 0.5) == pytest.approx(mesh_surface_area(*marching_cubes(one, 0.5, method="lorensen")[:2]),
-                                               rel=1e-6)
-    assert _mc_area(np.zeros((4, 4, 4), np.float32), 0.5) == 0.0

@@ -16,11 +16,9 @@ to a mesh:
 3. **True sphericity** ``π^(1/3) (6V)^(2/3) / A`` with ``A`` the area of the
    marching-cubes surface at level 0.5 of the binary image smoothed by a
    Gaussian of σ = 0.75 voxel (:func:`scipy.ndimage.gaussian_filter`) —
-   ``spam``'s ``trueSphericity``.  The area is :func:`_mc_area`'s: that of
-   :func:`skimage.measure.marching_cubes`' surface (same case table and
-   interpolation), summed cube by cube without building the mesh, three
-   times faster; it equals scikit-image's default (Lewiner) surface area
-   within 1e-6 relative (docs/validation.md, "Atlas descriptors").
+   ``spam``'s ``trueSphericity``: :func:`skimage.measure.marching_cubes`
+   (its default, Lewiner's variant, as spam uses) and
+   :func:`skimage.measure.mesh_surface_area`.
 4. **Convexity** = ``n`` / the number of voxel centres inside (or on) the
    convex hull of the grain's voxel centres (:class:`scipy.spatial.ConvexHull`)
    — ``spam``'s ``convexVolume``.  The lattice points in the hull are counted
@@ -42,7 +40,6 @@ particular depends on it (docs/validation.md, "Atlas descriptors").
 from __future__ import annotations
 
 import math
-from functools import lru_cache
 from typing import Any
 
 import numpy as np
@@ -323,98 +320,6 @@ def _hull_count(mask: np.ndarray) -> int:
     return int(count.sum())
 
 
-#: cube corners (x, y, z) in Lorensen's order, x along the image's last axis (as scikit-image's
-#: marching cubes reads ``im[z, y, x]``), and the 12 cube edges as corner pairs
-_MC_CORNERS = np.array([(0, 0, 0), (1, 0, 0), (1, 1, 0), (0, 1, 0), (0, 0, 1), (1, 0, 1), (1, 1, 1), (0, 1, 1)])
-_MC_EDGES = np.array([(0, 1), (1, 2), (2, 3), (3, 0), (4, 5), (5, 6), (6, 7), (7, 4), (0, 4), (1, 5), (2, 6), (3, 7)])
-
-
-@lru_cache(maxsize=1)
-def _mc_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Marching-cubes triangle table: (all triangles as edge triples, each case's first row, its count).
-
-    The classic table of scikit-image's marching cubes (``CASESCLASSIC``,
-    Lorensen & Cline), re-indexed from Lorensen's corner bits to the
-    natural bits ``x + 2y + 4z`` of :func:`_mc_area`'s cube index.
-    """
-    import base64
-
-    from skimage.measure._marching_cubes_lewiner_luts import CASESCLASSIC
-
-    shape, text = CASESCLASSIC
-    t = np.frombuffer(base64.decodebytes(text.encode("ascii")), dtype=np.int8).reshape(shape)[:, :15]
-    t = t.reshape(256, 5, 3)
-    bit = _MC_CORNERS[:, 0] + 2 * _MC_CORNERS[:, 1] + 4 * _MC_CORNERS[:, 2]
-    perm = np.zeros(256, dtype=np.int64)
-    for i in range(256):
-        perm[sum(1 << int(bit[k]) for k in range(8) if i >> k & 1)] = i
-    t = t[perm]
-    count = (t[:, :, 0] >= 0).sum(axis=1)
-    flat = np.concatenate([t[i, :count[i]] for i in range(256)]).astype(np.intp)
-    first = np.concatenate([[0], np.cumsum(count)[:-1]])
-    return flat, first, count
-
-
-@lru_cache(maxsize=1)
-def _mc_geometry() -> np.ndarray:
-    """(15, rows) float32, per row of the triangle table (vertices on edges e0, e1, e2 at s_k + t_k d_k):
-    s1 − s0 (3), s2 − s0 (3), d0 (3), d1 (3), d2 (3) — the triangle's two side vectors are
-    ``s1 − s0 + t1 d1 − t0 d0`` and ``s2 − s0 + t2 d2 − t0 d0``."""
-    tri_table = _mc_tables()[0]
-    s = _MC_CORNERS[_MC_EDGES[tri_table, 0]]  # (rows, 3 vertices, xyz)
-    d = _MC_CORNERS[_MC_EDGES[tri_table, 1]] - s
-    cols = [s[:, 1] - s[:, 0], s[:, 2] - s[:, 0], d[:, 0], d[:, 1], d[:, 2]]
-    return np.ascontiguousarray(np.concatenate(cols, axis=1).T.astype(np.float32))
-
-
-def _mc_area(volume: np.ndarray, level: float) -> float:
-    """Area of the marching-cubes isosurface of ``volume`` at ``level`` (voxel units), without building it.
-
-    The surface of :func:`skimage.measure.marching_cubes` (``method="lorensen"``:
-    the same case table, cube index and linear interpolation along the
-    edges), but only its area: each triangle is made in its own cube,
-    relative to the cube's corner (area does not depend on where a triangle
-    is), and only cubes that straddle the level are visited, all at once.
-    Equal to scikit-image's area to float rounding (``tests/test_atlas.py``);
-    its default Lewiner variant triangulates some ambiguous cubes
-    differently (docs/validation.md, "Atlas descriptors").
-    """
-    vol = np.ascontiguousarray(volume)
-    n0, n1, n2 = vol.shape
-    tri_table, first, count = _mc_tables()
-    # cube index, bit x + 2y + 4z set when that corner is above the level: three passes of pairs
-    b = (vol > level).view(np.uint8)
-    p = b[:, :, :-1] | (b[:, :, 1:] << 1)
-    q = p[:, :-1, :] | (p[:, 1:, :] << 2)
-    idx = (q[:-1] | (q[1:] << 4)).ravel()
-    cells = np.flatnonzero((idx != 0) & (idx != 255))
-    case = idx[cells]
-    nt = count[case]
-    total = int(nt.sum())
-    if total == 0:
-        return 0.0
-    owner = np.repeat(np.arange(len(case)), nt)
-    end = np.cumsum(nt)
-    row = first[case][owner] + np.arange(total) - (end - nt)[owner]  # each triangle's row of the table
-    # where each cube starts in the flat image
-    m12 = (n1 - 1) * (n2 - 1)
-    o0, r = np.divmod(cells, m12)
-    o1, o2 = np.divmod(r, n2 - 1)
-    base = ((o0 * n1 + o1) * n2 + o2)[owner]
-    # per table row, the image offsets of its 3 edges' two ends; all gathers 1-D (np.take on rows)
-    off = _MC_CORNERS[:, 2] * (n1 * n2) + _MC_CORNERS[:, 1] * n2 + _MC_CORNERS[:, 0]
-    ends = np.concatenate([off[_MC_EDGES[tri_table, 0]], off[_MC_EDGES[tri_table, 1]]], axis=1).T.copy()
-    at = np.take(ends, row, axis=1)  # (6, T)
-    at += base
-    val = np.take(vol.ravel(), at) - np.float32(level)
-    t0, t1, t2 = (val[k] / (val[k] - val[3 + k]) for k in range(3))  # float32, as scikit-image's vertices
-    g = np.take(_mc_geometry(), row, axis=1)  # (15, T)
-    ax, ay, az = (g[j] + t1 * g[9 + j] - t0 * g[6 + j] for j in range(3))
-    bx, by, bz = (g[3 + j] + t2 * g[12 + j] - t0 * g[6 + j] for j in range(3))
-    cx, cy, cz = ay * bz - az * by, az * bx - ax * bz, ax * by - ay * bx
-    return 0.5 * float(np.sqrt(cx * cx + cy * cy + cz * cz).sum(dtype=np.float64))
-
-
 def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, float]:
     """Atlas descriptors of a binary voxel image (one particle).
 
@@ -440,6 +345,7 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
     (1.0, 1.0, 1.0)
     """
     from scipy import ndimage
+    from skimage.measure import marching_cubes, mesh_surface_area
 
     mask = np.asarray(mask, dtype=bool)
     n = int(np.count_nonzero(mask))
@@ -472,7 +378,9 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
     sub = np.zeros(tuple(hi - lo + 2 * pad), dtype=np.float32)
     sub[tuple(slice(pad, pad + e) for e in hi - lo)] = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
     smooth = ndimage.gaussian_filter(sub, SIGMA, mode="constant", truncate=4.0)
-    area = _mc_area(smooth, 0.5) * h**2
+    # degenerate triangles add no area: keeping them skips scikit-image's clean-up pass
+    verts, tris, _, _ = marching_cubes(smooth, level=0.5, allow_degenerate=True)
+    area = float(mesh_surface_area(verts, tris)) * h**2
     sph = math.pi ** (1 / 3) * (6 * V) ** (2 / 3) / area if area > 0 else math.nan
     conv = n / _hull_count(mask)
     return {
