@@ -190,3 +190,24 @@ def test_misfit_weights_predict_the_ks_statistic_of_normal_samples():
         assert w[f"sd {k}"] * eps * sd[j] * KS_MAX == pytest.approx(ks, abs=0.01)
     # a narrow descriptor's spread misfit weighs more than a wide one's, in proportion
     assert w["sd convexity"] / w["sd flatness"] == pytest.approx(0.1 / 0.025, rel=0.02)
+
+
+def test_a_fitted_recipe_runs_in_batch_as_written(runner, tmp_path):
+    """What `fit` writes, `batch` runs: per-grain descriptors (each) and aspect (zingg) pass its pilot check.
+
+    The knobs are the Ottawa fit's (docs/fit.md); the fitted normals are truncated at 4 sd.
+    """
+    from grainforge.fit import TRUNCATE_SD, _aspect_table
+
+    s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
+    params = FITS["rf"].params({"irregularity": 0.0315, "irregularity_sd": 0.002, "roughness": 0.0140,
+                                "roughness_sd": 0.0038})
+    params["aspect"] = _aspect_table({"elongation_mean": 0.763, "elongation_sd": 0.105, "flatness_mean": 0.793,
+                                      "flatness_sd": 0.106}, 0.18)
+    d8 = params["descriptors"][2]
+    assert d8["high"] == pytest.approx(0.0140 + TRUNCATE_SD * 0.0038) and d8["low"] == 0.0
+    recipe = tmp_path / "recipe.toml"
+    recipe.write_text(recipe_text("rf", params, s, count=2, seed=3, header="test"), encoding="utf-8")
+    r = runner.invoke(cli, ["batch", str(recipe), "--out", str(tmp_path / "grains")])
+    assert r.exit_code == 0, r.output + r.stderr
+    assert len(list((tmp_path / "grains").glob("rf-*.stl"))) == 2

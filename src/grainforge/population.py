@@ -665,16 +665,44 @@ def check_extremes(recipe: Recipe) -> None:
         make_grain(recipe, index)  # the grain as drawn: its own error (fixed parameters) names it
         seed, params, _ = draw_grain(recipe, index)
         for name, dist in varying.items():
-            ends = dist.args["values"] if dist.kind == "choice" else dist.support()
-            for value in dict.fromkeys(ends):
-                if isinstance(value, float) and not math.isfinite(value):
-                    continue
+            for value in _extremes(dist):
                 try:
                     generate(recipe.method, dataclasses.replace(params, **{name: value}), seed)
                 except ParameterError as exc:
                     raise RecipeError(recipe.source, f"params.{name}",
                                       f"the distribution reaches {value!r}, where grain {index} cannot be made "
                                       f"({exc.reason}); narrow the distribution") from None
+
+
+def _extremes(dist: Distribution) -> list:
+    """The finite extreme values ``dist`` can draw: a choice's values, an interval's ends, and for
+    ``zingg`` and ``each`` every combination of their parts' ends (infinite ends left out).
+
+    Examples
+    --------
+    >>> e = Distribution("uniform", {"low": 0.5, "high": 0.9})
+    >>> _extremes(Distribution("zingg", {"elongation": e, "flatness": 0.8}))
+    [(1.0, 0.5, 0.4), (1.0, 0.9, 0.7200000000000001)]
+    >>> _extremes(Distribution("each", {"items": (0.0, e)}))
+    [(0.0, 0.5), (0.0, 0.9)]
+    """
+    import itertools
+
+    def ends(x) -> list:
+        if not isinstance(x, Distribution):
+            return [x]
+        if x.kind == "choice":
+            return list(x.args["values"])
+        return [v for v in x.support() if math.isfinite(v)]
+
+    if dist.kind == "zingg":
+        combos = itertools.product(ends(dist.args["elongation"]), ends(dist.args["flatness"]))
+        values = [(1.0, e, e * f) for e, f in combos]
+    elif dist.kind == "each":
+        values = list(itertools.product(*(ends(x) for x in dist.args["items"])))
+    else:
+        values = ends(dist)
+    return list(dict.fromkeys(values))
 
 
 def existing_grains(out: Path, recipe: Recipe) -> bool:

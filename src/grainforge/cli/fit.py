@@ -17,8 +17,9 @@ from .progress import progress_bar
               help="Folder for recipe.toml, fit.csv and fit.png.")
 @click.option("--voxel-size", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Voxel size of the sand's scan (µm); required unless the CSV has a 'Voxel Size (µm)' column.")
-@click.option("--method", default="cri", show_default=True,
-              help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best.")
+@click.option("--method", default="rf", show_default=True,
+              help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best. "
+                   "rf by default: its grains respond smoothly to the settings (docs/fit.md).")
 @click.option("--count", type=click.IntRange(min=500), default=500, show_default=True,
               help="Grains of the verification population and of the recipe (>= 500).")
 @click.option("--pilot", type=click.IntRange(min=20), default=200, show_default=True,
@@ -67,3 +68,11 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
                f"{result.seconds:.0f} s ({result.grains_measured} grains measured, {result.cpu_seconds:.0f} s of "
                f"worker CPU); wrote {', '.join(str(p) for p in paths)}", err=True)
     sys.stdout.flush()
+    # what `grainforge batch recipe.toml` checks before it starts: grains at every distribution's ends
+    from ..population import RecipeError, check_extremes, parse_recipe
+
+    try:
+        check_extremes(parse_recipe(result.recipe, source=str(paths[0])))
+    except RecipeError as exc:
+        click.echo(f"warning: grainforge batch would refuse this recipe: {exc}", err=True)
+        sys.exit(1)
