@@ -38,7 +38,7 @@ def main():
     import grainforge
     from skimage.measure import marching_cubes, mesh_surface_area
 
-    from grainforge.analysis.atlas import _hull_count, atlas_descriptors, random_rotation, voxelise
+    from grainforge.analysis.atlas import _hull_count, atlas_descriptors, random_rotation, straddling_cubes, voxelise
     from grainforge.methods import get
     from grainforge.solid import signed_volume
 
@@ -63,7 +63,7 @@ def main():
 
             def sph():
                 s = ndimage.gaussian_filter(sub, 0.75, mode="constant", truncate=4.0)
-                verts, tris, _, _ = marching_cubes(s, level=0.5, allow_degenerate=True)
+                verts, tris, _, _ = marching_cubes(s, level=0.5, allow_degenerate=True, mask=straddling_cubes(s, 0.5))
                 mesh_surface_area(verts, tris)
 
             mc = timed(sph, args.repeat)
