@@ -10,7 +10,7 @@ from typing import Mapping
 import numpy as np
 
 __all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop",
-           "rotation_matrix"]
+           "rotation_matrix", "lattice_slots"]
 
 
 def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> dict:
@@ -53,6 +53,24 @@ def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
     a = a / np.linalg.norm(a)
     K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
     return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
+
+
+def lattice_slots(count: int, side: int, cell: float, rng: np.random.Generator):
+    """Pour positions on a ``side`` × ``side`` lattice of ``cell``, layer after layer, each with a
+    random orientation from ``rng``: yields ``(slot, pos, axis, theta_deg, R)`` for slots 0..count-1.
+
+    Examples
+    --------
+    >>> [(s, p.tolist()) for s, p, *_ in lattice_slots(3, 2, 1.0, np.random.default_rng(0))]
+    [(0, [0.5, 0.5, 1.0]), (1, [1.5, 0.5, 1.0]), (2, [0.5, 1.5, 1.0])]
+    """
+    for slot in range(count):
+        i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
+        pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
+        axis = rng.normal(size=3)
+        axis /= np.linalg.norm(axis)
+        theta = float(rng.uniform(0, 360))
+        yield slot, pos, axis, theta, rotation_matrix(axis, math.radians(theta))
 
 
 def fmt(x: float) -> str:

@@ -28,8 +28,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import (clump_vtk_text, fmt, json_text, rotation_matrix, settle_loop, template_record, updated_settings,
-                   write_files, xyzr_text)
+from .deck import (clump_vtk_text, fmt, json_text, lattice_slots, rotation_matrix, settle_loop, template_record,
+                   updated_settings, write_files, xyzr_text)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
@@ -121,14 +121,8 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     infile = ["# grainforge rigid/small infile: ID mass xcm ycm zcm ixx iyy izz ixy ixz iyz vxcm vycm vzcm lx ly lz"
               " ixcm iycm izcm (SI, box frame)", str(n)]
     placements = []
-    for slot, k in enumerate(population):
+    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, rng), population):
         t = templates[k]
-        i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
-        pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        theta = float(rng.uniform(0, 360))
-        R = rotation_matrix(axis, math.radians(theta))
         # create_atoms puts the molecule's geometric centre (mean of the atom coordinates) at the
         # point and rotates about it: aim it so that the centroid (file origin) lands on pos
         point = pos + R @ t.clump.centres.mean(axis=0)

@@ -36,7 +36,7 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import fmt, json_text, rotation_matrix, settle_loop, template_record, updated_settings, write_files
+from .deck import fmt, json_text, lattice_slots, settle_loop, template_record, updated_settings, write_files
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
            "MAX_VERTICES"]
@@ -251,15 +251,9 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
 
     atoms, bodies, placements = [], [], []
     nmax = 1
-    for slot, k in enumerate(population):
+    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, rng), population):
         t = templates[k]
         f, e = topo[k]
-        i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
-        pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        theta = float(rng.uniform(0, 360))
-        R = rotation_matrix(axis, math.radians(theta))
         atoms.append(f"{slot + 1} 1 1 {fmt(t.mass * M)} " + " ".join(fmt(x * L) for x in pos))
         bodies += body_lines(slot + 1, (t.polyhedron @ R.T) * L, f, e, (R @ t.inertia @ R.T) * M * L * L,
                              2 * r_round[k] * L)
