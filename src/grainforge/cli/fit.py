@@ -19,7 +19,7 @@ from .progress import progress_bar
               help="Voxel size of the sand's scan (µm); required unless the CSV has a 'Voxel Size (µm)' column.")
 @click.option("--method", default="rf", show_default=True,
               help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best. "
-                   "rf by default: its grains respond smoothly to the settings (docs/fit.md).")
+                   "rf grains respond smoothly to their settings, CRI grains less so (docs/fit.md).")
 @click.option("--count", type=click.IntRange(min=500), default=500, show_default=True,
               help="Grains of the verification population and of the recipe (>= 500).")
 @click.option("--pilot", type=click.IntRange(min=20), default=200, show_default=True,
