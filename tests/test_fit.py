@@ -211,3 +211,24 @@ def test_a_fitted_recipe_runs_in_batch_as_written(runner, tmp_path):
     r = runner.invoke(cli, ["batch", str(recipe), "--out", str(tmp_path / "grains")])
     assert r.exit_code == 0, r.output + r.stderr
     assert len(list((tmp_path / "grains").glob("rf-*.stl"))) == 2
+
+
+def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_path, monkeypatch):
+    """The CLI runs batch's pilot check on the recipe it wrote: an unmakeable end is a warning and exit 1."""
+    import grainforge.fit as fitmod
+
+    s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
+    params = {"descriptors": [0.0, 0.05, {"distribution": "uniform", "low": 0.0, "high": 0.3}], "subdivisions": 3}
+    text = recipe_text("rf", params, s, count=500, seed=1, header="test")
+    gen = np.full((500, 5), 0.8)
+
+    def fake_fit(sand, method, **kw):
+        return fitmod.FitResult(method="rf", recipe=text, stats=compare(s.table(), gen[:, 1:]), generated=gen,
+                                knobs={}, aspect={})
+
+    monkeypatch.setattr(fitmod, "fit_sand", fake_fit)
+    out = tmp_path / "o"
+    r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size", "7", "--out", str(out)])
+    assert r.exit_code == 1, r.output + r.stderr
+    assert "warning: grainforge batch would refuse this recipe" in r.stderr and "params.descriptors" in r.stderr
+    assert (out / "recipe.toml").read_text(encoding="utf-8") == text  # the outputs are kept
