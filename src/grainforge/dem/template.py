@@ -166,8 +166,9 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         raise ValueError(f"{source or name}: not a closed solid ({'; '.join(problems)})")
     v = v * unit
     mp = mass_properties(v, f)
+    # the grain moves to its centroid; volume, inertia about the centroid and axes do not change
     v = v - mp.centroid
-    mp = mass_properties(v, f)
+    mp = dataclasses.replace(mp, centroid=np.zeros(3))
     kw: dict[str, Any] = {}
     if shape == "clump":
         from .clump import clump
