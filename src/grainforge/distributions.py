@@ -61,7 +61,7 @@ class Distribution:
             return -math.inf, math.inf
         if self.kind == "lognormal":
             return 0.0, math.inf
-        raise ValueError("choice has no interval support")
+        raise ValueError(f"{self.kind} has no interval support")
 
     def typical(self) -> Any:
         """A representative value (used to check cross-parameter rules up front)."""

@@ -339,12 +339,11 @@ def straddling_cubes(volume: np.ndarray, level: float) -> np.ndarray:
     n0, n1, n2 = b.shape
     above = b[:-1, :-1, :-1].copy()
     every = above.copy()
-    for dz in (0, 1):
-        for dy in (0, 1):
-            for dx in (0, 1):
-                c = b[dz:n0 - 1 + dz, dy:n1 - 1 + dy, dx:n2 - 1 + dx]
-                above |= c
-                every &= c
+    for dz, dy, dx in np.ndindex(2, 2, 2):
+        if dz or dy or dx:  # the (0, 0, 0) corner is where both started
+            c = b[dz:n0 - 1 + dz, dy:n1 - 1 + dy, dx:n2 - 1 + dx]
+            above |= c
+            every &= c
     cubes = above & ~every
     mask = np.zeros(b.shape, dtype=bool)
     mask[:-1, :-1, :-1] = cubes
