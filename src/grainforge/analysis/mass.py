@@ -24,13 +24,15 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
         second central moment per unit volume (its trace is R_g²), and
         ``face_areas`` (F,).
     """
+    from ..solid import cross3
+
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     o = v.mean(0)
     a, b, c = v[f[:, 0]] - o, v[f[:, 1]] - o, v[f[:, 2]] - o
-    cr = np.cross(b - a, c - a)
+    cr = cross3(b - a, c - a)
     face_areas = 0.5 * np.linalg.norm(cr, axis=1)
-    vol6 = np.einsum("ij,ij->i", a, np.cross(b, c))
+    vol6 = np.einsum("ij,ij->i", a, cross3(b, c))
     V = vol6.sum() / 6.0
     s = a + b + c
     if V != 0:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import signed_volume, solid_problems, split_bodies, volume_centroid
+from ..solid import _tetra_volumes, solid_problems, split_bodies
 
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
@@ -88,13 +88,18 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
     closed = is_closed(f, len(v))
     if not closed:
         flags.append("open")
-    elif signed_volume(v, f) < 0:
-        f = f[:, ::-1]
-        flags.append("inverted")
+    else:
+        # signed volume and volume centroid from one pass over the faces (solid.signed_volume, volume_centroid)
+        a, b, c, six = _tetra_volumes(v, f)
+        total = six.sum()
+        centroid = ((a + b + c) / 4.0 * six[:, None]).sum(axis=0) / total if total != 0 else v.mean(axis=0)
+        if total < 0:
+            f = f[:, ::-1]
+            flags.append("inverted")
     # fails the solid contract as written (grainforge check says why).  A grain star-shaped about its
     # volume centroid is proven free of self-intersections in O(F) (solid.star_certificate); others
     # get the pairwise test.  The flag is the same either way.
-    if "open" not in flags and solid_problems(v, f, star_centre=volume_centroid(v, f), merged=merged):
+    if "open" not in flags and solid_problems(v, f, star_centre=centroid, merged=merged):
         flags.append("not-solid")
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
     row.update(describe(SimpleNamespace(vertices=v, faces=f), closed=closed, **options))  # describe() reads .vertices and .faces
