@@ -25,6 +25,13 @@ What is different from ``trimesh.bounds.oriented_bounds``:
   direction is found with one ``searchsorted`` (rotating calipers without a
   loop).
 
+- candidates that cannot win are skipped: the box of a subset of the points
+  (the hull's extreme points in 64 directions) is never larger for any normal,
+  so that subset gives a lower bound per candidate for a fraction of the
+  cost; only candidates whose bound is below the volume already reached by
+  the most promising ones are searched on the full hull.  The result is the
+  same box (the winner and its ties are never skipped), about twice as fast.
+
 The result is exact over the candidate set (no angular rounding); the true
 3D minimum-volume box can in rare cases have no face flush with the hull
 (O'Rourke), so like every face-flush search this is an upper bound on it.
@@ -42,6 +49,11 @@ __all__ = ["minimum_box", "MAX_HULL_VERTICES", "SAMPLE_DIRECTIONS"]
 MAX_HULL_VERTICES = 2048
 #: larger hulls are reduced to their extreme points in this many directions (Fibonacci sphere)
 SAMPLE_DIRECTIONS = 1024
+#: hulls with more face normals than this are first bounded on their extreme points in this many
+#: directions (a lower bound per candidate normal), and only the candidates that can still win are searched
+_BOUND_DIRECTIONS = 64
+#: candidates with the lowest bounds searched first on the full hull, to set the volume to beat
+_BOUND_FIRST = 8
 #: memory budget: candidate normals × hull edges processed per chunk
 _CHUNK = 4_000_000
 #: the angle seam of the sorted outlines is put at an irrational angle, away from the
@@ -101,10 +113,12 @@ def _plane_bases(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return a, np.cross(n, a)
 
 
-def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.ndarray,
-                   edge_faces: np.ndarray, n: np.ndarray) -> tuple[float, int, tuple[float, float]]:
-    """Smallest box volume over candidate normals ``n``: (volume, candidate index, direction of
-    the rectangle's first side in that candidate's plane basis)."""
+def _chunk_volumes(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.ndarray,
+                   edge_faces: np.ndarray, n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Smallest box volume for each candidate normal ``n`` (B,), with the direction (dx, dy) of its
+    rectangle's first side in the candidate's plane basis (B,) each (the first such side in
+    outline order on ties).  ``X``: the hull's vertices; ``fn``: its face normals; ``edges``: its
+    edges as vertex index pairs into ``X``, ``edge_faces`` the two faces of each."""
     B = len(n)
     height = np.ptp(X @ n.T, axis=0)  # (B,)
     side = (fn @ n.T) > -1e-10  # (F, B): face turned towards n (or edge-on)
@@ -161,8 +175,22 @@ def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     c1, c2 = corner(alpha + np.pi / 2), corner(alpha + 3 * np.pi / 2)  # the two ends along the edge
     width_t = (vx[c1] - vx[c2]) * dx + (vy[c1] - vy[c2]) * dy
     volume = width_n * width_t * height[k]
+    # per candidate (k is sorted): the smallest volume and its first edge
+    best = np.minimum.reduceat(volume, first_of := np.flatnonzero(np.r_[True, k[1:] != k[:-1]]))
+    at = np.flatnonzero(volume == np.repeat(best, np.diff(np.r_[first_of, len(k)])))
+    at = at[np.r_[True, k[at][1:] != k[at][:-1]]]  # the first minimum of each candidate
+    out_v, out_dx, out_dy = np.full(B, np.inf), np.zeros(B), np.zeros(B)
+    out_v[k[at]], out_dx[k[at]], out_dy[k[at]] = volume[at], dx[at], dy[at]
+    return out_v, out_dx, out_dy
+
+
+def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.ndarray,
+                   edge_faces: np.ndarray, n: np.ndarray) -> tuple[float, int, tuple[float, float]]:
+    """Smallest box volume over candidate normals ``n``: (volume, candidate index, direction of
+    the rectangle's first side in that candidate's plane basis)."""
+    volume, dx, dy = _chunk_volumes(X, centre, fn, edges, edge_faces, n)
     i = int(np.argmin(volume))
-    return float(volume[i]), int(k[i]), (float(dx[i]), float(dy[i]))
+    return float(volume[i]), i, (float(dx[i]), float(dy[i]))
 
 
 def _rotation(r: np.ndarray) -> np.ndarray:
@@ -200,6 +228,34 @@ def _polish(X: np.ndarray, axes: np.ndarray) -> np.ndarray:
     if not res.fun < v0:
         return axes
     return _rotation(res.x) @ axes
+
+
+def _hull_edges(hull) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices X, face normals, edges (index pairs into X, each once) and the two faces of each edge."""
+    X = hull.points[hull.vertices]
+    nb = hull.neighbors  # nb[i, j]: the face opposite vertex j of face i
+    i, j = np.nonzero(nb > np.arange(len(nb))[:, None])
+    simp = hull.simplices
+    edges_all = np.stack([simp[i, (j + 1) % 3], simp[i, (j + 2) % 3]], axis=1)
+    remap = np.full(len(hull.points), -1, dtype=np.int64)
+    remap[hull.vertices] = np.arange(len(hull.vertices))
+    return X, hull.equations[:, :3], remap[edges_all], np.stack([i, nb[i, j]], axis=1)
+
+
+def _lower_bounds(X: np.ndarray, n: np.ndarray) -> np.ndarray:
+    """For each candidate normal, a volume no larger than its box's: the box of the points of X
+    extreme in :data:`_BOUND_DIRECTIONS` directions (−inf where no bound is found)."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    try:
+        sub = ConvexHull(_extreme_points(X, _BOUND_DIRECTIONS))
+    except (QhullError, ValueError):
+        return np.full(len(n), -np.inf)
+    Y, fn, edges, edge_faces = _hull_edges(sub)
+    per = max(1, _CHUNK // max(len(edges), 1))
+    lower = np.concatenate([_chunk_volumes(Y, Y.mean(axis=0), fn, edges, edge_faces, n[c0:c0 + per])[0]
+                            for c0 in range(0, len(n), per)])
+    return np.where(np.isfinite(lower), lower, -np.inf)
 
 
 def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
@@ -241,20 +297,19 @@ def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
     search_hull = hull
     if len(X) > MAX_HULL_VERTICES:  # smooth dense hull: search on its extreme points
         search_hull = ConvexHull(_extreme_points(X, SAMPLE_DIRECTIONS))
-    Xs = search_hull.points[search_hull.vertices]
-    fn = search_hull.equations[:, :3]
     # edges of the triangulated hull, each once, with the two faces that share it
-    nb = search_hull.neighbors  # nb[i, j]: the face opposite vertex j of face i
-    i, j = np.nonzero(nb > np.arange(len(nb))[:, None])
-    simp = search_hull.simplices
-    edges_all = np.stack([simp[i, (j + 1) % 3], simp[i, (j + 2) % 3]], axis=1)
-    edge_faces = np.stack([i, nb[i, j]], axis=1)
-    remap = np.full(len(search_hull.points), -1, dtype=np.int64)
-    remap[search_hull.vertices] = np.arange(len(search_hull.vertices))
-    edges = remap[edges_all]
+    Xs, fn, edges, edge_faces = _hull_edges(search_hull)
     centre = Xs.mean(axis=0)
 
     n = _candidate_normals(fn)
+    if len(n) > _BOUND_DIRECTIONS:
+        # a lower bound for every candidate from a few extreme points: the box of a subset of the
+        # points is no larger for any normal.  Candidates whose bound exceeds the volume already
+        # reached by the most promising ones cannot win, and are not searched on the full hull.
+        lower = _lower_bounds(Xs, n)
+        first = np.argsort(lower, kind="stable")[:_BOUND_FIRST]
+        reached = _best_in_chunk(Xs, centre, fn, edges, edge_faces, n[first])[0]
+        n = n[~(lower > reached * (1.0 + 1e-9))]  # in their original order: ties resolve as without the bound
     per = max(1, _CHUNK // max(len(edges), 1))
     best = (np.inf, (1.0, 0.0), None)
     for c0 in range(0, len(n), per):
