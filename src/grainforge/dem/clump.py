@@ -157,6 +157,7 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     uncovered = np.ones(grid.shape, dtype=bool)
     axes = grid.axes()
     est = 4.0 / 3.0 * np.pi * cr**3
+    cr_max = float(cr.max()) if len(cr) else 0.0
     centres, radii = [], []
     for _ in range(n):
         top = np.argpartition(-est, min(8, len(est) - 1))[:8]
@@ -180,10 +181,14 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         uncovered[best_lo[0]:best_hi[0], best_lo[1]:best_hi[1], best_lo[2]:best_hi[2]] &= ~best_blk
         centres.append(c)
         radii.append(r)
-        diff = cp - c
+        # only overlapping candidates lose estimated gain; they lie within r + the largest candidate
+        # radius in x, i.e. in one slice of the candidates (listed in grid order, x index first)
+        reach = int(np.ceil((r + cr_max) / h)) + 1
+        a, b = np.searchsorted(cidx[:, 0], [cidx[best][0] - reach, cidx[best][0] + reach + 1])
+        diff = cp[a:b] - c
         d2 = np.einsum("ij,ij->i", diff, diff)
-        near = d2 < (r + cr) ** 2  # only overlapping candidates lose estimated gain
-        est[near] -= _lens(cr[near], r, np.sqrt(d2[near]))
+        near = np.flatnonzero(d2 < (r + cr[a:b]) ** 2)
+        est[a + near] -= _lens(cr[a + near], r, np.sqrt(d2[near]))
     return np.array(centres).reshape(-1, 3), np.array(radii)
 
 
@@ -277,8 +282,15 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     h = d / resolution
     grid = grid_for(v, h, pad=3)
     inside = inside_mask(v, f, grid)
-    depth = ndimage.distance_transform_edt(inside) * h
+    # the distance transform on the inside's box plus one empty cell each side: the same distances
+    # (the nearest empty cell of an inside cell is never beyond that layer) on fewer cells
     idx = np.argwhere(inside)
+    depth = np.zeros(inside.shape)
+    if len(idx):
+        lo = np.maximum(idx.min(axis=0) - 1, 0)
+        hi = np.minimum(idx.max(axis=0) + 2, inside.shape)
+        crop = tuple(slice(a, b) for a, b in zip(lo, hi))
+        depth[crop] = ndimage.distance_transform_edt(inside[crop]) * h
     pts = grid.points(idx)
     centres, radii = _greedy(pts, depth[inside], idx, grid, spheres, h, inside, overshoot * d, spill_weight)
     if iterations > 0 and len(radii):
