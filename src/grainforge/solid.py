@@ -30,7 +30,7 @@ import numpy as np
 __all__ = [
     "signed_volume", "volume_centroid", "face_components", "is_closed", "as_written", "solid_problems",
     "require_solid", "index_problems", "split_bodies", "self_intersections", "star_certificate", "AREA_TOLERANCE",
-    "cross3",
+    "cross3", "volume_and_centroid",
 ]
 
 #: smallest face area allowed, relative to the squared bounding-box diagonal of the mesh.
@@ -81,12 +81,26 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 def volume_centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Centroid of the enclosed volume, shape (3,)."""
+    return volume_and_centroid(vertices, faces)[1]
+
+
+def volume_and_centroid(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray]:
+    """:func:`signed_volume` and :func:`volume_centroid` from one pass over the faces.
+
+    Examples
+    --------
+    >>> from grainforge.geodesic import icosphere
+    >>> v, f = icosphere(3)
+    >>> vol, c = volume_and_centroid(v + 1.0, f)
+    >>> round(vol, 2), c.round(6).tolist()
+    (4.15, [1.0, 1.0, 1.0])
+    """
     a, b, c, six_vol = _tetra_volumes(vertices, faces)
     vol = six_vol / 6.0
     total = vol.sum()
     if total == 0:
-        return vertices.mean(axis=0)
-    return ((a + b + c) / 4.0 * vol[:, None]).sum(axis=0) / total
+        return 0.0, np.asarray(vertices).mean(axis=0)
+    return float(six_vol.sum() / 6.0), ((a + b + c) / 4.0 * vol[:, None]).sum(axis=0) / total
 
 
 def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import _tetra_volumes, solid_problems, split_bodies
+from ..solid import solid_problems, split_bodies, volume_and_centroid
 
 __all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
 
@@ -89,11 +89,8 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
     if not closed:
         flags.append("open")
     else:
-        # signed volume and volume centroid from one pass over the faces (solid.signed_volume, volume_centroid)
-        a, b, c, six = _tetra_volumes(v, f)
-        total = six.sum()
-        centroid = ((a + b + c) / 4.0 * six[:, None]).sum(axis=0) / total if total != 0 else v.mean(axis=0)
-        if total < 0:
+        volume, centroid = volume_and_centroid(v, f)
+        if volume < 0:
             f = f[:, ::-1]
             flags.append("inverted")
     # fails the solid contract as written (grainforge check says why).  A grain star-shaped about its
