@@ -176,7 +176,8 @@ def _chunk_volumes(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     width_t = (vx[c1] - vx[c2]) * dx + (vy[c1] - vy[c2]) * dy
     volume = width_n * width_t * height[k]
     # per candidate (k is sorted): the smallest volume and its first edge
-    best = np.minimum.reduceat(volume, first_of := np.flatnonzero(np.r_[True, k[1:] != k[:-1]]))
+    first_of = np.flatnonzero(np.r_[True, k[1:] != k[:-1]])
+    best = np.minimum.reduceat(volume, first_of)
     at = np.flatnonzero(volume == np.repeat(best, np.diff(np.r_[first_of, len(k)])))
     at = at[np.r_[True, k[at][1:] != k[at][:-1]]]  # the first minimum of each candidate
     out_v, out_dx, out_dy = np.full(B, np.inf), np.zeros(B), np.zeros(B)
@@ -184,13 +185,13 @@ def _chunk_volumes(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.
     return out_v, out_dx, out_dy
 
 
-def _best_in_chunk(X: np.ndarray, centre: np.ndarray, fn: np.ndarray, edges: np.ndarray,
-                   edge_faces: np.ndarray, n: np.ndarray) -> tuple[float, int, tuple[float, float]]:
-    """Smallest box volume over candidate normals ``n``: (volume, candidate index, direction of
-    the rectangle's first side in that candidate's plane basis)."""
-    volume, dx, dy = _chunk_volumes(X, centre, fn, edges, edge_faces, n)
-    i = int(np.argmin(volume))
-    return float(volume[i]), i, (float(dx[i]), float(dy[i]))
+def _volumes(X: np.ndarray, fn: np.ndarray, edges: np.ndarray, edge_faces: np.ndarray,
+             n: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_chunk_volumes` for any number of candidates, in chunks within the memory budget
+    (the hull's vertex mean as the centre)."""
+    per = max(1, _CHUNK // max(len(edges), 1))
+    parts = [_chunk_volumes(X, X.mean(axis=0), fn, edges, edge_faces, n[c0:c0 + per]) for c0 in range(0, len(n), per)]
+    return tuple(np.concatenate(p) for p in zip(*parts)) if parts else (np.zeros(0),) * 3
 
 
 def _rotation(r: np.ndarray) -> np.ndarray:
@@ -251,10 +252,7 @@ def _lower_bounds(X: np.ndarray, n: np.ndarray) -> np.ndarray:
         sub = ConvexHull(_extreme_points(X, _BOUND_DIRECTIONS))
     except (QhullError, ValueError):
         return np.full(len(n), -np.inf)
-    Y, fn, edges, edge_faces = _hull_edges(sub)
-    per = max(1, _CHUNK // max(len(edges), 1))
-    lower = np.concatenate([_chunk_volumes(Y, Y.mean(axis=0), fn, edges, edge_faces, n[c0:c0 + per])[0]
-                            for c0 in range(0, len(n), per)])
+    lower = _volumes(*_hull_edges(sub), n)[0]
     return np.where(np.isfinite(lower), lower, -np.inf)
 
 
@@ -298,25 +296,18 @@ def minimum_box(points, hull=None) -> tuple[np.ndarray, np.ndarray]:
     if len(X) > MAX_HULL_VERTICES:  # smooth dense hull: search on its extreme points
         search_hull = ConvexHull(_extreme_points(X, SAMPLE_DIRECTIONS))
     # edges of the triangulated hull, each once, with the two faces that share it
-    Xs, fn, edges, edge_faces = _hull_edges(search_hull)
-    centre = Xs.mean(axis=0)
-
-    n = _candidate_normals(fn)
+    hull_edges = _hull_edges(search_hull)
+    n = _candidate_normals(hull_edges[1])
     if len(n) > _BOUND_DIRECTIONS:
         # a lower bound for every candidate from a few extreme points: the box of a subset of the
         # points is no larger for any normal.  Candidates whose bound exceeds the volume already
         # reached by the most promising ones cannot win, and are not searched on the full hull.
-        lower = _lower_bounds(Xs, n)
-        first = np.argsort(lower, kind="stable")[:_BOUND_FIRST]
-        reached = _best_in_chunk(Xs, centre, fn, edges, edge_faces, n[first])[0]
+        lower = _lower_bounds(hull_edges[0], n)
+        reached = _volumes(*hull_edges, n[np.argsort(lower, kind="stable")[:_BOUND_FIRST]])[0].min()
         n = n[~(lower > reached * (1.0 + 1e-9))]  # in their original order: ties resolve as without the bound
-    per = max(1, _CHUNK // max(len(edges), 1))
-    best = (np.inf, (1.0, 0.0), None)
-    for c0 in range(0, len(n), per):
-        v, k, side = _best_in_chunk(Xs, centre, fn, edges, edge_faces, n[c0:c0 + per])
-        if v < best[0]:
-            best = (v, side, n[c0 + k])
-    (dx, dy), normal = best[1], best[2]
+    volume, dxs, dys = _volumes(*hull_edges, n)
+    i = int(np.argmin(volume))  # the first candidate with the smallest box
+    dx, dy, normal = dxs[i], dys[i], n[i]
     a, b = _plane_bases(normal[None])
     u = dx * a[0] + dy * b[0]
     axes = np.stack([u, np.cross(normal, u), normal])
