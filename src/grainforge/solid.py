@@ -126,10 +126,14 @@ def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
 
 def _directed_edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """Sorted keys of every directed edge and of its reverse."""
-    f = np.asarray(faces, dtype=np.int64)
+    # int32 keys when they fit (sorting them is about twice as fast)
+    f = np.asarray(faces)
+    top = max(int(n_vertices), int(f.max()) + 1 if f.size else 0)
+    dt = np.int32 if top**2 < 2**31 and (f.size == 0 or f.min() >= 0) else np.int64
+    f = f.astype(dt, copy=False)
     a = f.ravel()
-    b = np.roll(f, -1, axis=1).ravel()
-    nv = np.int64(n_vertices)
+    b = f[:, [1, 2, 0]].ravel()
+    nv = dt(n_vertices)
     return np.sort(a * nv + b), np.sort(b * nv + a)
 
 
