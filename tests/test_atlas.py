@@ -67,6 +67,22 @@ def test_hull_count_matches_a_brute_force_count():
         assert _hull_count(mask) == brute
 
 
+def test_hull_count_of_flat_and_thin_masks():
+    # one voxel thick: an L in a vertical plane (x fixed) holds 75 of the 85 lattice points of its hull
+    g = np.indices((10, 10))
+    layer = ~((g[0] >= 5) & (g[1] >= 5))
+    mask = np.zeros((3, 10, 10), bool)
+    mask[1] = layer
+    assert _hull_count(mask) == 85
+    assert _hull_count(np.moveaxis(mask, 0, 2)) == 85  # the same L lying flat
+    line = np.zeros((7, 7, 7), bool)
+    line[[0, 6], [0, 3], [0, 6]] = True  # a segment along (2, 1, 2): 4 lattice points
+    assert _hull_count(line) == 4
+    tilted = np.zeros((5, 5, 5), bool)
+    tilted[[0, 4, 0], [0, 0, 4], [0, 4, 0]] = True  # the triangle x = z, x + y <= 4, x, y >= 0: 15 points
+    assert _hull_count(tilted) == 15
+
+
 def test_scanline_voxeliser_equals_ray_parity_and_hull_count_equals_brute_force_on_a_rough_grain():
     import grainforge
     from scipy.spatial import ConvexHull, Delaunay

@@ -274,44 +274,21 @@ def _hull_count(mask: np.ndarray) -> int:
 
     Per voxel column (x, y) inside the hull's shadow, the hull spans
     ``max(down planes) <= z <= min(up planes)``; each column needs only the
-    facets whose xy bounding box holds it (the facet under or over it is
-    among them, and any other up plane is no lower there, as the hull is
-    the intersection of its half-spaces).
+    facets whose xy projection holds it (:func:`_triangle_columns`): the
+    plane of any of them is the hull's top (or bottom) there.  The shadow is
+    the set of columns under some facet.
     """
-    from scipy.spatial import ConvexHull, QhullError
+    from scipy.spatial import ConvexHull
 
     mask = np.asarray(mask, dtype=bool)
     pts = _column_ends(mask).astype(np.float64)
-    try:
-        # joggled input (QJ): lattice points are highly degenerate (many coplanar), and merging
-        # coplanar facets costs Qhull twice as long; the joggle (~1e-11) is far below the tolerance.
-        # Points moved by an integer near their mean (still lattice points): Qhull is ~1.5x faster
-        hull = ConvexHull(pts - np.round(pts.mean(axis=0)), qhull_options="QJ")
-    except QhullError:  # flat (one voxel thick): every lattice point of the hull is a voxel
-        return int(mask.sum())
-    tol = 1e-9
+    centred = pts - np.round(pts.mean(axis=0))  # moved by an integer (still lattice points): Qhull is ~1.5x faster
+    if len(pts) < 4 or np.linalg.matrix_rank(centred) < 3:
+        return _flat_hull_count(np.argwhere(mask))
+    # joggled input (QJ): lattice points are highly degenerate (many coplanar), and merging
+    # coplanar facets costs Qhull twice as long; the joggle (~1e-11) is far below the tolerance
+    hull = ConvexHull(centred, qhull_options="QJ")
     nx, ny = mask.shape[:2]
-    # the shadow: lattice columns inside the 2D hull of the vertices' xy (edges from exact integer normals)
-    vxy = pts[np.unique(hull.simplices), :2]
-    i0, j0 = vxy.min(0).astype(np.int64)
-    i1, j1 = vxy.max(0).astype(np.int64)
-    rows = np.arange(i0, i1 + 1, dtype=np.float64)
-    try:
-        ring = vxy[ConvexHull(vxy).vertices]
-        p, q = ring, np.roll(ring, -1, axis=0)
-        xa, xb = np.minimum(p[:, 0], q[:, 0]), np.maximum(p[:, 0], q[:, 0])
-        # y of every edge at every row x = i it spans (a vertical edge: both its ends)
-        on = (rows[:, None] >= xa) & (rows[:, None] <= xb)
-        dx = q[:, 0] - p[:, 0]
-        frac = (rows[:, None] - p[:, 0]) / np.where(dx != 0, dx, 1.0)
-        ya = np.where(dx != 0, p[:, 1] + frac * (q[:, 1] - p[:, 1]), np.minimum(p[:, 1], q[:, 1]))
-        yb = np.where(dx != 0, ya, np.maximum(p[:, 1], q[:, 1]))
-        jlo = np.ceil(np.min(np.where(on, ya, np.inf), axis=1) - tol)
-        jhi = np.floor(np.max(np.where(on, yb, -np.inf), axis=1) + tol)
-    except QhullError:  # the grain is one column wide in x or y: its shadow is its box
-        jlo, jhi = np.full(len(rows), float(j0)), np.full(len(rows), float(j1))
-    jj = np.arange(j0, j1 + 1)
-    shadow = (jj >= jlo[:, None]) & (jj <= jhi[:, None])
     # facet planes from the lattice points themselves (integer normals: exact values at lattice columns);
     # the joggled equations only orient them
     tri = pts[hull.simplices]
@@ -321,14 +298,91 @@ def _hull_count(mask: np.ndarray) -> int:
     zmax = np.full(nx * ny, np.inf)
     zmin = np.full(nx * ny, -np.inf)
     for sel, acc, out in ((n[:, 2] > 0, np.minimum, zmax), (n[:, 2] < 0, np.maximum, zmin)):
-        t, ci, cj = _column_pairs([tri[sel, k, 0] for k in range(3)], [tri[sel, k, 1] for k in range(3)], (nx, ny))
+        t, ci, cj = _triangle_columns(tri[sel, :, 0], tri[sel, :, 1])
         n0, n1, n2, o = (np.ascontiguousarray(a) for a in (n[sel, 0], n[sel, 1], n[sel, 2], off[sel]))
         z = -(o[t] + n0[t] * ci + n1[t] * cj) / n2[t]
         acc.at(out, ci * ny + cj, z)  # a flat index: ufunc.at's fast path
-    zmax = zmax.reshape(nx, ny)[i0:i1 + 1, j0:j1 + 1][shadow]
-    zmin = zmin.reshape(nx, ny)[i0:i1 + 1, j0:j1 + 1][shadow]
-    count = np.maximum(np.floor(zmax + tol) - np.ceil(zmin - tol) + 1, 0)
+    # the shadow: the columns under some up facet (and over some down facet)
+    shadow = np.isfinite(zmax) & np.isfinite(zmin)
+    tol = 1e-9
+    count = np.maximum(np.floor(zmax[shadow] + tol) - np.ceil(zmin[shadow] - tol) + 1, 0)
     return int(count.sum())
+
+
+def _flat_hull_count(points: np.ndarray) -> int:
+    """Lattice points in the convex hull of lattice ``points`` (m, 3) that lie in a plane, on a line or at a point.
+
+    Examples
+    --------
+    >>> L = np.array([[0, 0, 0], [4, 0, 0], [0, 1, 0], [1, 1, 0], [0, 4, 0]])   # x + y <= 4 at z = 0
+    >>> _flat_hull_count(L)
+    15
+    >>> _flat_hull_count(np.array([[0, 0, 0], [2, 4, 6]]))                       # (0,0,0), (1,2,3), (2,4,6)
+    3
+    """
+    from scipy.spatial import ConvexHull
+
+    p = np.unique(np.asarray(points, dtype=np.int64), axis=0)
+    if len(p) == 1:
+        return 1
+    lo, hi = p.min(axis=0), p.max(axis=0)
+    g = np.stack(np.meshgrid(*(np.arange(a, b + 1) for a, b in zip(lo, hi)), indexing="ij"), -1).reshape(-1, 3)
+    d = p - p[0]
+    far = d[np.argmax(np.abs(d).sum(axis=1))]
+    normal = np.cross(far, d)
+    k = np.argmax(np.abs(normal).sum(axis=1))
+    if not normal[k].any():  # on a line: the points of g on it, between its ends (integer arithmetic)
+        e = g - p[0]
+        proj = e @ far
+        span = d @ far
+        on = ~np.cross(e, far).any(axis=1) & (proj >= span.min()) & (proj <= span.max())
+        return int(on.sum())
+    n = normal[k]
+    on = (g - p[0]) @ n == 0
+    keep = [a for a in range(3) if a != np.argmax(np.abs(n))]  # the plane projects one-to-one on these axes
+    h = ConvexHull(p[:, keep].astype(np.float64))
+    inside = (h.equations[:, :2] @ g[on][:, keep].T.astype(np.float64) + h.equations[:, 2:]) <= 1e-9
+    return int(inside.all(axis=0).sum())
+
+
+def _triangle_columns(x: np.ndarray, y: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Every lattice column (i, j) in each closed triangle of lattice points, scanned row by row.
+
+    ``x``, ``y``: (F, 3) coordinates (integers held as floats) of the
+    triangles' corners.  Returns (triangle index, i, j).  A column on an edge
+    or corner belongs to every triangle that has it (a lattice point off a
+    segment between lattice points ``L`` apart is at least ``1/L`` from it,
+    so the 1e-9 tolerance only absorbs rounding).
+
+    Examples
+    --------
+    >>> t, i, j = _triangle_columns(np.array([[0.0, 2, 0]]), np.array([[0.0, 0, 2]]))
+    >>> sorted(zip(i.tolist(), j.tolist()))
+    [(0, 0), (0, 1), (0, 2), (1, 0), (1, 1), (2, 0)]
+    """
+    tol = 1e-9
+    x0 = np.ceil(x.min(axis=1) - tol).astype(np.int64)
+    nrow = np.maximum(np.floor(x.max(axis=1) + tol).astype(np.int64) - x0 + 1, 0)
+    tr = np.repeat(np.arange(len(x)), nrow)
+    row = (np.repeat(x0 - np.cumsum(nrow) + nrow, nrow) + np.arange(int(nrow.sum()))).astype(np.float64)
+    lo = np.full(len(tr), np.inf)
+    hi = np.full(len(tr), -np.inf)
+    for k in range(3):  # the edges that span the row: y where they cross it (a vertical edge: both ends)
+        px, py, qx, qy = x[tr, k], y[tr, k], x[tr, (k + 1) % 3], y[tr, (k + 1) % 3]
+        spans = (np.minimum(px, qx) - tol <= row) & (row <= np.maximum(px, qx) + tol)
+        dx = qx - px
+        vertical = dx == 0
+        at = py + (row - px) * (qy - py) / np.where(vertical, 1.0, dx)
+        elo = np.where(vertical, np.minimum(py, qy), at)
+        ehi = np.where(vertical, np.maximum(py, qy), at)
+        lo = np.where(spans, np.minimum(lo, elo), lo)
+        hi = np.where(spans, np.maximum(hi, ehi), hi)
+    j0 = np.ceil(lo - tol)
+    ncol = np.maximum(np.floor(hi + tol) - j0 + 1, 0).astype(np.int64)
+    j0 = j0.astype(np.int64)
+    start = np.cumsum(ncol) - ncol
+    j = np.repeat(j0 - start, ncol) + np.arange(int(ncol.sum()))
+    return np.repeat(tr, ncol), np.repeat(row.astype(np.int64), ncol), j
 
 
 def straddling_cubes(volume: np.ndarray, level: float) -> np.ndarray:
