@@ -3,7 +3,7 @@
 One process, BLAS single-threaded (as in a worker).  Prints best and median
 wall clock and CPU time (time.process_time, all threads) per stage and in
 total (stages: scanline voxelising, lattice hull count, Gaussian filter +
-marching cubes and its area (scikit-image) on the grain's box + 1 voxel), for a CRI grain (20,480 faces) and a
+marching cubes (scikit-image) and its area on the grain's box + 1 voxel), for a CRI grain (20,480 faces) and a
 sphere, at 30, 60 and 69 voxels across.  Usage:
 ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_atlas.py [--repeat N]``.
 """
@@ -36,9 +36,10 @@ def main():
     from scipy import ndimage
 
     import grainforge
-    from skimage.measure import marching_cubes, mesh_surface_area
+    from skimage.measure import marching_cubes
 
-    from grainforge.analysis.atlas import _hull_count, atlas_descriptors, random_rotation, straddling_cubes, voxelise
+    from grainforge.analysis.atlas import (_hull_count, _surface_area, atlas_descriptors, random_rotation,
+                                          straddling_cubes, voxelise)
     from grainforge.methods import get
     from grainforge.solid import signed_volume
 
@@ -64,7 +65,7 @@ def main():
             def sph():
                 s = ndimage.gaussian_filter(sub, 0.75, mode="constant", truncate=4.0)
                 verts, tris, _, _ = marching_cubes(s, level=0.5, allow_degenerate=True, mask=straddling_cubes(s, 0.5))
-                mesh_surface_area(verts, tris)
+                _surface_area(verts, tris)
 
             mc = timed(sph, args.repeat)
             print(f"| {label} | {n} | {tot[0]:.1f} / {tot[1]:.1f} ({tot[2]:.1f} / {tot[3]:.1f}) "
