@@ -168,15 +168,15 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
     # columns run along x (the image's slowest axis), so that the parity sweep goes row by row over
     # whole (y, z) planes: a column (j, k) is the line of centres (·, j, k)
     qs, qa, qb = q[:, 0], q[:, 1], q[:, 2]
-    t, cj, ck = _column_pairs([qa[f[:, i]] for i in range(3)], [qb[f[:, i]] for i in range(3)], (ny, nz))
+    fc = np.ascontiguousarray(f.T)  # the corners' index columns, contiguous: gathers with them are ~2x faster
+    t, cj, ck = _column_pairs([qa[fc[i]] for i in range(3)], [qb[fc[i]] for i in range(3)], (ny, nz))
     # per face and edge e (vertex e -> e+1), evaluated from its lower-numbered vertex so that both
     # faces sharing the edge compute bit-identical values; a 0 is broken as if the column centre
     # were at (a + ε, b + ε²); ``sgn`` = −1 where the edge runs against its lower-numbered vertex
-    fh = f
     a, b = cj.astype(np.float64), ck.astype(np.float64)
     side, w = [], []
     for e in range(3):
-        ia, ib = fh[:, e], fh[:, (e + 1) % 3]
+        ia, ib = fc[e], fc[(e + 1) % 3]
         flip = ia > ib
         lo_i, hi_i = np.where(flip, ib, ia), np.where(flip, ia, ib)
         pa, pb = qa[lo_i], qb[lo_i]
@@ -188,12 +188,13 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
         side.append(np.where(val != 0, np.sign(val), tie[t]))
         w.append(val)
     hit = (side[0] == side[1]) & (side[1] == side[2]) & (side[0] != 0)
-    cj, ck, ft = cj[hit], ck[hit], fh[t[hit]]
+    th = t[hit]
+    cj, ck = cj[hit], ck[hit]
     w0, w1, w2 = w[0][hit], w[1][hit], w[2][hit]
     wsum = w0 + w1 + w2
     wsum = np.where(wsum != 0, wsum, 1.0)
     # barycentric: edge e is opposite vertex e + 2
-    s_ = (w0 * qs[ft[:, 2]] + w1 * qs[ft[:, 0]] + w2 * qs[ft[:, 1]]) / wsum
+    s_ = (w0 * qs[fc[2][th]] + w1 * qs[fc[0][th]] + w2 * qs[fc[1][th]]) / wsum
     i = np.clip(np.ceil(s_), 0, nx).astype(np.int64)
     col = cj * nz + ck
     plane = ny * nz
