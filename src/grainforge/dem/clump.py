@@ -149,15 +149,66 @@ def _lens(r1, r2, d):
     return np.where(disjoint, 0.0, vol)
 
 
+def _edt_squared(mask: np.ndarray) -> np.ndarray:
+    """Exact squared Euclidean distance transform, in cells², of a 3D boolean array (int32).
+
+    Every True cell gets the squared distance from its centre to the nearest False
+    cell centre, every False cell 0: the square of what
+    ``scipy.ndimage.distance_transform_edt`` returns, as exact integers. The array must
+    hold at least one False cell. Separable (Saito & Toriwaki): the distance to the
+    nearest False cell along the last axis from running maxima/minima of indices, then
+    along the two other axes the lower envelope ``min_s g[i ± s] + s²``, shifting the
+    whole array by s = 1, 2, … until s² reaches the largest value (a few tens of
+    vectorised passes for a grain at 40 cells per d_eq, several times faster than scipy).
+
+    Examples
+    --------
+    >>> m = np.zeros((5, 5, 5), dtype=bool)
+    >>> m[1:4, 1:4, 1:4] = True
+    >>> int(_edt_squared(m)[2, 2, 2]), int(_edt_squared(m)[1, 1, 1])
+    (4, 1)
+    """
+    mask = np.asarray(mask, dtype=bool)
+    # larger than any distance inside the array; its square still fits int32 for arrays up to ~15,000 cells a side
+    big = np.int32(sum(mask.shape) + 1)
+    k = np.arange(mask.shape[2], dtype=np.int32)
+    last = np.where(mask, -big, k)
+    np.maximum.accumulate(last, axis=2, out=last)
+    nxt = np.minimum.accumulate(np.where(mask, big, k)[:, :, ::-1], axis=2)[:, :, ::-1]
+    g = np.minimum(k - last, nxt - k)
+    g *= g
+    for axis in (1, 0):
+        g = np.ascontiguousarray(np.moveaxis(g, axis, 0))
+        out = g.copy()
+        for s in range(1, g.shape[0]):
+            s2 = np.int32(s * s)
+            if s2 >= out.max():  # a farther shift adds more than any value left: done
+                break
+            np.minimum(out[s:], g[:-s] + s2, out=out[s:])
+            np.minimum(out[:-s], g[s:] + s2, out=out[:-s])
+        g = np.moveaxis(out, 0, axis)
+    return np.ascontiguousarray(g)
+
+
 def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weight):
-    """Greedy spheres: candidates are inside cell centres, radius depth − h/2 + overshoot."""
+    """Greedy spheres: candidates are inside cell centres, radius depth − h/2 + overshoot.
+
+    Each step takes the 8 candidates of largest estimated gain, counts their exact gain on the
+    grid (uncovered inside cells − ``spill_weight`` × uncovered outside cells) and places the best;
+    then the estimate of every candidate the new sphere overlaps loses the lens volume.
+    """
     cand = depth > 1.0 * h
     cp, cr = points[cand], depth[cand] - 0.5 * h + overshoot
     cidx = inside_idx[cand]
-    uncovered = np.ones(grid.shape, dtype=bool)
+    # uncovered cells inside and outside the grain (one array each: two counts per candidate)
+    u_in = inside.copy()
+    u_out = ~inside
     axes = grid.axes()
     est = 4.0 / 3.0 * np.pi * cr**3
     cr_max = float(cr.max()) if len(cr) else 0.0
+    # candidate coordinates one contiguous array per axis (the distance pass reads them per step)
+    px, py, pz = (np.ascontiguousarray(cp[:, k]) for k in range(3))
+    x_index = np.ascontiguousarray(cidx[:, 0])
     centres, radii = [], []
     for _ in range(n):
         top = np.argpartition(-est, min(8, len(est) - 1))[:8]
@@ -170,23 +221,24 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
             dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
             dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
             blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
-            un = blk & uncovered[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
-            ins = inside[lo[0]:hi[0], lo[1]:hi[1], lo[2]:hi[2]]
-            gain = np.count_nonzero(un & ins) - spill_weight * np.count_nonzero(un & ~ins)
+            box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
+            gain = np.count_nonzero(blk & u_in[box]) - spill_weight * np.count_nonzero(blk & u_out[box])
             if gain > best_gain:
-                best, best_gain, best_blk, best_lo, best_hi = t, gain, blk, lo, hi
+                best, best_gain, best_blk, best_box = t, gain, blk, box
         if best_gain <= 0:
             break
         c, r = cp[best], cr[best]
-        uncovered[best_lo[0]:best_hi[0], best_lo[1]:best_hi[1], best_lo[2]:best_hi[2]] &= ~best_blk
+        u_in[best_box] &= ~best_blk
+        u_out[best_box] &= ~best_blk
         centres.append(c)
         radii.append(r)
         # only overlapping candidates lose estimated gain; they lie within r + the largest candidate
         # radius in x, i.e. in one slice of the candidates (listed in grid order, x index first)
         reach = int(np.ceil((r + cr_max) / h)) + 1
-        a, b = np.searchsorted(cidx[:, 0], [cidx[best][0] - reach, cidx[best][0] + reach + 1])
-        diff = cp[a:b] - c
-        d2 = np.einsum("ij,ij->i", diff, diff)
+        a, b = np.searchsorted(x_index, [cidx[best][0] - reach, cidx[best][0] + reach + 1])
+        d2 = (px[a:b] - c[0]) ** 2
+        d2 += (py[a:b] - c[1]) ** 2
+        d2 += (pz[a:b] - c[2]) ** 2
         near = np.flatnonzero(d2 < (r + cr[a:b]) ** 2)
         est[a + near] -= _lens(cr[a + near], r, np.sqrt(d2[near]))
     return np.array(centres).reshape(-1, 3), np.array(radii)
@@ -268,8 +320,6 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     >>> c.count, c.coverage > 0.75, c.spill < 0.05
     (8, True, True)
     """
-    from scipy import ndimage
-
     spheres = int(spheres)
     if spheres < 1:
         raise ValueError(f"spheres must be ≥ 1, got {spheres!r}")
@@ -290,10 +340,12 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
         lo = np.maximum(idx.min(axis=0) - 1, 0)
         hi = np.minimum(idx.max(axis=0) + 2, inside.shape)
         crop = tuple(slice(a, b) for a, b in zip(lo, hi))
-        depth[crop] = ndimage.distance_transform_edt(inside[crop]) * h
+        depth[crop] = np.sqrt(_edt_squared(inside[crop]).astype(np.float64)) * h
     pts = grid.points(idx)
     centres, radii = _greedy(pts, depth[inside], idx, grid, spheres, h, inside, overshoot * d, spill_weight)
     if iterations > 0 and len(radii):
+        from scipy import ndimage
+
         outside_depth = ndimage.distance_transform_edt(~inside) * h
         band = (~inside) & (outside_depth <= 0.05 * d)
         near = depth[inside] <= 0.1 * d
