@@ -210,26 +210,38 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     px, py, pz = (np.ascontiguousarray(cp[:, k]) for k in range(3))
     x_index = np.ascontiguousarray(cidx[:, 0])
     centres, radii = [], []
+    # exact gains counted in earlier steps, kept while no placed sphere's box meets the candidate's
+    known: dict[int, tuple] = {}
     for _ in range(n):
         top = np.argpartition(-est, min(8, len(est) - 1))[:8]
         best, best_gain = -1, -1
         for t in top:
-            c, r = cp[t], cr[t]
-            lo = np.maximum(cidx[t] - int(np.ceil(r / h)) - 1, 0)
-            hi = np.minimum(cidx[t] + int(np.ceil(r / h)) + 2, grid.shape)
-            dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
-            dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
-            dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
-            blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
-            box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
-            gain = np.count_nonzero(blk & u_in[box]) - spill_weight * np.count_nonzero(blk & u_out[box])
+            t = int(t)
+            if t in known:
+                gain, blk, lo, hi = known[t][:4]
+            else:
+                c, r = cp[t], cr[t]
+                lo = np.maximum(cidx[t] - int(np.ceil(r / h)) - 1, 0)
+                hi = np.minimum(cidx[t] + int(np.ceil(r / h)) + 2, grid.shape)
+                dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
+                dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
+                dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
+                blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
+                box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
+                gain = np.count_nonzero(blk & u_in[box]) - spill_weight * np.count_nonzero(blk & u_out[box])
+                known[t] = (gain, blk, lo, hi, tuple(lo.tolist()), tuple(hi.tolist()))
             if gain > best_gain:
-                best, best_gain, best_blk, best_box = t, gain, blk, box
+                best, best_gain, best_blk, best_lo, best_hi = t, gain, blk, lo, hi
         if best_gain <= 0:
             break
         c, r = cp[best], cr[best]
+        best_box = (slice(best_lo[0], best_hi[0]), slice(best_lo[1], best_hi[1]), slice(best_lo[2], best_hi[2]))
         u_in[best_box] &= ~best_blk
         u_out[best_box] &= ~best_blk
+        (bl0, bl1, bl2), (bh0, bh1, bh2) = best_lo.tolist(), best_hi.tolist()
+        known = {t: k for t, k in known.items()
+                 if not (k[4][0] < bh0 and k[4][1] < bh1 and k[4][2] < bh2
+                         and bl0 < k[5][0] and bl1 < k[5][1] and bl2 < k[5][2])}
         centres.append(c)
         radii.append(r)
         # only overlapping candidates lose estimated gain; they lie within r + the largest candidate
