@@ -230,7 +230,12 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     u_in = inside.copy()
     u_out = ~inside
     axes = grid.axes()
-    est = 4.0 / 3.0 * np.pi * cr**3
+    # minus the estimated gain (the selection wants the largest; -(e - l) == -e + l exactly)
+    neg_est = -(4.0 / 3.0 * np.pi * cr**3)
+    # every candidate's block: its cell ± ceil(r/h) + 1 (one more above), clipped to the grid
+    reach_cells = np.ceil(cr / h).astype(np.int64)[:, None]
+    block_lo = np.maximum(cidx - reach_cells - 1, 0)
+    block_hi = np.minimum(cidx + reach_cells + 2, np.asarray(grid.shape))
     cr_max = float(cr.max()) if len(cr) else 0.0
     # candidate coordinates one contiguous array per axis (the distance pass reads them per step)
     px, py, pz = (np.ascontiguousarray(cp[:, k]) for k in range(3))
@@ -239,23 +244,22 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     # exact gains counted in earlier steps, kept while no placed sphere's box meets the candidate's
     known: dict[int, tuple] = {}
     for _ in range(n):
-        top = np.argpartition(-est, min(8, len(est) - 1))[:8]
+        top = np.argpartition(neg_est, min(8, len(neg_est) - 1))[:8]
         best, best_gain = -1, -1
         for t in top:
             t = int(t)
             if t in known:
-                gain, blk, lo, hi = known[t][:4]
+                gain, blk, lo, hi = known[t]
             else:
                 c, r = cp[t], cr[t]
-                lo = np.maximum(cidx[t] - int(np.ceil(r / h)) - 1, 0)
-                hi = np.minimum(cidx[t] + int(np.ceil(r / h)) + 2, grid.shape)
+                lo, hi = block_lo[t].tolist(), block_hi[t].tolist()
                 dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
                 dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
                 dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
                 blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
                 box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
                 gain = np.count_nonzero(blk & u_in[box]) - spill_weight * np.count_nonzero(blk & u_out[box])
-                known[t] = (gain, blk, lo, hi, tuple(lo.tolist()), tuple(hi.tolist()))
+                known[t] = (gain, blk, lo, hi)
             if gain > best_gain:
                 best, best_gain, best_blk, best_lo, best_hi = t, gain, blk, lo, hi
         if best_gain <= 0:
@@ -264,10 +268,10 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         best_box = (slice(best_lo[0], best_hi[0]), slice(best_lo[1], best_hi[1]), slice(best_lo[2], best_hi[2]))
         u_in[best_box] &= ~best_blk
         u_out[best_box] &= ~best_blk
-        (bl0, bl1, bl2), (bh0, bh1, bh2) = best_lo.tolist(), best_hi.tolist()
+        (bl0, bl1, bl2), (bh0, bh1, bh2) = best_lo, best_hi
         known = {t: k for t, k in known.items()
-                 if not (k[4][0] < bh0 and k[4][1] < bh1 and k[4][2] < bh2
-                         and bl0 < k[5][0] and bl1 < k[5][1] and bl2 < k[5][2])}
+                 if not (k[2][0] < bh0 and k[2][1] < bh1 and k[2][2] < bh2
+                         and bl0 < k[3][0] and bl1 < k[3][1] and bl2 < k[3][2])}
         centres.append(c)
         radii.append(r)
         # only overlapping candidates lose estimated gain; they lie within r + the largest candidate
@@ -279,7 +283,7 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         d2 += (pz[a:b] - c[2]) ** 2
         near = a + np.flatnonzero(d2 < (r + cr[a:b]) ** 2)
         which, loss = _lens_loss(cr[near], r, np.sqrt(d2[near - a]))
-        est[near[which]] -= loss
+        neg_est[near[which]] += loss
     return np.array(centres).reshape(-1, 3), np.array(radii)
 
 
