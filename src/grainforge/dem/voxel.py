@@ -125,8 +125,11 @@ def inside_mask(vertices: np.ndarray, faces: np.ndarray, grid: Grid) -> np.ndarr
     z = (wa * pz[f[th, 0]] + wb * pz[f[th, 1]] + wc * pz[f[th, 2]]) / ar
     step = np.where(ar > 0, -1, 1)  # xy-projected ccw => normal up => leaving when going up
     k = np.clip(np.ceil(z).astype(np.int64), 0, nz)
-    # winding-number steps per cell; int16 (and a cumulative sum in int16, not numpy's default int64 for
-    # int32 input): a third of the time, and room for 32,767 nested layers
-    delta = np.zeros((nx, ny, nz + 1), dtype=np.int16)
-    np.add.at(delta, (ci[hit], cj[hit], k), step.astype(np.int16))
-    return np.cumsum(delta[:, :, :nz], axis=2, dtype=np.int16) > 0
+    # winding-number steps per cell in int16 (room for 32,767 nested layers), z first: the running
+    # sum along z is then one vectorised add of whole (x, y) planes per layer, several times faster
+    # than numpy's cumsum along a short last axis (integers: the same sums)
+    wind = np.zeros((nz + 1, nx, ny), dtype=np.int16)
+    np.add.at(wind, (k, ci[hit], cj[hit]), step.astype(np.int16))
+    for layer in range(1, nz):
+        wind[layer] += wind[layer - 1]
+    return np.ascontiguousarray((wind[:nz] > 0).transpose(1, 2, 0))
