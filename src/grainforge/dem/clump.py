@@ -182,7 +182,7 @@ def _edt_squared(mask: np.ndarray) -> np.ndarray:
     cell centre, every False cell 0: the square of what
     ``scipy.ndimage.distance_transform_edt`` returns, as exact integers. The array must
     hold at least one False cell. Separable (Saito & Toriwaki): the distance to the
-    nearest False cell along the last axis from running maxima/minima of indices, then
+    nearest False cell along the first axis from running maxima/minima of indices, then
     along the two other axes the lower envelope ``min_s g[i ± s] + s²``, shifting the
     whole array by s = 1, 2, … until s² reaches the largest value (a few tens of
     vectorised passes for a grain at 40 cells per d_eq, several times faster than scipy).
@@ -197,13 +197,18 @@ def _edt_squared(mask: np.ndarray) -> np.ndarray:
     mask = np.asarray(mask, dtype=bool)
     # larger than any distance inside the array; its square still fits int32 for arrays up to ~15,000 cells a side
     big = np.int32(sum(mask.shape) + 1)
-    k = np.arange(mask.shape[2], dtype=np.int32)
-    last = np.where(mask, -big, k)
-    np.maximum.accumulate(last, axis=2, out=last)
-    nxt = np.minimum.accumulate(np.where(mask, big, k)[:, :, ::-1], axis=2)[:, :, ::-1]
-    g = np.minimum(k - last, nxt - k)
+    # along axis 0, by whole planes: index of the last False cell at or before each cell, of the next
+    # at or after it (running max / min; much faster than numpy's accumulate along a short last axis)
+    i = np.arange(mask.shape[0], dtype=np.int32)[:, None, None]
+    last = np.where(mask, -big, i)
+    for a in range(1, len(last)):
+        np.maximum(last[a], last[a - 1], out=last[a])
+    nxt = np.where(mask, big, i)
+    for a in range(len(nxt) - 2, -1, -1):
+        np.minimum(nxt[a], nxt[a + 1], out=nxt[a])
+    g = np.minimum(i - last, nxt - i)
     g *= g
-    for axis in (1, 0):
+    for axis in (1, 2):
         g = np.ascontiguousarray(np.moveaxis(g, axis, 0))
         out = g.copy()
         for s in range(1, g.shape[0]):
