@@ -3,7 +3,7 @@
 The algorithm ("greedy inscribed spheres + SDF refinement", ours):
 
 1. Voxelise the grain (cell size ``d_eq / resolution``) and take the
-   Euclidean distance transform of the inside (scipy): every inside cell
+   exact Euclidean distance transform of the inside (:func:`_edt_squared`): every inside cell
    centre is the centre of a candidate inscribed sphere of radius
    ``D(x) − h/2``.
 2. Greedy placement: candidates are enlarged by ``overshoot · d_eq``;
