@@ -242,8 +242,6 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     block_lo = np.maximum(cidx - reach_cells - 1, 0)
     block_hi = np.minimum(cidx + reach_cells + 2, np.asarray(grid.shape))
     cr_max = float(cr.max()) if len(cr) else 0.0
-    # candidate coordinates one contiguous array per axis (the distance pass reads them per step)
-    px, py, pz = (np.ascontiguousarray(cp[:, k]) for k in range(3))
     x_index = np.ascontiguousarray(cidx[:, 0])
     centres, radii = [], []
     # exact gains counted in earlier steps, kept while no placed sphere's box meets the candidate's
@@ -283,9 +281,10 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         # radius in x, i.e. in one slice of the candidates (listed in grid order, x index first)
         reach = int(np.ceil((r + cr_max) / h)) + 1
         a, b = np.searchsorted(x_index, [cidx[best][0] - reach, cidx[best][0] + reach + 1])
-        d2 = (px[a:b] - c[0]) ** 2
-        d2 += (py[a:b] - c[1]) ** 2
-        d2 += (pz[a:b] - c[2]) ** 2
+        # einsum, not dx² + dy² + dz²: its sum rounds differently in ~1 of 4 distances, and a last-bit
+        # change of an estimate can change which of two tied candidates is taken
+        diff = cp[a:b] - c
+        d2 = np.einsum("ij,ij->i", diff, diff)
         near = a + np.flatnonzero(d2 < (r + cr[a:b]) ** 2)
         which, loss = _lens_loss(cr[near], r, np.sqrt(d2[near - a]))
         neg_est[near[which]] += loss
