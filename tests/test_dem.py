@@ -365,3 +365,14 @@ def test_liggghts_seeds_are_the_trial_division_primes():
     for n in list(range(10001, 10400)) + [86028157 + 1000 * k for k in range(1, 40)]:
         assert _next_prime(n) == trial(n)
     assert all(_is_prime(_seed(k)) for k in range(0, 400, 7))
+
+
+def test_clump_same_with_einsum_distances(monkeypatch):
+    """The greedy's per-axis squared distances give the spheres einsum's distances give."""
+    import grainforge.dem.clump as clump_module
+
+    g = grainforge.dpa(rng=11)
+    fast = clump(g.vertices, g.faces, spheres=40, resolution=40, rng=0)
+    monkeypatch.setattr(clump_module, "_einsum_rows_sum_xzy", lambda: False)
+    plain = clump(g.vertices, g.faces, spheres=40, resolution=40, rng=0)
+    assert np.array_equal(fast.centres, plain.centres) and np.array_equal(fast.radii, plain.radii)

@@ -31,6 +31,7 @@ Angelidakis et al. 2021 (CLUMP).
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 
 import numpy as np
@@ -221,6 +222,22 @@ def _edt_squared(mask: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(g)
 
 
+@functools.cache
+def _einsum_rows_sum_xzy() -> bool:
+    """Whether ``np.einsum("ij,ij->i", d, d)`` of 3-vectors rounds as ``(d0² + d2²) + d1²``.
+
+    NumPy's SIMD einsum loads a row into one vector and sums its lanes pairwise: on x86-64
+    (SSE, AVX2, AVX-512) that is ``(d0² + d2²) + d1²``, which differs from ``(d0² + d1²) + d2²``
+    in about one row in four; where multiply-adds are fused (aarch64) it is something else
+    again. Checked once on 256 rows, of which ~60 tell the orders apart.
+    """
+    d = np.random.default_rng(0).normal(size=(256, 3))
+    mine = d[:, 0] ** 2
+    mine += d[:, 2] ** 2
+    mine += d[:, 1] ** 2
+    return bool(np.array_equal(np.einsum("ij,ij->i", d, d), mine))
+
+
 def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weight):
     """Greedy spheres: candidates are inside cell centres, radius depth − h/2 + overshoot.
 
@@ -243,6 +260,9 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     block_hi = np.minimum(cidx + reach_cells + 2, np.asarray(grid.shape))
     cr_max = float(cr.max()) if len(cr) else 0.0
     x_index = np.ascontiguousarray(cidx[:, 0])
+    # candidate coordinates one contiguous array per axis, for the per-step squared distances
+    px, py, pz = (np.ascontiguousarray(cp[:, k]) for k in range(3))
+    xzy = _einsum_rows_sum_xzy()
     centres, radii = [], []
     # exact gains counted in earlier steps, kept while no placed sphere's box meets the candidate's
     known: dict[int, tuple] = {}
@@ -281,10 +301,16 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         # radius in x, i.e. in one slice of the candidates (listed in grid order, x index first)
         reach = int(np.ceil((r + cr_max) / h)) + 1
         a, b = np.searchsorted(x_index, [cidx[best][0] - reach, cidx[best][0] + reach + 1])
-        # einsum, not dx² + dy² + dz²: its sum rounds differently in ~1 of 4 distances, and a last-bit
-        # change of an estimate can change which of two tied candidates is taken
-        diff = cp[a:b] - c
-        d2 = np.einsum("ij,ij->i", diff, diff)
+        # the squared distances exactly as einsum("ij,ij->i") sums them (a last-bit change of an
+        # estimate can change which of two tied candidates is taken): (dx² + dz²) + dy² where that is
+        # its order (x86-64), else einsum itself
+        if xzy:
+            d2 = (px[a:b] - c[0]) ** 2
+            d2 += (pz[a:b] - c[2]) ** 2
+            d2 += (py[a:b] - c[1]) ** 2
+        else:
+            diff = cp[a:b] - c
+            d2 = np.einsum("ij,ij->i", diff, diff)
         near = a + np.flatnonzero(d2 < (r + cr[a:b]) ** 2)
         which, loss = _lens_loss(cr[near], r, np.sqrt(d2[near - a]))
         neg_est[near[which]] += loss
