@@ -160,6 +160,8 @@ def bench_deck(args):
             shutil.rmtree(tmp / f"deck{count}")
         print(f"| {count} | {args.workers} | {wall:.1f} | {cpu:.1f} | {1000 * cpu / count:.0f} | {rss:.0f} | {files} |"
               f"  (load average before/after {load[0]:.1f}/{os.getloadavg()[0]:.1f})", flush=True)
+    if not args.keep:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def main():
