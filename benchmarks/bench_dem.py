@@ -1,7 +1,7 @@
 """DEM export benchmarks (issue 15).
 
     .venv/bin/python benchmarks/bench_dem.py clumps [--clump-python /tmp/clumpbench/bin/python] [--iterations 30]
-    .venv/bin/python benchmarks/bench_dem.py deck --count 10000 [--workers 2]   (several counts: --count 100 300)
+    .venv/bin/python benchmarks/bench_dem.py deck --count 10000 [--workers 2] [--keep]   (several counts: --count 100 300)
 
 ``clumps``: our clump (grainforge.dem.clump) and clump-python's Euclidean
 distance-transform method (GenerateClump_Euclidean_3D, div=102, overlap=0.6 as
@@ -19,7 +19,8 @@ the clump call alone (ours includes voxelising; clump_quality is not timed).
 ``deck``: a batch-like folder of COUNT grain files (FSO/CRI/DPA cycled,
 written by grainforge.io) -> ``grainforge dem --engine liggghts`` (per-grain
 multisphere templates, 30 spheres). Prints wall and CPU time (parent +
-workers, polled every 0.2 s) and the peak RSS of the whole process tree.
+workers, polled every 0.2 s) and the peak RSS of the whole process tree. The grain folder
+and the deck are removed afterwards unless ``--keep``.
 """
 
 from __future__ import annotations
@@ -27,6 +28,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import shutil
 import subprocess
 import sys
 import tempfile
@@ -153,8 +155,13 @@ def bench_deck(args):
         wall, cpu, rss = _run_tree([str(exe), "dem", str(folder), "--out", str(tmp / f"deck{count}"),
                                     "--engine", "liggghts", "--workers", str(args.workers)])
         files = len(list((tmp / f"deck{count}").iterdir()))
+        if not args.keep:  # 10,000 grain files take ~7 GB
+            shutil.rmtree(folder)
+            shutil.rmtree(tmp / f"deck{count}")
         print(f"| {count} | {args.workers} | {wall:.1f} | {cpu:.1f} | {1000 * cpu / count:.0f} | {rss:.0f} | {files} |"
               f"  (load average before/after {load[0]:.1f}/{os.getloadavg()[0]:.1f})", flush=True)
+    if not args.keep:
+        shutil.rmtree(tmp, ignore_errors=True)
 
 
 def main():
@@ -166,6 +173,7 @@ def main():
     b = sub.add_parser("deck")
     b.add_argument("--count", type=int, nargs="+", default=[10000])
     b.add_argument("--workers", type=int, default=2)
+    b.add_argument("--keep", action="store_true", help="keep the grain folder and the deck (removed by default)")
     args = ap.parse_args()
     if args.what == "clumps":
         bench_clumps(args)

@@ -308,3 +308,71 @@ def test_dem_cli_clump_refinement(tmp_path):
     assert {p.name: p.read_bytes() for p in one.iterdir()} == {p.name: p.read_bytes() for p in two.iterdir()}
     r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(tmp_path / "bad"), "--refine-iterations", "-1"])
     assert r.exit_code == 2 and "--refine-iterations" in r.output and not (tmp_path / "bad").exists()
+
+
+def test_edt_squared_matches_scipy():
+    from scipy import ndimage
+
+    from grainforge.dem.clump import _edt_squared
+
+    rng = np.random.default_rng(5)
+    g = grainforge.dpa(rng=4)
+    grid = grid_for(g.vertices, 0.05, pad=2)
+    masks = [inside_mask(g.vertices, g.faces, grid)]
+    for shape in [(9, 13, 7), (20, 5, 11)]:
+        m = rng.random(shape) < 0.85
+        m[0] = False
+        masks.append(m)
+    for m in masks:
+        d2 = _edt_squared(m)
+        assert d2.dtype == np.int32
+        assert np.array_equal(np.sqrt(d2.astype(np.float64)), ndimage.distance_transform_edt(m))
+
+
+def test_merge_vertices_is_unique_rows():
+    from grainforge.dem.inputs import merge_vertices
+    from grainforge.solid import unique_rows
+
+    rng = np.random.default_rng(6)
+    g = grainforge.fso(rng=7)
+    soups = [g.vertices[g.faces].reshape(-1, 3).astype(np.float32).astype(np.float64)]
+    for k in range(300):
+        p = rng.integers(-2, 3, size=(int(rng.integers(0, 60)), 3)) * 0.5
+        p[rng.random(p.shape) < 0.2] *= -1  # -0.0 among the zeros
+        p = p.astype(np.float32) if k % 3 == 0 else p
+        if k % 7 == 0 and len(p):
+            p[0, 0] = 0.1  # not float32-exact in float64: the general path
+        soups.append(p)
+    for p in soups:
+        (u1, i1), (u2, i2) = unique_rows(p), merge_vertices(p)
+        assert u1.dtype == u2.dtype and np.array_equal(u1, u2) and np.array_equal(i1, i2)
+        assert np.array_equal(np.signbit(u1), np.signbit(u2))
+
+
+def test_liggghts_seeds_are_the_trial_division_primes():
+    import math
+
+    from grainforge.dem.liggghts import _is_prime, _next_prime, _seed
+
+    def trial(n):
+        n += 1 - n % 2
+        while any(n % p == 0 for p in range(3, int(math.isqrt(n)) + 1, 2)):
+            n += 2
+        return n
+
+    assert [k for k in range(200) if _is_prime(k)] == [k for k in range(2, 200)
+                                                        if all(k % p for p in range(2, int(math.isqrt(k)) + 1))]
+    for n in list(range(10001, 10400)) + [86028157 + 1000 * k for k in range(1, 40)]:
+        assert _next_prime(n) == trial(n)
+    assert all(_is_prime(_seed(k)) for k in range(0, 400, 7))
+
+
+def test_clump_same_with_einsum_distances(monkeypatch):
+    """The greedy's per-axis squared distances give the spheres einsum's distances give."""
+    import grainforge.dem.clump as clump_module
+
+    g = grainforge.dpa(rng=11)
+    fast = clump(g.vertices, g.faces, spheres=40, resolution=40, rng=0)
+    monkeypatch.setattr(clump_module, "_einsum_rows_sum_xzy", lambda: False)
+    plain = clump(g.vertices, g.faces, spheres=40, resolution=40, rng=0)
+    assert np.array_equal(fast.centres, plain.centres) and np.array_equal(fast.radii, plain.radii)

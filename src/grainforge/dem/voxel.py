@@ -91,39 +91,45 @@ def inside_mask(vertices: np.ndarray, faces: np.ndarray, grid: Grid) -> np.ndarr
     f = np.asarray(faces, dtype=np.int64)
     h = grid.spacing
     nx, ny, nz = grid.shape
-    # grid coordinates (cell-centre units)
+    # grid coordinates (cell-centre units), one contiguous array per axis
     p = (v - grid.origin) / h
-    a, b, c = p[f[:, 0]], p[f[:, 1]], p[f[:, 2]]
-    area2 = (b[:, 0] - a[:, 0]) * (c[:, 1] - a[:, 1]) - (b[:, 1] - a[:, 1]) * (c[:, 0] - a[:, 0])
-    keep = area2 != 0
-    a, b, c, area2 = a[keep], b[keep], c[keep], area2[keep]
-    tri = np.stack([a, b, c], axis=1)
-    i0 = np.clip(np.ceil(tri[:, :, 0].min(axis=1)).astype(np.int64), 0, nx)
-    i1 = np.clip(np.floor(tri[:, :, 0].max(axis=1)).astype(np.int64), -1, nx - 1)
-    j0 = np.clip(np.ceil(tri[:, :, 1].min(axis=1)).astype(np.int64), 0, ny)
-    j1 = np.clip(np.floor(tri[:, :, 1].max(axis=1)).astype(np.int64), -1, ny - 1)
+    px, py = np.ascontiguousarray(p[:, 0]), np.ascontiguousarray(p[:, 1])
+    ax, bx, cx = px[f[:, 0]], px[f[:, 1]], px[f[:, 2]]
+    ay, by, cy = py[f[:, 0]], py[f[:, 1]], py[f[:, 2]]
+    area2 = (bx - ax) * (cy - ay) - (by - ay) * (cx - ax)
+    i0 = np.clip(np.ceil(np.minimum(np.minimum(ax, bx), cx)).astype(np.int64), 0, nx)
+    i1 = np.clip(np.floor(np.maximum(np.maximum(ax, bx), cx)).astype(np.int64), -1, nx - 1)
+    j0 = np.clip(np.ceil(np.minimum(np.minimum(ay, by), cy)).astype(np.int64), 0, ny)
+    j1 = np.clip(np.floor(np.maximum(np.maximum(ay, by), cy)).astype(np.int64), -1, ny - 1)
     wi = np.maximum(i1 - i0 + 1, 0)
     wj = np.maximum(j1 - j0 + 1, 0)
-    count = wi * wj
-    t = np.repeat(np.arange(len(count)), count)
+    # only triangles that are not edge-on and cover at least one column centre go on
+    keep = np.flatnonzero((area2 != 0) & (wi > 0) & (wj > 0))
+    count = (wi * wj)[keep]
+    t = np.repeat(keep, count)
     start = np.cumsum(count) - count
     local = np.arange(count.sum()) - np.repeat(start, count)
-    ci = i0[t] + local // np.maximum(wj[t], 1)
-    cj = j0[t] + local % np.maximum(wj[t], 1)
+    wjt = wj[t]
+    ci = i0[t] + local // wjt
+    cj = j0[t] + local % wjt
     x, y = ci.astype(np.float64), cj.astype(np.float64)
-    ta, tb, tc, ar = a[t], b[t], c[t], area2[t]
+    tax, tay, tbx, tby, tcx, tcy, ar = ax[t], ay[t], bx[t], by[t], cx[t], cy[t], area2[t]
     # barycentric weights (signed areas) of the column centre in the projected triangle
-    wa = (tb[:, 0] - x) * (tc[:, 1] - y) - (tb[:, 1] - y) * (tc[:, 0] - x)
-    wb = (tc[:, 0] - x) * (ta[:, 1] - y) - (tc[:, 1] - y) * (ta[:, 0] - x)
+    wa = (tbx - x) * (tcy - y) - (tby - y) * (tcx - x)
+    wb = (tcx - x) * (tay - y) - (tcy - y) * (tax - x)
     wc = ar - wa - wb
     sgn = np.sign(ar)
-    hit = (wa * sgn >= 0) & (wb * sgn >= 0) & (wc * sgn >= 0)
-    wa, wb, wc, ar = wa[hit], wb[hit], wc[hit], ar[hit]
-    z = (wa * ta[hit, 2] + wb * tb[hit, 2] + wc * tc[hit, 2]) / ar
+    hit = np.flatnonzero((wa * sgn >= 0) & (wb * sgn >= 0) & (wc * sgn >= 0))
+    wa, wb, wc, ar, th = wa[hit], wb[hit], wc[hit], ar[hit], t[hit]
+    pz = p[:, 2]
+    z = (wa * pz[f[th, 0]] + wb * pz[f[th, 1]] + wc * pz[f[th, 2]]) / ar
     step = np.where(ar > 0, -1, 1)  # xy-projected ccw => normal up => leaving when going up
     k = np.clip(np.ceil(z).astype(np.int64), 0, nz)
-    # winding-number steps per cell; int16 (and a cumulative sum in int16, not numpy's default int64 for
-    # int32 input): a third of the time, and room for 32,767 nested layers
-    delta = np.zeros((nx, ny, nz + 1), dtype=np.int16)
-    np.add.at(delta, (ci[hit], cj[hit], k), step.astype(np.int16))
-    return np.cumsum(delta[:, :, :nz], axis=2, dtype=np.int16) > 0
+    # winding-number steps per cell in int16 (room for 32,767 nested layers), z first: the running
+    # sum along z is then one vectorised add of whole (x, y) planes per layer, several times faster
+    # than numpy's cumsum along a short last axis (integers: the same sums)
+    wind = np.zeros((nz + 1, nx, ny), dtype=np.int16)
+    np.add.at(wind, (k, ci[hit], cj[hit]), step.astype(np.int16))
+    for layer in range(1, nz):
+        wind[layer] += wind[layer - 1]
+    return np.ascontiguousarray((wind[:nz] > 0).transpose(1, 2, 0))
