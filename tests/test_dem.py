@@ -310,25 +310,6 @@ def test_dem_cli_clump_refinement(tmp_path):
     assert r.exit_code == 2 and "--refine-iterations" in r.output and not (tmp_path / "bad").exists()
 
 
-def test_edt_squared_matches_scipy():
-    from scipy import ndimage
-
-    from grainforge.dem.clump import _edt_squared
-
-    rng = np.random.default_rng(5)
-    g = grainforge.dpa(rng=4)
-    grid = grid_for(g.vertices, 0.05, pad=2)
-    masks = [inside_mask(g.vertices, g.faces, grid)]
-    for shape in [(9, 13, 7), (20, 5, 11)]:
-        m = rng.random(shape) < 0.85
-        m[0] = False
-        masks.append(m)
-    for m in masks:
-        d2 = _edt_squared(m)
-        assert d2.dtype == np.int32
-        assert np.array_equal(np.sqrt(d2.astype(np.float64)), ndimage.distance_transform_edt(m))
-
-
 def test_merge_vertices_is_unique_rows():
     from grainforge.dem.inputs import merge_vertices
     from grainforge.solid import unique_rows
@@ -365,14 +346,3 @@ def test_liggghts_seeds_are_the_trial_division_primes():
     for n in list(range(10001, 10400)) + [86028157 + 1000 * k for k in range(1, 40)]:
         assert _next_prime(n) == trial(n)
     assert all(_is_prime(_seed(k)) for k in range(0, 400, 7))
-
-
-def test_clump_same_with_einsum_distances(monkeypatch):
-    """The greedy's per-axis squared distances give the spheres einsum's distances give."""
-    import grainforge.dem.clump as clump_module
-
-    g = grainforge.dpa(rng=11)
-    fast = clump(g.vertices, g.faces, spheres=40, resolution=40, rng=0)
-    monkeypatch.setattr(clump_module, "_einsum_rows_sum_xzy", lambda: False)
-    plain = clump(g.vertices, g.faces, spheres=40, resolution=40, rng=0)
-    assert np.array_equal(fast.centres, plain.centres) and np.array_equal(fast.radii, plain.radii)
