@@ -28,7 +28,7 @@ def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     >>> enclosure_problems(b.vertices, b.faces[:-1])
     ['open boundary or inconsistent orientation']
     """
-    from ..solid import face_components, signed_volume
+    from ..solid import _directed_edges, face_components, signed_volume
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
@@ -40,10 +40,8 @@ def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
         return ["face index out of range"]
     if ((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])).any():
         return ["degenerate faces (repeated vertex)"]
-    a = f.ravel()
-    b = np.roll(f, -1, axis=1).ravel()
-    n = np.int64(len(v))
-    if not np.array_equal(np.sort(a * n + b), np.sort(b * n + a)):
+    directed, reverse = _directed_edges(f, len(v))
+    if not np.array_equal(directed, reverse):
         return ["open boundary or inconsistent orientation"]
     bodies = len(np.unique(face_components(f, len(v))))
     if bodies != 1:

