@@ -310,24 +310,27 @@ def test_dem_cli_clump_refinement(tmp_path):
     assert r.exit_code == 2 and "--refine-iterations" in r.output and not (tmp_path / "bad").exists()
 
 
-def test_merge_vertices_is_unique_rows():
-    from grainforge.dem.inputs import merge_vertices
+def test_vertex_merge_of_soups_and_small_sets():
+    """solid.unique_rows (read_grain's merge) on a grain's float32 soup and 300 small sets with
+    repeats and -0.0: np.unique's rows and inverse, each group's first occurrence kept (its sign)."""
     from grainforge.solid import unique_rows
 
     rng = np.random.default_rng(6)
     g = grainforge.fso(rng=7)
     soups = [g.vertices[g.faces].reshape(-1, 3).astype(np.float32).astype(np.float64)]
     for k in range(300):
-        p = rng.integers(-2, 3, size=(int(rng.integers(0, 60)), 3)) * 0.5
+        p = rng.integers(-2, 3, size=(int(rng.integers(1, 60)), 3)) * 0.5
         p[rng.random(p.shape) < 0.2] *= -1  # -0.0 among the zeros
         p = p.astype(np.float32) if k % 3 == 0 else p
-        if k % 7 == 0 and len(p):
+        if k % 7 == 0:
             p[0, 0] = 0.1  # not float32-exact in float64: the general path
         soups.append(p)
     for p in soups:
-        (u1, i1), (u2, i2) = unique_rows(p), merge_vertices(p)
-        assert u1.dtype == u2.dtype and np.array_equal(u1, u2) and np.array_equal(i1, i2)
-        assert np.array_equal(np.signbit(u1), np.signbit(u2))
+        u, inv = unique_rows(p)
+        ru, rinv = np.unique(p, axis=0, return_inverse=True)
+        assert u.dtype == p.dtype and np.array_equal(u, ru) and np.array_equal(inv, rinv.reshape(-1))
+        first = np.unique(inv, return_index=True)[1]
+        assert np.array_equal(np.signbit(u), np.signbit(p[first]))
 
 
 def test_liggghts_seeds_are_the_trial_division_primes():

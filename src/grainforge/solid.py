@@ -497,8 +497,9 @@ def unique_rows(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
     Rows are sorted by x, then y, then z (numeric order, as ``np.unique``
     sorts them) with ``np.lexsort`` instead of a sort of structured rows.
-    Points that float32 holds exactly (mesh files) are sorted on two integer
-    keys, (x, y) packed in 64 bits and z: the same order, faster again.
+    Points that float32 holds exactly (mesh files) are sorted on integer keys,
+    (x, y) packed in 64 bits, then z within the rare runs of equal (x, y):
+    the same order, faster again.
 
     Examples
     --------
@@ -522,19 +523,29 @@ def unique_rows(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if p.dtype == np.float64 and not np.array_equal(q, p):  # (NaN never equals: the general path)
             q = None
     if q is not None:
+        # one unstable argsort on (x, y) packed in 64 bits; the few runs of equal (x, y) holding
+        # different z are then sorted by z in place, and each group keeps its smallest index
         k = _sortable_bits(q)
         xy = (k[:, 0].astype(np.uint64) << np.uint64(32)) | k[:, 1].astype(np.uint64)
-        order = np.lexsort((k[:, 2], xy))
+        order = np.argsort(xy)
         xs, zs = xy[order], k[order, 2]
-        np.not_equal(xs[1:], xs[:-1], out=new[1:])
-        new[1:] |= zs[1:] != zs[:-1]
+        same_xy = xs[1:] == xs[:-1]
+        clash = same_xy & (zs[1:] != zs[:-1])
+        if clash.any():
+            run = np.cumsum(np.concatenate([[True], ~same_xy]))
+            pos = np.flatnonzero(np.isin(run, run[1:][clash]))
+            sub = np.lexsort((zs[pos], run[pos]))
+            order[pos], zs[pos] = order[pos][sub], zs[pos][sub]
+        np.logical_or(~same_xy, zs[1:] != zs[:-1], out=new[1:])
+        first = np.minimum.reduceat(order, np.flatnonzero(new))
     else:
         order = np.lexsort(p.T[::-1])
         s = p[order]
         np.any(s[1:] != s[:-1], axis=1, out=new[1:])
+        first = order[new]
     inverse = np.empty(len(p), dtype=np.int64)
     inverse[order] = np.cumsum(new) - 1
-    return p[order[new]], inverse
+    return p[first], inverse
 
 
 def split_bodies(

@@ -10,7 +10,7 @@ import numpy as np
 
 from .enclosure import enclosure_problems
 
-__all__ = ["grain_paths", "read_grain", "merge_vertices", "load_template", "build_templates", "enclosure_problems", "MESH_SUFFIXES"]
+__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "MESH_SUFFIXES"]
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
 
@@ -60,54 +60,6 @@ def grain_paths(inputs: Iterable[str | Path]) -> list[Path]:
     return out
 
 
-def merge_vertices(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`grainforge.solid.unique_rows` of (N, 3) points, faster for points float32 holds exactly.
-
-    The same result bit for bit: unique rows in numeric (x, y, z) order (−0.0 equal to 0.0, the
-    first occurrence kept) and the inverse. Float32-exact points (mesh files) are sorted with one
-    unstable ``argsort`` on (x, y) packed in 64 bits instead of a ``lexsort`` of all rows; the few
-    runs of equal (x, y) with different z are then sorted by z in place, and the row kept for each
-    group is its smallest index. Other points go to ``unique_rows``.
-
-    Examples
-    --------
-    >>> u, inv = merge_vertices(np.array([[1.0, 0, 0], [0, 1, 0], [1, 0, 0], [0, 1, -1]]))
-    >>> u.tolist(), inv.tolist()
-    ([[0.0, 1.0, -1.0], [0.0, 1.0, 0.0], [1.0, 0.0, 0.0]], [2, 1, 2, 0])
-    """
-    from ..solid import unique_rows
-
-    p = np.asarray(points)
-    if p.ndim != 2 or p.shape[1] != 3 or len(p) < 2 or p.dtype not in (np.float32, np.float64):
-        return unique_rows(p)
-    with np.errstate(over="ignore", invalid="ignore"):
-        q = np.ascontiguousarray(p, dtype=np.float32)
-    if p.dtype == np.float64 and not np.array_equal(q, p):  # (NaN never equals: the general path)
-        return unique_rows(p)
-    b = (q + np.float32(0.0)).view(np.uint32)  # -0.0 -> 0.0, then bits in numeric order
-    k = np.where(b >> np.uint32(31), ~b, b | np.uint32(0x80000000))
-    xy = (k[:, 0].astype(np.uint64) << np.uint64(32)) | k[:, 1]
-    order = np.argsort(xy)
-    xs, zs = xy[order], k[order, 2]
-    same_xy = xs[1:] == xs[:-1]
-    differ_z = zs[1:] != zs[:-1]
-    clash = same_xy & differ_z
-    if clash.any():
-        # the few runs of equal (x, y) holding different z: sort those positions by (run, z) in place
-        run = np.cumsum(np.concatenate([[True], ~same_xy]))
-        pos = np.flatnonzero(np.isin(run, run[1:][clash]))
-        sub = np.lexsort((zs[pos], run[pos]))
-        order[pos], zs[pos] = order[pos][sub], zs[pos][sub]
-        differ_z = zs[1:] != zs[:-1]
-    new = np.empty(len(p), dtype=bool)
-    new[0] = True
-    np.logical_or(~same_xy, differ_z, out=new[1:])
-    inverse = np.empty(len(p), dtype=np.int64)
-    inverse[order] = np.cumsum(new) - 1
-    first = np.minimum.reduceat(order, np.flatnonzero(new))
-    return p[first], inverse
-
-
 def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of a mesh file, vertices merged by position (as any reader sees it).
 
@@ -119,10 +71,11 @@ def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.
         If the file is unreadable or (with ``check``) the mesh is not a valid solid.
     """
     from ..io import read_mesh
+    from ..solid import unique_rows
 
     mesh = read_mesh(path)
     # merge by exact position (sorted by x, y, z, as np.unique(axis=0) would, several times faster)
-    v, inv = merge_vertices(np.ascontiguousarray(mesh.vertices, dtype=np.float64))
+    v, inv = unique_rows(np.ascontiguousarray(mesh.vertices, dtype=np.float64))
     f = inv[np.asarray(mesh.faces, dtype=np.int64)]
     if check:
         problems = enclosure_problems(v, f)
