@@ -145,22 +145,16 @@ def _quality(v, faces, d, centres, radii, resolution):
     return float(both / max(np.count_nonzero(grain), 1)), float((nu - both) / max(nu, 1))
 
 
-def _lens(r1, r2, d):
-    """Volume of the intersection of spheres of radii r1, r2 at distance d (broadcast)."""
-    d = np.maximum(d, 1e-300)
-    full = d <= np.abs(r1 - r2)
-    disjoint = d >= r1 + r2
-    vol = np.pi * (r1 + r2 - d) ** 2 * (d * d + 2 * d * (r1 + r2) - 3 * (r1 - r2) ** 2) / (12 * d)
-    small = np.minimum(r1, r2)
-    vol = np.where(full, 4.0 / 3.0 * np.pi * small**3, vol)
-    return np.where(disjoint, 0.0, vol)
-
-
 def _lens_loss(r1, r, d):
     """Where spheres of radii ``r1`` (array) overlap one of radius ``r`` at distances ``d``:
-    ``(which, volume)``, the indices with a positive overlap and its volume.
+    ``(which, volume)``, the indices with a positive overlap and the volume of the lens (the
+    intersection; the smaller sphere's volume where one holds the other).
 
-    The same arithmetic as :func:`_lens` (bit for bit), without the disjoint pairs.
+    Examples
+    --------
+    >>> which, vol = _lens_loss(np.array([1.0, 1.0, 0.2]), 1.0, np.array([1.0, 3.0, 0.5]))
+    >>> which.tolist(), bool(np.isclose(vol[0], 5 * np.pi / 12)), bool(np.isclose(vol[1], 4 / 3 * np.pi * 0.2**3))
+    ([0, 2], True, True)
     """
     d = np.maximum(d, 1e-300)
     s = r1 + r
