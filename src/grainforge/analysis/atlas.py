@@ -80,17 +80,17 @@ def _crossings(mesh, origins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return np.asarray(ray, dtype=np.int64), np.asarray(loc, dtype=np.float64).reshape(-1, 3)[:, 2]
 
 
-def _column_pairs(x, y, shape_xy, tol: float = 0.0):
+def _column_pairs(x, y, shape_xy):
     """Candidate (triangle, column) pairs: lattice columns (integer x, y) in each triangle's xy bounding box.
 
     ``x``, ``y``: three (F,) arrays each, the triangles' vertex coordinates in
     lattice units.  Returns (triangle index, column i, column j) arrays.
     """
     nx, ny = shape_xy
-    i0 = np.maximum(np.ceil(np.minimum(np.minimum(x[0], x[1]), x[2]) - tol), 0)
-    i1 = np.minimum(np.floor(np.maximum(np.maximum(x[0], x[1]), x[2]) + tol), nx - 1)
-    j0 = np.maximum(np.ceil(np.minimum(np.minimum(y[0], y[1]), y[2]) - tol), 0)
-    j1 = np.minimum(np.floor(np.maximum(np.maximum(y[0], y[1]), y[2]) + tol), ny - 1)
+    i0 = np.maximum(np.ceil(np.minimum(np.minimum(x[0], x[1]), x[2])), 0)
+    i1 = np.minimum(np.floor(np.maximum(np.maximum(x[0], x[1]), x[2])), nx - 1)
+    j0 = np.maximum(np.ceil(np.minimum(np.minimum(y[0], y[1]), y[2])), 0)
+    j1 = np.minimum(np.floor(np.maximum(np.maximum(y[0], y[1]), y[2])), ny - 1)
     wi, wj = i1 - i0 + 1, j1 - j0 + 1
     some = np.flatnonzero((wi > 0) & (wj > 0))
     wj = wj[some].astype(np.int64)

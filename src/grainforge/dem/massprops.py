@@ -118,12 +118,14 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
     >>> np.round(mp.principal, 12).tolist()
     [2.5, 5.0, 6.5]
     """
+    from ..solid import cross3
+
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     origin = v.mean(axis=0)
     vo = v - origin  # per vertex, then gathered: the same differences as per corner, fewer of them
     a, b, c = (np.take(vo, f[:, k], axis=0) for k in range(3))
-    det = np.einsum("ij,ij->i", a, np.cross(b, c))
+    det = np.einsum("ij,ij->i", a, cross3(b, c))
     volume = det.sum() / 6.0
     if not np.isfinite(volume) or volume <= 0:
         raise ValueError(f"mesh volume must be positive (closed, outward-oriented mesh), got {volume!r}")
