@@ -349,9 +349,13 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
     ~1e-7·R0 at amplitude 0.1); the worst case found over the parameter
     ranges (L/R0 ≈ 1000 with γ ≈ 1, where S is a small difference of large
     sums) is ~3e-4 of the RMS, i.e. 3e-5·R0.  See docs/methods/fso-performance.md.
-    The evaluation is deterministic: the matrix product has only 4 terms per
-    entry, summed in a fixed order, and runs single-threaded for blocks this
-    small; everything else is element-wise or NumPy's own ``einsum`` loop.
+    The evaluation is deterministic and independent of ``chunk``: the matrix
+    product has only 4 terms per entry, always goes through BLAS's gemm (a
+    one-row block is computed as two rows: gemv kernels round differently),
+    and runs single-threaded for blocks this small; everything else is
+    element-wise or NumPy's own ``einsum`` loop.  Bits are reproducible on one
+    CPU feature level and NumPy/OpenBLAS build (docs/validation.md,
+    "Reproducibility").
 
     Parameters
     ----------
@@ -397,13 +401,20 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
         chunk = WM_BLOCK_TERMS // T
     chunk = max(1, min(int(chunk), V))
     s = np.empty((chunk, T))
+    pair = np.empty((2, T))
     i32 = np.empty((chunk, T), dtype=np.int32)
     x = np.empty((chunk, T), dtype=np.float32)
     out = np.empty(V)
     for i0 in range(0, V, chunk):
         n = min(chunk, V - i0)
         ss, ii, xx = s[:n], i32[:n], x[:n]
-        np.matmul(P[i0 : i0 + n], Q, out=ss)
+        if n == 1:
+            # a one-row product would go through BLAS's gemv, whose kernels
+            # round differently from gemm's: use a two-row product instead
+            np.matmul(np.repeat(P[i0 : i0 + 1], 2, axis=0), Q, out=pair)
+            ss[0] = pair[0]
+        else:
+            np.matmul(P[i0 : i0 + n], Q, out=ss)
         np.copyto(ii, ss.view(np.int64), casting="unsafe")  # low 32 bits (wraps)
         if shift:
             uu = ii.view(np.uint32)  # unsigned: the shift wraps, well defined
