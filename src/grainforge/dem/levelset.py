@@ -8,7 +8,13 @@ import numpy as np
 
 from .voxel import Grid, grid_for, inside_mask
 
-__all__ = ["LevelSet", "level_set", "surface_nodes"]
+__all__ = ["LevelSet", "level_set", "surface_nodes", "DISTANCE_BLOCK", "MAX_NODES"]
+
+#: grid nodes per exact-distance query (bounds the candidate triangles held at once)
+DISTANCE_BLOCK = 512
+#: the most grid nodes a level set may have: ~1e6 nodes take ~60 MB of arrays and
+#: minutes of exact distances; a finer grid is refused, naming the spacing
+MAX_NODES = 1_000_000
 
 
 @dataclass(frozen=True)
@@ -87,10 +93,23 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
 
     d = (6 * signed_volume(v, f) / np.pi) ** (1 / 3)
     grid = grid_for(v, spacing * d, pad=int(pad))
+    n_nodes = int(np.prod(grid.shape))
+    if n_nodes > MAX_NODES:
+        coarsest = spacing * (n_nodes / MAX_NODES) ** (1 / 3)
+        while np.prod(grid_for(v, coarsest * d, pad=int(pad)).shape) > MAX_NODES:  # the pad does not scale
+            coarsest *= 1.02
+        raise ValueError(f"level-set spacing {spacing:g} of d_eq needs a {'x'.join(map(str, grid.shape))} grid "
+                         f"({n_nodes:,} nodes, more than {MAX_NODES:,}) for this grain: use a spacing of at least "
+                         f"{coarsest:.3g}")
     inside = inside_mask(v, f, grid)
     ax = grid.axes()
     pts = np.stack(np.meshgrid(*ax, indexing="ij"), axis=-1).reshape(-1, 3)
     mesh = trimesh.Trimesh(v, f, process=False, validate=False)
-    _, dist, _ = trimesh.proximity.closest_point(mesh, pts)
+    # trimesh gathers every triangle near each query point at once (for a flat
+    # grain, thousands per node): a bounded block of nodes per call keeps the
+    # memory of the whole field to that of one block
+    dist = np.empty(len(pts))
+    for i0 in range(0, len(pts), DISTANCE_BLOCK):
+        _, dist[i0 : i0 + DISTANCE_BLOCK], _ = trimesh.proximity.closest_point(mesh, pts[i0 : i0 + DISTANCE_BLOCK])
     sdf = np.where(inside.reshape(-1), -dist, dist).reshape(grid.shape)
     return LevelSet(grid, sdf, surface_nodes(v, f, nodes))
