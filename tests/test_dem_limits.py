@@ -35,3 +35,14 @@ def test_level_set_refuses_a_grid_over_the_node_budget(monkeypatch):
     except ValueError as exc:
         proposed = float(re.search(r"at least ([0-9.e-]+)", str(exc)).group(1))
     assert levelset.level_set(v, f, spacing=proposed).distance.size <= 5_000
+
+
+def test_a_manifest_of_random_bytes_is_named(tmp_path):
+    from grainforge.dem.inputs import grain_paths
+
+    bad = tmp_path / "manifest.csv"
+    bad.write_bytes(np.random.default_rng(0).integers(0, 256, 4000, dtype=np.uint8).tobytes())
+    with pytest.raises(ValueError, match=r"manifest\.csv: not a grainforge manifest"):
+        grain_paths([bad])
+    with pytest.raises(ValueError, match=r"manifest\.csv: not a grainforge manifest"):
+        grain_paths([tmp_path])

@@ -21,6 +21,8 @@ def _manifest_files(manifest: Path) -> list[Path]:
             rows = list(csv.DictReader(fh))
     except OSError as exc:
         raise ValueError(f"{manifest}: cannot read ({exc.strerror})") from None
+    except (UnicodeDecodeError, csv.Error):
+        raise ValueError(f"{manifest}: not a grainforge manifest (not a UTF-8 CSV table)") from None
     if not rows or "file" not in rows[0]:
         raise ValueError(f"{manifest}: not a grainforge manifest (no 'file' column)")
     return [manifest.parent / r["file"] for r in rows]
