@@ -45,7 +45,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["voxelise", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS", "SIGMA", "random_rotation"]
+__all__ = ["voxelise", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS", "SIGMA", "CONVENTIONS",
+           "random_rotation"]
 
 #: Gaussian filter width (voxels) before marching cubes, as the Sand Atlas (``spam``) uses.
 SIGMA = 0.75
@@ -446,7 +447,34 @@ def _surface_area(verts: np.ndarray, tris: np.ndarray) -> float:
     return float(np.sqrt(cx * cx + cy * cy + cz * cz).sum(dtype=np.float64)) / 2.0
 
 
-def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, float]:
+#: how true sphericity cuts the grain out before smoothing (:func:`voxel_descriptors`)
+CONVENTIONS = ("atlas", "whole")
+#: voxels added to spam's cube half-size (``getLabel(..., margin=2)`` in ``trueSphericity``)
+ATLAS_MARGIN = 2
+
+
+def _atlas_cube(mask: np.ndarray, centre: np.ndarray, lo: np.ndarray) -> np.ndarray:
+    """The grain cut out as ``spam.label.trueSphericity`` cuts it (the Sand Atlas's convention).
+
+    spam (0.9.1) extracts a cube centred on the voxel ``floor(c)`` below the
+    centre of mass ``c`` (float32), of half-size ``max(ceil(c − lo)) + 2``
+    voxels, ``lo`` the bounding box's *lower* faces: both of its offsets are
+    taken from the lower faces, so a grain that reaches further above its
+    centre of mass than below is clipped at the cube's upper faces.  Outside
+    the image the cube is zero (spam pads with zeros).
+    """
+    com = centre.astype(np.float32)
+    offset = int(np.max(np.ceil(com.astype(np.float64) - lo))) + ATLAS_MARGIN
+    start = np.floor(com).astype(np.int64) - offset
+    size = 2 * offset + 1
+    cube = np.zeros((size, size, size), dtype=np.float32)
+    src = tuple(slice(max(a, 0), min(a + size, e)) for a, e in zip(start, mask.shape))
+    dst = tuple(slice(s.start - a, s.stop - a) for s, a in zip(src, start))
+    cube[dst] = mask[src]
+    return cube
+
+
+def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0, *, convention: str = "atlas") -> dict[str, float]:
     """Atlas descriptors of a binary voxel image (one particle).
 
     Parameters
@@ -454,6 +482,15 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
     mask : (nx, ny, nz) bool ndarray
     voxel_size : float
         Voxel edge in the units wanted for lengths.
+    convention : {"atlas", "whole"}
+        How true sphericity sees the grain.  ``"atlas"`` (default) measures it
+        as the Sand Atlas did, with ``spam.label.trueSphericity``: the grain
+        cut out of a cube whose size comes from the lower bounding-box faces
+        only (a grain reaching further above its centre of mass than below is
+        clipped there and its sphericity over-stated), smoothed with scipy's
+        default ``reflect`` boundary.  ``"whole"`` smooths the whole grain
+        with empty space around it.  The other descriptors do not depend on it
+        (docs/validation.md, "Atlas descriptors").
 
     Returns
     -------
@@ -499,10 +536,15 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
     # the image is zero outside [lo, hi), so mode="constant" filters it exactly on any crop; the 0.5
     # level lies within one voxel of the grain's box (a voxel layer beyond the last is below 0.5:
     # at most half of the kernel minus its centre weight), so one empty voxel per side suffices
-    pad = 1
-    sub = np.zeros(tuple(hi - lo + 2 * pad), dtype=np.float32)
-    sub[tuple(slice(pad, pad + e) for e in hi - lo)] = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
-    smooth = gaussian_filter(sub, SIGMA, mode="constant", truncate=4.0)
+    if convention == "atlas":
+        smooth = gaussian_filter(_atlas_cube(mask, m, lo), SIGMA, mode="reflect", truncate=4.0)
+    elif convention == "whole":
+        pad = 1
+        sub = np.zeros(tuple(hi - lo + 2 * pad), dtype=np.float32)
+        sub[tuple(slice(pad, pad + e) for e in hi - lo)] = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
+        smooth = gaussian_filter(sub, SIGMA, mode="constant", truncate=4.0)
+    else:
+        raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
     # degenerate triangles add no area: keeping them skips scikit-image's clean-up pass; the mask
     # limits scikit-image's work to the cubes that straddle the level (the same surface, bit for bit)
     verts, tris, _, _ = marching_cubes(smooth, level=0.5, allow_degenerate=True, mask=straddling_cubes(smooth, 0.5))
@@ -520,7 +562,7 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0) -> dict[str, fl
 
 def atlas_descriptors(
     mesh_or_vertices, faces=None, *, voxel_size: float | None = None, voxels_across: float | None = None,
-    rotation: Any = None,
+    rotation: Any = None, convention: str = "atlas",
 ) -> dict[str, float]:
     """Sand-Atlas descriptors of a closed mesh, measured on its voxel image.
 
@@ -538,6 +580,8 @@ def atlas_descriptors(
         Turn the grain before voxelising (a scan sees grains in any
         orientation): a rotation matrix, or a seed/Generator for
         :func:`random_rotation`.  Default: as given.
+    convention : {"atlas", "whole"}
+        How true sphericity cuts the grain out (:func:`voxel_descriptors`).
 
     Returns
     -------
@@ -581,5 +625,5 @@ def atlas_descriptors(
         v = v @ R.T
     mask, _ = voxelise(v, f, h)
     out = {"voxel_size": h, "voxels_across": d_mesh / h}
-    out.update(voxel_descriptors(mask, h))
+    out.update(voxel_descriptors(mask, h, convention=convention))
     return out
