@@ -7,7 +7,14 @@ import trimesh
 import grainforge
 from grainforge.cli.main import cli
 from grainforge.params import ParameterError
-from grainforge.solid import AREA_TOLERANCE, require_solid, self_intersections, solid_problems, star_certificate
+from grainforge.solid import (
+    AREA_TOLERANCE,
+    is_closed,
+    require_solid,
+    self_intersections,
+    solid_problems,
+    star_certificate,
+)
 
 
 def _two_boxes(offset):
@@ -38,13 +45,34 @@ def test_sliver_below_float32_collapses():
     assert any("collapse when written" in p for p in problems)
 
 
-def test_near_zero_area_face_threshold_is_relative_to_size():
+def _box_with_inner_triangle(delta):
+    """A closed unit box whose first face holds a triangle ``delta`` times its size at its centroid.
+
+    The face (a, b, c) becomes the small triangle (p, q, r) and a ring of six
+    triangles joining it to a, b and c: still closed, consistently oriented.
+    """
     box = trimesh.creation.box()
-    v = np.concatenate([box.vertices, [[0.5, 0.5, -0.5 + 1e-9]]])  # a needle tent on the bottom face
-    f = box.faces[box.faces[:, :].min(axis=1) >= 0]
+    v, f = np.asarray(box.vertices, dtype=np.float64), np.asarray(box.faces, dtype=np.int64)
+    a, b, c = f[0]
+    g = v[f[0]].mean(axis=0)
+    n = len(v)
+    p, q, r = n, n + 1, n + 2
+    v = np.concatenate([v, g + delta * (v[f[0]] - g)])
+    ring = [[p, q, r], [a, b, q], [a, q, p], [b, c, r], [b, r, q], [c, a, p], [c, p, r]]
+    return v, np.concatenate([f[1:], ring])
+
+
+def test_near_zero_area_face_threshold_is_relative_to_size():
     for scale in (1.0, 1000.0):
-        problems = solid_problems(v * scale, np.concatenate([f, [[0, 1, 8]]]))
-        assert any("near-zero area" in p or "open edges" in p for p in problems)
+        # a triangle 1e-6 of the face's size: 5e-13 of the face area, below 1e-12·d² (d² = 3)
+        v, f = _box_with_inner_triangle(1e-6)
+        assert is_closed(f, len(v)), "the construction is closed"
+        problems = solid_problems(v * scale, f)
+        assert any("1 faces of near-zero area" in p for p in problems), problems
+        assert not any("collapse" in p or "open" in p for p in problems), problems
+        # ten times larger: 5e-11 of the face area, above the threshold
+        v, f = _box_with_inner_triangle(1e-5)
+        assert not any("near-zero area" in p for p in solid_problems(v * scale, f))
     assert AREA_TOLERANCE == 1e-12
 
 
