@@ -1,4 +1,4 @@
-"""``grainforge analyse`` on many grain files: the μCT-study case of issue 12.
+"""``grainforge analyse`` on many grain files: the μCT-study case (a whole scanned population at once).
 
 Target: 1,000 grains of 20,000 faces (FSO, icosphere level 5: 20,480 faces) with every
 descriptor, the fractal dimension included, in ≤ 60 s on the project machine's 2 cores.

@@ -1,6 +1,6 @@
 """Shape-analysis timings for a 20,480-face FSO grain (icosphere level 5).
 
-Targets (issue 5): every descriptor except the fractal dimension in ≤ 100 ms;
+Targets: every descriptor except the fractal dimension in ≤ 100 ms;
 with it in ≤ 500 ms.  Prints best-of-N wall-clock figures per stage and in
 total, one core.  Usage: ``python benchmarks/bench_analysis.py [--repeat N]``.
 """

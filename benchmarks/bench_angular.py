@@ -1,6 +1,6 @@
 """Angular-grain timings: one grain at subdivisions 5 (10,242 vertices), by stage and as a whole.
 
-Target (issue 16): one angular grain at 10,242 vertices **with roughness** in ≤ 60 ms on one
+Target: one angular grain at 10,242 vertices **with roughness** in ≤ 60 ms on one
 core.  Prints best-of-repeats wall and CPU times (the machine is shared: the load average is
 printed before and after); asserts nothing.  One core: BLAS/OpenMP threads are limited to 1.
 

@@ -1,4 +1,4 @@
-"""Timing of the Sand-Atlas voxel descriptors (issue 14): target ≤ 25 ms per grain per core at 60 voxels across.
+"""Timing of the Sand-Atlas voxel descriptors: target ≤ 25 ms per grain per core at 60 voxels across.
 
 One process, BLAS single-threaded (as in a worker).  Prints best and median
 wall clock and CPU time (time.process_time, all threads) per stage and in

@@ -1,6 +1,6 @@
 """CRI timings: one grain per subdivision level, and ``grainforge fourier`` on a 2048² image.
 
-Targets (issue 3): one CRI grain at subdivisions 5 in ≤ 20 ms on one core;
+Targets: one CRI grain at subdivisions 5 in ≤ 20 ms on one core;
 ``grainforge fourier`` on a 2048×2048 image with ~200 grains in ≤ 5 s.
 Prints figures; asserts nothing.  Run: ``.venv/bin/python benchmarks/bench_cri.py``.
 """

@@ -41,7 +41,7 @@ def main() -> None:
     D.aggregate("octahedron", 20, 1.0, np.random.default_rng(0))  # imports, caches
     grainforge.dpa(primaries=20, rng=0)
 
-    print("\n300 octahedra (issue 11; seeds 0, 1; wall s / CPU s, one run each)")
+    print("\n300 octahedra (face-cancellation union, contact rules; seeds 0, 1; wall s / CPU s, one run each)")
     for eps in (1.0, 3.0):
         for seed in (0, 1):
             t0, c0 = time.perf_counter(), time.process_time()

@@ -1,6 +1,6 @@
 """FSO timings: the Weierstrass–Mandelbrot kernel, one whole grain, and a 100-grain CLI run.
 
-Targets (issue 2): one FSO grain at subdivisions 5 (10,242 vertices, M = n_max = 40)
+Targets: one FSO grain at subdivisions 5 (10,242 vertices, M = n_max = 40)
 in ≤ 60 ms on one core, ≥ 10× faster than the straightforward float64 NumPy
 evaluation of the same double sum (``wm_sum_reference``) in the same run, with
 radii within 1e-4·R0 of it; ``grainforge generate fso --count 100 --subdivisions 4``

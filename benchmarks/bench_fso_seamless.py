@@ -1,4 +1,4 @@
-"""Seamless vs paper FSO surface: time of the overlay and of a whole grain (issue 13 target).
+"""Seamless vs paper FSO surface: time of the overlay and of a whole grain.
 
 Target: the seamless surface at subdivisions 5 (10,242 vertices), M = n_max = 40, in at most
 1.5× the paper form's time.  Both forms run the same rank-4 phase product, float32 cosine

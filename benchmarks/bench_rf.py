@@ -1,6 +1,6 @@
 """rf timings: one random-field grain per degree and subdivision level.
 
-Target (issue 13): an rf grain at 10,242 vertices (subdivisions 5), degree up to 32, in ≤ 20 ms
+Target: an rf grain at 10,242 vertices (subdivisions 5), degree up to 32, in ≤ 20 ms
 on one core.  Prints figures; asserts nothing.  Run: ``.venv/bin/python benchmarks/bench_rf.py``.
 The first call per (level, degree) builds and caches the harmonic basis; its cost is printed too.
 """

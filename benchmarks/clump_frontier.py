@@ -1,4 +1,4 @@
-"""How much coverage can a 30-sphere clump reach with at most 1 % spill? (issue 15's 0.95 target)
+"""How much coverage can a 30-sphere clump reach with at most 1 % spill? (the clump target: coverage ≥ 0.95)
 
     OPENBLAS_NUM_THREADS=1 nice .venv/bin/python benchmarks/clump_frontier.py [--spheres 30] [--iterations 200]
 

@@ -1,4 +1,4 @@
-"""How smoothly a CRI grain's Atlas descriptors follow the recipe (issue 14: the fit's common random numbers).
+"""How smoothly a CRI grain's Atlas descriptors follow the recipe (the fit's common random numbers).
 
 The fit assumes that grain i of a recipe changes a little when a setting
 changes a little (same seed, same uniform draws).  This measures it: grains

@@ -6,7 +6,7 @@
    STL files as a user gets them, read back and voxelised in their own orientation (the fit
    measured each grain in memory, in a random orientation)
 4. the sand's statistics against those of the files: mean, sd, two-sample KS (scipy), and the
-   verdict of the issue-14 criteria (KS ≤ 0.1, |mean difference| ≤ 0.01).
+   verdict of the fit's acceptance criteria (KS ≤ 0.1, |mean difference| ≤ 0.01; docs/fit.md).
 
 Usage: ``python benchmarks/ottawa_example.py [--out DIR] [--method rf]``; prints the times
 and a Markdown table.  About 5 min on the idle 2-core machine.

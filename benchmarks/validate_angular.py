@@ -1,4 +1,4 @@
-"""Measured control of the angular generator (issue 16): flatness, edge radius, descriptor range.
+"""Measured control of the angular generator: flatness, edge radius, descriptor range.
 
 Every grain is generated, written to STL at its printed size, read back with
 trimesh (vertices merged by position) and measured there.

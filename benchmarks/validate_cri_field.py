@@ -1,4 +1,4 @@
-"""CRI with random-field roughness (``--roughness field``) against the swept roughness (issue 13 point 3).
+"""CRI with random-field roughness (``--roughness field``) against the swept roughness.
 
 For each descriptor set: the separable share f(θ) + g(ψ) of the small-scale relief
 (``relief.separable_share``, the ridge measure of docs/validation.md; 8 grains, both roughness

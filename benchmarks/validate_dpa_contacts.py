@@ -1,4 +1,4 @@
-"""DPA growth with and without the contact rules of issue 11 (clearance 1e-3, notch ≥ 30°).
+"""DPA growth with and without the contact rules (clearance 1e-3, notch ≥ 30°; docs/methods/dpa.md).
 
 Run: ``nice .venv/bin/python benchmarks/validate_dpa_contacts.py [--seeds 10] [--primaries 200]``.
 Prints, per non-cube primitive and ε, how often a chosen placement was rejected as intruding or by

@@ -1,4 +1,5 @@
-"""The demo's DPA section, written in full and checked as readers see it (issue 11, "done when").
+"""The demo's DPA section, written in full and checked as readers see it: every file
+must read back as a valid solid and pass ``grainforge check``.
 
 Run: ``nice .venv/bin/python benchmarks/validate_dpa_demo.py [--out DIR]`` (≈ 5 min under load).
 Writes ``grainforge.demo.dpa_sweeps`` (300 primaries: cubes, smoothed cubes, octahedra; ε 0.1–100;

@@ -1,4 +1,5 @@
-"""Validation of the rf generator on the grains it writes (issue 13 point 4; docs/validation.md §rf).
+"""Validation of the rf generator on the grains it writes (docs/validation.md, "rf: section
+spectra and isotropy of random-field grains").
 
 Every grain is generated, written to binary STL, read back with trimesh (vertices merged by
 position) and cut by planes through its volume centroid (``grainforge.analysis.sections``: rays

@@ -1,4 +1,4 @@
-"""The angular generator (ALGORITHMS.md §6): exact rounded core, facets, validity, determinism, CLI."""
+"""The angular generator (docs/design/algorithms.md §6): exact rounded core, facets, validity, determinism, CLI."""
 
 import io
 

@@ -1,4 +1,4 @@
-"""2D contours: Fourier-descriptor, fractal-profile and image sources (ALGORITHMS.md §2a–2c)."""
+"""2D contours: Fourier-descriptor, fractal-profile and image sources (docs/design/algorithms.md §2a–2c)."""
 
 import numpy as np
 import pytest
@@ -190,7 +190,8 @@ def test_image_non_star_shaped_is_reported():
 @pytest.mark.parametrize("a, b, centre", [(80, 50, (150, 150)), (60, 60, (100, 120)), (90, 45, (150.5, 140))])
 def test_binary_ellipse_rays_through_pixel_corners(tmp_path, a, b, centre):
     """A binary (0/255) ellipse PNG: its traced outline has vertices exactly on rays (θ = 0, π, ...).
-    Every ray must still meet the boundary (issue 12: "no grain measured"), at the ellipse's radius."""
+    Every ray must still meet the boundary (such images were once refused with "no grain measured"),
+    at the ellipse's radius."""
     yy, xx = np.mgrid[:300, :300]
     cx, cy = centre
     img = ((((xx - cx) / a) ** 2 + ((yy - cy) / b) ** 2 <= 1) * 255).astype(np.uint8)

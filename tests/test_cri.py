@@ -1,4 +1,4 @@
-"""The CRI generator (ALGORITHMS.md §2d): sections, invariants, determinism, bad input."""
+"""The CRI generator (docs/design/algorithms.md §2d): sections, invariants, determinism, bad input."""
 
 import numpy as np
 import pytest
@@ -14,7 +14,7 @@ from grainforge.methods.cri import GRID, PLANES, Params, build, construct
 from grainforge.params import ParameterError
 from grainforge.solid import solid_problems
 
-# angle of a point in each principal plane, measured as in ALGORITHMS.md §2d
+# angle of a point in each principal plane, measured as in docs/design/algorithms.md §2d
 _ANGLE = {
     "xy": lambda p: np.arctan2(p[:, 1], p[:, 0]),
     "xz": lambda p: np.arctan2(p[:, 2], p[:, 0]),

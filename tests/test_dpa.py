@@ -116,10 +116,10 @@ def test_union_volume_is_n_primaries_and_one_body(name, eps):
         assert signed_volume(v, f) - cavity == n  # exact on the lattice
     else:
         v, f, union_volume, cavity = D.union_surface(agg)
-        # exact face cancellation, no inflation: N primary volumes up to rounding (issue 11: ≤ 1e-6)
+        # exact face cancellation, no inflation: N primary volumes up to rounding (the solid contract: ≤ 1e-6)
         assert union_volume == pytest.approx(n, rel=1e-12)
         assert signed_volume(v, f) == pytest.approx(n + cavity, rel=1e-12)
-    if agg.cells is not None:  # as written: pinches separated (issue 11)
+    if agg.cells is not None:  # as written: pinches separated (the solid contract)
         assert solid_problems(D.separate_pinches(v, f), f) == []
     else:  # as written (float32, merged by position), self-intersections included
         assert solid_problems(v, f) == []
@@ -149,7 +149,7 @@ def test_lattice_surface_pinched_contacts_stay_manifold():
     assert index_problems(v, f) == []  # manifold by indices ...
     assert any("more than two faces" in p for p in solid_problems(v, f))  # ... but pinched as written
     assert signed_volume(v, f) == 6
-    w = D.separate_pinches(v, f)  # issue 11: the pinches moved 1e-3 apart
+    w = D.separate_pinches(v, f)  # the solid contract: the pinches moved 1e-3 apart
     assert solid_problems(w, f) == []
     assert 6 - 0.01 < signed_volume(w, f) < 6
 
@@ -188,7 +188,7 @@ def test_every_grain_is_a_valid_solid_with_n_primaries_volume(name, n, eps, seed
     g = grainforge.dpa(primitive=name, exponent=eps, primaries=n, rng=seed)
     assert solid_problems(g.vertices, g.faces) == []
     volume = signed_volume(g.vertices, g.faces) / g.info["primary_size"] ** 3
-    # cubes: edge/vertex contacts notched (≤ 1e-3 primary volumes per pinch); others exact (issue 11)
+    # cubes: edge/vertex contacts notched (≤ 1e-3 primary volumes per pinch); others exact (face cancellation)
     assert volume == pytest.approx(n + g.info["cavity_volume"], rel=1e-9 if name != "cube" else 1e-3)
     assert 0.0 <= g.info["porosity"] < 1.0
 

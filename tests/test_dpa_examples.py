@@ -1,4 +1,4 @@
-"""Issue 11, "done when": every DPA example of README.md and docs/methods/dpa.md, run as written,
+"""Every DPA example of README.md and docs/methods/dpa.md, run as written,
 gives files that pass ``grainforge check`` and two independent readers (trimesh merging vertices by
 position, and admesh).  ``--count`` is lowered to 2 to bound the test's time (the first members of a
 population do not depend on its count; ``tests/test_population.py``)."""

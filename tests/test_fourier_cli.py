@@ -86,7 +86,8 @@ def test_fourier_bad_images(runner, tmp_path, kind):
 
 # ---------------------------------------------------------------- generate cri
 def test_fourier_binary_ellipse(runner, tmp_path):
-    """A binary ellipse image (outline vertices exactly on the rays at 0 and π) gives one grain (issue 12)."""
+    """A binary ellipse image (outline vertices exactly on the rays at 0 and π) gives one grain
+    (such images were once refused with "no grain measured")."""
     yy, xx = np.mgrid[:300, :300]
     img = ((((xx - 150) / 80) ** 2 + ((yy - 150) / 50) ** 2 <= 1) * 255).astype(np.uint8)
     res = runner.invoke(cli, ["fourier", _save(tmp_path / "ellipse.png", img)])

@@ -2,10 +2,11 @@
 
 ``wm_sum`` evaluates the double sum of paper Eqs. 2–3 with float64 phases and
 a float32 cosine; ``wm_sum_reference`` evaluates it straightforwardly in
-float64.  The requirement (issue 2) is a radius error within 1e-4·R0 at the
-default amplitude (RMS of (R − R0)/R0 = 0.1, so K = 0.1 / RMS(S)): that is
-``max |ΔS| ≤ 1e-3 · RMS(S)``.  The approximation error is not zero, so these
-tests use that tolerance (and a tighter, empirical one at the defaults).
+float64.  The requirement (docs/design/algorithms.md §1 item 7) is a radius
+error within 1e-4·R0 at the default amplitude (RMS of (R − R0)/R0 = 0.1, so
+K = 0.1 / RMS(S)): that is ``max |ΔS| ≤ 1e-3 · RMS(S)``.  The approximation
+error is not zero, so these tests use that tolerance (and a tighter, empirical
+one at the defaults).
 """
 
 import hashlib
@@ -22,7 +23,7 @@ from grainforge.geodesic import icosphere
 from grainforge.methods import fso
 from grainforge.params import ParameterError
 
-#: radius tolerance of the issue, as a fraction of R0
+#: radius tolerance of the fast kernel (docs/design/algorithms.md §1 item 7), as a fraction of R0
 RADIUS_TOL = 1e-4
 
 

@@ -1,4 +1,4 @@
-"""Resolution matching says when it removes the shape, and when a budget beats the tolerance (issue 12 §7)."""
+"""Resolution matching says when it removes the shape, and when a budget beats the tolerance."""
 
 from __future__ import annotations
 

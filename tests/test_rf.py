@@ -1,4 +1,4 @@
-"""The random-field generator rf (ALGORITHMS.md §5): harmonics, spectrum, sections, inputs, CLI."""
+"""The random-field generator rf (docs/design/algorithms.md §5): harmonics, spectrum, sections, inputs, CLI."""
 
 import io
 

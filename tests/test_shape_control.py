@@ -1,12 +1,13 @@
-"""Shape control measured on the grain (issue 13): FSO aspect, the seamless surface, CRI descriptors.
+"""Shape control measured on the grain: FSO aspect, the seamless surface, CRI descriptors.
 
 Statistical checks with fixed seeds (deterministic), on meshes read back from
 the written STL where the property is about the file, measured with code
 that does not know how the grain was made (grainforge.analysis.{box,relief,
 sections}, trimesh's inertia tensor).  Sample sizes are smaller and meshes
-coarser than in docs/validation.md (``benchmarks/validate_fso_shape.py``,
-``benchmarks/validate_cri.py``), so each tolerance is the documented target
-plus the sampling error of the smaller sample, stated at each test.
+coarser than in docs/validation.md, "Shape control on the grain"
+(``benchmarks/validate_fso_shape.py``, ``benchmarks/validate_cri.py``), so
+each tolerance is the documented target plus the sampling error of the
+smaller sample, stated at each test.
 """
 
 import io

@@ -1,4 +1,5 @@
-"""Issue 11: the solid contract as readers see it, and the repros of the issue (each fails on the old code)."""
+"""The solid contract as readers see it, and the commands that once wrote invalid solids
+(each fails on the old code)."""
 
 import numpy as np
 import pytest
@@ -99,7 +100,7 @@ def test_require_solid_raises_parameter_error_naming_the_parameter():
 
 
 @pytest.mark.parametrize("kwargs", [
-    dict(primitive="cube", exponent=1.0, primaries=200),  # README example (issue repro)
+    dict(primitive="cube", exponent=1.0, primaries=200),  # README example (wrote an invalid solid before)
     dict(primitive="cube", primaries=200),  # `generate dpa --primitive cube --seed 0`
 ])
 def test_dpa_cube_repros_are_valid_as_written(kwargs, tmp_path):
@@ -230,9 +231,9 @@ def assert_valid_stl(path, volume=None):
 
 
 @pytest.mark.parametrize("args", [
-    ["--primitive", "octahedron", "--primaries", "2", "--seed", "1"],  # issue 11 repro: 9 float32 vertices
+    ["--primitive", "octahedron", "--primaries", "2", "--seed", "1"],  # before the exact union: 9 float32 vertices
     ["--primitive", "octahedron", "--primaries", "4", "--seed", "1"],  # ... read as 2 parts
-    ["--primitive", "octahedron", "--exponent", "3", "--primaries", "300", "--seed", "0"],  # issue 11 repro
+    ["--primitive", "octahedron", "--exponent", "3", "--primaries", "300", "--seed", "0"],  # was invalid too
     ["--primitive", "tetrahedron", "--primaries", "150", "--smooth", "1", "--seed", "3"],
     ["--primitive", "truncated-octahedron", "--primaries", "80", "--exponent", "0.3", "--seed", "2"],
 ])
@@ -249,7 +250,7 @@ def test_dpa_polyhedra_repros_are_valid_as_written(args, tmp_path, runner):
 
 
 def test_dpa_octahedron_tray_repro_checks(tmp_path, runner):
-    # issue 11, points 2-3: the tray of octahedron aggregates is checked part by part without error
+    # the tray of octahedron aggregates is checked part by part without error (it reported errors before)
     out = tmp_path / "o3.3mf"
     res = runner.invoke(cli, ["tray", "--method", "dpa", "--param", "primitive=octahedron", "--param", "primaries=200",
                               "--param", "exponent=5", "--count", "4", "--size", "2", "--out", str(out)])

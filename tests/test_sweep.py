@@ -1,4 +1,4 @@
-"""Issue 11, point 5: a sweep over every generator's *declared* parameter space.
+"""A sweep over every generator's *declared* parameter space.
 
 Table-driven: the strategy of each method is built from ``grainforge.methods.METHODS`` and the
 method's ``ParamSpec`` list (ranges with their edges, choices, optional values), so a generator
@@ -80,7 +80,7 @@ def _cri(draw_params):
         lambda src: params_strategy("cri", caps={"subdivisions": 5}, fixed={"contour": src, "images": None}))
 
 
-#: DPA primitives built by exact face cancellation (issue 11, point 2), also swept one by one below.
+#: DPA primitives built by exact face cancellation (docs/methods/dpa.md, step 5), also swept one by one below.
 DPA_POLYHEDRA = ("dodecahedron", "icosahedron", "octahedron", "tetrahedron", "truncated-octahedron")
 
 
@@ -216,7 +216,7 @@ def test_sweep_declared_parameter_space(name):
 
 @pytest.mark.parametrize("primitive", DPA_POLYHEDRA)
 def test_sweep_dpa_polyhedra(primitive):
-    # was a strict xfail before the union was rebuilt (slivers and edge contacts, issue 11 point 2)
+    # was a strict xfail before the union was rebuilt (slivers and edge contacts of the manifold3d union)
     _sweep("dpa", 3, _dpa(params_strategy, [primitive]))
 
 

@@ -1,4 +1,4 @@
-"""Units (issue 12 §7): numbers are numbers, and every column name states its unit."""
+"""Units: numbers are numbers, and every column name states its unit."""
 
 from __future__ import annotations
 

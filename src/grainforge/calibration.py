@@ -42,7 +42,9 @@ UNITS = {"R_g_mean": "primary_sizes", "R_g_std": "primary_sizes"}
 DEFAULT_EXPONENTS = tuple(float(x) for x in np.round(np.geomspace(0.05, 100.0, 16), 6))
 DEFAULT_REPEATS = 8
 #: bump when the DPA algorithm changes so that old cached curves are not reused.
-ALGORITHM_VERSION = 3  # 2: exact minimum-volume box (analysis.box), D_A_scaling columns; 3: DPA contact rules (issue 11)
+#: 2: exact minimum-volume box (analysis.box), D_A_scaling columns;
+#: 3: DPA contact rules (clearance 1e-3, notch ≥ 30°; docs/methods/dpa.md, "Contacts").
+ALGORITHM_VERSION = 3
 COLUMNS = (
     "exponent", "D_A_mean", "D_A_std", "porosity_mean", "porosity_std", "R_g_mean", "R_g_std",
     "D_A_scaling_mean", "D_A_scaling_std",

@@ -6,7 +6,7 @@ contours).  Radii are stored normalised to a mean of 1 (the Fourier descriptor
 D0); ``scale`` holds the mean radius in the source's units (pixels for an
 image, 1 for a generated contour).
 
-Three sources (paper §2.2, Fig. 3; ALGORITHMS.md §2a–2c):
+Three sources (paper §2.2, Fig. 3; docs/design/algorithms.md §2a–2c):
 
 - :meth:`Contour.from_descriptors` — Fourier descriptors (Mollon & Zhao 2012):
   r(θ) = r0 [1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n)], with D2, D3, D8 given and
@@ -197,7 +197,7 @@ class Contour:
         return p + self.centroid if physical else p
 
     def descriptors(self, n_max: int = 16) -> np.ndarray:
-        """Fourier descriptors D_0..D_nmax (ALGORITHMS.md §2b).
+        """Fourier descriptors D_0..D_nmax (docs/design/algorithms.md §2b).
 
         Returns
         -------
@@ -300,7 +300,7 @@ class Contour:
         n_angles: int = DEFAULT_ANGLES,
         rng=None,
     ) -> "Contour":
-        """A random contour with given Fourier descriptors (ALGORITHMS.md §2a).
+        """A random contour with given Fourier descriptors (docs/design/algorithms.md §2a).
 
         r(θ) = 1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n), δ_n ~ U(0, 2π) drawn in the
         order n = 2..N from ``rng``.
@@ -390,7 +390,7 @@ class Contour:
 
         where h_mn = round(k_n cos α_m), k_n = 2πγ^n/L, α_m = πm/M: the
         frequencies are rounded to integer harmonics so that the profile closes
-        at 2π without a step or a kink (ALGORITHMS.md §2c).  Harmonics above
+        at 2π without a step or a kink (docs/design/algorithms.md §2c).  Harmonics above
         ``modes`` (and the grid's N/2 − 1) are dropped, as for a descriptor
         contour: finer ones could not be resolved by a mesh anyway.  r = 1 + K Z with K set
         so that the RMS of r − 1 is ``amplitude``.
@@ -466,7 +466,7 @@ class Contour:
         foreground: str = "auto",
         n_angles: int = DEFAULT_ANGLES,
     ) -> "Contour":
-        """The contour of the largest grain in an image (ALGORITHMS.md §2b).
+        """The contour of the largest grain in an image (docs/design/algorithms.md §2b).
 
         The image is thresholded (Otsu unless ``threshold`` is given), the
         largest connected component is kept with its holes filled, its

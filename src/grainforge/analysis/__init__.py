@@ -1,4 +1,4 @@
-"""Shape analysis: descriptors of 3D grains (ALGORITHMS.md §4).
+"""Shape analysis: descriptors of 3D grains (docs/design/algorithms.md §4).
 
 - :func:`describe` — every descriptor of one body (size, form, roughness,
   surface fractal dimension, principal-projection Fourier descriptors,

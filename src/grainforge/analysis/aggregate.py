@@ -1,4 +1,4 @@
-"""Fractality of aggregates (DPA, paper §2.3 and Eq. 5; ALGORITHMS.md §3).
+"""Fractality of aggregates (DPA, paper §2.3 and Eq. 5; docs/design/algorithms.md §3).
 
 All lengths are in units of the primary size a = V_p^(1/3) and volumes in
 units of the primary volume V_p, so every figure here is dimensionless.

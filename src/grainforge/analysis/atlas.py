@@ -1,4 +1,4 @@
-"""Measuring a grain the way a μCT study does (ALGORITHMS.md §8, the Sand Atlas definitions).
+"""Measuring a grain the way a μCT study does (docs/design/algorithms.md §8, the Sand Atlas definitions).
 
 The Sand Atlas (and the ``spam`` library it uses) measures each segmented
 particle on its binary voxel image.  :func:`atlas_descriptors` does the same

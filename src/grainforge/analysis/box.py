@@ -1,4 +1,4 @@
-"""Minimum-volume oriented bounding box of a point set (ALGORITHMS.md §4, L ≥ I ≥ S).
+"""Minimum-volume oriented bounding box of a point set (docs/design/algorithms.md §4, L ≥ I ≥ S).
 
 The search is the classical one (O'Rourke 1985; trimesh's ``oriented_bounds``):
 a box with one face flush with a face of the convex hull.  For each distinct

@@ -1,4 +1,4 @@
-"""3D shape descriptors (ALGORITHMS.md §4).
+"""3D shape descriptors (docs/design/algorithms.md §4).
 
 :func:`basic_descriptors` gives the columns every manifest carries;
 :func:`describe` gives everything ``grainforge analyse`` reports: size and
@@ -118,7 +118,7 @@ def describe(
     obj, *, fractal: bool = True, fourier: bool = True, primary_volume: float | None = None,
     closed: bool | None = None,
 ) -> dict[str, float]:
-    """Every descriptor of one body (ALGORITHMS.md §4).
+    """Every descriptor of one body (docs/design/algorithms.md §4).
 
     Parameters
     ----------
@@ -134,7 +134,7 @@ def describe(
         Volume V_p of an aggregate's primary particle; with it the aggregate
         dimension D_A = log(V/V_p) / log(Ā/a) of paper Eq. 5 is reported, Ā
         the mean edge of the minimum-volume box and a = V_p^(1/3) the primary
-        size (ALGORITHMS.md §3, the convention of
+        size (docs/design/algorithms.md §3, the convention of
         ``grainforge.analysis.aggregate``).  NaN when V ≤ V_p or Ā ≤ a.
     closed : bool, optional
         Whether the body is closed (:func:`is_closed`), if the caller already

@@ -1,6 +1,6 @@
 """Fourier descriptors of 2D outlines and of a 3D grain's principal projections.
 
-The 2D convention is Mollon & Zhao (2012), ALGORITHMS.md §2b: from the area
+The 2D convention is Mollon & Zhao (2012), docs/design/algorithms.md §2b: from the area
 centroid of the outline, ``N = 128`` rays at θ_j = 2πj/N give the radii
 r_j (outermost crossing); with c = rfft(r)/N, r0 = c0 and D_n = 2|c_n|/r0.
 
@@ -23,7 +23,7 @@ __all__ = [
     "principal_axes", "silhouette_radii", "projection_descriptors", "fd_columns",
 ]
 
-#: rays cast from the centroid (ALGORITHMS.md §2b)
+#: rays cast from the centroid (docs/design/algorithms.md §2b)
 N_RAYS = 128
 #: the descriptor orders reported
 FD_ORDERS = tuple(range(2, 17))
@@ -291,7 +291,7 @@ def projection_descriptors(
 
     The mesh is projected on each principal plane and the silhouette radii are
     found exactly along ``n_rays`` rays (:func:`silhouette_radii`).  As in
-    ALGORITHMS.md §2b the origin is the silhouette's area centroid: the area
+    docs/design/algorithms.md §2b the origin is the silhouette's area centroid: the area
     centroid of the 512-ray outline polygon seen from the projected volume
     centroid (exact for star-shaped outlines up to the polygon sampling; for a
     closed mesh the outline is taken from the contour edges alone, which is

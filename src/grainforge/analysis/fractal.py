@@ -14,7 +14,7 @@ vertices (u the unit direction from the volume centroid c):
   γ(δ) = ½ E[(h(u) − h(u′))²] over vertex pairs at angular separation δ.
   For a self-affine surface γ ∝ δ^(2H) with Hurst exponent H, and the
   surface's fractal dimension is D = 3 − H (the profile spectrum exponent is
-  β = 1 + 2H, so this is D = (7 − β)/2 of ALGORITHMS.md §4).  The slope is
+  β = 1 + 2H, so this is D = (7 − β)/2 of docs/design/algorithms.md §4).  The slope is
   fitted in log–log over δ from twice the mesh's median angular edge length
   (below that the mesh interpolates linearly, which biases the slope towards
   smoothness) to 0.35 rad (above that the degree-4 trend removal flattens the

@@ -5,7 +5,7 @@ knowledge of how the grain was made: the mesh is cut by the three planes
 through its volume centroid perpendicular to the principal axes of its
 inertia tensor (trimesh ``section``), and each section's outline is described
 by its radius function about its own area centroid
-(:func:`grainforge.contours.polygon_contour`, ALGORITHMS.md §2b), giving
+(:func:`grainforge.contours.polygon_contour`, docs/design/algorithms.md §2b), giving
 D_n = 2|c_n|/c_0.
 """
 

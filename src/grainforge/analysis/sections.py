@@ -2,7 +2,7 @@
 
 A plane through a point (by default the volume centroid) cuts the mesh in a
 closed outline (``trimesh.intersections.mesh_plane``); as for silhouettes
-(:mod:`grainforge.analysis.fourier`, ALGORITHMS.md §2b) the outline's radii
+(:mod:`grainforge.analysis.fourier`, docs/design/algorithms.md §2b) the outline's radii
 are taken along ``n_rays`` rays from its area centroid (outermost crossing)
 and D_n = 2|c_n|/c_0.  Used to check what the generators put into the
 grains (``docs/validation.md``): any orientation (:func:`random_normals`)

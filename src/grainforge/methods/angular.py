@@ -1,6 +1,6 @@
 """Angular grains: a rounded random polyhedron with dents and fractal roughness.
 
-ALGORITHMS.md §6; see ``docs/methods/angular.md``.  The grain is built in four
+docs/design/algorithms.md §6; see ``docs/methods/angular.md``.  The grain is built in four
 steps, all as a radius function r(u) of the unit direction u, sampled on the
 icosphere like FSO and CRI grains:
 

@@ -1,7 +1,7 @@
 """Contour Rotation Interpolation (CRI): a 3D grain from three 2D contours.
 
 Paper §2.2 (Mollon & Zhao 2012, 2013); the formulas are this package's
-reconstruction (ALGORITHMS.md §2d, ``docs/methods/cri.md``).  Axes: x longest,
+reconstruction (docs/design/algorithms.md §2d, ``docs/methods/cri.md``).  Axes: x longest,
 y intermediate, z shortest.  C1 lies in the xy plane (angle from +x towards
 +y), C2 in xz (from +x towards +z), C3 in yz (from +y towards +z).
 
@@ -447,7 +447,7 @@ def _best_orientation(fines: Sequence[np.ndarray]) -> list[np.ndarray]:
 
 
 def _correct(fines: Sequence[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
-    """Make the three contours agree at the six axis points (ALGORITHMS.md §2d step 1)."""
+    """Make the three contours agree at the six axis points (docs/design/algorithms.md §2d step 1)."""
     c1, c2, c3 = fines
     q = GRID // 4
     # values at 0, π/2, π, 3π/2 of each contour
@@ -549,7 +549,7 @@ CENTRE_PASSES = 4
 def _own_centre(fine: np.ndarray, spec: np.ndarray) -> np.ndarray:
     """The contour re-described about its own area centroid, with its descriptors kept.
 
-    Descriptors are measured about a contour's area centroid (ALGORITHMS.md
+    Descriptors are measured about a contour's area centroid (docs/design/algorithms.md
     §2b), which is not the origin a Fourier contour is synthesised about; the
     shift alone lowers D3 and D8 by ~10 % for D2 = 0.3.  So the radii are
     re-cast from the area centroid (``contours.polygon_contour``), every mode

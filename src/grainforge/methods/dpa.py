@@ -1,7 +1,7 @@
 """Directed Polyhedra Aggregation (DPA): porous, branching aggregates of convex primaries.
 
 Implements §2.3 of Hanaor et al., *3D printable geomaterials* (Eqs. 4–5;
-ALGORITHMS.md §3; ``docs/methods/dpa.md``).  Primaries of unit volume are
+docs/design/algorithms.md §3; ``docs/methods/dpa.md``).  Primaries of unit volume are
 added one at a time; the n-th attaches to a face of the parent
 i = ⌈(n−1)·u^(1/ε)⌉, u ~ U(0, 1] (Eq. 4).  Low ε favours old primaries
 (compact aggregates), high ε recent ones (branching aggregates).
@@ -411,7 +411,8 @@ def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Ge
     primaries.  Together these keep the exact face-cancellation union
     (:func:`union_surface`) a 2-manifold as written, also after smoothing
     (docs/methods/dpa.md, "Contacts"); ``clearance=-1, min_notch=-1``
-    turns them off (growth as before issue 11, for comparison).
+    turns them off (the growth before these contact rules were added, for
+    comparison).
 
     Examples
     --------

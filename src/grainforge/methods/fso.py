@@ -1,7 +1,7 @@
 """Fractal Surface Overlay (FSO): a Weierstrass–Mandelbrot surface on a geodesic sphere.
 
 Implements Eqs. 2 and 3 of Hanaor et al., *3D printable geomaterials*
-(see ``docs/methods/fso.md`` and ALGORITHMS.md §1).  For a vertex at azimuth
+(see ``docs/methods/fso.md`` and docs/design/algorithms.md §1).  For a vertex at azimuth
 θ and polar angle φ, with φ' = φ in the upper hemisphere and π − φ in the
 lower one,
 
@@ -341,7 +341,7 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
        as int32 (a truncating integer cast), i.e. the phase in units of 2^−fb
        modulo 2^(32−fb) units (shifted left when fb < 28 so that only the
        fraction remains), then converted to float32 radians;
-    3. float32 cosine (ALGORITHMS.md §1 item 7);
+    3. float32 cosine (docs/design/algorithms.md §1 item 7);
     4. the w_n-weighted sum over (m, n) with ``einsum`` (float32).
 
     Only steps 2–4 run in float32.  At the defaults the result agrees with

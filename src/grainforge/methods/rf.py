@@ -1,6 +1,6 @@
 """Random-field grains (rf): an isotropic Gaussian field of the radius, from a 2D descriptor spectrum.
 
-Mollon & Zhao (2014) style; ALGORITHMS.md §5 and ``docs/methods/rf.md``.  The
+Mollon & Zhao (2014) style; docs/design/algorithms.md §5 and ``docs/methods/rf.md``.  The
 radius on the unit sphere is r(u) = r0 (1 + f(u)), with f a zero-mean,
 isotropic Gaussian random field synthesised with real spherical harmonics
 (:mod:`grainforge.harmonics`) at the vertices of a geodesic sphere:
