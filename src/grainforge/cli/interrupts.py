@@ -65,6 +65,8 @@ def _handled(hold: bool) -> Iterator[list]:
         yield got
     except BaseException:
         restore()
+        if got:  # the signal first: whatever failed after an import swallowed it (a half-loaded module) is moot
+            signal.raise_signal(got[0])
         raise
     restore()
     if got:
