@@ -483,3 +483,14 @@ def test_sigkill_while_yade_runs_leaves_nothing_that_blocks_the_rerun(tmp_path, 
     err = err.decode()
     assert rerun.returncode == 1 and "Yade failed in repose-seed0" in err and "--overwrite" not in err, err
     assert list((work / "o").iterdir()) == []
+
+
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("delay", [0.8, 1.5])
+def test_signal_early_in_a_fit_is_honoured(tmp_path, sig, delay):
+    """A fit (minutes of work) stopped while it loads its modules or starts its pilot: one line, nothing left."""
+    proc = _start(["fit", str(OTTAWA), "--voxel-size", "7.3", "--out", "o", "--workers", "1"], tmp_path)
+    time.sleep(delay)
+    os.killpg(proc.pid, sig)
+    _stopped(proc, sig)
+    assert list(tmp_path.iterdir()) == []

@@ -11,6 +11,12 @@ from .paths import OutPath, output_dir
 from .progress import progress_bar
 
 
+#: modules a fit loads before any work (see cli.interrupts)
+HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",
+                 "grainforge.analysis.atlas", "grainforge.methods", "grainforge.population", "grainforge.workers",
+                 "grainforge.io", "matplotlib.pyplot")
+
+
 @click.command()
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
@@ -46,6 +52,7 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
     import sys
 
     from ..estimate import TooLargeError, duration
+    from .interrupts import preload
     from ..fit import FITS, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
 
     if method != "auto" and method not in FITS:
@@ -60,6 +67,10 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
                                  workers=workers)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
+    import matplotlib
+
+    matplotlib.use("Agg")
+    preload(HEAVY_MODULES)  # before any work: no lazy import later can swallow a Ctrl-C
     if seconds > 60:
         click.echo(f"estimated time: at most about {duration(seconds)} (a rough model; the progress bar shows the "
                    "measured rate)", err=True)
