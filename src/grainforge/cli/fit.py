@@ -67,6 +67,7 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
                                  workers=workers)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
+    preload(["matplotlib"])
     import matplotlib
 
     matplotlib.use("Agg")

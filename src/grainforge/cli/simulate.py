@@ -37,7 +37,7 @@ def _settings_cls():
     return Settings
 
 
-#: modules a run loads before any work, with the signals held (a lazy import later could swallow a Ctrl-C)
+#: modules a run loads before any work (cli.interrupts.preload: a lazy import later could swallow a Ctrl-C)
 HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.spatial", "scipy.spatial.transform",
                  "grainforge.io", "grainforge.solid", "grainforge.methods", "grainforge.population",
                  "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
@@ -49,29 +49,28 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     import os
 
     from ..estimate import TooLargeError, duration
-    from .interrupts import never_lost, preload, signals_held
+    from ..simulate import QUICK, Settings, check_inputs, check_size, yade_executable
+    from .interrupts import preload, signals_held
 
-    with never_lost():  # checks and imports: a signal that an import swallows is delivered as they end
-        from ..simulate import QUICK, Settings, check_inputs, check_size, yade_executable
+    if quick:
+        values = {**QUICK, **{k: v for k, v in values.items() if v is not None}}
+    settings = build_params(Settings, values)
+    outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
+                                                             for k in range(settings.seeds)]
+    out = output_dir(out, overwrite=overwrite, files=outputs)
+    available, make_seconds = check_inputs(inputs)
+    yade_executable()  # refuse before any work when Yade is missing
+    workers = workers or os.cpu_count() or 1
+    try:
+        seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
+                             as_spheres=as_spheres, workers=workers)
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    preload(["matplotlib"])
+    import matplotlib
 
-        if quick:
-            values = {**QUICK, **{k: v for k, v in values.items() if v is not None}}
-        settings = build_params(Settings, values)
-        outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
-                                                                 for k in range(settings.seeds)]
-        out = output_dir(out, overwrite=overwrite, files=outputs)
-        available, make_seconds = check_inputs(inputs)
-        yade_executable()  # refuse before any work when Yade is missing
-        workers = workers or os.cpu_count() or 1
-        try:
-            seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
-                                 as_spheres=as_spheres, workers=workers)
-        except TooLargeError as exc:
-            raise click.UsageError(str(exc)) from None
-        import matplotlib
-
-        matplotlib.use("Agg")
-        preload(HEAVY_MODULES)
+    matplotlib.use("Agg")
+    preload(HEAVY_MODULES)  # before any work: no lazy import later can swallow a Ctrl-C
     if seconds > 60:
         click.echo(f"estimated time: about {duration(seconds)} (a rough model; the progress bar shows the "
                    "measured rate)", err=True)
