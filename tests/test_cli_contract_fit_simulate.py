@@ -494,3 +494,35 @@ def test_signal_early_in_a_fit_is_honoured(tmp_path, sig, delay):
     os.killpg(proc.pid, sig)
     _stopped(proc, sig)
     assert list(tmp_path.iterdir()) == []
+
+
+def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_removed(tmp_path):
+    """The staging behind "all outputs or none": nothing moves while one output would be refused; with
+    --overwrite an earlier deck folder is replaced whole; a dead process's staging folder goes."""
+    from grainforge.run import STAGING_PREFIX
+    from grainforge.simulate import commit_stage, discard_stage, open_stage
+
+    out = tmp_path / "o"
+    (out / "repose-seed0").mkdir(parents=True)
+    (out / "repose-seed0" / "old.txt").write_text("old")
+    dead = subprocess.Popen(["true"])
+    dead.wait()
+    stale = out / f"{STAGING_PREFIX}{dead.pid}-x"
+    (stale / "repose-seed0").mkdir(parents=True)
+    stage, created = open_stage(out)
+    assert not created and not stale.exists() and stage.parent == out
+    (stage / "repose-seed0").mkdir()
+    (stage / "repose-seed0" / "run.py").write_text("new")
+    (stage / "results.csv").write_text("rows")
+    with pytest.raises(FileExistsError, match="repose-seed0 exists; use --overwrite"):
+        commit_stage(stage, out)
+    assert sorted(p.name for p in out.iterdir()) == sorted([stage.name, "repose-seed0"])
+    assert [p.name for p in (out / "repose-seed0").iterdir()] == ["old.txt"]
+    commit_stage(stage, out, overwrite=True)
+    discard_stage(stage, out, created)
+    assert sorted(p.name for p in out.iterdir()) == ["repose-seed0", "results.csv"]
+    assert [p.name for p in (out / "repose-seed0").iterdir()] == ["run.py"]
+    fresh = tmp_path / "fresh"
+    stage, created = open_stage(fresh)
+    discard_stage(stage, fresh, created)  # an interrupted run in a folder it created leaves no folder
+    assert created and not fresh.exists()
