@@ -98,8 +98,13 @@ def check_job(count: int, seconds_each: float, *, what: str, option: str, worker
         per = f"{duration(seconds_each)} each" if seconds_each >= 1 else f"{seconds_each * 1000:.2g} ms each"
         raise TooLargeError(
             f"{what} would take about {duration(total)} of computing ({per}"
-            + (f" on {workers} workers" if workers > 1 else "") + f"; limit 1 day); lower {option}")
+            + (f" on {workers} workers" if workers > 1 else "") + f"; limit {_limit()}); lower {option}")
     return total
+
+
+def _limit() -> str:
+    """The time limit as the messages say it (``1 day`` by default; tests may lower :data:`SECONDS_LIMIT`)."""
+    return "1 day" if SECONDS_LIMIT == 24 * 3600.0 else duration(SECONDS_LIMIT)
 
 
 def machine_memory() -> int:

@@ -56,6 +56,7 @@ import numpy as np
 __all__ = [
     "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Knob", "MethodFit", "FITS", "register", "fit_sand",
     "compare", "recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "STATISTICS",
+    "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS", "SPHERICITY_MAX",
 ]
 
 #: the four descriptors that are matched
@@ -78,6 +79,22 @@ ASPECT_STEP = 0.03
 #: finite-difference step and range of the fitted aspect standard deviations
 ASPECT_SD_STEP = 0.02
 ASPECT_SD_LOW, ASPECT_SD_HIGH = 0.005, 0.5
+#: largest true sphericity accepted: measured on voxels it can exceed 1 a little (Ottawa's largest is 1.02)
+SPHERICITY_MAX = 1.2
+#: fewest grains a sand must have to be fitted: two samples of 50 grains of one sand already differ by a
+#: KS statistic of about 0.17 (0.87·√(2/50)), beyond the 0.1 criterion; fewer grains say too little
+MIN_GRAINS = 50
+#: range of grain sizes, in voxels across (d_eq / voxel size), the fit measures: fewer than 5 voxels across
+#: describe no shape; at 1,000 one grain's voxel image holds 10⁹ voxels
+VOXELS_ACROSS = (5.0, 1000.0)
+#: per-grain cost of a fit (s, one core): making the grain, plus voxelising and measuring it, which grows
+#: with the cube of the voxels across (0.05 s at Ottawa's 69; docs/benchmarks.md)
+FIT_GRAIN_SECONDS, FIT_VOXEL_SECONDS, FIT_ACROSS_REF = 0.1, 0.05, 69.0
+#: memory of one grain's measurement, per cubed voxel across (bytes; 330 MB at 250 across, for an elongated
+#: grain's larger box a factor 2 more)
+FIT_VOXEL_BYTES = 48.0
+#: memory the fit keeps per grain measured (its cached row)
+FIT_ROW_BYTES = 300.0
 #: the statistics the search matches: mean and sd of each descriptor
 STATISTICS = tuple(f"{q} {k}" for k in DESCRIPTORS for q in ("mean", "sd"))
 
@@ -159,18 +176,102 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
                 x = float(cell)
             except ValueError:
                 raise ValueError(f"{path}: line {line}, column {col!r}: not a number: {cell!r}") from None
-            if not (math.isfinite(x) and x > 0) or (key in DESCRIPTORS and x > 1 + 1e-6 and key != "sphericity"):
-                raise ValueError(f"{path}: line {line}, column {col!r}: out of range: {cell!r}")
+            high = SPHERICITY_MAX if key == "sphericity" else 1 + 1e-6 if key in DESCRIPTORS else math.inf
+            if not (math.isfinite(x) and 0 < x <= high):
+                limit = f" (at most {SPHERICITY_MAX:g})" if key == "sphericity" else \
+                    " (at most 1)" if key in DESCRIPTORS else ""
+                raise ValueError(f"{path}: line {line}, column {col!r}: out of range{limit}: {cell!r}")
             data[key].append(x)
     if voxel_size is None:
         if "voxel_size" not in data:
             raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size, µm)")
         voxel_size = float(np.median(data["voxel_size"]))
     if not (math.isfinite(voxel_size) and voxel_size > 0):
-        raise ValueError(f"voxel size must be a positive number of µm, got {voxel_size!r}")
+        raise ValueError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")
+    across = np.asarray(data["equivalent_diameter"]) / voxel_size
+    lo, hi = VOXELS_ACROSS
+    if not (np.all(np.isfinite(across)) and across.min() >= lo and across.max() <= hi):
+        raise ValueError(f"{path}: at a voxel size of {voxel_size:g} µm its grains are {across.min():.3g} to "
+                         f"{across.max():.3g} voxels across; the fit measures grains {lo:g} to {hi:g} voxels "
+                         "across (is the voxel size in µm?)")
     return Sand(name=path.name, voxel_size=float(voxel_size),
                 equivalent_diameter=np.asarray(data["equivalent_diameter"]),
                 values={k: np.asarray(data[k]) for k in DESCRIPTORS})
+
+
+def check_sand(sand: Sand) -> None:
+    """Refuse a sand that cannot be fitted: fewer than :data:`MIN_GRAINS` grains, or a column without spread.
+
+    A fit matches distributions; identical grains (every value of a column
+    the same) have none to match, and their single size makes no grading.
+
+    Raises
+    ------
+    ValueError
+        One line naming the sand and the problem.
+
+    Examples
+    --------
+    >>> one = np.full(60, 0.8)
+    >>> s = Sand("s.csv", 7.3, np.linspace(300, 500, 60), {k: one for k in DESCRIPTORS})
+    >>> check_sand(s)
+    Traceback (most recent call last):
+    ...
+    ValueError: s.csv: every grain has the same sphericity (0.8): a fit needs a spread of sizes and shapes to match
+    """
+    if sand.count < MIN_GRAINS:
+        raise ValueError(f"{sand.name}: {sand.count} grain(s); a fit needs at least {MIN_GRAINS} "
+                         "(fewer grains say too little about the sand's distributions)")
+    for key, col in [("equivalent diameter", sand.equivalent_diameter)] + [(k, sand.values[k]) for k in DESCRIPTORS]:
+        if float(np.ptp(col)) <= 1e-9 * float(np.max(np.abs(col))):
+            raise ValueError(f"{sand.name}: every grain has the same {key} ({float(col[0]):g}): a fit needs a "
+                             "spread of sizes and shapes to match")
+
+
+def fit_grains(method: str, *, count: int, pilot: int, rounds: int, final_rounds: int) -> tuple[int, int]:
+    """Most grains a fit of ``method`` measures: (search grains, final-population grains).
+
+    The search measures the pilot at the start, half of it once per unknown
+    (the Jacobian), and once per round; the final population is measured up
+    to ``final_rounds`` times.  ``"auto"`` fits every method.
+
+    Examples
+    --------
+    >>> fit_grains("rf", count=500, pilot=200, rounds=6, final_rounds=3)
+    (2200, 1500)
+    """
+    if method == "auto":
+        parts = [fit_grains(m, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds) for m in FITS]
+        return sum(p[0] for p in parts), sum(p[1] for p in parts)
+    pilot = min(pilot, count)
+    unknowns = len(FITS[method].knobs) + 4
+    return pilot * (1 + rounds) + unknowns * max(2, pilot // 2), final_rounds * count
+
+
+def check_fit_size(sand: Sand, method: str, *, count: int, pilot: int, rounds: int, final_rounds: int,
+                   workers: int = 1) -> float:
+    """Estimated seconds of a fit; refuse one beyond a day or the machine's memory, naming the option to lower.
+
+    Raises
+    ------
+    grainforge.estimate.TooLargeError
+    """
+    from .estimate import check_job, check_memory
+
+    search, final = fit_grains(method, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds)
+    across = sand.equivalent_diameter / sand.voxel_size
+    each = FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * float(np.mean((across / FIT_ACROSS_REF) ** 3))
+    option = "--count" if final >= search else "--pilot (or --rounds)"
+    if method == "auto":
+        option += " or fit one --method"
+    cores = max(1, min(int(workers), os.cpu_count() or 1))
+    total = check_job(search + final, each, what=f"fit --method {method}, measuring up to {search + final} grains,",
+                      option=option, workers=cores)
+    per_worker = FIT_VOXEL_BYTES * float(across.max()) ** 3
+    check_memory(per_worker * max(1, int(workers)) + FIT_ROW_BYTES * (search + final),
+                 what=f"fit --method {method} on {workers} worker(s), measuring up to {search + final} grains "
+                      f"{across.max():.0f} voxels across,", option=f"{option} or --workers")
+    return total
 
 
 # --------------------------------------------------------------------------- per-method knobs
@@ -566,6 +667,7 @@ def fit_sand(
         raise ValueError(f"method {method!r} is not available in this grainforge")
     if count < 2 or not 2 <= pilot:
         raise ValueError("count and pilot must be at least 2")
+    check_sand(sand)
     pilot = min(pilot, count)
     spec = FITS[method]
     say = log or (lambda s: None)

@@ -59,6 +59,18 @@ class ParameterError(ValueError):
         self.reason = reason
         super().__init__(f"{name} {reason}")
 
+    def __reduce__(self):
+        """Rebuild from the constructor's arguments (a worker's error crosses a process pool intact).
+
+        Examples
+        --------
+        >>> import pickle
+        >>> e = pickle.loads(pickle.dumps(ParameterError("amplitude", "must be <= 0.3")))
+        >>> e.name, e.reason
+        ('amplitude', 'must be <= 0.3')
+        """
+        return (type(self), (self.name, self.reason))
+
 
 @dataclass(frozen=True)
 class ParamSpec:

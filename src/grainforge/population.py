@@ -112,6 +112,18 @@ class RecipeError(ValueError):
         where = f"{source}:{line}" if line else source
         super().__init__(f"{where}: {field}: {reason}")
 
+    def __reduce__(self):
+        """Rebuild from the constructor's arguments: a worker's error crosses the process pool intact.
+
+        Examples
+        --------
+        >>> import pickle
+        >>> e = pickle.loads(pickle.dumps(RecipeError("r.toml", "count", "too big", 2)))
+        >>> str(e), e.field, e.line
+        ('r.toml:2: count: too big', 'count', 2)
+        """
+        return (type(self), (self.source, self.field, self.reason, self.line))
+
 
 # --------------------------------------------------------------------------- line numbers
 _HEADER = re.compile(r"^\s*\[\[?\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")

@@ -11,6 +11,12 @@ from .paths import OutPath, output_dir
 from .progress import progress_bar
 
 
+#: modules a fit loads before any work (see cli.interrupts)
+HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",
+                 "grainforge.analysis.atlas", "grainforge.methods", "grainforge.population", "grainforge.workers",
+                 "grainforge.io", "matplotlib.pyplot")
+
+
 @click.command()
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
@@ -20,16 +26,17 @@ from .progress import progress_bar
 @click.option("--method", default="rf", show_default=True,
               help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best. "
                    "rf grains respond smoothly to their settings, CRI grains less so (docs/fit.md).")
-@click.option("--count", type=click.IntRange(min=500), default=500, show_default=True,
+@click.option("--count", type=click.IntRange(min=500, max=10**7), default=500, show_default=True,
               help="Grains of the verification population and of the recipe (>= 500).")
-@click.option("--pilot", type=click.IntRange(min=20), default=200, show_default=True,
+@click.option("--pilot", type=click.IntRange(min=20, max=10**6), default=200, show_default=True,
               help="Grains of each search round: the first grains of the final population (same seeds every round).")
 @click.option("--rounds", type=click.IntRange(min=1, max=20), default=6, show_default=True,
               help="Search rounds after the finite-difference Jacobian.")
 @click.option("--final-rounds", type=click.IntRange(min=1, max=10), default=3, show_default=True,
               help="Measurements of the whole population, each corrected from the last; the best is kept.")
 @click.option("--seed", type=click.IntRange(min=0), default=2024, show_default=True, help="Root seed of the recipe.")
-@click.option("--workers", type=click.IntRange(min=1), default=None, help="Worker processes [default: CPU count].")
+@click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
+              help="Worker processes [default: CPU count].")
 @click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv and fit.png in --out.")
 def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed, workers, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
@@ -44,13 +51,30 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
     import os
     import sys
 
-    from ..fit import FITS, OUTPUTS, fit_sand, read_sand, write_outputs
+    from ..estimate import TooLargeError, duration
+    from .interrupts import preload
+    from ..fit import FITS, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
 
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
                                  param_hint="--method")
     output_dir(out, overwrite=overwrite, files=[out / n for n in OUTPUTS])  # before any work
     s = read_sand(sand, voxel_size)
+    check_sand(s)
+    workers = workers or os.cpu_count() or 1
+    try:
+        seconds = check_fit_size(s, method, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds,
+                                 workers=workers)
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    preload(["matplotlib"])
+    import matplotlib
+
+    matplotlib.use("Agg")
+    preload(HEAVY_MODULES)  # before any work: no lazy import later can swallow a Ctrl-C
+    if seconds > 60:
+        click.echo(f"estimated time: at most about {duration(seconds)} (a rough model; the progress bar shows the "
+                   "measured rate)", err=True)
     state = {"desc": "fit"}
 
     def progress(it, total):
@@ -60,7 +84,7 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
                f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
                "across)", err=True)
     result = fit_sand(s, method, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds, seed=seed,
-                      workers=workers or os.cpu_count() or 1, progress=progress,
+                      workers=workers, progress=progress,
                       log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
     paths = write_outputs(s, result, out)
     verdict = "PASSES" if result.stats["pass"] else "does NOT pass"

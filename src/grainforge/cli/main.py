@@ -29,6 +29,21 @@ _STARTING = threading.current_thread() is threading.main_thread() \
 if _STARTING:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
 
+
+def _terminated_while_starting(signum, frame):  # pragma: no cover - exercised by a real signal
+    """SIGTERM while the command line loads its modules: the usual line and code, as later."""
+    try:
+        sys.stderr.write("Terminated.\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(128 + signal.SIGTERM)
+
+
+_TERM_STARTING = threading.current_thread() is threading.main_thread() \
+    and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
+if _TERM_STARTING:
+    signal.signal(signal.SIGTERM, _terminated_while_starting)
+
 import click  # noqa: E402
 
 from .._version import __version__  # noqa: E402
@@ -134,6 +149,8 @@ def _register():
 _register()
 if _STARTING and signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
     signal.signal(signal.SIGINT, signal.default_int_handler)  # from here on: KeyboardInterrupt, cleaned up
+if _TERM_STARTING and signal.getsignal(signal.SIGTERM) is _terminated_while_starting:
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # GrainforgeGroup.main raises Terminated from here on
 
 
 def main() -> None:  # console-script entry point

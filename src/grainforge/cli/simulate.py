@@ -21,7 +21,7 @@ def _command(test: str, doc: str):
                   help="Replace every grain by its volume-equivalent sphere (the sphere baseline).")
     @click.option("--label", default=None, show_default="the inputs' names",
                   help="Name of this population in results.csv.")
-    @click.option("--workers", type=click.IntRange(min=1), default=None,
+    @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
                   help="Yade runs (seeds) at once, each on one core (default: CPU count).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @param_options(_settings_cls())
@@ -37,12 +37,20 @@ def _settings_cls():
     return Settings
 
 
+#: modules a run loads before any work (cli.interrupts.preload: a lazy import later could swallow a Ctrl-C)
+HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.spatial", "scipy.spatial.transform",
+                 "grainforge.io", "grainforge.solid", "grainforge.methods", "grainforge.population",
+                 "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
+                 "grainforge.dem.clump", "grainforge.dem.enclosure", "grainforge.dem.yade", "grainforge.dem.deck",
+                 "grainforge.simulate.report", "matplotlib.pyplot", "matplotlib.collections")
+
+
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values):
     import os
 
-    from ..simulate import QUICK, Settings, build_population, check_inputs, run_test, summarise, yade_executable
-    from ..simulate.report import write_report
-    from tqdm import tqdm
+    from ..estimate import TooLargeError, duration
+    from ..simulate import QUICK, Settings, check_inputs, check_size, yade_executable
+    from .interrupts import preload, signals_held
 
     if quick:
         values = {**QUICK, **{k: v for k, v in values.items() if v is not None}}
@@ -50,8 +58,26 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)
-    check_inputs(inputs)
+    available, make_seconds = check_inputs(inputs)
     yade_executable()  # refuse before any work when Yade is missing
+    workers = workers or os.cpu_count() or 1
+    try:
+        seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
+                             as_spheres=as_spheres, workers=workers)
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    preload(["matplotlib"])
+    import matplotlib
+
+    matplotlib.use("Agg")
+    preload(HEAVY_MODULES)  # before any work: no lazy import later can swallow a Ctrl-C
+    if seconds > 60:
+        click.echo(f"estimated time: about {duration(seconds)} (a rough model; the progress bar shows the "
+                   "measured rate)", err=True)
+    from ..simulate import build_population, commit_stage, discard_stage, open_stage, run_test, summarise
+    from ..simulate.report import write_report
+    from tqdm import tqdm
+
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
     with tqdm(desc="clumps", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
         def step(done, total):
@@ -70,15 +96,23 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         runs.set_postfix_str(f"seed {settings.seed + k}: {phase}", refresh=False)
         runs.refresh()
 
+    # every output is made in a hidden staging folder and moved into --out when all are complete: an
+    # interrupt or a failed run leaves nothing (a SIGKILL leaves the staging folder, which the next run removes)
+    stage, created = open_stage(out)
     try:
-        rows = run_test(test, templates, settings, out, label=label, progress=progress, overwrite=overwrite,
-                        workers=workers or os.cpu_count() or 1)
-    except RuntimeError as exc:
-        raise click.ClickException(str(exc)) from None
+        try:
+            rows = run_test(test, templates, settings, stage, label=label, progress=progress,
+                            workers=workers)
+        except RuntimeError as exc:
+            raise click.ClickException(str(exc).replace(f"{stage}{os.sep}", "")) from None
+        finally:
+            runs.close()
+        write_report(rows, stage, test, settings)
+        with signals_held():  # the outputs appear together
+            commit_stage(stage, out, overwrite=overwrite)
     finally:
-        runs.close()
+        discard_stage(stage, out, created)
     summary = summarise(rows)
-    write_report(rows, out, test, settings)
     sd = summary["angle_sd_deg"]
     spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"
     name = "angle of repose" if test == "repose" else "tilt failure angle"

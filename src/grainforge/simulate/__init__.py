@@ -37,7 +37,8 @@ from ..params import param, validate
 from .measure import heap_angle, tilt_failure_angle
 
 __all__ = ["TESTS", "Settings", "QUICK", "yade_executable", "scene_settings", "check_inputs", "build_population",
-           "write_test_deck", "run_yade", "measure_result", "run_test", "summarise"]
+           "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage",
+           "commit_stage", "discard_stage"]
 
 #: the virtual tests
 TESTS = ("repose", "tilt")
@@ -156,8 +157,18 @@ def _is_recipe(paths: Sequence[Path]) -> bool:
     return len(paths) == 1 and paths[0].suffix.lower() == ".toml"
 
 
-def check_inputs(inputs: Sequence[str | os.PathLike]) -> None:
+def check_inputs(inputs: Sequence[str | os.PathLike]) -> tuple[int, float]:
     """Cheap checks of the inputs before any work: a readable recipe, or paths that hold grain files.
+
+    A recipe that ``grainforge batch`` would refuse as too large (its count
+    beyond a day of computing, e.g. ``count = 2**63 - 1``) is refused too:
+    the simulated grains stand for that population.
+
+    Returns
+    -------
+    (int, float)
+        The grains available (files, or the recipe's count) and the seconds
+        to make one (0 for files).
 
     Raises
     ------
@@ -166,13 +177,114 @@ def check_inputs(inputs: Sequence[str | os.PathLike]) -> None:
     """
     paths = [Path(p) for p in inputs]
     if _is_recipe(paths):
-        from ..population import load_recipe
+        from ..estimate import grain_seconds
+        from ..population import check_recipe_size, draw_grain, load_recipe
 
-        load_recipe(paths[0])
-    else:
-        from ..dem.inputs import grain_paths
+        recipe = load_recipe(paths[0])
+        check_recipe_size(recipe)
+        return recipe.count, grain_seconds(recipe.method, draw_grain(recipe, 0)[1])
+    from ..dem.inputs import grain_paths
 
-        grain_paths(paths)
+    return len(grain_paths(paths)), 0.0
+
+
+#: Yade seconds per grain and run (one core): a fixed part and a part per contact sphere, fitted to the
+#: repose runs of docs/simulate.md (200 grains of 1 and of 10 spheres: about 50 and 100 s a run)
+YADE_GRAIN_SECONDS, YADE_SPHERE_SECONDS = 0.25, 0.03
+#: a tilt run takes longer than a repose run of as many grains (the tilt steps; docs/simulate.md)
+TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
+#: seconds to make one clump template: about 0.08 s at 10 spheres, 0.15 s at 200
+TEMPLATE_SECONDS, TEMPLATE_SPHERE_SECONDS = 0.08, 0.0005
+#: Yade's memory per contact sphere (bytes: the body, its bound, its contacts)
+YADE_SPHERE_BYTES = 4096.0
+
+
+def check_size(test: str, settings: Settings, *, available: int, make_seconds: float = 0.0,
+               as_spheres: bool = False, workers: int = 1) -> float:
+    """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
+
+    Parameters
+    ----------
+    available, make_seconds : int, float
+        From :func:`check_inputs`: the grains the inputs hold, and the
+        seconds to generate one (a recipe) before it becomes a template.
+    workers : int
+        Yade runs at once (each on one core).
+
+    Raises
+    ------
+    grainforge.estimate.TooLargeError
+        With the estimate and the options that reduce it.
+
+    Examples
+    --------
+    >>> 60 < check_size("repose", Settings(), available=3) < 600
+    True
+    """
+    from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, duration
+
+    templates = min(settings.templates, available)
+    spheres = 1 if as_spheres else settings.spheres
+    make = templates * (make_seconds + TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS * spheres)
+    per_run = TEST_FACTOR[test] * settings.grains * (YADE_GRAIN_SECONDS + YADE_SPHERE_SECONDS * spheres)
+    at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
+    total = make + per_run * settings.seeds / at_once
+    if total > SECONDS_LIMIT:
+        option = "--templates" if make > total / 2 else "--grains, --spheres or --seeds"
+        raise TooLargeError(
+            f"{settings.seeds} {test} run(s) of {settings.grains} grains of {spheres} sphere(s) from {templates} "
+            f"template(s) would take about {duration(total)} of computing ({duration(per_run)} a run on "
+            f"{at_once} core(s), {duration(make)} for the templates; limit {_limit()}); lower {option}")
+    check_memory(YADE_SPHERE_BYTES * settings.grains * spheres * at_once,
+                 what=f"{at_once} Yade run(s) at once of {settings.grains} grains of {spheres} sphere(s)",
+                 option="--grains, --spheres or --workers")
+    return float(total)
+
+
+def open_stage(out: str | os.PathLike) -> tuple[Path, bool]:
+    """A hidden staging folder inside ``out`` for one command's outputs; whether ``out`` was created.
+
+    Staging folders of killed runs (their process gone) are removed first,
+    so a run killed by SIGKILL never blocks the next one.
+    """
+    import tempfile
+
+    from ..run import STAGING_PREFIX, remove_stale_staging
+
+    out = Path(out)
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    remove_stale_staging(out)
+    return Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out)), created
+
+
+def commit_stage(stage: Path, out: str | os.PathLike, *, overwrite: bool = False) -> list[Path]:
+    """Move everything in ``stage`` into ``out`` (folders first, then files): the outputs appear together.
+
+    An existing output is replaced only with ``overwrite`` (else ``FileExistsError``, nothing moved).
+    """
+    out = Path(out)
+    items = sorted(stage.iterdir(), key=lambda p: (not p.is_dir(), p.name))
+    if not overwrite:
+        for p in items:
+            if (out / p.name).exists():
+                raise FileExistsError(f"{out / p.name} exists; use --overwrite")
+    moved = []
+    for p in items:
+        target = out / p.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        p.replace(target)
+        moved.append(target)
+    return moved
+
+
+def discard_stage(stage: Path, out: str | os.PathLike, created: bool) -> None:
+    """Remove ``stage`` (empty after :func:`commit_stage`) and ``out`` if this run created it and it is empty."""
+    shutil.rmtree(stage, ignore_errors=True)
+    out = Path(out)
+    if created and out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
 
 
 def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *, as_spheres: bool = False,

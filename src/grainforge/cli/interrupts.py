@@ -1,0 +1,87 @@
+"""Ctrl-C and SIGTERM honoured at every moment of a command, imports included.
+
+Some libraries guard their optional imports with ``except BaseException``
+(trimesh does), so a ``KeyboardInterrupt`` raised while such a module loads
+is swallowed and the command would run on to its end as if nothing had
+happened; and an exception raised in the middle of a C extension's import
+can leave it half made (a crash at exit was seen).  So a command loads its
+heavy modules with :func:`preload`, after its checks and before any work:
+a signal meanwhile ends the command at once with the usual line and code
+(nothing is written yet, no process started), without raising anything
+into the importing code.  :func:`signals_held` instead holds the signals
+for a block that must not stop half-way (moving finished outputs into
+place) and delivers the first one as it ends.
+"""
+
+from __future__ import annotations
+
+import importlib
+import os
+import signal
+import sys
+import threading
+from contextlib import contextmanager
+from typing import Iterable, Iterator
+
+__all__ = ["signals_held", "preload"]
+
+#: the signals a command stops on, with the line it prints
+SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
+
+
+@contextmanager
+def _handled(handler) -> Iterator[None]:
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in SIGNALS}
+    for s, usual in previous.items():
+        if usual is not signal.SIG_IGN:  # an ignored signal (SIGINT of a background job) stays ignored
+            signal.signal(s, handler)
+    try:
+        yield
+    finally:
+        for s, usual in previous.items():
+            signal.signal(s, usual if usual is not None else signal.SIG_DFL)
+
+
+@contextmanager
+def signals_held() -> Iterator[list]:
+    """Hold SIGINT and SIGTERM during the block; deliver the first one that came as it ends.
+
+    Yields the list of signals held so far.  Outside the main thread (where
+    Python cannot set handlers) nothing is held.
+
+    Examples
+    --------
+    >>> with signals_held() as got:
+    ...     got
+    []
+    """
+    got: list[int] = []
+    with _handled(lambda signum, frame: got.append(signum)):
+        yield got
+    if got:
+        signal.raise_signal(got[0])  # the usual handler now: KeyboardInterrupt, Terminated, or the default
+
+
+def _exit_now(signum, frame):  # pragma: no cover - exercised by a real signal
+    try:
+        sys.stderr.write(SIGNALS[signum] + "\n")
+        sys.stderr.flush()
+    finally:
+        os._exit(128 + signum)
+
+
+def preload(modules: Iterable[str]) -> None:
+    """Import ``modules``; a SIGINT or SIGTERM meanwhile ends the process at once (exit 130 or 143, one line).
+
+    Call it only where nothing needs cleaning up: before any output or process exists.
+
+    Examples
+    --------
+    >>> preload(["json"])
+    """
+    with _handled(_exit_now):
+        for name in modules:
+            importlib.import_module(name)
