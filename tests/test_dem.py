@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -333,19 +334,35 @@ def test_vertex_merge_of_soups_and_small_sets():
         assert np.array_equal(np.signbit(u), np.signbit(p[first]))
 
 
-def test_liggghts_seeds_are_the_trial_division_primes():
-    import math
+def _trial_division_prime(n: int) -> bool:
+    return n > 1 and all(n % p for p in range(2, math.isqrt(n) + 1))
 
-    from grainforge.dem.liggghts import _is_prime, _next_prime, _seed
 
-    def trial(n):
-        n += 1 - n % 2
-        while any(n % p == 0 for p in range(3, int(math.isqrt(n)) + 1, 2)):
-            n += 2
-        return n
+def test_liggghts_deck_seeds_distinct_primes_for_1_to_200_templates():
+    """Every random seed of a LIGGGHTS deck (templates, distributions, one insertion per grain) is a
+    prime > 10000 that LIGGGHTS accepts, and no two are equal: for 1 to 200 templates of 1-3 copies
+    (the engine stops on a repeated seed within an insertion and its distributions)."""
+    import dataclasses
+    import re
 
-    assert [k for k in range(200) if _is_prime(k)] == [k for k in range(2, 200)
-                                                        if all(k % p for p in range(2, int(math.isqrt(k)) + 1))]
-    for n in list(range(10001, 10400)) + [86028157 + 1000 * k for k in range(1, 40)]:
-        assert _next_prime(n) == trial(n)
-    assert all(_is_prime(_seed(k)) for k in range(0, 400, 7))
+    from grainforge.dem.liggghts import SEED_MIN, deck_files
+
+    t0 = prepare(trimesh.creation.box((2.0, 1.5, 1.0)).vertices, trimesh.creation.box((2.0, 1.5, 1.0)).faces,
+                 "g", spheres=3)
+    seen = set()
+    for n in range(1, 201):
+        templates = [dataclasses.replace(t0, name=f"g{i}", count=1 + (i * 7 + n) % 3) for i in range(n)]
+        files = deck_files(templates)
+        text = files["in.templates"] + files["in.insert"]
+        seeds = [int(x) for x in re.findall(r"(?:particletemplate/multisphere|particledistribution/discrete|"
+                                            r"insert/pack seed) (\d+)", text)]
+        grains = sum(t.count for t in templates)
+        assert len(seeds) == 2 * n + 1 + grains  # every random fix of the deck was found
+        assert len(set(seeds)) == len(seeds), n
+        assert text.count("insert/pack") == grains
+        seen.update(seeds)
+    # LIGGGHTS: prime, > 10000, and below INT_MAX once the MPI rank (up to thousands) is added
+    assert all(SEED_MIN < s < 2**31 - 1 - 100_000 and _trial_division_prime(s) for s in seen)
+    assert SEED_MIN == 10000
+    # the same deck twice: the same seeds (nothing random in their choice)
+    assert deck_files(templates)["in.insert"] == files["in.insert"]
