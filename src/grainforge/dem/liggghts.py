@@ -43,6 +43,19 @@ SEED_LIMIT = 5_000_000
 # over the whole range (Park-Miller streams of close seeds start with close numbers)
 _SEED_STRIDE = 1_000_003
 
+# Under MPI (mpirun -np P liggghts -in in.run) ``processors * * 1`` cuts the box into columns,
+# P_x × P_y equal parts of its x and y extent. An insertion fix whose region spans two parts
+# lets each rank decide on its own whether to insert (LIGGGHTS adds a random number in [0, 1)
+# to the rank's share of the region), which can insert a grain twice or not at all. So every
+# region is a box of _NODE_BOX cells around its lattice node (``volume_limit`` below its volume:
+# LIGGGHTS refuses regions under 1e-10 m^3 otherwise), and the box margins beyond the
+# walls (lower _MARGIN_LO, upper _MARGIN_HI cells, an irrational ratio) keep every cut of up to
+# 32 parts per side at least 4e-5 cells away from every node of a lattice up to 300 cells
+# wide (tests/test_dem.py) — 400 times the region's half-width.
+_NODE_BOX = 2e-7
+_MARGIN_LO = 0.05
+_MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2
+
 
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
@@ -137,20 +150,21 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     total_mass = sum(t.mass * t.count for t in templates)
     mean_d = sum(t.d_eq * t.count for t in templates) / n
     ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
-    ins = ["# grainforge: insert every grain `count` times, each copy into its own lattice cell"]
+    ins = ["# grainforge: insert every grain `count` times, each copy at its own lattice node (within "
+           f"{_NODE_BOX:g} cells)"]
     slot = 0
     for k, t in enumerate(templates):
         ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
                    f"pts{k + 1} 1.0")
         for c in range(t.count):
             i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
-            lo = np.array([i * cell, j * cell, (layer + 0.5) * cell])
-            hi = lo + cell
+            node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
+            lo, hi = node - 0.5 * _NODE_BOX * cell, node + 0.5 * _NODE_BOX * cell
             ins.append(f"region r{slot} block {fmt(lo[0])} {fmt(hi[0])} {fmt(lo[1])} {fmt(hi[1])} "
-                       f"{fmt(lo[2])} {fmt(hi[2])} units box")
+                       f"{fmt(lo[2])} {fmt(hi[2])} units box volume_limit {fmt(0.5 * (_NODE_BOX * cell) ** 3)}")
             ins.append(f"fix i{slot} all insert/pack seed {seeds[2 * n_t + 1 + slot]} "
-                       f"distributiontemplate pdd{k + 1} maxattempt 1000 insert_every once overlapcheck yes "
-                       f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 100000")
+                       f"distributiontemplate pdd{k + 1} insert_every once overlapcheck no "
+                       f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 1000")
             slot += 1
     files["in.insert"] = "\n".join(ins) + "\n"
 
@@ -164,7 +178,8 @@ newton off
 communicate single vel yes
 units si
 
-region domain block {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
+processors * * 1
+region domain block {fmt(-_MARGIN_LO * cell)} {fmt(width + _MARGIN_HI * cell)} {fmt(-_MARGIN_LO * cell)} {fmt(width + _MARGIN_HI * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
 create_box 1 domain
 neighbor {fmt(0.5 * rmin)} bin
 neigh_modify delay 0
