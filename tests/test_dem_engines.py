@@ -427,3 +427,22 @@ def test_lammps_polyhedron_deck_under_mpirun_matches_one_rank(lmp, mpirun, popul
     d_mean = np.mean([deck["grains"][p["grain"]]["d_eq"] for p in deck["placements"]])
     compare_ranks(*states, d_mean, deck["box"][0])
     assert settled(one, p1) == settled(two, p2)
+
+
+@pytest.mark.slow
+def test_liggghts_pour_of_300_grains_inserts_each_once_on_2_and_4_ranks(liggghts, mpirun, population, tmp_path):
+    """Insertion only (the deck's in.run up to its pour): 300 grains on a 8 x 8 lattice, cut into
+    2 x 1 and 2 x 2 columns — every grain inserted once, each template as often as the deck says.
+    (The former insertion, a whole lattice cell per grain with an overlap check, put 293 of these
+    300 in on one process and 292 on 2 or 4 ranks.)"""
+    src, _ = make_deck(population, tmp_path, "liggghts", "--grains", "300", "--seed", "1", "--spheres", "4")
+    text = (src / "in.run").read_text()
+    (src / "in.insert-only").write_text(text[:text.index("dump vtk")] + "run 10\n")
+    deck = json.loads((src / "grains.json").read_text())
+    expect = sorted(k + 1 for k, g in enumerate(deck["grains"]) for _ in range(g["count"]))
+    assert len(expect) == 300
+    for ranks in (2, 4):
+        p = run([mpirun, "-np", str(ranks), liggghts, "-in", "in.insert-only"], cwd=src, env=MPI_ENV)
+        assert re.search(r"(2 by 1|1 by 2|2 by 2) by 1 MPI processor grid", p.stdout)
+        bodies = read_dump(src / "bodies-initial.txt")
+        assert sorted(bodies[:, 1].astype(int).tolist()) == expect, ranks
