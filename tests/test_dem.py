@@ -366,6 +366,14 @@ def test_liggghts_deck_seeds_distinct_primes_for_1_to_200_templates():
     assert SEED_MIN == 10000
     # the same deck twice: the same seeds (nothing random in their choice)
     assert deck_files(templates)["in.insert"] == files["in.insert"]
+    # the largest deck (as many templates as grains, MAX_POUR_GRAINS of them) still gets distinct seeds
+    from grainforge.dem.inputs import MAX_POUR_GRAINS
+    from grainforge.dem.liggghts import deck_seeds, seed_table
+
+    big = deck_seeds(3 * MAX_POUR_GRAINS + 1)
+    assert len(set(big)) == len(big) and set(big) <= set(seed_table().tolist())
+    with pytest.raises(ValueError, match="seed table"):
+        deck_seeds(len(seed_table()) + 1)
 
 
 def test_liggghts_insertion_regions_stay_inside_one_mpi_rank():

@@ -36,7 +36,8 @@ __all__ = ["write_deck", "deck_files", "pour_settings", "seed_table", "deck_seed
 #: of an insertion fix, its particle distribution and that distribution's templates must differ
 SEED_MIN = 10000
 #: seeds are drawn from the primes SEED_MIN < p < SEED_LIMIT (far below INT_MAX, which LIGGGHTS
-#: also checks after adding the MPI rank to some seeds)
+#: also checks after adding the MPI rank to some seeds); its 347,284 primes cover the largest deck,
+#: 2 × templates + 1 + grains ≤ 300,001 seeds for a pour of MAX_POUR_GRAINS
 SEED_LIMIT = 5_000_000
 # seed j is prime number (j * _SEED_STRIDE) mod len(table) of the table: a stride coprime to the
 # table's length (a prime larger than it) visits every entry once, and spreads neighbouring seeds
@@ -48,7 +49,7 @@ _SEED_STRIDE = 1_000_003
 # lets each rank decide on its own whether to insert (LIGGGHTS adds a random number in [0, 1)
 # to the rank's share of the region), which can insert a grain twice or not at all. So every
 # region is a box of _NODE_BOX cells around its lattice node (``volume_limit`` below its volume:
-# LIGGGHTS refuses regions under 1e-10 m^3 otherwise), and the box margins beyond the
+# LIGGGHTS refuses so small a region otherwise), and the box margins beyond the
 # walls (lower _MARGIN_LO, upper _MARGIN_HI cells, an irrational ratio) keep every cut of up to
 # 32 parts per side at least 4e-5 cells away from every node of a lattice up to 300 cells
 # wide (tests/test_dem.py) — 400 times the region's half-width.
