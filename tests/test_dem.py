@@ -430,7 +430,7 @@ def test_dem_cli_grains_total_pour(tmp_path):
     out, g = deck("l7", "liggghts", "--grains", "7", "--seed", "1")
     counts = {r["name"]: r["count"] for r in g["grains"]}
     assert sum(counts.values()) == 7 and sorted(counts.values()) == [2, 2, 3]
-    assert len(re.findall(r"^fix i\d+ all insert/pack", (out / "in.insert").read_text(), re.M)) == 7
+    assert len(re.findall(r"^fix i\d+ all insert/pack", (out / "in.insert").read_text(), re.MULTILINE)) == 7
     assert list(counts.values()) == pour_counts(3, 7, seed=1).tolist()
     again, _ = deck("l7b", "liggghts", "--grains", "7", "--seed", "1")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == {p.name: p.read_bytes() for p in again.iterdir()}

@@ -151,8 +151,8 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     total_mass = sum(t.mass * t.count for t in templates)
     mean_d = sum(t.d_eq * t.count for t in templates) / n
     ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
-    ins = ["# grainforge: insert every grain `count` times, each copy at its own lattice node (within "
-           f"{_NODE_BOX:g} cells)"]
+    head = f"each copy at its own lattice node (within {_NODE_BOX:g} cells)"
+    ins = [f"# grainforge: insert every grain `count` times, {head}"]
     slot = 0
     for k, t in enumerate(templates):
         ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
