@@ -12,11 +12,15 @@
   over all templates by **mass fraction** (the population's size/shape
   distribution);
 - ``in.insert``: the example's insertion — every grain ``count`` times, each
-  template into its own cell of a lattice above the box (random orientation);
+  copy by its own ``insert/pack`` at its own node of a lattice above the box
+  (random orientation); every random fix has its own prime seed
+  (:func:`deck_seeds`);
 - ``in.run``: the example — a box under gravity, Hertz contacts, VTK output in
   ``post/``, run until the multisphere kinetic energy falls below
   ``ke_threshold`` (J), writing ``bodies-initial.txt`` / ``bodies-final.txt``
   (id, clump type, mass, xcm, principal inertia per body) and ``settle.txt``.
+  It runs as written under ``mpirun -np P`` too (columns of ranks; see the
+  notes above ``_NODE_BOX``).
 """
 
 from __future__ import annotations
