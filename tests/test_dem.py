@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -333,19 +334,119 @@ def test_vertex_merge_of_soups_and_small_sets():
         assert np.array_equal(np.signbit(u), np.signbit(p[first]))
 
 
-def test_liggghts_seeds_are_the_trial_division_primes():
-    import math
+def _trial_division_prime(n: int) -> bool:
+    return n > 1 and all(n % p for p in range(2, math.isqrt(n) + 1))
 
-    from grainforge.dem.liggghts import _is_prime, _next_prime, _seed
 
-    def trial(n):
-        n += 1 - n % 2
-        while any(n % p == 0 for p in range(3, int(math.isqrt(n)) + 1, 2)):
-            n += 2
-        return n
+def test_liggghts_deck_seeds_distinct_primes_for_1_to_200_templates():
+    """Every random seed of a LIGGGHTS deck (templates, distributions, one insertion per grain) is a
+    prime > 10000 that LIGGGHTS accepts, and no two are equal: for 1 to 200 templates of 1-3 copies
+    (the engine stops on a repeated seed within an insertion and its distributions)."""
+    import dataclasses
+    import re
 
-    assert [k for k in range(200) if _is_prime(k)] == [k for k in range(2, 200)
-                                                        if all(k % p for p in range(2, int(math.isqrt(k)) + 1))]
-    for n in list(range(10001, 10400)) + [86028157 + 1000 * k for k in range(1, 40)]:
-        assert _next_prime(n) == trial(n)
-    assert all(_is_prime(_seed(k)) for k in range(0, 400, 7))
+    from grainforge.dem.liggghts import SEED_MIN, deck_files
+
+    t0 = prepare(trimesh.creation.box((2.0, 1.5, 1.0)).vertices, trimesh.creation.box((2.0, 1.5, 1.0)).faces,
+                 "g", spheres=3)
+    seen = set()
+    for n in range(1, 201):
+        templates = [dataclasses.replace(t0, name=f"g{i}", count=1 + (i * 7 + n) % 3) for i in range(n)]
+        files = deck_files(templates)
+        text = files["in.templates"] + files["in.insert"]
+        seeds = [int(x) for x in re.findall(r"(?:particletemplate/multisphere|particledistribution/discrete|"
+                                            r"insert/pack seed) (\d+)", text)]
+        grains = sum(t.count for t in templates)
+        assert len(seeds) == 2 * n + 1 + grains  # every random fix of the deck was found
+        assert len(set(seeds)) == len(seeds), n
+        assert text.count("insert/pack") == grains
+        seen.update(seeds)
+    # LIGGGHTS: prime, > 10000, and below INT_MAX once the MPI rank (up to thousands) is added
+    assert all(SEED_MIN < s < 2**31 - 1 - 100_000 and _trial_division_prime(s) for s in seen)
+    assert SEED_MIN == 10000
+    # the same deck twice: the same seeds (nothing random in their choice)
+    assert deck_files(templates)["in.insert"] == files["in.insert"]
+    # the largest deck (as many templates as grains, MAX_POUR_GRAINS of them) still gets distinct seeds
+    from grainforge.dem.inputs import MAX_POUR_GRAINS
+    from grainforge.dem.liggghts import deck_seeds, seed_table
+
+    big = deck_seeds(3 * MAX_POUR_GRAINS + 1)
+    assert len(set(big)) == len(big) and set(big) <= set(seed_table().tolist())
+    with pytest.raises(ValueError, match="seed table"):
+        deck_seeds(len(seed_table()) + 1)
+
+
+def test_liggghts_insertion_regions_stay_inside_one_mpi_rank():
+    """`processors * * 1` cuts the box into P_x equal parts along x (and y); an insertion region cut
+    by a part boundary may be inserted twice or not at all. The deck's margins keep every cut
+    (P_x ≤ 32, lattices up to 300 cells wide) ≥ 200 region widths from every lattice node, and
+    the deck puts each region on a node and the box at those margins."""
+    import re
+
+    from grainforge.dem import liggghts as lg
+
+    nodes = np.arange(300) + 0.5
+    for px in range(2, 33):
+        k = np.arange(1, px)[:, None]
+        for side in range(1, 301):
+            cuts = -lg._MARGIN_LO + k * (side + lg._MARGIN_LO + lg._MARGIN_HI) / px
+            assert np.abs(cuts - nodes[None, :side]).min() >= 200 * lg._NODE_BOX, (px, side)
+    # the deck follows the constants: 7 grains on a 2 x 2 lattice
+    t0 = prepare(trimesh.creation.box((2.0, 1.5, 1.0)).vertices, trimesh.creation.box((2.0, 1.5, 1.0)).faces,
+                 "g", spheres=3, count=7)
+    files = lg.deck_files([t0])
+    cell = 2.2 * t0.bounding_radius
+    dom = [float(x) for x in re.search(r"region domain block (\S+) (\S+) (\S+) (\S+)", files["in.run"]).groups()]
+    assert dom == pytest.approx([-lg._MARGIN_LO * cell, (2 + lg._MARGIN_HI) * cell] * 2, rel=1e-12)
+    assert "processors * * 1" in files["in.run"]
+    boxes = np.array([[float(x) for x in m] for m in re.findall(r"region r\d+ block" + r" (\S+)" * 6, files["in.insert"])])
+    assert len(boxes) == 7
+    centre = (boxes[:, 0::2] + boxes[:, 1::2]) / 2 / cell
+    assert np.allclose(centre[:, :2] % 1, 0.5) and np.allclose(boxes[:, 1::2] - boxes[:, 0::2], lg._NODE_BOX * cell)
+    assert "overlapcheck no" in files["in.insert"]  # no retries that test the rank's own borders
+
+
+def test_dem_cli_grains_total_pour(tmp_path):
+    """--grains N: a pour of exactly N grains drawn from the inputs in proportion, the same bytes
+    for the same --seed; with fewer grains than inputs only the drawn inputs are in the deck;
+    bad combinations and counts beyond the documented maximum: one line, exit 2, nothing written."""
+    import re
+
+    from grainforge.cli import dem as dem_cli
+    from grainforge.dem.inputs import MAX_POUR_GRAINS, pour_counts
+
+    src = tmp_path / "grains"
+    src.mkdir()
+    for i, method in enumerate(["fso", "cri", "fso"]):
+        grainforge.io.write_mesh(getattr(grainforge, method)(rng=20 + i).scaled(3.0), src / f"{method}-{i:04d}.stl")
+
+    def deck(name, engine, *extra):
+        out = tmp_path / name
+        r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(out), "--engine", engine, "--spheres", "4",
+                                     "--workers", "1", *extra])
+        assert r.exit_code == 0, r.output
+        return out, json.loads((out / "grains.json").read_text())
+
+    out, g = deck("l7", "liggghts", "--grains", "7", "--seed", "1")
+    counts = {r["name"]: r["count"] for r in g["grains"]}
+    assert sum(counts.values()) == 7 and sorted(counts.values()) == [2, 2, 3]
+    assert len(re.findall(r"^fix i\d+ all insert/pack", (out / "in.insert").read_text(), re.MULTILINE)) == 7
+    assert list(counts.values()) == pour_counts(3, 7, seed=1).tolist()
+    again, _ = deck("l7b", "liggghts", "--grains", "7", "--seed", "1")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == {p.name: p.read_bytes() for p in again.iterdir()}
+    # LAMMPS: one rigid body per grain
+    out, g = deck("m5", "lammps", "--grains", "5")
+    assert len(g["placements"]) == 5 and int((out / "rigid.infile").read_text().splitlines()[1]) == 5
+    # fewer grains than inputs: the two drawn inputs, once each
+    _, g = deck("l2", "liggghts", "--grains", "2", "--seed", "3")
+    assert [r["count"] for r in g["grains"]] == [1, 1] and len({r["name"] for r in g["grains"]}) == 2
+    # proportion: every count within one of grains / inputs
+    c = pour_counts(7, 1000, seed=5)
+    assert c.sum() == 1000 and c.max() - c.min() <= 1
+    assert dem_cli.MAX_POUR_GRAINS == MAX_POUR_GRAINS
+    for bad in (["--grains", "0"], ["--grains", str(MAX_POUR_GRAINS + 1)], ["--grains", "4", "--count", "2"],
+                ["--seed", "2"], ["--count", str(MAX_POUR_GRAINS // 3 + 1)]):
+        dest = tmp_path / "bad"
+        r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(dest), *bad])
+        assert r.exit_code == 2, (bad, r.output)
+        assert len(r.output.strip().splitlines()) == 1 and not dest.exists(), (bad, r.output)

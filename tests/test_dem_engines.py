@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 import shutil
 import subprocess
 
@@ -29,10 +30,10 @@ UNIT = 1e-3  # grain files are in mm
 REL = 1e-6
 
 
-def require(executable: str) -> str:
+def require(executable: str, package: str = "yade python3-yade liggghts lammps") -> str:
     path = shutil.which(executable)
     if path is None:
-        reason = f"{executable} not installed (apt-get install yade python3-yade liggghts lammps)"
+        reason = f"{executable} not installed (apt-get install {package})"
         if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
             pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
         pytest.skip(reason)
@@ -52,6 +53,17 @@ def liggghts():
 @pytest.fixture
 def lmp():
     return require("lmp")
+
+
+@pytest.fixture
+def mpirun():
+    return require("mpirun", "openmpi-bin")
+
+
+#: Open MPI settings for the runs under mpirun: CI runs as root; two ranks even on a one-core
+#: machine; a waiting rank yields its core (the runs share two cores with other work)
+MPI_ENV = {"OMPI_ALLOW_RUN_AS_ROOT": "1", "OMPI_ALLOW_RUN_AS_ROOT_CONFIRM": "1",
+           "OMPI_MCA_rmaps_base_oversubscribe": "1", "OMPI_MCA_mpi_yield_when_idle": "1"}
 
 
 @pytest.fixture(scope="module")
@@ -87,9 +99,9 @@ def make_deck(population, tmp_path, engine, *extra):
     return out, mesh_truth(files)
 
 
-def run(cmd, cwd, timeout=900):
+def run(cmd, cwd, timeout=900, env=None):
     proc = subprocess.run(cmd, cwd=cwd, capture_output=True, text=True, timeout=timeout,
-                          stdin=subprocess.DEVNULL)
+                          stdin=subprocess.DEVNULL, env=None if env is None else {**os.environ, **env})
     assert proc.returncode == 0, f"{cmd} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}"
     return proc
 
@@ -311,3 +323,126 @@ def test_lammps_polyhedron_deck_runs(lmp, population, tmp_path):
                  for b in final.values())
     assert ke_own < thr
     assert any((out / "post").glob("*.vtk"))
+
+
+# --- the same decks under MPI: `mpirun -np 2` against one process -----------------------------------
+
+def mpi_decks(population, tmp_path, engine, *extra):
+    """One small deck (6 of the 20 grains, drawn by --grains) copied into ``one`` and ``two``."""
+    src, _ = make_deck(population, tmp_path, engine, "--grains", "6", "--seed", "2", *extra)
+    one, two = tmp_path / "one", tmp_path / "two"
+    shutil.copytree(src, one)
+    shutil.copytree(src, two)
+    return one, two
+
+
+def assert_columns(log):
+    """Two ranks side by side (``processors * * 1``): the one column of 6 grains crosses the cut."""
+    assert re.search(r"(2 by 1|1 by 2) by 1 MPI processor grid", log), log[-2000:]
+
+
+def run_pour(cmd, cwd, timeout=900, env=None):
+    """Run a deck; a run that ends is fine whether or not the pour settled (compared by the caller)."""
+    proc = subprocess.run(cmd, check=False, cwd=cwd, capture_output=True, text=True, timeout=timeout,
+                          stdin=subprocess.DEVNULL, env=None if env is None else {**os.environ, **env})
+    assert proc.returncode == 0 or "NOT SETTLED" in proc.stdout, (
+        f"{cmd} failed:\n{proc.stdout[-3000:]}\n{proc.stderr[-3000:]}")
+    return proc
+
+
+def settled(out, proc):
+    """Whether the pour settled: the deck's settle.txt (KE below the threshold), else its log line."""
+    path = out / "settle.txt"
+    if path.exists():
+        ke, thr = (float(v) for v in path.read_text().split()[1::2])
+        return ke < thr
+    return "NOT SETTLED" not in proc.stdout and "SETTLED in" in proc.stdout
+
+
+def compare_ranks(state1, state2, d_mean, width):
+    """Two final states (``mass``, ``key``, ``x`` (N, 3) per run) of the same pour: the same grains
+    and mass, every centre in the box, and a bed alike (mean and top height within half a mean
+    diameter: the ranks draw their own random numbers, so grains land differently)."""
+    assert len(state1["mass"]) == len(state2["mass"]) == 6
+    assert sorted(state1["key"]) == sorted(state2["key"])
+    assert np.sum(state2["mass"]) == pytest.approx(np.sum(state1["mass"]), rel=1e-12)
+    for s in (state1, state2):
+        x = s["x"]
+        assert ((x[:, :2] > 0) & (x[:, :2] < width)).all() and (x[:, 2] > 0).all()
+    z1, z2 = state1["x"][:, 2], state2["x"][:, 2]
+    assert abs(z1.mean() - z2.mean()) < 0.5 * d_mean, (z1, z2)
+    assert abs(z1.max() - z2.max()) < 0.5 * d_mean, (z1, z2)
+
+
+@pytest.mark.slow
+def test_liggghts_clump_deck_under_mpirun_matches_one_rank(liggghts, mpirun, population, tmp_path):
+    one, two = mpi_decks(population, tmp_path, "liggghts", "--spheres", "8")
+    p1 = run_pour([liggghts, "-in", "in.run"], cwd=one)
+    p2 = run_pour([mpirun, "-np", "2", liggghts, "-in", "in.run"], cwd=two, env=MPI_ENV)
+    assert_columns(p2.stdout)
+    deck = json.loads((one / "grains.json").read_text())
+    states = []
+    for out in (one, two):
+        assert len(read_dump(out / "bodies-initial.txt")) == 6  # each grain inserted once
+        final = read_dump(out / "bodies-final.txt")  # id type mass x y z v
+        states.append({"mass": final[:, 2], "key": final[:, 1].astype(int).tolist(), "x": final[:, 3:6]})
+    d_mean = np.mean([g["d_eq"] for g in deck["grains"] for _ in range(g["count"])])
+    compare_ranks(*states, d_mean, deck["box"][0])
+    assert settled(one, p1) == settled(two, p2)
+
+
+def test_lammps_clump_deck_under_mpirun_matches_one_rank(lmp, mpirun, population, tmp_path):
+    one, two = mpi_decks(population, tmp_path, "lammps", "--spheres", "8")
+    p1 = run_pour([lmp, "-in", "in.run"], cwd=one)
+    p2 = run_pour([mpirun, "-np", "2", lmp, "-in", "in.run"], cwd=two, env=MPI_ENV)
+    assert_columns(p2.stdout)
+    deck = json.loads((one / "grains.json").read_text())
+    states = []
+    for out in (one, two):
+        final = read_dump(out / "bodies-final.txt")  # mol mass x y z I(3) v(3)
+        states.append({"mass": final[:, 1], "key": final[:, 0].astype(int).tolist(), "x": final[:, 2:5]})
+    d_mean = np.mean([g["d_eq"] for g in deck["grains"] for _ in range(g["count"])])
+    compare_ranks(*states, d_mean, deck["box"][0])
+    assert settled(one, p1) == settled(two, p2)
+    # the VTK conversion (a `shell` command) ran once, on rank 0, over the same dumps
+    assert sorted(p.name for p in (one / "post").glob("*.vtk")) == sorted(p.name for p in (two / "post").glob("*.vtk"))
+
+
+@pytest.mark.slow
+def test_lammps_polyhedron_deck_under_mpirun_matches_one_rank(lmp, mpirun, population, tmp_path):
+    from grainforge.dem.lammps_body import MICRO
+
+    L, M = MICRO["length"], MICRO["mass"]
+    one, two = mpi_decks(population, tmp_path, "lammps", "--shape", "polyhedron", "--vertices", "8")
+    p1 = run_pour([lmp, "-in", "in.run"], cwd=one, timeout=1800)
+    p2 = run_pour([mpirun, "-np", "2", lmp, "-in", "in.run"], cwd=two, timeout=1800, env=MPI_ENV)
+    assert_columns(p2.stdout)
+    deck = json.loads((one / "grains.json").read_text())
+    states = []
+    for out in (one, two):
+        final = read_lammps_body_data(out / "data.final")
+        ids = sorted(final)
+        states.append({"mass": np.array([final[i]["mass"] / M for i in ids]), "key": ids,
+                       "x": np.array([final[i]["x"] / L for i in ids])})
+    d_mean = np.mean([deck["grains"][p["grain"]]["d_eq"] for p in deck["placements"]])
+    compare_ranks(*states, d_mean, deck["box"][0])
+    assert settled(one, p1) == settled(two, p2)
+
+
+@pytest.mark.slow
+def test_liggghts_pour_of_300_grains_inserts_each_once_on_2_and_4_ranks(liggghts, mpirun, population, tmp_path):
+    """Insertion only (the deck's in.run up to its pour): 300 grains on a 8 x 8 lattice, cut into
+    2 x 1 and 2 x 2 columns — every grain inserted once, each template as often as the deck says.
+    (The former insertion, a whole lattice cell per grain with an overlap check, put 293 of these
+    300 in on one process and 292 on 2 or 4 ranks.)"""
+    src, _ = make_deck(population, tmp_path, "liggghts", "--grains", "300", "--seed", "1", "--spheres", "4")
+    text = (src / "in.run").read_text()
+    (src / "in.insert-only").write_text(text[:text.index("dump vtk")] + "run 10\n")
+    deck = json.loads((src / "grains.json").read_text())
+    expect = sorted(k + 1 for k, g in enumerate(deck["grains"]) for _ in range(g["count"]))
+    assert len(expect) == 300
+    for ranks in (2, 4):
+        p = run([mpirun, "-np", str(ranks), liggghts, "-in", "in.insert-only"], cwd=src, env=MPI_ENV)
+        assert re.search(r"(2 by 1|1 by 2|2 by 2) by 1 MPI processor grid", p.stdout)
+        bodies = read_dump(src / "bodies-initial.txt")
+        assert sorted(bodies[:, 1].astype(int).tolist()) == expect, ranks

@@ -9,6 +9,9 @@ import click
 
 from .paths import OutPath, output_dir
 
+#: grainforge.dem.inputs.MAX_POUR_GRAINS, spelt out so that the help does not import numpy (a test compares them)
+MAX_POUR_GRAINS = 100_000
+
 ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run", "lammps": "lmp -in in.run"}
 
 
@@ -32,11 +35,17 @@ ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run"
               help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @click.option("--unit", type=float, default=1e-3, show_default=True,
               help="Metres per file unit (grainforge files are in mm: 0.001).")
-@click.option("--count", type=click.IntRange(1), default=1, show_default=True,
+@click.option("--count", type=click.IntRange(1), default=None, show_default="1",
               help="Copies of each grain in the example pour.")
+@click.option("--grains", type=click.IntRange(1, MAX_POUR_GRAINS), default=None,
+              help="Instead of --count: the pour's total number of grains, drawn from the input grains in "
+                   "proportion (each taken grains // inputs times; the rest go to inputs drawn with --seed).")
+@click.option("--seed", type=click.IntRange(0), default=None, show_default="0",
+              help="Seed of the --grains draw.")
 @click.option("--workers", type=click.IntRange(1), default=None, help="Processes (default: CPU count).")
 @click.option("--overwrite", is_flag=True, help="Replace existing deck files.")
-def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing, unit, count, workers, overwrite):
+def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing, unit, count, grains, seed, workers,
+        overwrite):
     """Write a DEM deck of the grains in INPUTS (mesh files, generate/batch folders, manifests).
 
     Every grain keeps its exact mass, centroid and inertia from the mesh.  Run
@@ -44,7 +53,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     `lmp -in in.run` (docs/dem.md).
     """
     from ..dem import SUPPORTED
-    from ..dem.inputs import build_templates, grain_paths
+    from ..dem.inputs import build_templates, grain_paths, pour_counts
     from .progress import progress_bar
 
     if shape not in SUPPORTED[engine]:
@@ -62,12 +71,24 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
         elif engine == "lammps" and vertices > MAX_VERTICES:
             raise click.BadParameter(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}",
                                      param_hint="--vertices")
+    if grains is not None and count is not None:
+        raise click.UsageError("give --count (copies of each grain) or --grains (the total), not both")
+    if seed is not None and grains is None:
+        raise click.UsageError("--seed draws the --grains pour; give --grains")
     output_dir(out)  # writable, not a file: before any work (write_deck applies the overwrite rule)
     paths = grain_paths(inputs)
+    if grains is None:
+        count = 1 if count is None else count
+        if count * len(paths) > MAX_POUR_GRAINS:
+            raise click.BadParameter(f"{len(paths)} grain files × {count} = {count * len(paths)} grains; a pour "
+                                     f"holds at most {MAX_POUR_GRAINS}", param_hint="--count")
+        counts = [count] * len(paths)
+    else:
+        counts = pour_counts(len(paths), grains, 0 if seed is None else seed).tolist()
     workers = workers or os.cpu_count() or 1
-    templates = build_templates(paths, workers=workers, progress=progress_bar(len(paths), "dem"),
-                                unit=unit, density=density, shape=shape, spheres=spheres, refine_iterations=refine, count=count,
-                                polyhedron_vertices=vertices, levelset_spacing=spacing)
+    templates = build_templates(paths, workers=workers, progress=progress_bar(sum(c > 0 for c in counts), "dem"),
+                                counts=counts, unit=unit, density=density, shape=shape, spheres=spheres,
+                                refine_iterations=refine, polyhedron_vertices=vertices, levelset_spacing=spacing)
     from ..dem.decks import write_deck
 
     written = write_deck(engine, templates, out, overwrite=overwrite)

@@ -10,9 +10,44 @@ import numpy as np
 
 from .enclosure import enclosure_problems
 
-__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "MESH_SUFFIXES"]
+__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "pour_counts",
+           "MESH_SUFFIXES", "MAX_POUR_GRAINS"]
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
+
+#: the most grains an example pour holds (the LIGGGHTS deck inserts each grain by its own fix,
+#: and every deck places them on a lattice above the box: far beyond this is no example pour)
+MAX_POUR_GRAINS = 100_000
+
+
+def pour_counts(templates: int, grains: int, seed: int = 0) -> np.ndarray:
+    """Copies of each of ``templates`` input grains in a pour of ``grains`` grains, in proportion.
+
+    Every template is taken ``grains // templates`` times; the remaining
+    ``grains % templates`` copies go to as many different templates drawn
+    without replacement by ``np.random.default_rng(seed)``. The counts sum to
+    ``grains``, differ by at most one, and are the same for the same arguments.
+
+    Raises
+    ------
+    ValueError
+        If ``templates < 1`` or ``grains`` is not in ``[1, MAX_POUR_GRAINS]``.
+
+    Examples
+    --------
+    >>> pour_counts(3, 7, seed=1).tolist()
+    [2, 3, 2]
+    >>> int(pour_counts(5, 2).sum()), int(pour_counts(5, 2).max())
+    (2, 1)
+    """
+    if templates < 1:
+        raise ValueError(f"a pour needs at least one template, got {templates}")
+    if not 1 <= grains <= MAX_POUR_GRAINS:
+        raise ValueError(f"a pour holds 1 to {MAX_POUR_GRAINS} grains, got {grains}")
+    counts = np.full(templates, grains // templates, dtype=np.int64)
+    extra = np.random.default_rng(seed).choice(templates, size=grains % templates, replace=False)
+    counts[extra] += 1
+    return counts
 
 
 def _manifest_files(manifest: Path) -> list[Path]:
@@ -110,13 +145,22 @@ def _load_one(args):
 
 
 def build_templates(paths: Sequence[Path], *, workers: int = 1,
-                    progress: Callable[[Iterable], Iterable] | None = None, **kwargs) -> list:
+                    progress: Callable[[Iterable], Iterable] | None = None, counts: Sequence[int] | None = None,
+                    **kwargs) -> list:
     """Templates of every grain file, in order (``kwargs`` go to ``prepare``).
 
-    Runs on ``workers`` processes; the result does not depend on the count.
+    ``counts`` (one per path, e.g. from :func:`pour_counts`) sets each
+    template's ``count`` and leaves out the paths counted 0; names are those
+    of the full list either way. Runs on ``workers`` processes; the result does
+    not depend on the count.
     """
     names = _unique_names(paths)
-    tasks = [(p, n, kwargs) for p, n in zip(paths, names)]
+    if counts is None:
+        tasks = [(p, n, kwargs) for p, n in zip(paths, names)]
+    else:
+        if len(counts) != len(paths):
+            raise ValueError(f"{len(counts)} counts for {len(paths)} grain files")
+        tasks = [(p, n, {**kwargs, "count": int(c)}) for p, n, c in zip(paths, names, counts) if c > 0]
     wrap = progress or (lambda it: it)
     if workers <= 1 or len(tasks) < 4:
         return list(wrap(map(_load_one, tasks)))

@@ -138,6 +138,10 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     files["rigid.infile"] = "\n".join(infile) + "\n"
     mols = "\n".join(f"molecule {mol_id(t.name)} {t.name}.mol" for t in templates)
     top = (layers + 2) * cell
+    # under MPI, rigid/small reaches a body's atoms on other ranks as ghosts: the ghost cutoff spans
+    # a whole body plus the neighbour skin (the pair cutoff alone, ~ one sphere diameter, is shorter;
+    # LAMMPS stops with "Rigid body extent > ghost cutoff" or "Rigid body atoms missing" then)
+    ghost = 2 * max(t.bounding_radius for t in templates) + 0.2 * cell
     walls = "hooke/history {kn} NULL {g} NULL {mu} 1".format(kn=fmt(kn), g=fmt(gamman), mu=fmt(s["friction"]))
     run = f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
 # Units: SI (m, kg, s). Grains are rigid/small bodies with the mesh's exact mass, centre and inertia.
@@ -147,7 +151,9 @@ atom_modify map array
 dimension 3
 boundary f f f
 newton off
-comm_modify vel yes
+# under MPI: columns (the pour's bed spreads over every rank), and ghosts far enough for a whole body
+processors * * 1
+comm_modify vel yes cutoff {fmt(ghost)}
 region domain block {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
 create_box 1 domain
 fix molprop all property/atom mol ghost yes

@@ -283,6 +283,8 @@ boundary f f f
 atom_style body rounded/polyhedron 1 {nmax}
 atom_modify map array
 newton on
+# under MPI: columns, so that the pour's bed spreads over every rank
+processors * * 1
 comm_modify vel yes
 read_data data.bodies
 

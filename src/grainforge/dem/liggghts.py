@@ -12,15 +12,20 @@
   over all templates by **mass fraction** (the population's size/shape
   distribution);
 - ``in.insert``: the example's insertion — every grain ``count`` times, each
-  template into its own cell of a lattice above the box (random orientation);
+  copy by its own ``insert/pack`` at its own node of a lattice above the box
+  (random orientation); every random fix has its own prime seed
+  (:func:`deck_seeds`);
 - ``in.run``: the example — a box under gravity, Hertz contacts, VTK output in
   ``post/``, run until the multisphere kinetic energy falls below
   ``ke_threshold`` (J), writing ``bodies-initial.txt`` / ``bodies-final.txt``
   (id, clump type, mass, xcm, principal inertia per body) and ``settle.txt``.
+  It runs as written under ``mpirun -np P`` too (columns of ranks; see the
+  notes above ``_NODE_BOX``).
 """
 
 from __future__ import annotations
 
+import functools
 import math
 from pathlib import Path
 from typing import Sequence
@@ -29,9 +34,32 @@ import numpy as np
 
 from .deck import clump_vtk_text, fmt, json_text, settle_loop, template_record, updated_settings, write_files, xyzr_text
 
-__all__ = ["write_deck", "deck_files", "pour_settings"]
+__all__ = ["write_deck", "deck_files", "pour_settings", "seed_table", "deck_seeds", "SEED_MIN", "SEED_LIMIT"]
 
-_PRIMES = (15485863, 15485867, 32452843, 32452867, 49979687, 49979693, 67867967, 67867979, 86028121, 86028157)
+#: LIGGGHTS takes a random seed only if it is a prime > 10000 (it stops otherwise), and the seeds
+#: of an insertion fix, its particle distribution and that distribution's templates must differ
+SEED_MIN = 10000
+#: seeds are drawn from the primes SEED_MIN < p < SEED_LIMIT (far below INT_MAX, which LIGGGHTS
+#: also checks after adding the MPI rank to some seeds); its 347,284 primes cover the largest deck,
+#: 2 × templates + 1 + grains ≤ 300,001 seeds for a pour of MAX_POUR_GRAINS
+SEED_LIMIT = 5_000_000
+# seed j is prime number (j * _SEED_STRIDE) mod len(table) of the table: a stride coprime to the
+# table's length (a prime larger than it) visits every entry once, and spreads neighbouring seeds
+# over the whole range (Park-Miller streams of close seeds start with close numbers)
+_SEED_STRIDE = 1_000_003
+
+# Under MPI (mpirun -np P liggghts -in in.run) ``processors * * 1`` cuts the box into columns,
+# P_x × P_y equal parts of its x and y extent. An insertion fix whose region spans two parts
+# lets each rank decide on its own whether to insert (LIGGGHTS adds a random number in [0, 1)
+# to the rank's share of the region), which can insert a grain twice or not at all. So every
+# region is a box of _NODE_BOX cells around its lattice node (``volume_limit`` below its volume:
+# LIGGGHTS refuses so small a region otherwise), and the box margins beyond the
+# walls (lower _MARGIN_LO, upper _MARGIN_HI cells, an irrational ratio) keep every cut of up to
+# 32 parts per side at least 4e-5 cells away from every node of a lattice up to 300 cells
+# wide (tests/test_dem.py) — 400 times the region's half-width.
+_NODE_BOX = 2e-7
+_MARGIN_LO = 0.05
+_MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2
 
 
 def pour_settings(**kw) -> dict:
@@ -41,58 +69,56 @@ def pour_settings(**kw) -> dict:
     return updated_settings(s, kw, "pour settings")
 
 
-def _seed(k: int) -> int:
-    """A distinct prime > 10000 for the k-th random fix (LIGGGHTS wants primes)."""
-    base = _PRIMES[k % len(_PRIMES)]
-    return base + 0 if k < len(_PRIMES) else _next_prime(base + 1000 * (k // len(_PRIMES)))
-
-
-_WITNESSES = (2, 3, 5, 7, 11, 13, 17, 19, 23, 29, 31, 37)
-
-
-def _is_prime(n: int) -> bool:
-    """Whether ``n`` is prime: Miller–Rabin with the first twelve primes as witnesses, exact for
-    n < 3.3e24 (Sorenson & Webster 2015); decks need primes below 1e10.
+@functools.lru_cache(maxsize=1)
+def seed_table() -> np.ndarray:
+    """The primes ``SEED_MIN < p < SEED_LIMIT`` in ascending order (sieve of Eratosthenes), read-only.
 
     Examples
     --------
-    >>> [k for k in range(30) if _is_prime(k)]
-    [2, 3, 5, 7, 11, 13, 17, 19, 23, 29]
+    >>> seed_table()[:4].tolist(), len(seed_table())
+    ([10007, 10009, 10037, 10039], 347284)
     """
-    if n < 2:
-        return False
-    for p in _WITNESSES:
-        if n % p == 0:
-            return n == p
-    d, r = n - 1, 0
-    while d % 2 == 0:
-        d //= 2
-        r += 1
-    for a in _WITNESSES:
-        x = pow(a, d, n)
-        if x == 1 or x == n - 1:
-            continue
-        for _ in range(r - 1):
-            x = x * x % n
-            if x == n - 1:
-                break
-        else:
-            return False
-    return True
+    sieve = np.ones(SEED_LIMIT, dtype=bool)
+    sieve[:2] = False
+    for p in range(2, math.isqrt(SEED_LIMIT - 1) + 1):
+        if sieve[p]:
+            sieve[p * p::p] = False
+    table = np.flatnonzero(sieve[SEED_MIN + 1:]) + SEED_MIN + 1
+    table.setflags(write=False)
+    return table
 
 
-def _next_prime(n: int) -> int:
-    """The smallest prime ≥ ``n`` (``n`` itself if odd and prime), for odd candidates from ``n`` up."""
-    n += 1 - n % 2
-    while not _is_prime(n):
-        n += 2
-    return n
+def deck_seeds(count: int) -> list[int]:
+    """``count`` distinct primes in ``(SEED_MIN, SEED_LIMIT)`` for the random fixes of one deck.
+
+    Distinct by construction (different entries of :func:`seed_table`) and the
+    same for the same ``count``.
+
+    Raises
+    ------
+    ValueError
+        If the table holds fewer than ``count`` primes.
+
+    Examples
+    --------
+    >>> deck_seeds(3)
+    [10007, 4359001, 3721379]
+    """
+    table = seed_table()
+    if count > len(table):
+        raise ValueError(f"a deck needs {count} random seeds; the seed table holds {len(table)}")
+    return [int(x) for x in table[(np.arange(count, dtype=np.int64) * _SEED_STRIDE) % len(table)]]
 
 
 def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     """``{relative path: text}`` of a LIGGGHTS deck (nothing written)."""
     s = settings or pour_settings()
     files: dict[str, str] = {}
+    n_t = len(templates)
+    n = sum(t.count for t in templates)
+    # one distinct seed per random fix: templates, the mass-fraction distribution, one distribution
+    # per template, one insertion per grain (each copy its own orientation)
+    seeds = deck_seeds(2 * n_t + 1 + n)
     tpl = ["# grainforge: one multisphere template per grain (SI units), exact mesh mass and inertia",
            "# inertia_tensor Ixx Ixy Ixz Iyy Iyz Izz about the centroid, grain frame (kg m^2)"]
     names, masses = [], []
@@ -105,7 +131,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         files[f"{t.name}.clump.vtk"] = clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")
         I = t.inertia
         tensor = " ".join(fmt(x) for x in (I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]))
-        tpl.append(f"fix pts{k + 1} all particletemplate/multisphere {_seed(k)} atom_type 1 "
+        tpl.append(f"fix pts{k + 1} all particletemplate/multisphere {seeds[k]} atom_type 1 "
                    f"density constant {fmt(t.density)} nspheres {t.clump.count} ntry 1000000 "
                    f"spheres file {t.name}.xyzr scale 1.0 type {k + 1} "
                    f"mass {fmt(t.mass)} inertia_tensor {tensor} use_density")
@@ -115,12 +141,11 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     frac_text = [f"{x:.17g}" for x in frac]
     # the fractions must sum to 1 in LIGGGHTS' check; put the round-off on the largest
     frac_text[int(np.argmax(frac))] = f"{1.0 - (frac.sum() - frac.max()):.17g}"
-    tpl.append(f"fix pdd all particledistribution/discrete {_seed(len(templates))} {len(templates)} "
+    tpl.append(f"fix pdd all particledistribution/discrete {seeds[n_t]} {n_t} "
                + " ".join(f"{n} {f}" for n, f in zip(names, frac_text)))
     files["in.templates"] = "\n".join(tpl) + "\n"
 
     # lattice of insertion cells above the box: one per population member
-    n = sum(t.count for t in templates)
     cell = 2.2 * max(t.bounding_radius for t in templates)
     side = max(1, math.ceil(math.sqrt(n / 6.0)))
     width = side * cell
@@ -130,20 +155,21 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     total_mass = sum(t.mass * t.count for t in templates)
     mean_d = sum(t.d_eq * t.count for t in templates) / n
     ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
-    ins = ["# grainforge: insert every grain `count` times, each copy into its own lattice cell"]
+    head = f"each copy at its own lattice node (within {_NODE_BOX:g} cells)"
+    ins = [f"# grainforge: insert every grain `count` times, {head}"]
     slot = 0
     for k, t in enumerate(templates):
-        ins.append(f"fix pdd{k + 1} all particledistribution/discrete {_seed(len(templates) + 1 + 2 * k)} 1 "
+        ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
                    f"pts{k + 1} 1.0")
         for c in range(t.count):
             i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
-            lo = np.array([i * cell, j * cell, (layer + 0.5) * cell])
-            hi = lo + cell
+            node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
+            lo, hi = node - 0.5 * _NODE_BOX * cell, node + 0.5 * _NODE_BOX * cell
             ins.append(f"region r{slot} block {fmt(lo[0])} {fmt(hi[0])} {fmt(lo[1])} {fmt(hi[1])} "
-                       f"{fmt(lo[2])} {fmt(hi[2])} units box")
-            ins.append(f"fix i{slot} all insert/pack seed {_seed(len(templates) + 2 + 2 * k)} "
-                       f"distributiontemplate pdd{k + 1} maxattempt 1000 insert_every once overlapcheck yes "
-                       f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 100000")
+                       f"{fmt(lo[2])} {fmt(hi[2])} units box volume_limit {fmt(0.5 * (_NODE_BOX * cell) ** 3)}")
+            ins.append(f"fix i{slot} all insert/pack seed {seeds[2 * n_t + 1 + slot]} "
+                       f"distributiontemplate pdd{k + 1} insert_every once overlapcheck no "
+                       f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 1000")
             slot += 1
     files["in.insert"] = "\n".join(ins) + "\n"
 
@@ -157,7 +183,8 @@ newton off
 communicate single vel yes
 units si
 
-region domain block {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
+processors * * 1
+region domain block {fmt(-_MARGIN_LO * cell)} {fmt(width + _MARGIN_HI * cell)} {fmt(-_MARGIN_LO * cell)} {fmt(width + _MARGIN_HI * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
 create_box 1 domain
 neighbor {fmt(0.5 * rmin)} bin
 neigh_modify delay 0
