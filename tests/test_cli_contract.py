@@ -1,4 +1,4 @@
-"""The CLI contract, case by case (issue 12): every bad input, huge request and interrupt.
+"""The CLI contract, case by case: every bad input, huge request and interrupt.
 
 Every row of :data:`CASES` runs ``grainforge ARGS...`` as a real subprocess
 (in its own session, with a 6 GiB address-space limit so a request that tries

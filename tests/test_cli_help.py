@@ -1,4 +1,4 @@
-"""Help text (issue 12 §7): one style for defaults and ranges, derived from the parameter specs."""
+"""Help text: one style for defaults and ranges, derived from the parameter specs."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""Every plot the project writes has labelled axes with units, and legends that hide nothing (issue 12 §7).
+"""Every plot the project writes has labelled axes with units, and legends that hide nothing.
 
 The Figure objects are inspected (labels, legends, limits, artists), not pixels.
 """

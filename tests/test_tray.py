@@ -166,7 +166,7 @@ def test_tray_failure_after_a_plate_was_started_leaves_no_files(tmp_path, small_
     out = tmp_path / "out" / "t.3mf"
     with pytest.raises(ValueError, match="does not fit"):
         build_tray(FileSource(files), small_polyjet, out, workers=1)
-    assert not out.parent.exists()  # the folder it created is removed too (issue 12: no empty folder left)
+    assert not out.parent.exists()  # the folder it created is removed too (no empty folder is left behind)
 
 
 def test_cli_tray(runner, tmp_path):

@@ -35,13 +35,13 @@ SECONDS_LIMIT = 24 * 3600.0
 #: FSO kernel cost per vertex and term (s) at the default 40 × 40 terms; docs/benchmarks.md measures 2.3–2.7 ns
 FSO_TERM_SECONDS = 3e-9
 #: growth of the per-term cost with the number of terms T: (T / 1600)^0.6, fitted to 2.7 ns at 1,600 terms and
-#: 43 ns (CPU) at 400 × 400 = 160,000 terms (subdivisions 5, gamma 1.05, measured under load for issue 12)
+#: 43 ns (CPU) at 400 × 400 = 160,000 terms (subdivisions 5, gamma 1.05, measured under load)
 FSO_TERM_EXPONENT = 0.6
 #: per-vertex cost of the solid check, centring, scaling, manifest descriptors and export (s)
 VERTEX_SECONDS = 1e-5
 #: fixed cost per grain (s)
 GRAIN_SECONDS = 5e-3
-#: DPA cost per primary particle (s): 100,000 primaries took 31 s (issue 12)
+#: DPA cost per primary particle (s): 100,000 primaries took 31 s
 DPA_PRIMARY_SECONDS = 4e-4
 
 

@@ -16,7 +16,7 @@ Hanaor et al., *3D printable geomaterials* (Géotechnique 2016):
    corners, as the paper's Fig. 5 shows).
 6. DPA aggregates of octahedra over ε.
 
-Beyond the paper (issue 13, shape control):
+Beyond the paper (shape control measured on the grain):
 
 7. FSO aspects: the ellipsoidal precursor (``aspect``), seamless surface.
 8. Paper vs seamless FSO surface, each seen from a pole and from the equator

@@ -1,4 +1,4 @@
-"""Fit a generated population to a real sand's measured shape statistics (ALGORITHMS.md §8).
+"""Fit a generated population to a real sand's measured shape statistics (docs/design/algorithms.md §8).
 
 A *sand* is a table of per-grain measurements in the Sand Atlas format
 (:func:`read_sand`): equivalent diameter, true sphericity, convexity,

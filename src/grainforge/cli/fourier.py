@@ -124,7 +124,7 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
         raise SystemExit(1)
 
 
-#: memory one ray costs while a grain's radii are cast (bytes; 1e8 rays held 5.9 GB, issue 12)
+#: memory one ray costs while a grain's radii are cast (bytes; 1e8 rays held 5.9 GB)
 RAY_BYTES = 64
 #: largest memory the rays of one grain may take
 RAY_MEMORY = 2 * 1024**3

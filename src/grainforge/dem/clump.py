@@ -20,7 +20,7 @@ The algorithm ("greedy inscribed spheres + SDF refinement", ours):
 
 Quality (:func:`clump_quality`) is measured independently on a finer grid:
 coverage = vol(grain ∩ union)/vol(grain), spill = vol(union \\ grain)/vol(union),
-counting cell centres (ALGORITHMS.md §7). Mass properties for the engine never
+counting cell centres (docs/design/algorithms.md §7). Mass properties for the engine never
 come from the spheres: see :mod:`grainforge.dem.massprops`.
 
 References

@@ -3,7 +3,7 @@
 Volume, centroid and inertia tensor are integrated exactly over the solid by
 summing signed tetrahedra (origin, a, b, c) — one vectorised pass over the
 faces. Every DEM export in :mod:`grainforge.dem` uses these values, never the
-sum of overlapping sphere volumes (ALGORITHMS.md §7).
+sum of overlapping sphere volumes (docs/design/algorithms.md §7).
 """
 
 from __future__ import annotations
