@@ -46,3 +46,73 @@ def test_a_manifest_of_random_bytes_is_named(tmp_path):
         grain_paths([bad])
     with pytest.raises(ValueError, match=r"manifest\.csv: not a grainforge manifest"):
         grain_paths([tmp_path])
+
+
+def _cli() -> list[str]:
+    """The installed ``grainforge`` script when there is one: pool workers then import it as their
+    main module, as they do for a user (a ``-c`` command has no main module to import)."""
+    import shutil
+    import sys
+    from pathlib import Path
+
+    script = Path(sys.executable).parent / "grainforge"
+    if script.is_file():
+        return [str(script)]
+    found = shutil.which("grainforge")
+    return [found] if found else [sys.executable, "-c", "from grainforge.cli.main import main; main()"]
+
+
+_CLI = _cli()
+
+
+def _processes_with(marker: str) -> list[int]:
+    import os
+
+    found = []
+    for name in os.listdir("/proc"):
+        if name.isdigit():
+            try:
+                with open(f"/proc/{name}/environ", "rb") as fh:
+                    if marker.encode() in fh.read():
+                        found.append(int(name))
+            except OSError:
+                pass
+    return found
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay", [0.8, 1.6, 2.5, 4.0])
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
+    """While the pool starts and while it works: one line, the usual code, within 2 s, no process
+    and no deck left."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    import uuid
+
+    grains = tmp_path / "grains"
+    subprocess.run([*_CLI, "generate", "angular", "--count", "8", "--size", "2",
+                    "--subdivisions", "3", "--out", str(grains)], check=True, capture_output=True)
+    marker = f"GRAINFORGE_TEST_{uuid.uuid4().hex}"
+    env = dict(os.environ, **{marker: "1"})
+    out = tmp_path / "deck"
+    p = subprocess.Popen([*_CLI, "dem", str(grains), "--out", str(out),
+                          "--spheres", "300", "--refine-iterations", "100", "--workers", "2"],
+                         env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    time.sleep(delay)
+    sent = time.monotonic()
+    p.send_signal(getattr(signal, signame))
+    _, err = p.communicate(timeout=60)
+    took = time.monotonic() - sent
+    expected = {"SIGINT": (130, "Interrupted."), "SIGTERM": (143, "Terminated.")}[signame]
+    if p.returncode == 0:  # finished before the signal: nothing to test at this delay
+        pytest.skip("the command finished before the signal")
+    assert (p.returncode, err.strip()) == expected, err
+    assert took < 2.0, took
+    assert not out.exists()
+    time.sleep(1.0)
+    assert _processes_with(marker) == []

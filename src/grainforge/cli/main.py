@@ -24,7 +24,10 @@ def _interrupted_while_starting(signum, frame):  # pragma: no cover - exercised 
 # Loading click and the commands (NumPy, SciPy, ...) takes a second or two: a Ctrl-C meanwhile ends
 # the command with the usual line and code instead of an import traceback. (An inherited *ignored*
 # SIGINT stays ignored, the POSIX convention for background jobs.)
-_STARTING = threading.current_thread() is threading.main_thread() \
+# A multiprocessing worker imports the program's main module too (as ``__mp_main__``): it must keep
+# the default handlers, or a worker stopped by its owner would print the owner's line.
+_WORKER = "__mp_main__" in sys.modules
+_STARTING = not _WORKER and threading.current_thread() is threading.main_thread() \
     and signal.getsignal(signal.SIGINT) is signal.default_int_handler
 if _STARTING:
     signal.signal(signal.SIGINT, _interrupted_while_starting)
@@ -39,7 +42,7 @@ def _terminated_while_starting(signum, frame):  # pragma: no cover - exercised b
         os._exit(128 + signal.SIGTERM)
 
 
-_TERM_STARTING = threading.current_thread() is threading.main_thread() \
+_TERM_STARTING = not _WORKER and threading.current_thread() is threading.main_thread() \
     and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
 if _TERM_STARTING:
     signal.signal(signal.SIGTERM, _terminated_while_starting)

@@ -164,8 +164,9 @@ def build_templates(paths: Sequence[Path], *, workers: int = 1,
     wrap = progress or (lambda it: it)
     if workers <= 1 or len(tasks) < 4:
         return list(wrap(map(_load_one, tasks)))
-    from ..workers import process_pool, single_threaded_children
+    from ..workers import ordered_map
 
-    with single_threaded_children(), process_pool(workers, preload=["grainforge.dem.template",
-                                                                    "grainforge.dem.clump"]) as pool:
-        return list(wrap(pool.map(_load_one, tasks, chunksize=max(1, min(32, len(tasks) // (8 * workers))))))
+    # ordered_map stops its workers at once on an error or a signal (a pool's own shutdown
+    # would first run every queued grain to its end)
+    return list(wrap(ordered_map(_load_one, tasks, workers, preload=["grainforge.dem.template",
+                                                                      "grainforge.dem.clump"])))
