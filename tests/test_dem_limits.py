@@ -116,3 +116,77 @@ def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
     assert not out.exists()
     time.sleep(1.0)
     assert _processes_with(marker) == []
+
+
+@pytest.fixture(scope="module")
+def three_grains(tmp_path_factory):
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    out = tmp_path_factory.mktemp("g") / "grains"
+    res = CliRunner().invoke(cli, ["generate", "angular", "--count", "3", "--size", "2", "--subdivisions", "3",
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    return out
+
+
+@pytest.mark.parametrize("args,says", [
+    (["--density", "1e300"], "'--density': 1e+300 is not in the range"),
+    (["--density", "0"], "'--density': 0.0 is not in the range"),
+    (["--unit", "1e30"], "'--unit': 1e+30 is not in the range"),
+    (["--unit", "1e-30"], "'--unit': 1e-30 is not in the range"),
+    (["--unit", "1e-9"], "equivalent diameter 2e-09 m is outside 1e-06–10 m"),
+    (["--unit", "100"], "equivalent diameter 200 m is outside 1e-06–10 m"),
+    (["--spheres", "1"], "'--spheres': 1 is not in the range 2<=x<=1000"),
+])
+def test_dem_refuses_unphysical_settings(three_grains, tmp_path, args, says):
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    out = tmp_path / "deck"
+    res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(out), "--workers", "1", *args])
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert len(lines) == 1 and says in lines[0], res.output
+    assert not out.exists()
+
+
+def test_dem_says_when_clumps_have_fewer_spheres_than_asked(three_grains, tmp_path):
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(tmp_path / "d"), "--workers", "1",
+                                   "--spheres", "500"])
+    assert res.exit_code == 0, res.output
+    import json
+
+    placed = [g["spheres"] for g in json.loads((tmp_path / "d" / "grains.json").read_text())["grains"]]
+    assert max(placed) < 500
+    assert f"clumps have {min(placed)}–{max(placed)} spheres (at most 500 asked)" in res.output
+
+
+def test_liggghts_takes_grains_of_ten_microns(three_grains, tmp_path):
+    """LIGGGHTS refuses templates below 1e-12 m³ unless told otherwise; the deck tells it."""
+    import os
+    import shutil
+    import subprocess
+
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    if shutil.which("liggghts") is None:
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail("liggghts not installed but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip("liggghts not installed (apt-get install liggghts)")
+    deck = tmp_path / "d"
+    res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(deck), "--workers", "1", "--engine",
+                                   "liggghts", "--spheres", "10", "--unit", "5e-6"])  # 2 mm in the file: 10 µm
+    assert res.exit_code == 0, res.output
+    run = subprocess.run(["liggghts", "-in", "in.run"], cwd=deck, capture_output=True, text=True, timeout=300)
+    assert "Volume expectancy too small" not in run.stdout
+    assert "ERROR" not in run.stdout, run.stdout[-2000:]
+    assert (deck / "bodies-final.txt").is_file()

@@ -22,9 +22,10 @@ ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run"
 @click.option("--engine", type=click.Choice(["yade", "liggghts", "lammps"]), default="yade", show_default=True)
 @click.option("--shape", type=click.Choice(["clump", "polyhedron", "levelset"]), default="clump",
               show_default=True, help="Grain representation (what the engine supports).")
-@click.option("--density", type=float, default=2650.0, show_default=True, help="Solid density, kg/m³ (> 0).")
-@click.option("--spheres", type=click.IntRange(1, 1000), default=30, show_default=True,
-              help="Spheres per clump (the accuracy/cost knob).")
+@click.option("--density", type=click.FloatRange(1.0, 1e5), default=2650.0, show_default=True,
+              help="Solid density, kg/m³.")
+@click.option("--spheres", type=click.IntRange(2, 1000), default=30, show_default=True,
+              help="Spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage).")
 @click.option("--refine-iterations", "refine", type=click.IntRange(0, 10000), default=0, show_default=True,
               help="Clump: L-BFGS iterations refining all spheres after the greedy placement "
                    "(30: a few points more coverage for several times the CPU; 0: off).")
@@ -33,7 +34,7 @@ ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run"
                    "Default: 100 for Yade, 56 for LAMMPS (the most its read_data takes).")
 @click.option("--spacing", type=click.FloatRange(0.01, 0.5), default=0.05, show_default=True,
               help="Level set: grid spacing as a fraction of the equivalent diameter.")
-@click.option("--unit", type=float, default=1e-3, show_default=True,
+@click.option("--unit", type=click.FloatRange(1e-9, 1e3), default=1e-3, show_default=True,
               help="Metres per file unit (grainforge files are in mm: 0.001).")
 @click.option("--count", type=click.IntRange(1), default=None, show_default="1",
               help="Copies of each grain in the example pour.")
@@ -59,10 +60,6 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     if shape not in SUPPORTED[engine]:
         raise click.UsageError(f"--engine {engine} does not support --shape {shape} "
                                f"(supported: {', '.join(SUPPORTED[engine])})")
-    if not (density > 0):
-        raise click.BadParameter(f"must be > 0 kg/m³, got {density}", param_hint="--density")
-    if not (unit > 0):
-        raise click.BadParameter(f"must be > 0, got {unit}", param_hint="--unit")
     if shape == "polyhedron":
         from ..dem.lammps_body import MAX_VERTICES
 
@@ -90,6 +87,16 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
                                 counts=counts, unit=unit, density=density, shape=shape, spheres=spheres,
                                 refine_iterations=refine, polyhedron_vertices=vertices, levelset_spacing=spacing)
     from ..dem.decks import write_deck
+    from ..dem.inputs import GRAIN_SIZE_RANGE
 
+    lo, hi = GRAIN_SIZE_RANGE
+    for t in templates:
+        if not lo <= t.d_eq <= hi:
+            raise click.BadParameter(f"{t.source}: equivalent diameter {t.d_eq:.3g} m is outside {lo:g}–{hi:g} m "
+                                     "(the file's unit, --unit, is metres per file unit)", param_hint="--unit")
+    placed = [t.clump.count for t in templates if t.clump is not None]
+    if placed and min(placed) < spheres:
+        click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
+                   "stops when another sphere adds no coverage", err=True)
     written = write_deck(engine, templates, out, overwrite=overwrite)
     click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)

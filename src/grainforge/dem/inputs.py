@@ -10,10 +10,22 @@ import numpy as np
 
 from .enclosure import enclosure_problems
 
-__all__ = ["grain_paths", "read_grain", "load_template", "build_templates", "enclosure_problems", "pour_counts",
-           "MESH_SUFFIXES", "MAX_POUR_GRAINS"]
+__all__ = [
+    "GRAIN_SIZE_RANGE",
+    "grain_paths",
+    "read_grain",
+    "load_template",
+    "build_templates",
+    "enclosure_problems",
+    "pour_counts",
+    "MESH_SUFFIXES",
+    "MAX_POUR_GRAINS",
+]
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
+#: equivalent diameters (m) a deck accepts: 1 µm (silt; below, contact time steps and the engines'
+#: absolute tolerances leave SI units) to 10 m (boulders)
+GRAIN_SIZE_RANGE = (1e-6, 10.0)
 
 #: the most grains an example pour holds (the LIGGGHTS deck inserts each grain by its own fix,
 #: and every deck places them on a lattice above the box: far beyond this is no example pour)

@@ -131,8 +131,11 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         files[f"{t.name}.clump.vtk"] = clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")
         I = t.inertia
         tensor = " ".join(fmt(x) for x in (I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]))
+        # LIGGGHTS refuses a template below volume_limit (default 1e-12 m³, a 12 µm sphere) as a
+        # likely unit error; grainforge's volumes are exact and in SI, so the limit sits far below
         tpl.append(f"fix pts{k + 1} all particletemplate/multisphere {seeds[k]} atom_type 1 "
-                   f"density constant {fmt(t.density)} nspheres {t.clump.count} ntry 1000000 "
+                   f"density constant {fmt(t.density)} volume_limit {fmt(1e-3 * t.props.volume)} "
+                   f"nspheres {t.clump.count} ntry 1000000 "
                    f"spheres file {t.name}.xyzr scale 1.0 type {k + 1} "
                    f"mass {fmt(t.mass)} inertia_tensor {tensor} use_density")
         names.append(f"pts{k + 1}")
