@@ -136,8 +136,8 @@ def three_grains(tmp_path_factory):
     (["--density", "0"], "'--density': 0.0 is not in the range"),
     (["--unit", "1e30"], "'--unit': 1e+30 is not in the range"),
     (["--unit", "1e-30"], "'--unit': 1e-30 is not in the range"),
-    (["--unit", "1e-9"], "equivalent diameter 2e-09 m is outside 1e-06–10 m"),
-    (["--unit", "100"], "equivalent diameter 200 m is outside 1e-06–10 m"),
+    (["--unit", "1e-9"], "equivalent diameter 2e-09 m is outside 1e-05–10 m"),
+    (["--unit", "100"], "equivalent diameter 200 m is outside 1e-05–10 m"),
     (["--spheres", "1"], "'--spheres': 1 is not in the range 2<=x<=1000"),
 ])
 def test_dem_refuses_unphysical_settings(three_grains, tmp_path, args, says):

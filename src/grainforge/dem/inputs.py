@@ -23,9 +23,9 @@ __all__ = [
 ]
 
 MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
-#: equivalent diameters (m) a deck accepts: 1 µm (silt; below, contact time steps and the engines'
+#: equivalent diameters (m) a deck accepts: 10 µm (fine silt; below, contact time steps and the engines'
 #: absolute tolerances leave SI units) to 10 m (boulders)
-GRAIN_SIZE_RANGE = (1e-6, 10.0)
+GRAIN_SIZE_RANGE = (1e-5, 10.0)
 
 #: the most grains an example pour holds (the LIGGGHTS deck inserts each grain by its own fix,
 #: and every deck places them on a lattice above the box: far beyond this is no example pour)
