@@ -14,7 +14,7 @@ __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "a
            "sample_micrograph", "write_fourier_csv"]
 
 
-def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
+def _sweep(out: Path, method: str, make_params, values, label, seeds, title, common_scale=False) -> list[Path]:
     from .io import read_mesh
     from .render import contact_sheet
     from .run import manifest_rows, write_run
@@ -29,7 +29,7 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
     order = sorted(panels)
     sheet = out.with_suffix(".png")
     contact_sheet([panels[k][0] for k in order], [panels[k][1] for k in order], sheet,
-                  columns=len(values), title=title + " (files at d_eq = 10 mm)", unit="mm")
+                  columns=len(values), title=title + " (files at d_eq = 10 mm)", unit="mm", common_scale=common_scale)
     return [out, sheet]
 
 
@@ -208,15 +208,16 @@ def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     written = _sweep(
         out / "dpa-cubes", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n),
         values, "eps", seeds, f"DPA, {n} cubes: exponent ε from 0.1 (compact) to 100 (branching) (paper Fig. 5)",
+        common_scale=True,
     )
     written += _sweep(
         out / "dpa-cubes-smoothed", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n, smooth=2),
         values[::2] if quick else values, "eps", seeds[:1] if quick else seeds,
-        f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)",
+        f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)", common_scale=True,
     )
     written += _sweep(
         out / "dpa-octahedra", "dpa", lambda e: Params(primitive="octahedron", exponent=e, primaries=n),
-        values, "eps", seeds, f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)",
+        values, "eps", seeds, f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)", common_scale=True,
     )
     return written
 
