@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
-           "sample_micrograph", "write_fourier_csv"]
+           "sample_micrograph", "write_fourier_csv", "grain_image", "example_images", "EXAMPLE_IMAGES"]
 
 
 def _sweep(out: Path, method: str, make_params, values, label, seeds, title, common_scale=False) -> list[Path]:
@@ -62,8 +62,8 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     """
     import numpy as np
 
-    from .contours import Contour, draw_contours
-    from .io import atomic_write, read_mesh, save_figure
+    from .contours import Contour
+    from .io import read_mesh, save_figure
     from .methods.cri import Params
     from .render import contact_sheet
     from .run import manifest_rows, write_run
@@ -73,22 +73,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     folder = out / "cri"
     folder.mkdir(parents=True, exist_ok=True)
     # synthetic micrographs: three drawn grains, blurred, with sensor noise
-    import io as _io
-
-    from PIL import Image
-    from skimage.filters import gaussian
-
-    images = []
-    for i in range(3):
-        c = Contour.from_descriptors("rough-angular", rng=100 + i)
-        img = draw_contours((512, 512), [(c, (256, 256), 170.0)], background=40, fill=200).astype(float)
-        img = gaussian(img, sigma=2.0, preserve_range=True)
-        img += np.random.default_rng(200 + i).normal(0.0, 12.0, img.shape)
-        png = folder / f"synthetic-micrograph-{i}.png"
-        buf = _io.BytesIO()
-        Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
-        atomic_write(png, buf.getvalue())
-        images.append(str(png))
+    images = [str(grain_image(folder / f"synthetic-micrograph-{i}.png", seed=i)) for i in range(3)]
     # Figure 3: one contour from each source
     import matplotlib
 
@@ -315,6 +300,51 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     buf = _io.BytesIO()
     Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
     return atomic_write(path, buf.getvalue())
+
+
+def grain_image(path: Path, *, seed: int, size: int = 512) -> Path:
+    """A synthetic micrograph of one grain: a rough-angular Fourier contour drawn, blurred and speckled.
+
+    The contour (``Contour.from_descriptors("rough-angular", rng=100 + seed)``)
+    is drawn with radius 170/512 of the ``size`` × ``size`` picture, blurred
+    (σ = 2/512 of it) and given sensor noise (σ = 12 grey levels, ``rng=200 + seed``):
+    what ``generate cri --images`` and ``Contour.from_image`` read as a real grain image.
+    """
+    import io as _io
+
+    import numpy as np
+    from PIL import Image
+    from skimage.filters import gaussian
+
+    from .contours import Contour, draw_contours
+    from .io import atomic_write
+
+    c = Contour.from_descriptors("rough-angular", rng=100 + seed)
+    img = draw_contours((size, size), [(c, (size // 2, size // 2), 170.0 * size / 512)], background=40,
+                        fill=200).astype(float)
+    img = gaussian(img, sigma=2.0 * size / 512, preserve_range=True)
+    img += np.random.default_rng(200 + seed).normal(0.0, 12.0, img.shape)
+    buf = _io.BytesIO()
+    Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
+    return atomic_write(path, buf.getvalue())
+
+
+#: the example images the README's commands read (examples/images/), made by :func:`example_images`
+EXAMPLE_IMAGES = ("micrograph.png", "grain-a.png", "grain-b.png", "grain-c.png")
+
+
+def example_images(folder: Path) -> list[Path]:
+    """Write the small example images of ``examples/images/`` into ``folder``.
+
+    ``micrograph.png``: a sample of 2 × 3 grains (:func:`sample_micrograph`) for
+    ``grainforge fourier``; ``grain-a/b/c.png``: three single-grain images
+    (:func:`grain_image`, 256 px) for ``generate cri --images``.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [sample_micrograph(folder / EXAMPLE_IMAGES[0], rows=2, columns=3)]
+    written += [grain_image(folder / name, seed=i, size=256) for i, name in enumerate(EXAMPLE_IMAGES[1:])]
+    return written
 
 
 def write_fourier_csv(images, path: Path) -> Path:
