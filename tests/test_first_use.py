@@ -12,7 +12,6 @@ import numpy as np
 import pytest
 import trimesh
 
-import grainforge
 from grainforge.cli.main import cli
 
 ROOT = Path(__file__).resolve().parents[1]
