@@ -278,6 +278,31 @@ def test_dpa_figure_sheets_use_one_scale(monkeypatch, tmp_path):
     assert seen["common_scale"] is True and seen["unit"] == "mm"
 
 
+def test_demo_dpa_gallery_is_drawn_at_one_scale(monkeypatch, tmp_path):
+    """The demo's three DPA sheets share one scale: that of the largest aggregate of all three."""
+    import grainforge.demo as demo
+    import grainforge.render
+
+    sizes = iter([1.0, 2.0, 5.0])  # the largest aggregate of each sweep (mm)
+
+    def panels(out, method, make_params, values, label, seeds):
+        r = next(sizes)
+        return [trimesh.creation.icosphere(1, radius=r)], [f"{out.name}"]
+
+    sheets = {}
+
+    def capture(meshes, labels, out, **kw):
+        sheets[Path(out).name] = kw
+        return Path(out)
+
+    monkeypatch.setattr(demo, "_sweep_panels", panels)
+    monkeypatch.setattr(grainforge.render, "contact_sheet", capture)
+    demo.dpa_sweeps(tmp_path, quick=True)
+    assert sorted(sheets) == ["dpa-cubes-smoothed.png", "dpa-cubes.png", "dpa-octahedra.png"]
+    assert [kw["radius"] for kw in sheets.values()] == pytest.approx([5.0, 5.0, 5.0])
+    assert all(kw["unit"] == "mm" for kw in sheets.values())
+
+
 def _overlapping_tick_labels(fig):
     fig.canvas.draw()
     r = fig.canvas.get_renderer()

@@ -14,9 +14,9 @@ __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "a
            "sample_micrograph", "write_fourier_csv", "grain_image", "example_images", "EXAMPLE_IMAGES"]
 
 
-def _sweep(out: Path, method: str, make_params, values, label, seeds, title, common_scale=False) -> list[Path]:
+def _sweep_panels(out: Path, method: str, make_params, values, label, seeds) -> tuple[list, list[str]]:
+    """Write one run per value into ``out/<label>=<value>``; the meshes and labels of a sheet, row by seed."""
     from .io import read_mesh
-    from .render import contact_sheet
     from .run import manifest_rows, write_run
 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
@@ -27,10 +27,21 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title, com
         for i, r in enumerate(rows):
             panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
     order = sorted(panels)
+    return [panels[k][0] for k in order], [panels[k][1] for k in order]
+
+
+def _sweep_sheet(out: Path, meshes, labels, columns, title, radius=None) -> list[Path]:
+    from .render import contact_sheet
+
     sheet = out.with_suffix(".png")
-    contact_sheet([panels[k][0] for k in order], [panels[k][1] for k in order], sheet,
-                  columns=len(values), title=title + " (files at d_eq = 10 mm)", unit="mm", common_scale=common_scale)
+    contact_sheet(meshes, labels, sheet, columns=columns, title=title + " (files at d_eq = 10 mm)", unit="mm",
+                  radius=radius)
     return [out, sheet]
+
+
+def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
+    meshes, labels = _sweep_panels(out, method, make_params, values, label, seeds)
+    return _sweep_sheet(out, meshes, labels, len(values), title)
 
 
 def fso_sweeps(out: Path, quick: bool = False) -> list[Path]:
@@ -184,26 +195,31 @@ def _analysis_plots(out: Path, quick: bool = False) -> list[Path]:
 
 
 def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
-    """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε."""
+    """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε.
+
+    All three sheets are drawn at one scale (one scale-bar length), that of the largest aggregate.
+    """
     from .methods.dpa import Params
+    from .render import view_radius
 
     seeds = [0, 1] if quick else [0, 1, 2]
     n = 100 if quick else 300
     values = [0.1, 1, 3, 10, 30, 100]
-    written = _sweep(
-        out / "dpa-cubes", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n),
-        values, "eps", seeds, f"DPA, {n} cubes: exponent ε from 0.1 (compact) to 100 (branching) (paper Fig. 5)",
-        common_scale=True,
-    )
-    written += _sweep(
-        out / "dpa-cubes-smoothed", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n, smooth=2),
-        values[::2] if quick else values, "eps", seeds[:1] if quick else seeds,
-        f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)", common_scale=True,
-    )
-    written += _sweep(
-        out / "dpa-octahedra", "dpa", lambda e: Params(primitive="octahedron", exponent=e, primaries=n),
-        values, "eps", seeds, f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)", common_scale=True,
-    )
+    sweeps = [
+        (out / "dpa-cubes", lambda e: Params(primitive="cube", exponent=e, primaries=n), values, seeds,
+         f"DPA, {n} cubes: exponent ε from 0.1 (compact) to 100 (branching) (paper Fig. 5)"),
+        (out / "dpa-cubes-smoothed", lambda e: Params(primitive="cube", exponent=e, primaries=n, smooth=2),
+         values[::2] if quick else values, seeds[:1] if quick else seeds,
+         f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)"),
+        (out / "dpa-octahedra", lambda e: Params(primitive="octahedron", exponent=e, primaries=n), values, seeds,
+         f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)"),
+    ]
+    panels = [_sweep_panels(folder, "dpa", make, vals, "eps", s) for folder, make, vals, s, _ in sweeps]
+    # one scale for the whole DPA gallery: every grain has d_eq = 10 mm, so extents compare (compact vs branching)
+    radius = max(view_radius(m) for meshes, _ in panels for m in meshes)
+    written: list[Path] = []
+    for (folder, _, vals, _, title), (meshes, labels) in zip(sweeps, panels):
+        written += _sweep_sheet(folder, meshes, labels, len(vals), title, radius=radius)
     return written
 
 

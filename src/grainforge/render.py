@@ -352,12 +352,14 @@ def contact_sheet(
     meshes: Sequence, labels: Sequence[str], out: str | Path, *, columns: int | None = None,
     title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
     elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None, common_scale: bool = False,
+    radius: float | None = None,
 ) -> Path:
     """Write a PNG with one shaded, labelled panel per mesh (:func:`contact_sheet_figure`)."""
     from .io import save_figure
 
     fig = contact_sheet_figure(meshes, labels, columns=columns, title=title, panel_size=panel_size, dpi=dpi,
-                               elev=elev, azim=azim, color=color, unit=unit, common_scale=common_scale)
+                               elev=elev, azim=azim, color=color, unit=unit, common_scale=common_scale,
+                               radius=radius)
     return save_figure(fig, out)
 
 
@@ -365,6 +367,7 @@ def contact_sheet_figure(
     meshes: Sequence, labels: Sequence[str], *, columns: int | None = None,
     title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
     elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None, common_scale: bool = False,
+    radius: float | None = None,
 ):
     """A matplotlib Figure with one shaded, labelled panel per mesh.
 
@@ -390,6 +393,9 @@ def contact_sheet_figure(
         Draw every panel at one scale (that of the largest mesh), with one
         scale-bar length for the whole sheet, rather than each mesh filling
         its panel: sizes compare across panels.
+    radius : float, optional
+        The one scale to draw every panel at, as a half-width in mesh units
+        (for several sheets at one scale: the largest :func:`view_radius` of all).
     """
     import matplotlib
 
@@ -409,7 +415,8 @@ def contact_sheet_figure(
     title_in = 0.4 if title else 0.0
     height = rows * (panel_size + label_in) + title_in
     fig = plt.figure(figsize=(panel_size * cols, height), dpi=dpi)
-    radius = max(view_radius(m) for m in meshes) if common_scale else None
+    if radius is None and common_scale:
+        radius = max(view_radius(m) for m in meshes)
     for i, (m, lab) in enumerate(zip(meshes, labels)):
         ax = fig.add_subplot(rows, cols, i + 1)
         shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit, radius=radius)
