@@ -19,7 +19,7 @@ $(STAMP): $(BIN)/python pyproject.toml
 install: $(STAMP)
 
 demo: $(STAMP)
-	$(BIN)/grainforge demo --out out/demo
+	$(BIN)/grainforge demo --out out/demo --overwrite
 
 test: $(STAMP)
 	$(BIN)/python -m pytest

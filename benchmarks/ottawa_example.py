@@ -1,8 +1,8 @@
 """The README's worked example end to end, timed: Ottawa sand → recipe → 500 grains → measured files.
 
-1. ``grainforge fit examples/sand-atlas/ottawa-7.3um.csv --voxel-size 7.3 --out OUT/fit``
+1. ``grainforge fit examples/sand-atlas/ottawa-7.3um.csv --voxel-size-um 7.3 --out OUT/fit``
 2. ``grainforge batch OUT/fit/recipe.toml --out OUT/grains``
-3. ``grainforge analyse OUT/grains --voxel-size 0.0073 --no-fractal --csv OUT/grains.csv`` — the
+3. ``grainforge analyse OUT/grains --voxel-size-mm 0.0073 --no-fractal --csv OUT/grains.csv`` — the
    STL files as a user gets them, read back and voxelised in their own orientation (the fit
    measured each grain in memory, in a random orientation)
 4. the sand's statistics against those of the files: mean, sd, two-sample KS (scipy), and the
@@ -49,9 +49,9 @@ def main():
     args.out.mkdir(parents=True)
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
     times = {
-        "fit": run(["fit", str(SAND), "--voxel-size", "7.3", "--method", args.method, "--out", str(args.out / "fit")]),
+        "fit": run(["fit", str(SAND), "--voxel-size-um", "7.3", "--method", args.method, "--out", str(args.out / "fit")]),
         "batch": run(["batch", str(args.out / "fit" / "recipe.toml"), "--out", str(args.out / "grains")]),
-        "analyse": run(["analyse", str(args.out / "grains"), "--voxel-size", "0.0073", "--no-fractal",
+        "analyse": run(["analyse", str(args.out / "grains"), "--voxel-size-mm", "0.0073", "--no-fractal",
                         "--csv", str(args.out / "grains.csv")]),
     }
     print(", ".join(f"{k} {v:.0f} s" for k, v in times.items()) + f"; total {sum(times.values()) / 60:.1f} min; "

@@ -160,7 +160,7 @@ def test_analyse_cli_adds_atlas_columns(runner, tmp_path):
     row = json.loads(r.stdout)[0]
     assert row["atlas_voxels_across"] == pytest.approx(30) and row["atlas_voxel_size_mm"] > 0
     assert row["atlas_elongation"] == pytest.approx(0.8, abs=0.03)
-    r = runner.invoke(cli, ["analyse", str(p), "--voxels-across", "30", "--voxel-size", "0.1"])
+    r = runner.invoke(cli, ["analyse", str(p), "--voxels-across", "30", "--voxel-size-mm", "0.1"])
     assert r.exit_code == 2 and "not both" in r.stderr
 
 

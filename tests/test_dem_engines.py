@@ -92,7 +92,7 @@ def make_deck(population, tmp_path, engine, *extra):
     out = tmp_path / engine
     r = CliRunner().invoke(cli, ["dem", str(population / "fso"), str(population / "cri"), str(population / "dpa"),
                                  "--out", str(out), "--engine", engine, "--density", str(DENSITY),
-                                 "--spheres", "20", *extra])
+                                 *([] if "--shape" in extra else ["--spheres", "20"]), *extra])
     assert r.exit_code == 0, r.output
     files = sorted(population.glob("*/*.stl"))
     assert len(files) == 20

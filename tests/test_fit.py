@@ -60,7 +60,7 @@ def test_read_sand_reads_the_shipped_ottawa_file():
 def test_bad_sand_files_give_one_line_and_exit_2(runner, tmp_path, content, words):
     p = tmp_path / "sand.csv"
     p.write_text(content, encoding="utf-8")
-    r = runner.invoke(cli, ["fit", str(p), "--voxel-size", "7", "--out", str(tmp_path / "o")])
+    r = runner.invoke(cli, ["fit", str(p), "--voxel-size-um", "7", "--out", str(tmp_path / "o")])
     assert r.exit_code == 2, r.output
     assert words in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.stderr
     assert not (tmp_path / "o").exists()
@@ -69,7 +69,7 @@ def test_bad_sand_files_give_one_line_and_exit_2(runner, tmp_path, content, word
 def test_voxel_size_is_required_unless_a_column_gives_it(runner, tmp_path):
     p = _write_sand(tmp_path / "s.csv", _fake_rows(5))
     r = runner.invoke(cli, ["fit", str(p), "--out", str(tmp_path / "o")])
-    assert r.exit_code == 2 and "--voxel-size" in r.stderr
+    assert r.exit_code == 2 and "--voxel-size-um" in r.stderr
     text = p.read_text(encoding="utf-8").splitlines()
     text = [text[0] + ",Voxel Size (μm)"] + [t + ",5.0" for t in text[1:]]  # Greek mu is accepted too
     p.write_text("\n".join(text) + "\n", encoding="utf-8")
@@ -164,7 +164,7 @@ def test_existing_outputs_are_not_overwritten_without_overwrite(runner, tmp_path
     out = tmp_path / "o"
     out.mkdir()
     (out / "fit.csv").write_text("keep", encoding="utf-8")
-    r = runner.invoke(cli, ["fit", str(p), "--voxel-size", "7", "--out", str(out)])
+    r = runner.invoke(cli, ["fit", str(p), "--voxel-size-um", "7", "--out", str(out)])
     assert r.exit_code == 2 and "exists" in r.stderr and "--overwrite" in r.stderr
     assert (out / "fit.csv").read_text(encoding="utf-8") == "keep"
 
@@ -228,7 +228,7 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
 
     monkeypatch.setattr(fitmod, "fit_sand", fake_fit)
     out = tmp_path / "o"
-    r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size", "7", "--out", str(out)])
+    r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size-um", "7", "--out", str(out)])
     assert r.exit_code == 1, r.output + r.stderr
     assert "warning: grainforge batch would refuse this recipe" in r.stderr and "params.descriptors" in r.stderr
     assert (out / "recipe.toml").read_text(encoding="utf-8") == text  # the outputs are kept

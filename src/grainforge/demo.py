@@ -11,12 +11,12 @@ from pathlib import Path
 from typing import Callable
 
 __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
-           "sample_micrograph", "write_fourier_csv"]
+           "sample_micrograph", "write_fourier_csv", "grain_image", "example_images", "EXAMPLE_IMAGES"]
 
 
-def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
+def _sweep_panels(out: Path, method: str, make_params, values, label, seeds) -> tuple[list, list[str]]:
+    """Write one run per value into ``out/<label>=<value>``; the meshes and labels of a sheet, row by seed."""
     from .io import read_mesh
-    from .render import contact_sheet
     from .run import manifest_rows, write_run
 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
@@ -27,10 +27,21 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
         for i, r in enumerate(rows):
             panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
     order = sorted(panels)
+    return [panels[k][0] for k in order], [panels[k][1] for k in order]
+
+
+def _sweep_sheet(out: Path, meshes, labels, columns, title, radius=None) -> list[Path]:
+    from .render import contact_sheet
+
     sheet = out.with_suffix(".png")
-    contact_sheet([panels[k][0] for k in order], [panels[k][1] for k in order], sheet,
-                  columns=len(values), title=title + " (files at d_eq = 10 mm)", unit="mm")
+    contact_sheet(meshes, labels, sheet, columns=columns, title=title + " (files at d_eq = 10 mm)", unit="mm",
+                  radius=radius)
     return [out, sheet]
+
+
+def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> list[Path]:
+    meshes, labels = _sweep_panels(out, method, make_params, values, label, seeds)
+    return _sweep_sheet(out, meshes, labels, len(values), title)
 
 
 def fso_sweeps(out: Path, quick: bool = False) -> list[Path]:
@@ -62,8 +73,8 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     """
     import numpy as np
 
-    from .contours import Contour, draw_contours
-    from .io import atomic_write, read_mesh, save_figure
+    from .contours import Contour
+    from .io import read_mesh, save_figure
     from .methods.cri import Params
     from .render import contact_sheet
     from .run import manifest_rows, write_run
@@ -73,22 +84,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     folder = out / "cri"
     folder.mkdir(parents=True, exist_ok=True)
     # synthetic micrographs: three drawn grains, blurred, with sensor noise
-    import io as _io
-
-    from PIL import Image
-    from skimage.filters import gaussian
-
-    images = []
-    for i in range(3):
-        c = Contour.from_descriptors("rough-angular", rng=100 + i)
-        img = draw_contours((512, 512), [(c, (256, 256), 170.0)], background=40, fill=200).astype(float)
-        img = gaussian(img, sigma=2.0, preserve_range=True)
-        img += np.random.default_rng(200 + i).normal(0.0, 12.0, img.shape)
-        png = folder / f"synthetic-micrograph-{i}.png"
-        buf = _io.BytesIO()
-        Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
-        atomic_write(png, buf.getvalue())
-        images.append(str(png))
+    images = [str(grain_image(folder / f"synthetic-micrograph-{i}.png", seed=i)) for i in range(3)]
     # Figure 3: one contour from each source
     import matplotlib
 
@@ -199,25 +195,31 @@ def _analysis_plots(out: Path, quick: bool = False) -> list[Path]:
 
 
 def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
-    """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε."""
+    """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε.
+
+    All three sheets are drawn at one scale (one scale-bar length), that of the largest aggregate.
+    """
     from .methods.dpa import Params
+    from .render import view_radius
 
     seeds = [0, 1] if quick else [0, 1, 2]
     n = 100 if quick else 300
     values = [0.1, 1, 3, 10, 30, 100]
-    written = _sweep(
-        out / "dpa-cubes", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n),
-        values, "eps", seeds, f"DPA, {n} cubes: exponent ε from 0.1 (compact) to 100 (branching) (paper Fig. 5)",
-    )
-    written += _sweep(
-        out / "dpa-cubes-smoothed", "dpa", lambda e: Params(primitive="cube", exponent=e, primaries=n, smooth=2),
-        values[::2] if quick else values, "eps", seeds[:1] if quick else seeds,
-        f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)",
-    )
-    written += _sweep(
-        out / "dpa-octahedra", "dpa", lambda e: Params(primitive="octahedron", exponent=e, primaries=n),
-        values, "eps", seeds, f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)",
-    )
+    sweeps = [
+        (out / "dpa-cubes", lambda e: Params(primitive="cube", exponent=e, primaries=n), values, seeds,
+         f"DPA, {n} cubes: exponent ε from 0.1 (compact) to 100 (branching) (paper Fig. 5)"),
+        (out / "dpa-cubes-smoothed", lambda e: Params(primitive="cube", exponent=e, primaries=n, smooth=2),
+         values[::2] if quick else values, seeds[:1] if quick else seeds,
+         f"DPA, {n} cubes with rounded corners (smooth = 2) (paper Fig. 5, right)"),
+        (out / "dpa-octahedra", lambda e: Params(primitive="octahedron", exponent=e, primaries=n), values, seeds,
+         f"DPA, {n} octahedra: exponent ε from 0.1 to 100 (paper Fig. 6)"),
+    ]
+    panels = [_sweep_panels(folder, "dpa", make, vals, "eps", s) for folder, make, vals, s, _ in sweeps]
+    # one scale for the whole DPA gallery: every grain has d_eq = 10 mm, so extents compare (compact vs branching)
+    radius = max(view_radius(m) for meshes, _ in panels for m in meshes)
+    written: list[Path] = []
+    for (folder, _, vals, _, title), (meshes, labels) in zip(sweeps, panels):
+        written += _sweep_sheet(folder, meshes, labels, len(vals), title, radius=radius)
     return written
 
 
@@ -314,6 +316,51 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     buf = _io.BytesIO()
     Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
     return atomic_write(path, buf.getvalue())
+
+
+def grain_image(path: Path, *, seed: int, size: int = 512) -> Path:
+    """A synthetic micrograph of one grain: a rough-angular Fourier contour drawn, blurred and speckled.
+
+    The contour (``Contour.from_descriptors("rough-angular", rng=100 + seed)``)
+    is drawn with radius 170/512 of the ``size`` × ``size`` picture, blurred
+    (σ = 2/512 of it) and given sensor noise (σ = 12 grey levels, ``rng=200 + seed``):
+    what ``generate cri --images`` and ``Contour.from_image`` read as a real grain image.
+    """
+    import io as _io
+
+    import numpy as np
+    from PIL import Image
+    from skimage.filters import gaussian
+
+    from .contours import Contour, draw_contours
+    from .io import atomic_write
+
+    c = Contour.from_descriptors("rough-angular", rng=100 + seed)
+    img = draw_contours((size, size), [(c, (size // 2, size // 2), 170.0 * size / 512)], background=40,
+                        fill=200).astype(float)
+    img = gaussian(img, sigma=2.0 * size / 512, preserve_range=True)
+    img += np.random.default_rng(200 + seed).normal(0.0, 12.0, img.shape)
+    buf = _io.BytesIO()
+    Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
+    return atomic_write(path, buf.getvalue())
+
+
+#: the example images the README's commands read (examples/images/), made by :func:`example_images`
+EXAMPLE_IMAGES = ("micrograph.png", "grain-a.png", "grain-b.png", "grain-c.png")
+
+
+def example_images(folder: Path) -> list[Path]:
+    """Write the small example images of ``examples/images/`` into ``folder``.
+
+    ``micrograph.png``: a sample of 2 × 3 grains (:func:`sample_micrograph`) for
+    ``grainforge fourier``; ``grain-a/b/c.png``: three single-grain images
+    (:func:`grain_image`, 256 px) for ``generate cri --images``.
+    """
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    written = [sample_micrograph(folder / EXAMPLE_IMAGES[0], rows=2, columns=3)]
+    written += [grain_image(folder / name, seed=i, size=256) for i, name in enumerate(EXAMPLE_IMAGES[1:])]
+    return written
 
 
 def write_fourier_csv(images, path: Path) -> Path:

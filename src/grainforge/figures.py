@@ -192,7 +192,7 @@ def _dpa_sheet(out: Path, primitive: str, rows: list[tuple[int, str]], title: st
             labels.append(f"({chr(97 + k)}) ε = {eps:g}{note}" + (f", D_A = {DA:.2f}" if DA is not None else ""))
             k += 1
     return contact_sheet(grains, labels, out, columns=len(DPA_EXPONENTS), title=title + SIZE_NOTE, unit="mm",
-                         color=(0.72, 0.70, 0.66))
+                         color=(0.72, 0.70, 0.66), common_scale=True)  # one scale: extents compare
 
 
 def figure5(out: Path, subdivisions: int = 5) -> Path:

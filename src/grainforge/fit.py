@@ -184,7 +184,7 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
             data[key].append(x)
     if voxel_size is None:
         if "voxel_size" not in data:
-            raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size, µm)")
+            raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size-um)")
         voxel_size = float(np.median(data["voxel_size"]))
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise ValueError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")

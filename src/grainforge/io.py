@@ -18,7 +18,7 @@ import numpy as np
 
 from ._version import __version__
 
-__all__ = ["FORMATS", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
+__all__ = ["FORMATS", "READABLE_MESHES", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -181,6 +181,9 @@ def write_csv(
     return atomic_write(path, csv_text(rows, columns, units=units))
 
 
+#: the mesh formats every command reads (named in the message for a file of another kind)
+READABLE_MESHES = "STL, OBJ, PLY, 3MF"
+
 #: first bytes of common non-mesh files, to say what a misnamed file is
 _MAGIC = (
     (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
@@ -313,7 +316,7 @@ def read_mesh(path: str | os.PathLike):
                 head = fh.read(16)
             other = _what_is(head)
             if other is not None:
-                raise ValueError(f"{path}: not a {suffix.lstrip('.').upper()} mesh file (it is {other})")
+                raise ValueError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
             loaded = trimesh.load(path, force="mesh", process=False)
     except ValueError:
         raise

@@ -73,8 +73,15 @@ def zingg(ax, tables) -> None:
         ax.scatter(I / L, S / I, s=14, alpha=0.75, marker=marker, label=f"{_label(path)} (n={len(L)})")
     ax.axvline(2 / 3, color="0.6", lw=0.8)
     ax.axhline(2 / 3, color="0.6", lw=0.8)
-    for x, y, name in ((1 / 3, 1 / 3, "blade"), (5 / 6, 1 / 3, "disc"), (1 / 3, 5 / 6, "rod"), (5 / 6, 5 / 6, "equant")):
-        ax.text(x, y, name, ha="center", va="center", color="0.5", fontsize=9)
+    # each class name in its quadrant's corner next to the 2/3 lines, above the points on a light
+    # box: the equant corner (1, 1) is where most grains fall, and a name there would be hidden
+    pad = 0.015
+    for x, y, ha, va, name in ((2 / 3 - pad, 2 / 3 - pad, "right", "top", "blade"),
+                               (2 / 3 + pad, 2 / 3 - pad, "left", "top", "disc"),
+                               (2 / 3 - pad, 2 / 3 + pad, "right", "bottom", "rod"),
+                               (2 / 3 + pad, 2 / 3 + pad, "left", "bottom", "equant")):
+        ax.text(x, y, name, ha=ha, va=va, color="0.35", fontsize=9, zorder=5,
+                bbox=dict(boxstyle="round,pad=0.15", facecolor="white", edgecolor="none", alpha=0.85))
     ax.set(xlim=(0, 1.02), ylim=(0, 1.02), xlabel="elongation I/L", ylabel="flatness S/I", title="Zingg diagram")
     ax.set_aspect("equal")
 
@@ -180,11 +187,65 @@ def size_distribution(ax, tables) -> None:
                 markevery=[len(x) - 1] if single else None, ms=5)
     ax.set_xscale("log")
     ax.set_xlim(lo / 1.6, hi * 1.6)
+    _plain_log_ticks(ax.xaxis, lo / 1.6, hi * 1.6)
     ax.set(xlabel="equivalent diameter d_eq (mm)", ylabel="% finer by volume", ylim=(0, 102),
            title="Size distribution")
     ax.grid(True, which="both", color="0.9", lw=0.5)
     # below the axes: any corner inside may hold a curve (tight_layout makes room for it)
     ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.17), ncol=1, frameon=False)
+
+
+def _plain_log_ticks(axis, lo: float, hi: float, most: int = 6) -> None:
+    """Labelled ticks in mm as a person writes them (0.2, 0.5, 1, 2, ...) on a log axis from ``lo`` to ``hi``.
+
+    The densest of the 1-9, 1-2-3-5, 1-2-5, 1-3 and 1 sequences with at most ``most`` ticks in view, the
+    rest unlabelled: matplotlib's own labels (3×10⁻¹, 4×10⁻¹, ...) overlap on an axis of one or two
+    decades.
+
+    Examples
+    --------
+    >>> import matplotlib; matplotlib.use("Agg"); import matplotlib.pyplot as plt
+    >>> fig, ax = plt.subplots(); ax.set_xscale("log"); ax.set_xlim(0.3, 5)
+    (0.3, 5)
+    >>> _plain_log_ticks(ax.xaxis, 0.3, 5); [f"{v:g}" for v in ax.get_xticks()]
+    ['0.3', '0.5', '1', '2', '3', '5']
+    >>> plt.close(fig)
+    """
+    from matplotlib.ticker import FixedLocator, FuncFormatter, LogLocator, NullFormatter
+
+    ticks = [1.0]
+    for subs in (tuple(range(1, 10)), (1, 2, 3, 5), (1, 2, 5), (1, 3), (1,)):
+        k = np.arange(np.floor(np.log10(lo)), np.ceil(np.log10(hi)) + 1)
+        cand = np.sort((np.asarray(subs, dtype=float)[None, :] * 10.0 ** k[:, None]).ravel())
+        ticks = [float(v) for v in cand if lo <= v <= hi]
+        if len(ticks) <= most:
+            break
+    if len(ticks) > most:  # many decades: every n-th power of ten
+        step = int(np.ceil(len(ticks) / most))
+        ticks = ticks[::step]
+    axis.set_major_locator(FixedLocator(ticks))
+    axis.set_major_formatter(FuncFormatter(lambda v, _pos: f"{v:g}"))
+    axis.set_minor_locator(LogLocator(subs=np.arange(2, 10)))
+    axis.set_minor_formatter(NullFormatter())
+
+
+def _fit_legend(fig, ax) -> None:
+    """Lay ``fig`` out tightly, making the figure taller until the legend below the axes is inside it.
+
+    ``tight_layout`` alone leaves the legend cut off on an equal-aspect axis (the Zingg diagram).
+    """
+    for _ in range(4):
+        fig.tight_layout()
+        legend = ax.get_legend()
+        if legend is None:
+            return
+        fig.canvas.draw()  # applies the axis aspect: the legend's place as it will be saved
+        box = legend.get_window_extent(fig.canvas.get_renderer())
+        short = max(0.0, fig.bbox.y0 - box.y0) + max(0.0, box.y1 - fig.bbox.y1)
+        if short < 1.0:  # pixels
+            return
+        w, h = fig.get_size_inches()
+        fig.set_size_inches(w, h + short / fig.dpi + 0.1)
 
 
 def _markers():
@@ -228,7 +289,7 @@ def figure(kind: str, manifests: Sequence[str | Path], *, title: str | None = No
         if ax.get_legend() is None:
             # below the axes: inside, a legend may cover points or bands
             ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=1, frameon=False)
-        fig.tight_layout()
+        _fit_legend(fig, ax)
     except BaseException:
         plt.close(fig)  # also when drawing fails
         raise

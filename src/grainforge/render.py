@@ -22,7 +22,7 @@ from typing import Sequence
 import numpy as np
 
 __all__ = ["rasterize", "silhouette", "render_image", "shade", "contact_sheet", "contact_sheet_figure", "view_rotation",
-           "scale_bar_length"]
+           "scale_bar_length", "view_radius"]
 
 #: a corner whose vertex normal is further than this from its face normal is shaded flat
 CREASE_DEGREES = 50.0
@@ -213,7 +213,7 @@ def _corner_normals(v: np.ndarray, f: np.ndarray, crease_degrees: float = CREASE
 
 def render_image(
     mesh, *, size: int = 400, elev: float = 20.0, azim: float = -60.0, color=SAND,
-    background=(1.0, 1.0, 1.0), smooth: bool = True, supersample: int = 2,
+    background=(1.0, 1.0, 1.0), smooth: bool = True, supersample: int = 2, radius: float | None = None,
 ) -> np.ndarray:
     """An RGB picture of a mesh: orthographic, Phong-shaded, anti-aliased.
 
@@ -230,6 +230,9 @@ def render_image(
         Interpolate vertex normals (Phong) rather than flat facets.
     supersample : int
         Render at this factor and average down (anti-aliasing).
+    radius : float, optional
+        Half the picture's width in mesh units (:func:`view_radius` of the largest of several meshes
+        drawn at one scale); default: the mesh's own, so that it fills the picture.
 
     Returns
     -------
@@ -251,7 +254,8 @@ def render_image(
     R = view_rotation(elev, azim)
     c = (v.max(0) + v.min(0)) / 2
     cam = np.einsum("vi,ji->vj", v - c, R)  # einsum: no threaded BLAS for skinny products
-    radius = float(np.linalg.norm(cam, axis=1).max()) or 1.0
+    if radius is None:
+        radius = float(np.linalg.norm(cam, axis=1).max()) or 1.0
     scale = (n / 2 - 2 * ss) / radius
     xy = np.empty((len(v), 2))
     xy[:, 0] = cam[:, 0] * scale + (n - 1) / 2
@@ -290,18 +294,32 @@ def render_image(
     return img
 
 
+def view_radius(mesh) -> float:
+    """The half-width (mesh units) of the picture :func:`render_image` makes of ``mesh`` by default.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> round(view_radius(trimesh.creation.box((2.0, 2.0, 2.0))), 4)   # half the cube's diagonal
+    1.7321
+    """
+    v = np.asarray(mesh.vertices, dtype=np.float64)
+    return float(np.linalg.norm(v - (v.max(0) + v.min(0)) / 2, axis=1).max()) or 1.0
+
+
 def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size: int = 400,
-          unit: str | None = None) -> None:
+          unit: str | None = None, radius: float | None = None) -> None:
     """Draw a shaded picture of ``mesh`` on a (2D) matplotlib axis.
 
     With ``unit`` (the unit of the mesh coordinates, e.g. ``"mm"``) a scale bar
-    is drawn in the lower left corner (:func:`scale_bar_length`).
+    is drawn in the lower left corner (:func:`scale_bar_length`).  ``radius``:
+    as for :func:`render_image` (one scale for several pictures).
     """
-    ax.imshow(render_image(mesh, size=size, color=color, elev=elev, azim=azim), interpolation="antialiased")
+    ax.imshow(render_image(mesh, size=size, color=color, elev=elev, azim=azim, radius=radius),
+              interpolation="antialiased")
     ax.set_axis_off()
     if unit:
-        v = np.asarray(mesh.vertices, dtype=np.float64)
-        radius = float(np.linalg.norm(v - (v.max(0) + v.min(0)) / 2, axis=1).max()) or 1.0
+        radius = view_radius(mesh) if radius is None else float(radius)
         per_unit = (size / 2 - 2) / radius  # pixels per mesh unit, as render_image projects
         length = scale_bar_length(size / per_unit)
         # in a strip below the picture, so that it never covers the grain
@@ -333,20 +351,23 @@ def scale_bar_length(width: float) -> float:
 def contact_sheet(
     meshes: Sequence, labels: Sequence[str], out: str | Path, *, columns: int | None = None,
     title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
-    elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None,
+    elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None, common_scale: bool = False,
+    radius: float | None = None,
 ) -> Path:
     """Write a PNG with one shaded, labelled panel per mesh (:func:`contact_sheet_figure`)."""
     from .io import save_figure
 
     fig = contact_sheet_figure(meshes, labels, columns=columns, title=title, panel_size=panel_size, dpi=dpi,
-                               elev=elev, azim=azim, color=color, unit=unit)
+                               elev=elev, azim=azim, color=color, unit=unit, common_scale=common_scale,
+                               radius=radius)
     return save_figure(fig, out)
 
 
 def contact_sheet_figure(
     meshes: Sequence, labels: Sequence[str], *, columns: int | None = None,
     title: str | None = None, panel_size: float = 2.4, dpi: int = 130,
-    elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None,
+    elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None, common_scale: bool = False,
+    radius: float | None = None,
 ):
     """A matplotlib Figure with one shaded, labelled panel per mesh.
 
@@ -368,6 +389,13 @@ def contact_sheet_figure(
     unit : str, optional
         Unit of the mesh coordinates (``"mm"`` for files): each panel gets a
         scale bar.  Without it (grains in model units) there is none.
+    common_scale : bool
+        Draw every panel at one scale (that of the largest mesh), with one
+        scale-bar length for the whole sheet, rather than each mesh filling
+        its panel: sizes compare across panels.
+    radius : float, optional
+        The one scale to draw every panel at, as a half-width in mesh units
+        (for several sheets at one scale: the largest :func:`view_radius` of all).
     """
     import matplotlib
 
@@ -387,9 +415,11 @@ def contact_sheet_figure(
     title_in = 0.4 if title else 0.0
     height = rows * (panel_size + label_in) + title_in
     fig = plt.figure(figsize=(panel_size * cols, height), dpi=dpi)
+    if radius is None and common_scale:
+        radius = max(view_radius(m) for m in meshes)
     for i, (m, lab) in enumerate(zip(meshes, labels)):
         ax = fig.add_subplot(rows, cols, i + 1)
-        shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit)
+        shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit, radius=radius)
         ax.set_title(lab, fontsize=8, pad=2)
     if title:
         import textwrap

@@ -25,7 +25,7 @@ __all__ = ["UNITS", "with_unit", "plain", "headers"]
 _LENGTHS = ("size", "equivalent_diameter", "L", "I", "S", "L_pca", "I_pca", "S_pca", "radius_of_gyration",
             "R_g", "primary_size", "rounding_radius", "chordal_deviation", "deviation_tolerance", "mean_edge",
             "retained_wavelength", "x", "y", "z", "size_x", "size_y", "size_z", "gap",
-            # analyse --voxel-size/--voxels-across (Sand-Atlas voxel measures)
+            # analyse --voxel-size-mm/--voxels-across (Sand-Atlas voxel measures)
             "atlas_voxel_size", "atlas_equivalent_diameter", "atlas_major", "atlas_middle", "atlas_minor")
 
 #: column -> unit suffix, for every column grainforge writes that has a unit

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ..units import with_unit
+from .options import renamed_option
 from .paths import OutPath, mesh_inputs, output_file
 
 #: columns of the terminal table (all columns go to --csv and --json)
@@ -60,11 +61,12 @@ def _json_value(v):
               help="Fourier descriptors D2…D16 of the three principal projections.")
 @click.option("--primary-volume", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
-@click.option("--voxel-size", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--voxel-size-mm", "voxel_size", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
-                   "(mm, the file's units); see docs/validation.md.")
+                   "in mm (the files' unit: 7.3 µm is 0.0073); see docs/validation.md.")
+@renamed_option("--voxel-size", "--voxel-size-mm", "mm")
 @click.option("--voxels-across", type=click.FloatRange(min=2), default=None,
-              help="As --voxel-size, with the voxel size set to d_eq / this number.")
+              help="As --voxel-size-mm, with the voxel size set to d_eq / this number.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
 @click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
               help="Processes measuring files; rows do not depend on it.")
@@ -88,7 +90,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     if primary_volume is not None and not math.isfinite(primary_volume):
         raise click.BadParameter(f"must be a finite volume, got {primary_volume}", param_hint="'--primary-volume'")
     if voxel_size is not None and voxels_across is not None:
-        raise click.UsageError("give --voxel-size or --voxels-across, not both")
+        raise click.UsageError("give --voxel-size-mm or --voxels-across, not both")
     atlas = None
     if voxel_size is not None:
         atlas = {"voxel_size": voxel_size}

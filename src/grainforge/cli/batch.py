@@ -40,10 +40,14 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
                            progress=progress_bar(total=r.count, desc=f"{r.method} population"))
     except FileExistsError as exc:
         raise click.UsageError(str(exc)) from None
-    msg = f"wrote {result['generated']} {r.method} grain(s)"
-    if result["reused"]:
-        msg += f" (kept {result['reused']} intact from the interrupted batch)"
-    click.echo(f"{msg}, manifest.csv, manifest.json and population.png to {out}", err=True)
+    if result["generated"] == 0 and result["reused"] == r.count:
+        click.echo(f"the batch in {out} is already complete: all {r.count} {r.method} grains are intact, "
+                   "none generated; manifest.csv, manifest.json and population.png rewritten", err=True)
+    else:
+        msg = f"wrote {result['generated']} {r.method} grain(s)"
+        if result["reused"]:
+            msg += f" (kept {result['reused']} intact from the interrupted batch)"
+        click.echo(f"{msg}, manifest.csv, manifest.json and population.png to {out}", err=True)
     grading = (result["summary"] or {}).get("grading")
     if grading:
         click.echo(f"grading curve: max deviation from target {grading['max_abs_deviation_percent']:.1f} "

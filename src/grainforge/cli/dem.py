@@ -13,6 +13,17 @@ from .paths import OutPath, output_dir
 MAX_POUR_GRAINS = 100_000
 
 ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run", "lammps": "lmp -in in.run"}
+#: option (parameter name, flag) -> the --shape it applies to
+SHAPE_OPTIONS = {("spheres", "--spheres"): "clump", ("refine", "--refine-iterations"): "clump",
+                 ("vertices", "--vertices"): "polyhedron", ("spacing", "--spacing"): "levelset"}
+
+
+def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
+    """One line when an option of another --shape was given (it would be ignored silently)."""
+    for (name, flag), owner in SHAPE_OPTIONS.items():
+        source = ctx.get_parameter_source(name)
+        if owner != shape and source not in (None, click.core.ParameterSource.DEFAULT):
+            raise click.UsageError(f"{flag} applies to --shape {owner} only, not to --shape {shape}")
 
 
 @click.command()
@@ -25,7 +36,7 @@ ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run"
 @click.option("--density", type=click.FloatRange(1.0, 1e5), default=2650.0, show_default=True,
               help="Solid density, kg/m³.")
 @click.option("--spheres", type=click.IntRange(2, 1000), default=30, show_default=True,
-              help="Spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage).")
+              help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage).")
 @click.option("--refine-iterations", "refine", type=click.IntRange(0, 10000), default=0, show_default=True,
               help="Clump: L-BFGS iterations refining all spheres after the greedy placement "
                    "(30: a few points more coverage for several times the CPU; 0: off).")
@@ -57,6 +68,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     from ..dem.inputs import build_templates, grain_paths, pour_counts
     from .progress import progress_bar
 
+    _refuse_foreign_options(click.get_current_context(), shape)
     if shape not in SUPPORTED[engine]:
         raise click.UsageError(f"--engine {engine} does not support --shape {shape} "
                                f"(supported: {', '.join(SUPPORTED[engine])})")

@@ -215,3 +215,19 @@ def output_options(f=None, *, printer: bool = True):
     for opt in reversed(opts):
         f = opt(f)
     return f
+
+
+def renamed_option(old: str, new: str, what: str) -> Callable:
+    """A hidden option ``old`` that refuses in one line, naming ``new`` (the option's new name).
+
+    For an option renamed to carry its unit (``--voxel-size`` → ``--voxel-size-um``):
+    an old command line stops with exit code 2 rather than reading a number in the wrong unit.
+    """
+
+    def refuse(ctx, param, value):
+        if value is not None:
+            raise click.UsageError(f"{old} is now {new} ({what}); write {new} {value}")
+        return value
+
+    return click.option(old, "_renamed_" + old.lstrip("-").replace("-", "_"), hidden=True, default=None,
+                        expose_value=False, callback=refuse, is_eager=True)

@@ -9,6 +9,9 @@ import click
 from .options import build_params, param_options
 from .paths import OutPath, output_dir
 
+#: settings only the tilt test reads: not offered by `simulate repose`
+TILT_ONLY = ("tilt_step", "tilt_start")
+
 
 def _command(test: str, doc: str):
     @click.command(name=test, help=doc)
@@ -24,7 +27,7 @@ def _command(test: str, doc: str):
     @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
                   help="Yade runs (seeds) at once, each on one core (default: CPU count).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
-    @param_options(_settings_cls())
+    @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
     def command(inputs, out, quick, as_spheres, label, workers, overwrite, **values):
         _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values)
 

@@ -79,6 +79,7 @@ class Params:
     aspect: tuple[float, float, float] = param(
         (1.3, 1.1, 1.0), "semi-axes L:I:S (along x, y, z) of the ellipsoid the facets are tangent to "
         f"(ratios only; L/S at most {MAX_ASPECT_RATIO:g})", kind="floats", low=0.0, low_open=True, high=100.0,
+        shown_default="1.3:1.1:1",
     )
     rounding: float = param(
         0.1, "edge and corner radius relative to the smallest semi-axis (≈ Wadell roundness; 0 = sharp)",

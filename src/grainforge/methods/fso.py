@@ -94,7 +94,7 @@ class Params:
         (1.0, 1.0, 1.0), "proportions A:B:C of the grain along x, y, z, as its minimum box and inertia "
         "ellipsoid measure them: an ellipsoidal precursor (overlay along the radius), then a small per-grain "
         f"linear correction (ratios only; longest/shortest at most {MAX_ASPECT_RATIO:g})", kind="floats",
-        low=0.0, low_open=True, high=100.0,
+        low=0.0, low_open=True, high=100.0, shown_default="1:1:1",
     )
 
     def __post_init__(self):

@@ -432,8 +432,11 @@ def measure_result(result: dict) -> dict:
         try:
             h = heap_angle(np.asarray(result["spheres"]), bin_width=0.5 * d, grain_size=d, base=result["base_top"])
         except ValueError as exc:  # a heap of a few grains (--quick): no slope to measure
+            # the ring width is fixed (half a grain): the remedy open to the user is a bigger heap
+            reason = str(exc).split(" (")[0]
+            note = f"{reason} ({result['grains']} grains); use more --grains"
             row.update(angle_deg=float("nan"), sector_sd_deg=float("nan"), heap_height_mm=float("nan"),
-                       heap_foot_radius_mm=float("nan"), settled=bool(result["settled"]), note=str(exc))
+                       heap_foot_radius_mm=float("nan"), settled=bool(result["settled"]), note=note)
         else:
             row.update(angle_deg=h.angle, sector_sd_deg=h.spread, heap_height_mm=1e3 * h.height,
                        heap_foot_radius_mm=1e3 * h.foot, settled=bool(result["settled"]), note="")

@@ -136,7 +136,7 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     sel[i1:i2] = True
     if sel.sum() < 2:
         raise ValueError("the heap is too flat or too small to measure an angle (fewer than two rings "
-                         "on the slope: use a smaller bin_width)")
+                         "of width bin_width on the slope)")
     feet = np.nonzero(outside & ~(mean_profile > grain_size))[0]
     foot = float(centres[feet[0]] - 0.5 * bin_width) if len(feet) else float(centres[-1] + 0.5 * bin_width)
     per_sector = np.full(sectors, np.nan)
