@@ -184,7 +184,7 @@ def test_liggghts_takes_grains_of_ten_microns(three_grains, tmp_path):
         pytest.skip("liggghts not installed (apt-get install liggghts)")
     deck = tmp_path / "d"
     res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(deck), "--workers", "1", "--engine",
-                                   "liggghts", "--spheres", "10", "--unit", "5e-6"])  # 2 mm in the file: 10 µm
+                                   "liggghts", "--spheres", "10", "--unit", "5.5e-6"])  # 2 mm in the file: 11 µm
     assert res.exit_code == 0, res.output
     run = subprocess.run(["liggghts", "-in", "in.run"], cwd=deck, capture_output=True, text=True, timeout=300)
     assert "Volume expectancy too small" not in run.stdout
