@@ -190,3 +190,13 @@ def test_liggghts_takes_grains_of_ten_microns(three_grains, tmp_path):
     assert "Volume expectancy too small" not in run.stdout
     assert "ERROR" not in run.stdout, run.stdout[-2000:]
     assert (deck / "bodies-final.txt").is_file()
+
+
+def test_an_ascii_stl_with_text_coordinates_is_named(tmp_path):
+    from grainforge.io import read_mesh
+
+    bad = tmp_path / "text.stl"
+    bad.write_text("solid x\nfacet normal 0 0 1\nouter loop\nvertex a b c\nvertex 1 0 0\nvertex 0 1 0\n"
+                   "endloop\nendfacet\nendsolid x\n")
+    with pytest.raises(ValueError, match=r"text\.stl: corrupt or unsupported mesh file"):
+        read_mesh(bad)

@@ -318,8 +318,11 @@ def read_mesh(path: str | os.PathLike):
             if other is not None:
                 raise ValueError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
             loaded = trimesh.load(path, force="mesh", process=False)
-    except ValueError:
-        raise
+    except ValueError as exc:
+        if str(exc).startswith(f"{path}:"):  # ours: it names the file already
+            raise
+        detail = " ".join(str(exc).split()) or type(exc).__name__
+        raise ValueError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # trimesh raises many types for corrupt input
