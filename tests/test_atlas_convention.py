@@ -62,3 +62,28 @@ def test_live_spam_if_installed():
         lab[10:-10, 10:-10, 10:-10] = mask
         spam_now = float(spam_label.trueSphericity(lab)[1])
         assert abs(voxel_descriptors(mask, 0.029)["sphericity"] - spam_now) <= 1e-6, name
+
+
+def test_analyse_and_fit_name_the_convention(tmp_path):
+    import json
+
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+    from grainforge.fit import measure_grain
+
+    runner = CliRunner()
+    res = runner.invoke(cli, ["generate", "cri", "--seed", "3", "--size", "2", "--out", str(tmp_path / "g")])
+    assert res.exit_code == 0, res.output
+    stl = str(tmp_path / "g" / "cri-0000.stl")
+    sph = {}
+    for convention in ("atlas", "whole"):
+        res = runner.invoke(cli, ["analyse", stl, "--voxel-size-mm", "0.029", "--json", "--no-fourier",
+                                  "--sphericity-convention", convention])
+        assert res.exit_code == 0, res.output
+        sph[convention] = json.loads(res.stdout)[0]["atlas_sphericity"]
+    assert sph["atlas"] - sph["whole"] > 0.003, sph  # this grain is one spam clips
+    text = 'method = "cri"\ncount = 1\nseed = 3\n[size]\nmm = 0.35\n'
+    a = measure_grain(text, 0, 7.3)
+    w = measure_grain(text, 0, 7.3, "whole")
+    assert a[2:5] == w[2:5]  # convexity, flatness, elongation do not depend on it

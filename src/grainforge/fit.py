@@ -453,11 +453,12 @@ def _recipe(text: str):
     return parse_recipe(text, source="<fit>")
 
 
-def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, ...]:
+def measure_grain(text: str, index: int, voxel_size_um: float, convention: str = "atlas") -> tuple[float, ...]:
     """Grain ``index`` of recipe ``text`` as ``batch`` makes it, measured the Atlas way.
 
     It is voxelised at ``voxel_size_um`` relative to its drawn equivalent
-    diameter, in a random orientation drawn from its own seed.  Returns
+    diameter, in a random orientation drawn from its own seed; ``convention``
+    is true sphericity's (:func:`grainforge.analysis.atlas.voxel_descriptors`).  Returns
     (d_eq µm, sphericity, convexity, flatness, elongation, CPU seconds spent).
     """
     import time
@@ -471,7 +472,8 @@ def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, .
     seed, params, size_mm = draw_grain(recipe, index)
     grain = generate(recipe.method, params, seed)
     across = size_mm * 1000.0 / voxel_size_um
-    d = atlas_descriptors(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]))
+    d = atlas_descriptors(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]),
+                          convention=convention)
     return (d["equivalent_diameter"] / d["voxel_size"] * voxel_size_um, *(d[k] for k in DESCRIPTORS),
             time.process_time() - cpu)
 
@@ -479,8 +481,9 @@ def measure_grain(text: str, index: int, voxel_size_um: float) -> tuple[float, .
 class _Pool:
     """Runs :func:`measure_grain` over indices, in this process or on a worker pool."""
 
-    def __init__(self, workers: int):
+    def __init__(self, workers: int, convention: str = "atlas"):
         self.workers = workers
+        self.convention = convention
         self.ex = None
         self.cache: dict[tuple[str, int], tuple[float, ...]] = {}  # (recipe text, index) -> measurement
         self.cpu = 0.0  # CPU seconds the workers spent generating and measuring
@@ -507,14 +510,14 @@ class _Pool:
         out = np.empty((count, 5))
         todo = [i for i in range(count) if (text, i) not in self.cache]
         if self.ex is None:
-            it: Iterable = ((i, measure_grain(text, i, voxel)) for i in todo)
+            it: Iterable = ((i, measure_grain(text, i, voxel, self.convention)) for i in todo)
         else:
             from concurrent.futures import as_completed
 
             from .workers import single_threaded_children
 
             with single_threaded_children():
-                futs = {self.ex.submit(measure_grain, text, i, voxel): i for i in todo}
+                futs = {self.ex.submit(measure_grain, text, i, voxel, self.convention): i for i in todo}
             it = ((futs[f], f.result()) for f in as_completed(futs))
         if progress is not None and todo:
             it = progress(it, len(todo))
@@ -625,6 +628,7 @@ def fit_sand(
     final_rounds: int = 3,
     seed: int = 2024,
     workers: int = 1,
+    sphericity: str = "atlas",
     progress: Callable[[Iterable, int], Iterable] | None = None,
     log: Callable[[str], None] | None = None,
     desc: Callable[[str], None] | None = None,
@@ -644,6 +648,10 @@ def fit_sand(
         made from the previous one); the best is kept.
     workers : int
         Processes measuring grains (1: this process).
+    sphericity : {"atlas", "whole"}
+        How the generated grains' true sphericity is measured: as the Sand
+        Atlas did (spam's cube, the default, for tables measured that way) or
+        on the whole grain (:func:`grainforge.analysis.atlas.voxel_descriptors`).
     progress : callable, optional
         ``progress(iterable, total)`` wraps each population's grains (a bar).
     log, desc : callable, optional
@@ -755,7 +763,7 @@ def fit_sand(
         if np.any(dx):
             J += np.outer(dy - J @ dx, dx) / float(dx @ dx)
 
-    with _Pool(max(1, int(workers))) as pool:
+    with _Pool(max(1, int(workers)), sphericity) as pool:
         gen, st = evaluate(x, pilot, "pilot 0 (start)")
         # finite-difference Jacobian on the first half of the pilot (same grains: differences, not noise)
         nj = max(2, pilot // 2)

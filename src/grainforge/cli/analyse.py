@@ -67,11 +67,15 @@ def _json_value(v):
 @renamed_option("--voxel-size", "--voxel-size-mm", "mm")
 @click.option("--voxels-across", type=click.FloatRange(min=2), default=None,
               help="As --voxel-size-mm, with the voxel size set to d_eq / this number.")
+@click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
+              show_default=True,
+              help="atlas_sphericity as the Sand Atlas computed it (spam's cube, clipped above the centre of "
+                   "mass) or on the whole grain; docs/validation.md.")
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
 @click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
               help="Processes measuring files; rows do not depend on it.")
-def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, overwrite,
-            workers):
+def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, sphericity,
+            overwrite, workers):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.
 
     Volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S (minimum-volume
@@ -93,9 +97,9 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
         raise click.UsageError("give --voxel-size-mm or --voxels-across, not both")
     atlas = None
     if voxel_size is not None:
-        atlas = {"voxel_size": voxel_size}
+        atlas = {"voxel_size": voxel_size, "convention": sphericity}
     elif voxels_across is not None:
-        atlas = {"voxels_across": voxels_across}
+        atlas = {"voxels_across": voxels_across, "convention": sphericity}
     if csv_out is not None:
         output_file(csv_out, overwrite=overwrite, option="--csv", suffixes=(".csv",))
     files = mesh_inputs(files)

@@ -39,8 +39,12 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.option("--seed", type=click.IntRange(min=0), default=2024, show_default=True, help="Root seed of the recipe.")
 @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
               help="Worker processes [default: CPU count].")
+@click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
+              show_default=True,
+              help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
+                   "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
 @click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv and fit.png in --out.")
-def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed, workers, overwrite):
+def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed, workers, sphericity, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
 
     Every generated grain is voxelised at the sand's voxel size relative to
@@ -86,7 +90,7 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
                f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
                "across)", err=True)
     result = fit_sand(s, method, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds, seed=seed,
-                      workers=workers, progress=progress,
+                      workers=workers, sphericity=sphericity, progress=progress,
                       log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
     paths = write_outputs(s, result, out)
     verdict = "PASSES" if result.stats["pass"] else "does NOT pass"
