@@ -103,36 +103,36 @@ HUGE_SIM = ["--grains", "20000", "--templates", "20000", "--spheres", "200", "--
 
 CASES = [
     # fit: tables that cannot be fitted
-    Case("fit-700-identical-grains", ["fit", "{in}/same.csv", "--voxel-size", "7.3", "--out", "o", "--workers", "2"],
+    Case("fit-700-identical-grains", ["fit", "{in}/same.csv", "--voxel-size-um", "7.3", "--out", "o", "--workers", "2"],
          r"same\.csv: every grain has the same equivalent diameter"),
-    Case("fit-identical-sphericity", ["fit", "{in}/same-sphericity.csv", "--voxel-size", "7.3", "--out", "o"],
+    Case("fit-identical-sphericity", ["fit", "{in}/same-sphericity.csv", "--voxel-size-um", "7.3", "--out", "o"],
          r"same-sphericity\.csv: every grain has the same sphericity"),
-    Case("fit-2-grains", ["fit", "{in}/two.csv", "--voxel-size", "7.3", "--out", "o"],
+    Case("fit-2-grains", ["fit", "{in}/two.csv", "--voxel-size-um", "7.3", "--out", "o"],
          r"two\.csv: 2 grain\(s\); a fit needs at least 50"),
-    Case("fit-49-grains", ["fit", "{in}/few.csv", "--voxel-size", "7.3", "--out", "o"], r"few\.csv: 49 grain"),
-    Case("fit-sphericity-5", ["fit", "{in}/sph5.csv", "--voxel-size", "7.3", "--out", "o"],
+    Case("fit-49-grains", ["fit", "{in}/few.csv", "--voxel-size-um", "7.3", "--out", "o"], r"few\.csv: 49 grain"),
+    Case("fit-sphericity-5", ["fit", "{in}/sph5.csv", "--voxel-size-um", "7.3", "--out", "o"],
          r"sph5\.csv: line 2, column 'True Sphericity \(-\)': out of range \(at most 1\.2\): '5\.0'"),
-    Case("fit-empty-table", ["fit", "{in}/empty.csv", "--voxel-size", "7.3", "--out", "o"], r"empty\.csv: empty"),
-    Case("fit-missing-table", ["fit", "{in}/nope.csv", "--voxel-size", "7.3", "--out", "o"], r"nope\.csv"),
+    Case("fit-empty-table", ["fit", "{in}/empty.csv", "--voxel-size-um", "7.3", "--out", "o"], r"empty\.csv: empty"),
+    Case("fit-missing-table", ["fit", "{in}/nope.csv", "--voxel-size-um", "7.3", "--out", "o"], r"nope\.csv"),
     # fit: voxel sizes (µm) that put the grains outside 5 to 1000 voxels across
-    *[Case(f"fit-voxel-size-{v}", _fit("--voxel-size", v),
+    *[Case(f"fit-voxel-size-{v}", _fit("--voxel-size-um", v),
            r"ottawa-7\.3um\.csv: at a voxel size of .* voxels across; the fit measures grains 5 to 1000")
       for v in ("1e-30", "1e30", "1e6", "0.001", "0.4", "200")],
-    *[Case(f"fit-voxel-size-{v}", _fit("--voxel-size", v), r"voxel.size") for v in ("nan", "inf", "0", "-1")],
+    *[Case(f"fit-voxel-size-{v}", _fit("--voxel-size-um", v), r"voxel.size") for v in ("nan", "inf", "0", "-1")],
     # fit: huge work refused up front, by the declared range or the estimate
-    Case("fit-count-1e9", _fit("--voxel-size", "7.3", "--count", "1000000000"), r"--count.*not in the range"),
-    Case("fit-pilot-1e9", _fit("--voxel-size", "7.3", "--pilot", "1000000000"), r"--pilot.*not in the range"),
-    Case("fit-auto-count-1e8", _fit("--voxel-size", "7.3", "--method", "auto", "--count", "100000000"),
+    Case("fit-count-1e9", _fit("--voxel-size-um", "7.3", "--count", "1000000000"), r"--count.*not in the range"),
+    Case("fit-pilot-1e9", _fit("--voxel-size-um", "7.3", "--pilot", "1000000000"), r"--pilot.*not in the range"),
+    Case("fit-auto-count-1e8", _fit("--voxel-size-um", "7.3", "--method", "auto", "--count", "100000000"),
          r"--count.*not in the range"),
-    Case("fit-count-1e6", _fit("--voxel-size", "7.3", "--count", "1000000", "--workers", "1"),
+    Case("fit-count-1e6", _fit("--voxel-size-um", "7.3", "--count", "1000000", "--workers", "1"),
          r"fit --method rf, measuring up to \d+ grains, would take about .* days? .*; lower --count"),
-    Case("fit-pilot-1e6", _fit("--voxel-size", "7.3", "--count", "1000000", "--pilot", "1000000", "--workers", "1"),
+    Case("fit-pilot-1e6", _fit("--voxel-size-um", "7.3", "--count", "1000000", "--pilot", "1000000", "--workers", "1"),
          r"measuring up to 14000000 grains, would take about .*; lower --pilot \(or --rounds\)"),
-    Case("fit-auto-count-1e5", _fit("--voxel-size", "7.3", "--method", "auto", "--count", "100000", "--workers", "1"),
+    Case("fit-auto-count-1e5", _fit("--voxel-size-um", "7.3", "--method", "auto", "--count", "100000", "--workers", "1"),
          r"fit --method auto, .* would take about .*; lower --count or fit one --method"),
-    Case("fit-workers-1000", _fit("--voxel-size", "7.3", "--workers", "1000"), r"--workers.*not in the range"),
-    Case("fit-rounds-0", _fit("--voxel-size", "7.3", "--rounds", "0"), r"--rounds"),
-    Case("fit-method-nope", _fit("--voxel-size", "7.3", "--method", "nope"), r"--method"),
+    Case("fit-workers-1000", _fit("--voxel-size-um", "7.3", "--workers", "1000"), r"--workers.*not in the range"),
+    Case("fit-rounds-0", _fit("--voxel-size-um", "7.3", "--rounds", "0"), r"--rounds"),
+    Case("fit-method-nope", _fit("--voxel-size-um", "7.3", "--method", "nope"), r"--method"),
     # simulate: huge work refused up front with the estimate
     Case("simulate-repose-huge", _sim("repose", *HUGE_SIM),
          r"100 repose run\(s\) of 20000 grains of 200 sphere\(s\) .*would take about .*; lower --grains, --spheres "
@@ -150,7 +150,7 @@ CASES = [
     Case("simulate-bad-recipe", ["simulate", "tilt", "{in}/bad.toml", "--out", "o"], r"bad\.toml"),
     Case("simulate-out-is-a-file", _sim("repose")[:-1] + ["afile"], r"afile'? is a file"),
     Case("simulate-existing-results", _sim("repose")[:-1] + ["done"], r"exists.*--overwrite"),
-    Case("fit-existing-outputs", ["fit", str(OTTAWA), "--voxel-size", "7.3", "--out", "done"], r"exists.*--overwrite"),
+    Case("fit-existing-outputs", ["fit", str(OTTAWA), "--voxel-size-um", "7.3", "--out", "done"], r"exists.*--overwrite"),
 ]
 
 
@@ -278,7 +278,7 @@ def test_fuzz_fit_options_are_refused_up_front_without_a_budget(data, tmp_path_f
     from grainforge.fit import FITS
 
     cwd = tmp_path_factory.mktemp("fuzz-fit")
-    args = ["fit", str(OTTAWA), "--out", "o", "--voxel-size", str(data.draw(st.one_of(
+    args = ["fit", str(OTTAWA), "--out", "o", "--voxel-size-um", str(data.draw(st.one_of(
         st.just(7.3), st.floats(1e-40, 1e40), st.sampled_from(["0", "-1", "nan", "inf"])), label="voxel"))]
     args += ["--method", data.draw(st.sampled_from(list(FITS) + ["auto"]), label="method")]
     strategies = _option_values(fit, skip=("voxel_size",))
@@ -489,7 +489,7 @@ def test_sigkill_while_yade_runs_leaves_nothing_that_blocks_the_rerun(tmp_path, 
 @pytest.mark.parametrize("delay", [0.8, 1.5])
 def test_signal_early_in_a_fit_is_honoured(tmp_path, sig, delay):
     """A fit (minutes of work) stopped while it loads its modules or starts its pilot: one line, nothing left."""
-    proc = _start(["fit", str(OTTAWA), "--voxel-size", "7.3", "--out", "o", "--workers", "1"], tmp_path)
+    proc = _start(["fit", str(OTTAWA), "--voxel-size-um", "7.3", "--out", "o", "--workers", "1"], tmp_path)
     time.sleep(delay)
     os.killpg(proc.pid, sig)
     _stopped(proc, sig)
