@@ -34,12 +34,17 @@ def main():
     args = ap.parse_args()
     import trimesh
     from scipy import ndimage
-
-    import grainforge
     from skimage.measure import marching_cubes
 
-    from grainforge.analysis.atlas import (_hull_count, _surface_area, atlas_descriptors, random_rotation,
-                                          straddling_cubes, voxelise)
+    import grainforge
+    from grainforge.analysis.atlas import (
+        _hull_count,
+        _surface_area,
+        atlas_descriptors,
+        random_rotation,
+        straddling_cubes,
+        voxelise,
+    )
     from grainforge.methods import get
     from grainforge.solid import signed_volume
 

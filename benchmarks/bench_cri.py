@@ -26,9 +26,9 @@ def best(fn, repeat=7, number=10, clock=time.perf_counter):
 
 
 def bench_grains():
+    from grainforge.io import export_bytes
     from grainforge.methods import generate
     from grainforge.methods.cri import Params, build
-    from grainforge.io import export_bytes
 
     print("CRI grain (rough-angular), best of 7 × 10, one process; wall clock (CPU time):")
     print(f"{'s':>2} {'vertices':>9} {'build ms':>16} {'generate ms':>16} {'+STL ms':>16}")

@@ -12,7 +12,6 @@ import time
 
 import numpy as np
 
-
 CPU: list[float] = []  # CPU seconds (time.process_time) of the best run of each best() call
 
 

@@ -62,7 +62,7 @@ def ridge_share(vertices, faces) -> float:
 def sections_table(sets, grains: int, with_projections: bool = True, **kw):
     from grainforge import cri
 
-    print(f"\n| requested (D2, D3, D8) | sections: mean D2, D3, D8 | error | per plane (⊥L; ⊥I; ⊥S) "
+    print("\n| requested (D2, D3, D8) | sections: mean D2, D3, D8 | error | per plane (⊥L; ⊥I; ⊥S) "
           + ("| projections: mean D2, D3, D8 " if with_projections else "") + "|")
     print("|---|---|---|---|" + ("---|" if with_projections else ""))
     rows = []

@@ -14,7 +14,6 @@ from __future__ import annotations
 import time
 
 import numpy as np
-
 from validate_cri import read_back, ridge_share, section_descriptors
 
 SETS = ((0.0, 0.0, 0.02), (0.15, 0.10, 0.03), (0.3, 0.1, 0.05))

@@ -190,7 +190,7 @@ def part_ideal(n_fields, n_cut_fields):
     from grainforge.contours import descriptor_spectrum
     from grainforge.methods.rf import angular_spectrum, coefficients
 
-    print(f"\n### 2c. What an ideal isotropic field gives: x/y/z spread of 50-grain means, no mesh\n")
+    print("\n### 2c. What an ideal isotropic field gives: x/y/z spread of 50-grain means, no mesh\n")
     t = time.time()
     D = descriptor_spectrum(0.15, 0.1, 0.03, modes=32)
     offsets = (-0.45, -0.3, -0.15, 0.0, 0.15, 0.3, 0.45)

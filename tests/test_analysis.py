@@ -16,11 +16,18 @@ from scipy.spatial.transform import Rotation
 
 from grainforge import fso
 from grainforge.analysis.descriptors import (
-    BASIC_COLUMNS, DESCRIPTOR_COLUMNS, basic_descriptors, describe, is_closed, mass_properties,
+    BASIC_COLUMNS,
+    DESCRIPTOR_COLUMNS,
+    basic_descriptors,
+    describe,
+    is_closed,
+    mass_properties,
     principal_dimensions,
 )
 from grainforge.analysis.fourier import (
-    descriptors_from_radii, fd_columns, projection_descriptors,
+    descriptors_from_radii,
+    fd_columns,
+    projection_descriptors,
 )
 from grainforge.analysis.fractal import fractal_dimension
 from grainforge.analysis.measure import analyse_file, split_bodies

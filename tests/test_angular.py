@@ -151,7 +151,6 @@ def test_too_small_a_radius_is_named(monkeypatch):
 def test_radius_matches_brute_force_over_all_features():
     """The feature filter of radius() never drops the exit feature: same r as max over every capsule."""
     from grainforge.geodesic import icosphere
-    from grainforge.methods.angular import _polytope
 
     unit, _ = icosphere(4)
     cases = [(0.1, 0, 24, (2.0, 1.3, 1.0)), (0.5, 1, 24, (2.0, 1.3, 1.0)), (0.9, 2, 24, (2.0, 1.3, 1.0)),

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import trimesh
@@ -84,9 +82,9 @@ def test_hull_count_of_flat_and_thin_masks():
 
 
 def test_scanline_voxeliser_equals_ray_parity_and_hull_count_equals_brute_force_on_a_rough_grain():
-    import grainforge
     from scipy.spatial import ConvexHull, Delaunay
 
+    import grainforge
     from grainforge.analysis.atlas import _ray_toggles
     from grainforge.methods import get
 

@@ -89,7 +89,6 @@ def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
     import os
     import signal
     import subprocess
-    import sys
     import time
     import uuid
 

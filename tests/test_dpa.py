@@ -7,13 +7,16 @@ from hypothesis import strategies as st
 
 import grainforge
 from grainforge.analysis.aggregate import (
-    aggregate_dimension, bounding_box_edges, mass_radius_fit, porosity, radius_of_gyration,
+    aggregate_dimension,
+    bounding_box_edges,
+    mass_radius_fit,
+    porosity,
+    radius_of_gyration,
 )
 from grainforge.methods import dpa as D
 from grainforge.methods._polyhedra import PRIMITIVES, intrudes, mirror, solid
 from grainforge.params import ParameterError
 from grainforge.solid import index_problems, signed_volume, solid_problems
-
 
 # ---------------------------------------------------------------- primaries
 

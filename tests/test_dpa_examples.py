@@ -9,10 +9,10 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_solid_contract import assert_valid_stl
 
 import grainforge
 from grainforge.cli.main import cli
-from test_solid_contract import assert_valid_stl
 
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = [ROOT / "README.md", ROOT / "docs" / "methods" / "dpa.md"]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from grainforge.cli.main import cli
-from grainforge.fit import COLUMNS, DESCRIPTORS, FITS, compare, read_sand, recipe_text
+from grainforge.fit import DESCRIPTORS, FITS, compare, read_sand, recipe_text
 from grainforge.population import parse_recipe
 
 HEADER = ["Particle ID", "Volume (µm³)", "Equivalent Diameter (µm)", "Major Axis Length (µm)",

@@ -13,8 +13,8 @@ def manifests(tmp_path_factory):
     """Two analyse-style manifests of FSO grains (smooth vs rough) and a generate manifest."""
     from grainforge import fso
     from grainforge.analysis.descriptors import describe
-    from grainforge.run import write_run
     from grainforge.methods.fso import Params
+    from grainforge.run import write_run
 
     d = tmp_path_factory.mktemp("m")
     out = {}

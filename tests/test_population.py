@@ -8,7 +8,14 @@ import pytest
 import grainforge
 from grainforge.io import export_bytes
 from grainforge.population import (
-    Distribution, GradingCurve, RecipeError, draw_grain, field_line, grain_stream, make_grain, parse_recipe,
+    Distribution,
+    GradingCurve,
+    RecipeError,
+    draw_grain,
+    field_line,
+    grain_stream,
+    make_grain,
+    parse_recipe,
     run_batch,
 )
 

@@ -18,8 +18,8 @@ import trimesh
 
 import grainforge
 from grainforge.analysis.box import minimum_box
-from grainforge.analysis.relief import cap_band_rms, mirror_correlation, separable_share
 from grainforge.analysis.principal_sections import section_descriptors
+from grainforge.analysis.relief import cap_band_rms, mirror_correlation, separable_share
 from grainforge.io import export_bytes
 from grainforge.methods import cri as cri_mod
 from grainforge.methods import fso as fso_mod

@@ -100,7 +100,7 @@ def _angular(draw_params):
         lambda d: {**d, "aspect": tuple(sorted(d["aspect"], reverse=True))})
 
 
-@functools.lru_cache(maxsize=None)
+@functools.cache
 def _spectrum_csv() -> str:
     """A 'grainforge fourier' table of the synthetic sample micrograph (made once per session)."""
     import atexit

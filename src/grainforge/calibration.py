@@ -23,9 +23,9 @@ from __future__ import annotations
 import csv
 import hashlib
 import os
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
@@ -154,7 +154,7 @@ class Calibration:
         return write_csv(path, self.rows(), COLUMNS, units=UNITS)
 
     @classmethod
-    def read_csv(cls, path: str | os.PathLike) -> "Calibration":
+    def read_csv(cls, path: str | os.PathLike) -> Calibration:
         """Read a file written by :meth:`write_csv`."""
         with open(path, newline="") as fh:
             rows = list(csv.DictReader(fh))

@@ -29,10 +29,10 @@ Examples
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -222,7 +222,7 @@ class Contour:
         return fine[i] * (1 - w) + fine[(i + 1) % G] * w
 
     # ---------------------------------------------------------- transforms
-    def recentred(self) -> "Contour":
+    def recentred(self) -> Contour:
         """The same curve described about its area centroid (so that D1 ≈ 0).
 
         Generated contours are described about the origin they were built
@@ -237,7 +237,7 @@ class Contour:
         centroid = self.centroid + self.scale * np.array([cx, cy])
         return Contour(radii * self.scale, 1.0, centroid, star and self.star_shaped, self.source)
 
-    def rotated(self, angle: float) -> "Contour":
+    def rotated(self, angle: float) -> Contour:
         """The contour turned counter-clockwise by ``angle`` (exact, via a Fourier phase shift)."""
         N = self.n_angles
         c = np.fft.rfft(self.radii)
@@ -247,7 +247,7 @@ class Contour:
             c[-1] = c[-1].real
         return Contour(np.fft.irfft(c, N), self.scale, self.centroid, self.star_shaped, self.source)
 
-    def mirrored(self) -> "Contour":
+    def mirrored(self) -> Contour:
         """The contour reflected about the x axis (θ → −θ)."""
         r = np.roll(self.radii[::-1], 1)
         return Contour(r, self.scale, self.centroid, self.star_shaped, self.source)
@@ -259,7 +259,7 @@ class Contour:
         diam = fine[: G // 2] + fine[G // 2 :]
         return float(np.argmax(diam)) * TWO_PI / G
 
-    def aligned(self) -> "Contour":
+    def aligned(self) -> Contour:
         """The contour turned so that its longest diameter lies along +x."""
         return self.rotated(-self.longest_direction())
 
@@ -270,7 +270,7 @@ class Contour:
         x, y = fine * np.cos(t), fine * np.sin(t)
         return float(x.max() - x.min()), float(y.max() - y.min())
 
-    def stretched(self, ax: float, ay: float) -> "Contour":
+    def stretched(self, ax: float, ay: float) -> Contour:
         """The contour with x multiplied by ``ax`` and y by ``ay``, resampled on its grid.
 
         A linear map keeps a star-shaped contour star-shaped about the origin,
@@ -299,7 +299,7 @@ class Contour:
         modes: int = DEFAULT_MODES,
         n_angles: int = DEFAULT_ANGLES,
         rng=None,
-    ) -> "Contour":
+    ) -> Contour:
         """A random contour with given Fourier descriptors (docs/design/algorithms.md §2a).
 
         r(θ) = 1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n), δ_n ~ U(0, 2π) drawn in the
@@ -338,7 +338,7 @@ class Contour:
         return cls(_radii_from_spectrum(D, delta, n_angles), source="fourier")
 
     @classmethod
-    def from_spectrum(cls, D: Sequence[float], *, n_angles: int = DEFAULT_ANGLES, rng=None) -> "Contour":
+    def from_spectrum(cls, D: Sequence[float], *, n_angles: int = DEFAULT_ANGLES, rng=None) -> Contour:
         """A random contour with a full amplitude spectrum D_0…D_N (D_0, D_1 ignored).
 
         r(θ) = 1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n), δ_n ~ U(0, 2π) drawn as in
@@ -381,7 +381,7 @@ class Contour:
         modes: int = DEFAULT_MODES,
         n_angles: int = DEFAULT_ANGLES,
         rng=None,
-    ) -> "Contour":
+    ) -> Contour:
         """A fractal profile around the circle: the 2D variant of the paper's Eq. 1.
 
         With θ held constant in Eq. 1 and ρ the arc angle φ on a unit circle,
@@ -465,7 +465,7 @@ class Contour:
         threshold: float | None = None,
         foreground: str = "auto",
         n_angles: int = DEFAULT_ANGLES,
-    ) -> "Contour":
+    ) -> Contour:
         """The contour of the largest grain in an image (docs/design/algorithms.md §2b).
 
         The image is thresholded (Otsu unless ``threshold`` is given), the

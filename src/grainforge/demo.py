@@ -7,8 +7,8 @@ generators' sections are added as they land.
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
            "sample_micrograph", "write_fourier_csv", "grain_image", "example_images", "EXAMPLE_IMAGES"]

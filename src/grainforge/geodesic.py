@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -11,7 +11,7 @@ __all__ = ["icosphere", "spherical", "MAX_SUBDIVISIONS"]
 MAX_SUBDIVISIONS = 8
 
 
-@lru_cache(maxsize=None)
+@cache
 def _icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     import trimesh
 

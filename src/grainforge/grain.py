@@ -3,9 +3,10 @@
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Mapping
 from dataclasses import dataclass, field
 from types import MappingProxyType
-from typing import Any, Mapping
+from typing import Any
 
 import numpy as np
 
@@ -83,7 +84,7 @@ class Grain:
             vertices=self.vertices.copy(), faces=self.faces.copy(), process=False, validate=False
         )
 
-    def scaled(self, factor: float) -> "Grain":
+    def scaled(self, factor: float) -> Grain:
         """A new Grain with every coordinate multiplied by ``factor`` (> 0)."""
         factor = float(factor)
         if not np.isfinite(factor) or factor <= 0:

@@ -12,8 +12,8 @@ from __future__ import annotations
 
 import csv
 import textwrap
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -98,7 +98,7 @@ def sphericity_convexity(ax, tables) -> None:
 
 def _fd_matrix(t, plane: str):
     cols = sorted(
-        ((int(k.rsplit("_", 1)[1]), k) for k in t if k.startswith(f"fd_{plane}_") and k.rsplit("_", 1)[1].isdigit())
+        (int(k.rsplit("_", 1)[1]), k) for k in t if k.startswith(f"fd_{plane}_") and k.rsplit("_", 1)[1].isdigit()
     )
     return [n for n, _ in cols], [k for _, k in cols]
 

@@ -50,15 +50,16 @@ import os
 import re
 import shutil
 import tomllib
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Mapping, Sequence
+from typing import Any
 
 import numpy as np
 
 from .distributions import Distribution, FixedSize, GradingCurve, LognormalSize
 from .fabrication.scale import SIZE_DEFINITIONS
-from .io import FORMATS, atomic_write, export_bytes, write_csv
+from .io import FORMATS, atomic_write, write_csv
 from .params import ParameterError, ParamSpec, specs
 
 __all__ = [
@@ -770,7 +771,7 @@ def run_batch(
         For a recipe that does not match the interrupted batch, an unreachable
         scheduler, or a grain that cannot be made (named by index and seed).
     """
-    from .run import MANIFEST, manifest_columns
+    from .run import MANIFEST
 
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")

@@ -11,8 +11,9 @@ import os
 import re
 import shutil
 import tempfile
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
 from .analysis.descriptors import BASIC_COLUMNS, basic_descriptors
 from .fabrication.scale import check_size, to_size

@@ -18,7 +18,7 @@ Examples
 
 from __future__ import annotations
 
-from typing import Mapping, Sequence
+from collections.abc import Mapping, Sequence
 
 __all__ = ["UNITS", "with_unit", "plain", "headers"]
 

@@ -22,8 +22,9 @@ import sys
 import threading
 import time
 from collections import deque
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from contextlib import contextmanager
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any
 
 __all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive",
            "close_pool", "stop_forkserver"]

@@ -8,9 +8,7 @@ import click
 
 from .options import renamed_option
 from .paths import OutPath, output_dir
-
 from .progress import progress_bar
-
 
 #: modules a fit loads before any work (see cli.interrupts)
 HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",
@@ -58,8 +56,8 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
     import sys
 
     from ..estimate import TooLargeError, duration
-    from .interrupts import preload
     from ..fit import FITS, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
+    from .interrupts import preload
 
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",

@@ -20,8 +20,8 @@ import os
 import signal
 import sys
 import threading
+from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
-from typing import Iterable, Iterator
 
 __all__ = ["signals_held", "preload"]
 

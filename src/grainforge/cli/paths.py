@@ -32,8 +32,8 @@ from __future__ import annotations
 import os
 import tempfile
 import time
+from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Iterable, Sequence
 
 import click
 

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Callable, Iterable
+from collections.abc import Callable, Iterable
 
 
 def progress_bar(total: int | None = None, desc: str = "", unit: str = "grain") -> Callable[[Iterable], Iterable]:

@@ -77,9 +77,10 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     if seconds > 60:
         click.echo(f"estimated time: about {duration(seconds)} (a rough model; the progress bar shows the "
                    "measured rate)", err=True)
+    from tqdm import tqdm
+
     from ..simulate import build_population, commit_stage, discard_stage, open_stage, run_test, summarise
     from ..simulate.report import write_report
-    from tqdm import tqdm
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
     with tqdm(desc="clumps", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:

@@ -68,12 +68,12 @@ class Clump:
         """Number of spheres."""
         return int(len(self.radii))
 
-    def translated(self, offset) -> "Clump":
+    def translated(self, offset) -> Clump:
         """The same clump with every centre moved by ``offset``."""
         return Clump(self.centres + np.asarray(offset, dtype=np.float64), self.radii, self.coverage,
                      self.spill, self.resolution)
 
-    def scaled(self, factor: float) -> "Clump":
+    def scaled(self, factor: float) -> Clump:
         """The clump scaled by ``factor`` about the origin."""
         return Clump(self.centres * factor, self.radii * factor, self.coverage, self.spill, self.resolution)
 

@@ -41,7 +41,7 @@ class MassProperties:
     principal: np.ndarray
     axes: np.ndarray
 
-    def scaled(self, factor: float) -> "MassProperties":
+    def scaled(self, factor: float) -> MassProperties:
         """The properties of the solid scaled by ``factor`` about the origin."""
         f = float(factor)
         return MassProperties(self.volume * f**3, self.centroid * f, self.inertia * f**5,

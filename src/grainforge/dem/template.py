@@ -96,7 +96,7 @@ class GrainTemplate:
         """Largest distance of a vertex (or clump sphere surface) from the centroid, m."""
         return self.info["bounding_radius"]
 
-    def without_mesh(self) -> "GrainTemplate":
+    def without_mesh(self) -> GrainTemplate:
         """The same template without its mesh (what the decks need; small to keep by the thousand)."""
         return dataclasses.replace(self, vertices=None, faces=None)
 

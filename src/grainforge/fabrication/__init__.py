@@ -1,11 +1,11 @@
 """From grains to printable files: physical scale, printer profiles, resolution matching,
 printability checks and bulk print trays."""
 
+from ..io import read_parts
 from .printability import CheckResult, check_mesh
 from .printers import PRINTERS, Printer, get_printer, load_printers
 from .resolution import Resolution, match_subdivisions
 from .scale import SIZE_DEFINITIONS, scale_factor, to_size
-from ..io import read_parts
 from .threemf import read_3mf
 from .tray import FileSource, GeneratorSource, TrayResult, build_tray
 

@@ -21,9 +21,10 @@ smooth one.
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Any, Sequence
+from functools import cache
+from typing import Any
 
 import numpy as np
 
@@ -110,7 +111,7 @@ class Resolution:
                 f"chordal deviation {self.deviation * 1000:.1f} µm {cmp} {self.tolerance * 1000:.1f} µm")
 
 
-@lru_cache(maxsize=None)
+@cache
 def _midpoint_index(level: int) -> tuple[np.ndarray, np.ndarray]:
     """Unique edges (E, 2) of level ``level`` and the level+1 vertex at each edge's midpoint."""
     from scipy.spatial import cKDTree

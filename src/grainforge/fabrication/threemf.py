@@ -29,10 +29,11 @@ Examples
 from __future__ import annotations
 
 import struct
-from functools import lru_cache
 import zipfile
+from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import BinaryIO, Sequence
+from functools import lru_cache
+from typing import BinaryIO
 from xml.etree import ElementTree
 from xml.sax.saxutils import quoteattr
 

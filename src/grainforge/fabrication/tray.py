@@ -35,9 +35,10 @@ from __future__ import annotations
 import dataclasses
 import os
 import tempfile
+from collections.abc import Callable, Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Iterable, Iterator, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -274,8 +275,8 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
         k = scale_factor(g, task["size"], task["size_definition"])
         name = f"{task['method']}-{task['index']:05d}"
         return name, f"seed {task['seed']}", g.vertices * k, g.faces, getattr(task["params"], "subdivisions", None)
-    from ..solid import solid_problems
     from ..io import read_parts
+    from ..solid import solid_problems
 
     path = Path(task["path"])
     parts = read_parts(path)

@@ -8,7 +8,7 @@ Faces are convex polygons listed counter-clockwise seen from outside.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
@@ -131,7 +131,7 @@ def _same_points(a: np.ndarray, b: np.ndarray, tol: float = 1e-9) -> bool:
     return bool((d.min(axis=1) < tol).all())
 
 
-@lru_cache(maxsize=None)
+@cache
 def solid(name: str) -> Solid:
     """The unit-volume :class:`Solid` called ``name`` (one of :data:`PRIMITIVES`).
 

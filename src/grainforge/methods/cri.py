@@ -23,10 +23,11 @@ y intermediate, z shortest.  C1 lies in the xy plane (angle from +x towards
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from functools import lru_cache
+from functools import cache, lru_cache
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -50,7 +51,7 @@ STAR_SHAPED = True
 MAX_ASPECT_RATIO = 100.0
 
 
-def validity_parameter(p: "Params") -> str:
+def validity_parameter(p: Params) -> str:
     """The option a user changes when the surface is not a valid solid: what shaped the contours."""
     if p.aspect is not None:
         return "aspect"
@@ -237,7 +238,7 @@ def _geometry(unit: np.ndarray) -> _Geometry:
     return _Geometry(i1, w1, i2, w2, i3, w3, cos2, 1.0 - cos2, y_pos, z_pos, np.sin(theta))
 
 
-@lru_cache(maxsize=None)
+@cache
 def _sphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray, _Geometry]:
     unit, faces = icosphere(subdivisions)
     return unit, faces, _geometry(unit)

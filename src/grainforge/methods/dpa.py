@@ -10,13 +10,20 @@ i = ⌈(n−1)·u^(1/ε)⌉, u ~ U(0, 1] (Eq. 4).  Low ε favours old primaries
 from __future__ import annotations
 
 from dataclasses import dataclass
-from functools import lru_cache
+from functools import cache
 
 import numpy as np
 
 from ..params import ParameterError, param, validate
 from ._polyhedra import (
-    PRIMITIVES, Solid, edge_directions, face_frame, face_normals, rotation_matrix, sat_gap, solid,
+    PRIMITIVES,
+    Solid,
+    edge_directions,
+    face_frame,
+    face_normals,
+    rotation_matrix,
+    sat_gap,
+    solid,
 )
 
 __all__ = [
@@ -201,7 +208,7 @@ def _aggregate_cubes(n_total: int, exponent: float, rng: np.random.Generator) ->
     return np.array(cells, dtype=np.int64).reshape(-1, 3)
 
 
-@lru_cache(maxsize=None)
+@cache
 def _templates(name: str):
     """For each face f and distinct orientation j: the map x -> A x + b that turns the
     reference solid into its child on face f (mirror through f, then turn by 2πj/k about
@@ -250,7 +257,7 @@ def _dihedrals(s: Solid) -> np.ndarray:
         for i in range(len(fc)):
             owner.setdefault(frozenset((int(fc[i]), int(fc[(i + 1) % len(fc)]))), []).append(k)
     out = []
-    for k, fc in enumerate(s.faces):
+    for fc in s.faces:
         ang = []
         for i in range(len(fc)):
             a, b = owner[frozenset((int(fc[i]), int(fc[(i + 1) % len(fc)])))]

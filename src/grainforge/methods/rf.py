@@ -45,9 +45,10 @@ fixed-point iteration on κ (:func:`angular_spectrum`).
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
-from functools import lru_cache
-from typing import Any, Sequence
+from functools import cache, lru_cache
+from typing import Any
 
 import numpy as np
 
@@ -131,7 +132,7 @@ class Params:
 
 
 # ------------------------------------------------------------------ spectra
-@lru_cache(maxsize=None)
+@cache
 def _transfer(degree: int) -> np.ndarray:
     """M[n, l] = P̄_ln(0)² for n, l = 0..L (upper triangular in (n, l))."""
     P = legendre_equator(degree)

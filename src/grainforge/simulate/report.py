@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
@@ -54,7 +54,6 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
         fig, (ax0, ax1) = plt.subplots(1, 2, figsize=(11, 4.2), dpi=120)
         r0 = results[0]
         s = np.asarray(r0["spheres"])
-        d = r0["d_mean"]
         base = r0["base_top"]
         h = _heap(r0)
         xy = s[:, :2] - np.average(s[:, :2], axis=0, weights=s[:, 3] ** 3)
