@@ -94,7 +94,7 @@ for path in sorted(glob.glob(os.path.join("post", "vertices.*.dump"))):
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"seed": 0, "rounded_fraction": 0.05, "impact_overlap": 0.5, "restitution": 0.3,
-         "tangential_damping": 1.0, "viscous_time": 0.05, "dt_fraction": 0.04,
+         "tangential_damping": 1.0, "viscous_time": 1.0, "dt_fraction": 0.04,
          **settle_settings(), "dump_every": 10000}
     return updated_settings(s, kw, "pour settings")
 
@@ -229,11 +229,15 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     total_mass = sum(templates[k].mass for k in population)
     # The BODY contacts (and the walls: a vertex that passes the wall plane is pushed the wrong way)
     # hold only while overlaps stay inside the rounded radius: a linear spring stiff enough that
-    # the heaviest grain, falling from the top of the lattice onto the floor (at most at the
-    # terminal speed g·viscous_time of the background drag), compresses one contact by at most
-    # impact_overlap × the smallest rounded radius (SI)
+    # the heaviest grain, falling from the highest lattice node onto the floor (at most at the
+    # terminal speed g·tau of the background drag), compresses one contact by at most
+    # impact_overlap × the smallest rounded radius (SI). The drag's time constant tau is
+    # viscous_time grain times t_g = sqrt(d/g): the impact speed, hence the stiffness and the
+    # time step, then scale with the grains (a drag of fixed seconds lets millimetre grains hit
+    # at several times sqrt(g d), which costs steps)
     top = (layers + 2) * cell
-    v_impact = min(math.sqrt(2 * 9.81 * top), 9.81 * s["viscous_time"])
+    tau = s["viscous_time"] * math.sqrt(mean_d / GRAVITY)
+    v_impact = min(math.sqrt(2 * GRAVITY * layers * cell), GRAVITY * tau)
     kn = max(t.mass for t in templates) * (v_impact / (s["impact_overlap"] * min(r_round.values()))) ** 2
     # the smallest effective mass of a vertex contact between two grains: a push at distance r
     # from the centre also turns the grain (1/m + r²/I_min); the time step and the damping follow
@@ -249,7 +253,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
     sched = settle_schedule(dt, layers * cell, mean_d, s)
     cut_inner = 2 * max(r_round.values())
-    gamma = total_mass / n / s["viscous_time"]  # kg/s
+    gamma = total_mass / n / tau  # kg/s
     a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
 
     atoms, bodies, placements = [], [], []
@@ -300,7 +304,7 @@ timestep {fmt(dt * T)}
 
 fix integrate all nve/body
 fix grav all gravity {fmt(g)} vector 0 0 -1
-# background damping of the translational velocity, time constant viscous_time for the mean mass
+# background damping of the translational velocity: time constant sqrt(d/g) for the mean mass
 fix drag all viscous {fmt(gamma * MICRO["damping"])}
 fix floor all wall/body/polyhedron {wall} zplane 0.0 NULL
 fix wallx all wall/body/polyhedron {wall} xplane 0.0 {fmt(width * L)}

@@ -170,6 +170,12 @@ def contact_engines():
     """(bound functors, Ig2, Ip2, Law2) for the deck's grain shape against grains and walls."""
     shape = DECK["shape"]
     if shape == "polyhedron":
+        # Yade's polyhedron overlap test caches a separating plane per pair and warns
+        # "Unhandled switch case:0" whenever a pair has none cached yet (a new pair, or one that
+        # overlapped at the last step), then runs the full test: harmless, one line per such
+        # check, thousands per pour. Silence that file's warnings (its errors still show).
+        from yade import log
+        log.setLevel("Polyhedra_support.cpp", log.ERROR)
         return ([Bo1_Polyhedra_Aabb(), Bo1_Wall_Aabb(), Bo1_Sphere_Aabb()],
                 [Ig2_Polyhedra_Polyhedra_PolyhedraGeom(), Ig2_Wall_Polyhedra_PolyhedraGeom()],
                 [Ip2_PolyhedraMat_PolyhedraMat_PolyhedraPhys()],
