@@ -351,7 +351,7 @@ def pour():
     if settled:
         print("SETTLED in %d steps" % O.iter)
     else:
-        print("NOT SETTLED after %d steps (KE %.3g > %.3g J)" % (O.iter, ke_window, threshold))
+        print("NOT SETTLED after %d steps (KE %.4g > %.4g J)" % (O.iter, ke_window, threshold))
     sys.stdout.flush()
     return settled
 
