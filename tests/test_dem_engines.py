@@ -420,3 +420,23 @@ def test_deck_reports_settled(engine, shape, exe, args, options, two_grains, tmp
         s = deck["settle"]
         assert steps <= s["fall_steps"] + s["max_checks"] * s["check_every"] + 3
     assert sum(1 for l in proc.stdout.splitlines() if "SETTLED" in l) == 1
+
+
+@pytest.mark.slow
+def test_readme_dem_example_settles(tmp_path):
+    """The README's commands as written (20 FSO grains of 2 mm, 30-sphere clumps, Yade) settle:
+    they did not when the budget was a fixed 150,000 steps (docs/dem.md)."""
+    yade = require("yade")
+    r = CliRunner().invoke(cli, ["generate", "fso", "--out", str(tmp_path / "grains"), "--count", "20",
+                                 *README_FSO])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(cli, ["dem", str(tmp_path / "grains"), "--out", str(tmp_path / "deck"), "--engine", "yade",
+                                 "--density", "2650", "--spheres", "30"])
+    assert r.exit_code == 0, r.output
+    proc = subprocess.run([yade, "-n", "-x", "run.py"], cwd=tmp_path / "deck", capture_output=True, text=True,
+                          timeout=1200, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    m = SETTLED.fullmatch(last_line(proc.stdout))
+    rep = json.loads((tmp_path / "deck" / "results-yade.json").read_text())
+    assert m and int(m.group(1)) == rep["steps"]
+    assert rep["settled"] and rep["lost"] == [] and len(rep["final"]) == 20
