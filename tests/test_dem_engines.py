@@ -328,7 +328,7 @@ def test_lammps_polyhedron_deck_runs(lmp, population, tmp_path):
 SETTLED = re.compile(r"SETTLED in (\d+) steps")
 NOT_SETTLED = re.compile(r"NOT SETTLED after (\d+) steps \(KE (\S+) > (\S+) J\)")
 
-#: the README's grains (docs/dem.md), two of them: a column two grains high
+#: the README's grain parameters (2 mm FSO grains); two grains make a column two grains high
 README_FSO = ["--seed", "100", "--size", "2", "--fractal-dimension", "2.4", "--length-ratio", "7",
               "--amplitude", "0.1"]
 
