@@ -27,7 +27,7 @@ ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run"
                    "(30: a few points more coverage for several times the CPU; 0: off).")
 @click.option("--vertices", type=click.IntRange(4, 10000), default=None,
               help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts). "
-                   "Default: 16 (a small pour settles in minutes; LAMMPS reads at most 56).")
+                   "Default: 16 for Yade, 12 for LAMMPS (LAMMPS reads at most 56).")
 @click.option("--spacing", type=click.FloatRange(0.01, 0.5), default=0.05, show_default=True,
               help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @click.option("--unit", type=float, default=1e-3, show_default=True,
@@ -59,7 +59,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
         from ..dem.polyhedron import DEFAULT_VERTICES
 
         if vertices is None:
-            vertices = DEFAULT_VERTICES
+            vertices = DEFAULT_VERTICES[engine]
         elif engine == "lammps" and vertices > MAX_VERTICES:
             raise click.BadParameter(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}",
                                      param_hint="--vertices")

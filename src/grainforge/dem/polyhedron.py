@@ -6,10 +6,11 @@ import numpy as np
 
 __all__ = ["convex_polyhedron", "DEFAULT_VERTICES"]
 
-#: hull vertices of ``grainforge dem --shape polyhedron`` when ``--vertices`` is not given: a
-#: 14-grain pour settles in well under 2 min in Yade and in LAMMPS on 2 cores (contact cost grows
-#: steeply with the count: docs/dem.md and docs/benchmarks.md give the volume it costs)
-DEFAULT_VERTICES = 16
+#: engine -> hull vertices of ``grainforge dem --shape polyhedron`` when ``--vertices`` is not
+#: given: a 14-grain pour of 2 mm grains settles in well under 2 min on 2 cores in each (contact
+#: cost grows steeply with the count). LAMMPS dilates the hull by its rounded radius, so 12
+#: vertices there hold about the volume of 16 in Yade (docs/dem.md, docs/benchmarks.md).
+DEFAULT_VERTICES = {"yade": 16, "lammps": 12}
 
 
 def convex_polyhedron(vertices: np.ndarray, *, max_vertices: int | None = None) -> np.ndarray:
