@@ -233,8 +233,9 @@ def test_dem_cli_lammps_polyhedron_files(grain_files, tmp_path):
     from grainforge.dem.lammps_body import MICRO, hull_topology
 
     out = tmp_path / "deck"
+    # the most vertices LAMMPS takes (the default is 12): the line limits are tested where they bind
     args = ["dem", str(grain_files), "--out", str(out), "--engine", "lammps", "--shape", "polyhedron",
-            "--workers", "1"]
+            "--vertices", "56", "--workers", "1"]
     r = CliRunner().invoke(cli, args)
     assert r.exit_code == 0, r.output
     deck = json.loads((out / "grains.json").read_text())
@@ -244,7 +245,7 @@ def test_dem_cli_lammps_polyhedron_files(grain_files, tmp_path):
     body_line_counts, k, i = [], 0, start
     for p in deck["placements"]:
         g = deck["grains"][p["grain"]]
-        assert g["vertices"] <= 56  # the LAMMPS default
+        assert g["vertices"] <= 56
         m = trimesh.load(grain_files / f"{g['name']}.stl")  # independent reader
         m.apply_scale(1e-3)
         m.apply_translation(-m.center_mass)
@@ -451,3 +452,30 @@ def test_dem_cli_grains_total_pour(tmp_path):
         r = CliRunner().invoke(cli, ["dem", str(src), "--out", str(dest), *bad])
         assert r.exit_code == 2, (bad, r.output)
         assert len(r.output.strip().splitlines()) == 1 and not dest.exists(), (bad, r.output)
+
+
+def test_dem_cli_polyhedron_default_vertices(grain_files, tmp_path):
+    """Without --vertices each engine's deck gets its default hull size (Yade 16, LAMMPS 12)."""
+    from grainforge.dem.polyhedron import DEFAULT_VERTICES
+
+    for engine in ("yade", "lammps"):
+        out = tmp_path / engine
+        r = CliRunner().invoke(cli, ["dem", str(grain_files), "--out", str(out), "--engine", engine,
+                                     "--shape", "polyhedron", "--workers", "1"])
+        assert r.exit_code == 0, r.output
+        deck = json.loads((out / "grains.json").read_text())
+        assert {g["vertices"] for g in deck["grains"]} == {DEFAULT_VERTICES[engine]}
+
+
+def test_convex_polyhedron_keeps_volume_greedily():
+    """The kept vertices are chosen in one sequence (each adds the vertex farthest outside the hull
+    so far), so the kept hull's volume grows strictly with K and stays below the full hull's."""
+    from scipy.spatial import ConvexHull
+
+    from grainforge.dem.polyhedron import convex_polyhedron
+
+    g = grainforge.fso(rng=5)
+    full = ConvexHull(convex_polyhedron(g.vertices)).volume
+    vols = [ConvexHull(convex_polyhedron(g.vertices, max_vertices=k)).volume for k in (6, 8, 12, 16, 24)]
+    assert all(a < b for a, b in zip(vols, vols[1:]))
+    assert vols[-1] < full

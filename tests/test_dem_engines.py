@@ -106,6 +106,15 @@ def run(cmd, cwd, timeout=900, env=None):
     return proc
 
 
+def settle_record(out):
+    """(largest KE of the last checks, threshold) from a LIGGGHTS/LAMMPS deck's settle.txt, which
+    must say settled."""
+    words = (out / "settle.txt").read_text().split()
+    rec = dict(zip(words[::2], (float(v) for v in words[1::2])))
+    assert rec["settled"] == 1, rec
+    return rec["ke"], rec["threshold"]
+
+
 def check_report(report, truth):
     inserted = report["inserted"]
     assert len(inserted) == 20
@@ -206,7 +215,7 @@ def test_liggghts_deck_runs(liggghts, population, tmp_path):
         assert b[2] == pytest.approx(mass, rel=REL)
         assert np.allclose(np.sort(b[6:9]), principal, rtol=REL, atol=0)
     check_centres(bodies, read_dump(out / "atoms-initial.txt"), deck, truth)
-    ke, thr = (float(v) for v in (out / "settle.txt").read_text().split()[1::2])
+    ke, thr = settle_record(out)
     assert ke < thr
     final = read_dump(out / "bodies-final.txt")
     assert len(final) == 20  # no grain lost
@@ -244,7 +253,7 @@ def test_lammps_deck_runs(lmp, population, tmp_path):
         assert len(mine) == len(rows)
         d = np.linalg.norm(mine[:, None, 2:5] - expect[None], axis=2).min(axis=1)
         assert d.max() < REL * truth[p["name"]][2]
-    ke, thr = (float(v) for v in (out / "settle.txt").read_text().split()[1::2])
+    ke, thr = settle_record(out)
     assert ke < thr
     final = read_dump(out / "bodies-final.txt")  # mol mass x y z I(3) v(3)
     assert len(final) == 20
@@ -311,7 +320,7 @@ def test_lammps_polyhedron_deck_runs(lmp, population, tmp_path):
         assert len(local) == deck["grains"][p["grain"]]["vertices"] <= 16
         sd = trimesh.proximity.signed_distance(meshes[p["name"]], local)
         assert np.abs(sd).max() < REL * d_eq, (p["name"], np.abs(sd).max() / d_eq)
-    ke, thr = (float(v) for v in (out / "settle.txt").read_text().split()[1::2])
+    ke, thr = settle_record(out)
     assert ke < thr
     final = read_lammps_body_data(out / "data.final")
     assert sorted(final) == list(range(1, 21))  # no grain lost
@@ -446,3 +455,120 @@ def test_liggghts_pour_of_300_grains_inserts_each_once_on_2_and_4_ranks(liggghts
         assert re.search(r"(2 by 1|1 by 2|2 by 2) by 1 MPI processor grid", p.stdout)
         bodies = read_dump(src / "bodies-initial.txt")
         assert sorted(bodies[:, 1].astype(int).tolist()) == expect, ranks
+# ---- the settle report: last line and exit status, on small decks -----------------------------
+
+SETTLED = re.compile(r"SETTLED in (\d+) steps")
+NOT_SETTLED = re.compile(r"NOT SETTLED after (\d+) steps \(KE (\S+) > (\S+) J\)")
+
+#: the README's grain parameters (2 mm FSO grains); two grains make a column two grains high
+README_FSO = ["--seed", "100", "--size", "2", "--fractal-dimension", "2.4", "--length-ratio", "7",
+              "--amplitude", "0.1"]
+
+
+@pytest.fixture(scope="module")
+def two_grains(tmp_path_factory):
+    root = tmp_path_factory.mktemp("two")
+    r = CliRunner().invoke(cli, ["generate", "fso", "--count", "2", *README_FSO, "--out", str(root / "g")])
+    assert r.exit_code == 0, r.output
+    return root / "g"
+
+
+ENGINE_CASES = {  # id: engine, shape, executable, command, template options
+    "yade-clump": ("yade", "clump", "yade", ["-n", "-x", "run.py"], {"spheres": 8}),
+    "yade-polyhedron": ("yade", "polyhedron", "yade", ["-n", "-x", "run.py"], {"polyhedron_vertices": 8}),
+    "yade-levelset": ("yade", "levelset", "yade", ["-n", "-x", "run.py"], {"levelset_spacing": 0.1}),
+    "liggghts-clump": ("liggghts", "clump", "liggghts", ["-in", "in.run"], {"spheres": 8}),
+    "lammps-clump": ("lammps", "clump", "lmp", ["-in", "in.run"], {"spheres": 8}),
+    "lammps-polyhedron": ("lammps", "polyhedron", "lmp", ["-in", "in.run"], {"polyhedron_vertices": 8}),
+}
+
+
+def engine_cases(*slow):
+    """The cases as pytest parameters, those named in ``slow`` marked slow (> 20 s: Yade builds
+    level-set bodies slowly, ≈ 1 min; its polyhedron pour to rest takes ≈ 30 s)."""
+    return [pytest.param(*c, id=i, marks=[pytest.mark.slow] if i in slow else []) for i, c in ENGINE_CASES.items()]
+
+
+def small_deck(grains, out, engine, shape, options, **settings):
+    """A deck of the two grains, with scene settings changed by ``settings``."""
+    from grainforge.dem import lammps, lammps_body, liggghts, yade
+    from grainforge.dem.inputs import build_templates, grain_paths
+
+    templates = build_templates(grain_paths([grains]), workers=1, shape=shape, **options)
+    module = {"yade": yade, "liggghts": liggghts,
+              "lammps": lammps_body if shape == "polyhedron" else lammps}[engine]
+    module.write_deck(templates, out, settings=module.pour_settings(**settings))
+    return json.loads((out / "grains.json").read_text())
+
+
+def last_line(stdout):
+    lines = [l for l in stdout.splitlines() if l.strip()]
+    return lines[-1] if lines else ""
+
+
+def engine_steps(out, engine):
+    if engine == "yade":
+        return json.loads((out / "results-yade.json").read_text())["steps"]
+    words = (out / "settle.txt").read_text().split()
+    return int(float(dict(zip(words[::2], words[1::2]))["steps"]))
+
+
+@pytest.mark.parametrize("engine, shape, exe, args, options", engine_cases("yade-levelset"))
+def test_deck_reports_not_settled_with_exit_status(engine, shape, exe, args, options, two_grains, tmp_path):
+    """A threshold of 0 J can never be met: the run ends after its budget (here the fall and three
+    checks) with NOT SETTLED as its last line and exit status 1."""
+    path = require(exe)
+    out = tmp_path / "deck"
+    small_deck(two_grains, out, engine, shape, options, ke_ratio=0.0, settle_time=0.6)
+    proc = subprocess.run([path, *args], cwd=out, capture_output=True, text=True, timeout=600,
+                          stdin=subprocess.DEVNULL)
+    line = last_line(proc.stdout)
+    m = NOT_SETTLED.fullmatch(line)
+    assert m, f"last line {line!r}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
+    assert proc.returncode == 1
+    assert int(m.group(1)) == engine_steps(out, engine)
+    assert float(m.group(2)) > float(m.group(3)) == 0.0
+    assert sum(1 for l in proc.stdout.splitlines() if "SETTLED" in l) == 1
+
+
+@pytest.mark.parametrize("engine, shape, exe, args, options", engine_cases("yade-levelset", "yade-polyhedron"))
+def test_deck_reports_settled(engine, shape, exe, args, options, two_grains, tmp_path):
+    """At the default criterion two README grains settle: last line SETTLED in N steps, exit 0."""
+    path = require(exe)
+    out = tmp_path / "deck"
+    deck = small_deck(two_grains, out, engine, shape, options)
+    proc = subprocess.run([path, *args], cwd=out, capture_output=True, text=True, timeout=900,
+                          stdin=subprocess.DEVNULL)
+    line = last_line(proc.stdout)
+    m = SETTLED.fullmatch(line)
+    assert m, f"last line {line!r}\n{proc.stdout[-2000:]}\n{proc.stderr[-2000:]}"
+    assert proc.returncode == 0
+    steps = engine_steps(out, engine)
+    assert int(m.group(1)) == steps
+    if engine == "yade":
+        rep = json.loads((out / "results-yade.json").read_text())
+        assert rep["settled"] and rep["ke_window"] < rep["ke_threshold"] and rep["lost"] == []
+    else:  # stopped before its budget: fall + max_checks × check_every (+ the read-back runs)
+        s = deck["settle"]
+        assert steps <= s["fall_steps"] + s["max_checks"] * s["check_every"] + 3
+    assert sum(1 for l in proc.stdout.splitlines() if "SETTLED" in l) == 1
+
+
+@pytest.mark.slow
+def test_readme_dem_example_settles(tmp_path):
+    """The README's commands as written (20 FSO grains of 2 mm, 30-sphere clumps, Yade) settle:
+    they did not when the budget was a fixed 150,000 steps (docs/dem.md)."""
+    yade = require("yade")
+    r = CliRunner().invoke(cli, ["generate", "fso", "--out", str(tmp_path / "grains"), "--count", "20",
+                                 *README_FSO])
+    assert r.exit_code == 0, r.output
+    r = CliRunner().invoke(cli, ["dem", str(tmp_path / "grains"), "--out", str(tmp_path / "deck"), "--engine", "yade",
+                                 "--density", "2650", "--spheres", "30"])
+    assert r.exit_code == 0, r.output
+    proc = subprocess.run([yade, "-n", "-x", "run.py"], cwd=tmp_path / "deck", capture_output=True, text=True,
+                          timeout=1200, stdin=subprocess.DEVNULL)
+    assert proc.returncode == 0, proc.stdout[-2000:] + proc.stderr[-2000:]
+    m = SETTLED.fullmatch(last_line(proc.stdout))
+    rep = json.loads((tmp_path / "deck" / "results-yade.json").read_text())
+    assert m and int(m.group(1)) == rep["steps"]
+    assert rep["settled"] and rep["lost"] == [] and len(rep["final"]) == 20

@@ -42,7 +42,7 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
                    "(30: a few points more coverage for several times the CPU; 0: off).")
 @click.option("--vertices", type=click.IntRange(4, 10000), default=None,
               help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts). "
-                   "Default: 100 for Yade, 56 for LAMMPS (the most its read_data takes).")
+                   "Default: 16 for Yade, 12 for LAMMPS (LAMMPS reads at most 56).")
 @click.option("--spacing", type=click.FloatRange(0.01, 0.5), default=0.05, show_default=True,
               help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @click.option("--unit", type=click.FloatRange(1e-9, 1e3), default=1e-3, show_default=True,
@@ -74,9 +74,10 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
                                f"(supported: {', '.join(SUPPORTED[engine])})")
     if shape == "polyhedron":
         from ..dem.lammps_body import MAX_VERTICES
+        from ..dem.polyhedron import DEFAULT_VERTICES
 
         if vertices is None:
-            vertices = MAX_VERTICES if engine == "lammps" else 100
+            vertices = DEFAULT_VERTICES[engine]
         elif engine == "lammps" and vertices > MAX_VERTICES:
             raise click.BadParameter(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}",
                                      param_hint="--vertices")

@@ -17,7 +17,8 @@
   a settle loop on the rigid kinetic energy, body read-back files
   (``bodies-initial.txt``, ``bodies-final.txt``, ``atoms-initial.txt``,
   ``settle.txt``) and text dumps in ``post/`` converted to VTK by
-  ``dump2vtk.py`` (run by ``in.run`` through ``shell``).
+  ``dump2vtk.py`` (run by ``in.run`` through ``shell``); its last line is ``SETTLED in N steps``
+  (exit status 0) or ``NOT SETTLED after N steps (KE … > … J)`` (exit status 1).
 """
 
 from __future__ import annotations
@@ -28,8 +29,9 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import (clump_vtk_text, fmt, json_text, lattice_slots, rotation_matrix, settle_loop, template_record,
-                   updated_settings, write_files, xyzr_text)
+from .deck import (GRAVITY, clump_vtk_text, fmt, json_text, lattice_slots, rotation_matrix, settle_loop,
+                   settle_report, settle_schedule, settle_settings, template_record, updated_settings, write_files,
+                   xyzr_text)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
@@ -57,7 +59,7 @@ for path in sorted(glob.glob(os.path.join("post", "grains.*.dump"))):
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"seed": 0, "kn_weight_overlap": 0.005, "restitution": 0.3, "friction": 0.5, "dt_fraction": 0.02,
-         "check_every": 1000, "max_checks": 100, "ke_ratio": 1e-4, "dump_every": 5000}
+         **settle_settings(), "dump_every": 5000}
     return updated_settings(s, kw, "pour settings")
 
 
@@ -115,7 +117,8 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     lne = math.log(s["restitution"])
     zeta = -lne / math.sqrt(math.pi**2 + lne**2)
     gamman = 2 * zeta * omega
-    ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
+    ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
+    sched = settle_schedule(dt, layers * cell, mean_d, s)
 
     ins = ["# grainforge: one rigid grain per line (molecule IDs 1..N in this order)"]
     infile = ["# grainforge rigid/small infile: ID mass xcm ycm zcm ixx iyy izz ixy ixz iyz vxcm vycm vzcm lx ly lz"
@@ -179,7 +182,7 @@ variable ke equal c_kr+c_er
 variable kethr equal {fmt(ke_threshold)}
 compute body all rigid/local rb mol mass x y z inertiax inertiay inertiaz vx vy vz
 thermo_style custom step atoms c_kr c_er
-thermo {s["check_every"]}
+thermo {sched["check_every"]}
 
 dump b0 all local 1 bodies-initial.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8]
 dump_modify b0 format float %.17g
@@ -191,17 +194,19 @@ undump a0
 
 shell mkdir post
 dump vtk all custom {s["dump_every"]} post/grains.*.dump id mol x y z vx vy vz radius
-{settle_loop(s["check_every"], s["max_checks"])}
+{settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"], s["settle_checks"])}
 dump b1 all local 1 bodies-final.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8] c_body[9] c_body[10] c_body[11]
 dump_modify b1 format float %.17g
 run 0
 shell python3 dump2vtk.py
+# the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... J) (1)
+{settle_report("quit 0", "quit 1")}
 """
     files["in.run"] = run
     files["dump2vtk.py"] = DUMP2VTK
     deck = {"units": "SI (m, kg, s)", "grains": [template_record(t) for t in templates],
             "placements": placements, "box": [width, width],
-            "ke_threshold": ke_threshold, "dt": dt, "kn": kn, "scene": s}
+            "ke_threshold": ke_threshold, "dt": dt, "kn": kn, "settle": sched, "scene": s}
     files["grains.json"] = json_text(deck)
     return files
 

@@ -15,7 +15,8 @@
   ``fix nve/body``, a settle loop on translational + rotational kinetic energy,
   the engine's own state written back (``data.initial``, ``data.final``,
   ``settle.txt``) and vertex dumps in ``post/`` converted to VTK by
-  ``dump2vtk.py`` (run by ``in.run`` through ``shell``).
+  ``dump2vtk.py`` (run by ``in.run`` through ``shell``); the last line is ``SETTLED in N steps``
+  (exit status 0) or ``NOT SETTLED after N steps (KE … > … J)`` (exit status 1).
 
 Units: the deck runs in LAMMPS ``units micro`` (µm, pg, µs; force nN, energy
 10⁻¹⁵ J). The BODY package's contact code compares lengths with absolute
@@ -36,7 +37,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import fmt, json_text, lattice_slots, settle_loop, template_record, updated_settings, write_files
+from .deck import (GRAVITY, fmt, json_text, lattice_slots, settle_loop, settle_report, settle_schedule, settle_settings,
+                   template_record, updated_settings, write_files)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
            "MAX_VERTICES"]
@@ -92,8 +94,8 @@ for path in sorted(glob.glob(os.path.join("post", "vertices.*.dump"))):
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"seed": 0, "rounded_fraction": 0.05, "impact_overlap": 0.5, "restitution": 0.3,
-         "tangential_damping": 1.0, "viscous_time": 0.05, "dt_fraction": 0.04, "check_every": 1000, "max_checks": 200,
-         "ke_ratio": 1e-4, "dump_every": 10000}
+         "tangential_damping": 1.0, "viscous_time": 1.0, "dt_fraction": 0.04,
+         **settle_settings(), "dump_every": 10000}
     return updated_settings(s, kw, "pour settings")
 
 
@@ -227,11 +229,15 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     total_mass = sum(templates[k].mass for k in population)
     # The BODY contacts (and the walls: a vertex that passes the wall plane is pushed the wrong way)
     # hold only while overlaps stay inside the rounded radius: a linear spring stiff enough that
-    # the heaviest grain, falling from the top of the lattice onto the floor (at most at the
-    # terminal speed g·viscous_time of the background drag), compresses one contact by at most
-    # impact_overlap × the smallest rounded radius (SI)
+    # the heaviest grain, falling from the highest lattice node onto the floor (at most at the
+    # terminal speed g·tau of the background drag), compresses one contact by at most
+    # impact_overlap × the smallest rounded radius (SI). The drag's time constant tau is
+    # viscous_time grain times t_g = sqrt(d/g): the impact speed, hence the stiffness and the
+    # time step, then scale with the grains (a drag of fixed seconds lets millimetre grains hit
+    # at several times sqrt(g d), which costs steps)
     top = (layers + 2) * cell
-    v_impact = min(math.sqrt(2 * 9.81 * top), 9.81 * s["viscous_time"])
+    tau = s["viscous_time"] * math.sqrt(mean_d / GRAVITY)
+    v_impact = min(math.sqrt(2 * GRAVITY * layers * cell), GRAVITY * tau)
     kn = max(t.mass for t in templates) * (v_impact / (s["impact_overlap"] * min(r_round.values()))) ** 2
     # the smallest effective mass of a vertex contact between two grains: a push at distance r
     # from the centre also turns the grain (1/m + r²/I_min); the time step and the damping follow
@@ -244,9 +250,10 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     zeta = -lne / math.sqrt(math.pi**2 + lne**2)
     c_n = 2 * zeta * math.sqrt(kn * m_eff)  # viscous normal damping, kg/s
     c_t = s["tangential_damping"] * c_n
-    ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
+    ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
+    sched = settle_schedule(dt, layers * cell, mean_d, s)
     cut_inner = 2 * max(r_round.values())
-    gamma = total_mass / n / s["viscous_time"]  # kg/s
+    gamma = total_mass / n / tau  # kg/s
     a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
 
     atoms, bodies, placements = [], [], []
@@ -299,7 +306,7 @@ timestep {fmt(dt * T)}
 
 fix integrate all nve/body
 fix grav all gravity {fmt(g)} vector 0 0 -1
-# background damping of the translational velocity, time constant viscous_time for the mean mass
+# background damping of the translational velocity: time constant sqrt(d/g) for the mean mass
 fix drag all viscous {fmt(gamma * MICRO["damping"])}
 fix floor all wall/body/polyhedron {wall} zplane 0.0 NULL
 fix wallx all wall/body/polyhedron {wall} xplane 0.0 {fmt(width * L)}
@@ -315,7 +322,7 @@ variable ke equal c_kt+v_kr
 variable kethr equal {fmt(ke_threshold * MICRO["energy"])}
 compute vtx all body/local id 1 2 3
 thermo_style custom step atoms c_kt v_kr
-thermo {s["check_every"]}
+thermo {sched["check_every"]}
 
 run 0
 write_data data.initial nocoeff
@@ -323,13 +330,15 @@ write_data data.initial nocoeff
 shell mkdir post
 dump vtk all local {s["dump_every"]} post/vertices.*.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[4]
 dump_modify vtk format float %.17g
-{settle_loop(s["check_every"], s["max_checks"])}
+{settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"], s["settle_checks"])}
 undump vtk
 write_data data.final nocoeff
 dump last all local 1 post/vertices.final.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[4]
 dump_modify last format float %.17g
 run 0
 shell python3 dump2vtk.py
+# the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... J) (1)
+{settle_report("quit 0", "quit 1")}
 """
     files["in.run"] = run
     files["dump2vtk.py"] = DUMP2VTK
@@ -341,7 +350,7 @@ shell python3 dump2vtk.py
         grains.append(rec)
     deck = {"units": "SI (m, kg, s) here; the LAMMPS files use units micro: SI x factor", "micro": MICRO,
             "grains": grains, "placements": placements, "box": [width, width],
-            "ke_threshold": ke_threshold, "dt": dt, "kn": kn, "c_n": c_n, "c_t": c_t, "viscous_gamma": gamma,
+            "ke_threshold": ke_threshold, "dt": dt, "settle": sched, "kn": kn, "c_n": c_n, "c_t": c_t, "viscous_gamma": gamma,
             "scene": s}
     files["grains.json"] = json_text(deck)
     return files

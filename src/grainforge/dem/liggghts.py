@@ -17,10 +17,11 @@
   (:func:`deck_seeds`);
 - ``in.run``: the example — a box under gravity, Hertz contacts, VTK output in
   ``post/``, run until the multisphere kinetic energy falls below
-  ``ke_threshold`` (J), writing ``bodies-initial.txt`` / ``bodies-final.txt``
-  (id, clump type, mass, xcm, principal inertia per body) and ``settle.txt``.
-  It runs as written under ``mpirun -np P`` too (columns of ranks; see the
-  notes above ``_NODE_BOX``).
+  ``ke_threshold`` (J) at three checks in a row (docs/dem.md), writing ``bodies-initial.txt`` /
+  ``bodies-final.txt`` (id, clump type, mass, xcm, principal inertia per body) and ``settle.txt``;
+  its last line is ``SETTLED in N steps`` or ``NOT SETTLED after N steps (KE … > … J)`` (exit
+  status 1). It runs as written under ``mpirun -np P`` too (columns of ranks; see the notes above
+  ``_NODE_BOX``).
 """
 
 from __future__ import annotations
@@ -32,7 +33,8 @@ from typing import Sequence
 
 import numpy as np
 
-from .deck import clump_vtk_text, fmt, json_text, settle_loop, template_record, updated_settings, write_files, xyzr_text
+from .deck import (GRAVITY, clump_vtk_text, fmt, json_text, settle_loop, settle_report, settle_schedule,
+                   settle_settings, template_record, updated_settings, write_files, xyzr_text)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "seed_table", "deck_seeds", "SEED_MIN", "SEED_LIMIT"]
 
@@ -65,7 +67,7 @@ _MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
-         "check_every": 1000, "max_checks": 150, "ke_ratio": 1e-4, "vtk_every": 5000}
+         **settle_settings(), "vtk_every": 5000}
     return updated_settings(s, kw, "pour settings")
 
 
@@ -157,7 +159,9 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     dt = s["dt_safety"] * rmin * math.sqrt(max(t.density for t in templates) / s["young"])
     total_mass = sum(t.mass * t.count for t in templates)
     mean_d = sum(t.d_eq * t.count for t in templates) / n
-    ke_threshold = s["ke_ratio"] * total_mass * 9.81 * mean_d
+    ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
+    # the highest insertion node's top: where the last grain can start
+    sched = settle_schedule(dt, (layers + 0.5) * cell, mean_d, s)
     head = f"each copy at its own lattice node (within {_NODE_BOX:g} cells)"
     ins = [f"# grainforge: insert every grain `count` times, {head}"]
     slot = 0
@@ -221,7 +225,7 @@ compute bx all multisphere property xcm
 compute binert all multisphere property inertia
 compute bv all multisphere property vcm
 thermo_style custom step atoms c_kems c_erms
-thermo {s["check_every"]}
+thermo {sched["check_every"]}
 thermo_modify lost ignore norm no
 
 run 1
@@ -234,14 +238,17 @@ undump bodies0
 undump atoms0
 
 dump vtk all custom/vtk {s["vtk_every"]} post/grains_*.vtk id type x y z vx vy vz radius
-{settle_loop(s["check_every"], s["max_checks"])}
+{settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"], s["settle_checks"])}
 dump bodies1 all local 1 bodies-final.txt c_bid c_btype c_bmass c_bx[1] c_bx[2] c_bx[3] c_bv[1] c_bv[2] c_bv[3]
 dump_modify bodies1 format "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g"
 run 1
+# the last line: SETTLED in N steps, or NOT SETTLED after N steps (KE ... > ... J) and exit
+# status 1 (LIGGGHTS's quit takes no status and always exits 1)
+{settle_report("", "quit")}
 """
     files["in.run"] = run
     deck = {"units": "SI (m, kg, s)", "grains": [template_record(t) for t in templates],
-            "box": [width, width], "ke_threshold": ke_threshold, "dt": dt, "scene": s}
+            "box": [width, width], "ke_threshold": ke_threshold, "dt": dt, "settle": sched, "scene": s}
     files["grains.json"] = json_text(deck)
     return files
 

@@ -4,15 +4,25 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["convex_polyhedron"]
+__all__ = ["convex_polyhedron", "DEFAULT_VERTICES"]
+
+#: engine -> hull vertices of ``grainforge dem --shape polyhedron`` when ``--vertices`` is not
+#: given: a 14-grain pour of 2 mm grains settles in well under 2 min on 2 cores in each (contact
+#: cost grows steeply with the count). LAMMPS dilates the hull by its rounded radius, so 12
+#: vertices there hold about the volume of 16 in Yade (docs/dem.md, docs/benchmarks.md).
+DEFAULT_VERTICES = {"yade": 16, "lammps": 12}
 
 
 def convex_polyhedron(vertices: np.ndarray, *, max_vertices: int | None = None) -> np.ndarray:
     """Vertices of the convex hull, optionally simplified to at most ``max_vertices``.
 
-    Simplification keeps the hull vertices farthest apart (greedy farthest-point
-    selection, starting from the vertex farthest from the centroid), then takes
-    their hull: the result is convex and lies inside the grain's hull.
+    Simplification keeps the hull vertices that hold the most volume: greedily, starting from a
+    large tetrahedron of hull vertices (the vertex farthest from the centroid, the one farthest
+    from it, the one farthest from their line, the one farthest from their plane), it adds the
+    vertex farthest outside the hull of those kept so far, until ``max_vertices`` are kept; the
+    result is their hull (convex, inside the grain's hull). On rough 2 mm grains 16 vertices keep
+    ≈ 0.9 of the full hull's volume, where keeping the vertices farthest apart kept ≈ 0.7
+    (docs/dem.md).
 
     Parameters
     ----------
@@ -41,11 +51,21 @@ def convex_polyhedron(vertices: np.ndarray, *, max_vertices: int | None = None) 
     if int(max_vertices) < 4:
         raise ValueError(f"max_vertices must be ≥ 4, got {max_vertices!r}")
     c = hull.mean(axis=0)
-    chosen = [int(np.argmax(np.linalg.norm(hull - c, axis=1)))]
-    dist = np.linalg.norm(hull - hull[chosen[0]], axis=1)
-    for _ in range(int(max_vertices) - 1):
-        k = int(np.argmax(dist))
+    a = int(np.argmax(np.linalg.norm(hull - c, axis=1)))
+    b = int(np.argmax(np.linalg.norm(hull - hull[a], axis=1)))
+    ab = (hull[b] - hull[a]) / np.linalg.norm(hull[b] - hull[a])
+    rel = hull - hull[a]
+    c3 = int(np.argmax(np.linalg.norm(rel - np.outer(rel @ ab, ab), axis=1)))
+    n = np.cross(hull[b] - hull[a], hull[c3] - hull[a])
+    d = int(np.argmax(np.abs(rel @ n)))
+    chosen = [a, b, c3, d]
+    while len(chosen) < int(max_vertices):
+        eq = ConvexHull(hull[chosen]).equations  # outward unit normals, offsets: n·x + o ≤ 0 inside
+        out = (hull @ eq[:, :3].T + eq[:, 3]).max(axis=1)
+        out[chosen] = -np.inf
+        k = int(np.argmax(out))
+        if not out[k] > 0:
+            break
         chosen.append(k)
-        dist = np.minimum(dist, np.linalg.norm(hull - hull[k], axis=1))
     sub = hull[np.sort(chosen)]
     return sub[np.sort(ConvexHull(sub).vertices)]
