@@ -360,12 +360,13 @@ def run_pour(cmd, cwd, timeout=900, env=None):
 
 
 def settled(out, proc):
-    """Whether the pour settled: the deck's settle.txt (KE below the threshold), else its log line."""
-    path = out / "settle.txt"
-    if path.exists():
-        ke, thr = (float(v) for v in path.read_text().split()[1::2])
-        return ke < thr
-    return "NOT SETTLED" not in proc.stdout and "SETTLED in" in proc.stdout
+    """Whether the pour settled: the deck's settle.txt (``ke x threshold y settled 0|1 steps N``), and
+    the run's last line saying the same."""
+    words = (out / "settle.txt").read_text().split()
+    flag = dict(zip(words[::2], words[1::2]))["settled"] == "1"
+    last = proc.stdout.strip().splitlines()[-1]
+    assert last.startswith("SETTLED in" if flag else "NOT SETTLED after"), last
+    return flag
 
 
 def compare_ranks(state1, state2, d_mean, width):
