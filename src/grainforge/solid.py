@@ -247,8 +247,19 @@ def star_certificate(vertices: np.ndarray, faces: np.ndarray, centre=(0.0, 0.0, 
     return bool(abs(omega.sum() - 4.0 * np.pi) < 1e-6)
 
 
-def _candidate_pairs(tri: np.ndarray) -> np.ndarray:
-    """Pairs (i < j) of triangles whose bounding boxes overlap, from a uniform grid (no O(F²) step)."""
+#: candidate triangle pairs :func:`self_intersections` builds at once (bounds its memory by a constant)
+PAIR_BLOCK = 1 << 19
+
+
+def _candidate_pairs(tri: np.ndarray, block: int = PAIR_BLOCK):
+    """Pairs (i < j) of triangles whose bounding boxes overlap, from a uniform grid (no O(F²) step).
+
+    Yields (P, 2) arrays, each built from at most about ``block`` pairs of
+    triangles sharing a cell (plus one cell's worth), so memory does not grow
+    with the number of pairs.  A pair is reported once, by the first cell of
+    the overlap of its two boxes of cells, so no global de-duplication is
+    needed.
+    """
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     F = len(tri)
     ext = np.maximum(hi - lo, 0).max(axis=1)
@@ -266,27 +277,35 @@ def _candidate_pairs(tri: np.ndarray) -> np.ndarray:
     local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
     sx, sy = span[owner, 0], span[owner, 1]
     cell = c0[owner] + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1)
+    del local, sx, sy
     dims = cell.max(axis=0) + 1
     key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    del cell
     order = np.argsort(key, kind="stable")
     key, owner = key[order], owner[order]
+    del order
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
     ends = np.r_[starts[1:], len(key)]
     gsize = ends - starts
     pos = np.arange(len(key))
-    count = np.repeat(ends, gsize) - pos - 1
-    total = int(count.sum())
-    if total == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    left = np.repeat(pos, count)
-    right = left + 1 + (np.arange(total) - np.repeat(np.cumsum(count) - count, count))
-    i, j = owner[left], owner[right]
-    packed = np.unique(np.minimum(i, j) * np.int64(F) + np.maximum(i, j))  # 1-D keys: fast unique
-    i, j = packed // F, packed % F
-    keep = i != j
-    i, j = i[keep], j[keep]
-    overlap = ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all(axis=1)
-    return np.stack([i[overlap], j[overlap]], axis=1)
+    count = np.repeat(ends, gsize) - pos - 1  # pairs that start at each entry (with the later ones of its cell)
+    done = np.cumsum(count)
+    a = 0
+    while a < len(key):
+        b = max(a + 1, int(np.searchsorted(done, (done[a - 1] if a else 0) + block, side="right")))
+        cnt = count[a:b]
+        total = int(cnt.sum())
+        if total:
+            left = np.repeat(pos[a:b], cnt)
+            right = left + 1 + (np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            i, j = owner[left], owner[right]
+            ref = np.maximum(c0[i], c0[j])  # first cell of the overlap of the two boxes of cells
+            first = (ref[:, 0] * dims[1] + ref[:, 1]) * dims[2] + ref[:, 2] == key[left]
+            i, j = i[first], j[first]
+            i, j = np.minimum(i, j), np.maximum(i, j)
+            overlap = ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all(axis=1)
+            yield np.stack([i[overlap], j[overlap]], axis=1)
+        a = b
 
 
 def _segments_cross(p0, p1, tri, eps: float = 1e-9) -> np.ndarray:
@@ -335,9 +354,8 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
         return 0
     tri = v[f]
     hits = 0
-    pairs = _candidate_pairs(tri)
-    for start in range(0, len(pairs), 1_000_000):
-        i, j = pairs[start:start + 1_000_000].T
+    for pairs in _candidate_pairs(tri):
+        i, j = pairs.T
         same = f[i][:, :, None] == f[j][:, None, :]  # (P, 3, 3): corner k of i equals corner l of j
         shared = same.sum(axis=(1, 2))
         hit = np.zeros(len(i), dtype=bool)
