@@ -265,7 +265,7 @@ def test_candidate_pairs_in_blocks_are_the_overlapping_boxes_once(block):
     blocks = list(_candidate_pairs(tri, block=block))
     pairs = np.concatenate(blocks)
     assert (pairs[:, 0] < pairs[:, 1]).all()
-    packed = pairs[:, 0] * len(tri) + pairs[:, 1]
+    packed = pairs[:, 0].astype(np.int64) * len(tri) + pairs[:, 1]
     assert len(np.unique(packed)) == len(packed)  # no pair twice, across blocks too
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     i, j = np.triu_indices(len(tri), 1)

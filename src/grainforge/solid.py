@@ -201,16 +201,22 @@ def _fans(faces: np.ndarray, n_vertices: int) -> int:
     nv = np.int64(n_vertices)
     fwd = a * nv + b
     order = np.argsort(fwd)
-    pos = order[np.searchsorted(fwd[order], b * nv + a)]  # the half-edge b->a paired with a->b
-    # corner ids: 3*f + k is the corner of face f at vertex faces[f, k]
-    he = np.arange(3 * F)
-    nxt = 3 * (he // 3) + (he + 1) % 3  # corner of the edge's end vertex b within the same face
-    twin_start = pos  # half-edge b->a starts at b: its corner id is pos
-    twin_end = 3 * (pos // 3) + (pos + 1) % 3  # ... and ends at a
-    rows = np.concatenate([he, nxt])
-    cols = np.concatenate([twin_end, twin_start])
+    sorted_fwd = fwd[order]
+    del fwd
+    pos = order[np.searchsorted(sorted_fwd, b * nv + a)]  # the half-edge b->a paired with a->b
+    del order, sorted_fwd, b
+    # corner ids: 3*f + k is the corner of face f at vertex faces[f, k]; 32-bit ids when they fit (less memory)
+    ids = np.int32 if 3 * F < 2**31 else np.int64
+    he = np.arange(3 * F, dtype=ids)
+    rows = np.concatenate([he, 3 * (he // 3) + (he + 1) % 3])  # ... and the corner of the edge's end vertex b
+    del he
+    pos = pos.astype(ids)
+    cols = np.concatenate([3 * (pos // 3) + (pos + 1) % 3, pos])  # half-edge b->a ends at a, starts at b (pos)
+    del pos
     g = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * F, 3 * F))
+    del rows, cols
     n_comp, lab = connected_components(g, directed=False)
+    del g
     used = np.unique(faces)
     first = np.zeros(n_comp, dtype=np.int64)
     first[lab] = a  # every corner of a fan holds the same vertex
@@ -266,20 +272,22 @@ def _candidate_pairs(tri: np.ndarray, block: int = PAIR_BLOCK):
     h = max(float(np.median(ext)) * 2.0, float(np.ptp(tri.reshape(-1, 3), axis=0).max()) / 4096.0, 1e-300)
     origin = lo.min(axis=0)
     while True:  # coarsen the grid until big triangles cover few cells (bounded memory)
-        c0 = np.floor((lo - origin) / h).astype(np.int64)
-        c1 = np.floor((hi - origin) / h).astype(np.int64)
+        c0 = np.floor((lo - origin) / h).astype(np.int32)  # at most 4096 cells along the extent: 32 bits
+        c1 = np.floor((hi - origin) / h).astype(np.int32)
         span = c1 - c0 + 1
-        n = span.prod(axis=1)
+        n = span.prod(axis=1, dtype=np.int64)
         if n.sum() <= 8 * F + 1000:
             break
         h *= 2.0
-    owner = np.repeat(np.arange(F), n)
-    local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    del c1
+    ids = np.int32 if 8 * F + 1000 < 2**31 else np.int64  # triangle and entry ids: 32 bits when they fit
+    owner = np.repeat(np.arange(F, dtype=ids), n)
+    local = np.arange(int(n.sum()), dtype=ids) - np.repeat((np.cumsum(n) - n).astype(ids), n)
     sx, sy = span[owner, 0], span[owner, 1]
-    cell = c0[owner] + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1)
-    del local, sx, sy
-    dims = cell.max(axis=0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    cell = c0[owner] + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1).astype(np.int32)
+    del local, sx, sy, span, n
+    dims = (cell.max(axis=0) + 1).astype(np.int64)
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]  # int64 (dims is)
     del cell
     order = np.argsort(key, kind="stable")
     key, owner = key[order], owner[order]
@@ -289,6 +297,7 @@ def _candidate_pairs(tri: np.ndarray, block: int = PAIR_BLOCK):
     gsize = ends - starts
     pos = np.arange(len(key))
     count = np.repeat(ends, gsize) - pos - 1  # pairs that start at each entry (with the later ones of its cell)
+    del starts, ends, gsize
     done = np.cumsum(count)
     a = 0
     while a < len(key):
@@ -450,6 +459,7 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
         twice = int(np.count_nonzero(np.unique(fwd[1:][fwd[1:] == fwd[:-1]])))
         if (counts <= 2).all():
             problems.append(f"{twice} edges used twice in the same direction (inconsistent orientation)")
+    del a, b, und, counts, fwd  # the edge keys are not needed below (less memory for the fan test)
     if problems:
         return problems
     if intersections and star_centre is not None and star_certificate(v, f, star_centre):

@@ -200,11 +200,13 @@ def local_thickness(mesh, max_rays: int = MAX_RAYS, max_distance: float | None =
 
 def _box_cells(c0: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Every cell of the boxes of cells ``c0 .. c0 + span - 1``: (box index, (n, 3) cell) per cell."""
-    n = span.prod(axis=1)
-    owner = np.repeat(np.arange(len(c0)), n)
-    local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    n = span.prod(axis=1, dtype=np.int64)
+    ids = np.int32 if n.sum() + len(c0) < 2**31 else np.int64  # 32-bit ids when they fit (less memory)
+    owner = np.repeat(np.arange(len(c0), dtype=ids), n)
+    local = np.arange(int(n.sum()), dtype=ids) - np.repeat((np.cumsum(n) - n).astype(ids), n)
     sx, sy = span[owner, 0], span[owner, 1]
-    return owner, c0[owner] + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1)
+    step = np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1).astype(c0.dtype)
+    return owner, c0[owner] + step
 
 
 @dataclass(frozen=True)
@@ -263,19 +265,25 @@ def triangle_grid(tri: np.ndarray, max_entries: int | None = None) -> TriangleGr
     size = np.maximum(hi - lo, 0).max(axis=1)
     h = max(2.0 * float(np.median(size)), extent / GRID_MAX_CELLS, np.finfo(np.float64).tiny)
     while True:  # once the cell exceeds the extent every triangle is in one cell: F entries, the loop ends
-        c0 = np.floor((lo - origin) / h).astype(np.int64)
-        c1 = np.floor((hi - origin) / h).astype(np.int64)
+        c0 = np.floor((lo - origin) / h).astype(np.int32)  # at most GRID_MAX_CELLS along the extent
+        c1 = np.floor((hi - origin) / h).astype(np.int32)
         span = c1 - c0 + 1
-        if int(span.prod(axis=1).sum()) <= budget:
+        if int(span.prod(axis=1, dtype=np.int64).sum()) <= budget:
             break
         h *= 2.0
-    dims = c1.max(axis=0) + 1
+    dims = (c1.max(axis=0) + 1).astype(np.int64)  # cell keys are int64
+    del c1, lo, hi, size
     owner, cell = _box_cells(c0, span)
+    del c0, span
     key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    del cell
     order = np.argsort(key, kind="stable")
-    key, owner = key[order], owner[order]
-    keys, first, count = np.unique(key, return_index=True, return_counts=True)
-    return TriangleGrid(origin, h, dims, keys, first, count, owner)
+    key = key[order]
+    owner = owner[order]
+    del order
+    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    count = np.diff(np.r_[first, len(key)])
+    return TriangleGrid(origin, h, dims, key[first], first, count, owner)
 
 
 def _ray_cells(grid: TriangleGrid, origins, directions, reach: float, pad: float):
