@@ -16,7 +16,13 @@
   particles join.  Thinner than ``min_wall``: fail; thinner than
   :data:`NECK_FACTOR` x ``min_wall``: a warning that the grain is fragile;
 - **size**: an equivalent diameter below the printer's reliable ``min_size``
-  fails, and so does a part larger than the build volume.
+  fails (tested first and listed first), and so does a part larger than the
+  build volume.
+
+The rays find their candidate triangles in a :class:`TriangleGrid` walked
+along each ray, and test them :data:`MAX_PAIRS` at a time: memory is bounded
+by the mesh's own size whatever the printer's wall horizon, and the result
+is that of testing every triangle.
 
 All lengths are in millimetres.  Thickness along the inward normal is an
 approximation of the medial-axis thickness (it can over-estimate a wall
