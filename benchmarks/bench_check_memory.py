@@ -55,7 +55,7 @@ def check(exe: Path, target: Path, printer: str, limit_gb: float | None) -> tupl
     """Peak RSS (kB) from /usr/bin/time, wall seconds, and the status word(s) or the error line."""
     cmd = ["/usr/bin/time", "-f", "%M", str(exe), "check", str(target), "--printer", printer, "--csv"]
     t0 = time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, preexec_fn=_limit(limit_gb))
+    proc = subprocess.run(cmd, capture_output=True, text=True, preexec_fn=_limit(limit_gb), check=False)
     wall = time.perf_counter() - t0
     err = proc.stderr.strip().splitlines()
     peak = int(err[-1]) if err and err[-1].isdigit() else -1

@@ -8,8 +8,16 @@ from grainforge.cli import check as check_cli
 from grainforge.cli.main import cli
 from grainforge.fabrication import printability
 from grainforge.fabrication.printability import (
-    GRID_ENTRIES_PER_FACE, _candidate_slices, _moller_trumbore, _ray_cells, _segments, _short_rays, check_mesh,
-    local_thickness, self_intersections, triangle_grid,
+    GRID_ENTRIES_PER_FACE,
+    _candidate_slices,
+    _moller_trumbore,
+    _ray_cells,
+    _segments,
+    _short_rays,
+    check_mesh,
+    local_thickness,
+    self_intersections,
+    triangle_grid,
 )
 from grainforge.fabrication.threemf import ThreeMFWriter, mesh_xml
 
@@ -86,7 +94,7 @@ def test_ray_candidates_are_bounded_by_the_grain_not_the_horizon():
     counts = {}
     for horizon in (2.0 + 4 * eps, 1e3, 1e6):
         reach = min(horizon, float(np.linalg.norm(np.ptp(m.vertices, axis=0))) + 4 * eps)
-        ray, slot = _ray_cells(g, origins, -normals, reach, 2 * eps)
+        _, slot = _ray_cells(g, origins, -normals, reach, 2 * eps)
         counts[horizon] = int(g.count[slot].sum())
         assert _segments(g, reach) <= 2 * 2 * np.sqrt(3) / g.cell + 1
     assert counts[1e3] == counts[1e6]  # the walk stops at the mesh's diagonal
@@ -207,8 +215,8 @@ def test_cli_says_first_which_grains_are_below_the_reliable_size(runner, tmp_pat
     res = runner.invoke(cli, ["check", str(tmp_path / "g"), "--printer", "generic-fdm", "--csv"])
     assert res.exit_code == 1, res.output
     said = [ln for ln in res.stderr.splitlines() if "will not print reliably" in ln]
-    assert said == [f"{tmp_path / 'g' / 'a-small.stl'}: a-small: will not print reliably on generic-fdm: "
-                    "equivalent diameter 1.99 mm < reliable size 4 mm"]
+    assert said == [(f"{tmp_path / 'g' / 'a-small.stl'}: a-small: will not print reliably on generic-fdm: "
+                     "equivalent diameter 1.99 mm < reliable size 4 mm")]
     assert events[:2] == [("say", said[0]), ("check", "a-small")]  # said before the slow tests run
     assert ("check", "b-large") in events and len(events) == 3  # nothing said for the 5 mm grain
     rows = {r[1]: r for r in (ln.split(",") for ln in res.stdout.strip().splitlines()[1:])}

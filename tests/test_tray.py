@@ -201,10 +201,10 @@ def test_cli_tray_warns_when_grains_are_below_the_printers_reliable_size(runner,
         assert res.exit_code == 0, res.output
         warned[printer] = [ln for ln in res.stderr.splitlines() if "reliable size" in ln]
     p = get_printer("generic-fdm")
-    assert warned["generic-fdm"] == [
+    assert warned["generic-fdm"] == [(
         "WARNING: 1 of 2 grains (equivalent diameter 1.98 mm) are below the reliable size of generic-fdm "
         f"({p.min_size:g} mm, min wall {p.min_wall:g} mm, resolution {p.resolution:g} mm): they will not print "
-        f"reliably; print them at {p.min_size:g} mm or more, or on a finer printer."]
+        f"reliably; print them at {p.min_size:g} mm or more, or on a finer printer.")]
     assert warned["objet-eden-250"] == []  # 0.3 mm reliable size
 
 
