@@ -280,3 +280,25 @@ def test_star_shaped_generators_prove_it(name):
         v, f, _ = module.build(module.Params(), np.random.default_rng(seed))
         vw, fw = as_written(v, f)
         assert star_certificate(vw, fw, np.zeros(3))
+
+
+@pytest.mark.parametrize("block", [1, 977, 1 << 30])
+def test_candidate_pairs_in_blocks_are_the_overlapping_boxes_once(block):
+    # self_intersections builds its candidate pairs block by block (bounded memory); a pair is reported
+    # once, by the first cell of its boxes' overlap, so the blocks hold exactly the overlapping pairs
+    from grainforge.solid import _candidate_pairs
+
+    s = trimesh.creation.icosphere(3)
+    big = trimesh.creation.box(extents=(1.5, 0.2, 0.2))  # a few large triangles across many cells
+    tri = np.concatenate([s.triangles, big.triangles])
+    blocks = list(_candidate_pairs(tri, block=block))
+    pairs = np.concatenate(blocks)
+    assert (pairs[:, 0] < pairs[:, 1]).all()
+    packed = pairs[:, 0].astype(np.int64) * len(tri) + pairs[:, 1]
+    assert len(np.unique(packed)) == len(packed)  # no pair twice, across blocks too
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    i, j = np.triu_indices(len(tri), 1)
+    overlap = ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all(axis=1)
+    assert set(packed.tolist()) == set((i[overlap] * len(tri) + j[overlap]).tolist())
+    if block == 977:
+        assert len(blocks) > 10

@@ -188,6 +188,26 @@ def test_cli_tray(runner, tmp_path):
     assert {r["subdivisions"] for r in _rows(tmp_path / "t.csv")} == {"1"}
 
 
+def test_cli_tray_warns_when_grains_are_below_the_printers_reliable_size(runner, tmp_path):
+    import trimesh
+
+    s = trimesh.creation.icosphere(2, radius=1.0)  # d_eq 1.98 mm
+    s.export(tmp_path / "a.stl")
+    trimesh.Trimesh(s.vertices * 3, s.faces).export(tmp_path / "b.stl")  # 5.9 mm
+    warned = {}
+    for printer in ("generic-fdm", "objet-eden-250"):
+        res = runner.invoke(cli, ["tray", str(tmp_path / "a.stl"), str(tmp_path / "b.stl"), "--printer", printer,
+                                  "--out", str(tmp_path / printer / "t.stl")])
+        assert res.exit_code == 0, res.output
+        warned[printer] = [ln for ln in res.stderr.splitlines() if "reliable size" in ln]
+    p = get_printer("generic-fdm")
+    assert warned["generic-fdm"] == [(
+        "WARNING: 1 of 2 grains (equivalent diameter 1.98 mm) are below the reliable size of generic-fdm "
+        f"({p.min_size:g} mm, min wall {p.min_wall:g} mm, resolution {p.resolution:g} mm): they will not print "
+        f"reliably; print them at {p.min_size:g} mm or more, or on a finer printer.")]
+    assert warned["objet-eden-250"] == []  # 0.3 mm reliable size
+
+
 @pytest.mark.parametrize(
     "extra, message",
     [

@@ -201,16 +201,22 @@ def _fans(faces: np.ndarray, n_vertices: int) -> int:
     nv = np.int64(n_vertices)
     fwd = a * nv + b
     order = np.argsort(fwd)
-    pos = order[np.searchsorted(fwd[order], b * nv + a)]  # the half-edge b->a paired with a->b
-    # corner ids: 3*f + k is the corner of face f at vertex faces[f, k]
-    he = np.arange(3 * F)
-    nxt = 3 * (he // 3) + (he + 1) % 3  # corner of the edge's end vertex b within the same face
-    twin_start = pos  # half-edge b->a starts at b: its corner id is pos
-    twin_end = 3 * (pos // 3) + (pos + 1) % 3  # ... and ends at a
-    rows = np.concatenate([he, nxt])
-    cols = np.concatenate([twin_end, twin_start])
+    sorted_fwd = fwd[order]
+    del fwd
+    pos = order[np.searchsorted(sorted_fwd, b * nv + a)]  # the half-edge b->a paired with a->b
+    del order, sorted_fwd, b
+    # corner ids: 3*f + k is the corner of face f at vertex faces[f, k]; 32-bit ids when they fit (less memory)
+    ids = np.int32 if 3 * F < 2**31 else np.int64
+    he = np.arange(3 * F, dtype=ids)
+    rows = np.concatenate([he, 3 * (he // 3) + (he + 1) % 3])  # ... and the corner of the edge's end vertex b
+    del he
+    pos = pos.astype(ids)
+    cols = np.concatenate([3 * (pos // 3) + (pos + 1) % 3, pos])  # half-edge b->a ends at a, starts at b (pos)
+    del pos
     g = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(3 * F, 3 * F))
+    del rows, cols
     n_comp, lab = connected_components(g, directed=False)
+    del g
     used = np.unique(faces)
     first = np.zeros(n_comp, dtype=np.int64)
     first[lab] = a  # every corner of a fan holds the same vertex
@@ -247,46 +253,68 @@ def star_certificate(vertices: np.ndarray, faces: np.ndarray, centre=(0.0, 0.0, 
     return bool(abs(omega.sum() - 4.0 * np.pi) < 1e-6)
 
 
-def _candidate_pairs(tri: np.ndarray) -> np.ndarray:
-    """Pairs (i < j) of triangles whose bounding boxes overlap, from a uniform grid (no O(F²) step)."""
+#: candidate triangle pairs :func:`self_intersections` builds at once (bounds its memory by a constant)
+PAIR_BLOCK = 1 << 19
+
+
+def _candidate_pairs(tri: np.ndarray, block: int = PAIR_BLOCK):
+    """Pairs (i < j) of triangles whose bounding boxes overlap, from a uniform grid (no O(F²) step).
+
+    Yields (P, 2) arrays, each built from at most about ``block`` pairs of
+    triangles sharing a cell (plus one cell's worth), so memory does not grow
+    with the number of pairs.  A pair is reported once, by the first cell of
+    the overlap of its two boxes of cells, so no global de-duplication is
+    needed.
+    """
     lo, hi = tri.min(axis=1), tri.max(axis=1)
     F = len(tri)
     ext = np.maximum(hi - lo, 0).max(axis=1)
     h = max(float(np.median(ext)) * 2.0, float(np.ptp(tri.reshape(-1, 3), axis=0).max()) / 4096.0, 1e-300)
     origin = lo.min(axis=0)
     while True:  # coarsen the grid until big triangles cover few cells (bounded memory)
-        c0 = np.floor((lo - origin) / h).astype(np.int64)
-        c1 = np.floor((hi - origin) / h).astype(np.int64)
+        c0 = np.floor((lo - origin) / h).astype(np.int32)  # at most 4096 cells along the extent: 32 bits
+        c1 = np.floor((hi - origin) / h).astype(np.int32)
         span = c1 - c0 + 1
-        n = span.prod(axis=1)
+        n = span.prod(axis=1, dtype=np.int64)
         if n.sum() <= 8 * F + 1000:
             break
         h *= 2.0
-    owner = np.repeat(np.arange(F), n)
-    local = np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+    del c1
+    ids = np.int32 if 8 * F + 1000 < 2**31 else np.int64  # triangle and entry ids: 32 bits when they fit
+    owner = np.repeat(np.arange(F, dtype=ids), n)
+    local = np.arange(int(n.sum()), dtype=ids) - np.repeat((np.cumsum(n) - n).astype(ids), n)
     sx, sy = span[owner, 0], span[owner, 1]
-    cell = c0[owner] + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1)
-    dims = cell.max(axis=0) + 1
-    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    cell = c0[owner] + np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1).astype(np.int32)
+    del local, sx, sy, span, n
+    dims = (cell.max(axis=0) + 1).astype(np.int64)
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]  # int64 (dims is)
+    del cell
     order = np.argsort(key, kind="stable")
     key, owner = key[order], owner[order]
+    del order
     starts = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
     ends = np.r_[starts[1:], len(key)]
     gsize = ends - starts
     pos = np.arange(len(key))
-    count = np.repeat(ends, gsize) - pos - 1
-    total = int(count.sum())
-    if total == 0:
-        return np.zeros((0, 2), dtype=np.int64)
-    left = np.repeat(pos, count)
-    right = left + 1 + (np.arange(total) - np.repeat(np.cumsum(count) - count, count))
-    i, j = owner[left], owner[right]
-    packed = np.unique(np.minimum(i, j) * np.int64(F) + np.maximum(i, j))  # 1-D keys: fast unique
-    i, j = packed // F, packed % F
-    keep = i != j
-    i, j = i[keep], j[keep]
-    overlap = ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all(axis=1)
-    return np.stack([i[overlap], j[overlap]], axis=1)
+    count = np.repeat(ends, gsize) - pos - 1  # pairs that start at each entry (with the later ones of its cell)
+    del starts, ends, gsize
+    done = np.cumsum(count)
+    a = 0
+    while a < len(key):
+        b = max(a + 1, int(np.searchsorted(done, (done[a - 1] if a else 0) + block, side="right")))
+        cnt = count[a:b]
+        total = int(cnt.sum())
+        if total:
+            left = np.repeat(pos[a:b], cnt)
+            right = left + 1 + (np.arange(total) - np.repeat(np.cumsum(cnt) - cnt, cnt))
+            i, j = owner[left], owner[right]
+            ref = np.maximum(c0[i], c0[j])  # first cell of the overlap of the two boxes of cells
+            first = (ref[:, 0] * dims[1] + ref[:, 1]) * dims[2] + ref[:, 2] == key[left]
+            i, j = i[first], j[first]
+            i, j = np.minimum(i, j), np.maximum(i, j)
+            overlap = ((lo[i] <= hi[j]) & (lo[j] <= hi[i])).all(axis=1)
+            yield np.stack([i[overlap], j[overlap]], axis=1)
+        a = b
 
 
 def _segments_cross(p0, p1, tri, eps: float = 1e-9) -> np.ndarray:
@@ -335,9 +363,8 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
         return 0
     tri = v[f]
     hits = 0
-    pairs = _candidate_pairs(tri)
-    for start in range(0, len(pairs), 1_000_000):
-        i, j = pairs[start:start + 1_000_000].T
+    for pairs in _candidate_pairs(tri):
+        i, j = pairs.T
         same = f[i][:, :, None] == f[j][:, None, :]  # (P, 3, 3): corner k of i equals corner l of j
         shared = same.sum(axis=(1, 2))
         hit = np.zeros(len(i), dtype=bool)
@@ -432,6 +459,7 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
         twice = int(np.count_nonzero(np.unique(fwd[1:][fwd[1:] == fwd[:-1]])))
         if (counts <= 2).all():
             problems.append(f"{twice} edges used twice in the same direction (inconsistent orientation)")
+    del a, b, und, counts, fwd  # the edge keys are not needed below (less memory for the fan test)
     if problems:
         return problems
     if intersections and star_centre is not None and star_certificate(v, f, star_centre):

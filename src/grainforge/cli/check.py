@@ -28,26 +28,37 @@ def _table(rows: list[dict]) -> str:
 def check(files, printer_spec, as_csv):
     """Check mesh FILES (STL, OBJ, PLY, 3MF, or folders of them; every object of a 3MF) against a printer.
 
-    Checks: watertight, manifold, one body, no self-intersection, wall
-    thickness / minimum feature and thin necks against the printer's minimum
-    wall, and grains below the printer's reliable size.  Prints a table on
-    stdout; exits with 1 when something will not print (FAIL), 0 otherwise
-    (WARN rows print but are fragile).
+    Checks: grains below the printer's reliable size (said first, one line
+    per part on stderr), watertight, manifold, one body, no
+    self-intersection, wall thickness / minimum feature and thin necks
+    against the printer's minimum wall.  Prints a table on stdout; exits with
+    1 when something will not print (FAIL), 0 otherwise (WARN rows print but
+    are fragile).  Files are read and checked one at a time.
     """
-    from ..fabrication.printability import check_mesh
+    import sys
+
+    from ..fabrication.printability import check_mesh, equivalent_diameter
     from ..fabrication.printers import get_printer
-    from ..io import read_parts
-    from ..io import csv_text
+    from ..io import csv_text, read_parts
     from .paths import mesh_inputs
     from .progress import progress_bar
 
     printer = get_printer(printer_spec)
     files = mesh_inputs(files)
-    parts = [(path, part) for path in files for part in read_parts(path)]  # ValueError -> exit 2
     rows = []
-    for path, part in progress_bar(total=len(parts), desc="check")(parts):
-        r = check_mesh(part.vertices, part.faces, printer, name=part.name).row()
-        rows.append({"file": str(path), **r})
+    for path in progress_bar(total=len(files), desc="check", unit="file")(files):
+        try:
+            parts = read_parts(path)  # ValueError -> exit 2; one file in memory at a time
+            for part in parts:
+                small = printer.size_problem(equivalent_diameter(part.vertices, part.faces))
+                if small is not None:  # before the slower tests, so that it is seen at once
+                    _say(f"{path}: {part.name}: will not print reliably on {printer.name}: {small}", sys.stderr)
+                r = check_mesh(part.vertices, part.faces, printer, name=part.name).row()
+                rows.append({"file": str(path), **r})
+        except MemoryError:
+            raise MemoryError(str(path)) from None  # the message names the file
+        finally:
+            parts = part = None  # let this file go before the next one is read
     click.echo(csv_text(rows, COLUMNS) if as_csv else _table(rows), nl=not as_csv)
     failed = sum(r["status"] == "FAIL" for r in rows)
     warned = sum(r["status"] == "WARN" for r in rows)
@@ -55,3 +66,10 @@ def check(files, printer_spec, as_csv):
                f"(min wall {printer.min_wall:g} mm, reliable size {printer.min_size:g} mm)", err=True)
     if failed:
         raise SystemExit(1)
+
+
+def _say(line: str, stream) -> None:
+    """One line on stderr that does not break a progress bar."""
+    from tqdm import tqdm
+
+    tqdm.write(line, file=stream)

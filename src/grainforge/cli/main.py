@@ -100,8 +100,9 @@ class GrainforgeGroup(click.Group):
         except OSError as exc:  # permission denied, not a directory, disk full, ...: name the path
             click.echo(f"Error: {_os_error(exc)}", err=True)
             sys.exit(2)
-        except MemoryError:
-            click.echo("Error: not enough memory for this request; ask for fewer or smaller grains", err=True)
+        except MemoryError as exc:
+            what = str(exc.args[0]) if exc.args and isinstance(exc.args[0], str) else ""
+            click.echo(f"Error: {memory_message(self._command_name(args), what)}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
             click.echo("Interrupted.", err=True)
@@ -109,6 +110,41 @@ class GrainforgeGroup(click.Group):
         if standalone_mode:
             sys.exit(rv if isinstance(rv, int) else 0)
         return rv
+
+
+    def _command_name(self, args) -> str | None:
+        """The subcommand named on the command line (the first word that is not an option), if any."""
+        for word in sys.argv[1:] if args is None else args:
+            if not str(word).startswith("-"):
+                return str(word) if str(word) in self.commands else None
+        return None
+
+
+#: what a command that ran out of memory says, by command (the default suits the commands that make grains);
+#: ``{what}`` is what the command was working on when it ran out (the MemoryError's argument), if it says
+MEMORY_HINTS = {
+    "check": "not enough memory to check {what}; files are read and checked one at a time, so check a "
+             "version with fewer triangles, or a 3MF's objects in smaller files",
+}
+DEFAULT_MEMORY_HINT = "not enough memory for this request; ask for fewer or smaller grains"
+
+
+def memory_message(command: str | None, what: str = "") -> str:
+    """The one line said when ``command`` runs out of memory while working on ``what``.
+
+    Examples
+    --------
+    >>> memory_message("check", "tray.3mf")[:53]
+    'not enough memory to check tray.3mf; files are read a'
+    >>> memory_message("check")[:39]
+    'not enough memory to check these meshes'
+    >>> memory_message("tray")
+    'not enough memory for this request; ask for fewer or smaller grains'
+    """
+    hint = MEMORY_HINTS.get(command or "")
+    if hint is None:
+        return DEFAULT_MEMORY_HINT
+    return hint.format(what=what or "these meshes")
 
 
 def _one_line(exc: BaseException) -> str:

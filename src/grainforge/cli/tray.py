@@ -136,6 +136,9 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
         if shape is not None:
             warnings.append(shape + ("" if res.limited_by == "budget" else
                                      "  Print larger or on a finer printer, or give --param subdivisions=N."))
+    small = printer.size_warning([row["equivalent_diameter"] for row in result.rows])
+    if small is not None:
+        warnings.append(small)
     layers = ", ".join(str(n) for n in result.layers)
     click.echo(f"wrote {len(result.rows)} grains on {result.plates} plate(s) ({layers} layer(s)), "
                f"gap {result.gap * 1000:g} µm: {', '.join(map(str, result.files))}; "

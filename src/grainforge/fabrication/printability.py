@@ -16,7 +16,13 @@
   particles join.  Thinner than ``min_wall``: fail; thinner than
   :data:`NECK_FACTOR` x ``min_wall``: a warning that the grain is fragile;
 - **size**: an equivalent diameter below the printer's reliable ``min_size``
-  fails, and so does a part larger than the build volume.
+  fails (tested first and listed first), and so does a part larger than the
+  build volume.
+
+The rays find their candidate triangles in a :class:`TriangleGrid` walked
+along each ray, and test them :data:`MAX_PAIRS` at a time: memory is bounded
+by the mesh's own size whatever the printer's wall horizon, and the result
+is that of testing every triangle.
 
 All lengths are in millimetres.  Thickness along the inward normal is an
 approximation of the medial-axis thickness (it can over-estimate a wall
@@ -31,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["CheckResult", "check_mesh", "local_thickness", "self_intersections", "THIN_AREA_LIMIT", "NECK_FACTOR"]
+__all__ = ["CheckResult", "check_mesh", "equivalent_diameter", "TriangleGrid", "triangle_grid", "local_thickness", "self_intersections", "THIN_AREA_LIMIT", "NECK_FACTOR"]
 
 #: largest fraction of the surface area allowed below ``min_wall`` before a part fails.
 THIN_AREA_LIMIT = 0.005
@@ -41,6 +47,14 @@ NECK_FACTOR = 2.0
 THICKNESS_HORIZON = 4.0
 #: faces sampled for ray casting (all faces when there are fewer).
 MAX_RAYS = 4000
+#: (ray, triangle) candidate pairs the wall-thickness test holds at once (about 350 bytes each):
+#: bounds its memory whatever the mesh, the grain's size and the printer's horizon.
+MAX_PAIRS = 1 << 17
+#: the triangle grid of the wall-thickness test holds at most this many (triangle, cell) entries per
+#: triangle, plus 1000 (its cells are coarsened until it does) ...
+GRID_ENTRIES_PER_FACE = 8
+#: ... and its cells are at least 1/GRID_MAX_CELLS of the mesh's extent.
+GRID_MAX_CELLS = 4096
 
 
 @dataclass
@@ -190,27 +204,188 @@ def local_thickness(mesh, max_rays: int = MAX_RAYS, max_distance: float | None =
     return idx, thickness
 
 
-def _short_rays(mesh, idx, origins, normals, length, eps):
-    """Distance along -normal to the first triangle within ``length`` (``inf`` if none)."""
-    from scipy.spatial import cKDTree
+def _box_cells(c0: np.ndarray, span: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Every cell of the boxes of cells ``c0 .. c0 + span - 1``: (box index, (n, 3) cell) per cell."""
+    n = span.prod(axis=1, dtype=np.int64)
+    ids = np.int32 if n.sum() + len(c0) < 2**31 else np.int64  # 32-bit ids when they fit (less memory)
+    owner = np.repeat(np.arange(len(c0), dtype=ids), n)
+    local = np.arange(int(n.sum()), dtype=ids) - np.repeat((np.cumsum(n) - n).astype(ids), n)
+    sx, sy = span[owner, 0], span[owner, 1]
+    step = np.stack([local % sx, (local // sx) % sy, local // (sx * sy)], axis=1).astype(c0.dtype)
+    return owner, c0[owner] + step
 
-    tri = np.asarray(mesh.triangles)
-    cen = tri.mean(axis=1)
-    rad = float(np.linalg.norm(tri - cen[:, None], axis=2).max())
-    mids = origins - normals * (length / 2)
-    lists = cKDTree(cen).query_ball_point(mids, r=length / 2 + rad)
-    counts = np.fromiter((len(c) for c in lists), dtype=np.int64, count=len(lists))
+
+@dataclass(frozen=True)
+class TriangleGrid:
+    """Triangles binned in a uniform grid of cubic cells: each in every cell its bounding box overlaps.
+
+    Only occupied cells are stored, sorted by key, so memory is the number of
+    (triangle, cell) entries, which :func:`triangle_grid` bounds by the mesh's
+    own size.
+    """
+
+    origin: np.ndarray  #: (3,) corner of cell (0, 0, 0)
+    cell: float  #: edge of a cell
+    dims: np.ndarray  #: (3,) cells along x, y, z
+    keys: np.ndarray  #: (K,) occupied cells, ``(i * dims[1] + j) * dims[2] + k``, sorted
+    first: np.ndarray  #: (K,) where each cell's triangles start in ``owner``
+    count: np.ndarray  #: (K,) how many triangles each cell holds
+    owner: np.ndarray  #: (E,) triangle indices, grouped by cell
+
+    @property
+    def entries(self) -> int:
+        """Number of (triangle, cell) entries."""
+        return len(self.owner)
+
+    def cell_of(self, points: np.ndarray) -> np.ndarray:
+        """Integer cell coordinates of ``points`` (not clipped to the grid)."""
+        return np.floor((points - self.origin) / self.cell).astype(np.int64)
+
+
+def triangle_grid(tri: np.ndarray, max_entries: int | None = None) -> TriangleGrid:
+    """Bin triangles ``(F, 3, 3)`` in a :class:`TriangleGrid`, coarse enough to hold at most ``max_entries``.
+
+    The cell starts at twice the median triangle extent (at least
+    1/:data:`GRID_MAX_CELLS` of the mesh's extent) and doubles until the
+    entries fit ``max_entries`` (default :data:`GRID_ENTRIES_PER_FACE` per
+    triangle plus 1000; never less than one per triangle): a few big triangles
+    cannot make the grid large.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(3)
+    >>> g = triangle_grid(s.triangles)
+    >>> g.entries <= GRID_ENTRIES_PER_FACE * len(s.faces) + 1000
+    True
+    >>> triangle_grid(s.triangles, max_entries=len(s.faces)).entries   # one cell: every triangle once
+    1280
+    """
+    tri = np.asarray(tri, dtype=np.float64)
+    lo, hi = tri.min(axis=1), tri.max(axis=1)
+    F = len(tri)
+    budget = GRID_ENTRIES_PER_FACE * F + 1000 if max_entries is None else int(max_entries)
+    budget = max(budget, F)
+    origin = lo.min(axis=0)
+    extent = float((hi.max(axis=0) - origin).max())
+    size = np.maximum(hi - lo, 0).max(axis=1)
+    h = max(2.0 * float(np.median(size)), extent / GRID_MAX_CELLS, np.finfo(np.float64).tiny)
+    while True:  # once the cell exceeds the extent every triangle is in one cell: F entries, the loop ends
+        c0 = np.floor((lo - origin) / h).astype(np.int32)  # at most GRID_MAX_CELLS along the extent
+        c1 = np.floor((hi - origin) / h).astype(np.int32)
+        span = c1 - c0 + 1
+        if int(span.prod(axis=1, dtype=np.int64).sum()) <= budget:
+            break
+        h *= 2.0
+    dims = (c1.max(axis=0) + 1).astype(np.int64)  # cell keys are int64
+    del c1, lo, hi, size
+    owner, cell = _box_cells(c0, span)
+    del c0, span
+    key = (cell[:, 0] * dims[1] + cell[:, 1]) * dims[2] + cell[:, 2]
+    del cell
+    order = np.argsort(key, kind="stable")
+    key = key[order]
+    owner = owner[order]
+    del order
+    first = np.flatnonzero(np.r_[True, key[1:] != key[:-1]])
+    count = np.diff(np.r_[first, len(key)])
+    return TriangleGrid(origin, h, dims, key[first], first, count, owner)
+
+
+def _ray_cells(grid: TriangleGrid, origins, directions, reach: float, pad: float):
+    """The occupied cells that rays ``origins + s * directions`` (unit directions, 0 ≤ s ≤ reach) pass.
+
+    Each ray is cut into segments of at most half a cell; a cell is kept when
+    a segment's bounding box, grown by ``pad``, overlaps it (so no cell a ray
+    crosses is missed, and a segment meets at most 2 x 2 x 2 cells).
+
+    Returns
+    -------
+    ray : (m,) int64
+        Ray index (into ``origins``) of each (ray, cell) pair, each pair once.
+    slot : (m,) int64
+        Index of the cell in ``grid.keys``.
+    """
+    n = _segments(grid, reach)
+    s = np.linspace(0.0, reach, n + 1)
+    p = origins[:, None, :] + s[None, :, None] * directions[:, None, :]  # (r, n + 1, 3)
+    c0 = np.maximum(grid.cell_of(np.minimum(p[:, :-1], p[:, 1:]).reshape(-1, 3) - pad), 0)
+    c1 = np.minimum(grid.cell_of(np.maximum(p[:, :-1], p[:, 1:]).reshape(-1, 3) + pad), grid.dims - 1)
+    inside = (c0 <= c1).all(axis=1)  # segments outside the grid meet no triangle
+    seg, cell = _box_cells(c0[inside], c1[inside] - c0[inside] + 1)
+    ray = np.flatnonzero(inside)[seg] // n
+    key = (cell[:, 0] * grid.dims[1] + cell[:, 1]) * grid.dims[2] + cell[:, 2]
+    cells = int(grid.dims[0]) * int(grid.dims[1]) * int(grid.dims[2])  # <= 4097**3: no overflow
+    if cells * len(origins) < 2**62:  # each (ray, cell) once (consecutive segments share cells)
+        packed = np.unique(ray * np.int64(cells) + key)
+        ray, key = packed // cells, packed % cells
+    slot = np.minimum(np.searchsorted(grid.keys, key), len(grid.keys) - 1)
+    hit = grid.keys[slot] == key
+    return ray[hit], slot[hit]
+
+
+def _segments(grid: TriangleGrid, reach: float) -> int:
+    """Segments of at most half a cell that cover a ray of length ``reach``."""
+    return max(1, int(np.ceil(2.0 * reach / grid.cell)))
+
+
+def _candidate_slices(grid: TriangleGrid, ray: np.ndarray, slot: np.ndarray, max_pairs: int):
+    """(ray, triangle) pairs of the given (ray, cell) pairs, at most ``max_pairs`` at a time."""
+    count = grid.count[slot]
+    end = np.cumsum(count)
+    total = int(end[-1]) if len(end) else 0
+    for a in range(0, total, max_pairs):
+        pos = np.arange(a, min(a + max_pairs, total))
+        k = np.searchsorted(end, pos, side="right")
+        yield ray[k], grid.owner[grid.first[slot[k]] + pos - (end[k] - count[k])]
+
+
+def _short_rays(mesh, idx, origins, normals, length, eps, max_pairs: int = MAX_PAIRS):
+    """Distance along -normal to the first triangle within ``length`` (``inf`` if none).
+
+    Candidates come from a :class:`TriangleGrid` walked along each ray, up to
+    ``length`` or the mesh's bounding-box diagonal, whichever is shorter
+    (nothing lies further); rays are taken in groups and candidate pairs at
+    most ``max_pairs`` at a time, so memory stays bounded whatever the mesh
+    size and the horizon.  Every triangle a ray can hit is a candidate: the
+    result is that of testing every triangle.
+    """
+    tri = np.asarray(mesh.triangles, dtype=np.float64)
     out = np.full(len(idx), np.inf)
-    if counts.sum() == 0:
+    if len(idx) == 0 or len(tri) == 0:
         return out
-    ray = np.repeat(np.arange(len(idx)), counts)
-    cand = np.concatenate([np.asarray(c, dtype=np.int64) for c in lists])
-    keep = cand != idx[ray]
-    ray, cand = ray[keep], cand[keep]
-    ok, u, w, t = _moller_trumbore(origins[ray], -normals[ray] * length, tri[cand], 1e-30)
-    hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t * length > eps) & (t <= 1)
-    np.minimum.at(out, ray[hit], t[hit] * length + eps)
+    grid = triangle_grid(tri)
+    diag = float(np.linalg.norm(np.ptp(tri.reshape(-1, 3), axis=0)))
+    reach = min(length, diag + 4 * eps)  # an origin lies within eps of the mesh: nothing is further
+    pad = 2 * eps + 1e-9 * diag
+    direction = -normals * length
+    per = max(1, max_pairs // (8 * _segments(grid, reach)))  # (ray, cell) pairs of a group <= max_pairs
+    for r0 in range(0, len(idx), per):
+        ray, slot = _ray_cells(grid, origins[r0:r0 + per], -normals[r0:r0 + per], reach, pad)
+        for ray_k, cand in _candidate_slices(grid, ray + r0, slot, max_pairs):
+            keep = cand != idx[ray_k]
+            ray_k, cand = ray_k[keep], cand[keep]
+            ok, u, w, t = _moller_trumbore(origins[ray_k], direction[ray_k], tri[cand], 1e-30)
+            hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t * length > eps) & (t <= 1)
+            np.minimum.at(out, ray_k[hit], t[hit] * length + eps)
     return out
+
+
+def equivalent_diameter(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Diameter of the sphere of the mesh's volume, (6|V|/π)^(1/3) (0 for no faces); cheap, so it comes first.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> b = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
+    >>> round(equivalent_diameter(b.vertices, b.faces), 4)   # (6/π)^(1/3)
+    1.2407
+    """
+    from ..solid import signed_volume
+
+    f = np.asarray(faces, dtype=np.int64)
+    vol = signed_volume(np.asarray(vertices, dtype=np.float64), f) if len(f) else 0.0
+    return float(np.cbrt(6 * abs(vol) / np.pi))
 
 
 def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "part") -> CheckResult:
@@ -229,16 +404,18 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "pa
     """
     import trimesh
 
-    from ..solid import signed_volume, solid_problems
+    from ..solid import solid_problems
     from .printers import get_printer
 
     printer = get_printer(printer)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     problems = solid_problems(v, f, intersections=False)  # the solid contract; intersections counted below
-    vol = signed_volume(v, f) if len(f) else 0.0
-    d_eq = float(np.cbrt(6 * abs(vol) / np.pi))
+    d_eq = equivalent_diameter(v, f)
     res = CheckResult(name, len(f), d_eq, problems, 0, np.inf, 0.0, np.inf)
+    small = printer.size_problem(d_eq)  # first: the cheapest test, and the one that matters most
+    if small is not None:
+        res.failures.append(small)
     if problems:
         res.failures.append("not a valid solid: " + "; ".join(problems))
     if len(f) == 0 or not np.isfinite(v).all():
@@ -249,8 +426,6 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "pa
     ext = np.sort(np.ptp(v, axis=0))[::-1]
     if (ext > np.sort(printer.build_volume)[::-1]).any():
         res.failures.append(f"larger than the build volume ({' x '.join(f'{e:.1f}' for e in ext)} mm)")
-    if d_eq < printer.min_size:
-        res.failures.append(f"equivalent diameter {d_eq:.3g} mm < reliable size {printer.min_size:g} mm")
     if not problems:
         mesh = trimesh.Trimesh(v, f, process=False, validate=False)
         res.horizon = THICKNESS_HORIZON * printer.min_wall

@@ -34,6 +34,8 @@ from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
+import numpy as np
+
 __all__ = ["Printer", "PRINTERS", "get_printer", "load_printers", "TECHNOLOGIES"]
 
 TECHNOLOGIES = ("polyjet", "fdm", "sla")
@@ -107,6 +109,45 @@ class Printer:
     def max_deviation(self) -> float:
         """Largest allowed distance between a mesh and the surface it samples: half the resolution."""
         return 0.5 * self.resolution
+
+    def size_problem(self, equivalent_diameter: float) -> str | None:
+        """Why a grain of this equivalent diameter (mm) will not print reliably, or None if it is large enough.
+
+        Examples
+        --------
+        >>> p = get_printer("generic-fdm")
+        >>> p.size_problem(2.0)
+        'equivalent diameter 2 mm < reliable size 4 mm'
+        >>> p.size_problem(4.0) is None
+        True
+        """
+        if equivalent_diameter >= self.min_size:
+            return None
+        return f"equivalent diameter {equivalent_diameter:.3g} mm < reliable size {self.min_size:g} mm"
+
+    def size_warning(self, equivalent_diameters) -> str | None:
+        """A warning when some grains (equivalent diameters, mm) are below :attr:`min_size`, else None.
+
+        Examples
+        --------
+        >>> p = get_printer("generic-fdm")
+        >>> print(p.size_warning([2.0, 2.1, 5.0]))  # doctest: +NORMALIZE_WHITESPACE
+        2 of 3 grains (equivalent diameter 2 to 2.1 mm) are below the reliable size of generic-fdm (4 mm,
+        min wall 0.8 mm, resolution 0.4 mm): they will not print reliably; print them at 4 mm or more, or
+        on a finer printer.
+        >>> p.size_warning([4.0, 5.0]) is None
+        True
+        """
+        d = np.asarray(equivalent_diameters, dtype=np.float64)
+        small = d[d < self.min_size]
+        if len(small) == 0:
+            return None
+        lo, hi = float(small.min()), float(small.max())
+        span = f"{lo:.3g} mm" if f"{lo:.3g}" == f"{hi:.3g}" else f"{lo:.3g} to {hi:.3g} mm"
+        return (f"{len(small)} of {len(d)} grains (equivalent diameter {span}) are below the reliable size of "
+                f"{self.name} ({self.min_size:g} mm, min wall {self.min_wall:g} mm, resolution "
+                f"{self.resolution:g} mm): they will not print reliably; print them at {self.min_size:g} mm or "
+                f"more, or on a finer printer.")
 
 
 def _positive(name: str, key: str, value: Any) -> float:
