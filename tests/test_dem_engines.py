@@ -115,10 +115,13 @@ def settle_record(out):
     return rec["ke"], rec["threshold"]
 
 
-def check_report(report, truth):
+def check_report(report, truth, n=20):
+    """Every one of ``n`` grains inserted (all of ``truth`` when n = 20) with its mesh's mass properties,
+    settled, none lost."""
     inserted = report["inserted"]
-    assert len(inserted) == 20
-    assert sorted(r["name"] for r in inserted) == sorted(truth)
+    assert len(inserted) == n
+    names = sorted(r["name"] for r in inserted)
+    assert names == sorted(truth) if n == len(truth) else set(names) <= set(truth)
     for r in inserted:
         mass, principal, d_eq = truth[r["name"]]
         assert r["mass"] == pytest.approx(mass, rel=REL)
@@ -126,7 +129,7 @@ def check_report(report, truth):
         assert np.allclose(r["pos"], r["target"], rtol=0, atol=REL * d_eq)
     assert report["settled"], f"kinetic energy {report['kinetic_energy']} ≥ {report['ke_threshold']}"
     assert report["lost"] == []
-    assert len(report["final"]) == 20
+    assert len(report["final"]) == n
 
 
 def test_yade_deck_runs(yade, population, tmp_path):  # the engine first: skip before generating grains
@@ -148,16 +151,18 @@ def grain_frame_meshes(population):
 
 
 @pytest.mark.parametrize("shape, extra, tol", [
-    # hull vertices are mesh vertices: they sit on the surface to rounding
-    ("polyhedron", ["--vertices", "24"], 1e-6),
+    # hull vertices are mesh vertices: they sit on the surface to rounding (default vertex count)
+    ("polyhedron", [], 1e-6),
     # Yade ray-traces its surface nodes on the discrete field (spacing 0.05 d_eq)
     ("levelset", ["--spacing", "0.05"], 0.05),
 ])
 def test_yade_polyhedron_and_levelset_decks_run(yade, population, tmp_path, shape, extra, tol):
-    out, truth = make_deck(population, tmp_path, "yade", "--shape", shape, *extra)
+    # 8 of the 20 grains (fso, cri and dpa drawn by --grains): polyhedron and level-set contacts are
+    # costly, and 8 grains exercise every kind
+    out, truth = make_deck(population, tmp_path, "yade", "--shape", shape, "--grains", "8", "--seed", "3", *extra)
     run([yade, "-n", "-x", "run.py"], cwd=out)
     report = json.loads((out / "results-yade.json").read_text())
-    check_report(report, truth)
+    check_report(report, truth, n=8)
     # the contact shape sits where the mesh is: Yade's own vertices / surface nodes, mapped back
     # into the grain frame with the insertion's position and rotation, lie on the mesh surface
     meshes = grain_frame_meshes(population)
