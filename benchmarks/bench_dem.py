@@ -1,4 +1,4 @@
-"""DEM export benchmarks (issue 15).
+"""DEM export benchmarks.
 
     .venv/bin/python benchmarks/bench_dem.py clumps [--clump-python /tmp/clumpbench/bin/python] [--iterations 30]
     .venv/bin/python benchmarks/bench_dem.py deck --count 10000 [--workers 2] [--keep]   (several counts: --count 100 300)
