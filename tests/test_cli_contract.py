@@ -49,6 +49,10 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+# every row runs a real grainforge process (memory limits, signals): the full suite runs them;
+# the fast lane has the in-process contract tests (test_cli_contract_fit_simulate.py, test_first_use.py)
+pytestmark = pytest.mark.slow
+
 #: the CLI as a user runs it (the package this interpreter imports)
 CLI = [sys.executable, "-c", "from grainforge.cli.main import main; main()"]
 #: address-space limit of every command (bytes): a runaway allocation fails fast

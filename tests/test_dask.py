@@ -9,6 +9,9 @@ import pytest
 from grainforge.cli.main import cli
 from grainforge.population import parse_recipe, run_batch
 
+# a distributed LocalCluster starts in seconds: the full suite runs these, the fast lane does not
+pytestmark = pytest.mark.slow
+
 distributed = pytest.importorskip("distributed")
 
 RECIPE = """\

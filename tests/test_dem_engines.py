@@ -25,6 +25,9 @@ from click.testing import CliRunner
 
 from grainforge.cli.main import cli
 
+# every test here runs a DEM engine: the full suite (make test) runs them, the fast lane does not
+pytestmark = pytest.mark.slow
+
 DENSITY = 2650.0
 UNIT = 1e-3  # grain files are in mm
 REL = 1e-6
