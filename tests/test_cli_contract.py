@@ -48,6 +48,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from _processes import kill_sessions, session_processes
 
 # every row runs a real grainforge process (memory limits, signals): the full suite runs them;
 # the fast lane has the in-process contract tests (test_cli_contract_fit_simulate.py, test_first_use.py)
@@ -281,21 +282,6 @@ def _snapshot(*folders: Path) -> set[str]:
     return out
 
 
-def _session_processes(sid: int) -> list[int]:
-    """Processes (not zombies) whose session is ``sid``."""
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if not entry.name.isdigit():
-            continue
-        try:
-            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if int(fields[3]) == sid and fields[0] not in ("Z", "X"):  # fields[3]: session id
-            pids.append(int(entry.name))
-    return pids
-
-
 def _limit_memory():
     """``preexec_fn`` of every command: the memory limit, and SIGINT handled by default as in a foreground
     job of an interactive shell. (A parent that ignores SIGINT, e.g. a test run started in the background
@@ -326,22 +312,13 @@ def _no_strays():
     """After each test, even a failed one: kill whatever its commands left running (a failing case must not
     leave processes on the machine)."""
     yield
-    while _SESSIONS:
-        proc = _SESSIONS.pop()
-        for pid in _session_processes(proc.pid):
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        if proc.poll() is None:
-            proc.kill()
-        proc.communicate()
+    kill_sessions(_SESSIONS)
 
 
 def assert_no_processes_left(sid: int, grace: float = 5.0) -> None:
     """No process of session ``sid`` may outlive the command (``grace`` seconds to exit)."""
     deadline = time.monotonic() + grace
-    while (left := _session_processes(sid)) and time.monotonic() < deadline:
+    while (left := session_processes(sid)) and time.monotonic() < deadline:
         time.sleep(0.1)
     for pid in left:  # clean up before failing
         try:
@@ -499,7 +476,7 @@ def test_sigkill_on_tray_leaves_no_process_and_the_next_run_cleans_up(case_dir, 
 
 def _forkserver_started(sid: int):
     def started():
-        for pid in _session_processes(sid):
+        for pid in session_processes(sid):
             try:
                 if b"multiprocessing.forkserver" in Path(f"/proc/{pid}/cmdline").read_bytes():
                     return True

@@ -35,6 +35,7 @@ from pathlib import Path
 
 import click
 import pytest
+from _processes import kill_sessions, session_processes
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -316,19 +317,6 @@ def test_fuzz_simulate_options_are_refused_up_front_without_a_budget(data, tmp_p
 CLI = [sys.executable, "-c", "from grainforge.cli.main import main; main()"]
 
 
-def _session_processes(sid: int) -> list[int]:
-    pids = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
-            except (OSError, IndexError):
-                continue
-            if int(fields[3]) == sid and fields[0] not in ("Z", "X"):
-                pids.append(int(entry.name))
-    return pids
-
-
 def _processes_in(folder: Path) -> list[int]:
     """Processes (not zombies) whose working directory is inside ``folder`` (Yade runs in its deck)."""
     pids = []
@@ -350,16 +338,7 @@ _STARTED: list[subprocess.Popen] = []
 @pytest.fixture(autouse=True)
 def _no_strays():
     yield
-    while _STARTED:
-        proc = _STARTED.pop()
-        for pid in _session_processes(proc.pid):
-            try:
-                os.kill(pid, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        if proc.poll() is None:
-            proc.kill()
-        proc.communicate()
+    kill_sessions(_STARTED)
 
 
 def _start(args: list[str], cwd: Path, **env) -> subprocess.Popen:
@@ -396,7 +375,7 @@ def _stopped(proc: subprocess.Popen, sig: int) -> str:
     err = err.decode("utf-8", "replace")
     assert proc.returncode == 128 + sig and "Traceback" not in err, (proc.returncode, err)
     assert err.strip().splitlines() == ["Interrupted." if sig == signal.SIGINT else "Terminated."], err
-    _assert_gone(lambda: _session_processes(proc.pid))
+    _assert_gone(lambda: session_processes(proc.pid))
     return err
 
 

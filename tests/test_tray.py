@@ -12,7 +12,12 @@ from grainforge.cli.main import cli
 from grainforge.fabrication.printers import get_printer
 from grainforge.fabrication.threemf import read_3mf, read_stl_parts
 from grainforge.fabrication.tray import (
-    FileSource, GeneratorSource, ShelfPacker, build_tray, min_mesh_distance, orient_stable,
+    FileSource,
+    GeneratorSource,
+    ShelfPacker,
+    build_tray,
+    min_mesh_distance,
+    orient_stable,
 )
 from grainforge.methods.fso import Params as FsoParams
 from grainforge.run import write_run
@@ -43,7 +48,7 @@ def test_packer_keeps_boxes_apart_and_inside(extents, stacking, gap):
     p = ShelfPacker(volume, gap, stacking)
     p.compact(len(extents), extents[0])
     placed = [(p.place(e), np.array(e)) for e in extents]
-    for (plate, *xyz), e in placed:
+    for (_plate, *xyz), e in placed:
         lo = np.array(xyz)
         assert (lo >= 0).all() and (lo + e <= np.array(volume) + 1e-12).all()
         assert stacking or lo[2] == 0
@@ -124,9 +129,9 @@ def test_stable_orientation_of_a_wedge():
 def test_output_identical_whatever_the_workers(tmp_path):
     src = GeneratorSource("fso", SMALL, tuple(range(40, 50)), 2.0)
     for ext in (".3mf", ".stl"):
-        a = build_tray(src, "objet-eden-250", tmp_path / ext[1:] / "one{ext}".format(ext=ext), workers=1,
+        a = build_tray(src, "objet-eden-250", tmp_path / ext[1:] / f"one{ext}", workers=1,
                        max_subdivisions=2)
-        b = build_tray(src, "objet-eden-250", tmp_path / ext[1:] / "two{ext}".format(ext=ext), workers=2,
+        b = build_tray(src, "objet-eden-250", tmp_path / ext[1:] / f"two{ext}", workers=2,
                        max_subdivisions=2)
         assert a.files[0].read_bytes() == b.files[0].read_bytes()
         assert a.csv.read_bytes() == b.csv.read_bytes()

@@ -55,9 +55,9 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
     import os
     import sys
 
-    from ..estimate import TooLargeError, duration
+    from ..estimate import TooLargeError
     from ..fit import FITS, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
-    from .interrupts import preload
+    from .interrupts import ready_for_work
 
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
@@ -71,14 +71,7 @@ def fit(sand, out, voxel_size, method, count, pilot, rounds, final_rounds, seed,
                                  workers=workers)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    preload(["matplotlib"])
-    import matplotlib
-
-    matplotlib.use("Agg")
-    preload(HEAVY_MODULES)  # before any work: no lazy import later can swallow a Ctrl-C
-    if seconds > 60:
-        click.echo(f"estimated time: at most about {duration(seconds)} (a rough model; the progress bar shows the "
-                   "measured rate)", err=True)
+    ready_for_work(HEAVY_MODULES, seconds, bound="at most about")
     state = {"desc": "fit"}
 
     def progress(it, total):

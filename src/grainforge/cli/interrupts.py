@@ -23,7 +23,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 
-__all__ = ["signals_held", "preload"]
+__all__ = ["signals_held", "preload", "ready_for_work"]
 
 #: the signals a command stops on, with the line it prints
 SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
@@ -85,3 +85,23 @@ def preload(modules: Iterable[str]) -> None:
     with _handled(_exit_now):
         for name in modules:
             importlib.import_module(name)
+
+
+def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "about") -> None:
+    """Before a long job: load the plotting backend and ``modules`` (:func:`preload`), then, when
+    the job is estimated at over a minute, say so on stderr.
+
+    ``seconds`` is the job's estimate; ``bound`` words it ("about", "at most about").
+    """
+    import click
+
+    from ..estimate import duration
+
+    preload(["matplotlib"])
+    import matplotlib
+
+    matplotlib.use("Agg")
+    preload(modules)  # before any work: no lazy import later can swallow a Ctrl-C
+    if seconds > 60:
+        click.echo(f"estimated time: {bound} {duration(seconds)} (a rough model; the progress bar shows the "
+                   "measured rate)", err=True)

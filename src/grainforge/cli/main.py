@@ -173,9 +173,23 @@ def cli():
 
 
 def _register():
+    from . import (
+        analyse,
+        batch,
+        calibrate,
+        check,
+        dem,
+        demo,
+        figures,
+        fit,
+        fourier,
+        generate,
+        plot,
+        render,
+        simulate,
+        tray,
+    )
     from .options import apply_help_style
-
-    from . import analyse, batch, calibrate, check, dem, demo, figures, fit, fourier, generate, plot, render, simulate, tray
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,

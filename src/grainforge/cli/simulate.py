@@ -51,9 +51,9 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values):
     import os
 
-    from ..estimate import TooLargeError, duration
+    from ..estimate import TooLargeError
     from ..simulate import QUICK, Settings, check_inputs, check_size, yade_executable
-    from .interrupts import preload, signals_held
+    from .interrupts import ready_for_work, signals_held
 
     if quick:
         values = {**QUICK, **{k: v for k, v in values.items() if v is not None}}
@@ -69,14 +69,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
                              as_spheres=as_spheres, workers=workers)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    preload(["matplotlib"])
-    import matplotlib
-
-    matplotlib.use("Agg")
-    preload(HEAVY_MODULES)  # before any work: no lazy import later can swallow a Ctrl-C
-    if seconds > 60:
-        click.echo(f"estimated time: about {duration(seconds)} (a rough model; the progress bar shows the "
-                   "measured rate)", err=True)
+    ready_for_work(HEAVY_MODULES, seconds, bound="about")
     from tqdm import tqdm
 
     from ..simulate import build_population, commit_stage, discard_stage, open_stage, run_test, summarise

@@ -24,14 +24,27 @@
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from .deck import (GRAVITY, clump_vtk_text, fmt, json_text, lattice_slots, rotation_matrix, settle_loop,
-                   settle_report, settle_schedule, settle_settings, template_record, updated_settings, write_files,
-                   xyzr_text)
+from .deck import (
+    GRAVITY,
+    clump_vtk_text,
+    fmt,
+    json_text,
+    lattice_slots,
+    rotation_matrix,
+    settle_loop,
+    settle_report,
+    settle_schedule,
+    settle_settings,
+    template_record,
+    updated_settings,
+    write_files,
+    xyzr_text,
+)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 

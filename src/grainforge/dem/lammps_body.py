@@ -32,13 +32,24 @@ body (``MAXBODY``/``MAXLINE``); a hull that does not fit raises ``ValueError``
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from .deck import (GRAVITY, fmt, json_text, lattice_slots, settle_loop, settle_report, settle_schedule, settle_settings,
-                   template_record, updated_settings, write_files)
+from .deck import (
+    GRAVITY,
+    fmt,
+    json_text,
+    lattice_slots,
+    settle_loop,
+    settle_report,
+    settle_schedule,
+    settle_settings,
+    template_record,
+    updated_settings,
+    write_files,
+)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
            "MAX_VERTICES"]

@@ -28,13 +28,25 @@ from __future__ import annotations
 
 import functools
 import math
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from .deck import (GRAVITY, clump_vtk_text, fmt, json_text, settle_loop, settle_report, settle_schedule,
-                   settle_settings, template_record, updated_settings, write_files, xyzr_text)
+from .deck import (
+    GRAVITY,
+    clump_vtk_text,
+    fmt,
+    json_text,
+    settle_loop,
+    settle_report,
+    settle_schedule,
+    settle_settings,
+    template_record,
+    updated_settings,
+    write_files,
+    xyzr_text,
+)
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "seed_table", "deck_seeds", "SEED_MIN", "SEED_LIMIT"]
 
@@ -168,7 +180,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     for k, t in enumerate(templates):
         ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
                    f"pts{k + 1} 1.0")
-        for c in range(t.count):
+        for _ in range(t.count):
             i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
             node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
             lo, hi = node - 0.5 * _NODE_BOX * cell, node + 0.5 * _NODE_BOX * cell

@@ -30,13 +30,21 @@ tests (``grainforge simulate``) reuse the grain insertion: it may call
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import numpy as np
 
-from .deck import (clump_vtk_text, fmt, json_text, settle_settings, template_record, updated_settings, write_files,
-                   xyzr_text)
+from .deck import (
+    clump_vtk_text,
+    fmt,
+    json_text,
+    settle_settings,
+    template_record,
+    updated_settings,
+    write_files,
+    xyzr_text,
+)
 
 __all__ = ["write_deck", "deck_files", "LIBRARY", "POUR_SCENE", "pour_settings"]
 

@@ -1,0 +1,38 @@
+"""Process helpers shared by the tests that run real ``grainforge`` processes."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+from pathlib import Path
+
+
+def session_processes(sid: int) -> list[int]:
+    """Processes (not zombies) whose session is ``sid``."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[3]) == sid and fields[0] not in ("Z", "X"):  # fields[3]: session id
+            pids.append(int(entry.name))
+    return pids
+
+
+def kill_sessions(started: list[subprocess.Popen]) -> None:
+    """Kill every process of the sessions ``started`` made (each started with ``start_new_session``),
+    and reap them; empties the list."""
+    while started:
+        proc = started.pop()
+        for pid in session_processes(proc.pid):
+            try:
+                os.kill(pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
+        if proc.poll() is None:
+            proc.kill()
+        proc.communicate()
