@@ -138,6 +138,8 @@ def three_grains(tmp_path_factory):
     (["--unit", "1e-9"], "equivalent diameter 2e-09 m is outside 1e-05–10 m"),
     (["--unit", "100"], "equivalent diameter 200 m is outside 1e-05–10 m"),
     (["--spheres", "1"], "'--spheres': 1 is not in the range 2<=x<=1000"),
+    # Yade's polyhedra crash the engine at 12 µm
+    (["--shape", "polyhedron", "--unit", "6e-6"], "equivalent diameter 1.2e-05 m is outside 2e-05–10 m"),
 ])
 def test_dem_refuses_unphysical_settings(three_grains, tmp_path, args, says):
     from click.testing import CliRunner

@@ -100,9 +100,10 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
                                 counts=counts, unit=unit, density=density, shape=shape, spheres=spheres,
                                 refine_iterations=refine, polyhedron_vertices=vertices, levelset_spacing=spacing)
     from ..dem.decks import write_deck
-    from ..dem.inputs import GRAIN_SIZE_RANGE
+    from ..dem.inputs import GRAIN_SIZE_RANGE, MIN_GRAIN_SIZE
 
     lo, hi = GRAIN_SIZE_RANGE
+    lo = MIN_GRAIN_SIZE.get((engine, shape), lo)
     for t in templates:
         if not lo <= t.d_eq <= hi:
             raise click.BadParameter(f"{t.source}: equivalent diameter {t.d_eq:.3g} m is outside {lo:g}–{hi:g} m "

@@ -12,6 +12,7 @@ from .enclosure import enclosure_problems
 
 __all__ = [
     "GRAIN_SIZE_RANGE",
+    "MIN_GRAIN_SIZE",
     "grain_paths",
     "read_grain",
     "load_template",
@@ -26,6 +27,10 @@ MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
 #: equivalent diameters (m) a deck accepts: 10 µm (fine silt; below, contact time steps and the engines'
 #: absolute tolerances leave SI units) to 10 m (boulders)
 GRAIN_SIZE_RANGE = (1e-5, 10.0)
+#: a larger smallest size where an engine's representation needs one: Yade's polyhedra (CGAL,
+#: absolute tolerances) crashed the engine ("malloc_consolidate(): unaligned fastbin chunk") at
+#: 12 µm and settled at 20 µm
+MIN_GRAIN_SIZE = {("yade", "polyhedron"): 2e-5}
 
 #: the most grains an example pour holds (the LIGGGHTS deck inserts each grain by its own fix,
 #: and every deck places them on a lattice above the box: far beyond this is no example pour)
