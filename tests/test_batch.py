@@ -118,6 +118,7 @@ def test_resume_regenerates_only_damaged_or_unrecorded_grains(recipe_file, tmp_p
     assert kept == {i: (out / f"fso-{i:04d}.stl").stat().st_mtime_ns for i in (0, 1, 3, 4)}
 
 
+@pytest.mark.slow
 def test_resume_after_killing_a_real_batch_process(tmp_path):
     recipe = tmp_path / "slow.toml"
     # Grains slow enough (about 0.1-0.3 s each) to kill the run part-way.

@@ -187,6 +187,7 @@ def test_dem_cli_refuses_overwrite(grain_files, tmp_path):
     assert {p: p.read_bytes() for p in out.iterdir()} == before  # same input, same bytes
 
 
+@pytest.mark.slow
 def test_dem_cli_yade_polyhedron_and_levelset_files(grain_files, tmp_path):
     """The files of the non-clump Yade decks hold the grain's hull / distance field (metres,
     centroid at the origin; the level set in the principal frame), with the mesh's mass."""

@@ -14,6 +14,9 @@ from test_solid_contract import assert_valid_stl
 import grainforge
 from grainforge.cli.main import cli
 
+# every DPA example of the docs, run as written: the full suite runs them, the fast lane does not
+pytestmark = pytest.mark.slow
+
 ROOT = Path(__file__).resolve().parents[1]
 SOURCES = [ROOT / "README.md", ROOT / "docs" / "methods" / "dpa.md"]
 

@@ -217,6 +217,7 @@ def test_dpa_files_pass_check_as_docs_dem_says(runner, tmp_path):
     assert "have such edges and fail" not in text
 
 
+@pytest.mark.slow
 def test_printing_doc_shows_the_level_generate_chooses(runner, tmp_path):
     """The docs/printing.md example: its command's resolution line is the one the docs print."""
     text = (ROOT / "docs" / "printing.md").read_text()

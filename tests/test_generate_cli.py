@@ -160,6 +160,7 @@ def test_help_and_version(runner):
     assert runner.invoke(cli, ["--version"]).exit_code == 0
 
 
+@pytest.mark.slow
 def test_printer_matches_resolution_and_records_it(runner, tmp_path):
     from grainforge.fabrication.resolution import match_subdivisions
     from grainforge.methods.fso import Params
@@ -178,6 +179,7 @@ def test_printer_matches_resolution_and_records_it(runner, tmp_path):
     assert len(trimesh.load(tmp_path / "fso-0000.stl").faces) == 20 * 4 ** expected.subdivisions
 
 
+@pytest.mark.slow
 def test_finer_printer_gives_finer_mesh(runner, tmp_path):
     levels = {}
     for printer in ("generic-fdm", "objet-eden-250"):

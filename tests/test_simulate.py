@@ -143,6 +143,7 @@ def require_yade():
         pytest.skip(reason)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("test", ["repose", "tilt"])
 def test_quick_run_in_yade(runner, grains, tmp_path, test):
     require_yade()
