@@ -22,3 +22,17 @@ def runner():
     from click.testing import CliRunner
 
     return CliRunner()
+
+
+@pytest.fixture(scope="session")
+def angular_grains(tmp_path_factory):
+    """A folder of three small angular grains (2 mm, subdivisions 3) with their manifest."""
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    out = tmp_path_factory.mktemp("angular") / "grains"
+    res = CliRunner().invoke(cli, ["generate", "angular", "--count", "3", "--size", "2", "--subdivisions", "3",
+                                   "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    return out

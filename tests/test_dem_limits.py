@@ -117,19 +117,6 @@ def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
     assert _processes_with(marker) == []
 
 
-@pytest.fixture(scope="module")
-def three_grains(tmp_path_factory):
-    from click.testing import CliRunner
-
-    from grainforge.cli.main import cli
-
-    out = tmp_path_factory.mktemp("g") / "grains"
-    res = CliRunner().invoke(cli, ["generate", "angular", "--count", "3", "--size", "2", "--subdivisions", "3",
-                                   "--out", str(out)])
-    assert res.exit_code == 0, res.output
-    return out
-
-
 @pytest.mark.parametrize("args,says", [
     (["--density", "1e300"], "'--density': 1e+300 is not in the range"),
     (["--density", "0"], "'--density': 0.0 is not in the range"),
@@ -141,25 +128,25 @@ def three_grains(tmp_path_factory):
     # Yade's polyhedra crash the engine at 12 µm
     (["--shape", "polyhedron", "--unit", "6e-6"], "equivalent diameter 1.2e-05 m is outside 2e-05–10 m"),
 ])
-def test_dem_refuses_unphysical_settings(three_grains, tmp_path, args, says):
+def test_dem_refuses_unphysical_settings(angular_grains, tmp_path, args, says):
     from click.testing import CliRunner
 
     from grainforge.cli.main import cli
 
     out = tmp_path / "deck"
-    res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(out), "--workers", "1", *args])
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(out), "--workers", "1", *args])
     assert res.exit_code == 2, res.output
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
     assert len(lines) == 1 and says in lines[0], res.output
     assert not out.exists()
 
 
-def test_dem_says_when_clumps_have_fewer_spheres_than_asked(three_grains, tmp_path):
+def test_dem_says_when_clumps_have_fewer_spheres_than_asked(angular_grains, tmp_path):
     from click.testing import CliRunner
 
     from grainforge.cli.main import cli
 
-    res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(tmp_path / "d"), "--workers", "1",
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(tmp_path / "d"), "--workers", "1",
                                    "--spheres", "500"])
     assert res.exit_code == 0, res.output
     import json
@@ -169,22 +156,18 @@ def test_dem_says_when_clumps_have_fewer_spheres_than_asked(three_grains, tmp_pa
     assert f"clumps have {min(placed)}–{max(placed)} spheres (at most 500 asked)" in res.output
 
 
-def test_liggghts_takes_grains_of_ten_microns(three_grains, tmp_path):
+def test_liggghts_takes_grains_of_ten_microns(angular_grains, tmp_path):
     """LIGGGHTS refuses templates below 1e-12 m³ unless told otherwise; the deck tells it."""
-    import os
-    import shutil
     import subprocess
 
     from click.testing import CliRunner
+    from test_dem_engines import require
 
     from grainforge.cli.main import cli
 
-    if shutil.which("liggghts") is None:
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail("liggghts not installed but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip("liggghts not installed (apt-get install liggghts)")
+    require("liggghts")
     deck = tmp_path / "d"
-    res = CliRunner().invoke(cli, ["dem", str(three_grains), "--out", str(deck), "--workers", "1", "--engine",
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(deck), "--workers", "1", "--engine",
                                    "liggghts", "--spheres", "10", "--unit", "5.5e-6"])  # 2 mm in the file: 11 µm
     assert res.exit_code == 0, res.output
     run = subprocess.run(["liggghts", "-in", "in.run"], cwd=deck, capture_output=True, text=True, timeout=300)

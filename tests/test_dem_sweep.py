@@ -10,8 +10,6 @@ declarations, so the sweep follows them.
 from __future__ import annotations
 
 import json
-import os
-import shutil
 import subprocess
 
 import click
@@ -20,6 +18,7 @@ import pytest
 from click.testing import CliRunner
 from hypothesis import given, settings
 from hypothesis import strategies as st
+from test_dem_engines import require
 
 from grainforge.cli.dem import dem as dem_command
 from grainforge.cli.main import cli
@@ -41,15 +40,6 @@ def _ranges():
 
 
 RANGES = _ranges()
-
-
-@pytest.fixture(scope="module")
-def grains(tmp_path_factory):
-    out = tmp_path_factory.mktemp("sweep") / "g"
-    res = CliRunner().invoke(cli, ["generate", "angular", "--count", "2", "--size", "2", "--subdivisions", "3",
-                                   "--out", str(out)])
-    assert res.exit_code == 0, res.output
-    return out
 
 
 def _value(data, name):
@@ -83,10 +73,10 @@ def _draw(data):
 
 @settings(max_examples=20, deadline=None)
 @given(data=st.data())
-def test_every_draw_is_a_deck_or_one_line(grains, tmp_path_factory, data):
+def test_every_draw_is_a_deck_or_one_line(angular_grains, tmp_path_factory, data):
     engine, shape, args = _draw(data)
     out = tmp_path_factory.mktemp("deck") / "d"
-    res = CliRunner().invoke(cli, ["dem", str(grains), "--out", str(out), *args])
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(out), *args])
     if res.exit_code == 2:
         lines = [ln for ln in res.output.splitlines() if ln.strip()]
         assert len(lines) == 1 and lines[0].startswith("Error: "), (args, res.output)
@@ -97,17 +87,10 @@ def test_every_draw_is_a_deck_or_one_line(grains, tmp_path_factory, data):
         assert deck["grains"], args
 
 
-def _require(exe):
-    if shutil.which(exe) is None:
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(f"{exe} not installed but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(f"{exe} not installed")
-
-
 @pytest.mark.parametrize("engine,shape", [(e, s) for e in sorted(SHAPES) for s in SHAPES[e] if s != "levelset"])
-def test_a_sample_of_swept_decks_runs_in_its_engine(grains, tmp_path, engine, shape):
+def test_a_sample_of_swept_decks_runs_in_its_engine(angular_grains, tmp_path, engine, shape):
     """One draw per engine and shape (level sets: in test_dem_engines.py), from a seeded generator."""
-    _require(ENGINE_RUN[engine][0])
+    require(ENGINE_RUN[engine][0])
     rng = np.random.default_rng([len(engine), len(shape), ord(engine[0]), ord(shape[0])])
     args = ["--engine", engine, "--shape", shape, "--workers", "1",
             "--density", repr(float(10 ** rng.uniform(2.5, 4.5))),
@@ -117,7 +100,7 @@ def test_a_sample_of_swept_decks_runs_in_its_engine(grains, tmp_path, engine, sh
     else:
         args += ["--vertices", str(int(rng.integers(6, 17)))]
     out = tmp_path / "d"
-    res = CliRunner().invoke(cli, ["dem", str(grains), "--out", str(out), *args])
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(out), *args])
     assert res.exit_code == 0, (args, res.output)
     run = subprocess.run(ENGINE_RUN[engine], cwd=out, capture_output=True, text=True, timeout=600,
                          stdin=subprocess.DEVNULL)
