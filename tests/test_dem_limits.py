@@ -184,3 +184,63 @@ def test_an_ascii_stl_with_text_coordinates_is_named(tmp_path):
                    "endloop\nendfacet\nendsolid x\n")
     with pytest.raises(ValueError, match=r"text\.stl: corrupt or unsupported mesh file"):
         read_mesh(bad)
+
+
+def test_grain_size_is_refused_before_the_representation_is_built(monkeypatch):
+    """The size check comes before the clump (the costly part): a refused grain never reaches it."""
+    import trimesh
+
+    from grainforge.dem import clump as clump_module
+    from grainforge.dem.template import prepare
+
+    def no_clump(*args, **kwargs):
+        raise AssertionError("the clump was built for a grain outside the size range")
+
+    monkeypatch.setattr(clump_module, "clump", no_clump)
+    box = trimesh.creation.box((2.0, 2.0, 2.0))
+    with pytest.raises(ValueError, match=r"box.stl: equivalent diameter 2.48e-06 m is outside 1e-05–10 m"):
+        prepare(box.vertices, box.faces, "box", unit=1e-6, source="box.stl", size_range=(1e-5, 10.0))
+    t = prepare(box.vertices, box.faces, "box", spheres=4, shape="polyhedron", size_range=(1e-5, 10.0))
+    assert abs(t.d_eq - 2.48e-3) < 1e-5
+
+
+@pytest.mark.parametrize("args,says", [
+    (["--refine-iterations", "10000", "--spheres", "1000"],
+     "2000 clump template(s) would take about 1.9 days of computing (2.8 min each on 2 workers; limit 1 day); "
+     "lower --refine-iterations (or --spheres), or give fewer grain files"),
+    (["--shape", "levelset", "--spacing", "0.01"],
+     "2000 levelset template(s) would take about 4.2 days of computing (6.1 min each on 2 workers; limit 1 day); "
+     "raise --spacing, or give fewer grain files"),
+])
+def test_dem_refuses_template_work_beyond_a_day_up_front(angular_grains, tmp_path, args, says):
+    """Heavy but valid settings on many files: the estimate refuses them before any template is built."""
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    many = tmp_path / "many"
+    many.mkdir()
+    grain = sorted(angular_grains.glob("*.stl"))[0]
+    for k in range(2000):
+        (many / f"g{k:04d}.stl").symlink_to(grain)
+    out = tmp_path / "deck"
+    res = CliRunner().invoke(cli, ["dem", str(many), "--out", str(out), "--workers", "2", *args])
+    assert res.exit_code == 2, res.output
+    lines = [ln for ln in res.output.splitlines() if ln.strip()]
+    assert lines == [f"Error: {says}"], res.output
+    assert not out.exists()
+
+
+def test_dem_announces_template_work_over_a_minute(angular_grains, tmp_path, monkeypatch):
+    """Valid heavy work runs, saying first how long it may take (the model's upper bound)."""
+    from click.testing import CliRunner
+
+    from grainforge import estimate
+    from grainforge.cli.main import cli
+
+    # a model 1000 times slower than measured: three grains look like minutes of work
+    monkeypatch.setattr(estimate, "DEM_TEMPLATE_SECONDS", 80.0)
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(tmp_path / "d"), "--workers", "1",
+                                   "--spheres", "4"])
+    assert res.exit_code == 0, res.output
+    assert "estimated time: about 4 min (a rough model" in res.output

@@ -45,7 +45,9 @@ RANGES = _ranges()
 def _value(data, name):
     kind, lo, hi = RANGES[name]
     if name == "refine":
-        hi = 200  # the refinement's iterations cost CPU linearly; the range's top is a budget question
+        # the refinement's iterations cost CPU linearly: the range's top is estimated up front and refused
+        # over a day (test_dem_limits.py); the sweep keeps its draws to seconds
+        hi = 200
     if name == "spheres":
         hi = 200
     if name in ("count", "grains"):

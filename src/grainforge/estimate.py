@@ -27,7 +27,7 @@ import os
 from typing import Any
 
 __all__ = ["SECONDS_LIMIT", "grain_seconds", "check_job", "check_memory", "machine_memory", "duration",
-           "TooLargeError", "icosphere_vertices"]
+           "TooLargeError", "icosphere_vertices", "dem_template_seconds"]
 
 #: longest job accepted (seconds of computing on the given workers)
 SECONDS_LIMIT = 24 * 3600.0
@@ -43,6 +43,20 @@ VERTEX_SECONDS = 1e-5
 GRAIN_SECONDS = 5e-3
 #: DPA cost per primary particle (s): 100,000 primaries took 31 s
 DPA_PRIMARY_SECONDS = 4e-4
+
+#: DEM template costs on one core, measured by benchmarks/bench_dem_templates.py on 2 mm angular and CRI
+#: grains of 20,480 faces: reading, checking, mass properties and the greedy clump (or the hull) (s)
+DEM_TEMPLATE_SECONDS = 0.08
+#: one L-BFGS-B iteration of the clump refinement: a fixed part and a part per sphere (s)
+DEM_REFINE_ITERATION_SECONDS = 1.7e-3
+DEM_REFINE_SPHERE_SECONDS = 1.5e-4
+#: the greedy placement stops where another sphere adds no coverage: 58-67 spheres on the benchmark
+#: grains for any --spheres above that, so the refinement cost stops growing near this count
+DEM_REFINE_SPHERES_CAP = 100
+#: level set: seconds = coefficient x nodes^exponent (exact distances to the mesh; fitted to 8.9 s at
+#: 20,384 nodes and 137 s at ~800,000)
+LEVELSET_NODE_COEFFICIENT = 5.5e-3
+LEVELSET_NODE_EXPONENT = 0.745
 
 
 class TooLargeError(ValueError):
@@ -70,6 +84,33 @@ def grain_seconds(method: str, params: Any) -> float:
     return float(t)
 
 
+def dem_template_seconds(shape: str, *, spheres: int = 30, refine_iterations: int = 0,
+                         spacing: float = 0.05) -> float:
+    """Rough upper bound of the seconds one grain's DEM template takes on one core.
+
+    The clump refinement is counted at its full ``refine_iterations`` (L-BFGS-B
+    often converges sooner: an upper bound); the level-set grid is that of a
+    compact grain (about 1.4 d_eq across each way, plus the padding).
+
+    Examples
+    --------
+    >>> round(dem_template_seconds("clump"), 2)
+    0.08
+    >>> 5 < dem_template_seconds("clump", spheres=100, refine_iterations=1000) < 20
+    True
+    >>> 3 < dem_template_seconds("levelset") < 20
+    True
+    """
+    t = DEM_TEMPLATE_SECONDS
+    if shape == "clump":
+        n = min(int(spheres), DEM_REFINE_SPHERES_CAP)
+        t += int(refine_iterations) * (DEM_REFINE_ITERATION_SECONDS + DEM_REFINE_SPHERE_SECONDS * n)
+    elif shape == "levelset":
+        nodes = (1.4 / float(spacing) + 4) ** 3
+        t += LEVELSET_NODE_COEFFICIENT * nodes ** LEVELSET_NODE_EXPONENT
+    return float(t)
+
+
 def duration(seconds: float) -> str:
     """``"3.2 h"``, ``"41 s"``, ``"1.9e+04 years"``.
 
@@ -85,8 +126,11 @@ def duration(seconds: float) -> str:
     return f"{seconds:.2g} s"
 
 
-def check_job(count: int, seconds_each: float, *, what: str, option: str, workers: int = 1) -> float:
+def check_job(count: int, seconds_each: float, *, what: str, option: str, workers: int = 1,
+              advice: str | None = None) -> float:
     """Total seconds for ``count`` items of ``seconds_each`` on ``workers``; refuse beyond a day.
+
+    The message ends "lower ``option``", or ``advice`` when given (e.g. "raise --spacing").
 
     Raises
     ------
@@ -98,7 +142,7 @@ def check_job(count: int, seconds_each: float, *, what: str, option: str, worker
         per = f"{duration(seconds_each)} each" if seconds_each >= 1 else f"{seconds_each * 1000:.2g} ms each"
         raise TooLargeError(
             f"{what} would take about {duration(total)} of computing ({per}"
-            + (f" on {workers} workers" if workers > 1 else "") + f"; limit {_limit()}); lower {option}")
+            + (f" on {workers} workers" if workers > 1 else "") + f"; limit {_limit()}); " + (advice or f"lower {option}"))
     return total
 
 

@@ -96,21 +96,41 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     else:
         counts = pour_counts(len(paths), grains, 0 if seed is None else seed).tolist()
     workers = workers or os.cpu_count() or 1
-    templates = build_templates(paths, workers=workers, progress=progress_bar(sum(c > 0 for c in counts), "dem"),
-                                counts=counts, unit=unit, density=density, shape=shape, spheres=spheres,
-                                refine_iterations=refine, polyhedron_vertices=vertices, levelset_spacing=spacing)
-    from ..dem.decks import write_deck
+    files = sum(c > 0 for c in counts)
+    _estimate(files, shape, spheres, refine, spacing, min(workers, files))
     from ..dem.inputs import GRAIN_SIZE_RANGE, MIN_GRAIN_SIZE
 
-    lo, hi = GRAIN_SIZE_RANGE
-    lo = MIN_GRAIN_SIZE.get((engine, shape), lo)
-    for t in templates:
-        if not lo <= t.d_eq <= hi:
-            raise click.BadParameter(f"{t.source}: equivalent diameter {t.d_eq:.3g} m is outside {lo:g}–{hi:g} m "
-                                     "(the file's unit, --unit, is metres per file unit)", param_hint="--unit")
+    # every grain's size is checked before its representation is built (the costly part)
+    size_range = (MIN_GRAIN_SIZE.get((engine, shape), GRAIN_SIZE_RANGE[0]), GRAIN_SIZE_RANGE[1])
+    templates = build_templates(paths, workers=workers, progress=progress_bar(files, "dem"),
+                                counts=counts, unit=unit, density=density, shape=shape, spheres=spheres,
+                                refine_iterations=refine, polyhedron_vertices=vertices, levelset_spacing=spacing,
+                                size_range=size_range)
+    from ..dem.decks import write_deck
+
     placed = [t.clump.count for t in templates if t.clump is not None]
     if placed and min(placed) < spheres:
         click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
                    "stops when another sphere adds no coverage", err=True)
     written = write_deck(engine, templates, out, overwrite=overwrite)
     click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
+
+
+def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int) -> None:
+    """Refuse template work estimated beyond a day, naming what to change; announce work over a minute."""
+    from ..estimate import TooLargeError, check_job, dem_template_seconds
+    from .interrupts import say_estimate
+
+    each = dem_template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing)
+    if shape == "clump" and refine > 0:
+        advice = "lower --refine-iterations (or --spheres), or give fewer grain files"
+    elif shape == "levelset":
+        advice = "raise --spacing, or give fewer grain files"
+    else:
+        advice = "give fewer grain files"
+    try:
+        seconds = check_job(files, each, what=f"{files} {shape} template(s)", option="", workers=workers,
+                            advice=advice)
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    say_estimate(seconds, bound="at most about" if shape == "clump" and refine > 0 else "about")

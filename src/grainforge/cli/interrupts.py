@@ -23,7 +23,7 @@ import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 
-__all__ = ["signals_held", "preload", "ready_for_work"]
+__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate"]
 
 #: the signals a command stops on, with the line it prints
 SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
@@ -93,15 +93,20 @@ def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "abou
 
     ``seconds`` is the job's estimate; ``bound`` words it ("about", "at most about").
     """
-    import click
-
-    from ..estimate import duration
-
     preload(["matplotlib"])
     import matplotlib
 
     matplotlib.use("Agg")
     preload(modules)  # before any work: no lazy import later can swallow a Ctrl-C
+    say_estimate(seconds, bound=bound)
+
+
+def say_estimate(seconds: float, *, bound: str = "about") -> None:
+    """On stderr, the job's estimated time when it is over a minute (nothing below)."""
+    import click
+
+    from ..estimate import duration
+
     if seconds > 60:
         click.echo(f"estimated time: {bound} {duration(seconds)} (a rough model; the progress bar shows the "
                    "measured rate)", err=True)

@@ -104,7 +104,8 @@ class GrainTemplate:
 def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float = 1e-3,
             density: float = 2650.0, shape: str = "clump", spheres: int = 30, refine_iterations: int = 0,
             polyhedron_vertices: int | None = None, levelset_spacing: float = 0.05,
-            source: str = "", count: int = 1, rng=0) -> GrainTemplate:
+            source: str = "", count: int = 1, rng=0,
+            size_range: tuple[float, float] | None = None) -> GrainTemplate:
     """Make a :class:`GrainTemplate` from a closed mesh.
 
     Parameters
@@ -133,11 +134,15 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         Copies of this grain in the population (≥ 1).
     rng : int or Generator
         Seeds the clump refinement sample.
+    size_range : (float, float), optional
+        Equivalent diameters (m) the caller accepts; a grain outside is refused
+        before its representation is built (the costly part).
 
     Raises
     ------
     ValueError
-        For a mesh that is not a valid solid, a density ≤ 0, an unknown shape.
+        For a mesh that is not a valid solid, a density ≤ 0, an unknown shape,
+        a grain outside ``size_range``.
 
     Examples
     --------
@@ -166,6 +171,9 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         raise ValueError(f"{source or name}: not a closed solid ({'; '.join(problems)})")
     v = v * unit
     mp = mass_properties(v, f)
+    if size_range is not None and not size_range[0] <= mp.equivalent_diameter <= size_range[1]:
+        raise ValueError(f"{source or name}: equivalent diameter {mp.equivalent_diameter:.3g} m is outside "
+                         f"{size_range[0]:g}–{size_range[1]:g} m (at {unit:g} m per file unit)")
     # the grain moves to its centroid; volume, inertia about the centroid and axes do not change
     v = v - mp.centroid
     mp = dataclasses.replace(mp, centroid=np.zeros(3))
