@@ -56,7 +56,8 @@ def bench_grains():
 def bench_fourier():
     from PIL import Image
 
-    from grainforge.contours import Contour, draw_contours
+    from grainforge.contours import Contour
+    from grainforge.imaging import draw_contours
 
     rng = np.random.default_rng(0)
     items = []

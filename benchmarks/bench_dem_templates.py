@@ -30,12 +30,12 @@ def main() -> None:
     ap.add_argument("--levelset", action="store_true", help="also time level sets (minutes)")
     args = ap.parse_args()
 
-    from grainforge.dem.inputs import read_grain
-    from grainforge.dem.template import prepare
-    from grainforge.estimate import dem_template_seconds
     from click.testing import CliRunner
 
     from grainforge.cli.main import cli
+    from grainforge.dem.inputs import read_grain
+    from grainforge.dem.template import prepare
+    from grainforge.estimate import dem_template_seconds
 
     with tempfile.TemporaryDirectory() as tmp:
         grains = {}

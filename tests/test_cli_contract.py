@@ -253,7 +253,8 @@ def inputs(tmp_path_factory) -> Path:
     v[0] = np.nan
     (d / "nan.stl").write_bytes(_binary_stl(v, np.asarray(g.faces)))
     zipfile.ZipFile(d / "empty.3mf", "w").close()
-    from grainforge.contours import Contour, draw_contours
+    from grainforge.contours import Contour
+    from grainforge.imaging import draw_contours
 
     img = draw_contours((160, 160), [(Contour.from_descriptors("rough-sphere", rng=0), (80, 80), 50.0)])
     Image.fromarray(img).save(d / "grain.png")

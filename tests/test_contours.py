@@ -5,14 +5,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from grainforge.contours import (
-    PRESETS,
-    Contour,
-    descriptor_spectrum,
-    draw_contours,
-    load_image,
-    scan_image,
-)
+from grainforge.contours import PRESETS, Contour, descriptor_spectrum, scan_image
+from grainforge.imaging import draw_contours, load_image
 from grainforge.params import ParameterError
 
 

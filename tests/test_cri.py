@@ -7,7 +7,8 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import grainforge
-from grainforge.contours import Contour, descriptor_spectrum, draw_contours
+from grainforge.contours import Contour, descriptor_spectrum
+from grainforge.imaging import draw_contours
 from grainforge.io import export_bytes
 from grainforge.methods import generate
 from grainforge.methods.cri import GRID, PLANES, Params, build, construct

@@ -10,9 +10,10 @@ from hypothesis import strategies as st
 
 import grainforge
 from grainforge.analysis.sections import random_normals, section_descriptors
-from grainforge.contours import Contour, descriptor_spectrum, draw_contours
+from grainforge.contours import Contour, descriptor_spectrum
 from grainforge.geodesic import icosphere
 from grainforge.harmonics import degree_order, real_harmonics, synthesis
+from grainforge.imaging import draw_contours
 from grainforge.io import export_bytes
 from grainforge.methods import generate
 from grainforge.methods.rf import Params, angular_spectrum, build, coefficients, section_spectrum

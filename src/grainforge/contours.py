@@ -15,7 +15,8 @@ Three sources (paper §2.2, Fig. 3; docs/design/algorithms.md §2a–2c):
 - :meth:`Contour.from_fractal` — the 2D variant of the paper's Eq. 1 along the
   circle, with integer harmonics so that the profile closes smoothly at 2π.
 - :meth:`Contour.from_image` — a grain image: threshold, largest component,
-  holes filled, boundary, rays from the area centroid.
+  holes filled, boundary, rays from the area centroid (the image side lives in
+  :mod:`grainforge.imaging`).
 
 :meth:`Contour.descriptors` is the inverse: c = rfft(r)/N, D_n = 2|c_n|/c0.
 
@@ -32,10 +33,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import lru_cache
-from pathlib import Path
 
 import numpy as np
 
+from .imaging import grain_masks, load_image
 from .params import ParameterError
 
 __all__ = [
@@ -44,13 +45,10 @@ __all__ = [
     "DEFAULT_DECAY",
     "descriptor_spectrum",
     "descriptors_of_radii",
-    "grain_masks",
-    "load_image",
-    "mask_contour",
     "polygon_contour",
+    "mask_contour",
     "scan_image",
     "GrainScan",
-    "draw_contours",
 ]
 
 TWO_PI = 2.0 * np.pi
@@ -499,8 +497,9 @@ class Contour:
         >>> round(c.scale), np.round(c.centroid).tolist(), c.star_shaped
         (40, [60.0, -70.0], True)
         """
-        mask = grain_masks(load_image(image), threshold=threshold, foreground=foreground)
         from skimage.measure import label
+
+        mask = grain_masks(load_image(image), threshold=threshold, foreground=foreground)
 
         lab = label(mask, connectivity=2)
         if lab.max() == 0:
@@ -566,124 +565,6 @@ def resolve_descriptors(descriptors) -> tuple[float, float, float]:
     if not all(np.isfinite(d)) or min(d) < 0 or max(d) > 1:
         raise ParameterError("descriptors", f"must each be in [0, 1], got {descriptors!r}")
     return d
-
-
-def load_image(image) -> np.ndarray:
-    """A grey-level float image from a path or an array.
-
-    Raises
-    ------
-    ValueError
-        If the file is missing or unreadable, or the array is empty.
-    """
-    if isinstance(image, (str, Path)):
-        path = Path(image)
-        if not path.is_file():
-            raise ValueError(f"{path}: no such image file")
-        from PIL import Image, UnidentifiedImageError
-
-        try:
-            with Image.open(path) as im:
-                im.load()
-                if im.mode in ("P", "PA", "LA", "RGBA", "RGB", "CMYK", "1"):
-                    im = im.convert("L")
-                arr = np.asarray(im, dtype=np.float64)
-        except (UnidentifiedImageError, OSError, ValueError) as exc:
-            raise ValueError(f"{path}: cannot read image ({exc})") from None
-    else:
-        arr = np.asarray(image, dtype=np.float64)
-    if arr.ndim == 3:
-        arr = arr[..., :3].mean(axis=2) if arr.shape[2] >= 3 else arr[..., 0]
-    if arr.ndim != 2 or arr.size == 0 or min(arr.shape) < 3:
-        raise ValueError(f"image must be a non-empty 2D grey or colour image, got shape {arr.shape}")
-    if not np.isfinite(arr).all():
-        raise ValueError("image holds non-finite values")
-    return arr
-
-
-def otsu_threshold(image: np.ndarray, bins: int = 256) -> float:
-    """Otsu's threshold (maximum between-class variance) of a grey image.
-
-    Pixels above the returned value form one class.  Integer-valued images
-    are histogrammed per grey level; others in ``bins`` bins.  (Equivalent
-    to ``skimage.filters.threshold_otsu``, without importing
-    ``skimage.filters``, which costs about a second.)
-
-    Examples
-    --------
-    >>> img = np.r_[np.full(50, 10.0), np.full(50, 200.0)]
-    >>> 10 <= otsu_threshold(img) < 200
-    True
-    """
-    a = np.asarray(image, dtype=np.float64).ravel()
-    lo, hi = float(a.min()), float(a.max())
-    if hi <= lo:
-        return lo
-    if np.array_equal(a, np.round(a)) and hi - lo < 65536:
-        counts = np.bincount((a - lo).astype(np.int64)).astype(np.float64)
-        centers = lo + np.arange(len(counts))
-    else:
-        counts, edges = np.histogram(a, bins=bins, range=(lo, hi))
-        counts = counts.astype(np.float64)
-        centers = (edges[:-1] + edges[1:]) / 2
-    w1 = np.cumsum(counts)
-    w2 = np.cumsum(counts[::-1])[::-1]
-    m1 = np.cumsum(counts * centers) / np.maximum(w1, 1e-300)
-    m2 = (np.cumsum((counts * centers)[::-1]) / np.maximum(np.cumsum(counts[::-1]), 1e-300))[::-1]
-    between = w1[:-1] * w2[1:] * (m1[:-1] - m2[1:]) ** 2
-    return float(centers[int(np.argmax(between))])
-
-
-def grain_masks(image: np.ndarray, *, threshold: float | None = None, foreground: str = "auto") -> np.ndarray:
-    """Boolean mask of grain pixels (threshold, then the chosen side).
-
-    Raises
-    ------
-    ValueError
-        If the image is uniform (no threshold separates anything).
-    """
-    if foreground not in ("auto", "dark", "bright"):
-        raise ValueError(f"foreground must be auto, dark or bright, got {foreground!r}")
-    lo, hi = float(image.min()), float(image.max())
-    if hi <= lo:
-        raise ValueError("image is uniform: it holds no grain")
-    if threshold is None:
-        threshold = otsu_threshold(image)
-    bright = image > threshold
-    if foreground == "bright":
-        return bright
-    if foreground == "dark":
-        return ~bright
-    border = np.concatenate([bright[0], bright[-1], bright[1:-1, 0], bright[1:-1, -1]])
-    return ~bright if border.mean() > 0.5 else bright
-
-
-def mask_contour(
-    mask: np.ndarray, *, n_angles: int = DEFAULT_ANGLES, offset=(0.0, 0.0), filled: bool = False
-) -> Contour:
-    """The :class:`Contour` of one connected component given as a boolean mask.
-
-    Holes are filled, the boundary is traced at the 0.5 level, the origin is
-    the polygon's area centroid and the radius along each of ``n_angles`` rays
-    is the outermost crossing of the boundary.  Coordinates are (x, y) =
-    (column, −row) so that angles run counter-clockwise as displayed;
-    ``offset`` = (row0, col0) of the mask in a larger image; ``filled`` says
-    that the holes are filled already.
-    """
-    from scipy.ndimage import binary_fill_holes
-    from skimage.measure import find_contours
-
-    m = np.asarray(mask, dtype=bool)
-    if not filled:
-        m = binary_fill_holes(m)
-    if not m.any():
-        raise ValueError("mask holds no grain")
-    padded = np.pad(m, 1).astype(np.float64)
-    loops = find_contours(padded, 0.5)
-    loop = max(loops, key=len)
-    x = loop[:, 1] - 1 + offset[1]
-    y = -(loop[:, 0] - 1 + offset[0])
-    return polygon_contour(np.stack([x, y], axis=1), n_angles=n_angles, source="image")
 
 
 def polygon_contour(points, *, n_angles: int = DEFAULT_ANGLES, source: str = "polygon") -> Contour:
@@ -797,6 +678,34 @@ def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, 
     return radii, star
 
 
+def mask_contour(
+    mask: np.ndarray, *, n_angles: int = DEFAULT_ANGLES, offset=(0.0, 0.0), filled: bool = False
+) -> Contour:
+    """The :class:`Contour` of one connected component given as a boolean mask.
+
+    Holes are filled, the boundary is traced at the 0.5 level, the origin is
+    the polygon's area centroid and the radius along each of ``n_angles`` rays
+    is the outermost crossing of the boundary.  Coordinates are (x, y) =
+    (column, −row) so that angles run counter-clockwise as displayed;
+    ``offset`` = (row0, col0) of the mask in a larger image; ``filled`` says
+    that the holes are filled already.
+    """
+    from scipy.ndimage import binary_fill_holes
+    from skimage.measure import find_contours
+
+    m = np.asarray(mask, dtype=bool)
+    if not filled:
+        m = binary_fill_holes(m)
+    if not m.any():
+        raise ValueError("mask holds no grain")
+    padded = np.pad(m, 1).astype(np.float64)
+    loops = find_contours(padded, 0.5)
+    loop = max(loops, key=len)
+    x = loop[:, 1] - 1 + offset[1]
+    y = -(loop[:, 0] - 1 + offset[0])
+    return polygon_contour(np.stack([x, y], axis=1), n_angles=n_angles, source="image")
+
+
 @dataclass(frozen=True)
 class GrainScan:
     """The grains found in one image by :func:`scan_image`.
@@ -879,35 +788,3 @@ def scan_image(
             continue
         areas.append(area)
     return GrainScan(contours, areas, border, small, unmeasurable)
-
-
-def draw_contours(shape: tuple[int, int], items, *, background: int = 0, fill: int = 255) -> np.ndarray:
-    """Rasterise contours into a grey image (the inverse of :func:`scan_image`).
-
-    Parameters
-    ----------
-    shape : (rows, cols)
-    items : iterable of (Contour, (x, y), radius)
-        Each contour, its centre in pixels (x = column, y = row) and its mean
-        radius in pixels.  Angles run counter-clockwise as displayed.
-    background, fill : int
-        Grey levels (0–255).
-
-    Returns
-    -------
-    (rows, cols) uint8
-
-    Examples
-    --------
-    >>> img = draw_contours((64, 64), [(Contour(np.ones(64)), (32, 32), 20)])
-    >>> img.dtype.name, abs(float((img > 0).sum()) / (np.pi * 20**2) - 1) < 0.02
-    ('uint8', True)
-    """
-    from skimage.draw import polygon
-
-    img = np.full(shape, background, dtype=np.uint8)
-    for contour, (x, y), radius in items:
-        p = contour.points() * float(radius)
-        rr, cc = polygon(y - p[:, 1], x + p[:, 0], shape=shape)
-        img[rr, cc] = fill
-    return img

@@ -300,7 +300,8 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     from PIL import Image
     from skimage.filters import gaussian
 
-    from .contours import Contour, draw_contours
+    from .contours import Contour
+    from .imaging import draw_contours
     from .io import atomic_write
 
     rng = np.random.default_rng(seed)
@@ -332,7 +333,8 @@ def grain_image(path: Path, *, seed: int, size: int = 512) -> Path:
     from PIL import Image
     from skimage.filters import gaussian
 
-    from .contours import Contour, draw_contours
+    from .contours import Contour
+    from .imaging import draw_contours
     from .io import atomic_write
 
     c = Contour.from_descriptors("rough-angular", rng=100 + seed)
