@@ -37,7 +37,7 @@ def main() -> None:
         m = trimesh.load(p)
         ok = (m.is_watertight and m.is_winding_consistent and m.body_count == 1 and m.volume > 0
               and not solid_problems(m.vertices, m.faces))
-        a = subprocess.run(["admesh", p], capture_output=True, text=True).stdout
+        a = subprocess.run(["admesh", p], capture_output=True).stdout.decode(errors="replace")  # admesh echoes the header unterminated
         vals = [int(re.search(rf"{k}\s*:\s*(\d+)", a).group(1)) for k in (
             "Number of parts", "Degenerate facets", "Facets reversed", "Edges fixed", "Facets removed", "Backwards edges")]
         if not ok or vals[0] != 1 or any(vals[1:]):

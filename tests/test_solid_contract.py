@@ -205,7 +205,9 @@ def _admesh_report(path) -> dict[str, float]:
 
     if shutil.which("admesh") is None:
         pytest.skip("admesh is not installed")
-    out = subprocess.run(["admesh", str(path)], capture_output=True, text=True, check=True).stdout
+    # admesh echoes the 80-byte STL header as an unterminated string: whatever follows it in memory
+    # is printed too, so its output is not always valid UTF-8
+    out = subprocess.run(["admesh", str(path)], capture_output=True, check=True).stdout.decode(errors="replace")
     stats = {}
     for name in ("Number of parts", "Degenerate facets", "Edges fixed", "Facets removed", "Facets added",
                  "Facets reversed", "Backwards edges", "Normals fixed", "Total disconnected facets", "Volume"):
