@@ -21,13 +21,16 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/grainforge demo --out out/demo --overwrite
 
+# the suite runs on PYTEST_PROCS processes (pytest-xdist; the machine the targets are set on has 2 cores)
+PYTEST_PROCS ?= 2
+
 test: $(STAMP)
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n $(PYTEST_PROCS)
 
 # the fast lane for everyday work: lint, then every test not marked slow
 check: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest -m "not slow" -q
+	$(BIN)/python -m pytest -m "not slow" -q -n $(PYTEST_PROCS)
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done
