@@ -1,4 +1,4 @@
-"""Every file an example command in README.md and docs/*.md reads exists.
+"""Every file an example command in README.md, docs/*.md and docs/guide/*.md reads exists.
 
 A new user copies the commands of the README and the docs: each input file they
 name must be in the repository (e.g. ``examples/images/micrograph.png``), or be
@@ -26,7 +26,7 @@ from grainforge.cli.main import cli
 from grainforge.cli.paths import OutPath
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), *sorted((ROOT / "docs" / "guide").glob("*.md"))]
 SHELL_LANGS = {"", "sh", "bash", "console", "shell"}
 #: a value of a non-path option that names a file (``--images a.png,b.png``, ``--spectrum fd.csv``)
 FILE_SUFFIX = re.compile(r"\.(png|jpe?g|tiff?|csv|json|toml|stl|obj|ply|3mf|py)$", re.I)

@@ -1,4 +1,4 @@
-"""Every DPA example of README.md and docs/methods/dpa.md, run as written,
+"""Every DPA example of README.md, docs/guide/generate.md and docs/methods/dpa.md, run as written,
 gives files that pass ``grainforge check`` and two independent readers (trimesh merging vertices by
 position, and admesh).  ``--count`` is lowered to 2 to bound the test's time (the first members of a
 population do not depend on its count; ``tests/test_population.py``)."""
@@ -18,7 +18,7 @@ from grainforge.cli.main import cli
 pytestmark = pytest.mark.slow
 
 ROOT = Path(__file__).resolve().parents[1]
-SOURCES = [ROOT / "README.md", ROOT / "docs" / "methods" / "dpa.md"]
+SOURCES = [ROOT / "README.md", ROOT / "docs" / "guide" / "generate.md", ROOT / "docs" / "methods" / "dpa.md"]
 
 
 def _cli_examples():
