@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -173,11 +174,8 @@ def hull_vtk_text(vertices: np.ndarray, faces: np.ndarray, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
-    """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
-
-    s = settings or pour_settings()
-    L, M, T = MICRO["length"], MICRO["mass"], MICRO["time"]
+def _shape_files(templates: Sequence) -> tuple[dict, list]:
+    """``({<grain>.poly, <grain>.hull.vtk: text}, [(faces, edges) per template])``."""
     files: dict[str, str] = {}
     topo = []
     for t in templates:
@@ -191,6 +189,11 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         files[f"{t.name}.poly"] = "\n".join(lines) + "\n"
         files[f"{t.name}.hull.vtk"] = hull_vtk_text(t.polyhedron, f, f"grainforge hull {t.name} (m)")
 
+    return files, topo
+
+
+def _pour_plan(templates: Sequence, s: dict) -> SimpleNamespace:
+    """The pour's population, box, contact stiffness and damping, time step and settle schedule (SI)."""
     population = [k for k, t in enumerate(templates) for _ in range(t.count)]
     rng = np.random.default_rng(s["seed"])
     order = rng.permutation(len(population))
@@ -234,6 +237,17 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     gamma = total_mass / n / tau  # kg/s
     a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
 
+    return SimpleNamespace(population=population, rng=rng, n=n, r_round=r_round, cell=cell, side=side,
+                           width=width, layers=layers, mean_d=mean_d, top=top, tau=tau, kn=kn, dt=dt, c_n=c_n,
+                           c_t=c_t, ke_threshold=ke_threshold, sched=sched, cut_inner=cut_inner, gamma=gamma,
+                           a_ua=a_ua)
+
+
+def _data_file(templates: Sequence, topo: list, p: SimpleNamespace) -> tuple[str, list, int]:
+    """``(data.bodies text, placements, nmax)``: the bodies at their lattice slots, units micro."""
+    L, M = MICRO["length"], MICRO["mass"]
+    population, rng, side, cell, r_round = p.population, p.rng, p.side, p.cell, p.r_round
+    n, width, top = p.n, p.width, p.top
     atoms, bodies, placements = [], [], []
     nmax = 1
     for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, rng), population):
@@ -253,12 +267,19 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
             f"{fmt(lo[0] * L)} {fmt(hi[0] * L)} xlo xhi", f"{fmt(lo[1] * L)} {fmt(hi[1] * L)} ylo yhi",
             f"{fmt(lo[2] * L)} {fmt(hi[2] * L)} zlo zhi", "",
             "Atoms # body: atom-ID atom-type bodyflag mass x y z", ""] + atoms + ["", "Bodies", ""] + bodies
-    files["data.bodies"] = "\n".join(data) + "\n"
+    return "\n".join(data) + "\n", placements, nmax
 
+
+
+def _run_text(p: SimpleNamespace, s: dict, nmax: int) -> str:
+    """The ``in.run`` of the pour (units micro)."""
+    L, T = MICRO["length"], MICRO["time"]
+    kn, c_n, c_t, cell, width, dt = p.kn, p.c_n, p.c_t, p.cell, p.width, p.dt
+    a_ua, cut_inner, gamma, ke_threshold, sched = p.a_ua, p.cut_inner, p.gamma, p.ke_threshold, p.sched
     Kn, Cn, Ct = kn * MICRO["stiffness"], c_n * MICRO["damping"], c_t * MICRO["damping"]
     g = 9.81 * MICRO["acceleration"]
     wall = f"{fmt(Kn)} {fmt(Cn)} {fmt(Ct)}"
-    run = f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
+    return f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
 # Grains are convex rounded/polyhedron bodies (BODY package) with the mesh's exact mass, centre and
 # inertia. Units: micro (um, pg, us; force nN, energy 1e-15 J): the BODY contact code has absolute
 # length tolerances of 1e-3 input units, far too coarse in SI for millimetre grains (grains.json: SI).
@@ -318,8 +339,19 @@ shell python3 dump2vtk.py
 # the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... J) (1)
 {settle_report("quit 0", "quit 1")}
 """
-    files["in.run"] = run
+
+
+def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
+    """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
+
+    s = settings or pour_settings()
+    files, topo = _shape_files(templates)
+    p = _pour_plan(templates, s)
+    files["data.bodies"], placements, nmax = _data_file(templates, topo, p)
+    files["in.run"] = _run_text(p, s, nmax)
     files["dump2vtk.py"] = render("lammps_body_dump2vtk.py")
+    r_round, width, ke_threshold, dt, sched = p.r_round, p.width, p.ke_threshold, p.dt, p.sched
+    kn, c_n, c_t, gamma = p.kn, p.c_n, p.c_t, p.gamma
     grains = []
     for k, (t, (f, e)) in enumerate(zip(templates, topo)):
         rec = template_record(t)
