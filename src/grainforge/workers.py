@@ -27,7 +27,7 @@ from contextlib import contextmanager
 from typing import Any
 
 __all__ = ["process_pool", "single_threaded_children", "THREAD_VARS", "ordered_map", "watch_parent", "pid_alive",
-           "close_pool", "stop_forkserver"]
+           "close_pool", "stop_forkserver", "kill_process_tree"]
 
 #: seconds between a worker's checks that the process that made its pool is alive
 WATCH_INTERVAL = 0.25
@@ -278,28 +278,65 @@ def _children_of(pid: int) -> list[int]:
     return found
 
 
+def _descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (children first, then theirs; Linux ``/proc``, empty elsewhere)."""
+    found, todo = [], [pid]
+    while todo:
+        kids = _children_of(todo.pop())
+        found += kids
+        todo += kids
+    return found
+
+
+def kill_process_tree(pid: int) -> None:
+    """SIGKILL process ``pid``, every process below it and, when it leads a process group of its own
+    (``start_new_session=True``), that group: the one kill path of grainforge's child processes.
+
+    ``pid`` is stopped (SIGSTOP) first, so it cannot start new children while they are listed. The
+    caller still reaps ``pid`` if it is its child (``Popen.wait``). A process already gone is no
+    error. Never signals this process's own group.
+
+    Examples
+    --------
+    >>> import subprocess, sys
+    >>> proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"], start_new_session=True)
+    >>> kill_process_tree(proc.pid)
+    >>> proc.wait()
+    -9
+    """
+    try:
+        group = os.getpgid(pid)
+    except ProcessLookupError:
+        return
+    own_group = group == pid and group != os.getpgrp()
+    try:
+        os.kill(pid, signal.SIGSTOP)
+    except ProcessLookupError:
+        return
+    for child in _descendants(pid):
+        try:
+            os.kill(child, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        if own_group:
+            os.killpg(pid, signal.SIGKILL)
+        else:
+            os.kill(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+
+
 def stop_forkserver() -> None:
     """Kill this process's multiprocessing fork server and every process it forked (workers, also
-    half-started ones); the next pool starts a new fork server.
-
-    The fork server is stopped (SIGSTOP) first, so it cannot fork while its children are listed.
-    """
+    half-started ones) with :func:`kill_process_tree`; the next pool starts a new fork server."""
     from multiprocessing import forkserver
 
     server = getattr(forkserver, "_forkserver", None)
     pid = getattr(server, "_forkserver_pid", None)
     if pid is None or not pid_alive(pid):
         return
-    try:
-        os.kill(pid, signal.SIGSTOP)
-        for child in _children_of(pid):
-            try:
-                os.kill(child, signal.SIGKILL)
-            except ProcessLookupError:
-                pass
-        os.kill(pid, signal.SIGKILL)
-    except ProcessLookupError:
-        pass
+    kill_process_tree(pid)
     try:
         server._stop()  # reaps it and forgets its address, so the next pool starts a new one
     except (OSError, AttributeError):

@@ -34,6 +34,7 @@ from __future__ import annotations
 import math
 from collections.abc import Sequence
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -50,6 +51,7 @@ from .deck import (
     updated_settings,
     write_files,
 )
+from .scripts import render
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
            "MAX_VERTICES"]
@@ -67,40 +69,6 @@ MAX_VERTICES = 56
 # read_data: lines of one body (integer + double lines) ≤ MAXBODY − 1 = 31; a line < MAXLINE = 256 chars
 _MAX_BODY_LINES = 31
 _MAX_LINE = 250
-
-DUMP2VTK = r'''"""Convert LAMMPS vertex dumps post/vertices.*.dump (compute body/local: id x y z per hull vertex,
-in the order of data.bodies, um) to legacy-VTK polygon meshes in metres, using the hull faces in
-grains.json."""
-import glob
-import json
-import os
-
-deck = json.load(open("grains.json"))
-scale = 1.0 / deck["micro"]["length"]  # the dumps are in um; the VTK files in m
-faces = {p["id"]: deck["grains"][p["grain"]]["faces"] for p in deck["placements"]}
-for path in sorted(glob.glob(os.path.join("post", "vertices.*.dump"))):
-    lines = open(path).read().splitlines()
-    start = next(i for i, l in enumerate(lines) if l.startswith("ITEM: ENTRIES")) + 1
-    rows = [l.split() for l in lines[start:] if l.strip()]
-    bodies = {}
-    for r in rows:
-        bodies.setdefault(int(r[0]), []).append(" ".join(repr(float(x) * scale) for x in r[1:4]))
-    points, polys, ids = [], [], []
-    for bid in sorted(bodies):
-        base = len(points)
-        points += bodies[bid]
-        for f in faces[bid]:
-            polys.append("3 %d %d %d" % (base + f[0], base + f[1], base + f[2]))
-            ids.append(str(bid))
-    out = ["# vtk DataFile Version 3.0", "grainforge LAMMPS bodies " + os.path.basename(path), "ASCII",
-           "DATASET POLYDATA", "POINTS %d double" % len(points)]
-    out += points
-    out += ["POLYGONS %d %d" % (len(polys), 4 * len(polys))] + polys
-    out += ["CELL_DATA %d" % len(polys), "SCALARS body int 1", "LOOKUP_TABLE default"] + ids
-    with open(path[:-5] + ".vtk", "w") as fh:
-        fh.write("\n".join(out) + "\n")
-'''
-
 
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
@@ -206,11 +174,8 @@ def hull_vtk_text(vertices: np.ndarray, faces: np.ndarray, title: str) -> str:
     return "\n".join(lines) + "\n"
 
 
-def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
-    """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
-
-    s = settings or pour_settings()
-    L, M, T = MICRO["length"], MICRO["mass"], MICRO["time"]
+def _shape_files(templates: Sequence) -> tuple[dict, list]:
+    """``({<grain>.poly, <grain>.hull.vtk: text}, [(faces, edges) per template])``."""
     files: dict[str, str] = {}
     topo = []
     for t in templates:
@@ -224,6 +189,11 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         files[f"{t.name}.poly"] = "\n".join(lines) + "\n"
         files[f"{t.name}.hull.vtk"] = hull_vtk_text(t.polyhedron, f, f"grainforge hull {t.name} (m)")
 
+    return files, topo
+
+
+def _pour_plan(templates: Sequence, s: dict) -> SimpleNamespace:
+    """The pour's population, box, contact stiffness and damping, time step and settle schedule (SI)."""
     population = [k for k, t in enumerate(templates) for _ in range(t.count)]
     rng = np.random.default_rng(s["seed"])
     order = rng.permutation(len(population))
@@ -267,6 +237,17 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     gamma = total_mass / n / tau  # kg/s
     a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
 
+    return SimpleNamespace(population=population, rng=rng, n=n, r_round=r_round, cell=cell, side=side,
+                           width=width, layers=layers, mean_d=mean_d, top=top, tau=tau, kn=kn, dt=dt, c_n=c_n,
+                           c_t=c_t, ke_threshold=ke_threshold, sched=sched, cut_inner=cut_inner, gamma=gamma,
+                           a_ua=a_ua)
+
+
+def _data_file(templates: Sequence, topo: list, p: SimpleNamespace) -> tuple[str, list, int]:
+    """``(data.bodies text, placements, nmax)``: the bodies at their lattice slots, units micro."""
+    L, M = MICRO["length"], MICRO["mass"]
+    population, rng, side, cell, r_round = p.population, p.rng, p.side, p.cell, p.r_round
+    n, width, top = p.n, p.width, p.top
     atoms, bodies, placements = [], [], []
     nmax = 1
     for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, rng), population):
@@ -286,12 +267,19 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
             f"{fmt(lo[0] * L)} {fmt(hi[0] * L)} xlo xhi", f"{fmt(lo[1] * L)} {fmt(hi[1] * L)} ylo yhi",
             f"{fmt(lo[2] * L)} {fmt(hi[2] * L)} zlo zhi", "",
             "Atoms # body: atom-ID atom-type bodyflag mass x y z", ""] + atoms + ["", "Bodies", ""] + bodies
-    files["data.bodies"] = "\n".join(data) + "\n"
+    return "\n".join(data) + "\n", placements, nmax
 
+
+
+def _run_text(p: SimpleNamespace, s: dict, nmax: int) -> str:
+    """The ``in.run`` of the pour (units micro)."""
+    L, T = MICRO["length"], MICRO["time"]
+    kn, c_n, c_t, cell, width, dt = p.kn, p.c_n, p.c_t, p.cell, p.width, p.dt
+    a_ua, cut_inner, gamma, ke_threshold, sched = p.a_ua, p.cut_inner, p.gamma, p.ke_threshold, p.sched
     Kn, Cn, Ct = kn * MICRO["stiffness"], c_n * MICRO["damping"], c_t * MICRO["damping"]
     g = 9.81 * MICRO["acceleration"]
     wall = f"{fmt(Kn)} {fmt(Cn)} {fmt(Ct)}"
-    run = f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
+    return f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
 # Grains are convex rounded/polyhedron bodies (BODY package) with the mesh's exact mass, centre and
 # inertia. Units: micro (um, pg, us; force nN, energy 1e-15 J): the BODY contact code has absolute
 # length tolerances of 1e-3 input units, far too coarse in SI for millimetre grains (grains.json: SI).
@@ -351,8 +339,19 @@ shell python3 dump2vtk.py
 # the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... J) (1)
 {settle_report("quit 0", "quit 1")}
 """
-    files["in.run"] = run
-    files["dump2vtk.py"] = DUMP2VTK
+
+
+def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
+    """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
+
+    s = settings or pour_settings()
+    files, topo = _shape_files(templates)
+    p = _pour_plan(templates, s)
+    files["data.bodies"], placements, nmax = _data_file(templates, topo, p)
+    files["in.run"] = _run_text(p, s, nmax)
+    files["dump2vtk.py"] = render("lammps_body_dump2vtk.py")
+    r_round, width, ke_threshold, dt, sched = p.r_round, p.width, p.ke_threshold, p.dt, p.sched
+    kn, c_n, c_t, gamma = p.kn, p.c_n, p.c_t, p.gamma
     grains = []
     for k, (t, (f, e)) in enumerate(zip(templates, topo)):
         rec = template_record(t)

@@ -480,6 +480,55 @@ def _check_size_of_job(source, workers: int) -> None:
                   option="--count", workers=workers)
 
 
+def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, str, float]:
+    """``(out, its format, gap)`` of a tray request, or ``ValueError``/``FileExistsError`` (nothing written)."""
+    out = Path(out)
+    fmt = out.suffix.lower()
+    if fmt not in OUT_FORMATS:
+        raise ValueError(f"--out must end in .3mf or .stl, got {out.name!r}")
+    gap = printer.default_gap if gap is None else float(gap)
+    if not np.isfinite(gap) or gap <= 0:
+        raise ValueError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
+    if len(source) == 0:
+        raise ValueError("no grains to lay out")
+    if not overwrite:
+        existing = _existing_outputs(out)
+        if existing:
+            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+    return out, fmt, gap
+
+
+def _matched_source(source, printer, max_subdivisions: int | None, max_triangles: int | None):
+    """``(source, resolution)``: generated grains at the subdivisions their printed size calls for
+    (``resolution`` None and ``source`` as given when that does not apply)."""
+    from .resolution import MAX_MATCHED, match_subdivisions, supports_matching
+
+    if not (isinstance(source, GeneratorSource) and supports_matching(source.method)):
+        return source, None
+    resolution = match_subdivisions(
+        source.method, source.params, source.size, source.size_definition, printer, source.seeds[:3],
+        max_level=MAX_MATCHED if max_subdivisions is None else max_subdivisions,
+        max_faces=None if max_triangles is None else max(20, int(max_triangles) // len(source)),
+    )
+    source = dataclasses.replace(source, params=dataclasses.replace(source.params,
+                                                                     subdivisions=resolution.subdivisions))
+    return source, resolution
+
+
+def _csv_row(p: Prepared, plate: int, position: tuple[float, float, float], resolution) -> dict[str, Any]:
+    """The CSV row of a placed grain (``plate`` counted from 0)."""
+    x, y, z = position
+    return {
+        "index": p.index, "name": p.name, "source": p.source, "plate": plate + 1,
+        "x": x, "y": y, "z": z,
+        "size_x": float(p.extents[0]), "size_y": float(p.extents[1]), "size_z": float(p.extents[2]),
+        "volume": p.volume, "equivalent_diameter": float(np.cbrt(6 * p.volume / np.pi)),
+        "faces": p.faces, "subdivisions": p.subdivisions,
+        "chordal_deviation": None if resolution is None else resolution.deviation,
+        "resolution_limited_by": None if resolution is None else resolution.limited_by,
+    }
+
+
 def build_tray(
     source: GeneratorSource | FileSource,
     printer,
@@ -533,32 +582,13 @@ def build_tray(
     """
     from ..io import file_mode, write_csv
     from .printers import get_printer
-    from .resolution import MAX_MATCHED, match_subdivisions, supports_matching
     from .threemf import STLWriter, ThreeMFWriter
 
     printer = get_printer(printer)
-    out = Path(out)
-    fmt = out.suffix.lower()
-    if fmt not in OUT_FORMATS:
-        raise ValueError(f"--out must end in .3mf or .stl, got {out.name!r}")
-    gap = printer.default_gap if gap is None else float(gap)
-    if not np.isfinite(gap) or gap <= 0:
-        raise ValueError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
-    if len(source) == 0:
-        raise ValueError("no grains to lay out")
-    if not overwrite:
-        existing = _existing_outputs(out)
-        if existing:
-            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+    out, fmt, gap = _checked_request(source, printer, out, gap, overwrite)
     resolution = None
-    if isinstance(source, GeneratorSource) and match_resolution and supports_matching(source.method):
-        resolution = match_subdivisions(
-            source.method, source.params, source.size, source.size_definition, printer, source.seeds[:3],
-            max_level=MAX_MATCHED if max_subdivisions is None else max_subdivisions,
-            max_faces=None if max_triangles is None else max(20, int(max_triangles) // len(source)),
-        )
-        source = dataclasses.replace(source, params=dataclasses.replace(source.params,
-                                                                         subdivisions=resolution.subdivisions))
+    if match_resolution:
+        source, resolution = _matched_source(source, printer, max_subdivisions, max_triangles)
     _check_size_of_job(source, workers)
 
     made = [q for q in [out.parent, *out.parent.parents] if not q.exists()]
@@ -595,15 +625,7 @@ def build_tray(
             writer.add_object(p.name, p.payload, (x, y, z))
             footprints[-1].append(p.footprint + np.array([x, y], dtype=np.float32))
             layers_of[-1].append(packer.layers - 1)
-            rows.append({
-                "index": p.index, "name": p.name, "source": p.source, "plate": pl + 1,
-                "x": x, "y": y, "z": z,
-                "size_x": float(p.extents[0]), "size_y": float(p.extents[1]), "size_z": float(p.extents[2]),
-                "volume": p.volume, "equivalent_diameter": float(np.cbrt(6 * p.volume / np.pi)),
-                "faces": p.faces, "subdivisions": p.subdivisions,
-                "chordal_deviation": None if resolution is None else resolution.deviation,
-                "resolution_limited_by": None if resolution is None else resolution.limited_by,
-            })
+            rows.append(_csv_row(p, pl, (x, y, z), resolution))
         writer.close()
         fh.close()
         layer_count = [layers[-1] + 1 for layers in layers_of]  # layers only grow within a plate
