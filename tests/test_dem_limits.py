@@ -244,3 +244,39 @@ def test_dem_announces_template_work_over_a_minute(angular_grains, tmp_path, mon
                                    "--spheres", "4"])
     assert res.exit_code == 0, res.output
     assert "estimated time: about 4 min (a rough model" in res.output
+
+
+@pytest.mark.slow
+def test_dem_killed_leaves_no_process_and_says_nothing(tmp_path):
+    """SIGKILL of the owner: its workers, fork server and resource tracker exit by themselves, the
+    tracker cleans up the pool's semaphores without a warning on the user's terminal, no deck."""
+    import os
+    import signal
+    import subprocess
+    import time
+    import uuid
+
+    grains = tmp_path / "grains"
+    subprocess.run([*_CLI, "generate", "angular", "--count", "8", "--size", "2",
+                    "--subdivisions", "3", "--out", str(grains)], check=True, capture_output=True)
+    marker = f"GRAINFORGE_TEST_{uuid.uuid4().hex}"
+    env = dict(os.environ, **{marker: "1"})
+    out = tmp_path / "deck"
+    p = subprocess.Popen([*_CLI, "dem", str(grains), "--out", str(out),
+                          "--spheres", "300", "--refine-iterations", "100", "--workers", "2"],
+                         env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    deadline = time.monotonic() + 60
+    while len(_processes_with(marker)) < 4 and time.monotonic() < deadline:  # owner, server, 2 workers
+        time.sleep(0.1)
+    time.sleep(1.0)
+    if p.poll() is not None:
+        pytest.skip("the command finished before the signal")
+    p.send_signal(signal.SIGKILL)
+    _, err = p.communicate(timeout=60)
+    for _ in range(50):  # the workers notice their owner's death within a second
+        if not _processes_with(marker):
+            break
+        time.sleep(0.1)
+    assert _processes_with(marker) == []
+    assert err == b"", err  # the pipe stays open until every process holding it has exited
+    assert not out.exists()

@@ -144,6 +144,25 @@ def watch_parent(owner: int) -> None:
     threading.Thread(target=watch, name="grainforge-watch-parent", daemon=True).start()
 
 
+@contextmanager
+def _quiet_stderr() -> Iterator[None]:
+    """File descriptor 2 on /dev/null meanwhile (for a child process started inside: it keeps it)."""
+
+    try:
+        sys.stderr.flush()
+    except (AttributeError, ValueError, OSError):
+        pass
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
 def process_pool(workers: int, preload: Sequence[str] = ()):
     """A ``ProcessPoolExecutor`` of ``workers`` processes started from a fork server.
 
@@ -169,7 +188,11 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
         # tracker first: starting it unblocks SIGINT in this thread.)
         # The fork server imports NumPy (preload) once for all workers: it must start with the
         # BLAS thread limits of one worker = one core, or every worker inherits multithreaded BLAS.
-        resource_tracker.ensure_running()
+        with _quiet_stderr():
+            # the tracker outlives a killed owner and then unlinks the pool's semaphores; its report
+            # of them ("leaked semaphore objects") is no news after a SIGKILL, and nothing else it
+            # prints concerns the user
+            resource_tracker.ensure_running()
         with sigint_blocked(), single_threaded_children():
             forkserver.ensure_running()
     else:
