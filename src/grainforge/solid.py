@@ -30,7 +30,7 @@ import numpy as np
 __all__ = [
     "signed_volume", "volume_centroid", "face_components", "is_closed", "as_written", "solid_problems",
     "require_solid", "index_problems", "split_bodies", "self_intersections", "star_certificate", "AREA_TOLERANCE",
-    "cross3", "volume_and_centroid",
+    "cross3", "volume_and_centroid", "second_moments",
 ]
 
 #: smallest face area allowed, relative to the squared bounding-box diagonal of the mesh.
@@ -101,6 +101,57 @@ def volume_and_centroid(vertices: np.ndarray, faces: np.ndarray) -> tuple[float,
     if total == 0:
         return 0.0, np.asarray(vertices).mean(axis=0)
     return float(six_vol.sum() / 6.0), ((a + b + c) / 4.0 * vol[:, None]).sum(axis=0) / total
+
+
+def second_moments(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray, np.ndarray]:
+    """Volume, volume centroid and second central moment of a closed triangle mesh, exactly.
+
+    The one implementation of the solid's mass integrals: :func:`grainforge.dem.massprops.mass_properties`
+    (inertia tensor) and :func:`grainforge.analysis.mass.mass_properties` (covariance) both call it.
+    Each face ``(a, b, c)`` and the vertex mean span a signed tetrahedron of volume
+    ``det[a, b, c] / 6``; its second moment is ``det/120 · (a aᵀ + b bᵀ + c cᵀ + (a+b+c)(a+b+c)ᵀ)``.
+    Summing and shifting to the centroid gives ``C = ∫ (x − x̄)(x − x̄)ᵀ dV``.
+
+    Returns
+    -------
+    volume : float
+        Signed volume (positive when outward); ``0`` gives a zero centroid offset and ``C``.
+    centroid : (3,) float64
+    second : (3, 3) float64
+        ``C``; ``C / volume`` is the covariance, ``tr(C) 1 − C`` the unit-density inertia tensor.
+
+    Examples
+    --------
+    A tetrahedron (0, e₁, e₂, e₃): V = 1/6, centroid (1/4, 1/4, 1/4).
+
+    >>> v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+    >>> f = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    >>> vol, c, C = second_moments(v, f)
+    >>> round(vol, 6), np.round(c, 12).tolist()
+    (0.166667, [0.25, 0.25, 0.25])
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    origin = v.mean(axis=0)
+    vo = v - origin  # per vertex, then gathered: the same differences as per corner, fewer of them
+    a, b, c = (np.take(vo, f[:, k], axis=0) for k in range(3))
+    det = np.einsum("ij,ij->i", a, cross3(b, c))
+    volume = det.sum() / 6.0
+    if volume == 0 or not np.isfinite(volume):
+        return float(volume), origin, np.zeros((3, 3))
+    s = a + b + c
+    centroid_rel = (det[:, None] * s).sum(axis=0) / 24.0 / volume
+    # Σ det·(a aᵀ + b bᵀ + c cᵀ + s sᵀ): the six distinct entries from contiguous coordinate rows
+    # (≈ 4× faster than four three-operand einsums; no BLAS, so the same bits in any process)
+    second = np.zeros((3, 3))
+    for x in (a, b, c, s):
+        rows = np.ascontiguousarray(x.T)
+        weighted = det * rows
+        for j in range(3):
+            for k in range(j, 3):
+                second[j, k] += np.sum(weighted[j] * rows[k])
+    second = (second + np.triu(second, 1).T) / 120.0
+    return float(volume), centroid_rel + origin, second - volume * np.outer(centroid_rel, centroid_rel)
 
 
 def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:

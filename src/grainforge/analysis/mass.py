@@ -14,8 +14,10 @@ __all__ = ["mass_properties", "principal_moments"]
 def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """Volume, area, centroid and second central moments of a closed triangle mesh.
 
-    Signed tetrahedra from the vertex mean: ∫x xᵀ dV over a tetrahedron
-    (0, a, b, c) is (V/20)(aaᵀ + bbᵀ + ccᵀ + ssᵀ) with s = a + b + c.
+    The integrals are :func:`grainforge.solid.second_moments` (the one
+    implementation, shared with :func:`grainforge.dem.massprops.mass_properties`);
+    this adds the surface area and per-face areas, and does not reject a
+    non-positive volume (``analyse`` reports open and inverted bodies).
 
     Returns
     -------
@@ -24,29 +26,17 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
         second central moment per unit volume (its trace is R_g²), and
         ``face_areas`` (F,).
     """
-    from ..solid import cross3
+    from ..solid import cross3, second_moments
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     o = v.mean(0)
-    a, b, c = v[f[:, 0]] - o, v[f[:, 1]] - o, v[f[:, 2]] - o
-    cr = cross3(b - a, c - a)
-    face_areas = 0.5 * np.linalg.norm(cr, axis=1)
-    vol6 = np.einsum("ij,ij->i", a, cross3(b, c))
-    V = vol6.sum() / 6.0
-    s = a + b + c
-    if V != 0:
-        centroid_o = (vol6[:, None] * s).sum(0) / (24.0 * V)
-        w = vol6 / 120.0
-        X = np.concatenate([a, b, c, s])
-        # einsum, not BLAS: a threaded BLAS call on this skinny product is slow on a busy machine
-        second = np.einsum("ti,tj->ij", X * np.tile(w, 4)[:, None], X)
-        cov = second / V - np.outer(centroid_o, centroid_o)
-    else:
-        centroid_o = np.zeros(3)
-        cov = np.zeros((3, 3))
+    a, b, c = v[f[:, 0]] - o, v[f[:, 1]] - o, v[f[:, 2]] - o  # from the vertex mean, as the moments
+    face_areas = 0.5 * np.linalg.norm(cross3(b - a, c - a), axis=1)
+    V, centroid, second = second_moments(v, f)
+    cov = second / V if V != 0 else second
     return {
-        "volume": float(V), "area": float(face_areas.sum()), "centroid": centroid_o + o,
+        "volume": float(V), "area": float(face_areas.sum()), "centroid": centroid,
         "covariance": cov, "face_areas": face_areas,
     }
 
