@@ -460,12 +460,13 @@ def test_sigkill_while_yade_runs_leaves_nothing_that_blocks_the_rerun(tmp_path, 
     left = [p.name for p in (work / "o").iterdir()]
     assert len(left) == 1 and left[0].startswith(".grainforge-staging-"), left  # no deck folder in --out
     # the rerun is not refused for the killed run's leftovers, and removes them (here Yade "fails" at once:
-    # the run gets past every check, and its own failure leaves nothing either)
+    # the run gets past every check, and its own failure keeps only that run's deck and log, in failed-<run>)
     rerun = _start(args, work, GRAINFORGE_YADE="false")
     _, err = rerun.communicate(timeout=120)
     err = err.decode()
     assert rerun.returncode == 1 and "Yade failed in repose-seed0" in err and "--overwrite" not in err, err
-    assert list((work / "o").iterdir()) == []
+    assert "failed-repose-seed0" in err, err
+    assert [p.name for p in (work / "o").iterdir()] == ["failed-repose-seed0"]
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])

@@ -10,6 +10,7 @@ import math
 import os
 import re
 import shutil
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -163,3 +164,111 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
     assert (out / f"{test}.png").stat().st_size > 10_000
     assert (out / f"{test}-seed0" / "run.py").is_file()
     assert "angle" in r.stderr + r.stdout
+
+
+# ---- settings an engine cannot run: one line, exit 2, before any engine starts or anything is written ----
+
+REFUSED = [
+    (["--engine", "liggghts"], "simulate has no liggghts scenes"),
+    (["--engine", "lammps"], "--engine"),
+    (["--mpi", "0"], "--mpi"),
+    (["--mpi", "-3"], "--mpi"),
+    (["--mpi", "2"], "--mpi: yade runs one process per seed"),
+    (["--shape", "levelset"], "--shape levelset: simulate's yade scenes take --shape clump only"),
+    (["--shape", "polyhedron"], "--shape polyhedron"),
+    (["--shape", "sphere"], "--shape"),
+]
+
+
+@pytest.mark.parametrize("test", ["repose", "tilt"])
+@pytest.mark.parametrize("args, message", REFUSED, ids=[" ".join(a) for a, _ in REFUSED])
+def test_settings_an_engine_cannot_run_are_refused_up_front(runner, grains, tmp_path, test, args, message):
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick", *args])
+    _one_line_exit_2(r)
+    assert message in r.stderr
+    assert not out.exists()
+
+
+def test_an_engine_that_is_not_installed_is_refused_up_front(runner, grains, tmp_path, monkeypatch):
+    monkeypatch.setenv("GRAINFORGE_YADE", str(tmp_path / "no-such-yade"))
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick"])
+    _one_line_exit_2(r)
+    assert "Yade is not installed" in r.stderr
+    assert not out.exists()
+
+
+def _fake_engine(path, body):
+    path.write_text("#!/bin/sh\n" + body)
+    path.chmod(0o755)
+    return path
+
+
+def test_a_failed_engine_run_keeps_its_deck_and_log_and_says_where(runner, grains, tmp_path, monkeypatch):
+    """An engine failure (not an interrupt) keeps that run's deck and log in --out/failed-<run>/, named in
+    the error line; no result appears, and the rerun is not refused for it."""
+    fake = _fake_engine(tmp_path / "yade", 'echo "run.py line 3: the scene broke"\nexit 3\n')
+    monkeypatch.setenv("GRAINFORGE_YADE", str(fake))
+    out = tmp_path / "sim"
+    for _ in range(2):  # the second run replaces the first one's failed folder
+        r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick"])
+        assert r.exit_code == 1, r.output
+        lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+        assert len(lines) == 1 and "Traceback" not in r.output, r.stderr
+        assert "Yade failed in repose-seed0 (exit 3): run.py line 3: the scene broke" in lines[0]
+        assert str(out / "failed-repose-seed0") in lines[0]
+        assert sorted(p.name for p in out.iterdir()) == ["failed-repose-seed0"]
+        kept = out / "failed-repose-seed0"
+        assert (kept / "run.py").is_file() and (kept / "grains.json").is_file()
+        assert "the scene broke" in (kept / "yade.log").read_text()
+
+
+def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grains, tmp_path):
+    """The engine's whole process group goes (an mpirun's ranks are its children): a stand-in engine that
+    starts a child and waits; SIGINT to the command; both gone, --out not created."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from _processes import kill_sessions
+
+    work = tmp_path / "work"
+    work.mkdir()
+    fake = _fake_engine(tmp_path / "yade", f'sleep 60 &\necho $! > "{tmp_path}/child.pid"\n'
+                                           f'echo $$ > "{tmp_path}/engine.pid"\nwait\n')
+    proc = subprocess.Popen([sys.executable, "-c", "from grainforge.cli.main import main; main()", "simulate",
+                             "repose", str(grains), "--out", "o", "--quick"], cwd=work, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                            env=dict(os.environ, GRAINFORGE_YADE=str(fake)))
+    started = [proc]
+    try:
+        deadline = time.monotonic() + 120  # a hang guard
+        while not (tmp_path / "child.pid").exists() or not (tmp_path / "engine.pid").exists():
+            assert proc.poll() is None, proc.communicate()[1].decode()
+            assert time.monotonic() < deadline, "the stand-in engine never started"
+            time.sleep(0.05)
+        time.sleep(0.3)
+        pids = [int((tmp_path / f).read_text()) for f in ("child.pid", "engine.pid")]
+        os.kill(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err.decode()
+        assert err.decode().strip().splitlines()[-1] == "Interrupted."
+
+        def alive(pid):
+            try:
+                return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in "ZX"
+            except OSError:
+                return False
+
+        deadline = time.monotonic() + 5
+        while any(alive(p) for p in pids) and time.monotonic() < deadline:
+            time.sleep(0.1)
+        left = [p for p in pids if alive(p)]
+        for p in left:
+            os.kill(p, signal.SIGKILL)
+        assert not left, f"engine processes left behind: {left}"
+        assert list(work.iterdir()) == []
+    finally:
+        kill_sessions(started)

@@ -11,6 +11,39 @@ from .paths import OutPath, output_dir
 
 #: settings only the tilt test reads: not offered by `simulate repose`
 TILT_ONLY = ("tilt_step", "tilt_start")
+#: engines and grain representations the options name (the DEM decks' ones, grainforge dem)
+ENGINES = ("yade", "liggghts")
+SHAPES = ("clump", "polyhedron", "levelset")
+#: what simulate's scenes can run, per engine
+RUNS = {"yade": ("clump",), "liggghts": ()}
+
+
+def check_engine(engine: str, mpi: int | None, shape: str) -> None:
+    """Refuse, in one line and before any work, an engine/representation/MPI combination simulate cannot run.
+
+    Raises
+    ------
+    click.UsageError
+        For an engine simulate has no scene for, ``--mpi`` with an engine
+        that does not run under MPI, a ``--shape`` the engine's scenes cannot
+        take, or an engine that is not installed.
+    """
+    if not RUNS[engine]:
+        raise click.UsageError(f"--engine {engine}: simulate has no {engine} scenes yet (grainforge dem "
+                               f"--engine {engine} writes a pour deck); use --engine yade")
+    if mpi is not None:
+        raise click.UsageError(f"--mpi: {engine} runs one process per seed here, not under mpirun; "
+                               "use --workers for runs at once")
+    if shape not in RUNS[engine]:
+        raise click.UsageError(f"--shape {shape}: simulate's {engine} scenes take "
+                               f"{', '.join('--shape ' + s for s in RUNS[engine])} only (grainforge dem "
+                               f"--shape {shape} writes the deck)")
+    from ..simulate import yade_executable
+
+    try:
+        yade_executable()
+    except FileNotFoundError as exc:
+        raise click.UsageError(str(exc)) from None
 
 
 def _command(test: str, doc: str):
@@ -26,9 +59,18 @@ def _command(test: str, doc: str):
                   help="Name of this population in results.csv.")
     @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
                   help="Yade runs (seeds) at once, each on one core (default: CPU count).")
+    @click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
+                  help="DEM engine of the runs (simulate's scenes exist for Yade only, yet).")
+    @click.option("--mpi", type=click.IntRange(min=1), default=None,
+                  help="MPI ranks of each run (an engine run under mpirun; Yade runs one process per seed: "
+                       "use --workers).")
+    @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
+                  help="Grain representation (simulate's scenes take clumps only, yet; --spheres sets their "
+                       "size).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
-    def command(inputs, out, quick, as_spheres, label, workers, overwrite, **values):
+    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, overwrite, **values):
+        check_engine(engine, mpi, shape)
         _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values)
 
     return command
@@ -52,7 +94,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     import os
 
     from ..estimate import TooLargeError
-    from ..simulate import QUICK, Settings, check_inputs, check_size, yade_executable
+    from ..simulate import QUICK, Settings, check_inputs, check_size
     from .interrupts import ready_for_work, signals_held
 
     if quick:
@@ -62,7 +104,6 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)
     available, make_seconds = check_inputs(inputs)
-    yade_executable()  # refuse before any work when Yade is missing
     workers = workers or os.cpu_count() or 1
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
@@ -72,7 +113,16 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     ready_for_work(HEAVY_MODULES, seconds, bound="about")
     from tqdm import tqdm
 
-    from ..simulate import build_population, commit_stage, discard_stage, open_stage, run_test, summarise
+    from ..simulate import (
+        EngineFailed,
+        build_population,
+        commit_stage,
+        discard_stage,
+        keep_failed,
+        open_stage,
+        run_test,
+        summarise,
+    )
     from ..simulate.report import write_report
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
@@ -100,8 +150,11 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         try:
             rows = run_test(test, templates, settings, stage, label=label, progress=progress,
                             workers=workers)
-        except RuntimeError as exc:
-            raise click.ClickException(str(exc).replace(f"{stage}{os.sep}", "")) from None
+        except EngineFailed as exc:
+            # an engine failure (not an interrupt): its deck and log are kept for the diagnosis, nothing else
+            kept = keep_failed(exc.deck, out)
+            message = str(exc).replace(f"{stage}{os.sep}", "")
+            raise click.ClickException(f"{message}; its deck and log are in {kept}") from None
         finally:
             runs.close()
         write_report(rows, stage, test, settings)

@@ -38,7 +38,7 @@ from .measure import heap_angle, tilt_failure_angle
 
 __all__ = ["TESTS", "Settings", "QUICK", "yade_executable", "scene_settings", "check_inputs", "build_population",
            "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage",
-           "commit_stage", "discard_stage"]
+           "commit_stage", "discard_stage", "EngineFailed", "keep_failed", "FAILED_PREFIX"]
 
 #: the virtual tests
 TESTS = ("repose", "tilt")
@@ -360,8 +360,9 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
 
     Raises
     ------
-    RuntimeError
-        If Yade exits with an error (the last line of its log is quoted).
+    EngineFailed
+        If Yade exits with an error (the last line of its log is quoted; the
+        exception's ``deck`` is the run's folder, kept by :func:`keep_failed`).
     """
     deck = Path(deck)
     exe = yade_executable()
@@ -388,8 +389,37 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
             _RUNNING.discard(proc)
     if rc != 0 or not (deck / "result.json").is_file():
         tail = [ln.strip() for ln in log_path.read_text(errors="replace").splitlines() if ln.strip()]
-        raise RuntimeError(f"Yade failed in {deck} (exit {rc}): {tail[-1] if tail else 'no output'}")
+        raise EngineFailed(f"Yade failed in {deck} (exit {rc}): {tail[-1] if tail else 'no output'}", deck)
     return json.loads((deck / "result.json").read_text())
+
+
+class EngineFailed(RuntimeError):
+    """An engine run ended with an error (not an interrupt); ``deck`` is its folder (deck and log)."""
+
+    def __init__(self, message: str, deck: str | os.PathLike):
+        super().__init__(message)
+        self.deck = Path(deck)
+
+
+#: name prefix of the folder in ``--out`` that keeps a failed run's deck and log
+FAILED_PREFIX = "failed-"
+
+
+def keep_failed(deck: str | os.PathLike, out: str | os.PathLike) -> Path:
+    """Move a failed run's folder (deck and engine log) to ``out/failed-<name>`` and return that path.
+
+    An earlier ``failed-<name>`` folder is replaced: it is a diagnostic of the
+    last failure, not a result.  The successful outputs stay staged (nothing
+    else of the failed command appears in ``out``).
+    """
+    deck, out = Path(deck), Path(out)
+    target = out / f"{FAILED_PREFIX}{deck.name}"
+    if target.is_dir() and not target.is_symlink():
+        shutil.rmtree(target)
+    elif target.exists() or target.is_symlink():
+        target.unlink()
+    deck.replace(target)
+    return target
 
 
 #: Yade processes started by this process and not yet finished (killed on an interrupt)
