@@ -80,15 +80,53 @@ def test_voxel_size_is_required_unless_a_column_gives_it(runner, tmp_path):
 
 def test_recipe_text_is_a_valid_batch_recipe_with_the_sand_grading(tmp_path):
     s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
-    spec = FITS["cri"]
-    params = spec.params({k.name: k.start for k in spec.knobs})
-    params["aspect"] = {"distribution": "zingg", "elongation": 0.8,
-                        "flatness": {"distribution": "uniform", "low": 0.6, "high": 0.9}}
+    params = {"descriptors": [0.0, 0.1, 0.006], "subdivisions": 5,
+              "aspect": {"distribution": "zingg", "elongation": 0.8,
+                         "flatness": {"distribution": "uniform", "low": 0.6, "high": 0.9}}}
     r = parse_recipe(recipe_text("cri", params, s, count=500, seed=1, header="a\nb"))
     assert r.count == 500 and r.size_definition == "equivalent" and r.size.basis == "count"
     assert r.size.sieves_mm[0] == pytest.approx(s.equivalent_diameter.min() / 1000, rel=1e-5)
     assert r.size.sieves_mm[-1] == pytest.approx(s.equivalent_diameter.max() / 1000, rel=1e-5)
-    assert r.params["descriptors"].kind == "each" and r.params["aspect"].kind == "zingg"
+    assert r.params["aspect"].kind == "zingg"
+
+
+def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path):
+    """What `fit` writes ([grains]: one value per grain), `batch` runs, grain i with grain i's settings."""
+    from grainforge.fit import twin_recipe_text
+    from grainforge.population import draw_grain
+
+    spec = FITS["rf"]
+    us = [np.array([0.1, 0.2, 0.8, 0.7]), np.array([0.3, 0.1, 0.6, 0.9])]
+    own = [{**spec.grain_params(u)} for u in us]
+    text = twin_recipe_text(spec, own, [0.41, 0.52], seed=3, header="test")
+    recipe = parse_recipe(text)
+    for i in range(len(us)):
+        _, params, size = draw_grain(recipe, i)
+        assert size == [0.41, 0.52][i]
+        assert list(params.descriptors) == own[i]["descriptors"] and list(params.aspect) == own[i]["aspect"]
+        assert params.subdivisions == 5
+    (tmp_path / "recipe.toml").write_text(text.replace("subdivisions = 5", "subdivisions = 3"), encoding="utf-8")
+    r = runner.invoke(cli, ["batch", str(tmp_path / "recipe.toml"), "--out", str(tmp_path / "grains")])
+    assert r.exit_code == 0, r.output + r.stderr
+    assert len(list((tmp_path / "grains").glob("rf-*.stl"))) == 2
+
+
+@pytest.mark.parametrize("grains, words", [
+    ("size_mm = [0.4]", "grains.size_mm: must be a list of count = 2 values"),
+    ("size_mm = [0.4, -1.0]", "grain 1: must be in"),
+    ("nope = [1, 2]", "grains.nope: is not a rf parameter"),
+    ("aspect = [[1.0, 0.5, 0.4], { distribution = \"uniform\", low = 0.1, high = 0.2 }]", "not a distribution"),
+    ("descriptors = [[0.0, 0.1, 0.01], [0.0, 0.9, 0.01]]", "grain 1"),
+])
+def test_bad_grains_tables_name_the_field(grains, words):
+    from grainforge.population import RecipeError
+
+    text = f'method = "rf"\ncount = 2\nseed = 1\n[size]\nmm = 0.4\n[grains]\n{grains}\n'
+    if "size_mm" in grains:
+        text = text.replace("mm = 0.4\n", 'definition = "equivalent"\n')
+    with pytest.raises(RecipeError, match="grains") as exc:
+        parse_recipe(text)
+    assert words in str(exc.value)
 
 
 def test_compare_passes_identical_samples_and_fails_shifted_ones():
@@ -169,50 +207,6 @@ def test_existing_outputs_are_not_overwritten_without_overwrite(runner, tmp_path
     assert (out / "fit.csv").read_text(encoding="utf-8") == "keep"
 
 
-def test_misfit_weights_predict_the_ks_statistic_of_normal_samples():
-    """_weights: a mean misfit δ costs δ/(σ√(2π)) of KS and a spread misfit ε·σ costs φ(1)·ε (normal laws)."""
-    from scipy.stats import ks_2samp
-
-    from grainforge.fit import KS_MAX, MEAN_TOL, STATISTICS, _weights
-
-    rng = np.random.default_rng(5)
-    sd = np.array([0.03, 0.025, 0.1, 0.1])
-    sand = rng.normal(0.8, sd, size=(50_000, 4))
-    w = dict(zip(STATISTICS, _weights(sand)))
-    z = rng.normal(size=50_000)
-    for j, k in enumerate(("sphericity", "convexity")):
-        delta = 0.3 * sd[j]  # a mean offset: its KS part of the weight, times delta, is the KS statistic
-        ks = ks_2samp(sand[:, j], 0.8 + delta + sd[j] * z).statistic
-        ks_weight = math.sqrt(w[f"mean {k}"] ** 2 - (1 / MEAN_TOL) ** 2)
-        assert ks_weight * delta * KS_MAX == pytest.approx(ks, abs=0.01)
-        eps = 0.2  # a wider spread
-        ks = ks_2samp(sand[:, j], 0.8 + sd[j] * (1 + eps) * z).statistic
-        assert w[f"sd {k}"] * eps * sd[j] * KS_MAX == pytest.approx(ks, abs=0.01)
-    # a narrow descriptor's spread misfit weighs more than a wide one's, in proportion
-    assert w["sd convexity"] / w["sd flatness"] == pytest.approx(0.1 / 0.025, rel=0.02)
-
-
-def test_a_fitted_recipe_runs_in_batch_as_written(runner, tmp_path):
-    """What `fit` writes, `batch` runs: per-grain descriptors (each) and aspect (zingg) pass its pilot check.
-
-    The knobs are the Ottawa fit's (docs/fit.md); the fitted normals are truncated at 4 sd.
-    """
-    from grainforge.fit import TRUNCATE_SD, _aspect_table
-
-    s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
-    params = FITS["rf"].params({"irregularity": 0.0315, "irregularity_sd": 0.002, "roughness": 0.0140,
-                                "roughness_sd": 0.0038})
-    params["aspect"] = _aspect_table({"elongation_mean": 0.763, "elongation_sd": 0.105, "flatness_mean": 0.793,
-                                      "flatness_sd": 0.106}, 0.18)
-    d8 = params["descriptors"][2]
-    assert d8["high"] == pytest.approx(0.0140 + TRUNCATE_SD * 0.0038) and d8["low"] == 0.0
-    recipe = tmp_path / "recipe.toml"
-    recipe.write_text(recipe_text("rf", params, s, count=2, seed=3, header="test"), encoding="utf-8")
-    r = runner.invoke(cli, ["batch", str(recipe), "--out", str(tmp_path / "grains")])
-    assert r.exit_code == 0, r.output + r.stderr
-    assert len(list((tmp_path / "grains").glob("rf-*.stl"))) == 2
-
-
 def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_path, monkeypatch):
     """The CLI runs batch's pilot check on the recipe it wrote: an unmakeable end is a warning and exit 1."""
     import grainforge.fit as fitmod
@@ -220,11 +214,15 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
     s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
     params = {"descriptors": [0.0, 0.05, {"distribution": "uniform", "low": 0.0, "high": 0.3}], "subdivisions": 3}
     text = recipe_text("rf", params, s, count=500, seed=1, header="test")
-    gen = np.full((500, 5), 0.8)
+    gen = np.full((50, 5), 0.8)
+    gen[:, 0], gen[:, 1:] = s.equivalent_diameter, s.table()
+    stats = compare(s.table(), gen[:, 1:], twin_within=1.0)
+    stats.update(reachable=1.0, unreachable_by={})
 
     def fake_fit(sand, method, **kw):
-        return fitmod.FitResult(method="rf", recipe=text, stats=compare(s.table(), gen[:, 1:]), generated=gen,
-                                knobs={}, aspect={})
+        return fitmod.FitResult(method="rf", recipe=text, stats=stats, generated=gen, sand_rows=np.arange(50),
+                                settings=[{"irregularity": 0.05}] * 50, reachable=np.ones(50, bool),
+                                targets=s.table())
 
     monkeypatch.setattr(fitmod, "fit_sand", fake_fit)
     out = tmp_path / "o"
