@@ -408,7 +408,8 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
                       "across,", option=f"{option}, --max-voxels-across or --workers")
     seconds = expected * each / cores
     if seconds > 60 * max_minutes:
-        cap = "" if not max_across else f" or --max-voxels-across (now {max_across:g})"
+        cap = (f" or --max-voxels-across (now {max_across:g})" if max_across
+               else f" or set --max-voxels-across (e.g. {MAX_VOXELS_ACROSS:g})")
         raise TooLargeError(
             f"fit --method {method} would take about {duration(seconds)} on {cores} core(s) (about {expected} "
             f"grains at {duration(each) if each >= 1 else f'{each * 1000:.2g} ms'} each, {across.mean():.0f} "
