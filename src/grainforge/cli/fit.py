@@ -39,7 +39,7 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.option("--max-minutes", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
               help="Refuse a fit estimated to take longer (wall clock on --workers).")
 @click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Where designs are cached [default: $GRAINFORGE_CACHE or ~/.cache/grainforge].")
+              help="Where designs are cached (see docs/fit.md) [default: $GRAINFORGE_CACHE or ~/.cache/grainforge]")
 @click.option("--seed", type=click.IntRange(min=0), default=2024, show_default=True, help="Root seed of the recipe.")
 @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
               help="Worker processes [default: CPU count].")
