@@ -27,8 +27,8 @@ from pathlib import Path
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 VOXEL_UM = 13.3
 #: the known settings: name -> (mean, sd, low, high) of a truncated normal
-KNOWN = {"irregularity": (0.12, 0.035, 0.04, 0.22), "roughness": (0.028, 0.005, 0.015, 0.039),
-         "elongation": (0.72, 0.08, 0.45, 0.95), "flatness": (0.70, 0.08, 0.45, 0.95)}
+KNOWN = {"irregularity": (0.10, 0.05, 0.02, 0.22), "roughness": (0.031, 0.006, 0.015, 0.039),
+         "elongation": (0.64, 0.1, 0.4, 0.95), "flatness": (0.70, 0.1, 0.4, 0.95)}
 GRAINS = 150
 SEED = 41
 #: the fine sand's settings, voxel size (µm), median d_eq (µm) and grains
