@@ -144,6 +144,7 @@ ANGULAR = Path(__file__).resolve().parent / "data" / "synthetic-angular-sand.csv
 ANGULAR_SETTINGS = ANGULAR.with_name("synthetic-angular-sand-settings.csv")
 
 
+@pytest.mark.slow  # about 340 small grains: 464 s at load 6-7 on the shared 2 cores
 def test_twins_of_a_small_population_copy_their_sand_grains(tmp_path, monkeypatch):
     """A twin fit of 60 rows of the synthetic angular sand (rf-made, so every grain is reachable), with coarse
     rf grains (subdivisions 3) for speed: the criteria hold, and grain i of the recipe, made as batch makes it,
