@@ -114,8 +114,8 @@ DESIGN_VERSION = 1
 #: with the cube of the voxels across (0.05 s at Ottawa's 69; docs/benchmarks.md)
 FIT_GRAIN_SECONDS, FIT_VOXEL_SECONDS, FIT_ACROSS_REF = 0.1, 0.05, 69.0
 #: measurements per twin the estimate expects (the first, and the refinements of the twins that miss;
-#: the Ottawa rf fit measured 2.17 per twin, docs/fit.md)
-EXPECTED_MEASUREMENTS = 2.2
+#: the Ottawa rf fit measured 3.17 per twin, docs/fit.md)
+EXPECTED_MEASUREMENTS = 3.2
 #: memory of one grain's measurement, per cubed voxel across (bytes; 330 MB at 250 across, for an elongated
 #: grain's larger box a factor 2 more)
 FIT_VOXEL_BYTES = 48.0
@@ -368,7 +368,7 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int,
     Examples
     --------
     >>> fit_grains("rf", count=500, design_grains=400, refine=3)
-    (1500, 2900)
+    (2000, 2400)
     """
     designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
     expected = designs + int(round(count * min(EXPECTED_MEASUREMENTS, 1 + refine)))
@@ -381,7 +381,7 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
     return np.minimum(across, max_across) if max_across else across
 
 
-def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 3,
+def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
                    max_across: float | None = MAX_VOXELS_ACROSS, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
                    cache: str | os.PathLike | None = None) -> float:
