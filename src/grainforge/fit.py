@@ -629,7 +629,7 @@ def design_path(method: str, convention: str, high: float, grains: int = DESIGN_
     from .calibration import cache_dir
 
     spec = FITS[method]
-    key = repr((DESIGN_VERSION, __version__, DESIGN_SEED, spec.all_settings, sorted(spec.fixed.items()),
+    key = repr((DESIGN_VERSION, __version__, DESIGN_SEED, method, spec.all_settings, sorted(spec.fixed.items()),
                 convention, float(high), int(grains)))
     digest = hashlib.sha256(key.encode()).hexdigest()[:12]
     return Path(cache or cache_dir()) / "fit-designs" / f"{method}-{convention}-{high:g}-{grains}-{digest}.npz"
