@@ -19,18 +19,21 @@ import sys
 
 import numpy as np
 
-from grainforge.fit import DESCRIPTORS, FITS, _aspect_table, measure_grain, read_sand, recipe_text
+from grainforge.fit import DESCRIPTORS, measure_grain, read_sand, recipe_text
 
 
 def main(n: int = 30, eps: float = 1e-5) -> None:
     sand = read_sand("examples/sand-atlas/ottawa-7.3um.csv", 7.3)
-    spec = FITS["cri"]
-    knobs = {"irregularity": 0.09, "irregularity_sd": 0.015, "roughness": 0.006153, "roughness_sd": 0.002567}
+
+    def tn(mean, sd, low, high):
+        return {"distribution": "truncnormal", "mean": mean, "sd": sd, "low": low, "high": high}
 
     def text(de):
-        a = {"elongation_mean": 0.803 + de, "elongation_sd": 0.100, "flatness_mean": 0.804, "flatness_sd": 0.106}
-        params = spec.params(knobs)
-        params["aspect"] = _aspect_table(a, 0.179942)
+        # the settings of the earlier (distribution-fitting) CRI fit of Ottawa
+        params = {"descriptors": [0.0, tn(0.09, 0.015, 0.03, 0.15), tn(0.006153, 0.002567, 0.0, 0.016421)],
+                  "subdivisions": 5,
+                  "aspect": {"distribution": "zingg", "elongation": tn(0.803 + de, 0.1, 0.403 + de, 1.0),
+                             "flatness": tn(0.804, 0.106, 0.404, 1.0)}}
         return recipe_text("cri", params, sand, count=500, seed=2024)
 
     import grainforge.methods.cri as cri

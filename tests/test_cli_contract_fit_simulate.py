@@ -122,17 +122,24 @@ CASES = [
     *[Case(f"fit-voxel-size-{v}", _fit("--voxel-size-um", v), r"voxel.size") for v in ("nan", "inf", "0", "-1")],
     # fit: huge work refused up front, by the declared range or the estimate
     Case("fit-count-1e9", _fit("--voxel-size-um", "7.3", "--count", "1000000000"), r"--count.*not in the range"),
-    Case("fit-pilot-1e9", _fit("--voxel-size-um", "7.3", "--pilot", "1000000000"), r"--pilot.*not in the range"),
+    Case("fit-design-grains-1e9", _fit("--voxel-size-um", "7.3", "--design-grains", "1000000000"),
+         r"--design-grains.*not in the range"),
     Case("fit-auto-count-1e8", _fit("--voxel-size-um", "7.3", "--method", "auto", "--count", "100000000"),
          r"--count.*not in the range"),
     Case("fit-count-1e6", _fit("--voxel-size-um", "7.3", "--count", "1000000", "--workers", "1"),
          r"fit --method rf, measuring up to \d+ grains, would take about .* days? .*; lower --count"),
-    Case("fit-pilot-1e6", _fit("--voxel-size-um", "7.3", "--count", "1000000", "--pilot", "1000000", "--workers", "1"),
-         r"measuring up to 14000000 grains, would take about .*; lower --pilot \(or --rounds\)"),
     Case("fit-auto-count-1e5", _fit("--voxel-size-um", "7.3", "--method", "auto", "--count", "100000", "--workers", "1"),
-         r"fit --method auto, .* would take about .*; lower --count or fit one --method"),
+         r"fit --method auto would take about .* over --max-minutes 60: raise --max-minutes, lower --count or fit "
+         r"one --method"),
+    # fit: over the --max-minutes budget, or a resolution measured uncapped, refused up front saying what to change
+    Case("fit-over-budget", _fit("--voxel-size-um", "7.3", "--count", "20000", "--workers", "1", "--max-minutes", "5"),
+         r"fit --method rf would take about .* over --max-minutes 5: raise --max-minutes, lower --count or "
+         r"--max-voxels-across \(now 150\)"),
+    Case("fit-uncapped-1.3um", _fit("--voxel-size-um", "1.3", "--max-voxels-across", "0", "--workers", "1"),
+         r"fit --method rf would take about .* h on 1 core.* voxels across\), over --max-minutes 60: raise "
+         r"--max-minutes, lower --count or set --max-voxels-across \(e\.g\. 150\)"),
     Case("fit-workers-1000", _fit("--voxel-size-um", "7.3", "--workers", "1000"), r"--workers.*not in the range"),
-    Case("fit-rounds-0", _fit("--voxel-size-um", "7.3", "--rounds", "0"), r"--rounds"),
+    Case("fit-refine-minus-1", _fit("--voxel-size-um", "7.3", "--refine", "-1"), r"--refine"),
     Case("fit-method-nope", _fit("--voxel-size-um", "7.3", "--method", "nope"), r"--method"),
     # simulate: huge work refused up front with the estimate
     Case("simulate-repose-huge", _sim("repose", *HUGE_SIM),
@@ -283,7 +290,7 @@ def test_fuzz_fit_options_are_refused_up_front_without_a_budget(data, tmp_path_f
         st.just(7.3), st.floats(1e-40, 1e40), st.sampled_from(["0", "-1", "nan", "inf"])), label="voxel"))]
     args += ["--method", data.draw(st.sampled_from(list(FITS) + ["auto"]), label="method")]
     strategies = _option_values(fit, skip=("voxel_size",))
-    assert {"--count", "--pilot", "--rounds", "--final-rounds", "--workers"} <= set(strategies)
+    assert {"--count", "--refine", "--design-grains", "--max-voxels-across", "--max-minutes", "--workers"} <= set(strategies)
     args += _draw_args(data, strategies)
     _refused_in_one_line(args, cwd)
 

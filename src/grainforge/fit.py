@@ -1,49 +1,55 @@
-"""Fit a generated population to a real sand's measured shape statistics (docs/design/algorithms.md §8).
+"""Fit a generated population to a real sand, grain by grain (docs/design/algorithms.md §8, docs/fit.md).
 
 A *sand* is a table of per-grain measurements in the Sand Atlas format
 (:func:`read_sand`): equivalent diameter, true sphericity, convexity,
 flatness and elongation, measured on μCT voxel images of a known voxel size.
-:func:`fit_sand` finds a recipe (:mod:`grainforge.population`) whose grains,
-measured the same way (:func:`grainforge.analysis.atlas.atlas_descriptors`
-at the same voxel size relative to each grain), match the sand: for each of
-the four descriptors the two-sample Kolmogorov–Smirnov statistic
-(:func:`scipy.stats.ks_2samp`) ≤ 0.1 and the mean within 0.01.
+:func:`fit_sand` makes every generated grain the **twin** of one sand grain:
+it has that grain's equivalent diameter, and generator settings chosen so
+that, measured the same way (:func:`grainforge.analysis.atlas.atlas_descriptors`
+at the same voxel size relative to its size), it has that grain's four
+descriptors.  The population so inherits the sand's joint distribution —
+its marginals, the correlations between descriptors and between size and
+shape — instead of matching four marginals made of independent draws.
 
-What is fitted
---------------
-- **Size**: the sand's equivalent diameters become the recipe's grading
-  (``[size]`` by count, equivalent definition), so every generated grain is
-  voxelised at the sand's resolution for its size.
-- **Aspect** (every method with an ``aspect`` L:I:S parameter): drawn per
-  grain as ``{ distribution = "zingg" }`` with truncated-normal elongation
-  I/L and flatness S/I; their two means and two sds are unknowns.
-- **Surface knobs** (per method, :data:`FITS`): a few numbers, each with a
-  mean and a per-grain spread (e.g. CRI's irregularity and roughness
-  descriptors), that steer the means and spreads of sphericity and convexity.
+How
+---
+1. **Design** (:func:`design`): a few hundred grains of the method, their
+   per-grain settings (surface knobs and the aspect's Zingg ratios) and
+   resolution spread over the method's whole range (a Sobol design), each
+   generated and measured once; cached on disk per method, convention and
+   resolution range (:func:`design_path`), so a second fit of any sand
+   measures none.
+2. **Inverse model** (:mod:`grainforge.twins`): a cubic least-squares model
+   from settings and log(voxels across) to the four descriptors, solved,
+   bounded, per sand grain for the settings it predicts to measure like it.
+3. **Twins**: grain ``i`` of the recipe (its own seed, as ``batch`` makes it)
+   gets its sand grain's size and the model's settings, and is measured.
+4. **Refinement**: a twin more than :data:`REFINE_TOL` off on any descriptor
+   gets new settings from the model plus its own offset (measured minus
+   predicted: what its seed and orientation add) and is measured again, up
+   to ``refine`` times; each grain keeps its closest twin.
 
-All unknowns are solved for jointly against all eight statistics
-(:data:`STATISTICS`: the mean and sd of each descriptor): a rougher grain
-also measures less elongated, a flatter one less spherical, and a per-grain
-spread of irregularity widens sphericity and convexity alike, so no knob can
-be matched to one statistic alone.  Damped Gauss–Newton steps in a trust
-region, on a finite-difference Jacobian (measured once, then Broyden
-updates), with each misfit weighted by what it does to the criteria
-(:func:`_weights`: a spread misfit of a narrow descriptor costs more KS than
-one of a wide descriptor), on a *pilot* population whose grains keep their
-seeds from round to round (common random numbers), so that the statistics
-change smoothly with the settings.
+The fit **passes** when, on the population: each descriptor's two-sample KS
+statistic ≤ :data:`KS_MAX` and mean within :data:`MEAN_TOL`; each of the six
+pairwise Spearman correlations within :data:`CORR_TOL` of the sand's; and at
+least :data:`TWIN_SHARE` of the grains the method can reach (the model's
+closest setting predicts a twin within :data:`TWIN_TOL`) have a twin within
+:data:`TWIN_TOL` on every descriptor (:func:`compare`).
 
-A final population of ``count`` (≥ 500) grains verifies the fit; if it
-misses, a correction is made from it and it is measured again
-(``final_rounds`` times at most; the best is kept).
+Resolution: generated grains are measured at min(voxels across,
+``max_across``) (default :data:`MAX_VOXELS_ACROSS`, where their descriptors
+have converged with resolution; ``benchmarks/fit_resolution.py``); the
+sand's own numbers are never rescaled.
 
 Adding a method is a few lines: :func:`register` a :class:`MethodFit` that
-names its knobs and turns knob values into the recipe's ``[params]`` table.
+names its per-grain settings and their ranges and turns them into a grain's
+parameters.
 """
 
 from __future__ import annotations
 
 import csv
+import hashlib
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -55,9 +61,10 @@ from typing import Any
 import numpy as np
 
 __all__ = [
-    "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Knob", "MethodFit", "FITS", "register", "fit_sand",
-    "compare", "recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "STATISTICS",
-    "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS", "SPHERICITY_MAX",
+    "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Setting", "MethodFit", "FITS", "register", "fit_sand",
+    "compare", "recipe_text", "twin_recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "CORR_TOL",
+    "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS",
+    "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "design", "design_path", "measure_grain", "OUTPUTS",
 ]
 
 #: the four descriptors that are matched
@@ -75,11 +82,16 @@ VOXEL_COLUMN = "Voxel Size (µm)"
 #: acceptance: two-sample KS statistic and |mean difference| per descriptor
 KS_MAX = 0.1
 MEAN_TOL = 0.01
-#: finite-difference step (and trust-region unit) of the fitted aspect means
-ASPECT_STEP = 0.03
-#: finite-difference step and range of the fitted aspect standard deviations
-ASPECT_SD_STEP = 0.02
-ASPECT_SD_LOW, ASPECT_SD_HIGH = 0.005, 0.5
+#: acceptance: |Spearman correlation difference| for each pair of descriptors
+CORR_TOL = 0.1
+#: acceptance: a twin is within this of its sand grain on every descriptor, for this share of reachable grains
+TWIN_TOL = 0.03
+TWIN_SHARE = 0.9
+#: a twin further than this from its sand grain on any descriptor, or than REFINE_SD of the sand's sd of
+#: that descriptor, is refined (tighter than TWIN_TOL: the population's means and rank correlations need
+#: twins that are close on the scale of the sand's own spread, not just inside the tolerance)
+REFINE_TOL = 0.012
+REFINE_SD = 0.3
 #: largest true sphericity accepted: measured on voxels it can exceed 1 a little (Ottawa's largest is 1.02)
 SPHERICITY_MAX = 1.2
 #: fewest grains a sand must have to be fitted: two samples of 50 grains of one sand already differ by a
@@ -88,16 +100,29 @@ MIN_GRAINS = 50
 #: range of grain sizes, in voxels across (d_eq / voxel size), the fit measures: fewer than 5 voxels across
 #: describe no shape; at 1,000 one grain's voxel image holds 10⁹ voxels
 VOXELS_ACROSS = (5.0, 1000.0)
+#: generated grains are measured at most this many voxels across: their descriptors have converged there
+#: (within 0.005 of 300 voxels across on every generator; docs/fit.md, benchmarks/fit_resolution.py)
+MAX_VOXELS_ACROSS = 150.0
+#: grains of a method's design, and the smallest resolution it spans (voxels across)
+DESIGN_GRAINS = 400
+DESIGN_ACROSS_LOW = 10.0
+#: root seed of every design (designs do not depend on the sand or the fit's seed); bump DESIGN_VERSION
+#: when a generator or the measurement changes, so that cached designs are not reused
+DESIGN_SEED = 20261202
+DESIGN_VERSION = 1
 #: per-grain cost of a fit (s, one core): making the grain, plus voxelising and measuring it, which grows
 #: with the cube of the voxels across (0.05 s at Ottawa's 69; docs/benchmarks.md)
 FIT_GRAIN_SECONDS, FIT_VOXEL_SECONDS, FIT_ACROSS_REF = 0.1, 0.05, 69.0
+#: measurements per twin the estimate expects (the first, and the refinements of the twins that miss;
+#: the Ottawa rf fit measured 3.17 per twin, docs/fit.md)
+EXPECTED_MEASUREMENTS = 3.2
 #: memory of one grain's measurement, per cubed voxel across (bytes; 330 MB at 250 across, for an elongated
 #: grain's larger box a factor 2 more)
 FIT_VOXEL_BYTES = 48.0
 #: memory the fit keeps per grain measured (its cached row)
 FIT_ROW_BYTES = 300.0
-#: the statistics the search matches: mean and sd of each descriptor
-STATISTICS = tuple(f"{q} {k}" for k in DESCRIPTORS for q in ("mean", "sd"))
+#: a fit estimated beyond this is refused up front (``--max-minutes``)
+MAX_MINUTES = 60.0
 
 
 # --------------------------------------------------------------------------- the sand
@@ -229,92 +254,57 @@ def check_sand(sand: Sand) -> None:
                              "spread of sizes and shapes to match")
 
 
-def fit_grains(method: str, *, count: int, pilot: int, rounds: int, final_rounds: int) -> tuple[int, int]:
-    """Most grains a fit of ``method`` measures: (search grains, final-population grains).
-
-    The search measures the pilot at the start, half of it once per unknown
-    (the Jacobian), and once per round; the final population is measured up
-    to ``final_rounds`` times.  ``"auto"`` fits every method.
-
-    Examples
-    --------
-    >>> fit_grains("rf", count=500, pilot=200, rounds=6, final_rounds=3)
-    (2200, 1500)
-    """
-    if method == "auto":
-        parts = [fit_grains(m, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds) for m in FITS]
-        return sum(p[0] for p in parts), sum(p[1] for p in parts)
-    pilot = min(pilot, count)
-    unknowns = len(FITS[method].knobs) + 4
-    return pilot * (1 + rounds) + unknowns * max(2, pilot // 2), final_rounds * count
 
 
-def check_fit_size(sand: Sand, method: str, *, count: int, pilot: int, rounds: int, final_rounds: int,
-                   workers: int = 1) -> float:
-    """Estimated seconds of a fit; refuse one beyond a day or the machine's memory, naming the option to lower.
-
-    Raises
-    ------
-    grainforge.estimate.TooLargeError
-    """
-    from .estimate import check_job, check_memory
-
-    search, final = fit_grains(method, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds)
-    across = sand.equivalent_diameter / sand.voxel_size
-    each = FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * float(np.mean((across / FIT_ACROSS_REF) ** 3))
-    option = "--count" if final >= search else "--pilot (or --rounds)"
-    if method == "auto":
-        option += " or fit one --method"
-    cores = max(1, min(int(workers), os.cpu_count() or 1))
-    total = check_job(search + final, each, what=f"fit --method {method}, measuring up to {search + final} grains,",
-                      option=option, workers=cores)
-    per_worker = FIT_VOXEL_BYTES * float(across.max()) ** 3
-    check_memory(per_worker * max(1, int(workers)) + FIT_ROW_BYTES * (search + final),
-                 what=f"fit --method {method} on {workers} worker(s), measuring up to {search + final} grains "
-                      f"{across.max():.0f} voxels across,", option=f"{option} or --workers")
-    return total
-
-
-# --------------------------------------------------------------------------- per-method knobs
+# --------------------------------------------------------------------------- per-method settings
 @dataclass(frozen=True)
-class Knob:
-    """One fitted number: start value, bounds and the finite-difference step (also its scale)."""
+class Setting:
+    """One per-grain setting the inverse model solves for, with the range the design spans."""
 
     name: str
-    start: float
     low: float
     high: float
-    step: float
+
+
+#: the aspect's Zingg ratios, a per-grain setting of every method (measured flatness and elongation follow
+#: them closely, the surface shifts them a little)
+ASPECT_SETTINGS = (Setting("elongation", 0.25, 1.0), Setting("flatness", 0.25, 1.0))
 
 
 @dataclass(frozen=True)
 class MethodFit:
-    """How to fit one generator.
+    """How to fit one generator grain by grain.
 
     Attributes
     ----------
     method : str
         Generator name (must have an ``aspect`` L:I:S parameter).
-    knobs : tuple of Knob
-        Fitted numbers besides the aspect distribution.
-    targets : tuple of str
-        The statistics the knobs mainly steer, as many as knobs: ``"mean X"``
-        or ``"sd X"`` for X in :data:`DESCRIPTORS` (documentation: the search
-        solves every knob against all of :data:`STATISTICS`).
+    settings : tuple of Setting
+        Per-grain settings besides the aspect's (``elongation``, ``flatness``,
+        appended by :attr:`all_settings`).
+    fixed : dict
+        The recipe's ``[params]``: what every grain shares.
     params : callable
-        Knob values (dict) -> the recipe's ``[params]`` table (numbers,
-        lists, or distribution tables such as :func:`truncnormal`), without
-        ``aspect``.
+        Setting values (dict, the aspect's included) -> the grain's own
+        parameters (the recipe's ``[grains]`` columns), ``aspect`` included.
     """
 
     method: str
-    knobs: tuple[Knob, ...]
-    targets: tuple[str, ...]
+    settings: tuple[Setting, ...]
+    fixed: Mapping[str, Any]
     params: Callable[[Mapping[str, float]], dict]
 
-    def __post_init__(self):
-        if len(self.knobs) != len(self.targets):
-            raise ValueError(f"{self.method}: {len(self.knobs)} knobs need as many targets, got {self.targets}")
+    @property
+    def all_settings(self) -> tuple[Setting, ...]:
+        return self.settings + ASPECT_SETTINGS
+
+    def values(self, u: np.ndarray) -> dict[str, float]:
+        """Unit-box coordinates ``u`` (one per :attr:`all_settings`) -> setting values."""
+        return {s.name: float(s.low + float(x) * (s.high - s.low)) for s, x in zip(self.all_settings, u)}
+
+    def grain_params(self, u: np.ndarray) -> dict:
+        """The grain's own parameters for unit-box coordinates ``u``, rounded as the recipe writes them."""
+        return _written(self.params(self.values(u)))
 
 
 #: method name -> its :class:`MethodFit` (``fit --method``)
@@ -327,72 +317,104 @@ def register(spec: MethodFit) -> MethodFit:
     return spec
 
 
-#: a fitted normal is truncated this many standard deviations from its mean (inside the knob's range)
-TRUNCATE_SD = 4.0
+def _aspect(v: Mapping[str, float]) -> list[float]:
+    return [1.0, v["elongation"], v["elongation"] * v["flatness"]]
 
 
-def truncnormal(mean: float, sd: float, low: float, high: float) -> dict:
-    """A recipe ``truncnormal`` table: the mean clipped into [low, high], the
-    range narrowed to mean ± :data:`TRUNCATE_SD` sd within [low, high].
+def _descriptor_params(v: Mapping[str, float]) -> dict:
+    # D2 = 0: the aspect alone sets the form (a per-grain D2 deforms it at random, which the measured
+    # flatness and elongation then follow only loosely); D3 (irregularity) and D8 (roughness) per grain
+    return {"descriptors": [0.0, v["irregularity"], v["roughness"]], "aspect": _aspect(v)}
 
-    The narrowing keeps the recipe runnable: ``batch`` makes pilot grains at
-    each end of every distribution before it starts
-    (:func:`grainforge.population.check_extremes`), and a draw beyond 4 sd
-    has a probability of 6e-5, so the normal is practically unchanged.
+
+_DESCRIPTOR_SETTINGS = (Setting("irregularity", 0.0, 0.25), Setting("roughness", 0.0, 0.04))
+
+register(MethodFit("rf", _DESCRIPTOR_SETTINGS, {"subdivisions": 5}, _descriptor_params))
+register(MethodFit("cri", _DESCRIPTOR_SETTINGS, {"subdivisions": 5}, _descriptor_params))
+register(MethodFit(
+    "fso", (Setting("amplitude", 0.0, 0.15), Setting("fractal_dimension", 2.0, 2.8)),
+    {"surface": "seamless", "subdivisions": 5},
+    lambda v: {"amplitude": v["amplitude"], "fractal_dimension": v["fractal_dimension"], "aspect": _aspect(v)},
+))
+register(MethodFit(
+    # angular grains: edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad,
+    # 16 facets, a fine texture)
+    "angular", (Setting("rounding", 0.0, 0.9), Setting("dent_depth", 0.0, 0.7)),
+    {"facets": 16, "dents": 6, "dent_width": 0.5, "roughness": 0.005, "length_ratio": 2.0, "subdivisions": 5},
+    lambda v: {"rounding": v["rounding"], "dent_depth": v["dent_depth"], "aspect": _aspect(v)},
+))
+
+
+def _written(v: Any) -> Any:
+    """``v`` as the recipe writes it (floats to 6 significant digits, :func:`_toml`): what ``batch`` reads back."""
+    if isinstance(v, float):
+        return float(f"{v:.6g}")
+    if isinstance(v, (list, tuple)):
+        return [_written(x) for x in v]
+    if isinstance(v, dict):
+        return {k: _written(x) for k, x in v.items()}
+    return v
+
+
+# --------------------------------------------------------------------------- estimate
+def fit_grains(method: str, *, count: int, design_grains: int, refine: int,
+               cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
+    """Grains a fit of ``method`` measures: (expected, at most).
+
+    The design's grains (none when it is cached), then each twin once, plus
+    refinements: :data:`EXPECTED_MEASUREMENTS` per twin expected, ``1 +
+    refine`` at most.  ``"auto"`` measures every method's design.
 
     Examples
     --------
-    >>> t = truncnormal(1.2, 0.1, 0.0, 1.0)
-    >>> t["mean"], round(t["low"], 12), t["high"]
-    (1.0, 0.6, 1.0)
+    >>> fit_grains("rf", count=500, design_grains=400, refine=3)
+    (2000, 2400)
     """
-    m, sd = float(min(max(mean, low), high)), float(max(sd, 1e-4))
-    lo, hi = max(float(low), m - TRUNCATE_SD * sd), min(float(high), m + TRUNCATE_SD * sd)
-    return {"distribution": "truncnormal", "mean": m, "sd": sd, "low": lo, "high": hi}
+    designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
+    expected = designs + int(round(count * min(EXPECTED_MEASUREMENTS, 1 + refine)))
+    return expected, designs + count * (1 + refine)
 
 
-def _descriptor_knobs(irregularity: float, roughness: float, high: float) -> tuple[Knob, ...]:
-    """Irregularity D3 and roughness D8, each drawn per grain (mean and sd fitted)."""
-    return (Knob("irregularity", irregularity, 0.0, high, 0.02), Knob("roughness", roughness, 0.0, 0.05, 0.004),
-            Knob("irregularity_sd", 0.04, 0.002, 0.15, 0.015), Knob("roughness_sd", 0.004, 0.0005, 0.03, 0.003))
+def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
+    """Voxels across each sand grain's twin is measured at: the sand's, capped at ``max_across``."""
+    across = sand.equivalent_diameter / sand.voxel_size
+    return np.minimum(across, max_across) if max_across else across
 
 
-def _descriptor_params(k: Mapping[str, float], high: float) -> dict:
-    # D2 = 0: the aspect alone sets the form; D3 (irregularity) and D8 (roughness) drawn per grain
-    return {"descriptors": [0.0, truncnormal(k["irregularity"], k["irregularity_sd"], 0.0, high),
-                            truncnormal(k["roughness"], k["roughness_sd"], 0.0, 0.1)],
-            "subdivisions": 5}
+def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
+                   max_across: float | None = MAX_VOXELS_ACROSS, workers: int = 1,
+                   max_minutes: float = MAX_MINUTES, convention: str = "atlas",
+                   cache: str | os.PathLike | None = None) -> float:
+    """Expected wall-clock seconds of a fit; refuse one over ``max_minutes``, a day or the machine's memory.
 
+    Raises
+    ------
+    grainforge.estimate.TooLargeError
+        One line with the estimate and what to change.
+    """
+    from .estimate import TooLargeError, check_job, check_memory, duration
 
-_SHAPE_TARGETS = ("mean sphericity", "mean convexity", "sd sphericity", "sd convexity")
-
-register(MethodFit("cri", knobs=_descriptor_knobs(0.10, 0.006, 0.4), targets=_SHAPE_TARGETS,
-                   params=lambda k: _descriptor_params(k, 0.4)))
-register(MethodFit("rf", knobs=_descriptor_knobs(0.06, 0.006, 0.3), targets=_SHAPE_TARGETS,
-                   params=lambda k: _descriptor_params(k, 0.3)))
-register(MethodFit(
-    "fso",
-    knobs=(Knob("amplitude", 0.06, 0.0, 0.3, 0.01), Knob("fractal_dimension", 2.3, 2.0, 2.9, 0.1),
-           Knob("amplitude_sd", 0.015, 0.001, 0.1, 0.008), Knob("fractal_dimension_sd", 0.05, 0.005, 0.3, 0.05)),
-    targets=_SHAPE_TARGETS,
-    params=lambda k: {"amplitude": truncnormal(k["amplitude"], k["amplitude_sd"], 0.0, 0.3),
-                      "fractal_dimension": truncnormal(k["fractal_dimension"], k["fractal_dimension_sd"], 2.0, 2.9),
-                      "surface": "seamless", "subdivisions": 5},
-))
-
-
-register(MethodFit(
-    # angular grains: edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad,
-    # 16 facets, a fine texture); both drawn per grain, mean and sd fitted
-    "angular",
-    knobs=(Knob("rounding", 0.15, 0.0, 0.9, 0.05), Knob("dent_depth", 0.35, 0.0, 0.7, 0.05),
-           Knob("rounding_sd", 0.08, 0.005, 0.4, 0.03), Knob("dent_depth_sd", 0.1, 0.005, 0.3, 0.03)),
-    targets=_SHAPE_TARGETS,
-    params=lambda k: {"facets": 16, "rounding": truncnormal(k["rounding"], k["rounding_sd"], 0.0, 0.9),
-                      "dents": 6, "dent_width": 0.5,
-                      "dent_depth": truncnormal(k["dent_depth"], k["dent_depth_sd"], 0.0, 0.7),
-                      "roughness": 0.005, "length_ratio": 2.0, "subdivisions": 5},
-))
+    design_high = _design_high(sand, max_across)
+    expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine,
+                                cached=lambda m: design_path(m, convention, design_high, design_grains, cache).exists())
+    across = measured_across(sand, max_across)
+    each = FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * float(np.mean((across / FIT_ACROSS_REF) ** 3))
+    option = "--count" + (" or fit one --method" if method == "auto" else "")
+    cores = max(1, min(int(workers), os.cpu_count() or 1))
+    check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
+    per_worker = FIT_VOXEL_BYTES * float(max(across.max(), design_high)) ** 3
+    check_memory(per_worker * max(1, int(workers)) + FIT_ROW_BYTES * most,
+                 what=f"fit --method {method} on {workers} worker(s), measuring grains {across.max():.0f} voxels "
+                      "across,", option=f"{option}, --max-voxels-across or --workers")
+    seconds = expected * each / cores
+    if seconds > 60 * max_minutes:
+        cap = (f" or --max-voxels-across (now {max_across:g})" if max_across
+               else f" or set --max-voxels-across (e.g. {MAX_VOXELS_ACROSS:g})")
+        raise TooLargeError(
+            f"fit --method {method} would take about {duration(seconds)} on {cores} core(s) (about {expected} "
+            f"grains at {duration(each) if each >= 1 else f'{each * 1000:.2g} ms'} each, {across.mean():.0f} "
+            f"voxels across), over --max-minutes {max_minutes:g}: raise --max-minutes, lower {option}{cap}")
+    return seconds
 
 
 # --------------------------------------------------------------------------- recipes
@@ -446,7 +468,33 @@ def recipe_text(method: str, params: Mapping[str, Any], sand: Sand, *, count: in
     return "\n".join(lines)
 
 
-# --------------------------------------------------------------------------- measuring a population
+
+def twin_recipe_text(spec: MethodFit, grains: Sequence[Mapping[str, Any]], size_mm: Sequence[float], *,
+                     seed: int, fmt: str = "stl", header: str = "") -> str:
+    """A ``grainforge batch`` recipe of twins: ``spec.fixed`` in ``[params]``, each grain's own parameters and
+    size in ``[grains]`` (one value per grain, in grain order).
+
+    Examples
+    --------
+    >>> from grainforge.population import draw_grain, parse_recipe
+    >>> text = twin_recipe_text(FITS["rf"], [FITS["rf"].grain_params(np.full(4, 0.5))], [0.4], seed=1)
+    >>> _, params, size = draw_grain(parse_recipe(text), 0)
+    >>> params.descriptors, params.aspect, size
+    ((0.0, 0.125, 0.02), (1.0, 0.625, 0.390625), 0.4)
+    """
+    lines = [f"# {line}" if line else "#" for line in header.splitlines()]
+    lines += [f"method = {_toml(spec.method)}", f"count = {len(grains)}", f"seed = {int(seed)}",
+              f"format = {_toml(fmt)}", "", "[params]"]
+    lines += [f"{k} = {_toml(v)}" for k, v in spec.fixed.items()]
+    lines += ["", "[size]", 'definition = "equivalent"', "",
+              "[grains]  # one value per grain, in grain order: each the twin of one sand grain (fit.csv)",
+              f"size_mm = {_toml([float(s) for s in size_mm])}"]
+    for name in grains[0]:
+        lines.append(f"{name} = {_toml([g[name] for g in grains])}")
+    return "\n".join(lines) + "\n"
+
+
+# --------------------------------------------------------------------------- measuring grains
 @lru_cache(maxsize=8)
 def _recipe(text: str):
     from .population import parse_recipe
@@ -454,39 +502,72 @@ def _recipe(text: str):
     return parse_recipe(text, source="<fit>")
 
 
-def measure_grain(text: str, index: int, voxel_size_um: float, convention: str = "atlas") -> tuple[float, ...]:
+def measure_grain(text: str, index: int, voxel_size_um: float, convention: str = "atlas",
+                  max_across: float | None = None) -> tuple[float, ...]:
     """Grain ``index`` of recipe ``text`` as ``batch`` makes it, measured the Atlas way.
 
     It is voxelised at ``voxel_size_um`` relative to its drawn equivalent
-    diameter, in a random orientation drawn from its own seed; ``convention``
-    is true sphericity's (:func:`grainforge.analysis.atlas.voxel_descriptors`).  Returns
-    (d_eq µm, sphericity, convexity, flatness, elongation, CPU seconds spent).
+    diameter (at most ``max_across`` voxels across), in a random orientation
+    drawn from its own seed; ``convention`` is true sphericity's
+    (:func:`grainforge.analysis.atlas.voxel_descriptors`).  Returns (d_eq µm,
+    sphericity, convexity, flatness, elongation, CPU seconds spent).
     """
     import time
 
     cpu = time.process_time()
-    from .analysis.atlas import atlas_descriptors
-    from .methods import generate
     from .population import draw_grain
 
     recipe = _recipe(text)
     seed, params, size_mm = draw_grain(recipe, index)
-    grain = generate(recipe.method, params, seed)
     across = size_mm * 1000.0 / voxel_size_um
+    d = _measure(recipe.method, params, seed, min(across, max_across) if max_across else across, convention)
+    return (size_mm * 1000.0, *d, time.process_time() - cpu)
+
+
+def _measure(method: str, params: Any, seed: int, across: float, convention: str) -> tuple[float, ...]:
+    from .analysis.atlas import atlas_descriptors
+    from .methods import generate
+
+    grain = generate(method, params, seed)
     d = atlas_descriptors(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]),
                           convention=convention)
-    return (d["equivalent_diameter"] / d["voxel_size"] * voxel_size_um, *(d[k] for k in DESCRIPTORS),
-            time.process_time() - cpu)
+    return tuple(float(d[k]) for k in DESCRIPTORS)
+
+
+def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, Any], seed: int, across: float,
+                     convention: str = "atlas") -> tuple[float, ...]:
+    """One grain made with ``fixed`` and its ``own`` parameters and ``seed``, measured ``across`` voxels across.
+
+    Returns the four descriptors and the CPU seconds; NaNs if the generator
+    refuses these settings (a design corner, say).
+    """
+    import time
+
+    from .methods import get
+    from .params import ParameterError
+
+    cpu = time.process_time()
+    try:
+        d = _measure(method, get(method).Params(**{**fixed, **own}), seed, across, convention)
+    except (ParameterError, ValueError):
+        d = (math.nan,) * 4
+    return (*d, time.process_time() - cpu)
+
+
+def grain_seed(root: int, index: int) -> int:
+    """The seed ``batch`` gives grain ``index`` of a recipe with root seed ``root``."""
+    from .population import grain_stream
+
+    return int(grain_stream(root, index).integers(0, 2**63))
 
 
 class _Pool:
-    """Runs :func:`measure_grain` over indices, in this process or on a worker pool."""
+    """Runs :func:`measure_settings` jobs, in this process or on a worker pool."""
 
     def __init__(self, workers: int, convention: str = "atlas"):
         self.workers = workers
         self.convention = convention
         self.ex = None
-        self.cache: dict[tuple[str, int], tuple[float, ...]] = {}  # (recipe text, index) -> measurement
         self.cpu = 0.0  # CPU seconds the workers spent generating and measuring
         self.grains = 0
 
@@ -507,36 +588,122 @@ class _Pool:
             # interrupted as_completed could hang; seen with SIGTERM during a fit)
             close_pool(self.ex, abort=exc_type is not None)
 
-    def run(self, text: str, count: int, voxel: float, progress) -> np.ndarray:
-        out = np.empty((count, 5))
-        todo = [i for i in range(count) if (text, i) not in self.cache]
+    def run(self, method: str, fixed: Mapping[str, Any], jobs: Sequence[tuple[dict, int, float]],
+            progress) -> np.ndarray:
+        """(n, 4) descriptors of the jobs (own parameters, seed, voxels across); NaN rows where refused."""
+        out = np.empty((len(jobs), 4))
+        args = [(method, fixed, own, seed, across, self.convention) for own, seed, across in jobs]
         if self.ex is None:
-            it: Iterable = ((i, measure_grain(text, i, voxel, self.convention)) for i in todo)
+            it: Iterable = ((i, measure_settings(*a)) for i, a in enumerate(args))
         else:
             from concurrent.futures import as_completed
 
             from .workers import single_threaded_children
 
             with single_threaded_children():
-                futs = {self.ex.submit(measure_grain, text, i, voxel, self.convention): i for i in todo}
+                futs = {self.ex.submit(measure_settings, *a): i for i, a in enumerate(args)}
             it = ((futs[f], f.result()) for f in as_completed(futs))
-        if progress is not None and todo:
-            it = progress(it, len(todo))
+        if progress is not None and jobs:
+            it = progress(it, len(jobs))
         for i, row in it:
-            self.cache[(text, i)] = row[:5]
-            self.cpu += row[5]
+            out[i] = row[:4]
+            self.cpu += row[4]
             self.grains += 1
-        for i in range(count):
-            out[i] = self.cache[(text, i)]
         return out
 
 
-# --------------------------------------------------------------------------- comparing
-def compare(sand: np.ndarray, gen: np.ndarray) -> dict[str, Any]:
-    """Statistics of two (n, 4) descriptor tables: means, sds, KS per descriptor; correlations.
+# --------------------------------------------------------------------------- the design
+def _design_high(sand: Sand, max_across: float | None) -> float:
+    """Highest resolution a design spans: the cap, or (uncapped) the sand's largest grain's, on a 10 % grid."""
+    if max_across:
+        return float(max_across)
+    top = float((sand.equivalent_diameter / sand.voxel_size).max())
+    return float(f"{1.1 ** math.ceil(math.log(max(top, DESIGN_ACROSS_LOW * 1.1)) / math.log(1.1)):.4g}")
 
-    ``score`` is the largest of KS/0.1 and |Δmean|/0.01 over the four
-    descriptors: the fit passes when it is ≤ 1.
+
+def design_path(method: str, convention: str, high: float, grains: int = DESIGN_GRAINS,
+                cache: str | os.PathLike | None = None) -> Path:
+    """Where a method's design is cached: under ``cache`` (default :func:`grainforge.calibration.cache_dir`),
+    keyed by everything that changes its grains."""
+    from ._version import __version__
+    from .calibration import cache_dir
+
+    spec = FITS[method]
+    key = repr((DESIGN_VERSION, __version__, DESIGN_SEED, method, spec.all_settings, sorted(spec.fixed.items()),
+                convention, float(high), int(grains)))
+    digest = hashlib.sha256(key.encode()).hexdigest()[:12]
+    return Path(cache or cache_dir()) / "fit-designs" / f"{method}-{convention}-{high:g}-{grains}-{digest}.npz"
+
+
+@dataclass(frozen=True)
+class Design:
+    """A method's design: unit-box settings ``u``, resolutions ``across`` and measured descriptors ``y``."""
+
+    method: str
+    u: np.ndarray
+    across: np.ndarray
+    y: np.ndarray  # NaN rows: the generator refused those settings
+
+    def model(self):
+        from .twins import ForwardModel
+
+        ok = np.all(np.isfinite(self.y), axis=1)
+        return ForwardModel.fit(self.u[ok], self.across[ok], self.y[ok])
+
+
+def design(method: str, pool: _Pool, *, high: float, grains: int = DESIGN_GRAINS,
+           cache: str | os.PathLike | None = None, progress=None) -> Design:
+    """The cached design of ``method`` (measured, and cached atomically, if it is not yet)."""
+    from .io import atomic_write
+    from .twins import design_points
+
+    spec = FITS[method]
+    path = design_path(method, pool.convention, high, grains, cache)
+    if path.exists():
+        with np.load(path) as z:
+            return Design(method, z["u"], z["across"], z["y"])
+    pts = design_points(grains, len(spec.all_settings) + 1, DESIGN_SEED)
+    u, t = pts[:, :-1], pts[:, -1]
+    across = DESIGN_ACROSS_LOW * (high / DESIGN_ACROSS_LOW) ** t
+    jobs = [(spec.grain_params(u[i]), grain_seed(DESIGN_SEED, i), float(across[i])) for i in range(grains)]
+    y = pool.run(method, spec.fixed, jobs, progress)
+    import io
+
+    buf = io.BytesIO()
+    np.savez(buf, u=u, across=across, y=y)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, buf.getvalue())
+    return Design(method, u, across, y)
+
+
+# --------------------------------------------------------------------------- comparing
+#: the six descriptor pairs whose rank correlations are compared
+PAIRS = tuple((DESCRIPTORS[i], DESCRIPTORS[j]) for i in range(4) for j in range(i + 1, 4))
+
+
+def spearman(table: np.ndarray) -> np.ndarray:
+    """(k, k) Spearman rank correlations of the columns of ``table``."""
+    from scipy.stats import rankdata
+
+    r = np.apply_along_axis(rankdata, 0, np.asarray(table, np.float64))
+    return np.corrcoef(r.T)
+
+
+def compare(sand: np.ndarray, gen: np.ndarray, *, twin_within: float | None = None) -> dict[str, Any]:
+    """Statistics of two (n, 4) descriptor tables: means, sds, KS per descriptor; Spearman correlations.
+
+    ``score`` is the largest of KS/:data:`KS_MAX`, |Δmean|/:data:`MEAN_TOL`
+    and |Δρ|/:data:`CORR_TOL` (and, with ``twin_within``, the share of
+    reachable twins within :data:`TWIN_TOL`, as :data:`TWIN_SHARE`/share):
+    the fit passes when it is ≤ 1.
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(1)
+    >>> a = rng.uniform(0.6, 0.9, size=(400, 4))
+    >>> st = compare(a, a.copy())
+    >>> st["pass"], st["score"]
+    (True, 0.0)
     """
     from scipy.stats import ks_2samp
 
@@ -550,285 +717,303 @@ def compare(sand: np.ndarray, gen: np.ndarray) -> dict[str, Any]:
                          "gen_sd": float(b.std(ddof=1)), "ks": ks, "mean_diff": dm,
                          "pass": ks <= KS_MAX and abs(dm) <= MEAN_TOL}
         worst = max(worst, ks / KS_MAX, abs(dm) / MEAN_TOL)
-    cs, cg = np.corrcoef(sand.T), np.corrcoef(gen.T)
-    for i in range(4):
-        for j in range(i + 1, 4):
-            out["corr"][f"{DESCRIPTORS[i]}-{DESCRIPTORS[j]}"] = (float(cs[i, j]), float(cg[i, j]))
-    out["score"] = worst
-    out["pass"] = all(v["pass"] for v in out["per"].values())
+    cs, cg = spearman(sand), spearman(gen)
+    for a, b in PAIRS:
+        i, j = DESCRIPTORS.index(a), DESCRIPTORS.index(b)
+        out["corr"][f"{a}-{b}"] = (float(cs[i, j]), float(cg[i, j]))
+        worst = max(worst, abs(cg[i, j] - cs[i, j]) / CORR_TOL)
+    corr_ok = all(abs(g - s) <= CORR_TOL for s, g in out["corr"].values())
+    out["twin_within"] = twin_within
+    if twin_within is not None:
+        worst = max(worst, TWIN_SHARE / max(twin_within, 1e-9))
+    out["score"] = float(worst)
+    out["pass"] = (all(v["pass"] for v in out["per"].values()) and corr_ok
+                   and (twin_within is None or twin_within >= TWIN_SHARE))
     return out
-
-
-def _weights(sand: np.ndarray) -> np.ndarray:
-    """Weight of each of :data:`STATISTICS`' misfits: what it does to the criteria, for sand sds σ.
-
-    For two normal distributions of sd σ whose means differ by δ, the KS
-    statistic is 2Φ(δ/2σ) − 1 ≈ δ/(σ√(2π)); for equal means and sds σ and
-    σ(1 + ε) it is max |Φ(x) − Φ(x/(1 + ε))| ≈ ε·φ(1).  So a mean misfit
-    counts against both its tolerance and the KS limit,
-    ``√(1/MEAN_TOL² + (1/(σ√(2π) KS_MAX))²)``, and a spread misfit against
-    the KS limit, ``φ(1)/(σ KS_MAX)``: a narrow descriptor (Ottawa's
-    convexity, σ = 0.026) is weighted more than a wide one (flatness, 0.107).
-
-    Examples
-    --------
-    >>> rng = np.random.default_rng(0)
-    >>> w = dict(zip(STATISTICS, _weights(rng.normal(0.8, [0.025, 0.025, 0.1, 0.1], size=(4000, 4)))))
-    >>> round(float(w["sd convexity"] / w["sd flatness"]), 1), round(float(w["mean convexity"] / w["mean flatness"]), 1)
-    (4.0, 1.8)
-    """
-    sd = np.maximum(np.asarray(sand, dtype=np.float64).std(axis=0, ddof=1), 1e-6)
-    phi1 = math.exp(-0.5) / math.sqrt(2 * math.pi)
-    out = []
-    for t in STATISTICS:
-        kind, desc = t.split()
-        s = float(sd[DESCRIPTORS.index(desc)])
-        if kind == "mean":
-            out.append(math.hypot(1 / MEAN_TOL, 1 / (s * math.sqrt(2 * math.pi) * KS_MAX)))
-        else:
-            out.append(phi1 / (s * KS_MAX))
-    return np.array(out)
-
-
-def _stat(table: np.ndarray, name: str) -> float:
-    kind, desc = name.split()
-    col = table[:, DESCRIPTORS.index(desc)]
-    return float(col.mean() if kind == "mean" else col.std(ddof=1))
 
 
 # --------------------------------------------------------------------------- the fit
 @dataclass
 class FitResult:
-    """What :func:`fit_sand` found."""
+    """What :func:`fit_sand` found: one twin per generated grain."""
 
     method: str
     recipe: str  # TOML text of the final recipe
-    stats: dict[str, Any]  # compare(sand, final population)
-    generated: np.ndarray  # (count, 5): d_eq µm + DESCRIPTORS
-    knobs: dict[str, float]
-    aspect: dict[str, float]
-    history: list[dict] = field(default_factory=list)
+    stats: dict[str, Any]  # compare(sand rows, twins)
+    generated: np.ndarray  # (count, 5): d_eq µm + DESCRIPTORS, as measured
+    sand_rows: np.ndarray  # (count,): index into the sand of each grain's original
+    settings: list[dict[str, float]]  # each grain's setting values
+    reachable: np.ndarray  # (count,) bool: the model's closest setting predicts a twin within TWIN_TOL
+    history: list[str] = field(default_factory=list)
     seconds: float = 0.0  # wall clock
     cpu_seconds: float = 0.0  # generating and measuring, summed over the workers
     grains_measured: int = 0
 
+    @property
+    def twin_error(self) -> np.ndarray:
+        """(count,) largest |twin − original| over the four descriptors."""
+        return np.max(np.abs(self.generated[:, 1:] - self.targets), axis=1)
 
-def _aspect_table(a: Mapping[str, float], low: float) -> dict:
-    return {"distribution": "zingg",
-            "elongation": truncnormal(a["elongation_mean"], a["elongation_sd"], low, 1.0),
-            "flatness": truncnormal(a["flatness_mean"], a["flatness_sd"], low, 1.0)}
+    targets: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (count, 4) the originals'
+
+
+def choose_rows(n: int, count: int | None, seed: int) -> np.ndarray:
+    """Sand rows the twins copy: all (``count`` None), a random ``count`` of them without replacement, or with
+    replacement beyond all ``n`` (all rows, then random repeats).
+
+    Examples
+    --------
+    >>> choose_rows(5, None, 1).tolist(), len(set(choose_rows(100, 60, 1).tolist())), len(choose_rows(5, 8, 1))
+    ([0, 1, 2, 3, 4], 60, 8)
+    """
+    rng = np.random.default_rng([seed, 7])
+    if count is None or count == n:
+        return np.arange(n)
+    if count < n:
+        return np.sort(rng.choice(n, size=count, replace=False))
+    return np.concatenate([np.arange(n), rng.choice(n, size=count - n, replace=True)])
+
+
+@dataclass
+class _Twins:
+    """The fit's working state: per grain its target, resolution, seed, settings and best twin so far."""
+
+    spec: MethodFit
+    targets: np.ndarray  # (n, 4)
+    across: np.ndarray  # (n,) measured at
+    seeds: list[int]
+    u: np.ndarray  # (n, p) settings being tried
+    reach: np.ndarray  # (n,) the model's predicted miss at u
+    tol: np.ndarray  # (4,) refinement tolerance per descriptor
+    best_u: np.ndarray = None  # type: ignore[assignment]
+    best_y: np.ndarray = None  # type: ignore[assignment]
+
+    def error(self, y: np.ndarray, idx: np.ndarray | None = None) -> np.ndarray:
+        """Largest |measured − target| per grain (of ``idx``, default all); inf where unmeasured."""
+        e = np.max(np.abs(y - (self.targets if idx is None else self.targets[idx])), axis=1)
+        return np.where(np.isfinite(e), e, np.inf)
+
+    def relative(self, y: np.ndarray, idx: np.ndarray) -> np.ndarray:
+        """Largest |measured − target| / tolerance per grain of ``idx``: > 1 is refined."""
+        e = np.max(np.abs(y - self.targets[idx]) / self.tol, axis=1)
+        return np.where(np.isfinite(e), e, np.inf)
+
+    def keep_best(self, idx: np.ndarray, y: np.ndarray) -> None:
+        if self.best_y is None:
+            self.best_u, self.best_y = self.u.copy(), np.full_like(self.targets, np.nan)
+        better = self.relative(y, idx) < self.relative(self.best_y[idx], idx)
+        self.best_u[idx[better]] = self.u[idx[better]]
+        self.best_y[idx[better]] = y[better]
+
+
+def _start_twins(spec: MethodFit, model, sand: Sand, rows: np.ndarray, across_cap: float | None,
+                 seed: int) -> _Twins:
+    """Each twin's first settings: the inverse model's, for its original at its resolution."""
+    from .twins import invert
+
+    targets = sand.table()[rows]
+    across = measured_across(sand, across_cap)[rows]
+    tol = np.minimum(REFINE_TOL, REFINE_SD * sand.table().std(axis=0))
+    u, miss = invert(model, targets, across, scale=tol)
+    return _Twins(spec, targets, across, [grain_seed(seed, i) for i in range(len(rows))], u, miss, tol)
+
+
+def _measure_twins(tw: _Twins, pool: _Pool, idx: np.ndarray, progress) -> np.ndarray:
+    jobs = [(tw.spec.grain_params(tw.u[i]), tw.seeds[i], float(tw.across[i])) for i in idx]
+    y = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress)
+    tw.keep_best(idx, y)
+    return y
+
+
+def _refine(tw: _Twins, model, idx: np.ndarray, y: np.ndarray) -> None:
+    """New settings for twins ``idx`` (last measured ``y``): the model plus each grain's own offset."""
+    from .twins import invert
+
+    pred = np.array([model.predict(tw.u[i], tw.across[i])[0] for i in idx])
+    offsets = np.where(np.isfinite(y), y - pred, 0.0)
+    u, miss = invert(model, tw.targets[idx], tw.across[idx], offsets=offsets, start=tw.u[idx], scale=tw.tol)
+    tw.u[idx] = u
+    tw.reach[idx] = miss
+
+
+def _twin_summary(tw: _Twins) -> str:
+    e = tw.error(tw.best_y)
+    reach = tw.reach <= TWIN_TOL
+    return (f"{np.mean(e <= TWIN_TOL):.1%} of twins within {TWIN_TOL} on every descriptor "
+            f"({np.mean(e[reach] <= TWIN_TOL) if reach.any() else 0:.1%} of the {reach.sum()} reachable), "
+            f"{np.mean(tw.relative(tw.best_y, np.arange(len(e))) <= 1):.1%} within the refinement tolerance "
+            f"({', '.join(f'{t:.4f}' for t in tw.tol)}); median error {np.median(e):.4f}")
+
+
+def choose_method(sand: Sand, pool: _Pool, *, high: float, grains: int, cache, progress, say, name) -> str:
+    """``auto``: the method whose inverse model reaches the most of the sand (ties: the smaller median miss)."""
+    from .twins import invert
+
+    table, across = sand.table(), measured_across(sand, high)
+    rows = choose_rows(sand.count, min(sand.count, 300), 0)
+    best = None
+    for m in FITS:
+        name(f"design {m}")
+        model = design(m, pool, high=high, grains=grains, cache=cache, progress=progress).model()
+        _, miss = invert(model, table[rows], across[rows])
+        key = (float(np.mean(miss <= TWIN_TOL)), -float(np.median(miss)))
+        say(f"auto: {m} reaches {key[0]:.1%} of the sand (model's median miss {-key[1]:.4f})")
+        best = max(best or (key, m), (key, m))
+    return best[1]
 
 
 def fit_sand(
     sand: Sand,
     method: str = "rf",
     *,
-    count: int = 500,
-    pilot: int = 200,
-    rounds: int = 6,
-    final_rounds: int = 3,
+    count: int | None = 500,
+    refine: int = 4,
     seed: int = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
+    max_across: float | None = MAX_VOXELS_ACROSS,
+    design_grains: int = DESIGN_GRAINS,
+    cache: str | os.PathLike | None = None,
     progress: Callable[[Iterable, int], Iterable] | None = None,
     log: Callable[[str], None] | None = None,
     desc: Callable[[str], None] | None = None,
 ) -> FitResult:
-    """Fit ``method``'s settings to ``sand``; see the module docstring.
+    """Make ``count`` twins of ``sand``'s grains with ``method``; see the module docstring.
 
     Parameters
     ----------
-    count : int
-        Grains of the final (verification) population and of the recipe.
-    pilot : int
-        Grains of each search round.
-    rounds : int
-        Newton rounds on the pilot after the finite-difference Jacobian.
-    final_rounds : int
-        Measurements of the whole population (each after a correction
-        made from the previous one); the best is kept.
+    count : int or None
+        Grains of the recipe, each the twin of one sand row (:func:`choose_rows`;
+        None: every row once).
+    refine : int
+        Rounds of per-grain refinement of the twins that miss by more than
+        :data:`REFINE_TOL`.
     workers : int
         Processes measuring grains (1: this process).
     sphericity : {"atlas", "whole"}
         How the generated grains' true sphericity is measured: as the Sand
-        Atlas did (spam's cube, the default, for tables measured that way) or
-        on the whole grain (:func:`grainforge.analysis.atlas.voxel_descriptors`).
+        Atlas did (spam's cube, the default) or on the whole grain
+        (:func:`grainforge.analysis.atlas.voxel_descriptors`).
+    max_across : float or None
+        Generated grains are measured at most this many voxels across (None:
+        at the sand's resolution, however fine).
+    design_grains : int
+        Grains of the method's design (cached under ``cache``).
     progress : callable, optional
-        ``progress(iterable, total)`` wraps each population's grains (a bar).
+        ``progress(iterable, total)`` wraps each phase's grains (a bar).
     log, desc : callable, optional
-        ``log(line)`` gets one line per round; ``desc(text)`` names the
-        population being measured next.
+        ``log(line)`` gets one line per phase; ``desc(text)`` names the
+        phase measured next.
     """
     import time
 
-    if method == "auto":
-        results = []
-        for m in FITS:
-            (log or (lambda s: None))(f"auto: fitting {m}")
-            results.append(fit_sand(sand, m, count=count, pilot=pilot, rounds=rounds, final_rounds=final_rounds,
-                                    seed=seed, workers=workers, progress=progress, log=log, desc=desc))
-        return min(results, key=lambda r: r.stats["score"])
-    if method not in FITS:
+    if method != "auto" and method not in FITS:
         raise ValueError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
-    from .methods import METHODS
-
-    if method not in METHODS:
-        raise ValueError(f"method {method!r} is not available in this grainforge")
-    if count < 2 or not 2 <= pilot:
-        raise ValueError("count and pilot must be at least 2")
     check_sand(sand)
-    pilot = min(pilot, count)
-    spec = FITS[method]
-    say = log or (lambda s: None)
-    name = desc or (lambda s: None)
+    say, name = log or (lambda s: None), desc or (lambda s: None)
     t0 = time.perf_counter()
-    target = sand.table()
-    sv = sand.values
-    low = float(max(0.05, min(sv["elongation"].min(), sv["flatness"].min()) - 0.1))
-    aspect = {"elongation_mean": float(sv["elongation"].mean()), "elongation_sd": float(sv["elongation"].std()),
-              "flatness_mean": float(sv["flatness"].mean()), "flatness_sd": float(sv["flatness"].std())}
-    # The unknowns: the method's knobs (each steering means and/or spreads) and the aspect distribution's
-    # two means and two sds.  All are solved for jointly against all eight measured statistics (the mean
-    # and sd of each descriptor): a rougher grain also measures less elongated, a flatter one less
-    # spherical, and one per-grain spread (irregularity's, say) widens both sphericity and convexity.
-    # Gauss-Newton steps on a finite-difference Jacobian, the residuals weighted by what they do to the
-    # criteria (_weights: a mean error counts against its 0.01 and, with a spread error, against the KS).
-    nk = len(spec.knobs)
-    knames = [k.name for k in spec.knobs]
-    anames = ["elongation_mean", "flatness_mean", "elongation_sd", "flatness_sd"]
-    x = np.array([k.start for k in spec.knobs] + [aspect[a] for a in anames])
-    lo_b = np.array([k.low for k in spec.knobs] + [low, low, ASPECT_SD_LOW, ASPECT_SD_LOW])
-    hi_b = np.array([k.high for k in spec.knobs] + [1.0, 1.0, ASPECT_SD_HIGH, ASPECT_SD_HIGH])
-    steps = np.array([k.step for k in spec.knobs] + [ASPECT_STEP, ASPECT_STEP, ASPECT_SD_STEP, ASPECT_SD_STEP])
-    targets = STATISTICS
-    y_star = np.array([_stat(target, t) for t in targets])
-    weights = _weights(target)
-    history: list[dict] = []
+    high = _design_high(sand, max_across)
+    history: list[str] = []
 
-    def unpack(xv):
-        knobs = dict(zip(knames, map(float, xv[:nk])))
-        asp = dict(zip(anames, map(float, xv[nk:])))
-        return knobs, asp
-
-    def text_for(xv, n, s=seed):
-        knobs, asp = unpack(xv)
-        params = spec.params(knobs)
-        params["aspect"] = _aspect_table(asp, low)
-        return recipe_text(method, params, sand, count=n, seed=s)
-
-    def stats(gen):
-        return np.array([_stat(gen[:, 1:], t) for t in targets])
-
-    def evaluate(xv, n, label):
-        # always the final recipe: a pilot is its first n grains (same seeds, sizes and draws)
-        name(label)
-        gen = pool.run(text_for(xv, count), n, sand.voxel_size, progress)
-        st = compare(target, gen[:, 1:])
-        knobs, asp = unpack(xv)
-        history.append({"label": label, "knobs": knobs, "aspect": asp, "score": st["score"],
-                        "merit": merit(gen),
-                        **{f"{k}_{q}": st["per"][k][q] for k in DESCRIPTORS for q in ("gen_mean", "gen_sd", "ks")}})
-        say(f"{label}: score {st['score']:.2f} (<= 1 passes), misfit {merit(gen):.2f}; "
-            + ", ".join(f"{k[:5]} {st['per'][k]['gen_mean']:.3f}±{st['per'][k]['gen_sd']:.3f} KS {st['per'][k]['ks']:.2f}"
-                        for k in DESCRIPTORS)
-            + "; " + ", ".join(f"{k} {v:.4g}" for k, v in knobs.items())
-            + ", aspect " + ", ".join(f"{a} {asp[a]:.3f}" for a in anames))
-        return gen, st
-
-    def merit(gen):
-        # what a round is judged by: the weighted misfit of means and spreads (a KS statistic of a pilot
-        # is mostly sampling noise)
-        return float(np.sum((weights * (stats(gen) - y_star)) ** 2))
-
-    def newton(xv, J, gen, trust):
-        # bounded, damped weighted least squares in step units: each unknown moves at most `trust` steps
-        # and stays within its range (a bound is honoured in the solve, not by clipping its result
-        # afterwards, which would throw away the compensation the other unknowns were making); the
-        # damping keeps the step small along nearly singular directions (irregularity and roughness, and
-        # their spreads, lower or widen sphericity and convexity in similar proportions)
-        from scipy.optimize import lsq_linear
-
-        n = len(xv)
-        Js = weights[:, None] * J * steps[None, :]
-        r = weights * (y_star - stats(gen))
-        lam = 0.05 * np.trace(Js.T @ Js) / n + 1e-12
-        A = np.vstack([Js, math.sqrt(lam) * np.eye(n)])
-        b = np.concatenate([r, np.zeros(n)])
-        lo = np.maximum(-trust, (lo_b - xv) / steps)
-        hi = np.minimum(trust, (hi_b - xv) / steps)
-        hi = np.maximum(hi, lo + 1e-12)
-        dz = lsq_linear(A, b, bounds=(lo, hi)).x
-        return np.clip(xv + dz * steps, lo_b, hi_b)
-
-    def broyden(J, dx, dy):
-        if np.any(dx):
-            J += np.outer(dy - J @ dx, dx) / float(dx @ dx)
+    def note(line: str) -> None:
+        history.append(line)
+        say(line)
 
     with _Pool(max(1, int(workers)), sphericity) as pool:
-        gen, st = evaluate(x, pilot, "pilot 0 (start)")
-        # finite-difference Jacobian on the first half of the pilot (same grains: differences, not noise)
-        nj = max(2, pilot // 2)
-        y0 = stats(gen[:nj])
-        J = np.zeros((len(targets), len(x)))
-        labels = knames + anames
-        for i in range(len(x)):
-            xi = x.copy()
-            xi[i] = xi[i] + steps[i] if xi[i] + steps[i] <= hi_b[i] else xi[i] - steps[i]
-            gi, _ = evaluate(xi, nj, f"jacobian {i + 1}/{len(x)} ({labels[i]})")
-            J[:, i] = (stats(gi) - y0) / (xi[i] - x[i])
-        trust = 2.0  # trust region, in steps: halved after a round that makes things worse
-        best = (merit(gen), x.copy(), gen, st)
-        for r in range(1, rounds + 1):
-            x_new = newton(x, J, gen, trust)
-            gen_new, st_new = evaluate(x_new, pilot, f"pilot {r}")
-            broyden(J, x_new - x, stats(gen_new) - stats(gen))
-            if merit(gen_new) < best[0]:
-                best = (merit(gen_new), x_new.copy(), gen_new, st_new)
-                trust = min(1.5 * trust, 4.0)
-            else:  # worse: go back to the best settings with a smaller step
-                trust *= 0.5
-            _, x, gen, st = best
-            x = x.copy()
-            if st["score"] <= 0.6:
+        if method == "auto":
+            method = choose_method(sand, pool, high=high, grains=design_grains, cache=cache, progress=progress,
+                                   say=note, name=name)
+            note(f"auto: chose {method}")
+        spec = FITS[method]
+        name(f"design {method}")
+        model = design(method, pool, high=high, grains=design_grains, cache=cache, progress=progress).model()
+        note(f"design {method}: model rms " + ", ".join(f"{k[:5]} {r:.4f}" for k, r in zip(DESCRIPTORS, model.rms)))
+        rows = choose_rows(sand.count, count, seed)
+        tw = _start_twins(spec, model, sand, rows, max_across, seed)
+        idx = np.arange(len(rows))
+        for r in range(refine + 1):
+            name("twins" if r == 0 else f"refine {r}/{refine}")
+            y = _measure_twins(tw, pool, idx, progress)
+            note(f"{'twins' if r == 0 else f'refine {r}'}: {len(idx)} grains measured; {_twin_summary(tw)}")
+            keep = tw.relative(tw.best_y[idx], idx) > 1
+            if r == refine or not keep.any():
                 break
-        final = None
-        cost = pool
-        prev = None
-        trust = 1.5
-        for attempt in range(final_rounds):
-            gen, st = evaluate(x, count, f"final {count} grains" + (f" (correction {attempt})" if attempt else ""))
-            if prev is not None:  # secant from two measurements of the same grains
-                broyden(J, x - prev[0], stats(gen) - stats(prev[1]))
-            if final is None or st["score"] < final[1]["score"]:
-                final = (gen, st, x.copy())
-            else:
-                trust *= 0.5
-            if st["pass"]:
-                break
-            # corrections from the best final population (its own seeds: no sampling noise between rounds)
-            gen, st, x = final[0], final[1], final[2].copy()
-            prev = (x.copy(), gen)
-            x = newton(x, J, gen, trust)
-    gen, st, x = final
-    knobs, aspect = unpack(x)
-    header = (f"grainforge fit: {method} grains matched to {sand.name} ({sand.count} grains, voxel "
-              f"{sand.voxel_size:g} µm)\n" + "\n".join(
-                  f"{k}: sand {st['per'][k]['sand_mean']:.3f} generated {st['per'][k]['gen_mean']:.3f} "
-                  f"KS {st['per'][k]['ks']:.3f}" for k in DESCRIPTORS)
-              + f"\n{'passes' if st['pass'] else 'does NOT pass'}: KS <= {KS_MAX} and |mean diff| <= {MEAN_TOL} "
-              f"on {count} grains")
-    params = spec.params(knobs)
-    params["aspect"] = _aspect_table(aspect, low)
-    text = recipe_text(method, params, sand, count=count, seed=seed, header=header)
-    return FitResult(method=method, recipe=text, stats=st, generated=gen,
-                     knobs=knobs, aspect=aspect,
-                     history=history, seconds=time.perf_counter() - t0, cpu_seconds=cost.cpu,
-                     grains_measured=cost.grains)
+            idx, y = idx[keep], y[keep]
+            _refine(tw, model, idx, y)
+    return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool)
+
+
+def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int, history: list[str],
+            seconds: float, pool: _Pool) -> FitResult:
+    """The fit's result from its twins: each grain's closest measurement, its settings and the recipe."""
+    ok = np.all(np.isfinite(tw.best_y), axis=1)
+    err = tw.error(tw.best_y)
+    reachable = (tw.reach <= TWIN_TOL) | (err <= TWIN_TOL)
+    within = float(np.mean(err[reachable] <= TWIN_TOL)) if reachable.any() else 0.0
+    st = compare(tw.targets[ok], tw.best_y[ok], twin_within=within)
+    st["reachable"] = float(np.mean(reachable))
+    st["unreachable_by"] = _unreachable_by(tw, ~reachable)
+    st["refused"] = int((~ok).sum())
+    size_mm = [_written(float(d) / 1000.0) for d in sand.equivalent_diameter[rows]]
+    gen = np.column_stack([np.asarray(size_mm) * 1000.0, tw.best_y])
+    header = _recipe_header(sand, spec.method, st, len(rows))
+    own = [spec.grain_params(u) for u in tw.best_u]
+    text = twin_recipe_text(spec, own, size_mm, seed=seed, header=header)
+    return FitResult(method=spec.method, recipe=text, stats=st, generated=gen, sand_rows=rows,
+                     settings=[spec.values(u) for u in tw.best_u], reachable=reachable, history=history,
+                     seconds=seconds, cpu_seconds=pool.cpu, grains_measured=pool.grains, targets=tw.targets)
+
+
+def _unreachable_by(tw: _Twins, out: np.ndarray) -> dict[str, int]:
+    """Unreachable grains counted by the descriptor their closest twin misses most."""
+    if not out.any():
+        return {}
+    worst = np.nanargmax(np.abs(np.nan_to_num(tw.best_y[out], nan=9.0) - tw.targets[out]), axis=1)
+    return {DESCRIPTORS[k]: int(np.sum(worst == k)) for k in range(4) if np.any(worst == k)}
+
+
+def _recipe_header(sand: Sand, method: str, st: dict, n: int) -> str:
+    lines = [f"grainforge fit: {n} {method} grains, each the twin of one grain of {sand.name} "
+             f"({sand.count} grains, voxel {sand.voxel_size:g} µm)"]
+    lines += [f"{k}: sand {p['sand_mean']:.3f} generated {p['gen_mean']:.3f} KS {p['ks']:.3f}"
+              for k, p in st["per"].items()]
+    lines += ["Spearman " + ", ".join(f"{k} {a:+.2f}/{b:+.2f}" for k, (a, b) in st["corr"].items())]
+    lines += [f"{st['twin_within']:.1%} of reachable twins within {TWIN_TOL}; {1 - st['reachable']:.1%} "
+              "unreachable"]
+    lines += [f"{'passes' if st['pass'] else 'does NOT pass'}: KS <= {KS_MAX}, |mean diff| <= {MEAN_TOL}, "
+              f"|Spearman diff| <= {CORR_TOL}, twins within {TWIN_TOL} for >= {TWIN_SHARE:.0%}"]
+    return "\n".join(lines)
 
 
 # --------------------------------------------------------------------------- outputs
-def fit_rows(result: FitResult) -> list[dict[str, Any]]:
-    """The rows of ``fit.csv``: per-descriptor means, sds and KS, then correlations, sand vs generated."""
+TWIN_COLUMNS = ("grain", "sand_row", "sand_d_eq_um", "d_eq_um",
+                *[f"{w}_{k}" for k in DESCRIPTORS for w in ("sand", "twin")], "max_difference", "within",
+                "reachable")
+
+
+def twin_rows(result: FitResult) -> list[dict[str, Any]]:
+    """The rows of ``fit.csv``: each generated grain beside the sand row it is the twin of (row numbers from 1,
+    as in the sand's file)."""
+    err = result.twin_error
+    rows = []
+    for i, j in enumerate(result.sand_rows):
+        row: dict[str, Any] = {"grain": i, "sand_row": int(j) + 1, "sand_d_eq_um": result.generated[i, 0],
+                               "d_eq_um": result.generated[i, 0]}
+        for c, k in enumerate(DESCRIPTORS):
+            row[f"sand_{k}"] = float(result.targets[i, c])
+            row[f"twin_{k}"] = float(result.generated[i, c + 1])
+        row.update(max_difference=float(err[i]), within=bool(err[i] <= TWIN_TOL),
+                   reachable=bool(result.reachable[i]))
+        row.update({f"setting_{k}": v for k, v in result.settings[i].items()})
+        rows.append(row)
+    return rows
+
+
+STAT_COLUMNS = ("statistic", "quantity", "sand", "generated", "difference", "criterion", "pass")
+
+
+def stat_rows(result: FitResult) -> list[dict[str, Any]]:
+    """The rows of ``fit-stats.csv``: means, sds, KS; Spearman correlations; the twins' share, sand vs generated."""
     rows = []
     for k in DESCRIPTORS:
         p = result.stats["per"][k]
@@ -840,16 +1025,21 @@ def fit_rows(result: FitResult) -> list[dict[str, Any]]:
         rows.append({"statistic": "ks", "quantity": k, "sand": "", "generated": "", "difference": p["ks"],
                      "criterion": f"KS statistic <= {KS_MAX}", "pass": p["ks"] <= KS_MAX})
     for pair, (a, b) in result.stats["corr"].items():
-        rows.append({"statistic": "correlation", "quantity": pair, "sand": a, "generated": b, "difference": b - a,
-                     "criterion": "reported", "pass": ""})
+        rows.append({"statistic": "spearman", "quantity": pair, "sand": a, "generated": b, "difference": b - a,
+                     "criterion": f"|difference| <= {CORR_TOL}", "pass": abs(b - a) <= CORR_TOL})
+    st = result.stats
+    rows.append({"statistic": "twins", "quantity": f"share within {TWIN_TOL} (reachable grains)", "sand": "",
+                 "generated": st["twin_within"], "difference": "", "criterion": f">= {TWIN_SHARE}",
+                 "pass": st["twin_within"] >= TWIN_SHARE})
+    why = ", ".join(f"{n} by {k}" for k, n in st["unreachable_by"].items()) or "none"
+    rows.append({"statistic": "twins", "quantity": f"share unreachable ({why})", "sand": "",
+                 "generated": 1 - st["reachable"], "difference": "", "criterion": "reported", "pass": ""})
     return rows
 
 
-FIT_COLUMNS = ("statistic", "quantity", "sand", "generated", "difference", "criterion", "pass")
-
-
 def fit_figure(sand: Sand, result: FitResult, path: Path) -> None:
-    """``fit.png``: histograms of the four descriptors and flatness vs elongation, sand vs generated."""
+    """``fit.png``: histograms of the four descriptors and the size, twin errors, and the Spearman correlation
+    matrices of sand and generated grains."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -857,54 +1047,65 @@ def fit_figure(sand: Sand, result: FitResult, path: Path) -> None:
 
     from .io import save_figure
 
-    gen = result.generated[:, 1:]
-    st = sand.table()
-    fig, axes = plt.subplots(2, 3, figsize=(12.6, 7.2))
+    gen, st = result.generated[:, 1:], result.targets
+    fig, axes = plt.subplots(2, 4, figsize=(16, 7.6))
     for ax, j in zip(axes.flat, range(4)):
         k = DESCRIPTORS[j]
-        lo = min(st[:, j].min(), gen[:, j].min())
-        hi = max(st[:, j].max(), gen[:, j].max(), lo + 1e-6)
-        bins = np.linspace(lo, hi, 36)
-        ax.hist(st[:, j], bins=bins, density=True, alpha=0.55, color="0.35", label=f"sand (n={sand.count})")
+        lo, hi = min(st[:, j].min(), np.nanmin(gen[:, j])), max(st[:, j].max(), np.nanmax(gen[:, j]))
+        bins = np.linspace(lo, max(hi, lo + 1e-6), 36)
+        ax.hist(st[:, j], bins=bins, density=True, alpha=0.55, color="0.35", label=f"sand (n={len(st)})")
         ax.hist(gen[:, j], bins=bins, density=True, alpha=0.55, color="tab:orange",
-                label=f"{result.method} (n={len(gen)})")
+                label=f"{result.method} twins (n={len(gen)})")
         p = result.stats["per"][k]
         ax.set_title(f"{k}: mean {p['sand_mean']:.3f} vs {p['gen_mean']:.3f}, KS {p['ks']:.3f}", fontsize=9)
         ax.legend(fontsize=7)
     ax = axes.flat[4]
-    ax.scatter(st[:, 3], st[:, 2], s=3, alpha=0.35, color="0.35", label="sand")
-    ax.scatter(gen[:, 3], gen[:, 2], s=3, alpha=0.5, color="tab:orange", label=result.method)
-    c = result.stats["corr"]["flatness-elongation"]
-    ax.set_xlabel("elongation (middle/major)")
-    ax.set_ylabel("flatness (minor/middle)")
-    ax.set_title(f"flatness vs elongation: r = {c[0]:.2f} (sand), {c[1]:.2f} ({result.method})", fontsize=9)
-    ax.legend(fontsize=7, markerscale=3)
+    err = result.twin_error
+    ax.hist(np.minimum(err, 0.1), bins=40, color="tab:blue")
+    ax.axvline(TWIN_TOL, color="k", ls="--", lw=1)
+    ax.set_xlabel("largest |twin − sand grain| (4 descriptors; ≤ 0.1 shown)")
+    ax.set_title(f"twins: {result.stats['twin_within']:.1%} of reachable within {TWIN_TOL}; "
+                 f"{1 - result.stats['reachable']:.1%} unreachable", fontsize=9)
     ax = axes.flat[5]
-    bins = np.linspace(min(sand.equivalent_diameter.min(), result.generated[:, 0].min()),
-                       max(sand.equivalent_diameter.max(), result.generated[:, 0].max()), 36)
-    ax.hist(sand.equivalent_diameter, bins=bins, density=True, alpha=0.55, color="0.35", label="sand")
-    ax.hist(result.generated[:, 0], bins=bins, density=True, alpha=0.55, color="tab:orange", label=result.method)
+    d = result.generated[:, 0]
+    bins = np.linspace(sand.equivalent_diameter.min(), sand.equivalent_diameter.max(), 36)
+    ax.hist(sand.equivalent_diameter, bins=bins, density=True, alpha=0.55, color="0.35", label="sand (all rows)")
+    ax.hist(d, bins=bins, density=True, alpha=0.55, color="tab:orange", label=result.method)
     ax.set_xlabel("equivalent diameter (µm)")
-    ax.set_title("size (the recipe's grading)", fontsize=9)
+    ax.set_title("size (each twin has its sand grain's)", fontsize=9)
     ax.legend(fontsize=7)
+    labels = [k[:5] for k in DESCRIPTORS]
+    for ax, table, who in ((axes.flat[6], st, "sand rows"), (axes.flat[7], gen, f"{result.method} twins")):
+        c = spearman(table)
+        ax.imshow(c, vmin=-1, vmax=1, cmap="RdBu_r")
+        for i in range(4):
+            for j in range(4):
+                ax.text(j, i, f"{c[i, j]:+.2f}", ha="center", va="center", fontsize=9)
+        ax.set_xticks(range(4), labels, fontsize=8)
+        ax.set_yticks(range(4), labels, fontsize=8)
+        ax.set_title(f"Spearman correlations: {who}", fontsize=9)
     verdict = "passes" if result.stats["pass"] else "does NOT pass"
-    fig.suptitle(f"{sand.name} vs {len(gen)} {result.method} grains measured the Atlas way "
-                 f"({sand.voxel_size:g} µm voxels): {verdict} KS <= {KS_MAX}, |Δmean| <= {MEAN_TOL}", fontsize=10)
+    fig.suptitle(f"{sand.name} vs {len(gen)} {result.method} twins measured the Atlas way "
+                 f"({sand.voxel_size:g} µm voxels): {verdict} (KS <= {KS_MAX}, |Δmean| <= {MEAN_TOL}, "
+                 f"|Δρ| <= {CORR_TOL}, twins within {TWIN_TOL} for >= {TWIN_SHARE:.0%})", fontsize=10)
     fig.tight_layout()
     save_figure(fig, path, dpi=90)
 
 
+#: what ``fit`` writes into its output folder
+OUTPUTS = ("recipe.toml", "fit.csv", "fit-stats.csv", "fit.png")
+
+
 def write_outputs(sand: Sand, result: FitResult, out: str | os.PathLike) -> list[Path]:
-    """Write ``recipe.toml``, ``fit.csv`` and ``fit.png`` into ``out`` (atomically); return the paths."""
+    """Write :data:`OUTPUTS` into ``out`` (each atomically); return the paths."""
     from .io import atomic_write, write_csv
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    paths = [out / "recipe.toml", out / "fit.csv", out / "fit.png"]
+    paths = [out / n for n in OUTPUTS]
     atomic_write(paths[0], result.recipe)
-    write_csv(paths[1], fit_rows(result), FIT_COLUMNS)
-    fit_figure(sand, result, paths[2])
+    rows = twin_rows(result)
+    write_csv(paths[1], rows, list(rows[0]))
+    write_csv(paths[2], stat_rows(result), STAT_COLUMNS)
+    fit_figure(sand, result, paths[3])
     return paths
-
-
-OUTPUTS = ("recipe.toml", "fit.csv", "fit.png")

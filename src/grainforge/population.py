@@ -91,7 +91,7 @@ _DIST_KEYS = {
 }
 #: how long ``--scheduler`` waits for the scheduler to answer.
 DASK_CONNECT_TIMEOUT = "20s"
-_TOP_KEYS = ("method", "count", "seed", "format", "params", "size")
+_TOP_KEYS = ("method", "count", "seed", "format", "params", "size", "grains")
 
 
 class RecipeError(ValueError):
@@ -184,6 +184,8 @@ class Recipe:
     sampling: str = "quasi"
     text: str = field(default="", repr=False)
     source: str = "<recipe>"
+    #: ``[grains]``: parameter name (or ``size_mm``) -> one fixed value per grain, in grain order
+    grains: Mapping[str, tuple] = field(default_factory=dict, repr=False)
 
     @property
     def digest(self) -> str:
@@ -266,13 +268,60 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
     except ParameterError as exc:
         bad = exc.name if exc.name in params else next(iter(params), exc.name)
         fail(["params", bad], exc.reason)
+    grains = _grains(data.get("grains"), pspecs, typical, module.Params, count, method, fail)
 
-    size, definition = _size(data.get("size"), fail)
+    raw_size = data.get("size")
+    if "size_mm" in grains:  # sizes per grain: [size] may only say what the sizes mean
+        if not isinstance(raw_size, (dict, type(None))) or set(raw_size or {}) - {"definition"}:
+            fail(["size"], "with grains.size_mm, [size] may only give definition")
+        size, definition = _size({"mm": 1.0, **(raw_size or {})}, fail)
+    else:
+        size, definition = _size(raw_size, fail)
     sampling = (data.get("size") or {}).get("sampling", "quasi")
     if sampling not in ("quasi", "random"):
         fail(["size", "sampling"], f"must be \"quasi\" or \"random\", got {sampling!r}")
     return Recipe(method=method, count=count, seed=seed, format=fmt, params=params, size=size,
-                  size_definition=definition, sampling=sampling, text=text, source=source)
+                  size_definition=definition, sampling=sampling, text=text, source=source, grains=grains)
+
+
+def _grains(raw, pspecs, typical, params_type, count, method, fail) -> dict[str, tuple]:
+    """``[grains]``: one fixed value per grain for some parameters (and ``size_mm``), each checked,
+    and each grain's whole parameter set checked by the method (as ``grainforge fit`` writes twins)."""
+    if raw is None:
+        return {}
+    if not isinstance(raw, dict) or not raw:
+        fail(["grains"], "must be a table of name = [one value per grain]")
+    from .fabrication.scale import MAX_SIZE_MM, MIN_SIZE_MM
+
+    out: dict[str, tuple] = {}
+    for name, values in raw.items():
+        if name != "size_mm" and name not in pspecs:
+            fail(["grains", name], f"is not a {method} parameter or size_mm (expected one of "
+                                   f"{', '.join(list(pspecs) + ['size_mm'])})")
+        if not isinstance(values, list) or len(values) != count:
+            fail(["grains", name], f"must be a list of count = {count} values, one per grain, got "
+                                   f"{len(values) if isinstance(values, list) else type(values).__name__}")
+        checked = []
+        for i, v in enumerate(values):
+            if isinstance(v, dict) or (isinstance(v, list) and any(isinstance(x, dict) for x in v)):
+                fail(["grains", name], f"grain {i}: must be a fixed value, not a distribution")
+            if name == "size_mm":
+                if not (_number(v) and MIN_SIZE_MM <= v <= MAX_SIZE_MM):
+                    fail(["grains", name], f"grain {i}: must be in [{MIN_SIZE_MM:g}, {MAX_SIZE_MM:g}] mm, got {v!r}")
+                checked.append(float(v))
+            else:
+                try:
+                    checked.append(pspecs[name].check(v))
+                except ParameterError as exc:
+                    fail(["grains", name], f"grain {i}: {exc.reason}")
+        out[name] = tuple(checked)
+    names = [n for n in out if n != "size_mm"]
+    for i in range(count if names else 0):
+        try:
+            params_type(**{**typical, **{n: out[n][i] for n in names}})
+        except ParameterError as exc:
+            fail(["grains", exc.name if exc.name in out else names[0]], f"grain {i}: {exc.reason}")
+    return out
 
 
 def _whole(data, key, low, fail, required=False):
@@ -498,11 +547,15 @@ def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
     values = {}
     for spec in specs(params_type):
         v = recipe.params.get(spec.name)
-        if isinstance(v, Distribution):
+        if spec.name in recipe.grains:  # one value per grain ([grains]): nothing drawn
+            values[spec.name] = recipe.grains[spec.name][index]
+        elif isinstance(v, Distribution):
             values[spec.name] = v.draw(rng)
         elif spec.name in recipe.params:
             values[spec.name] = v
     size = recipe.size.sample(size_quantile(recipe, index, float(rng.random())))
+    if "size_mm" in recipe.grains:
+        size = recipe.grains["size_mm"][index]
     try:
         params = params_type(**values)
     except ParameterError as exc:

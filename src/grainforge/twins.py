@@ -1,0 +1,166 @@
+"""Inverse models for twin fits: measured descriptors → generator settings (docs/fit.md).
+
+A *design* is a set of generated grains whose settings ``u`` (each scaled to
+[0, 1]) and resolution (voxels across) are spread over the method's whole
+range, measured once.  :class:`ForwardModel` is a least-squares cubic
+polynomial from (settings, log resolution) to the four measured descriptors;
+:func:`invert` solves it, bounded, for the settings whose grain the model
+predicts to measure like a target, optionally with a per-grain offset (what
+one grain's own seed and orientation add to the model, learnt from
+measuring it: the refinement step).
+
+Pure functions of NumPy arrays; nothing here generates or measures a grain
+(:mod:`grainforge.fit` does).
+
+Examples
+--------
+>>> rng = np.random.default_rng(0)
+>>> u = rng.random((200, 2))
+>>> across = np.full(200, 60.0)
+>>> y = np.column_stack([0.9 - 0.3 * u[:, 0] ** 2, 0.5 + 0.4 * u[:, 1], u[:, 0] * u[:, 1], 1 - u[:, 1] / 2])
+>>> model = ForwardModel.fit(u, across, y)
+>>> sol, miss = invert(model, y[:3], np.full(3, 60.0))
+>>> bool(np.allclose(sol, u[:3], atol=1e-2)), bool(np.all(miss < 1e-3))
+(True, True)
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["design_points", "ForwardModel", "invert"]
+
+#: polynomial degree of the forward model
+DEGREE = 3
+#: ridge penalty on the polynomial coefficients (relative to the design's size): keeps the corners tame
+RIDGE = 1e-6
+
+
+def design_points(n: int, dims: int, seed: int) -> np.ndarray:
+    """``n`` scrambled Sobol points in [0, 1]^dims (a design that fills the box evenly).
+
+    Examples
+    --------
+    >>> p = design_points(64, 3, seed=1)
+    >>> p.shape, bool(p.min() >= 0 and p.max() < 1)
+    ((64, 3), True)
+    """
+    from scipy.stats import qmc
+
+    m = int(np.ceil(np.log2(max(n, 2))))
+    return qmc.Sobol(dims, scramble=True, seed=np.random.default_rng(seed)).random_base2(m)[:n]
+
+
+def _features(u: np.ndarray, across: np.ndarray) -> np.ndarray:
+    """Monomials up to :data:`DEGREE` of the settings and log(voxels across) (scaled to about [0, 1])."""
+    z = np.column_stack([np.asarray(u, np.float64), np.log(np.asarray(across, np.float64)) / np.log(1000.0)])
+    cols = [np.ones(len(z))]
+    for d in range(1, DEGREE + 1):
+        for idx in itertools.combinations_with_replacement(range(z.shape[1]), d):
+            cols.append(np.prod(z[:, idx], axis=1))
+    return np.column_stack(cols)
+
+
+@dataclass(frozen=True)
+class ForwardModel:
+    """Settings u ∈ [0, 1]^p and voxels across → the four descriptors (a cubic least-squares fit).
+
+    ``rms`` is the root-mean-square residual per descriptor on the design:
+    what one grain's own seed and orientation scatter about the model.
+    """
+
+    coef: np.ndarray  # (features, 4)
+    rms: np.ndarray  # (4,)
+    dims: int
+
+    @classmethod
+    def fit(cls, u: np.ndarray, across: np.ndarray, y: np.ndarray) -> ForwardModel:
+        X = _features(u, across)
+        y = np.asarray(y, np.float64)
+        A = np.vstack([X, np.sqrt(RIDGE * len(X)) * np.eye(X.shape[1])])
+        b = np.vstack([y, np.zeros((X.shape[1], y.shape[1]))])
+        coef = np.linalg.lstsq(A, b, rcond=None)[0]
+        rms = np.sqrt(np.mean((X @ coef - y) ** 2, axis=0))
+        return cls(coef=coef, rms=rms, dims=u.shape[1])
+
+    def predict(self, u: np.ndarray, across: np.ndarray) -> np.ndarray:
+        u = np.atleast_2d(u)
+        return _features(u, np.broadcast_to(across, (len(u),))) @ self.coef
+
+
+def invert(model: ForwardModel, targets: np.ndarray, across: np.ndarray, *, offsets: np.ndarray | None = None,
+           start: np.ndarray | None = None, scale: np.ndarray | float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Settings u ∈ [0, 1]^p whose predicted descriptors (plus ``offsets``) come closest to each target.
+
+    Parameters
+    ----------
+    targets : (n, 4) array
+    across : (n,) array
+        Voxels across each grain is measured at.
+    offsets : (n, 4) array, optional
+        Added to the model's prediction per grain (measured − predicted at
+        the grain's last settings): the refinement step.
+    start : (n, p) array, optional
+        Where each solve starts (default: the best of a coarse grid).
+    scale : float or (4,) array
+        Each descriptor's misfit is divided by it (the twin tolerance).
+
+    Returns
+    -------
+    u : (n, p) array
+    miss : (n,) array
+        Largest |predicted − target| over the descriptors at ``u``: what the
+        model says the method cannot reach (the solve stops at a bound).
+    """
+    targets = np.atleast_2d(np.asarray(targets, np.float64))
+    n = len(targets)
+    across = np.broadcast_to(np.asarray(across, np.float64), (n,)).copy()
+    offsets = np.zeros_like(targets) if offsets is None else np.asarray(offsets, np.float64)
+    scale = np.broadcast_to(np.asarray(scale, np.float64), (targets.shape[1],))
+    if start is None:
+        grid = design_points(512, model.dims, seed=0)
+        start = np.empty((n, model.dims))
+        for i in range(n):
+            pred = model.predict(grid, across[i]) + offsets[i]
+            start[i] = grid[np.argmin(np.max(np.abs(pred - targets[i]) / scale, axis=1))]
+    u = _gauss_newton(lambda x: (model.predict(x, across) + offsets - targets) / scale, np.clip(start, 0.0, 1.0))
+    miss = np.max(np.abs(model.predict(u, across) + offsets - targets), axis=1)
+    return u, miss
+
+
+def _gauss_newton(resid, u: np.ndarray, iterations: int = 60, h: float = 1e-6) -> np.ndarray:
+    """Minimise ``|resid(u)|²`` row by row over u ∈ [0, 1]^p: damped Gauss–Newton on all rows at once.
+
+    A setting at a bound that the gradient pushes outward is held there
+    (its column dropped) while the others move; the damping of a row grows
+    after a step that does not lower its misfit and shrinks after one that does.
+    """
+    n, p = u.shape
+    lam = np.full(n, 1e-3)
+    r = resid(u)
+    cost = np.sum(r**2, axis=1)
+    eye = np.eye(p)
+    for _ in range(iterations):
+        J = np.stack([(resid(u + h * eye[k]) - r) / h for k in range(p)], axis=2)  # (n, m, p); the model is
+        # a polynomial, defined (and smooth) just outside the box too
+        g = np.einsum("nmp,nm->np", J, r)
+        held = ((u <= 0) & (g > 0)) | ((u >= 1) & (g < 0))
+        J = np.where(held[:, None, :], 0.0, J)
+        A = np.einsum("nmp,nmq->npq", J, J)
+        A += (lam[:, None, None] * (np.einsum("npp->np", A)[:, :, None] * eye + 1e-9 * eye))
+        du = -np.linalg.solve(A, np.einsum("nmp,nm->np", J, r)[:, :, None])[:, :, 0]
+        trial = np.clip(u + du, 0.0, 1.0)
+        rt = resid(trial)
+        ct = np.sum(rt**2, axis=1)
+        better = ct < cost
+        u = np.where(better[:, None], trial, u)
+        r = np.where(better[:, None], rt, r)
+        done = np.abs(cost - ct) <= 1e-14 * (1 + cost)
+        cost = np.where(better, ct, cost)
+        lam = np.where(better, lam / 3, lam * 4)
+        if np.all(done | (lam > 1e8)):
+            break
+    return u
