@@ -80,28 +80,35 @@ def _processes_with(marker: str) -> list[int]:
     return found
 
 
-@pytest.mark.slow
-@pytest.mark.parametrize("delay", [0.8, 1.6, 2.5, 4.0])
-@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
-def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
-    """While the pool starts and while it works: one line, the usual code, within 2 s, no process
-    and no deck left."""
+def _heavy_dem_run(tmp_path, **popen):
+    """A marked ``dem`` of 8 angular grains with 48 s of clump work: (process, marker, deck folder)."""
     import os
-    import signal
     import subprocess
-    import time
     import uuid
 
     grains = tmp_path / "grains"
     subprocess.run([*_CLI, "generate", "angular", "--count", "8", "--size", "2",
                     "--subdivisions", "3", "--out", str(grains)], check=True, capture_output=True)
     marker = f"GRAINFORGE_TEST_{uuid.uuid4().hex}"
-    env = dict(os.environ, **{marker: "1"})
     out = tmp_path / "deck"
     p = subprocess.Popen([*_CLI, "dem", str(grains), "--out", str(out),
                           "--spheres", "300", "--refine-iterations", "100", "--workers", "2"],
-                         env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
-                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+                         env=dict(os.environ, **{marker: "1"}), stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, **popen)
+    return p, marker, out
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("delay", [0.8, 1.6, 2.5, 4.0])
+@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
+    """While the pool starts and while it works: one line, the usual code, within 2 s, no process
+    and no deck left."""
+    import signal
+    import time
+
+    p, marker, out = _heavy_dem_run(tmp_path, text=True,
+                                    preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(delay)
     sent = time.monotonic()
     p.send_signal(getattr(signal, signame))
@@ -250,21 +257,10 @@ def test_dem_announces_template_work_over_a_minute(angular_grains, tmp_path, mon
 def test_dem_killed_leaves_no_process_and_says_nothing(tmp_path):
     """SIGKILL of the owner: its workers, fork server and resource tracker exit by themselves, the
     tracker cleans up the pool's semaphores without a warning on the user's terminal, no deck."""
-    import os
     import signal
-    import subprocess
     import time
-    import uuid
 
-    grains = tmp_path / "grains"
-    subprocess.run([*_CLI, "generate", "angular", "--count", "8", "--size", "2",
-                    "--subdivisions", "3", "--out", str(grains)], check=True, capture_output=True)
-    marker = f"GRAINFORGE_TEST_{uuid.uuid4().hex}"
-    env = dict(os.environ, **{marker: "1"})
-    out = tmp_path / "deck"
-    p = subprocess.Popen([*_CLI, "dem", str(grains), "--out", str(out),
-                          "--spheres", "300", "--refine-iterations", "100", "--workers", "2"],
-                         env=env, stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE)
+    p, marker, out = _heavy_dem_run(tmp_path)
     deadline = time.monotonic() + 60
     while len(_processes_with(marker)) < 4 and time.monotonic() < deadline:  # owner, server, 2 workers
         time.sleep(0.1)
