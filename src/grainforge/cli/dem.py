@@ -122,7 +122,8 @@ def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float,
     from .interrupts import say_estimate
 
     each = dem_template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing)
-    if shape == "clump" and refine > 0:
+    refining = shape == "clump" and refine > 0  # the model counts every iteration: an upper bound
+    if refining:
         advice = "lower --refine-iterations (or --spheres), or give fewer grain files"
     elif shape == "levelset":
         advice = "raise --spacing, or give fewer grain files"
@@ -133,4 +134,4 @@ def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float,
                             advice=advice)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    say_estimate(seconds, bound="at most about" if shape == "clump" and refine > 0 else "about")
+    say_estimate(seconds, bound="at most about" if refining else "about")
