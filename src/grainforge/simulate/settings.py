@@ -1,0 +1,129 @@
+"""Settings of the virtual bulk tests, the scene dictionary the engine reads, and the up-front estimate."""
+
+from __future__ import annotations
+
+import math
+import os
+from dataclasses import dataclass
+
+from ..params import param, validate
+
+__all__ = ["TESTS", "Settings", "QUICK", "scene_settings", "check_size"]
+
+#: the virtual tests
+TESTS = ("repose", "tilt")
+
+
+@dataclass(frozen=True)
+class Settings:
+    """Settings of a virtual bulk test, SI units unless stated.
+
+    The same settings apply to every shape in a comparison.
+    """
+
+    grains: int = param(200, "grains in the test (drawn from the population's templates)", kind="int",
+                        low=2, high=20000)
+    templates: int = param(40, "distinct grains made into clumps; the test draws from them with replacement "
+                           "and random orientations", kind="int", low=1, high=20000)
+    spheres: int = param(10, "spheres per clump (grainforge.dem.clump; more = closer to the mesh, slower)",
+                         kind="int", low=1, high=200)
+    size: float | None = param(None, "equivalent diameter every grain is scaled to", unit="mm", low=0.01,
+                               high=1000, optional=True,
+                               shown_default="the files' own size in mm, or the recipe's sizes")
+    density: float = param(1180.0, "grain density; 1180 is a PolyJet photopolymer, as the paper's printed grains",
+                           unit="kg/m³", low=1.0, high=30000.0)
+    young: float = param(1e6, "contact modulus E: normal stiffness k_n = E·r of a sphere contact", unit="Pa",
+                         low=1e3, high=1e11)
+    poisson: float = param(0.3, "tangential/normal stiffness ratio k_s/k_n", low=0.0, high=1.0, low_open=True)
+    friction: float = param(0.5, "contact friction coefficient μ (the same for grains, base and walls)",
+                            low=0.0, high=5.0)
+    damping: float = param(0.3, "Yade's local (non-viscous) damping, the same for every shape", low=0.0,
+                           high=0.9)
+    seeds: int = param(3, "independent runs (seeds seed, seed+1, ...); the angle is reported with its spread",
+                       kind="int", low=1, high=100)
+    seed: int = param(0, "first seed", kind="int", low=0, high=2**31 - 1)
+    base_roughness: float = param(0.3, "radius of the fixed spheres of the rough base, in mean grain diameters",
+                                  low=0.05, high=2.0)
+    tilt_step: float = param(0.5, "tilt increment of the tilt test", unit="deg", low=0.05, high=5.0)
+    tilt_start: float = param(10.0, "first tilt angle of the tilt test", unit="deg", low=0.0, high=60.0)
+
+    def __post_init__(self):
+        validate(self)
+
+
+#: settings of ``--quick``: a few tens of grains, seconds per run (plumbing, not a measurement)
+QUICK = dict(grains=30, templates=6, spheres=6, seeds=1, tilt_step=1.0, tilt_start=15.0)
+
+
+def scene_settings(settings: Settings, test: str, seed: int) -> dict:
+    """The ``grains.json["scene"]`` dictionary the Yade scene reads.
+
+    Examples
+    --------
+    >>> s = scene_settings(Settings(), "repose", 4)
+    >>> s["seed"], s["grains"], round(s["friction_deg"], 2)
+    (4, 200, 26.57)
+    """
+    if test not in TESTS:
+        raise ValueError(f"test must be one of {', '.join(TESTS)}, got {test!r}")
+    return {
+        "test": test, "seed": int(seed), "grains": settings.grains, "young": settings.young,
+        "poisson": settings.poisson, "friction_deg": math.degrees(math.atan(settings.friction)),
+        "damping": settings.damping, "gravity": 9.81, "dt_safety": 0.3, "check_every": 500,
+        "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": 0.5,
+        "max_time_factor": 8.0, "tilt_step_deg": settings.tilt_step, "tilt_start_deg": settings.tilt_start,
+        "tilt_hold": 8.0, "failure_displacement": 0.5, "layer_depth": 4.0,
+    }
+
+
+#: Yade seconds per grain and run (one core): a fixed part and a part per contact sphere, fitted to the
+#: repose runs of docs/simulate.md (200 grains of 1 and of 10 spheres: about 50 and 100 s a run)
+YADE_GRAIN_SECONDS, YADE_SPHERE_SECONDS = 0.25, 0.03
+#: a tilt run takes longer than a repose run of as many grains (the tilt steps; docs/simulate.md)
+TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
+#: seconds to make one clump template: about 0.08 s at 10 spheres, 0.15 s at 200
+TEMPLATE_SECONDS, TEMPLATE_SPHERE_SECONDS = 0.08, 0.0005
+#: Yade's memory per contact sphere (bytes: the body, its bound, its contacts)
+YADE_SPHERE_BYTES = 4096.0
+
+
+def check_size(test: str, settings: Settings, *, available: int, make_seconds: float = 0.0,
+               as_spheres: bool = False, workers: int = 1) -> float:
+    """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
+
+    Parameters
+    ----------
+    available, make_seconds : int, float
+        From :func:`check_inputs`: the grains the inputs hold, and the
+        seconds to generate one (a recipe) before it becomes a template.
+    workers : int
+        Yade runs at once (each on one core).
+
+    Raises
+    ------
+    grainforge.estimate.TooLargeError
+        With the estimate and the options that reduce it.
+
+    Examples
+    --------
+    >>> 60 < check_size("repose", Settings(), available=3) < 600
+    True
+    """
+    from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, duration
+
+    templates = min(settings.templates, available)
+    spheres = 1 if as_spheres else settings.spheres
+    make = templates * (make_seconds + TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS * spheres)
+    per_run = TEST_FACTOR[test] * settings.grains * (YADE_GRAIN_SECONDS + YADE_SPHERE_SECONDS * spheres)
+    at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
+    total = make + per_run * settings.seeds / at_once
+    if total > SECONDS_LIMIT:
+        option = "--templates" if make > total / 2 else "--grains, --spheres or --seeds"
+        raise TooLargeError(
+            f"{settings.seeds} {test} run(s) of {settings.grains} grains of {spheres} sphere(s) from {templates} "
+            f"template(s) would take about {duration(total)} of computing ({duration(per_run)} a run on "
+            f"{at_once} core(s), {duration(make)} for the templates; limit {_limit()}); lower {option}")
+    check_memory(YADE_SPHERE_BYTES * settings.grains * spheres * at_once,
+                 what=f"{at_once} Yade run(s) at once of {settings.grains} grains of {spheres} sphere(s)",
+                 option="--grains, --spheres or --workers")
+    return float(total)
