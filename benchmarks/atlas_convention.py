@@ -15,8 +15,9 @@ import argparse
 
 import numpy as np
 
-from grainforge.analysis.atlas import random_rotation, voxel_descriptors, voxelise
+from grainforge.analysis.atlas import voxel_descriptors, voxelise
 from grainforge.methods import generate, get
+from grainforge.rotations import random_rotation
 
 
 def main():

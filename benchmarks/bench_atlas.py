@@ -41,11 +41,11 @@ def main():
         _hull_count,
         _surface_area,
         atlas_descriptors,
-        random_rotation,
         straddling_cubes,
         voxelise,
     )
     from grainforge.methods import get
+    from grainforge.rotations import random_rotation
     from grainforge.solid import signed_volume
 
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "

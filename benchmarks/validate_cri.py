@@ -41,9 +41,9 @@ def read_back(grain):
 
 def section_descriptors(mesh, orders=ORDERS) -> np.ndarray:
     """(3, len(orders)) D_n of the sections through the volume centroid ⊥ the principal inertia axes."""
-    from grainforge.analysis.principal_sections import section_descriptors as sd
+    from grainforge.analysis.sections import principal_section_descriptors
 
-    return sd(mesh, orders)
+    return principal_section_descriptors(mesh, orders)
 
 
 def projection_fds(mesh, orders=ORDERS) -> np.ndarray:

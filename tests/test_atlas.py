@@ -6,8 +6,9 @@ import numpy as np
 import pytest
 import trimesh
 
-from grainforge.analysis.atlas import _hull_count, atlas_descriptors, random_rotation, voxel_descriptors, voxelise
+from grainforge.analysis.atlas import _hull_count, atlas_descriptors, voxel_descriptors, voxelise
 from grainforge.cli.main import cli
+from grainforge.rotations import random_rotation
 
 
 def _ellipsoid(a, b, c, subdivisions=5):
@@ -85,8 +86,8 @@ def test_scanline_voxeliser_equals_ray_parity_and_hull_count_equals_brute_force_
     from scipy.spatial import ConvexHull, Delaunay
 
     import grainforge
-    from grainforge.analysis.atlas import _ray_toggles
     from grainforge.methods import get
+    from grainforge.voxel import _ray_toggles
 
     g = grainforge.generate("cri", get("cri").Params(descriptors=(0, 0.12, 0.012), aspect=(1, 0.7, 0.55),
                                                      subdivisions=4), 2)

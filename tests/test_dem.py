@@ -15,7 +15,7 @@ from grainforge.cli.main import cli
 from grainforge.dem.clump import clump, clump_quality
 from grainforge.dem.massprops import mass_properties, rotation_to_quaternion
 from grainforge.dem.template import prepare
-from grainforge.dem.voxel import grid_for, inside_mask
+from grainforge.voxel import grid_for, inside_mask
 
 
 def test_mass_properties_box_analytic():

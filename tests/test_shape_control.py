@@ -18,8 +18,8 @@ import trimesh
 
 import grainforge
 from grainforge.analysis.box import minimum_box
-from grainforge.analysis.principal_sections import section_descriptors
 from grainforge.analysis.relief import cap_band_rms, mirror_correlation, separable_share
+from grainforge.analysis.sections import principal_section_descriptors
 from grainforge.io import export_bytes
 from grainforge.methods import cri as cri_mod
 from grainforge.methods import fso as fso_mod
@@ -140,7 +140,7 @@ def test_cri_sections_carry_the_descriptors(descriptors):
     """Mean D2, D3, D8 of the sections ⊥ the principal inertia axes through the volume centroid, 10 grains:
     within 10 % of the request (+ 3 % for the 10-grain sample; docs/validation.md: 20 grains, within 10 %).
     D2 = D3 = 0 are checked as absolute values below 0.015 (a rough sphere's sections are not circles)."""
-    S = np.array([section_descriptors(_read_back(grainforge.cri(descriptors=descriptors, rng=s)))
+    S = np.array([principal_section_descriptors(_read_back(grainforge.cri(descriptors=descriptors, rng=s)))
                   for s in range(10)])
     mean = S.mean(axis=(0, 1))
     for want, got in zip(descriptors, mean):
@@ -153,10 +153,10 @@ def test_cri_sections_carry_the_descriptors(descriptors):
 def test_cri_stretch_consistency_loses_roughness():
     """The 2016 reconstruction (linear stretch) loses D8 on the sections; the default keeps it (8 grains)."""
     d = (0.3, 0.1, 0.04)
-    old = np.mean([section_descriptors(_read_back(grainforge.cri(descriptors=d, consistency="stretch",
+    old = np.mean([principal_section_descriptors(_read_back(grainforge.cri(descriptors=d, consistency="stretch",
                                                                  ridge_twist=0.0, rng=s)))[:, 2]
                    for s in range(8)])
-    new = np.mean([section_descriptors(_read_back(grainforge.cri(descriptors=d, rng=s)))[:, 2] for s in range(8)])
+    new = np.mean([principal_section_descriptors(_read_back(grainforge.cri(descriptors=d, rng=s)))[:, 2] for s in range(8)])
     assert old < 0.88 * 0.04 and abs(new / 0.04 - 1) < 0.1
 
 

@@ -5,13 +5,9 @@ particle on its binary voxel image.  :func:`atlas_descriptors` does the same
 to a mesh:
 
 1. **Voxelise** at voxel size ``h``: a voxel belongs to the grain when its
-   centre is inside the mesh.  The inside test is parity along x, by
-   scanline: every triangle is projected on the yz plane, the voxel columns
-   whose centre it covers are found in one vectorised pass (a centre on a
-   shared edge or vertex goes to exactly one triangle), and each crossing
-   toggles every voxel centre beyond it (:func:`voxelise`).  A column with an
-   odd number of crossings (an open or degenerate mesh) is cast again as a
-   ray with trimesh, slightly to the side.
+   centre is inside the mesh (:func:`voxelise`, which is
+   :func:`grainforge.voxel.inside_mask` with the scanner's conventions:
+   centres on the lattice ``h·(k + 1/2)``, parity along x).
 2. ``V = n h³`` for ``n`` voxels, ``d_eq = (6V/π)^(1/3)``.
 3. **True sphericity** ``π^(1/3) (6V)^(2/3) / A`` with ``A`` the area of the
    marching-cubes surface at level 0.5 of the binary image smoothed by a
@@ -45,8 +41,9 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["voxelise", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS", "SIGMA", "CONVENTIONS",
-           "random_rotation"]
+from ..rotations import random_rotation
+
+__all__ = ["voxelise", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS", "SIGMA", "CONVENTIONS"]
 
 #: Gaussian filter width (voxels) before marching cubes, as the Sand Atlas (``spam``) uses.
 SIGMA = 0.75
@@ -55,68 +52,13 @@ ATLAS_COLUMNS = (
     "voxel_size", "voxels_across", "voxels", "volume", "equivalent_diameter", "major", "middle", "minor",
     "sphericity", "convexity", "flatness", "elongation",
 )
-#: relative side steps of re-cast rays for columns with an odd number of crossings
-_RETRY = ((0.0, 0.0), (1e-4, 3e-4), (-2e-4, 1e-4), (3e-4, -2e-4))
-
-
-def random_rotation(rng: Any) -> np.ndarray:
-    """A uniformly random 3×3 rotation matrix from ``rng`` (anything ``default_rng`` accepts).
-
-    Examples
-    --------
-    >>> R = random_rotation(1)
-    >>> bool(np.allclose(R @ R.T, np.eye(3))), round(float(np.linalg.det(R)), 9)
-    (True, 1.0)
-    """
-    from scipy.spatial.transform import Rotation
-
-    return Rotation.random(random_state=np.random.default_rng(rng)).as_matrix()
-
-
-def _crossings(mesh, origins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(ray index, z) of every surface crossing of the +z rays from ``origins``."""
-    direction = np.zeros_like(origins)
-    direction[:, 2] = 1.0
-    loc, ray, _ = mesh.ray.intersects_location(origins, direction, multiple_hits=True)
-    return np.asarray(ray, dtype=np.int64), np.asarray(loc, dtype=np.float64).reshape(-1, 3)[:, 2]
-
-
-def _column_pairs(x, y, shape_xy):
-    """Candidate (triangle, column) pairs: lattice columns (integer x, y) in each triangle's xy bounding box.
-
-    ``x``, ``y``: three (F,) arrays each, the triangles' vertex coordinates in
-    lattice units.  Returns (triangle index, column i, column j) arrays.
-    """
-    nx, ny = shape_xy
-    i0 = np.maximum(np.ceil(np.minimum(np.minimum(x[0], x[1]), x[2])), 0)
-    i1 = np.minimum(np.floor(np.maximum(np.maximum(x[0], x[1]), x[2])), nx - 1)
-    j0 = np.maximum(np.ceil(np.minimum(np.minimum(y[0], y[1]), y[2])), 0)
-    j1 = np.minimum(np.floor(np.maximum(np.maximum(y[0], y[1]), y[2])), ny - 1)
-    wi, wj = i1 - i0 + 1, j1 - j0 + 1
-    some = np.flatnonzero((wi > 0) & (wj > 0))
-    wj = wj[some].astype(np.int64)
-    count = wi[some].astype(np.int64) * wj
-    start = np.cumsum(count) - count
-    local = np.arange(int(count.sum()), dtype=np.int64) - np.repeat(start, count)
-    di, dj = np.divmod(local, np.repeat(wj, count))
-    return (np.repeat(some, count), np.repeat(i0[some].astype(np.int64), count) + di,
-            np.repeat(j0[some].astype(np.int64), count) + dj)
-
-
 def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
     """The binary voxel image of a closed mesh: voxels whose centre is inside.
 
-    A scanline parity test, vectorised over the triangles: each triangle is
-    projected on the yz plane, the voxel columns (lines of centres along x)
-    whose centre it covers are found, and the x where the column crosses it
-    toggles every voxel centre beyond; one sweep along x, plane by plane,
-    turns the toggles into the image.  A column centre on a projected edge or vertex is given to
-    exactly one of the triangles that share it (the edge tests are evaluated
-    the same way from both sides, ties broken as if the centre were moved by
-    an infinitesimal (ε, ε²)), so closed meshes give an even number of
-    crossings per column.  Columns with an odd count (possible only for an
-    open or degenerate mesh) are cast again with trimesh's rays, a little to
-    the side.
+    :func:`grainforge.voxel.inside_mask` (the one voxeliser) with the
+    conventions of a scan: voxel centres on the lattice ``h·(k + 1/2)``
+    whatever the mesh's position (``anchor="lattice"``), and the parity rule
+    along x (``axis=0, rule="parity"``).
 
     Parameters
     ----------
@@ -150,92 +92,21 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
     >>> int(voxelise(cube.vertices, cube.faces, 1.0)[0].sum())   # those on one side of each pair count
     27
     """
+    from ..voxel import grid_for, inside_mask
+
     h = float(voxel_size)
     if not (math.isfinite(h) and h > 0):
         raise ValueError(f"voxel size must be a positive number, got {voxel_size!r}")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    lo = np.array([v[:, k].min() for k in range(3)])
-    hi = np.array([v[:, k].max() for k in range(3)])
-    # voxel centres on the lattice h·(k + 1/2): independent of where the box starts
-    first = np.floor(lo / h - 0.5) - 1  # one empty voxel below the lowest centre inside
-    last = np.ceil(hi / h - 0.5) + 1
-    shape = (last - first + 1).astype(np.int64)
-    origin = (first + 0.5) * h
-    if np.prod(shape.astype(np.float64)) > 2e8:
+    # voxel centres on the lattice h·(k + 1/2): independent of where the box starts; one empty voxel
+    # beyond the outermost centre that can be inside
+    grid = grid_for(v, h, pad=1, anchor="lattice")
+    shape = grid.shape
+    if np.prod(np.asarray(shape, dtype=np.float64)) > 2e8:
         raise ValueError(f"voxel size {h:g} gives a {shape[0]}x{shape[1]}x{shape[2]} image: too fine for this grain")
-    nx, ny, nz = (int(k) for k in shape)
-    q = (v - origin) / h  # lattice units: voxel centres at integers
-    # columns run along x (the image's slowest axis), so that the parity sweep goes row by row over
-    # whole (y, z) planes: a column (j, k) is the line of centres (·, j, k)
-    qs, qa, qb = q[:, 0], q[:, 1], q[:, 2]
-    fc = np.ascontiguousarray(f.T)  # the corners' index columns, contiguous: gathers with them are ~2x faster
-    t, cj, ck = _column_pairs([qa[fc[i]] for i in range(3)], [qb[fc[i]] for i in range(3)], (ny, nz))
-    # per face and edge e (vertex e -> e+1), evaluated from its lower-numbered vertex so that both
-    # faces sharing the edge compute bit-identical values; a 0 is broken as if the column centre
-    # were at (a + ε, b + ε²); ``sgn`` = −1 where the edge runs against its lower-numbered vertex
-    a, b = cj.astype(np.float64), ck.astype(np.float64)
-    side, w = [], []
-    for e in range(3):
-        ia, ib = fc[e], fc[(e + 1) % 3]
-        flip = ia > ib
-        lo_i, hi_i = np.where(flip, ib, ia), np.where(flip, ia, ib)
-        pa, pb = qa[lo_i], qb[lo_i]
-        da, db = qa[hi_i] - pa, qb[hi_i] - pb
-        sgn = np.where(flip, -1.0, 1.0)
-        tie = sgn * np.where(db != 0, -np.sign(db), np.sign(da))
-        da, db = sgn * da, sgn * db  # so val below is sgn · (da (b − pb) − db (a − pa)), bit for bit
-        val = da[t] * (b - pb[t]) - db[t] * (a - pa[t])
-        side.append(np.where(val != 0, np.sign(val), tie[t]))
-        w.append(val)
-    hit = (side[0] == side[1]) & (side[1] == side[2]) & (side[0] != 0)
-    th = t[hit]
-    cj, ck = cj[hit], ck[hit]
-    w0, w1, w2 = w[0][hit], w[1][hit], w[2][hit]
-    wsum = w0 + w1 + w2
-    wsum = np.where(wsum != 0, wsum, 1.0)
-    # barycentric: edge e is opposite vertex e + 2
-    s_ = (w0 * qs[fc[2][th]] + w1 * qs[fc[0][th]] + w2 * qs[fc[1][th]]) / wsum
-    i = np.clip(np.ceil(s_), 0, nx).astype(np.int64)
-    col = cj * nz + ck
-    plane = ny * nz
-    counts = np.bincount(col, minlength=plane)
-    toggles = (np.bincount(i * plane + col, minlength=(nx + 1) * plane).astype(np.uint8) & 1).reshape(nx + 1, plane)
-    odd = np.flatnonzero(counts & 1)
-    if len(odd):
-        # the fallback casts +z rays: give it the mesh with axes (y, z, x) (a rotation)
-        toggles[:, odd] = _ray_toggles(v[:, [1, 2, 0]], f, origin[1:] + np.column_stack([odd // nz, odd % nz]) * h,
-                                       lo[0] - h, origin[0], h, nx).T
-    # parity sweep along x: plane i is inside where an odd number of crossings lie below it
-    inside = np.empty((nx, plane), dtype=np.uint8)
-    inside[0] = toggles[0]
-    for r in range(1, nx):
-        np.bitwise_xor(inside[r - 1], toggles[r], out=inside[r])
-    return inside.view(bool).reshape(nx, ny, nz), origin
-
-
-def _ray_toggles(v, f, xy, z0, oz, h, nz):
-    """Parity toggles of voxel columns at ``xy`` by +z rays cast with trimesh (the fallback for odd columns)."""
-    import trimesh
-
-    mesh = trimesh.Trimesh(v, f, process=False)
-    toggles = np.zeros((len(xy), nz + 1), dtype=np.int64)
-    todo = np.arange(len(xy))
-    for step in _RETRY:
-        origins = np.column_stack([xy[todo] + np.asarray(step) * h, np.full(len(todo), z0)])
-        ray, z = _crossings(mesh, origins)
-        counts = np.bincount(ray, minlength=len(todo))
-        good = counts % 2 == 0
-        keep = good[ray]
-        # a crossing at height z toggles every voxel centre above it
-        k = np.clip(np.ceil((z[keep] - oz) / h), 0, nz).astype(np.int64)
-        np.add.at(toggles, (todo[ray[keep]], k), 1)
-        todo = todo[~good]
-        if len(todo) == 0:
-            break
-    else:
-        raise ValueError(f"{len(todo)} voxel column(s) cross the surface an odd number of times: the mesh is not closed")
-    return toggles & 1
+    # columns along x (the image's slowest axis): the parity sweep goes over whole (y, z) planes
+    return inside_mask(v, f, grid, axis=0, rule="parity"), grid.origin
 
 
 def _column_ends(mask: np.ndarray) -> np.ndarray:
@@ -579,7 +450,7 @@ def atlas_descriptors(
     rotation : (3, 3) array_like or seed, optional
         Turn the grain before voxelising (a scan sees grains in any
         orientation): a rotation matrix, or a seed/Generator for
-        :func:`random_rotation`.  Default: as given.
+        :func:`grainforge.rotations.random_rotation` (scipy's convention).  Default: as given.
     convention : {"atlas", "whole"}
         How true sphericity cuts the grain out (:func:`voxel_descriptors`).
 

@@ -1,12 +1,25 @@
-"""Fourier descriptors of planar sections of a closed mesh.
+"""Fourier descriptors of planar sections of a closed mesh: one core, two outline conventions.
 
-A plane through a point (by default the volume centroid) cuts the mesh in a
-closed outline (``trimesh.intersections.mesh_plane``); as for silhouettes
-(:mod:`grainforge.analysis.fourier`, docs/design/algorithms.md §2b) the outline's radii
-are taken along ``n_rays`` rays from its area centroid (outermost crossing)
-and D_n = 2|c_n|/c_0.  Used to check what the generators put into the
-grains (``docs/validation.md``): any orientation (:func:`random_normals`)
-or perpendicular to chosen axes.
+A plane cuts the mesh in an outline; its radii are taken along ``n_rays``
+rays θ_j = 2πj/n_rays from the outline's area centroid (outermost crossing,
+as for silhouettes: :mod:`grainforge.analysis.fourier`,
+docs/design/algorithms.md §2b) and D_n = 2|c_n|/c_0.  :func:`section_radii`
+is the one implementation; its ``outline`` parameter says which outline:
+
+``"segments"``
+    Every segment where the plane cuts the mesh
+    (``trimesh.intersections.mesh_plane``), taken together: the radius is the
+    outermost crossing of any of them, the area centroid that of the radius
+    function.  Any plane, any orientation (:func:`random_normals`).
+``"loop"``
+    The largest closed loop of the section (trimesh ``section``), as a
+    polygon (:func:`grainforge.contours.polygon_contour`: shoelace centroid),
+    the plane nudged off the mesh's vertices when they leave the loop in
+    pieces.  What a thin section shows.
+
+:func:`principal_section_descriptors` cuts through the volume centroid
+perpendicular to the principal axes of inertia with ``"loop"`` outlines.
+Used to check what the generators put into the grains (``docs/validation.md``).
 """
 
 from __future__ import annotations
@@ -15,7 +28,11 @@ import numpy as np
 
 from .fourier import FD_ORDERS, N_RAYS, _outline_radii, _polygon_area_centroid_of_radii, descriptors_from_radii
 
-__all__ = ["plane_basis", "section_radii", "section_descriptors", "random_normals"]
+__all__ = ["plane_basis", "section_radii", "section_descriptors", "principal_section_descriptors",
+           "random_normals", "OUTLINES"]
+
+#: the outline conventions of :func:`section_radii`
+OUTLINES = ("segments", "loop")
 
 #: rays used to find the outline's area centroid
 CENTROID_RAYS = 1024
@@ -47,7 +64,8 @@ def _trimesh(mesh):
                            process=False)
 
 
-def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS) -> tuple[np.ndarray, np.ndarray]:
+def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS, *, outline: str = "segments",
+                  basis=None) -> tuple[np.ndarray, np.ndarray]:
     """Radii of the section through ``origin`` with ``normal``, from the outline's area centroid.
 
     Parameters
@@ -58,11 +76,16 @@ def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS) -> tuple[np.n
         A point of the plane (default: the volume centroid of the mesh; pass
         it when cutting one mesh many times).
     n_rays : int
+    outline : {"segments", "loop"}
+        Which outline (module docstring).
+    basis : (2, 3) float, optional
+        The in-plane axes the angles are measured in (default
+        :func:`plane_basis`).
 
     Returns
     -------
     r : (n_rays,) float64
-        Outermost crossing along θ_j = 2πj/n_rays, measured in ``plane_basis(normal)``.
+        Outermost crossing along θ_j = 2πj/n_rays, measured in ``basis``.
     centre : (3,) float64
         The outline's area centroid (the rays' origin) in 3D.
 
@@ -70,16 +93,28 @@ def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS) -> tuple[np.n
     ------
     ValueError
         If the plane misses the mesh or the outline does not surround its centroid.
-    """
-    from trimesh.intersections import mesh_plane
 
+    Examples
+    --------
+    >>> import trimesh
+    >>> box = trimesh.creation.box((2.0, 2.0, 2.0))
+    >>> [np.round(section_radii(box, (0, 0, 1), n_rays=8, outline=o)[0][:2], 6).tolist() for o in OUTLINES]
+    [[1.0, 1.414214], [1.0, 1.414214]]
+    """
+    if outline not in OUTLINES:
+        raise ValueError(f"outline must be one of {', '.join(OUTLINES)}, got {outline!r}")
     mesh = _trimesh(mesh)
     o = np.asarray(mesh.center_mass if origin is None else origin, dtype=np.float64)
     n = np.asarray(normal, dtype=np.float64)
+    basis = plane_basis(n) if basis is None else np.asarray(basis, dtype=np.float64)
+    if outline == "loop":
+        c = _loop_contour(mesh, n, o, basis, n_rays)
+        return c.radii * c.scale, o + np.asarray(c.centroid) @ basis
+    from trimesh.intersections import mesh_plane
+
     seg = mesh_plane(mesh, n, o)
     if len(seg) == 0:
         raise ValueError("the plane does not cut the mesh")
-    basis = plane_basis(n)
     q = (seg.reshape(-1, 3) - o) @ basis.T
     edges = np.arange(len(q)).reshape(-1, 2)
     r, _ = _outline_radii(q, edges, CENTROID_RAYS)
@@ -92,10 +127,30 @@ def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS) -> tuple[np.n
     return r, o + c @ basis
 
 
-def section_descriptors(mesh, normal, origin=None, orders=FD_ORDERS, n_rays: int = N_RAYS) -> np.ndarray:
+def _loop_contour(mesh, normal, origin, basis, n_rays):
+    """The largest closed loop of the section as a Contour (``"loop"`` outlines)."""
+    from ..contours import polygon_contour
+
+    size = float(np.ptp(np.asarray(mesh.vertices), axis=0).max())
+    unit = normal / np.linalg.norm(normal)
+    # a plane through mesh vertices can leave the outline in pieces: nudge it off them
+    for nudge in (0.0, 1e-7, -1e-7, 1e-5):
+        sec = mesh.section(plane_origin=origin + nudge * size * unit, plane_normal=normal)
+        if sec is None:
+            continue
+        pts = max((np.asarray(p) for p in sec.discrete), key=len) - origin
+        try:
+            return polygon_contour(pts @ basis.T, n_angles=n_rays, source="section")
+        except ValueError:
+            continue
+    raise ValueError("no closed outline around the centroid in the section")
+
+
+def section_descriptors(mesh, normal, origin=None, orders=FD_ORDERS, n_rays: int = N_RAYS, *,
+                        outline: str = "segments") -> np.ndarray:
     """D_n (for ``orders``) of the section through ``origin`` (default the volume centroid) with ``normal``.
 
-    ``mesh`` as in :func:`section_radii`.
+    ``mesh``, ``outline`` as in :func:`section_radii`.
 
     Examples
     --------
@@ -106,8 +161,35 @@ def section_descriptors(mesh, normal, origin=None, orders=FD_ORDERS, n_rays: int
     >>> np.round(d, 3).tolist()  # a 2:1 ellipse: D2 = 0.338, D3 = 0
     [0.338, 0.0]
     """
-    r, _ = section_radii(mesh, normal, origin, n_rays)
+    r, _ = section_radii(mesh, normal, origin, n_rays, outline=outline)
     return descriptors_from_radii(r, orders)
+
+
+def principal_section_descriptors(mesh, orders=(2, 3, 8), n_rays: int = 256) -> np.ndarray:
+    """(3, len(orders)) D_n of the sections through the volume centroid ⊥ the principal inertia axes.
+
+    Rows: ⊥ the longest, the intermediate, the shortest axis; ``"loop"``
+    outlines (what a thin section or a cut would show, measured with no
+    knowledge of how the grain was made).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> e = trimesh.creation.icosphere(4)
+    >>> _ = e.apply_scale((3.0, 2.0, 1.0))
+    >>> np.round(principal_section_descriptors(e, orders=(2,))[:, 0], 2).tolist()  # ellipses 2:1, 3:1, 3:2
+    [0.34, 0.52, 0.2]
+    """
+    mesh = _trimesh(mesh)
+    centre = np.asarray(mesh.center_mass, dtype=np.float64)
+    _, vec = np.linalg.eigh(np.asarray(mesh.moment_inertia, dtype=np.float64))
+    axes = vec.T  # smallest moment first: the longest axis
+    rows = []
+    for k in range(3):
+        r, _ = section_radii(mesh, axes[k], centre, n_rays, outline="loop",
+                             basis=np.stack([axes[(k + 1) % 3], axes[(k + 2) % 3]]))
+        rows.append(descriptors_from_radii(r, orders))
+    return np.array(rows)
 
 
 def random_normals(count: int, rng=None) -> np.ndarray:

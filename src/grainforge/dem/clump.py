@@ -35,7 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .voxel import grid_for, inside_mask
+from ..voxel import grid_for, inside_mask
 
 __all__ = ["Clump", "clump", "clump_quality", "union_mask"]
 

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .voxel import Grid, grid_for, inside_mask
+from ..voxel import Grid, grid_for, inside_mask
 
 __all__ = ["LevelSet", "level_set", "surface_nodes", "DISTANCE_BLOCK", "MAX_NODES"]
 
@@ -58,7 +58,7 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
     """Signed distance to the mesh surface at the nodes of a regular grid.
 
     Inside/outside is exact at the nodes (scanline parity,
-    :func:`grainforge.dem.voxel.inside_mask`); the distance is the exact
+    :func:`grainforge.voxel.inside_mask`); the distance is the exact
     Euclidean distance to the nearest triangle (trimesh), signed.
 
     Parameters

@@ -37,9 +37,10 @@ import numpy as np
 
 from ..geodesic import icosphere, spherical
 from ..params import ParameterError, param, validate
+from ..rotations import random_rotation
 
 __all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "draw_field", "Field",
-           "SURFACES", "ellipsoid_radius", "spread_axes", "random_rotation"]
+           "SURFACES", "ellipsoid_radius", "spread_axes"]
 
 NAME = "fso"
 VALIDITY_PARAMETER = "amplitude"
@@ -162,17 +163,6 @@ def spread_axes(m: int) -> np.ndarray:
     return np.column_stack([r * np.cos(a), r * np.sin(a), z])
 
 
-def random_rotation(rng: np.random.Generator) -> np.ndarray:
-    """A uniformly distributed 3×3 rotation matrix (unit quaternion from four normal draws)."""
-    q = rng.standard_normal(4)
-    w, x, y, z = q / np.linalg.norm(q)
-    return np.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-    ])
-
-
 def draw_field(p: Params, rng: np.random.Generator) -> Field:
     """Draw the random field of one grain from ``rng``.
 
@@ -190,7 +180,7 @@ def draw_field(p: Params, rng: np.random.Generator) -> Field:
     wavenumbers = TWO_PI * p.gamma**n / p.length_ratio
     psi = rng.uniform(0.0, TWO_PI, size=(M, N))
     if p.surface == "seamless":
-        directions = spread_axes(M) @ random_rotation(rng).T
+        directions = spread_axes(M) @ random_rotation(rng, convention="scalar-first").T
         return Field(psi, None, None, weights, wavenumbers, directions)
     zeta = rng.uniform(0.0, TWO_PI, size=(M, N))
     alpha = np.pi * np.arange(1, M + 1) / M
