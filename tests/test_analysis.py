@@ -315,7 +315,7 @@ def test_formats_agree(tmp_path, grain, fmt):
 
     p = tmp_path / f"g.{fmt}"
     if fmt == "3mf":
-        from grainforge.fabrication.threemf import ThreeMFWriter, mesh_xml
+        from grainforge.io.threemf import ThreeMFWriter, mesh_xml
 
         with open(p, "wb") as fh, ThreeMFWriter(fh) as w:
             w.add_object("g", mesh_xml(grain.vertices, grain.faces))

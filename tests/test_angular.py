@@ -207,8 +207,8 @@ def test_recipe_batch_tray_check(runner, tmp_path):
     """The example recipe parses; a small batch, a tray and `check` all work on angular grains."""
     from pathlib import Path
 
-    from grainforge.fabrication.threemf import read_3mf
     from grainforge.fabrication.tray import GeneratorSource, build_tray
+    from grainforge.io.threemf import read_3mf
     from grainforge.population import load_recipe, parse_recipe, run_batch
 
     example = Path(__file__).parents[1] / "examples" / "angular-sand.toml"

@@ -3,7 +3,12 @@
 - Algorithm modules (``grainforge.methods``, ``.analysis``, ``.fabrication``)
   never import click or ``grainforge.cli``, directly or through another module.
 - No import cycles among grainforge modules, counting imports made inside
-  functions too (a lazy import that closes a cycle is still a cycle).
+  functions too (a lazy import that closes a cycle is still a cycle), and
+  counting the parent packages an import runs: ``import a.b.c`` executes
+  ``a/b/__init__.py`` as well, so it is an import of ``a.b`` too.
+- No upward import: every top-level module or package of grainforge sits in a
+  layer (:data:`LAYERS`, as docs/design/architecture.md draws them) and
+  imports only from its own layer or those below.
 - Method modules export parameters and pure functions only: no ``cli_command``.
 """
 
@@ -17,6 +22,20 @@ import pytest
 SRC = Path(__file__).resolve().parents[1] / "src"
 PACKAGE = "grainforge"
 ALGORITHMS = ("grainforge.methods", "grainforge.analysis", "grainforge.fabrication")
+
+#: the layers, bottom first: a module imports from its own layer and those below, never above
+LAYERS = (
+    # the base: data, geometry kernels, files, processes
+    ("_version", "params", "units", "solid", "geodesic", "harmonics", "spectra", "rotations", "voxel", "imaging",
+     "contours", "grain", "io", "workers"),
+    # algorithms on grains
+    ("methods", "analysis", "fabrication", "render", "plots", "estimate", "distributions", "calibration", "twins",
+     "report"),
+    # jobs built from them
+    ("run", "population", "fit", "dem", "simulate", "figures", "demo"),
+    # the commands
+    ("cli",),
+)
 
 
 def _modules() -> dict[str, Path]:
@@ -58,11 +77,36 @@ def _imports(name: str) -> list[tuple[str, int]]:
     return found
 
 
+def _with_parents(importer: str, target: str) -> set[str]:
+    """``target`` and the packages between the root and it that importing it runs, leaving out the root
+    (every module's) and the importer's own packages (already running when it runs)."""
+    parts = target.split(".")
+    found = {target}
+    for k in range(2, len(parts)):
+        parent = ".".join(parts[:k])
+        if importer != parent and not importer.startswith(parent + "."):
+            found.add(parent)
+    return found
+
+
 def _graph() -> dict[str, set[str]]:
     graph = {}
     for name in MODULES:
-        graph[name] = {t for t, _ in _imports(name) if t in MODULES and t != name}
+        targets = set()
+        for t, _ in _imports(name):
+            if t in MODULES:
+                targets |= _with_parents(name, t)
+        targets.discard(name)
+        graph[name] = targets
     return graph
+
+
+def _layer(name: str) -> int | None:
+    unit = name.split(".")[1] if "." in name else None
+    for level, names in enumerate(LAYERS):
+        if unit in names:
+            return level
+    return None
 
 
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
@@ -105,6 +149,16 @@ def test_graph_sees_lazy_imports():
     assert "grainforge.cli.generate" in graph["grainforge.cli.main"]
 
 
+def test_graph_counts_parent_packages():
+    """Importing a submodule runs its parent package: an import of ``fabrication.threemf`` from ``io``
+    is one of ``fabrication`` too (whose init imported ``io``: the cycle the old detector missed)."""
+    assert _with_parents("grainforge.io", "grainforge.fabrication.threemf") == {
+        "grainforge.fabrication.threemf", "grainforge.fabrication"}
+    # a package's own modules importing each other is no import of the package from outside
+    assert _with_parents("grainforge.io.stl", "grainforge.io.threemf") == {"grainforge.io.threemf"}
+    assert "grainforge.methods" in _graph()["grainforge.run"]
+
+
 def test_cycle_detector_finds_a_cycle():
     assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
     assert _cycles({"a": {"b"}, "b": set()}) == []
@@ -113,6 +167,27 @@ def test_cycle_detector_finds_a_cycle():
 def test_no_import_cycles():
     cycles = _cycles(_graph())
     assert cycles == [], "import cycles among grainforge modules: " + "; ".join(" <-> ".join(c) for c in cycles)
+
+
+def test_every_module_has_a_layer():
+    missing = sorted({name.split(".")[1] for name in MODULES if name != PACKAGE and _layer(name) is None})
+    assert missing == [], f"put these in a layer of LAYERS (and docs/design/architecture.md): {missing}"
+
+
+def test_no_upward_imports():
+    graph = _graph()
+    up = []
+    for name, targets in graph.items():
+        if name == PACKAGE:
+            continue  # the root package re-exports (lazily); every module's parent
+        for t in sorted(targets):
+            if t != PACKAGE and _layer(t) > _layer(name):
+                up.append(f"{MODULES[name].relative_to(SRC)} (layer {_layer(name)}) imports {t} (layer {_layer(t)})")
+    assert up == [], "upward imports:\n" + "\n".join(up)
+
+
+def test_upward_detector_sees_an_upward_import():
+    assert _layer("grainforge.io.stl") < _layer("grainforge.fabrication.tray") < _layer("grainforge.cli.main")
 
 
 @pytest.mark.parametrize("package", ALGORITHMS)

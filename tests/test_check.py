@@ -19,7 +19,7 @@ from grainforge.fabrication.printability import (
     self_intersections,
     triangle_grid,
 )
-from grainforge.fabrication.threemf import ThreeMFWriter, mesh_xml
+from grainforge.io.threemf import ThreeMFWriter, mesh_xml
 
 
 def _neck(radius):

@@ -142,7 +142,7 @@ def strategy_for(name: str):
 
 
 def _three_mf(grain) -> bytes:
-    from grainforge.fabrication.threemf import ThreeMFWriter, mesh_xml
+    from grainforge.io.threemf import ThreeMFWriter, mesh_xml
 
     buf = io.BytesIO()
     with ThreeMFWriter(buf) as w:

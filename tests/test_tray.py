@@ -10,7 +10,6 @@ from scipy.spatial import Delaunay
 
 from grainforge.cli.main import cli
 from grainforge.fabrication.printers import get_printer
-from grainforge.fabrication.threemf import read_3mf, read_stl_parts
 from grainforge.fabrication.tray import (
     FileSource,
     GeneratorSource,
@@ -19,6 +18,8 @@ from grainforge.fabrication.tray import (
     min_mesh_distance,
     orient_stable,
 )
+from grainforge.io.stl import read_stl_parts
+from grainforge.io.threemf import read_3mf
 from grainforge.methods.fso import Params as FsoParams
 from grainforge.run import write_run
 from grainforge.solid import solid_problems, volume_centroid

@@ -409,9 +409,9 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
 def print_tray(out: Path, quick: bool = False) -> list[Path]:
     """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains."""
     from .fabrication.printability import check_mesh
-    from .fabrication.threemf import read_3mf
     from .fabrication.tray import GeneratorSource, build_tray
     from .io import write_csv
+    from .io.threemf import read_3mf
     from .methods.cri import Params
 
     n = 40 if quick else 400

@@ -2,11 +2,11 @@
 printability checks and bulk print trays."""
 
 from ..io import read_parts
+from ..io.threemf import read_3mf
 from .printability import CheckResult, check_mesh
 from .printers import PRINTERS, Printer, get_printer, load_printers
 from .resolution import Resolution, match_subdivisions
 from .scale import SIZE_DEFINITIONS, scale_factor, to_size
-from .threemf import read_3mf
 from .tray import FileSource, GeneratorSource, TrayResult, build_tray
 
 __all__ = [

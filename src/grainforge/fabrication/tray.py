@@ -296,8 +296,9 @@ def prepare(task: dict) -> Prepared:
     """Make, scale and orient one grain, and encode it for the output format."""
     from scipy.spatial import ConvexHull
 
+    from ..io.stl import stl_triangles
+    from ..io.threemf import mesh_xml
     from ..solid import signed_volume
-    from .threemf import mesh_xml, stl_triangles
 
     name, source, v, f, subdivisions = _grain_mesh(task)
     v = orient_principal(v) if task["stacking"] else orient_stable(v, f)
@@ -581,8 +582,9 @@ def build_tray(
         If an output exists and ``overwrite`` is false.
     """
     from ..io import file_mode, write_csv
+    from ..io.stl import STLWriter
+    from ..io.threemf import ThreeMFWriter
     from .printers import get_printer
-    from .threemf import STLWriter, ThreeMFWriter
 
     printer = get_printer(printer)
     out, fmt, gap = _checked_request(source, printer, out, gap, overwrite)
@@ -672,7 +674,7 @@ def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, seed:
 
     Parameters
     ----------
-    parts : sequence of objects with ``vertices`` and ``faces`` (e.g. :class:`~grainforge.fabrication.threemf.Part`)
+    parts : sequence of objects with ``vertices`` and ``faces`` (e.g. :class:`~grainforge.io.threemf.Part`)
     within : float
     samples : int
     seed : int

@@ -1,8 +1,12 @@
-"""Mesh export, manifests and atomic writes.
+"""Every reader and writer of files: mesh export, manifests, atomic writes, STL and 3MF.
 
 Every file grainforge writes goes through :func:`atomic_write`: the data is
 written to a temporary file in the destination folder and renamed into place,
-so an interrupted run never leaves a half-written file.
+so an interrupted run never leaves a half-written file.  The format modules
+below this package hold the rest: :mod:`grainforge.io.stl` (the one STL
+reader, the record layout and the streaming tray writer) and
+:mod:`grainforge.io.threemf` (3MF writing and reading).  This package imports
+nothing above it: fabrication, dem and the commands import it.
 """
 
 from __future__ import annotations
@@ -17,7 +21,9 @@ from typing import Any
 
 import numpy as np
 
-from ._version import __version__
+from .._version import __version__
+from .sniff import what_is
+from .stl import check_stl, read_stl, stl_header
 
 __all__ = ["FORMATS", "READABLE_MESHES", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
 
@@ -33,12 +39,7 @@ def _as_trimesh(obj):
 def _stl(mesh, header: str) -> bytes:
     from trimesh.exchange.stl import export_stl
 
-    data = export_stl(mesh)
-    head = header.encode("ascii", "replace")[:80].ljust(80, b" ")
-    # A binary STL header must not begin with "solid" (readers would take it for ASCII).
-    if head.lower().startswith(b"solid"):
-        head = b"_" + head[:79]
-    return head + data[80:]
+    return stl_header(header) + export_stl(mesh)[80:]
 
 
 def _obj(mesh, header: str) -> bytes:
@@ -164,7 +165,7 @@ def csv_text(
     buf = _io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     if units:
-        from .units import UNITS, headers
+        from ..units import UNITS, headers
 
         w.writerow(headers(columns, UNITS if units is True else units))
     else:
@@ -185,103 +186,6 @@ def write_csv(
 #: the mesh formats every command reads (named in the message for a file of another kind)
 READABLE_MESHES = "STL, OBJ, PLY, 3MF"
 
-#: first bytes of common non-mesh files, to say what a misnamed file is
-_MAGIC = (
-    (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
-    (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a zip archive"), (b"PK\x05\x06", "an empty zip archive"),
-    (b"\x1f\x8b", "a gzip archive"), (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"),
-)
-
-
-def _what_is(head: bytes) -> str | None:
-    for magic, name in _MAGIC:
-        if head.startswith(magic):
-            return name
-    return None
-
-
-#: a binary STL whose header announces at most this many times the file's size is called truncated;
-#: beyond, the count is taken as noise (random bytes, another kind of file)
-TRUNCATED_FACTOR = 64
-
-
-def _binary_stl(path: Path):
-    """A binary STL as a triangle-soup trimesh (what ``trimesh.load(..., process=False)`` gives), read with
-    NumPy in one pass; ``None`` if the file is not a consistent binary STL (ASCII, for instance)."""
-    import trimesh
-
-    data = path.read_bytes()
-    if len(data) < 84:
-        return None
-    n = int.from_bytes(data[80:84], "little")
-    if len(data) != 84 + 50 * n or n == 0 or data[:5].lower() == b"solid" and b"facet normal" in data[:400]:
-        return None
-    rec = np.frombuffer(data, dtype=np.dtype([("n", "<f4", 3), ("v", "<f4", (3, 3)), ("a", "<u2")]), count=n,
-                        offset=84)
-    vertices = rec["v"].reshape(-1, 3).astype(np.float64)
-    faces = np.arange(3 * n, dtype=np.int64).reshape(-1, 3)
-    return trimesh.Trimesh(vertices, faces, process=False, validate=False)
-
-
-def check_stl(path: str | os.PathLike) -> None:
-    """Refuse an STL file whose bytes are neither a consistent binary STL nor ASCII STL.
-
-    A binary STL is an 80-byte header, a facet count ``n`` and ``n`` records
-    of 50 bytes: the file size must be ``84 + 50 n``.  An ASCII STL starts with
-    ``solid`` and holds ``facet``/``vertex`` lines.
-
-    Raises
-    ------
-    ValueError
-        Saying what is wrong with the file (truncated, wrong facet count,
-        another kind of file, empty).
-
-    Examples
-    --------
-    >>> import tempfile, pathlib
-    >>> p = pathlib.Path(tempfile.mkdtemp()) / "t.stl"
-    >>> _ = p.write_bytes(b"x" * 80 + (3).to_bytes(4, "little") + b"y" * 60)
-    >>> check_stl(p)
-    Traceback (most recent call last):
-    ...
-    ValueError: ...t.stl: truncated binary STL: the header announces 3 facets (234 bytes) but the file has 144 bytes
-    """
-    path = Path(path)
-    size = path.stat().st_size
-    with path.open("rb") as fh:
-        head = fh.read(1024)
-    if size == 0:
-        raise ValueError(f"{path}: empty file")
-    other = _what_is(head)
-    if other is not None:
-        raise ValueError(f"{path}: not an STL file (it is {other})")
-    if size >= 84:
-        n = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
-        if size == 84 + 50 * n:
-            if n == 0:
-                raise ValueError(f"{path}: binary STL with no facets")
-            return
-    if head.lstrip()[:5].lower() == b"solid":
-        try:
-            text = head.decode("ascii")
-        except UnicodeDecodeError:
-            text = ""
-        if "facet" in text or "endsolid" in text or size < 1024:
-            return  # ASCII STL (trimesh parses and validates it)
-    if size < 84:
-        raise ValueError(f"{path}: not an STL file ({size} bytes: too short for a binary STL, and not ASCII STL)")
-    n = int.from_bytes(head[80:84], "little")
-    expected = 84 + 50 * n
-    if size < expected <= TRUNCATED_FACTOR * size:  # plausibly the start of a real binary STL
-        raise ValueError(f"{path}: truncated binary STL: the header announces {n} facets "
-                         f"({expected} bytes) but the file has {size} bytes")
-    if (size - 84) % 50 == 0:
-        raise ValueError(f"{path}: corrupt binary STL: the header announces {n} facets but the file holds "
-                         f"{(size - 84) // 50}")
-    raise ValueError(f"{path}: not an STL file (neither ASCII STL nor a binary STL: facet count {n} in the "
-                     f"header does not match the file size of {size} bytes)")
-
-
 def read_mesh(path: str | os.PathLike):
     """Read a mesh file (STL, OBJ, PLY, 3MF, ...) as a single trimesh.
 
@@ -300,14 +204,10 @@ def read_mesh(path: str | os.PathLike):
         raise ValueError(f"{path}: no such file")
     suffix = path.suffix.lower()
     try:
-        loaded = None
         if suffix == ".stl":
-            check_stl(path)
-            loaded = _binary_stl(path)
-        if loaded is not None:
-            pass
+            loaded = read_stl(path)
         elif suffix == ".3mf":
-            from .fabrication.threemf import read_3mf_file
+            from .threemf import read_3mf_file
 
             parts = read_3mf_file(path)
             loaded = trimesh.util.concatenate(
@@ -315,7 +215,7 @@ def read_mesh(path: str | os.PathLike):
         else:
             with path.open("rb") as fh:
                 head = fh.read(16)
-            other = _what_is(head)
+            other = what_is(head)
             if other is not None:
                 raise ValueError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
             loaded = trimesh.load(path, force="mesh", process=False)
@@ -341,7 +241,7 @@ def read_parts(path: str | os.PathLike) -> list:
 
     Returns
     -------
-    list of grainforge.fabrication.threemf.Part
+    list of grainforge.io.threemf.Part
         Named parts; an STL's triangle soup has its exactly coincident vertices merged.
 
     Raises
@@ -349,14 +249,14 @@ def read_parts(path: str | os.PathLike) -> list:
     ValueError
         If the file is missing, unreadable or holds no triangles.
     """
-    from .fabrication.threemf import Part, read_3mf_file
+    from .threemf import Part, read_3mf_file
 
     path = Path(path)
     if path.suffix.lower() == ".3mf":
         return read_3mf_file(path)
     mesh = read_mesh(path)
     # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
-    from .solid import unique_rows
+    from ..solid import unique_rows
 
     v, inv = unique_rows(np.asarray(mesh.vertices, dtype=np.float64))
     f = inv[np.asarray(mesh.faces, dtype=np.int64)]

@@ -1,14 +1,13 @@
-"""Streaming writers for many-part print files: 3MF (one named object per part) and binary STL.
+"""3MF print files: a streaming writer (one named object per part) and a reader.
 
-Both writers take one part at a time and keep only a few numbers per part in
-memory, so a tray of thousands of grains is written with bounded memory:
+The writer takes one part at a time and keeps only a few numbers per part in
+memory, so a tray of thousands of grains is written with bounded memory (its
+binary-STL counterpart is :class:`grainforge.io.stl.STLWriter`):
 
 - :class:`ThreeMFWriter` streams the model XML into a deflated zip entry
   (``3D/3dmodel.model``); each part is an ``<object>`` with its own name and
   mesh, placed by a ``<build><item transform=...>``.  The mesh XML of a part
   can be made in a worker process (:func:`mesh_xml`).
-- :class:`STLWriter` writes the 80-byte header and a placeholder count, then
-  the triangles of each part, and patches the count on close.
 
 :func:`read_3mf` reads a 3MF back with the standard library only (trimesh's
 3MF reader needs lxml) and returns the placed parts.
@@ -28,12 +27,10 @@ Examples
 
 from __future__ import annotations
 
-import struct
 import zipfile
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import lru_cache
-from typing import BinaryIO
 from xml.etree import ElementTree
 from xml.sax.saxutils import quoteattr
 
@@ -42,7 +39,7 @@ import numpy as np
 from .._version import __version__
 
 __all__ = [
-    "ThreeMFWriter", "STLWriter", "mesh_xml", "stl_triangles", "read_3mf", "read_stl_parts", "read_3mf_file", "Part",
+    "ThreeMFWriter", "mesh_xml", "read_3mf", "read_3mf_file", "Part",
 ]
 
 _NS = "http://schemas.microsoft.com/3dmanufacturing/core/2015/02"
@@ -165,66 +162,6 @@ class ThreeMFWriter:
             self.abort()
 
 
-_STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("attr", "<u2")])
-
-
-def stl_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Binary-STL records (50 bytes each) of a mesh, with unit face normals.
-
-    Returns
-    -------
-    (F,) structured array of dtype ``normal (3,) f4, vertices (3, 3) f4, attr u2``
-    """
-    tri = np.asarray(vertices, dtype=np.float64)[np.asarray(faces)]
-    n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
-    n /= np.maximum(np.linalg.norm(n, axis=1, keepdims=True), 1e-300)
-    out = np.zeros(len(tri), dtype=_STL_DTYPE)
-    out["normal"] = n
-    out["vertices"] = tri
-    return out
-
-
-class STLWriter:
-    """Write a binary STL one part at a time (header, triangles, then the count is patched)."""
-
-    def __init__(self, file: BinaryIO, header: str = ""):
-        self._fh = file
-        head = (header or f"grainforge {__version__} tray").encode("ascii", "replace")[:80].ljust(80, b" ")
-        if head.lower().startswith(b"solid"):
-            head = b"_" + head[:79]
-        self._start = file.tell()
-        file.write(head + struct.pack("<I", 0))
-        self.triangles = 0
-        self.count = 0
-
-    def add_object(self, name: str, records: np.ndarray, translation: Sequence[float] = (0.0, 0.0, 0.0)) -> int:
-        """Append a part (records from :func:`stl_triangles`, in part coordinates) moved by ``translation``."""
-        rec = records.copy()
-        rec["vertices"] += np.asarray(translation, dtype=np.float64).astype(np.float32)
-        self._fh.write(rec.tobytes())
-        self.triangles += len(rec)
-        self.count += 1
-        return self.count
-
-    def close(self) -> None:
-        if self.triangles >= 2**32:
-            raise ValueError(f"binary STL holds at most 2^32 - 1 triangles, got {self.triangles}; use .3mf")
-        end = self._fh.tell()
-        self._fh.seek(self._start + 80)
-        self._fh.write(struct.pack("<I", self.triangles))
-        self._fh.seek(end)
-
-    def abort(self) -> None:
-        """Stop without patching the count (the caller deletes the partial file)."""
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is None:
-            self.close()
-
-
 @dataclass(frozen=True)
 class Part:
     """One placed part read back from a print file."""
@@ -291,22 +228,10 @@ def read_3mf(file) -> list[Part]:
     return parts
 
 
-def read_stl_parts(path) -> list[Part]:
-    """The connected bodies of a binary STL (vertices merged exactly), in file order."""
-    import trimesh
-
-    from ..solid import split_bodies
-
-    mesh = trimesh.load(path, file_type="stl", process=False)
-    bodies = split_bodies(mesh.vertices, mesh.faces, drop_degenerate=False)
-    return [Part(f"body-{k}", v, f) for k, (v, f) in enumerate(bodies)]
-
-
 def read_3mf_file(path) -> list[Part]:
     """The parts (build items) of the 3MF file ``path``, checked.
 
-    :func:`grainforge.io.read_parts` reads any mesh file as parts; this is its 3MF branch
-    (kept here, so that this module does not import :mod:`grainforge.io`, which imports it).
+    :func:`grainforge.io.read_parts` reads any mesh file as parts; this is its 3MF branch.
 
     Raises
     ------
