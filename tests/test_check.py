@@ -10,7 +10,6 @@ from grainforge.fabrication import printability
 from grainforge.fabrication.printability import (
     GRID_ENTRIES_PER_FACE,
     _candidate_slices,
-    _moller_trumbore,
     _ray_cells,
     _segments,
     _short_rays,
@@ -20,6 +19,7 @@ from grainforge.fabrication.printability import (
     triangle_grid,
 )
 from grainforge.io.threemf import ThreeMFWriter, mesh_xml
+from grainforge.solid import moller_trumbore
 
 
 def _neck(radius):
@@ -113,7 +113,7 @@ def test_candidate_slices_are_bounded_and_hold_every_hit():
     # brute force: every (ray, triangle) crossing within reach is among the candidates
     R, T = np.meshgrid(np.arange(len(idx)), np.arange(len(m.faces)), indexing="ij")
     R, T = R.ravel(), T.ravel()
-    ok, u, w, t = _moller_trumbore(origins[R], -normals[R] * reach, m.triangles[T], 1e-30)
+    ok, u, w, t = moller_trumbore(origins[R], -normals[R] * reach, m.triangles[T], 1e-30)
     hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0) & (t <= 1)
     assert hit.sum() > len(idx)
     assert {(int(a), int(b)) for a, b in zip(R[hit], T[hit])} <= found

@@ -318,18 +318,20 @@ def calibrate(
         results: Iterable = map(_measure, tasks)
         pool = None
     else:
-        from .workers import process_pool, single_threaded_children
+        from .workers import close_pool, process_pool, single_threaded_children
 
         pool = process_pool(workers, ["grainforge.calibration", "grainforge.methods.dpa", "trimesh"])
         with single_threaded_children():  # map submits every task, starting the workers
             results = pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
+    ok = False
     try:
         if progress is not None:
             results = progress(results)
         values = np.array(list(results), dtype=np.float64).reshape(len(exps), repeats, 4)
+        ok = True
     finally:
         if pool is not None:
-            pool.shutdown(cancel_futures=True)
+            close_pool(pool, abort=not ok)  # an error, Ctrl-C or SIGTERM: stop the workers now
 
     import warnings
 

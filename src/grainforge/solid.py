@@ -30,7 +30,7 @@ import numpy as np
 __all__ = [
     "signed_volume", "volume_centroid", "face_components", "is_closed", "as_written", "solid_problems",
     "require_solid", "index_problems", "split_bodies", "self_intersections", "star_certificate", "AREA_TOLERANCE",
-    "cross3", "volume_and_centroid", "second_moments",
+    "cross3", "volume_and_centroid", "second_moments", "moller_trumbore",
 ]
 
 #: smallest face area allowed, relative to the squared bounding-box diagonal of the mesh.
@@ -368,21 +368,53 @@ def _candidate_pairs(tri: np.ndarray, block: int = PAIR_BLOCK):
         a = b
 
 
-def _segments_cross(p0, p1, tri, eps: float = 1e-9) -> np.ndarray:
-    """Whether each segment p0→p1 crosses the interior of the matching triangle (strictly, relative margin eps)."""
-    d = p1 - p0
+def moller_trumbore(p0, d, tri, det_min: float, relative: bool = False):
+    """Vectorised Möller–Trumbore: barycentrics (u, w) and parameter t of ``p0 + t·d`` on each triangle.
+
+    The one ray/segment–triangle intersection of grainforge (the solid contract's
+    self-intersection test, the printability checks' thickness rays).
+
+    Parameters
+    ----------
+    p0, d : (n, 3) float64
+        Ray origins and directions (a segment p0→p1 is ``d = p1 − p0``, hit for 0 < t < 1).
+    tri : (n, 3, 3) float64
+        The matching triangles.
+    det_min : float
+        ``ok`` is false where the ray is parallel to the triangle: |det| ≤ det_min, or with
+        ``relative`` |det| ≤ det_min · |d| |e1| |e2| (a threshold that scales with the mesh).
+
+    Returns
+    -------
+    ok : (n,) bool
+    u, w, t : (n,) float64
+
+    Examples
+    --------
+    >>> tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
+    >>> ok, u, w, t = moller_trumbore(np.array([[0.2, 0.3, -1.0]]), np.array([[0.0, 0, 2]]), tri, 1e-15)
+    >>> bool(ok[0]), round(float(u[0]), 12), round(float(w[0]), 12), float(t[0])
+    (True, 0.2, 0.3, 0.5)
+    """
     e1 = tri[:, 1] - tri[:, 0]
     e2 = tri[:, 2] - tri[:, 0]
     h = np.cross(d, e2)
     a = np.einsum("ij,ij->i", e1, h)
-    scale = np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1)
-    ok = np.abs(a) > 1e-12 * scale
+    if relative:
+        det_min = det_min * (np.linalg.norm(d, axis=1) * np.linalg.norm(e1, axis=1) * np.linalg.norm(e2, axis=1))
+    ok = np.abs(a) > det_min
     inv = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
     s = p0 - tri[:, 0]
     u = inv * np.einsum("ij,ij->i", s, h)
     q = np.cross(s, e1)
     w = inv * np.einsum("ij,ij->i", d, q)
     t = inv * np.einsum("ij,ij->i", e2, q)
+    return ok, u, w, t
+
+
+def _segments_cross(p0, p1, tri, eps: float = 1e-9) -> np.ndarray:
+    """Whether each segment p0→p1 crosses the interior of the matching triangle (strictly, relative margin eps)."""
+    ok, u, w, t = moller_trumbore(p0, p1 - p0, tri, 1e-12, relative=True)
     return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
 
 

@@ -16,6 +16,7 @@ Two habits every pool shares:
 
 from __future__ import annotations
 
+import functools
 import os
 import signal
 import sys
@@ -163,10 +164,42 @@ def _quiet_stderr() -> Iterator[None]:
         os.close(null)
 
 
+@functools.cache
+def _pool_class():
+    """:class:`concurrent.futures.ProcessPoolExecutor` with what :func:`close_pool` needs to know,
+    recorded through public API only (made lazily: the class imports concurrent.futures).
+
+    Its workers are the children this process started after the pool was made, so one process
+    runs one pool at a time (as every grainforge command does)."""
+    from concurrent.futures import ProcessPoolExecutor
+
+    class Pool(ProcessPoolExecutor):
+        """A ``ProcessPoolExecutor`` that remembers its size, its start method and the child processes
+        this process had before it (so that its own workers are the children started since)."""
+
+        def __init__(self, workers: int, mp_context, owner: int):
+            import multiprocessing
+
+            self.workers = int(workers)
+            self.start_method = mp_context.get_start_method()
+            self.children_before = {p.pid for p in multiprocessing.active_children()}
+            super().__init__(max_workers=self.workers, mp_context=mp_context, initializer=watch_parent,
+                             initargs=(owner,))
+
+        def worker_processes(self) -> list:
+            """The pool's live worker processes (``multiprocessing.Process`` objects)."""
+            import multiprocessing
+
+            return [p for p in multiprocessing.active_children() if p.pid not in self.children_before]
+
+    return Pool
+
+
 def process_pool(workers: int, preload: Sequence[str] = ()):
     """A ``ProcessPoolExecutor`` of ``workers`` processes started from a fork server.
 
     Workers exit by themselves when this process dies (see :func:`watch_parent`).
+    Shut it down with :func:`close_pool`.
 
     Parameters
     ----------
@@ -175,7 +208,6 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
         Modules the fork server imports once, before forking the workers.
     """
     import multiprocessing
-    from concurrent.futures import ProcessPoolExecutor
 
     if "forkserver" in multiprocessing.get_all_start_methods():
         from multiprocessing import forkserver, resource_tracker
@@ -197,8 +229,7 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
             forkserver.ensure_running()
     else:
         ctx = multiprocessing.get_context("spawn")
-    return ProcessPoolExecutor(max_workers=int(workers), mp_context=ctx, initializer=watch_parent,
-                               initargs=(os.getpid(),))
+    return _pool_class()(workers, ctx, os.getpid())
 
 
 def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, preload: Sequence[str] = (),
@@ -241,19 +272,27 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
 
 
 def close_pool(pool, abort: bool = False) -> None:
-    """Shut a pool down; with ``abort`` (an error, Ctrl-C, SIGTERM) stop its workers now instead of
-    letting them finish the tasks they hold."""
+    """Shut a pool of :func:`process_pool` down; with ``abort`` (an error, Ctrl-C, SIGTERM) stop its
+    workers now instead of letting them finish the tasks they hold.
+
+    The documented shutdown: ``pool.shutdown(wait=False, cancel_futures=True)`` drops the queued
+    tasks; the workers (``multiprocessing.active_children()`` started since the pool was made) are
+    terminated and joined; when fewer workers than asked for had started, one may still be on its
+    way from the fork server, so the fork server and everything it forked are killed
+    (:func:`stop_forkserver`); and the pool's result pipe is unblocked
+    (:func:`_unblock_result_reader`, the one use of a private attribute, for the reason given there).
+    """
     if not abort:
         pool.shutdown(wait=True, cancel_futures=True)
         return
-    processes = list(getattr(pool, "_processes", {}).values())
-    results = getattr(pool, "_result_queue", None)  # (shutdown forgets it)
+    processes = pool.worker_processes()
+    unblock = _unblock_result_reader(pool)  # before shutdown, which forgets the pipe
     for p in processes:
         try:
             p.terminate()
-        except (OSError, AttributeError):
+        except (OSError, AttributeError, ValueError):
             pass
-    if len(processes) < getattr(pool, "_max_workers", 0) and _uses_forkserver(pool):
+    if len(processes) < pool.workers and pool.start_method == "forkserver":
         # start-up was cut short: a worker may be on its way from the fork server (the request sent,
         # its pid not yet known here); it would start after this process is gone and print a
         # traceback. Stop the fork server and every process it forked.
@@ -261,24 +300,33 @@ def close_pool(pool, abort: bool = False) -> None:
     pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         p.join(timeout=5)
-    # A worker stopped while it was sending a result leaves the pool's manager thread reading the
-    # rest of that message for ever (this process holds the pipe's write end as well), and the
-    # interpreter waits for that thread at exit: the command printed "Interrupted." and hung.
-    # Closing our write end lets the read see the end of the pipe (the workers' ends died with them).
-    writer = getattr(results, "_writer", None)
-    if writer is not None:
-        try:
-            writer.close()
-        except OSError:
-            pass
+    unblock()
 
 
-def _uses_forkserver(pool) -> bool:
-    ctx = getattr(pool, "_mp_context", None)
-    try:
-        return ctx is not None and ctx.get_start_method() == "forkserver"
-    except (AttributeError, ValueError):
-        return False
+def _unblock_result_reader(pool) -> Callable[[], None]:
+    """What unblocks the pool's result reader once its workers are stopped: closing this process's
+    write end of the result pipe.
+
+    A worker stopped while it was sending a result leaves the pool's manager thread reading the rest
+    of that message for ever (this process holds the pipe's write end as well, so the read never
+    sees the end of the pipe), and the interpreter waits for that thread at exit: the command
+    printed "Interrupted." and hung. Closing our write end lets the read end (the workers' ends died
+    with them). Neither ``concurrent.futures`` (up to Python 3.14's ``terminate_workers``) nor
+    ``multiprocessing`` has a public way to reach that pipe, so this is the one place grainforge
+    touches a private attribute of the standard library: ``pool._result_queue._writer``. Where it
+    is missing (another Python), the returned function does nothing and an interrupted pool may
+    again wait for its manager thread.
+    """
+    writer = getattr(getattr(pool, "_result_queue", None), "_writer", None)
+
+    def close() -> None:
+        if writer is not None:
+            try:
+                writer.close()
+            except OSError:
+                pass
+
+    return close
 
 
 def _children_of(pid: int) -> list[int]:
@@ -350,20 +398,32 @@ def kill_process_tree(pid: int) -> None:
         pass
 
 
+def _forkserver_pids() -> list[int]:
+    """Children of this process that are multiprocessing fork servers (found by their command line
+    in Linux ``/proc``; empty elsewhere)."""
+    found = []
+    for pid in _children_of(os.getpid()):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                cmdline = fh.read()
+        except OSError:
+            continue
+        if b"multiprocessing.forkserver" in cmdline:
+            found.append(pid)
+    return found
+
+
 def stop_forkserver() -> None:
     """Kill this process's multiprocessing fork server and every process it forked (workers, also
-    half-started ones) with :func:`kill_process_tree`; the next pool starts a new fork server."""
-    from multiprocessing import forkserver
+    half-started ones) with :func:`kill_process_tree`.
 
-    server = getattr(forkserver, "_forkserver", None)
-    pid = getattr(server, "_forkserver_pid", None)
-    if pid is None or not pid_alive(pid):
-        return
-    kill_process_tree(pid)
-    try:
-        server._stop()  # reaps it and forgets its address, so the next pool starts a new one
-    except (OSError, AttributeError):
-        pass
+    The fork server is found as the child of this process running ``multiprocessing.forkserver``.
+    The next pool starts a new one: ``multiprocessing.forkserver.ensure_running()`` reaps a dead fork
+    server and starts another.
+    """
+    for pid in _forkserver_pids():
+        if pid_alive(pid):
+            kill_process_tree(pid)
 
 
 _END = object()

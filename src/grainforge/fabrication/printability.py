@@ -37,6 +37,8 @@ from typing import Any
 
 import numpy as np
 
+from ..solid import moller_trumbore
+
 __all__ = ["CheckResult", "check_mesh", "equivalent_diameter", "TriangleGrid", "triangle_grid", "local_thickness", "self_intersections", "THIN_AREA_LIMIT", "NECK_FACTOR"]
 
 #: largest fraction of the surface area allowed below ``min_wall`` before a part fails.
@@ -127,28 +129,9 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     return count(*as_written(vertices, faces))
 
 
-def _moller_trumbore(p0, d, tri, det_min):
-    """Vectorised Möller–Trumbore: barycentrics (u, w) and parameter t of p0 + t·d on each triangle.
-
-    ``ok`` is false where the segment is parallel to the triangle (|det| ≤ det_min).
-    """
-    e1 = tri[:, 1] - tri[:, 0]
-    e2 = tri[:, 2] - tri[:, 0]
-    h = np.cross(d, e2)
-    a = np.einsum("ij,ij->i", e1, h)
-    ok = np.abs(a) > det_min
-    inv = np.where(ok, 1.0 / np.where(ok, a, 1.0), 0.0)
-    s = p0 - tri[:, 0]
-    u = inv * np.einsum("ij,ij->i", s, h)
-    q = np.cross(s, e1)
-    w = inv * np.einsum("ij,ij->i", d, q)
-    t = inv * np.einsum("ij,ij->i", e2, q)
-    return ok, u, w, t
-
-
 def _segment_hits_triangle(p0, p1, tri):
     """Whether segment p0→p1 crosses each triangle's interior (strictly, by a 1e-9 margin)."""
-    ok, u, w, t = _moller_trumbore(p0, p1 - p0, tri, 1e-15)
+    ok, u, w, t = moller_trumbore(p0, p1 - p0, tri, 1e-15)
     eps = 1e-9
     return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
 
@@ -365,7 +348,7 @@ def _short_rays(mesh, idx, origins, normals, length, eps, max_pairs: int = MAX_P
         for ray_k, cand in _candidate_slices(grid, ray + r0, slot, max_pairs):
             keep = cand != idx[ray_k]
             ray_k, cand = ray_k[keep], cand[keep]
-            ok, u, w, t = _moller_trumbore(origins[ray_k], direction[ray_k], tri[cand], 1e-30)
+            ok, u, w, t = moller_trumbore(origins[ray_k], direction[ray_k], tri[cand], 1e-30)
             hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t * length > eps) & (t <= 1)
             np.minimum.at(out, ray_k[hit], t[hit] * length + eps)
     return out

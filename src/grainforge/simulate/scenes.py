@@ -13,7 +13,12 @@ is measured afterwards, in grainforge, from that file
 (:mod:`grainforge.simulate.measure`).
 
 These texts run inside Yade (its Python, its numpy); they never import
-grainforge.
+grainforge.  Their ``random_rotation`` (a Yade ``Quaternion`` about a
+Gaussian axis, from Python's :mod:`random`) is therefore a deliberate
+engine-side copy of what :func:`grainforge.rotations.random_rotation` does
+in grainforge, as is the orientation draw of the deck's example pour
+(``grainforge/dem/scripts/yade_pour.py``): a comment inside the texts would
+change the decks' bytes, so it is said here.
 """
 
 from __future__ import annotations
