@@ -207,7 +207,8 @@ def inside_mask(vertices: np.ndarray, faces: np.ndarray, grid: Grid, *, axis: in
         # counter-clockwise in (a, b) = outward normal along +axis = leaving when going along the column
         step = -side[0][hit]
         bad = np.flatnonzero(np.bincount(col, weights=step, minlength=plane))
-        steps = np.bincount(cell, weights=step, minlength=(ns + 1) * plane).astype(np.int16)
+        steps = np.zeros((ns + 1) * plane, dtype=np.int16)
+        np.add.at(steps, cell, step.astype(np.int16))
     steps = steps.reshape(ns + 1, plane)
     # sweep along the columns, whole planes at a time (much faster than numpy's accumulate along a
     # short last axis; int16 leaves room for 32,767 nested layers)
