@@ -57,7 +57,7 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
               nodes: int = 500) -> LevelSet:
     """Signed distance to the mesh surface at the nodes of a regular grid.
 
-    Inside/outside is exact at the nodes (scanline parity,
+    Inside/outside is exact at the nodes (scanline winding number,
     :func:`grainforge.voxel.inside_mask`); the distance is the exact
     Euclidean distance to the nearest triangle (trimesh), signed.
 
