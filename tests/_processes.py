@@ -36,3 +36,22 @@ def kill_sessions(started: list[subprocess.Popen]) -> None:
         if proc.poll() is None:
             proc.kill()
         proc.communicate()
+
+
+def child_processes(pid: int) -> list[int]:
+    """Processes (not zombies) descended from ``pid``, at any depth."""
+    parent = {}
+    for entry in Path("/proc").iterdir():
+        if not entry.name.isdigit():
+            continue
+        try:
+            fields = (entry / "stat").read_text().rsplit(")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if fields[0] not in ("Z", "X"):
+            parent[int(entry.name)] = int(fields[1])  # fields[1]: parent pid
+    found, frontier = [], {pid}
+    while frontier:
+        frontier = {p for p, pp in parent.items() if pp in frontier}
+        found += sorted(frontier)
+    return found
