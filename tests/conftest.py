@@ -17,6 +17,16 @@ settings.register_profile("thorough", max_examples=300, deadline=None, suppress_
 settings.load_profile(os.environ.get("GRAINFORGE_HYPOTHESIS", "default"))
 
 
+def pytest_collection_modifyitems(config, items):
+    """The tests marked slow first, each group in its collected order.
+
+    ``make test`` spreads the tests over two processes by work stealing (pytest-xdist's
+    ``--dist worksteal``): a process that runs out of tests takes half of the other's queue.
+    Starting with the long tests leaves short ones for the end, so that no process is left
+    running one long test alone while the other idles."""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture
 def runner():
     from click.testing import CliRunner
