@@ -404,11 +404,13 @@ def sim_dir(tmp_path, inputs):
 
 
 @pytest.mark.slow  # a real process per signal and moment
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-@pytest.mark.parametrize("delay", [0.3, 0.8, 1.3, 1.8])
+@pytest.mark.parametrize("sig, delay", [(signal.SIGINT, 0.3), (signal.SIGTERM, 0.8), (signal.SIGINT, 1.3),
+                                        (signal.SIGTERM, 1.8)], ids=["SIGINT-0.3", "SIGTERM-0.8", "SIGINT-1.3",
+                                                                     "SIGTERM-1.8"])
 def test_signal_before_yade_starts_is_honoured(sim_dir, inputs, sig, delay):
     """At any moment before the engine runs (imports, checks, templates): exit 130/143 in one line, nothing
-    written, no process left. (An import that swallowed the KeyboardInterrupt used to let the run go on.)"""
+    written, no process left. (An import that swallowed the KeyboardInterrupt used to let the run go on.)
+    The moments alternate between the two signals: each signal early and late, each moment once."""
     work, fake = sim_dir
     proc = _start(["simulate", "repose", str(inputs / "ang"), "--quick", "--out", "o"], work,
                   GRAINFORGE_YADE=str(fake))

@@ -99,10 +99,11 @@ def _heavy_dem_run(tmp_path, **popen):
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("delay", [0.8, 1.6, 2.5, 4.0])
-@pytest.mark.parametrize("signame", ["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("signame, delay", [("SIGINT", 0.8), ("SIGTERM", 1.6), ("SIGINT", 2.5), ("SIGTERM", 4.0)])
 def test_dem_honours_signals_at_any_moment(tmp_path, delay, signame):
     """While the pool starts and while it works: one line, the usual code, no process and no deck left.
+    Each signal is sent once while the pool starts (0.8, 1.6 s) and once while it works (2.5, 4 s): the
+    moment decides what there is to stop, the signal only which line and code the command ends with.
     (How quickly the command stops is a figure for docs/benchmarks.md, not an assertion: the 60 s
     below only guards against a hang.)"""
     import signal
