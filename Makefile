@@ -22,9 +22,9 @@ demo: $(STAMP)
 	$(BIN)/grainforge demo --out out/demo --overwrite
 
 # the suite runs on PYTEST_PROCS processes (pytest-xdist; the machine the targets are set on has 2 cores),
-# balanced by work stealing (tests/conftest.py puts the slow tests first)
+# one test at a time to whichever process is free, the slow tests first (tests/conftest.py)
 PYTEST_PROCS ?= 2
-PYTEST_DIST  ?= --dist worksteal
+PYTEST_DIST  ?= --dist load --maxschedchunk 1
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -n $(PYTEST_PROCS) $(PYTEST_DIST)

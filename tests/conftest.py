@@ -20,10 +20,11 @@ settings.load_profile(os.environ.get("GRAINFORGE_HYPOTHESIS", "default"))
 def pytest_collection_modifyitems(config, items):
     """The tests marked slow first, each group in its collected order.
 
-    ``make test`` spreads the tests over two processes by work stealing (pytest-xdist's
-    ``--dist worksteal``): a process that runs out of tests takes half of the other's queue.
-    Starting with the long tests leaves short ones for the end, so that no process is left
-    running one long test alone while the other idles."""
+    ``make test`` hands the tests to two processes one at a time, in this order, to whichever is
+    free (pytest-xdist's ``--dist load --maxschedchunk 1``). Starting with the long tests leaves
+    short ones for the end, so that no process is left running one long test alone while the
+    other idles. (Work stealing, ``--dist worksteal``, did leave one: it splits the queue in two
+    halves up front and steals from the tail, so the long tests at the head stay on one process.)"""
     items.sort(key=lambda item: item.get_closest_marker("slow") is None)
 
 

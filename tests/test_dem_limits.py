@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 import trimesh
+from click.testing import CliRunner
 
+from grainforge.cli.main import cli
 from grainforge.dem import levelset
 
 
@@ -35,6 +39,19 @@ def test_level_set_refuses_a_grid_over_the_node_budget(monkeypatch):
     except ValueError as exc:
         proposed = float(re.search(r"at least ([0-9.e-]+)", str(exc)).group(1))
     assert levelset.level_set(v, f, spacing=proposed).distance.size <= 5_000
+
+
+def test_a_level_set_spacing_too_fine_is_refused_in_one_line_before_the_estimate(angular_grains, tmp_path):
+    """The node budget is checked for every grain up front: one line naming the file, exit 2, no deck (it
+    used to come from the first template built, after the time estimate had been printed: two lines)."""
+    out = tmp_path / "d"
+    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(out), "--engine", "yade",
+                                   "--shape", "levelset", "--spacing", "0.01", "--workers", "1"])
+    assert res.exit_code == 2, res.output
+    lines = res.stderr.strip().splitlines()
+    assert len(lines) == 1 and re.match(r"Error: .*angular-0000\.stl: level-set spacing 0\.01 of d_eq needs .* "
+                                        r"use a spacing of at least", lines[0]), res.stderr
+    assert not out.exists()
 
 
 def test_a_manifest_of_random_bytes_is_named(tmp_path):
