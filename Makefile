@@ -21,16 +21,18 @@ install: $(STAMP)
 demo: $(STAMP)
 	$(BIN)/grainforge demo --out out/demo --overwrite
 
-# the suite runs on PYTEST_PROCS processes (pytest-xdist; the machine the targets are set on has 2 cores)
+# the suite runs on PYTEST_PROCS processes (pytest-xdist; the machine the targets are set on has 2 cores),
+# one test at a time to whichever process is free, the slow tests first (tests/conftest.py)
 PYTEST_PROCS ?= 2
+PYTEST_DIST  ?= --dist load --maxschedchunk 1
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -n $(PYTEST_PROCS)
+	$(BIN)/python -m pytest -n $(PYTEST_PROCS) $(PYTEST_DIST)
 
 # the fast lane for everyday work: lint, then every test not marked slow
 check: $(STAMP)
 	$(BIN)/ruff check src tests benchmarks
-	$(BIN)/python -m pytest -m "not slow" -q -n $(PYTEST_PROCS)
+	$(BIN)/python -m pytest -m "not slow" -q -n $(PYTEST_PROCS) $(PYTEST_DIST)
 
 bench: $(STAMP)
 	@for b in benchmarks/bench_*.py; do echo "== $$b"; $(BIN)/python $$b || exit 1; done

@@ -17,6 +17,17 @@ settings.register_profile("thorough", max_examples=300, deadline=None, suppress_
 settings.load_profile(os.environ.get("GRAINFORGE_HYPOTHESIS", "default"))
 
 
+def pytest_collection_modifyitems(config, items):
+    """The tests marked slow first, each group in its collected order.
+
+    ``make test`` hands the tests to two processes one at a time, in this order, to whichever is
+    free (pytest-xdist's ``--dist load --maxschedchunk 1``). Starting with the long tests leaves
+    short ones for the end, so that no process is left running one long test alone while the
+    other idles. (Work stealing, ``--dist worksteal``, did leave one: it splits the queue in two
+    halves up front and steals from the tail, so the long tests at the head stay on one process.)"""
+    items.sort(key=lambda item: item.get_closest_marker("slow") is None)
+
+
 @pytest.fixture
 def runner():
     from click.testing import CliRunner

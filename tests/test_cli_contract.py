@@ -1,16 +1,22 @@
 """The CLI contract, case by case: every bad input, huge request and interrupt.
 
-Every row of :data:`CASES` runs ``grainforge ARGS...`` as a real subprocess
-(in its own session, with a 6 GiB address-space limit so a request that tries
-to allocate too much fails fast instead of swapping the machine) in a fresh
-folder, and asserts the contract:
+Every row of :data:`CASES` runs ``grainforge ARGS...`` in a fresh folder and
+asserts the contract.  Most rows run *in-process* (click's ``CliRunner``,
+through the same ``cli.main`` that turns errors into one line and an exit
+code, as the console script does): no interpreter start per row.  The rows
+marked ``process=True`` run as a real subprocess (in its own session, with a
+6 GiB address-space limit): the huge requests, where the limit is what makes
+a request that tries to allocate too much fail fast instead of swapping the
+machine, and which also prove the exit codes of the real executable.  Every
+row asserts:
 
 - the exit code (2 for bad input; 0 or 1 where the row documents it);
 - exactly one line on stderr (or ``lines`` lines where documented), matching ``err``;
 - no ``Traceback``;
 - no file or folder appears or disappears in the case folder or the shared
   inputs, except the ``creates`` the row documents;
-- no process of the command's session is left afterwards.
+- no process is left afterwards (of the command's session for a subprocess;
+  no child of the test process for an in-process row).
 
 Adding a row for a new command
 ------------------------------
@@ -29,8 +35,8 @@ writes should get at least the rows: read-only folder, under ``afile``, empty
 path, existing output without ``--overwrite``.  Interrupt cases (real
 signals) are the ``test_sigterm_*``, ``test_sigkill_*`` and ``test_ctrl_c_*`` functions at the end.
 
-Run: ``.venv/bin/python -m pytest tests/test_cli_contract.py -q`` (117 rows and 5 sequences; each command
-starts in about 0.5 s idle, so a few minutes idle; it took 9–10 min at load average 20–30).
+Run: ``.venv/bin/python -m pytest tests/test_cli_contract.py -q``.  The in-process rows are in the fast
+lane; the subprocess rows, sequences and signals are marked slow.
 """
 
 from __future__ import annotations
@@ -48,11 +54,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from _processes import kill_sessions, session_processes
-
-# every row runs a real grainforge process (memory limits, signals): the full suite runs them;
-# the fast lane has the in-process contract tests (test_cli_contract_fit_simulate.py, test_first_use.py)
-pytestmark = pytest.mark.slow
+from _processes import child_processes, kill_sessions, session_processes
 
 #: the CLI as a user runs it (the package this interpreter imports)
 CLI = [sys.executable, "-c", "from grainforge.cli.main import main; main()"]
@@ -81,7 +83,11 @@ class Case:
     check : callable, optional
         ``check(case_folder)`` for more assertions on a documented success.
     timeout : float
-        Seconds before the command counts as hanging.
+        Seconds before the command counts as hanging (subprocess rows).
+    readonly : bool
+        The row needs ``ro/`` unwritable (skipped where that cannot be arranged).
+    process : bool
+        Run as a real, memory-limited subprocess (a huge request) instead of in-process.
     """
 
     id: str
@@ -93,6 +99,7 @@ class Case:
     check: object = None
     timeout: float = 60.0
     readonly: bool = False
+    process: bool = False
 
 
 def _jpeg(d: Path) -> None:
@@ -169,13 +176,13 @@ CASES: list[Case] = [
     Case("generate-out-below-stl", ["generate", "fso", "--out", "{in}/grain.stl/sub"], err=r"is a file, not a folder"),
     # §1: MemoryError / huge values
     Case("render-columns-1e9", ["render", "{in}/grain.stl", "-o", "r.png", "--columns", "1000000000"],
-         code=0, err=r"wrote r\.png", creates=("r.png",)),
+         code=0, err=r"wrote r\.png", creates=("r.png",), process=True),
     Case("calibrate-exponents-1e9", ["calibrate", "dpa", "--exponents", "1:1000000000:1", "--out", "cal"],
-         err=r"--exponents.*1000"),
+         err=r"--exponents.*1000", process=True),
     Case("tray-count-1e9", ["tray", "--method", "fso", "--count", "1000000000", "--size", "0.5", "--out", "t.3mf"],
-         err=r"would (take|need) .*--count"),
-    Case("batch-size-mm-1e300", ["batch", "{in}/huge_size.toml", "--out", "b"], err=r"size\.mm: must be in"),
-    Case("batch-median-1e300", ["batch", "{in}/huge_median.toml", "--out", "b"], err=r"median_mm"),
+         err=r"would (take|need) .*--count", process=True),
+    Case("batch-size-mm-1e300", ["batch", "{in}/huge_size.toml", "--out", "b"], err=r"size\.mm: must be in", process=True),
+    Case("batch-median-1e300", ["batch", "{in}/huge_median.toml", "--out", "b"], err=r"median_mm", process=True),
     # §2: exit 0 on bad input
     Case("render-nan", ["render", "{in}/nan.stl", "-o", "r.png"], err=r"non-finite"),
     *[Case(f"plot-{kind}-text-columns", ["plot", kind, "{in}/text.csv", "-o", "p.png"], err=r"holds no numbers")
@@ -186,19 +193,19 @@ CASES: list[Case] = [
       for v in ("nan", "inf", "-inf")],
     # §3: huge requests refused up front with the estimate and the option that reduces it
     Case("generate-fso-count-1e9", ["generate", "fso", "--count", "1000000000", "--out", "g"],
-         err=r"would take .*--count"),
+         err=r"would take .*--count", process=True),
     Case("generate-cri-count-1e9", ["generate", "cri", "--count", "1000000000", "--out", "g"],
-         err=r"would take .*--count"),
-    Case("batch-count-2**63-1", ["batch", "{in}/huge_count.toml", "--out", "b"], err=r"would take .*count"),
-    Case("fourier-rays-1e8", ["fourier", "{in}/grain.png", "--rays", "100000000"], err=r"GiB.*--rays|--rays.*GiB"),
+         err=r"would take .*--count", process=True),
+    Case("batch-count-2**63-1", ["batch", "{in}/huge_count.toml", "--out", "b"], err=r"would take .*count", process=True),
+    Case("fourier-rays-1e8", ["fourier", "{in}/grain.png", "--rays", "100000000"], err=r"GiB.*--rays|--rays.*GiB", process=True),
     Case("calibrate-repeats-1e9", ["calibrate", "dpa", "--primaries", "100000", "--repeats", "1000000000",
-                                   "--out", "cal"], err=r"would take .*--repeats"),
+                                   "--out", "cal"], err=r"would take .*--repeats", process=True),
     Case("fso-subdivisions-8-400-terms", ["generate", "fso", "--subdivisions", "8", "--ridges", "400",
                                           "--frequencies", "400", "--gamma", "1.05", "--count", "1000", "--out", "g"],
-         err=r"would take .*--(subdivisions|count)"),
+         err=r"would take .*--(subdivisions|count)", process=True),
     Case("tray-max-triangles-1e12", ["tray", "--method", "fso", "--count", "100000", "--max-triangles",
                                      "1000000000000", "--max-subdivisions", "7", "--out", "t.3mf"],
-         err=r"would take .*--count", timeout=240),  # resolution matching's pilot grains come first
+         err=r"would take .*--count", timeout=240, process=True),  # resolution matching's pilot grains come first
     # §4: a batch whose parameter draws reach invalid values is refused before any work
     Case("batch-amplitude-support", ["batch", "{in}/bad_amplitude.toml", "--out", "b", "--workers", "1"],
          err=r"amplitude"),
@@ -369,7 +376,8 @@ def case_dir(tmp_path):
     _writable(tmp_path / "ro")
 
 
-def run_case(case: Case, d: Path, inputs: Path) -> tuple[int, str]:
+def run_process(case: Case, d: Path, inputs: Path) -> tuple[int, str]:
+    """``case`` as a real, memory-limited subprocess in ``d``: its exit code and stderr."""
     proc = start(case.args, d, inputs)
     try:
         _, err = proc.communicate(timeout=case.timeout)
@@ -381,7 +389,53 @@ def run_case(case: Case, d: Path, inputs: Path) -> tuple[int, str]:
     return proc.returncode, err.decode("utf-8", "replace")
 
 
-@pytest.mark.parametrize("case", CASES, ids=[c.id for c in CASES])
+def _pool_processes() -> list[int]:
+    """Descendants of this process, less multiprocessing's per-interpreter helpers themselves (the workers
+    a fork server forks are its children, and counted)."""
+    helpers = (b"multiprocessing.forkserver", b"multiprocessing.resource_tracker")
+    out = []
+    for pid in child_processes(os.getpid()):
+        try:
+            helper = (Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[1] == str(os.getpid())
+                      and any(h in Path(f"/proc/{pid}/cmdline").read_bytes() for h in helpers))
+        except (OSError, IndexError):
+            continue
+        if not helper:
+            out.append(pid)
+    return out
+
+
+def run_in_process(case: Case, d: Path, inputs: Path) -> tuple[int, str]:
+    """``case`` in this process (click's ``CliRunner``, working directory ``d``): its exit code and stderr.
+
+    An exception that escapes ``cli.main`` (a traceback in a real process) fails the test; so does a child
+    process (a pool worker) still alive 5 s after the command returned.  The fork server and resource
+    tracker that multiprocessing keeps for the life of the interpreter are not counted here: a real process
+    takes them with it, which the subprocess rows and the signal tests check."""
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    before = set(_pool_processes())
+    with pytest.MonkeyPatch.context() as mp:
+        mp.chdir(d)
+        mp.setenv("COLUMNS", "200")
+        r = CliRunner().invoke(cli, [a.replace("{in}", str(inputs)) for a in case.args], prog_name="grainforge")
+    assert r.exception is None or isinstance(r.exception, SystemExit), (
+        f"grainforge {' '.join(case.args)} raised {r.exception!r}; stderr:\n{r.stderr}")
+    deadline = time.monotonic() + 5.0
+    while (left := set(_pool_processes()) - before) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    assert not left, f"processes left behind: {left}"
+    return r.exit_code, r.stderr
+
+
+def run_case(case: Case, d: Path, inputs: Path) -> tuple[int, str]:
+    return run_process(case, d, inputs) if case.process else run_in_process(case, d, inputs)
+
+
+@pytest.mark.parametrize("case", [pytest.param(c, id=c.id, marks=[pytest.mark.slow] if c.process else [])
+                                  for c in CASES])
 def test_cli_contract(case: Case, case_dir, inputs):
     d, readonly = case_dir
     if case.readonly and not readonly:
@@ -443,6 +497,7 @@ def _has(d: Path, pattern: str):
     return lambda: any(d.glob(pattern))
 
 
+@pytest.mark.slow
 def test_sigterm_on_generate_leaves_no_staging_folder(case_dir, inputs):
     d, _ = case_dir
     before = _snapshot(d)
@@ -461,6 +516,7 @@ TRAY = ["tray", "--method", "fso", "--param", "subdivisions=3", "--count", "3000
         "--workers", "2", "--out", "t.3mf"]
 
 
+@pytest.mark.slow
 def test_sigkill_on_tray_leaves_no_process_and_the_next_run_cleans_up(case_dir, inputs):
     d, _ = case_dir
     before = _snapshot(d)
@@ -487,6 +543,7 @@ def _forkserver_started(sid: int):
     return started
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("phase", ["starting", "pool-starting", "writing"])
 def test_ctrl_c_on_tray_is_quick_and_leaves_nothing(case_dir, inputs, phase):
     """Ctrl-C (SIGINT to the whole process group, as a terminal sends it) 0.3 s after the start (the

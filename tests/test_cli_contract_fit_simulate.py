@@ -15,7 +15,8 @@ every request, valid or not, must then be refused up front in one line,
 before any heavy work.
 
 Signals need real processes: the ``test_signal_*`` functions at the end
-start the command as a subprocess, in its own session.  Before Yade starts
+start the command as a subprocess, in its own session (marked slow: the
+full suite runs them, the fast lane does not).  Before Yade starts
 (the first second or two: imports, checks, clump templates) a stand-in
 ``yade`` that only sleeps keeps the command waiting, so a signal that were
 ignored would show as a run that goes on; while Yade runs, the real engine
@@ -189,7 +190,8 @@ def test_cli_contract_fit_simulate(case: Case, case_dir, inputs):
     before = _snapshot(case_dir, inputs)
     r = _invoke([a.replace("{in}", str(inputs)) for a in case.args])
     err = r.stderr
-    assert "Traceback" not in err and r.exception is None or isinstance(r.exception, SystemExit), (err, r.exception)
+    assert "Traceback" not in err, err
+    assert r.exception is None or isinstance(r.exception, SystemExit), (err, r.exception)
     assert r.exit_code == case.code, f"exit {r.exit_code}; stderr:\n{err}"
     assert len(err.strip().splitlines()) == case.lines, f"expected {case.lines} line(s) on stderr:\n{err}"
     assert re.search(case.err, err), f"stderr does not match {case.err!r}:\n{err}"
@@ -401,11 +403,14 @@ def sim_dir(tmp_path, inputs):
     return work, fake
 
 
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-@pytest.mark.parametrize("delay", [0.3, 0.8, 1.3, 1.8])
+@pytest.mark.slow  # a real process per signal and moment
+@pytest.mark.parametrize("sig, delay", [(signal.SIGINT, 0.3), (signal.SIGTERM, 0.8), (signal.SIGINT, 1.3),
+                                        (signal.SIGTERM, 1.8)], ids=["SIGINT-0.3", "SIGTERM-0.8", "SIGINT-1.3",
+                                                                     "SIGTERM-1.8"])
 def test_signal_before_yade_starts_is_honoured(sim_dir, inputs, sig, delay):
     """At any moment before the engine runs (imports, checks, templates): exit 130/143 in one line, nothing
-    written, no process left. (An import that swallowed the KeyboardInterrupt used to let the run go on.)"""
+    written, no process left. (An import that swallowed the KeyboardInterrupt used to let the run go on.)
+    The moments alternate between the two signals: each signal early and late, each moment once."""
     work, fake = sim_dir
     proc = _start(["simulate", "repose", str(inputs / "ang"), "--quick", "--out", "o"], work,
                   GRAINFORGE_YADE=str(fake))
@@ -442,6 +447,7 @@ def _wait_for_yade(work: Path, proc: subprocess.Popen) -> None:
 
 
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.slow  # runs Yade
 def test_signal_while_yade_runs_kills_it_and_leaves_nothing(tmp_path, inputs, sig):
     require_yade()
     work = tmp_path / "work"
@@ -454,6 +460,7 @@ def test_signal_while_yade_runs_kills_it_and_leaves_nothing(tmp_path, inputs, si
     assert list(work.iterdir()) == []  # no deck folder: the rerun needs no --overwrite
 
 
+@pytest.mark.slow  # runs Yade
 def test_sigkill_while_yade_runs_leaves_nothing_that_blocks_the_rerun(tmp_path, inputs):
     require_yade()
     work = tmp_path / "work"
@@ -476,6 +483,7 @@ def test_sigkill_while_yade_runs_leaves_nothing_that_blocks_the_rerun(tmp_path, 
     assert [p.name for p in (work / "o").iterdir()] == ["failed-repose-seed0"]
 
 
+@pytest.mark.slow  # a real process per signal and moment
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.parametrize("delay", [0.8, 1.5])
 def test_signal_early_in_a_fit_is_honoured(tmp_path, sig, delay):

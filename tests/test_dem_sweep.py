@@ -76,9 +76,12 @@ def _draw(data):
 @settings(max_examples=20, deadline=None)
 @given(data=st.data())
 def test_every_draw_is_a_deck_or_one_line(angular_grains, tmp_path_factory, data):
+    """One input grain: the options' ranges are what is swept, and a template costs the same whichever grain
+    it is made from (three grains cost three times as much and exercise nothing more)."""
     engine, shape, args = _draw(data)
     out = tmp_path_factory.mktemp("deck") / "d"
-    res = CliRunner().invoke(cli, ["dem", str(angular_grains), "--out", str(out), *args])
+    grain = sorted(angular_grains.glob("*.stl"))[0]
+    res = CliRunner().invoke(cli, ["dem", str(grain), "--out", str(out), *args])
     if res.exit_code == 2:
         lines = [ln for ln in res.output.splitlines() if ln.strip()]
         assert len(lines) == 1 and lines[0].startswith("Error: "), (args, res.output)

@@ -97,7 +97,10 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
         counts = pour_counts(len(paths), grains, 0 if seed is None else seed).tolist()
     workers = workers or os.cpu_count() or 1
     files = sum(c > 0 for c in counts)
-    _estimate(files, shape, spheres, refine, spacing, min(workers, files))
+    announce = _estimate(files, shape, spheres, refine, spacing, min(workers, files))
+    if shape == "levelset":  # a spacing too fine for a grain: refused before the estimate is said and any work
+        _check_level_set_budget([p for p, c in zip(paths, counts) if c > 0], unit, spacing)
+    announce()
     from ..dem.inputs import GRAIN_SIZE_RANGE, MIN_GRAIN_SIZE
 
     # every grain's size is checked before its representation is built (the costly part)
@@ -116,8 +119,21 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
 
 
-def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int) -> None:
-    """Refuse template work estimated beyond a day, naming what to change; announce work over a minute."""
+def _check_level_set_budget(paths, unit: float, spacing: float) -> None:
+    from ..dem.inputs import read_grain
+    from ..dem.template import check_level_set_budget
+
+    for p in paths:
+        v, f = read_grain(p, check=False)
+        try:
+            check_level_set_budget(v, f, unit=unit, spacing=spacing)
+        except ValueError as exc:
+            raise ValueError(f"{p}: {exc}") from None
+
+
+def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int):
+    """Refuse template work estimated beyond a day, naming what to change; return the call that announces
+    work over a minute."""
     from ..estimate import TooLargeError, check_job, dem_template_seconds
     from .interrupts import say_estimate
 
@@ -134,4 +150,4 @@ def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float,
                             advice=advice)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    say_estimate(seconds, bound="at most about" if refining else "about")
+    return lambda: say_estimate(seconds, bound="at most about" if refining else "about")

@@ -53,6 +53,41 @@ def surface_nodes(vertices: np.ndarray, faces: np.ndarray, count: int) -> np.nda
     return v[np.sort(chosen)]
 
 
+def level_set_grid(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05, pad: int = 3) -> Grid:
+    """The node grid of :func:`level_set` (same arguments), refused over :data:`MAX_NODES` nodes.
+
+    Cheap (one volume, one bounding box): ``grainforge dem`` calls it for every grain before any
+    template is built, so that a spacing too fine is refused in one line before any work.
+
+    Raises
+    ------
+    ValueError
+        Over :data:`MAX_NODES` nodes, naming the finest spacing that fits.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(2)
+    >>> level_set_grid(s.vertices, s.faces, spacing=0.2).shape
+    (12, 12, 12)
+    """
+    from ..solid import signed_volume
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    d = (6 * signed_volume(v, f) / np.pi) ** (1 / 3)
+    grid = grid_for(v, spacing * d, pad=int(pad))
+    n_nodes = int(np.prod(grid.shape))
+    if n_nodes > MAX_NODES:
+        coarsest = spacing * (n_nodes / MAX_NODES) ** (1 / 3)
+        while np.prod(grid_for(v, coarsest * d, pad=int(pad)).shape) > MAX_NODES:  # the pad does not scale
+            coarsest *= 1.02
+        raise ValueError(f"level-set spacing {spacing:g} of d_eq needs a {'x'.join(map(str, grid.shape))} grid "
+                         f"({n_nodes:,} nodes, more than {MAX_NODES:,}) for this grain: use a spacing of at least "
+                         f"{coarsest:.3g}")
+    return grid
+
+
 def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05, pad: int = 3,
               nodes: int = 500) -> LevelSet:
     """Signed distance to the mesh surface at the nodes of a regular grid.
@@ -89,18 +124,7 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
         raise ValueError(f"pad must be ≥ 1, got {pad!r}")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    from ..solid import signed_volume
-
-    d = (6 * signed_volume(v, f) / np.pi) ** (1 / 3)
-    grid = grid_for(v, spacing * d, pad=int(pad))
-    n_nodes = int(np.prod(grid.shape))
-    if n_nodes > MAX_NODES:
-        coarsest = spacing * (n_nodes / MAX_NODES) ** (1 / 3)
-        while np.prod(grid_for(v, coarsest * d, pad=int(pad)).shape) > MAX_NODES:  # the pad does not scale
-            coarsest *= 1.02
-        raise ValueError(f"level-set spacing {spacing:g} of d_eq needs a {'x'.join(map(str, grid.shape))} grid "
-                         f"({n_nodes:,} nodes, more than {MAX_NODES:,}) for this grain: use a spacing of at least "
-                         f"{coarsest:.3g}")
+    grid = level_set_grid(v, f, spacing=spacing, pad=pad)
     inside = inside_mask(v, f, grid)
     ax = grid.axes()
     pts = np.stack(np.meshgrid(*ax, indexing="ij"), axis=-1).reshape(-1, 3)

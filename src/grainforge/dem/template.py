@@ -169,8 +169,7 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     problems = enclosure_problems(v, f)
     if problems:
         raise ValueError(f"{source or name}: not a closed solid ({'; '.join(problems)})")
-    v = v * unit
-    mp = mass_properties(v, f)
+    v, mp = _in_metres(v, f, unit)
     if size_range is not None and not size_range[0] <= mp.equivalent_diameter <= size_range[1]:
         raise ValueError(f"{source or name}: equivalent diameter {mp.equivalent_diameter:.3g} m is outside "
                          f"{size_range[0]:g}–{size_range[1]:g} m (at {unit:g} m per file unit)")
@@ -199,3 +198,30 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         radius = max(radius, float((np.linalg.norm(c.centres, axis=1) + c.radii).max()))
     return GrainTemplate(name=name, vertices=v, faces=f, props=mp, density=float(density), shape=shape,
                          source=source, count=int(count), info={"bounding_radius": radius}, **kw)
+
+
+def _in_metres(vertices: np.ndarray, faces: np.ndarray, unit: float) -> tuple[np.ndarray, MassProperties]:
+    v = np.asarray(vertices, dtype=np.float64) * unit
+    return v, mass_properties(v, faces)
+
+
+def check_level_set_budget(vertices: np.ndarray, faces: np.ndarray, *, unit: float, spacing: float) -> None:
+    """Refuse a grain whose level set at ``spacing`` would exceed the node budget, before any work.
+
+    The grid is the one :func:`prepare` builds (the grain centred and in its principal frame), so
+    the refusal is the builder's own, only earlier.  A mesh that is not a closed solid is left to
+    :func:`prepare`, which names its problems.
+
+    Raises
+    ------
+    ValueError
+        From :func:`grainforge.dem.levelset.level_set_grid`.
+    """
+    from .enclosure import enclosure_problems
+    from .levelset import level_set_grid
+
+    f = np.asarray(faces, dtype=np.int64)
+    if enclosure_problems(np.asarray(vertices, dtype=np.float64), f):
+        return
+    v, mp = _in_metres(vertices, f, unit)
+    level_set_grid((v - mp.centroid) @ mp.axes, f, spacing=spacing)
