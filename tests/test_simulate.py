@@ -169,14 +169,16 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
 # ---- settings an engine cannot run: one line, exit 2, before any engine starts or anything is written ----
 
 REFUSED = [
-    (["--engine", "liggghts"], "simulate has no liggghts scenes"),
     (["--engine", "lammps"], "--engine"),
     (["--mpi", "0"], "--mpi"),
     (["--mpi", "-3"], "--mpi"),
+    (["--engine", "liggghts", "--mpi", "0"], "--mpi"),
     (["--mpi", "2"], "--mpi: yade runs one process per seed"),
     (["--shape", "levelset"], "--shape levelset: simulate's yade scenes take --shape clump only"),
     (["--shape", "polyhedron"], "--shape polyhedron"),
     (["--shape", "sphere"], "--shape"),
+    (["--engine", "liggghts", "--shape", "levelset"], "--shape levelset: simulate's liggghts scenes take --shape clump only"),
+    (["--engine", "liggghts", "--shape", "polyhedron", "--mpi", "2"], "--shape polyhedron: simulate's liggghts"),
 ]
 
 
@@ -196,6 +198,23 @@ def test_an_engine_that_is_not_installed_is_refused_up_front(runner, grains, tmp
     r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick"])
     _one_line_exit_2(r)
     assert "Yade is not installed" in r.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("variable, args, message", [
+    ("GRAINFORGE_LIGGGHTS", ["--engine", "liggghts"], "LIGGGHTS is not installed"),
+    ("GRAINFORGE_LIGGGHTS", ["--engine", "liggghts", "--mpi", "2"], "LIGGGHTS is not installed"),
+    ("GRAINFORGE_MPIRUN", ["--engine", "liggghts", "--mpi", "2"], "--mpi: mpirun is not installed"),
+])
+def test_liggghts_or_mpirun_not_installed_is_refused_up_front(runner, grains, tmp_path, monkeypatch, variable, args,
+                                                              message):
+    if variable == "GRAINFORGE_MPIRUN" and shutil.which("liggghts") is None:
+        monkeypatch.setenv("GRAINFORGE_LIGGGHTS", str(_fake_engine(tmp_path / "liggghts", "exit 0\n")))
+    monkeypatch.setenv(variable, str(tmp_path / "no-such-engine"))
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--quick", *args])
+    _one_line_exit_2(r)
+    assert message in r.stderr
     assert not out.exists()
 
 
