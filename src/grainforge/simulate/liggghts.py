@@ -50,8 +50,8 @@ __all__ = ["liggghts_executable", "mpirun_executable", "contact_table", "deck_fi
 GRAIN, BASE, WALL = 1, 2, 3
 #: insertion nodes stay clear of the column cuts of up to this many ranks along x and along y
 MAX_CUTS = 64
-#: the steps of one settle check and one lift / progress chunk (as the Yade scenes' check_every)
-_STRIDE = 1_000_003  # a prime larger than the seed table: distinct seeds within a deck
+#: a prime larger than the seed table: seeds k * _STRIDE (mod its length) are distinct within a deck
+_STRIDE = 1_000_003
 
 
 def liggghts_executable() -> str:
@@ -171,22 +171,6 @@ def _clear_of_cuts(x: np.ndarray, lo: float, length: float, margin: float) -> np
     raise AssertionError("insertion nodes could not be moved clear of the processor cuts")
 
 
-def _stl(radius: float, z0: float, z1: float, segments: int = 32) -> str:
-    """ASCII STL of the open side of a cylinder about the z axis (two triangles per segment)."""
-    a = 2.0 * np.pi * np.arange(segments + 1) / segments
-    p = np.column_stack([radius * np.cos(a), radius * np.sin(a)])
-    out = ["solid cylinder"]
-    for k in range(segments):
-        (x0, y0), (x1, y1) = p[k], p[k + 1]
-        n = np.array([np.cos(0.5 * (a[k] + a[k + 1])), np.sin(0.5 * (a[k] + a[k + 1])), 0.0])
-        for tri in (((x0, y0, z0), (x1, y1, z0), (x1, y1, z1)), ((x0, y0, z0), (x1, y1, z1), (x0, y0, z1))):
-            out.append("facet normal " + " ".join(repr(float(x)) for x in n) + "\nouter loop")
-            out += ["vertex " + " ".join(repr(float(x)) for x in v) for v in tri]
-            out.append("endloop\nendfacet")
-    out.append("endsolid cylinder")
-    return "\n".join(out) + "\n"
-
-
 def _settle(name: str, threshold: float, min_checks: int, max_checks: int, every: int, f0: float, f1: float,
             phase: str) -> str:
     """Input lines of a settle phase, as the Yade scenes' ``settle``: run ``every`` steps at a time until
@@ -249,7 +233,7 @@ def _layout(templates: Sequence, test: str, settings: Settings, seed: int) -> di
         geo.update(R=R, height=height, half=half, box=(-box, box, -box, box), base_x=centres, base_y=centres,
                    fall=math.sqrt(2.0 * height / 9.81), top=2.0 * height + 2.0 * d + cell)
     else:
-        per_row = max(2, int(round(math.sqrt(n / settings_layer_depth(settings)))))
+        per_row = max(2, int(round(math.sqrt(n / _layer_depth(settings)))))
         width = per_row * cell
         q = np.arange(n)
         i, j, layer = q % per_row, (q // per_row) % per_row, q // (per_row * per_row)
@@ -272,7 +256,7 @@ def _layout(templates: Sequence, test: str, settings: Settings, seed: int) -> di
     return geo
 
 
-def settings_layer_depth(settings: Settings) -> float:
+def _layer_depth(settings: Settings) -> float:
     """Depth of the tilt layer in grains (the Yade scene's ``layer_depth``)."""
     return float(scene_settings(settings, "tilt", 0)["layer_depth"])
 
@@ -281,6 +265,16 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     """``{relative path: text}`` of the LIGGGHTS deck of one run of ``test`` (nothing written).
 
     Run from inside the folder with ``liggghts -in in.run`` or ``mpirun -np P liggghts -in in.run``.
+
+    Notes
+    -----
+    The repose cylinder is a primitive granular wall (``zcylinder``, the grains' contact law)
+    removed in one step after the fill, where the Yade scene lifts a facet cylinder at
+    0.5 √(g d): LIGGGHTS 3.8 as packaged stops at any ``fix move/mesh`` ("Illegal situation in
+    MultiNodeMesh::registerMove") and crashes when mesh walls are swapped during a run.  Every
+    other step of the scenes follows the Yade text, with the differences of :func:`contact_table`.
+    A fix added or removed between runs needs LIGGGHTS's set-up (``run N`` with ``pre yes``): a
+    ``pre no`` run after it keeps the old fix lists and integrates nothing.
     """
     from ..dem.deck import fmt, json_text, template_record, xyzr_text
     from ..dem.liggghts import node_insertion, template_fix
@@ -399,7 +393,7 @@ fix cylw all wall/gran {model} primitive type {WALL} zcylinder {fmt(geo["R"])} 0
         # the cylinder: LIGGGHTS 3.8 as packaged can neither move a mesh wall (any fix move/mesh stops with
         # "Illegal situation in MultiNodeMesh::registerMove") nor swap mesh walls during a run (a crash),
         # so the cylinder is a primitive granular wall, removed at once where the Yade scene lifts it
-        lift_text = f"unfix cylw\nprint \"grainforge-progress 0.7 lift\""
+        lift_text = "unfix cylw\nprint \"grainforge-progress 0.7 lift\""
         fill_min = int(math.ceil(3.0 * geo["fall"] / (every * dt)))
         collapse_min = int(math.ceil(0.5 * geo["fall"] / (every * dt)))
         body = f"""{_settle("fill", 10.0 * threshold, fill_min, max_checks, every, 0.0, 0.3, "fill")}
