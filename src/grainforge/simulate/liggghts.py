@@ -549,7 +549,7 @@ def run_liggghts(deck: str | os.PathLike, *, mpi: int | None = None,
     EngineFailed
         If LIGGGHTS exits with an error or writes no final state.
     """
-    from .engine import EngineFailed, run_engine_process
+    from .process import EngineFailed, run_engine_process
 
     deck = Path(deck)
     cmd, env = engine_command(mpi)
