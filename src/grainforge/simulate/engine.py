@@ -11,7 +11,7 @@ from pathlib import Path
 import numpy as np
 
 from .measure import heap_angle, tilt_failure_angle
-from .process import EngineFailed, _kill_all, run_engine_process
+from .process import EngineFailed, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 
 __all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result", "run_test", "summarise"]
@@ -158,7 +158,7 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     try:
         return list(pool.map(one, range(len(seeds))))
     except BaseException:
-        _kill_all()
+        kill_running()
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

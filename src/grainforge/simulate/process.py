@@ -8,7 +8,7 @@ import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-__all__ = ["run_engine_process", "EngineFailed"]
+__all__ = ["run_engine_process", "EngineFailed", "kill_running"]
 
 
 def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
@@ -58,7 +58,8 @@ def _track(proc):
     return proc
 
 
-def _kill_all() -> None:
+def kill_running() -> None:
+    """Kill every engine process this process started and that has not finished (with its children)."""
     for proc in list(_RUNNING):
         _kill(proc)
 
