@@ -10,7 +10,6 @@ import math
 import os
 import re
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -251,7 +250,7 @@ def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grai
     import sys
     import time
 
-    from _processes import kill_sessions
+    from _processes import assert_gone, kill_sessions
 
     work = tmp_path / "work"
     work.mkdir()
@@ -274,20 +273,7 @@ def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grai
         _, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, err.decode()
         assert err.decode().strip().splitlines()[-1] == "Interrupted."
-
-        def alive(pid):
-            try:
-                return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in "ZX"
-            except OSError:
-                return False
-
-        deadline = time.monotonic() + 5
-        while any(alive(p) for p in pids) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        left = [p for p in pids if alive(p)]
-        for p in left:
-            os.kill(p, signal.SIGKILL)
-        assert not left, f"engine processes left behind: {left}"
+        assert_gone(pids)
         assert list(work.iterdir()) == []
     finally:
         kill_sessions(started)

@@ -18,6 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_dem_engines import require  # skips, or fails under GRAINFORGE_REQUIRE_ENGINES=1
 
 from grainforge.cli.main import cli
 from grainforge.simulate import QUICK, Settings, build_population
@@ -112,18 +113,6 @@ def test_mpi_command_lets_open_mpi_run_as_root_and_oversubscribe(monkeypatch, tm
 
 # ---- the real engine ------------------------------------------------------------------------------------
 
-def require(executable: str, package: str) -> str:
-    import shutil
-
-    path = shutil.which(executable)
-    if path is None:
-        reason = f"{executable} not installed (apt-get install {package})"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
-    return path
-
-
 def check_run(runner, grains, out, test, *extra):
     r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick", "--engine", "liggghts",
                             *extra])
@@ -191,18 +180,11 @@ def _descendants(pid: int) -> set[int]:
     return out
 
 
-def _alive(pid: int) -> bool:
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in "ZX"
-    except OSError:
-        return False
-
-
 @pytest.mark.slow
 def test_an_interrupt_kills_mpirun_and_every_rank_and_leaves_nothing(grains, tmp_path):
     require("liggghts", "liggghts")
     require("mpirun", "openmpi-bin")
-    from _processes import kill_sessions
+    from _processes import assert_gone, kill_sessions
 
     work = tmp_path / "work"
     work.mkdir()
@@ -225,13 +207,7 @@ def test_an_interrupt_kills_mpirun_and_every_rank_and_leaves_nothing(grains, tmp
         os.kill(proc.pid, signal.SIGINT)
         _, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, err.decode()
-        deadline = time.monotonic() + 5
-        while any(_alive(p) for p in engine) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        left = [p for p in engine if _alive(p)]
-        for p in left:
-            os.kill(p, signal.SIGKILL)
-        assert not left, f"engine processes left behind: {left}"
+        assert_gone(engine)
         assert list(work.iterdir()) == []
     finally:
         kill_sessions(started)

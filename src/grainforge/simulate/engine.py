@@ -4,14 +4,13 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from .measure import heap_angle, tilt_failure_angle
-from .process import EngineFailed, kill_running, run_engine_process
+from .process import EngineFailed, find_executable, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 
 __all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result", "run_test", "summarise"]
@@ -25,10 +24,8 @@ def yade_executable() -> str:
     FileNotFoundError
         If Yade is not installed (Debian: ``apt-get install yade``).
     """
-    exe = shutil.which(os.environ.get("GRAINFORGE_YADE", "yade"))
-    if exe is None:
-        raise FileNotFoundError("Yade is not installed (on Debian: apt-get install --no-install-recommends yade)")
-    return exe
+    return find_executable("GRAINFORGE_YADE", "yade",
+                           "Yade is not installed (on Debian: apt-get install --no-install-recommends yade)")
 
 
 def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,

@@ -35,7 +35,6 @@ from __future__ import annotations
 import json
 import math
 import os
-import shutil
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
@@ -62,10 +61,10 @@ def liggghts_executable() -> str:
     FileNotFoundError
         If LIGGGHTS is not installed (Debian: ``apt-get install liggghts``).
     """
-    exe = shutil.which(os.environ.get("GRAINFORGE_LIGGGHTS", "liggghts"))
-    if exe is None:
-        raise FileNotFoundError("LIGGGHTS is not installed (on Debian: apt-get install liggghts)")
-    return exe
+    from .process import find_executable
+
+    return find_executable("GRAINFORGE_LIGGGHTS", "liggghts",
+                           "LIGGGHTS is not installed (on Debian: apt-get install liggghts)")
 
 
 def mpirun_executable() -> str:
@@ -76,10 +75,10 @@ def mpirun_executable() -> str:
     FileNotFoundError
         If no MPI launcher is installed (Debian: ``apt-get install openmpi-bin``).
     """
-    exe = shutil.which(os.environ.get("GRAINFORGE_MPIRUN", "mpirun"))
-    if exe is None:
-        raise FileNotFoundError("--mpi: mpirun is not installed (on Debian: apt-get install openmpi-bin)")
-    return exe
+    from .process import find_executable
+
+    return find_executable("GRAINFORGE_MPIRUN", "mpirun",
+                           "--mpi: mpirun is not installed (on Debian: apt-get install openmpi-bin)")
 
 
 def restitution_of_local_damping(damping: float) -> float:

@@ -8,7 +8,23 @@ import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
-__all__ = ["run_engine_process", "EngineFailed", "kill_running"]
+__all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable"]
+
+
+def find_executable(variable: str, name: str, missing: str) -> str:
+    """Path of command ``name``, or of the command the environment variable ``variable`` names.
+
+    Raises
+    ------
+    FileNotFoundError
+        With the message ``missing`` when there is none.
+    """
+    import shutil
+
+    exe = shutil.which(os.environ.get(variable, name))
+    if exe is None:
+        raise FileNotFoundError(missing)
+    return exe
 
 
 def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
