@@ -81,6 +81,19 @@ def test_deck_uses_the_yade_contact_settings(templates, test):
     assert rec["dt"] == pytest.approx(0.3 * math.sqrt(m_min / max(kn)), rel=1e-12)
 
 
+def test_a_sphere_is_a_multisphere_with_an_inner_sphere_that_never_touches(grains):
+    s = Settings(**QUICK)
+    files = lg.deck_files(build_population([grains], s, as_spheres=True), "tilt", s, 0)
+    xyzr = [text for name, text in files.items() if name.endswith(".xyzr")]
+    assert xyzr
+    for text in xyzr:
+        rows = np.array([[float(x) for x in ln.split()] for ln in text.splitlines() if not ln.startswith("#")])
+        assert rows.shape == (2, 4) and np.all(rows[1, :3] == rows[0, :3])
+        assert rows[1, 3] == pytest.approx(0.01 * rows[0, 3])
+    fixes = [ln for ln in files["in.templates"].splitlines() if "particletemplate/multisphere" in ln]
+    assert len(fixes) == len(xyzr) and all(" nspheres 2 " in ln for ln in fixes)
+
+
 def test_local_damping_and_its_viscous_equivalent_have_one_restitution():
     t = lg.contact_table(Settings(damping=0.3), 1e-3, 3e-4, 5e-6)
     zeta = t["damping_ratio"]

@@ -146,6 +146,20 @@ def contact_table(settings: Settings, r_grain: float, r_base: float, m_grain: fl
             "restitution": e, "damping_ratio": zeta, "k_max": max(k_gg, k_gb, k_gw)}
 
 
+def _multisphere(t):
+    """``t`` as LIGGGHTS takes it: it refuses a multisphere of one sphere ("illegal number of spheres"),
+    so a one-sphere clump gets a second sphere of 1 % its radius at its centre, inside it: it never
+    touches anything, and the mass and inertia stay the mesh's (given explicitly)."""
+    import dataclasses
+
+    c = t.clump
+    if c.count > 1:
+        return t
+    inner = dataclasses.replace(c, centres=np.vstack([c.centres, c.centres[:1]]),
+                                radii=np.append(c.radii, 0.01 * c.radii[0]))
+    return dataclasses.replace(t, clump=inner)
+
+
 def _seeds(count: int, seed: int) -> list[int]:
     """``count`` distinct primes for the random fixes of one deck, a different set for each seed."""
     from ..dem.liggghts import seed_table
@@ -301,7 +315,7 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     seeds = _seeds(2 * len(used) + n, seed)
     tpl = ["# grainforge: one multisphere template per grain drawn (SI units), exact mesh mass and inertia"]
     for q, k in enumerate(used):
-        t = templates[k]
+        t = _multisphere(templates[k])
         files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=f"grainforge clump of {t.source or t.name}")
         tpl.append(template_fix(t, k, seeds[q], atom_type=GRAIN))
         tpl.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[len(used) + q]} 1 pts{k + 1} 1.0")
