@@ -61,6 +61,22 @@ def test_deck_is_the_same_for_the_same_seed_and_differs_between_seeds(templates,
     assert len(seeds) == s.grains == len(set(seeds))
 
 
+def test_clump_types_of_the_drawn_templates_are_consecutive(grains):
+    """LIGGGHTS stops unless the multisphere types are 1, 2, ... with no gap: templates not drawn are left out."""
+    s = Settings(**{**QUICK, "grains": 3, "templates": 3})
+    templates = build_population([grains], s)
+    files = lg.deck_files(templates, "tilt", s, 0)
+    types = [int(t) for t in re.findall(r" type (\d+) mass", files["in.templates"])]
+    assert types == list(range(1, len(types) + 1))
+    used = {int(t) for t in re.findall(r"distributiontemplate pdd(\d+)", files["in.insert"])}
+    assert used == set(types)
+    s2 = Settings(**{**QUICK, "grains": 2, "templates": 3})
+    for seed in range(6):  # two grains drawn from three templates: some seed leaves one out
+        files = lg.deck_files(templates, "tilt", s2, seed)
+        types = [int(t) for t in re.findall(r" type (\d+) mass", files["in.templates"])]
+        assert types == list(range(1, len(types) + 1))
+
+
 @pytest.mark.parametrize("test", ["repose", "tilt"])
 def test_deck_uses_the_yade_contact_settings(templates, test):
     s = Settings(**QUICK, friction=0.7, young=2e6, poisson=0.25)

@@ -317,12 +317,14 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     for q, k in enumerate(used):
         t = _multisphere(templates[k])
         files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=f"grainforge clump of {t.source or t.name}")
-        tpl.append(template_fix(t, k, seeds[q], atom_type=GRAIN))
-        tpl.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[len(used) + q]} 1 pts{k + 1} 1.0")
+        # LIGGGHTS numbers the clump types of the drawn templates 1, 2, ... with no gap
+        tpl.append(template_fix(t, q, seeds[q], atom_type=GRAIN))
+        tpl.append(f"fix pdd{q + 1} all particledistribution/discrete {seeds[len(used) + q]} 1 pts{q + 1} 1.0")
     files["in.templates"] = "\n".join(tpl) + "\n"
     ins = ["# grainforge: every grain at its own node of the scene's lattice, random orientation"]
+    clump_type = {k: q + 1 for q, k in enumerate(used)}
     for slot, (k, node) in enumerate(zip(pick, geo["nodes"])):
-        ins += node_insertion(slot, node, cell, seeds[2 * len(used) + slot], f"pdd{k + 1}")
+        ins += node_insertion(slot, node, cell, seeds[2 * len(used) + slot], f"pdd{clump_type[int(k)]}")
     files["in.insert"] = "\n".join(ins) + "\n"
     files["in.unfix"] = "\n".join(f"unfix i{slot}\nregion r{slot} delete" for slot in range(n)) + "\n"
     base = geo["base"]
