@@ -76,6 +76,8 @@ def main(argv=None) -> int:
     ap.add_argument("--mpi", type=int, default=2, help="ranks of each LIGGGHTS run (heap)")
     ap.add_argument("--workers", type=int, default=1, help="runs at once (compare)")
     ap.add_argument("--engines", default="yade,liggghts", help="engines compared, comma-separated (compare)")
+    ap.add_argument("--damping", type=float, default=Settings().damping,
+                    help="Yade's local damping (LIGGGHTS: the viscous damping of the same restitution)")
     ap.add_argument("--tilt-step", type=float, default=1.0)
     ap.add_argument("--tilt-start", type=float, default=5.0)
     ap.add_argument("--out", type=Path, default=ROOT / "out/bench-engines")
@@ -85,11 +87,11 @@ def main(argv=None) -> int:
     table = []
     if args.mode == "compare":
         settings = Settings(grains=args.grains, seeds=args.seeds, tilt_step=args.tilt_step,
-                            tilt_start=args.tilt_start)
+                            tilt_start=args.tilt_start, damping=args.damping)
         for engine in args.engines.split(","):
             rows, (cpu, wall) = run_set("tilt", SPHERES, settings, args.out / f"compare-{engine}", engine,
                                         workers=args.workers)
-            text, rec = row_text(f"tilt, spheres, {engine}", rows, cpu, wall)
+            text, rec = row_text(f"tilt, spheres, {engine}, damping {args.damping:g}", rows, cpu, wall)
             print(text, flush=True)
             table.append(rec)
     elif args.mode == "scaling":
