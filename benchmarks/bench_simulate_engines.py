@@ -62,7 +62,8 @@ def row_text(name, rows, cpu, wall):
     angles = ", ".join(f"{r['angle_deg']:.1f}" for r in rows)
     return (f"{name:44s} {s['angle_mean_deg']:6.1f} {s['angle_sd_deg']:5.1f}  [{angles}]  {cpu:7.0f} {wall:7.0f}",
             {"set": name, "mean_deg": s["angle_mean_deg"], "sd_deg": s["angle_sd_deg"], "angles": angles,
-             "cpu_s": cpu, "wall_s": wall, "steps": sum(r["steps"] for r in rows)})
+             "cpu_s": cpu, "wall_s": wall, "steps_per_run": float(np.mean([r["steps"] for r in rows])),
+             "cpu_us_per_grain_step": 1e6 * cpu / sum(r["grains"] * r["steps"] for r in rows)})
 
 
 def main(argv=None) -> int:
@@ -73,7 +74,7 @@ def main(argv=None) -> int:
     ap.add_argument("mode", choices=["compare", "scaling", "heap"])
     ap.add_argument("--grains", type=int, default=100)
     ap.add_argument("--seeds", type=int, default=3)
-    ap.add_argument("--mpi", type=int, default=2, help="ranks of each LIGGGHTS run (heap)")
+    ap.add_argument("--mpi", type=int, default=2, help="ranks of each LIGGGHTS run (heap; 0: no mpirun)")
     ap.add_argument("--workers", type=int, default=1, help="runs at once (compare)")
     ap.add_argument("--engines", default="yade,liggghts", help="engines compared, comma-separated (compare)")
     ap.add_argument("--damping", type=float, default=Settings().damping,
@@ -100,21 +101,22 @@ def main(argv=None) -> int:
             rows, (cpu, wall) = run_set("repose", SPHERES, settings, args.out / f"scaling-np{ranks or 1}",
                                         "liggghts", mpi=ranks)
             text, rec = row_text(f"repose, spheres, {ranks or 1} rank(s)", rows, cpu, wall)
-            per = cpu / (args.grains * rows[0]["steps"])
-            print(text + f"  {1e6 * per:.2f} µs CPU per grain-step ({rows[0]['steps']} steps)", flush=True)
-            table.append({**rec, "ranks": ranks or 1, "cpu_us_per_grain_step": 1e6 * per})
+            print(text, flush=True)
+            table.append({**rec, "ranks": ranks or 1})
     else:
         settings = Settings(grains=args.grains, seeds=args.seeds)
         for population in POPULATIONS:
             tag = population[0].split(" (")[0].replace(" ", "-")
             rows, (cpu, wall) = run_set("repose", population, settings, args.out / f"heap-{tag}", "liggghts",
-                                        mpi=args.mpi)
+                                        mpi=args.mpi or None)
             text, rec = row_text(f"repose, {population[0]}", rows, cpu, wall)
             print(text, flush=True)
             table.append(rec)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / f"{args.mode}.csv", table)
-    print(f"# mean steps per run: {np.mean([r['steps'] for r in table]) / max(1, args.seeds):.0f}")
+    for rec in table:
+        print(f"# {rec['set']}: {rec['steps_per_run']:.0f} steps per run, "
+              f"{rec['cpu_us_per_grain_step']:.2f} µs CPU per grain and step")
     return 0
 
 
