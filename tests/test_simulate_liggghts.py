@@ -119,11 +119,12 @@ def test_local_damping_and_its_viscous_equivalent_have_one_restitution():
 
 
 def test_insertion_nodes_stay_clear_of_every_processor_cut():
-    x = np.array([0.5, 1.0 / 3.0 + 1e-9, 0.25, 0.123456])
+    x = np.array([0.5, 1.0 / 3.0 + 1e-9, 0.25, 0.123456, 1e-9, 1.0 - 1e-9])
     moved = lg._clear_of_cuts(x, 0.0, 1.0, 1e-4)
-    cuts = np.concatenate([np.arange(1, p) / p for p in range(2, lg.MAX_CUTS + 1)])
+    cuts = np.concatenate([np.arange(0, p + 1) / p for p in range(1, lg.MAX_CUTS + 1)])
     assert np.abs(moved[:, None] - cuts[None, :]).min() >= 1e-4
     assert moved[3] == x[3] and np.abs(moved - x).max() < 1e-3
+    assert ((moved > 0.0) & (moved < 1.0)).all()  # the ends (a periodic boundary) push inwards
 
 
 def test_mpi_command_lets_open_mpi_run_as_root_and_oversubscribe(monkeypatch, tmp_path):

@@ -105,7 +105,7 @@ def contact_table(settings: Settings, r_grain: float, r_base: float, m_grain: fl
         ``young`` (k_n = E r), ``poisson`` (k_t / k_n), ``damping`` (Yade's local damping λ).
     r_grain, r_base : float
         Mean contact-sphere radius of the grains, radius of the base spheres (m).
-    m_grain, : float
+    m_grain : float
         Mean grain mass (kg): the effective mass of a grain pair is m/2, of a grain on the fixed
         base or a wall m.
 
@@ -172,15 +172,16 @@ def _seeds(count: int, seed: int) -> list[int]:
 
 
 def _clear_of_cuts(x: np.ndarray, lo: float, length: float, margin: float) -> np.ndarray:
-    """``x`` moved by a few ``margin`` where it lies within ``margin`` of a cut of [lo, lo + length]
-    into 1..MAX_CUTS equal parts (LIGGGHTS's processor columns)."""
-    cuts = np.unique(np.concatenate([lo + length * np.arange(1, p) / p for p in range(2, MAX_CUTS + 1)]))
+    """``x`` moved by a few ``margin`` (towards the middle) where it lies within ``margin`` of a cut of
+    [lo, lo + length] into 1..MAX_CUTS equal parts (LIGGGHTS's processor columns) or of its ends (a
+    periodic boundary is a cut too)."""
+    cuts = np.unique(np.concatenate([lo + length * np.arange(0, p + 1) / p for p in range(1, MAX_CUTS + 1)]))
     x = np.array(x, dtype=np.float64)
     for _ in range(8):
         near = np.abs(x[:, None] - cuts[None, :]).min(axis=1) < margin
         if not near.any():
             return x
-        x[near] += 2.5 * margin
+        x[near] += 2.5 * margin * np.where(x[near] < lo + 0.5 * length, 1.0, -1.0)
     raise AssertionError("insertion nodes could not be moved clear of the processor cuts")
 
 
