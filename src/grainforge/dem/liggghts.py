@@ -101,6 +101,16 @@ def node_insertion(slot: int, node, cell: float, seed: int, distribution: str) -
             f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 1000"]
 
 
+#: input lines that insert the grains as multisphere bodies and define their kinetic energy ``ke`` (J)
+MULTISPHERE_SETUP = """include in.templates
+include in.insert
+fix ms all multisphere
+
+compute kems all ke/multisphere
+compute erms all erotate/multisphere
+variable ke equal c_kems+c_erms"""
+
+
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
     s = {"young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
@@ -234,13 +244,7 @@ fix wx1 all wall/gran model hertz tangential history primitive type 1 xplane {fm
 fix wy0 all wall/gran model hertz tangential history primitive type 1 yplane 0.0
 fix wy1 all wall/gran model hertz tangential history primitive type 1 yplane {fmt(width)}
 
-include in.templates
-include in.insert
-fix ms all multisphere
-
-compute kems all ke/multisphere
-compute erms all erotate/multisphere
-variable ke equal c_kems+c_erms
+{MULTISPHERE_SETUP}
 variable kethr equal {fmt(ke_threshold)}
 compute bid all multisphere property id_multisphere
 compute btype all multisphere property clumptype

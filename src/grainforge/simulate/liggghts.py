@@ -291,7 +291,7 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     ``pre no`` run after it keeps the old fix lists and integrates nothing.
     """
     from ..dem.deck import fmt, json_text, template_record, xyzr_text
-    from ..dem.liggghts import node_insertion, template_fix
+    from ..dem.liggghts import MULTISPHERE_SETUP, node_insertion, template_fix
 
     for t in templates:
         if t.shape != "clump" or t.clump is None:
@@ -372,13 +372,7 @@ fix gravi all gravity {fmt(g)} vector 0.0 0.0 -1.0
 include in.base
 group base type {BASE}
 fix frz base freeze
-include in.templates
-include in.insert
-fix ms all multisphere
-
-compute kems all ke/multisphere
-compute erms all erotate/multisphere
-variable ke equal c_kems+c_erms
+{MULTISPHERE_SETUP}
 compute bx all multisphere property xcm
 compute bv all multisphere property vcm
 compute bvx all reduce ave c_bv[1]
