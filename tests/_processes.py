@@ -52,3 +52,24 @@ def child_processes(pid: int) -> list[int]:
         frontier = {p for p, pp in parent.items() if pp in frontier}
         found += sorted(frontier)
     return found
+
+
+def alive(pid: int) -> bool:
+    """Whether process ``pid`` exists and is not a zombie."""
+    try:
+        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in "ZX"
+    except OSError:
+        return False
+
+
+def assert_gone(pids, wait: float = 5.0) -> None:
+    """Every process of ``pids`` ends within ``wait`` seconds (those left are killed, then it fails)."""
+    import time
+
+    deadline = time.monotonic() + wait
+    while any(alive(p) for p in pids) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    left = [p for p in pids if alive(p)]
+    for p in left:
+        os.kill(p, signal.SIGKILL)
+    assert not left, f"engine processes left behind: {left}"

@@ -154,6 +154,14 @@ CASES = [
       for a in (["--grains", "20001"], ["--grains", "1"], ["--seeds", "101"], ["--spheres", "0"],
                 ["--templates", "0"], ["--friction", "nan"], ["--size", "0"], ["--workers", "0"],
                 ["--workers", "1000"])],
+    # simulate: engine, MPI and representation combinations no scene runs
+    Case("simulate-mpi-with-yade", _sim("repose", "--mpi", "2"), r"--mpi: yade runs one process per seed"),
+    Case("simulate-liggghts-mpi-0", _sim("tilt", "--engine", "liggghts", "--mpi", "0"), r"--mpi"),
+    Case("simulate-liggghts-mpi-5000", _sim("tilt", "--engine", "liggghts", "--mpi", "5000"), r"--mpi"),
+    Case("simulate-liggghts-levelset", _sim("repose", "--engine", "liggghts", "--shape", "levelset"),
+         r"--shape levelset: simulate's liggghts scenes take --shape clump only"),
+    Case("simulate-liggghts-huge", _sim("repose", "--engine", "liggghts", "--mpi", "2", *HUGE_SIM),
+         r"would take about"),
     Case("simulate-missing-input", ["simulate", "repose", "{in}/nothing", "--out", "o"], r"nothing"),
     Case("simulate-empty-folder", ["simulate", "tilt", "{in}/nogrinit", "--out", "o"], r"no grain files"),
     Case("simulate-bad-recipe", ["simulate", "tilt", "{in}/bad.toml", "--out", "o"], r"bad\.toml"),
@@ -175,7 +183,8 @@ def case_dir(tmp_path, monkeypatch):
     for name in ("results.csv", "fit.csv"):
         (tmp_path / "done" / name).write_text("old\n")
     monkeypatch.chdir(tmp_path)
-    monkeypatch.setenv("GRAINFORGE_YADE", "true")  # passes the Yade check; never run by a refused case
+    for engine in ("YADE", "LIGGGHTS", "MPIRUN"):  # pass the engine checks; never run by a refused case
+        monkeypatch.setenv(f"GRAINFORGE_{engine}", "true")
     return tmp_path
 
 

@@ -10,7 +10,6 @@ import math
 import os
 import re
 import shutil
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -169,14 +168,16 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
 # ---- settings an engine cannot run: one line, exit 2, before any engine starts or anything is written ----
 
 REFUSED = [
-    (["--engine", "liggghts"], "simulate has no liggghts scenes"),
     (["--engine", "lammps"], "--engine"),
     (["--mpi", "0"], "--mpi"),
     (["--mpi", "-3"], "--mpi"),
+    (["--engine", "liggghts", "--mpi", "0"], "--mpi"),
     (["--mpi", "2"], "--mpi: yade runs one process per seed"),
     (["--shape", "levelset"], "--shape levelset: simulate's yade scenes take --shape clump only"),
     (["--shape", "polyhedron"], "--shape polyhedron"),
     (["--shape", "sphere"], "--shape"),
+    (["--engine", "liggghts", "--shape", "levelset"], "--shape levelset: simulate's liggghts scenes take --shape clump only"),
+    (["--engine", "liggghts", "--shape", "polyhedron", "--mpi", "2"], "--shape polyhedron: simulate's liggghts"),
 ]
 
 
@@ -196,6 +197,23 @@ def test_an_engine_that_is_not_installed_is_refused_up_front(runner, grains, tmp
     r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick"])
     _one_line_exit_2(r)
     assert "Yade is not installed" in r.stderr
+    assert not out.exists()
+
+
+@pytest.mark.parametrize("variable, args, message", [
+    ("GRAINFORGE_LIGGGHTS", ["--engine", "liggghts"], "LIGGGHTS is not installed"),
+    ("GRAINFORGE_LIGGGHTS", ["--engine", "liggghts", "--mpi", "2"], "LIGGGHTS is not installed"),
+    ("GRAINFORGE_MPIRUN", ["--engine", "liggghts", "--mpi", "2"], "--mpi: mpirun is not installed"),
+])
+def test_liggghts_or_mpirun_not_installed_is_refused_up_front(runner, grains, tmp_path, monkeypatch, variable, args,
+                                                              message):
+    if variable == "GRAINFORGE_MPIRUN" and shutil.which("liggghts") is None:
+        monkeypatch.setenv("GRAINFORGE_LIGGGHTS", str(_fake_engine(tmp_path / "liggghts", "exit 0\n")))
+    monkeypatch.setenv(variable, str(tmp_path / "no-such-engine"))
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--quick", *args])
+    _one_line_exit_2(r)
+    assert message in r.stderr
     assert not out.exists()
 
 
@@ -232,7 +250,7 @@ def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grai
     import sys
     import time
 
-    from _processes import kill_sessions
+    from _processes import assert_gone, kill_sessions
 
     work = tmp_path / "work"
     work.mkdir()
@@ -255,20 +273,7 @@ def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grai
         _, err = proc.communicate(timeout=60)
         assert proc.returncode == 130, err.decode()
         assert err.decode().strip().splitlines()[-1] == "Interrupted."
-
-        def alive(pid):
-            try:
-                return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] not in "ZX"
-            except OSError:
-                return False
-
-        deadline = time.monotonic() + 5
-        while any(alive(p) for p in pids) and time.monotonic() < deadline:
-            time.sleep(0.1)
-        left = [p for p in pids if alive(p)]
-        for p in left:
-            os.kill(p, signal.SIGKILL)
-        assert not left, f"engine processes left behind: {left}"
+        assert_gone(pids)
         assert list(work.iterdir()) == []
     finally:
         kill_sessions(started)

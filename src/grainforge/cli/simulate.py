@@ -1,4 +1,4 @@
-"""``grainforge simulate repose|tilt INPUTS --out DIR``: virtual bulk tests in Yade."""
+"""``grainforge simulate repose|tilt INPUTS --out DIR``: virtual bulk tests in Yade or LIGGGHTS (under mpirun)."""
 
 from __future__ import annotations
 
@@ -15,7 +15,9 @@ TILT_ONLY = ("tilt_step", "tilt_start")
 ENGINES = ("yade", "liggghts")
 SHAPES = ("clump", "polyhedron", "levelset")
 #: what simulate's scenes can run, per engine
-RUNS = {"yade": ("clump",), "liggghts": ()}
+RUNS = {"yade": ("clump",), "liggghts": ("clump",)}
+#: engines simulate runs under mpirun (--mpi)
+MPI_ENGINES = ("liggghts",)
 
 
 def check_engine(engine: str, mpi: int | None, shape: str) -> None:
@@ -31,19 +33,24 @@ def check_engine(engine: str, mpi: int | None, shape: str) -> None:
     if not RUNS[engine]:
         raise click.UsageError(f"--engine {engine}: simulate has no {engine} scenes yet (grainforge dem "
                                f"--engine {engine} writes a pour deck); use --engine yade")
-    if mpi is not None:
+    if mpi is not None and engine not in MPI_ENGINES:
         raise click.UsageError(f"--mpi: {engine} runs one process per seed here, not under mpirun; "
-                               "use --workers for runs at once")
+                               "use --workers for runs at once (or --engine liggghts --mpi N)")
     if shape not in RUNS[engine]:
         raise click.UsageError(f"--shape {shape}: simulate's {engine} scenes take "
                                f"{', '.join('--shape ' + s for s in RUNS[engine])} only (grainforge dem "
                                f"--shape {shape} writes the deck)")
     from ..simulate import yade_executable
+    from ..simulate.liggghts import liggghts_executable, mpirun_executable
 
-    try:
-        yade_executable()
-    except FileNotFoundError as exc:
-        raise click.UsageError(str(exc)) from None
+    checks = {"yade": [yade_executable], "liggghts": [liggghts_executable]}[engine]
+    if mpi is not None:
+        checks.append(mpirun_executable)
+    for check in checks:
+        try:
+            check()
+        except FileNotFoundError as exc:
+            raise click.UsageError(str(exc)) from None
 
 
 def _command(test: str, doc: str):
@@ -58,20 +65,22 @@ def _command(test: str, doc: str):
     @click.option("--label", default=None, show_default="the inputs' names",
                   help="Name of this population in results.csv.")
     @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
-                  help="Yade runs (seeds) at once, each on one core (default: CPU count).")
+                  help="Engine runs (seeds) at once, each on one core or on --mpi ranks (default: CPU count "
+                       "divided by --mpi).")
     @click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
-                  help="DEM engine of the runs (simulate's scenes exist for Yade only, yet).")
-    @click.option("--mpi", type=click.IntRange(min=1), default=None,
-                  help="MPI ranks of each run (an engine run under mpirun; Yade runs one process per seed: "
-                       "use --workers).")
+                  help="DEM engine of the runs: Yade, or LIGGGHTS (the same scenes as multisphere clumps; "
+                       "docs/simulate.md says where the engines differ).")
+    @click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
+                  help="LIGGGHTS only: run each seed under `mpirun -np N` (the box cut into N columns). "
+                       "Yade runs one process per seed: use --workers.")
     @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
-                  help="Grain representation (simulate's scenes take clumps only, yet; --spheres sets their "
-                       "size).")
+                  help="Grain representation (simulate's Yade and LIGGGHTS scenes take clumps; --spheres sets "
+                       "their size).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
     def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, overwrite, **values):
         check_engine(engine, mpi, shape)
-        _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values)
+        _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi)
 
     return command
 
@@ -87,10 +96,11 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "grainforge.io", "grainforge.solid", "grainforge.methods", "grainforge.population",
                  "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
                  "grainforge.dem.clump", "grainforge.dem.enclosure", "grainforge.dem.yade", "grainforge.dem.deck",
-                 "grainforge.simulate.report", "matplotlib.pyplot", "matplotlib.collections")
+                 "grainforge.dem.liggghts", "grainforge.simulate.liggghts", "grainforge.simulate.report",
+                 "matplotlib.pyplot", "matplotlib.collections")
 
 
-def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values):
+def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine="yade", mpi=None):
     import os
 
     from ..estimate import TooLargeError
@@ -104,7 +114,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)
     available, make_seconds = check_inputs(inputs)
-    workers = workers or os.cpu_count() or 1
+    workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
                              as_spheres=as_spheres, workers=workers)
@@ -132,7 +142,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             bar.update(1)
 
         templates = build_population(inputs, settings, as_spheres=as_spheres, progress=step)
-    runs = tqdm(total=settings.seeds * 1000, desc=f"{test} (Yade)", unit="‰", disable=None, leave=False,
+    name = "Yade" if engine == "yade" else "LIGGGHTS" + (f", {mpi} MPI ranks" if mpi else "")
+    runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
 
     done = [0.0] * settings.seeds
@@ -149,7 +160,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     try:
         try:
             rows = run_test(test, templates, settings, stage, label=label, progress=progress,
-                            workers=workers)
+                            workers=workers, engine=engine, mpi=mpi)
         except EngineFailed as exc:
             # an engine failure (not an interrupt): its deck and log are kept for the diagnosis, nothing else
             kept = keep_failed(exc.deck, out)
@@ -177,7 +188,8 @@ repose = _command("repose", """Angle of repose: a cylinder of grains on a rough 
 
     INPUTS: mesh files (mm), a generate/batch folder, a manifest, or one TOML recipe.
     Each grain becomes a clump with the mesh's exact mass and inertia (grainforge dem);
-    Yade runs headless once per seed; the heap's slope is fitted in 8 sectors.  See docs/simulate.md.
+    Yade (or LIGGGHTS, --engine liggghts [--mpi N]) runs headless once per seed; the heap's slope is
+    fitted in 8 sectors.  See docs/simulate.md.
     """)
 tilt = _command("tilt", """Tilt table: a layer of grains on a rough plate is tilted until it slides.
 
@@ -188,7 +200,7 @@ tilt = _command("tilt", """Tilt table: a layer of grains on a rough plate is til
 
 @click.group()
 def simulate():
-    """Virtual bulk tests in Yade (angle of repose, tilt table): shape's effect on bulk friction."""
+    """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table): shape's effect on bulk friction."""
 
 
 simulate.add_command(repose)

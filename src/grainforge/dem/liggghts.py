@@ -48,7 +48,7 @@ from .deck import (
     xyzr_text,
 )
 
-__all__ = ["write_deck", "deck_files", "pour_settings", "seed_table", "deck_seeds", "SEED_MIN", "SEED_LIMIT"]
+__all__ = ["write_deck", "deck_files", "pour_settings", "template_fix", "node_insertion", "seed_table", "deck_seeds", "SEED_MIN", "SEED_LIMIT"]
 
 #: LIGGGHTS takes a random seed only if it is a prime > 10000 (it stops otherwise), and the seeds
 #: of an insertion fix, its particle distribution and that distribution's templates must differ
@@ -74,6 +74,41 @@ _SEED_STRIDE = 1_000_003
 _NODE_BOX = 2e-7
 _MARGIN_LO = 0.05
 _MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2
+
+
+def template_fix(t, k: int, seed: int, atom_type: int = 1) -> str:
+    """The ``fix pts<k+1> ... particletemplate/multisphere`` line of template ``t`` (clump type ``k + 1``):
+    the spheres of ``<name>.xyzr``, the mesh's exact mass and inertia tensor (grain frame)."""
+    I = t.inertia
+    tensor = " ".join(fmt(x) for x in (I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]))
+    # LIGGGHTS refuses a template below volume_limit (default 1e-12 m³, a 12 µm sphere) as a
+    # likely unit error; grainforge's volumes are exact and in SI, so the limit sits far below
+    return (f"fix pts{k + 1} all particletemplate/multisphere {seed} atom_type {atom_type} "
+            f"density constant {fmt(t.density)} volume_limit {fmt(1e-3 * t.props.volume)} "
+            f"nspheres {t.clump.count} ntry 1000000 "
+            f"spheres file {t.name}.xyzr scale 1.0 type {k + 1} "
+            f"mass {fmt(t.mass)} inertia_tensor {tensor} use_density")
+
+
+def node_insertion(slot: int, node, cell: float, seed: int, distribution: str) -> list[str]:
+    """The region and ``insert/pack`` lines that insert one grain of ``distribution`` at ``node``
+    (random orientation), within a box of ``_NODE_BOX`` cells around it (see the notes above ``_NODE_BOX``)."""
+    lo, hi = np.asarray(node) - 0.5 * _NODE_BOX * cell, np.asarray(node) + 0.5 * _NODE_BOX * cell
+    return [f"region r{slot} block {fmt(lo[0])} {fmt(hi[0])} {fmt(lo[1])} {fmt(hi[1])} "
+            f"{fmt(lo[2])} {fmt(hi[2])} units box volume_limit {fmt(0.5 * (_NODE_BOX * cell) ** 3)}",
+            f"fix i{slot} all insert/pack seed {seed} "
+            f"distributiontemplate {distribution} insert_every once overlapcheck no "
+            f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 1000"]
+
+
+#: input lines that insert the grains as multisphere bodies and define their kinetic energy ``ke`` (J)
+MULTISPHERE_SETUP = """include in.templates
+include in.insert
+fix ms all multisphere
+
+compute kems all ke/multisphere
+compute erms all erotate/multisphere
+variable ke equal c_kems+c_erms"""
 
 
 def pour_settings(**kw) -> dict:
@@ -143,15 +178,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
                 f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
         files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=head)
         files[f"{t.name}.clump.vtk"] = clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")
-        I = t.inertia
-        tensor = " ".join(fmt(x) for x in (I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]))
-        # LIGGGHTS refuses a template below volume_limit (default 1e-12 m³, a 12 µm sphere) as a
-        # likely unit error; grainforge's volumes are exact and in SI, so the limit sits far below
-        tpl.append(f"fix pts{k + 1} all particletemplate/multisphere {seeds[k]} atom_type 1 "
-                   f"density constant {fmt(t.density)} volume_limit {fmt(1e-3 * t.props.volume)} "
-                   f"nspheres {t.clump.count} ntry 1000000 "
-                   f"spheres file {t.name}.xyzr scale 1.0 type {k + 1} "
-                   f"mass {fmt(t.mass)} inertia_tensor {tensor} use_density")
+        tpl.append(template_fix(t, k, seeds[k]))
         names.append(f"pts{k + 1}")
         masses.append(t.mass * t.count)
     frac = np.asarray(masses) / np.sum(masses)
@@ -183,12 +210,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         for _ in range(t.count):
             i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
             node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
-            lo, hi = node - 0.5 * _NODE_BOX * cell, node + 0.5 * _NODE_BOX * cell
-            ins.append(f"region r{slot} block {fmt(lo[0])} {fmt(hi[0])} {fmt(lo[1])} {fmt(hi[1])} "
-                       f"{fmt(lo[2])} {fmt(hi[2])} units box volume_limit {fmt(0.5 * (_NODE_BOX * cell) ** 3)}")
-            ins.append(f"fix i{slot} all insert/pack seed {seeds[2 * n_t + 1 + slot]} "
-                       f"distributiontemplate pdd{k + 1} insert_every once overlapcheck no "
-                       f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 1000")
+            ins += node_insertion(slot, node, cell, seeds[2 * n_t + 1 + slot], f"pdd{k + 1}")
             slot += 1
     files["in.insert"] = "\n".join(ins) + "\n"
 
@@ -222,13 +244,7 @@ fix wx1 all wall/gran model hertz tangential history primitive type 1 xplane {fm
 fix wy0 all wall/gran model hertz tangential history primitive type 1 yplane 0.0
 fix wy1 all wall/gran model hertz tangential history primitive type 1 yplane {fmt(width)}
 
-include in.templates
-include in.insert
-fix ms all multisphere
-
-compute kems all ke/multisphere
-compute erms all erotate/multisphere
-variable ke equal c_kems+c_erms
+{MULTISPHERE_SETUP}
 variable kethr equal {fmt(ke_threshold)}
 compute bid all multisphere property id_multisphere
 compute btype all multisphere property clumptype

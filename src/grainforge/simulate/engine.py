@@ -4,17 +4,16 @@ from __future__ import annotations
 
 import json
 import os
-import shutil
-import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
 
 import numpy as np
 
 from .measure import heap_angle, tilt_failure_angle
+from .process import EngineFailed, find_executable, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 
-__all__ = ["yade_executable", "write_test_deck", "run_yade", "EngineFailed", "measure_result", "run_test", "summarise"]
+__all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result", "run_test", "summarise"]
 
 
 def yade_executable() -> str:
@@ -25,15 +24,18 @@ def yade_executable() -> str:
     FileNotFoundError
         If Yade is not installed (Debian: ``apt-get install yade``).
     """
-    exe = shutil.which(os.environ.get("GRAINFORGE_YADE", "yade"))
-    if exe is None:
-        raise FileNotFoundError("Yade is not installed (on Debian: apt-get install --no-install-recommends yade)")
-    return exe
+    return find_executable("GRAINFORGE_YADE", "yade",
+                           "Yade is not installed (on Debian: apt-get install --no-install-recommends yade)")
 
 
 def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
-                    *, overwrite: bool = False) -> list[Path]:
-    """Write the Yade deck of one run of ``test`` into ``out`` (``yade -n -x run.py`` from inside it)."""
+                    *, overwrite: bool = False, engine: str = "yade") -> list[Path]:
+    """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
+    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts.deck_files`)."""
+    if engine == "liggghts":
+        from .liggghts import write_test_deck as write_liggghts
+
+        return write_liggghts(templates, test, settings, seed, out, overwrite=overwrite)
     from ..dem.yade import write_deck
     from .scenes import REPOSE, TILT
 
@@ -57,61 +59,13 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
         exception's ``deck`` is the run's folder, kept by :func:`keep_failed`).
     """
     deck = Path(deck)
-    exe = yade_executable()
     log_path = deck / "yade.log"
-    env = dict(os.environ, OMP_NUM_THREADS="1")
-    from ..workers import die_with_parent
-
-    with open(log_path, "w", buffering=1) as log:
-        proc = _track(subprocess.Popen([exe, "-n", "-x", "run.py"], cwd=deck, stdout=subprocess.PIPE,
-                                stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True, env=env,
-                                start_new_session=True, preexec_fn=die_with_parent))
-        try:
-            for line in proc.stdout:
-                log.write(line)
-                if line.startswith("grainforge-progress") and progress is not None:
-                    _, frac, *phase = line.split()
-                    progress(float(frac), " ".join(phase))
-            rc = proc.wait(timeout=timeout)
-        except BaseException:
-            _kill(proc)
-            raise
-        finally:
-            proc.stdout.close()
-            _RUNNING.discard(proc)
+    rc = run_engine_process([yade_executable(), "-n", "-x", "run.py"], deck, log_path, {}, progress,
+                            timeout=timeout)
     if rc != 0 or not (deck / "result.json").is_file():
         tail = [ln.strip() for ln in log_path.read_text(errors="replace").splitlines() if ln.strip()]
         raise EngineFailed(f"Yade failed in {deck} (exit {rc}): {tail[-1] if tail else 'no output'}", deck)
     return json.loads((deck / "result.json").read_text())
-
-
-class EngineFailed(RuntimeError):
-    """An engine run ended with an error (not an interrupt); ``deck`` is its folder (deck and log)."""
-
-    def __init__(self, message: str, deck: str | os.PathLike):
-        super().__init__(message)
-        self.deck = Path(deck)
-
-
-#: engine processes started by this process and not yet finished (killed on an interrupt)
-_RUNNING: set = set()
-
-
-def _track(proc):
-    _RUNNING.add(proc)
-    return proc
-
-
-def _kill_all() -> None:
-    for proc in list(_RUNNING):
-        _kill(proc)
-
-
-def _kill(proc: subprocess.Popen) -> None:
-    from ..workers import kill_process_tree
-
-    kill_process_tree(proc.pid)
-    proc.wait()
 
 
 def measure_result(result: dict) -> dict:
@@ -148,7 +102,8 @@ def measure_result(result: dict) -> dict:
 
 def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.PathLike, *,
              label: str = "", progress: Callable[[int, float, str], None] | None = None,
-             overwrite: bool = False, workers: int = 1) -> list[dict]:
+             overwrite: bool = False, workers: int = 1, engine: str = "yade",
+             mpi: int | None = None) -> list[dict]:
     """Run ``test`` once per seed into ``out/<test>-seed<k>/`` and measure each run.
 
     Parameters
@@ -165,8 +120,11 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     progress : callable, optional
         ``progress(run index, fraction, phase)`` while each run goes on.
     workers : int
-        Yade processes at once (each single-threaded); the seeds' runs are
+        Engine runs at once (each single-threaded, or ``mpi`` ranks); the seeds' runs are
         independent, so the rows do not depend on it.
+    engine : {"yade", "liggghts"}
+    mpi : int, optional
+        LIGGGHTS only: ranks of each run under ``mpirun``.
 
     Returns
     -------
@@ -177,11 +135,16 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     seeds = [settings.seed + k for k in range(settings.seeds)]
     decks = [out / f"{test}-seed{seed}" for seed in seeds]
     for seed, deck in zip(seeds, decks):
-        write_test_deck(templates, test, settings, seed, deck, overwrite=overwrite)
+        write_test_deck(templates, test, settings, seed, deck, overwrite=overwrite, engine=engine)
 
     def one(k):
         report = None if progress is None else (lambda f, p: progress(k, f, p))
-        result = run_yade(decks[k], progress=report)
+        if engine == "liggghts":
+            from .liggghts import run_liggghts
+
+            result = run_liggghts(decks[k], mpi=mpi, progress=report)
+        else:
+            result = run_yade(decks[k], progress=report)
         return {"label": label, "seed": seeds[k], **measure_result(result)}
 
     if workers <= 1 or len(seeds) == 1:
@@ -192,7 +155,7 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     try:
         return list(pool.map(one, range(len(seeds))))
     except BaseException:
-        _kill_all()
+        kill_running()
         raise
     finally:
         pool.shutdown(wait=True, cancel_futures=True)

@@ -1,0 +1,87 @@
+"""Engine processes of the virtual tests: started in a session of their own, their output logged and their
+progress lines read, killed with everything below them (an mpirun's ranks) on an interrupt."""
+
+from __future__ import annotations
+
+import os
+import subprocess
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+__all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable"]
+
+
+def find_executable(variable: str, name: str, missing: str) -> str:
+    """Path of command ``name``, or of the command the environment variable ``variable`` names.
+
+    Raises
+    ------
+    FileNotFoundError
+        With the message ``missing`` when there is none.
+    """
+    import shutil
+
+    exe = shutil.which(os.environ.get(variable, name))
+    if exe is None:
+        raise FileNotFoundError(missing)
+    return exe
+
+
+def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
+                       progress: Callable[[float, str], None] | None, *, timeout: float | None = None) -> int:
+    """Run an engine command in ``cwd`` (its own session), its output to ``log_path``; its exit status.
+
+    ``grainforge-progress <fraction> <phase>`` lines go to ``progress``.  On any exception
+    (an interrupt) the process and everything below it (an mpirun's ranks) are killed.
+    """
+    from ..workers import die_with_parent
+
+    env = dict(os.environ, OMP_NUM_THREADS="1", **env)
+    with open(log_path, "w", buffering=1) as log:
+        proc = _track(subprocess.Popen(list(cmd), cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                       stdin=subprocess.DEVNULL, text=True, errors="replace", env=env, start_new_session=True,
+                                       preexec_fn=die_with_parent))
+        try:
+            for line in proc.stdout:
+                log.write(line)
+                if line.startswith("grainforge-progress") and progress is not None:
+                    _, frac, *phase = line.split()
+                    progress(float(frac), " ".join(phase))
+            rc = proc.wait(timeout=timeout)
+        except BaseException:
+            _kill(proc)
+            raise
+        finally:
+            proc.stdout.close()
+            _RUNNING.discard(proc)
+    return rc
+
+
+class EngineFailed(RuntimeError):
+    """An engine run ended with an error (not an interrupt); ``deck`` is its folder (deck and log)."""
+
+    def __init__(self, message: str, deck: str | os.PathLike):
+        super().__init__(message)
+        self.deck = Path(deck)
+
+
+#: engine processes started by this process and not yet finished (killed on an interrupt)
+_RUNNING: set = set()
+
+
+def _track(proc):
+    _RUNNING.add(proc)
+    return proc
+
+
+def kill_running() -> None:
+    """Kill every engine process this process started and that has not finished (with its children)."""
+    for proc in list(_RUNNING):
+        _kill(proc)
+
+
+def _kill(proc: subprocess.Popen) -> None:
+    from ..workers import kill_process_tree
+
+    kill_process_tree(proc.pid)
+    proc.wait()
