@@ -95,7 +95,7 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
     from grainforge.population import draw_grain
 
     spec = FITS["rf"]
-    us = [np.array([0.1, 0.2, 0.8, 0.7]), np.array([0.3, 0.1, 0.6, 0.9])]
+    us = [np.array([0.1, 0.2, 0.5, 0.8, 0.7]), np.array([0.3, 0.1, 0.9, 0.6, 0.9])]
     own = [{**spec.grain_params(u)} for u in us]
     text = twin_recipe_text(spec, own, [0.41, 0.52], seed=3, header="test")
     recipe = parse_recipe(text)
@@ -103,6 +103,7 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
         _, params, size = draw_grain(recipe, i)
         assert size == [0.41, 0.52][i]
         assert list(params.descriptors) == own[i]["descriptors"] and list(params.aspect) == own[i]["aspect"]
+        assert list(params.decay) == own[i]["decay"]
         assert params.subdivisions == 5
     (tmp_path / "recipe.toml").write_text(text.replace("subdivisions = 5", "subdivisions = 3"), encoding="utf-8")
     r = runner.invoke(cli, ["batch", str(tmp_path / "recipe.toml"), "--out", str(tmp_path / "grains")])
