@@ -361,10 +361,11 @@ register(MethodFit(
     max_across=None,
 ))
 register(MethodFit(
-    # angular grains: edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad,
-    # 16 facets, a fine texture)
+    # crushed, angular grains (Hostun-like): a 7-facet core, so that sphericity falls well below convexity as it
+    # does in crushed sands; edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad);
+    # a fine texture (FSO overlay of RMS 0.02)
     "angular", (Setting("rounding", 0.0, 0.9), Setting("dent_depth", 0.0, 0.7)),
-    {"facets": 16, "dents": 6, "dent_width": 0.5, "roughness": 0.005, "length_ratio": 2.0, "subdivisions": 5},
+    {"facets": 7, "dents": 6, "dent_width": 0.5, "roughness": 0.02, "length_ratio": 2.0, "subdivisions": 5},
     lambda v: {"rounding": v["rounding"], "dent_depth": v["dent_depth"], "aspect": _aspect(v)},
 ))
 
