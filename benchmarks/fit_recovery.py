@@ -4,7 +4,8 @@ A synthetic sand (``benchmarks/make_synthetic_sand.py``: grains of one
 generator, each made with known settings, measured the Atlas way into an
 Atlas CSV, the settings in a ``...-settings.csv`` beside it) is fitted by
 :func:`grainforge.fit.fit_sand` with every row twinned once, and the script
-prints the fit's criteria, then per setting the mean of the known settings
+prints the fit's criteria, then per setting (those the fitted method shares with the sand's
+generator) the mean of the known settings
 (of the rows twinned), the mean of the fitted ones and their relative
 difference, and the Spearman correlation between each grain's known and
 fitted setting: a setting is *identifiable* when the fitted values follow the
@@ -67,7 +68,7 @@ def main() -> None:
     print("| setting | known mean | fitted mean | difference | Spearman known vs fitted, per grain |")
     print("|---|---|---|---|---|")
     for k in known[0]:
-        if k == "Particle ID":
+        if k not in result.settings[0]:  # the row number, or a setting of another generator than the fitted one
             continue
         a = np.array([float(known[j][k]) for j in rows])
         b = np.array([s[k] for s in result.settings])
