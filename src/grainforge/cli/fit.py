@@ -68,7 +68,7 @@ def fit(sand, out, voxel_size, method, count, refine, design_grains, max_across,
     import sys
 
     from ..estimate import TooLargeError, duration
-    from ..fit import FITS, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
+    from ..fit import FITS, METHOD_CAP, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
     from .interrupts import ready_for_work
 
     if method != "auto" and method not in FITS:
@@ -78,8 +78,6 @@ def fit(sand, out, voxel_size, method, count, refine, design_grains, max_across,
     s = read_sand(sand, voxel_size)
     check_sand(s)
     workers = workers or os.cpu_count() or 1
-    from ..fit import METHOD_CAP
-
     max_across = METHOD_CAP if max_across is None else max_across or None
     try:
         seconds = check_fit_size(s, method, count=count, design_grains=design_grains, refine=refine,
