@@ -265,6 +265,24 @@ def test_angular_grains_are_shaped_by_their_seed_more_than_by_their_settings():
     assert abs(other[1] - own[1]) > 0.1 and abs(other[3] - own[3]) > 0.1, (own, other)
 
 
+def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
+    """rf is capped at 150 voxels across, fso is not (its fractal surface has not converged): on the synthetic 1 µm
+    sand (150 to 290 voxels across) an fso fit is estimated dearer than an rf one and, over a 15-minute budget,
+    refused up front naming --max-voxels-across; capped explicitly it costs what rf does."""
+    from grainforge.estimate import TooLargeError
+    from grainforge.fit import METHOD_CAP, check_fit_size, resolve_cap
+
+    sand = read_sand(RF_SAND.with_name("synthetic-1um-sand.csv"))
+    assert resolve_cap("rf", METHOD_CAP) == 150.0 and resolve_cap("fso", METHOD_CAP) is None
+    kw = dict(count=500, workers=2, cache=tmp_path)
+    rf, fso = check_fit_size(sand, "rf", **kw), check_fit_size(sand, "fso", **kw)
+    assert fso > 1.5 * rf and check_fit_size(sand, "auto", **kw) > fso  # auto: every design, the dearest twins
+    assert check_fit_size(sand, "rf", max_minutes=15, **kw) == rf
+    with pytest.raises(TooLargeError, match=r"fit --method fso .* over --max-minutes 15.* set --max-voxels-across"):
+        check_fit_size(sand, "fso", max_minutes=15, **kw)
+    assert check_fit_size(sand, "fso", max_across=150.0, **kw) == pytest.approx(rf, rel=0.01)
+
+
 def test_bad_tables_are_refused_before_anything_is_written(runner, tmp_path):
     """One grain, a constant column (correlations undefined), a voxel size needing days: one line, exit 2."""
     rows = _fake_rows(60)
