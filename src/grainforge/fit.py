@@ -356,8 +356,9 @@ register(MethodFit(
     "fso", (Setting("amplitude", 0.0, 0.15), Setting("fractal_dimension", 2.0, 2.8)),
     {"surface": "seamless", "subdivisions": 5},
     lambda v: {"amplitude": v["amplitude"], "fractal_dimension": v["fractal_dimension"], "aspect": _aspect(v)},
-    # no cap: the FSO overlay's fractal surface keeps gaining area as the voxels resolve it (sphericity 0.04
-    # lower at 300 voxels across than at 150; docs/fit.md), so fso grains are measured at the sand's resolution
+    # no cap: the FSO overlay's fractal surface keeps gaining area as the voxels resolve it (sphericity 0.044
+    # lower at 300 voxels across than at 150, still 0.009 lower than at 250; docs/fit.md), so fso grains are
+    # measured at the sand's resolution
     max_across=None,
 ))
 register(MethodFit(
