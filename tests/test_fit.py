@@ -156,7 +156,7 @@ def design_cache(tmp_path_factory):
 
 
 def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cache, monkeypatch):
-    """Fast lane: a tiny twin fit (64 design grains, 50 twins measured at 20 voxels across, two refinements):
+    """Fast lane: a tiny twin fit (80 design grains, 40 twins measured at 20 voxels across, one refinement):
     fit.csv has its columns, pairs every twin with a distinct sand row whose values it copies, gives the twin its
     sand grain's size, and fit-stats.csv's Spearman correlations are those of fit.csv's columns."""
     import grainforge.fit as fitmod
@@ -164,17 +164,19 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
 
     sand = read_sand(RF_SAND)
     lines = []
-    result = fit_sand(sand, "rf", count=50, refine=2, design_grains=64, max_across=20.0, cache=design_cache,
+    result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, cache=design_cache,
                       log=lines.append)
-    assert [line.split(":")[0] for line in lines] == ["design rf", "twins", "refine 1", "refine 2"]
-    assert result.grains_measured >= 50 and len(result.generated) == 50
+    assert [line.split(":")[0] for line in lines] == ["design rf", "twins", "refine 1"]
+    assert result.grains_measured >= 40 and len(result.generated) == 40
+    # two twins' first settings lie in a corner where the generator refuses their seed; refined, they are made
+    assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
     monkeypatch.setattr(fitmod, "fit_figure", lambda *a: None)  # fit.png: the slow plumbing test draws it
     paths = write_outputs(sand, result, tmp_path / "out")
     rows = list(csv.DictReader(paths[1].read_text(encoding="utf-8").splitlines()))
     settings = [f"setting_{s.name}" for s in FITS["rf"].all_settings]
     assert list(rows[0]) == [*TWIN_COLUMNS, *settings]
-    assert len(rows) == 50 and len({r["sand_row"] for r in rows}) == 50
-    sand_table, twin_table = np.empty((50, 4)), np.empty((50, 4))
+    assert len(rows) == 40 and len({r["sand_row"] for r in rows}) == 40
+    sand_table, twin_table = np.empty((40, 4)), np.empty((40, 4))
     for i, r in enumerate(rows):
         j = int(r["sand_row"]) - 1  # rows of the sand's file, from 1
         assert int(r["grain"]) == i and j == result.sand_rows[i]
@@ -194,12 +196,12 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     for pair, r in stats.items():
         a, b = (DESCRIPTORS.index(k) for k in pair.split("-"))
         assert float(r["sand"]) == pytest.approx(cs[a, b]) and float(r["generated"]) == pytest.approx(cg[a, b])
-        # even this tiny fit (a 64-grain design, twins measured coarser than the sand) carries the sand's
-        # correlations over, loosely: its last run was within 0.07; 50 grains' rank correlations are noisy
-        # (about ±0.14), so the full criterion (0.1) is checked on Ottawa (benchmarks/fit_twins.py)
+        # even this tiny fit (an 80-grain design, twins measured coarser than the sand) carries the sand's
+        # correlations over, loosely: its last run was within 0.18; 40 grains' rank correlations are noisy
+        # (about ±0.16), so the full criterion (0.1) is checked on Ottawa (benchmarks/fit_twins.py)
         assert abs(cg[a, b] - cs[a, b]) <= 0.25, pair
     assert cs[0, 1] > 0.5 and cg[0, 1] > 0.5  # sphericity-convexity: strong in the sand, so in its twins
-    assert fitmod.design_path("rf", "atlas", 20.0, 64, design_cache).exists()
+    assert fitmod.design_path("rf", "atlas", 20.0, 80, design_cache).exists()
 
 
 @pytest.mark.slow  # about 200 grains at 25 to 40 voxels across (about 10 s of CPU)

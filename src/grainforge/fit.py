@@ -879,6 +879,11 @@ def _refine(tw: _Twins, model, idx: np.ndarray, y: np.ndarray) -> None:
     pred = np.array([model.predict(tw.u[i], tw.across[i])[0] for i in idx])
     offsets = np.where(np.isfinite(y), y - pred, 0.0)
     u, miss = invert(model, tw.targets[idx], tw.across[idx], offsets=offsets, start=tw.u[idx], scale=tw.tol)
+    # a grain the generator refused to make or measure at its settings (a corner of the design box, with its own
+    # seed) is not re-solved, which would lead back to that corner: its settings move a third of the way
+    # towards the middle of the box
+    refused = ~np.all(np.isfinite(y), axis=1)
+    u[refused] = 0.5 + (tw.u[idx][refused] - 0.5) * (2.0 / 3.0)
     tw.u[idx] = u
     tw.reach[idx] = miss
 
