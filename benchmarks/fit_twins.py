@@ -8,7 +8,7 @@ The design cache is the user's (``$GRAINFORGE_CACHE``); ``--fresh-cache DIR`` us
 so that the design is measured and timed too.  Usage::
 
     nice .venv/bin/python benchmarks/fit_twins.py                                   # Ottawa, rf, 500 twins
-    nice .venv/bin/python benchmarks/fit_twins.py --sand tests/data/synthetic-angular-sand.csv --method auto
+    nice .venv/bin/python benchmarks/fit_twins.py --sand tests/data/synthetic-rf-sand.csv --method auto
     nice .venv/bin/python benchmarks/fit_twins.py --sand tests/data/synthetic-1um-sand.csv
 """
 

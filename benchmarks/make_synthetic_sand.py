@@ -1,21 +1,25 @@
-"""Make the synthetic sands of ``tests/data``: rf grains with known settings, measured into Sand Atlas CSVs.
+"""Make the synthetic sands of ``tests/data``: generated grains with known settings, measured into Sand Atlas CSVs.
 
-``angular`` (default): ``synthetic-angular-sand.csv``, 150 grains whose
-per-grain settings (irregularity D3, roughness D8 and the Zingg ratios of the
-aspect) are drawn from known truncated normals (:data:`KNOWN`), each
-measured the Atlas way at about 30 voxels across (13.3 µm voxels, d_eq about
-400 µm), the drawn settings in ``synthetic-angular-sand-settings.csv`` (same
-row order): Hostun-like angular grains (true sphericity about 0.72,
-convexity about 0.80, flatness about 0.70; the script prints the measured
-means and sds).
+``angular`` (default): ``synthetic-angular-sand.csv``, 150 grains of the
+``angular`` generator (the fit's ``angular`` method: 7 facets, 6 dents, a fine
+texture) whose per-grain settings (edge rounding, dent depth and the Zingg
+ratios of the aspect) are drawn from known truncated normals
+(:data:`KNOWN_ANGULAR`), each measured the Atlas way at about 30 voxels across
+(13.3 µm voxels, d_eq about 400 µm), the drawn settings in
+``synthetic-angular-sand-settings.csv`` (same row order): a crushed,
+Hostun-like sand (the script prints the measured means and sds).
 
-``fine``: ``synthetic-1um-sand.csv``, 100 Ottawa-like grains (:data:`FINE`)
+``rf``: ``synthetic-rf-sand.csv``, 150 rf grains (:data:`KNOWN_RF`: irregularity
+D3, roughness D8, the aspect; the roughness decay at the generator's default)
+made and measured the same way, settings in ``synthetic-rf-sand-settings.csv``.
+
+``fine``: ``synthetic-1um-sand.csv``, 100 Ottawa-like rf grains (:data:`FINE`)
 of d_eq about 200 µm at 1 µm voxels, each measured at its full resolution
 (140 to 290 voxels across): a table at a resolution the fit measures capped.
 
 Deterministic; usage::
 
-    nice .venv/bin/python benchmarks/make_synthetic_sand.py [angular|fine]
+    nice .venv/bin/python benchmarks/make_synthetic_sand.py [angular|rf|fine]
 """
 
 from __future__ import annotations
@@ -27,27 +31,35 @@ from pathlib import Path
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 VOXEL_UM = 13.3
 #: the known settings: name -> (mean, sd, low, high) of a truncated normal
-KNOWN = {"irregularity": (0.10, 0.05, 0.02, 0.22), "roughness": (0.031, 0.006, 0.015, 0.039),
-         "elongation": (0.64, 0.1, 0.4, 0.95), "flatness": (0.70, 0.1, 0.4, 0.95)}
+KNOWN_ANGULAR = {"rounding": (0.25, 0.1, 0.05, 0.5), "dent_depth": (0.55, 0.08, 0.35, 0.7),
+                 "elongation": (0.6, 0.08, 0.4, 0.85), "flatness": (0.5, 0.08, 0.3, 0.75)}
+KNOWN_RF = {"irregularity": (0.10, 0.05, 0.02, 0.22), "roughness": (0.031, 0.006, 0.015, 0.039),
+            "elongation": (0.64, 0.1, 0.4, 0.95), "flatness": (0.70, 0.1, 0.4, 0.95)}
 GRAINS = 150
 SEED = 41
 #: the fine sand's settings, voxel size (µm), median d_eq (µm) and grains
 FINE = {"irregularity": (0.04, 0.015, 0.0, 0.1), "roughness": (0.012, 0.004, 0.0, 0.03),
         "elongation": (0.77, 0.1, 0.45, 0.98), "flatness": (0.77, 0.1, 0.45, 0.98)}
 FINE_VOXEL_UM, FINE_D_UM, FINE_GRAINS = 1.0, 200.0, 100
+#: rf's roughness decay in the rf sands: the generator's default (the fit's rf method varies it per grain)
+RF_DECAY = -5.0 / 3.0
 
 
 def main() -> None:
     import sys
 
-    if sys.argv[1:] == ["fine"]:
-        make("synthetic-1um-sand.csv", FINE, FINE_GRAINS, FINE_VOXEL_UM, FINE_D_UM, settings=None)
+    which = sys.argv[1] if sys.argv[1:] else "angular"
+    if which == "fine":
+        make("rf", "synthetic-1um-sand.csv", FINE, FINE_GRAINS, FINE_VOXEL_UM, FINE_D_UM, settings=None)
+    elif which == "rf":
+        make("rf", "synthetic-rf-sand.csv", KNOWN_RF, GRAINS, VOXEL_UM, 400.0, settings="synthetic-rf-sand-settings.csv")
     else:
-        make("synthetic-angular-sand.csv", KNOWN, GRAINS, VOXEL_UM, 400.0,
+        make("angular", "synthetic-angular-sand.csv", KNOWN_ANGULAR, GRAINS, VOXEL_UM, 400.0,
              settings="synthetic-angular-sand-settings.csv")
 
 
-def make(name: str, known: dict, grains: int, voxel_um: float, d_um: float, settings: str | None) -> None:
+def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um: float,
+         settings: str | None) -> None:
     import numpy as np
     from scipy.stats import truncnorm
 
@@ -55,14 +67,15 @@ def make(name: str, known: dict, grains: int, voxel_um: float, d_um: float, sett
     from grainforge.methods import get
 
     rng = np.random.default_rng(SEED)
-    spec = FITS["rf"]
+    spec = FITS[method]
     rows, truth = [], []
     for i in range(grains):
         v = {k: float(truncnorm.rvs((lo - m) / s, (hi - m) / s, loc=m, scale=s, random_state=rng))
              for k, (m, s, lo, hi) in known.items()}
         d_eq = float(d_um * math.exp(0.1 * rng.standard_normal()))
-        params = get("rf").Params(**{**spec.fixed, **spec.params(v)})
-        d = _measure("rf", params, grain_seed(SEED, i), d_eq / voxel_um, "atlas")
+        params = spec.params({**v, "roughness_decay": RF_DECAY} if method == "rf" else v)
+        d = _measure(method, get(method).Params(**{**spec.fixed, **params}), grain_seed(SEED, i), d_eq / voxel_um,
+                     "atlas")
         rows.append([i + 1, math.pi / 6 * d_eq**3, d_eq, *d, voxel_um])
         truth.append([i + 1, *(v[k] for k in known)])
         print(f"grain {i + 1}/{grains}", end="\r", flush=True)

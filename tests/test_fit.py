@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import csv
 import math
-import os
 from pathlib import Path
 
 import numpy as np
@@ -96,7 +95,7 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
     from grainforge.population import draw_grain
 
     spec = FITS["rf"]
-    us = [np.array([0.1, 0.2, 0.8, 0.7]), np.array([0.3, 0.1, 0.6, 0.9])]
+    us = [np.array([0.1, 0.2, 0.5, 0.8, 0.7]), np.array([0.3, 0.1, 0.9, 0.6, 0.9])]
     own = [{**spec.grain_params(u)} for u in us]
     text = twin_recipe_text(spec, own, [0.41, 0.52], seed=3, header="test")
     recipe = parse_recipe(text)
@@ -104,6 +103,7 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
         _, params, size = draw_grain(recipe, i)
         assert size == [0.41, 0.52][i]
         assert list(params.descriptors) == own[i]["descriptors"] and list(params.aspect) == own[i]["aspect"]
+        assert list(params.decay) == own[i]["decay"]
         assert params.subdivisions == 5
     (tmp_path / "recipe.toml").write_text(text.replace("subdivisions = 5", "subdivisions = 3"), encoding="utf-8")
     r = runner.invoke(cli, ["batch", str(tmp_path / "recipe.toml"), "--out", str(tmp_path / "grains")])
@@ -140,71 +140,149 @@ def test_compare_passes_identical_samples_and_fails_shifted_ones():
     assert st["per"]["sphericity"]["pass"] and set(st["corr"]) >= {"flatness-elongation"}
 
 
-ANGULAR = Path(__file__).resolve().parent / "data" / "synthetic-angular-sand.csv"
-ANGULAR_SETTINGS = ANGULAR.with_name("synthetic-angular-sand-settings.csv")
+RF_SAND = Path(__file__).resolve().parent / "data" / "synthetic-rf-sand.csv"
+RF_SETTINGS = RF_SAND.with_name("synthetic-rf-sand-settings.csv")
+ANGULAR_SAND = RF_SAND.with_name("synthetic-angular-sand.csv")
+#: the twin tests measure grains at most this many voxels across: the synthetic rf sand's grains are 25 to 40
+#: voxels across, so its twins are measured at their sand grain's resolution and the design spans 10 to 40
+#: (the default cap, 150, would make the design's grains up to 100 times dearer)
+TEST_ACROSS = 40.0
 
 
-@pytest.mark.slow  # about 150 grains of 0.05 s CPU each at 30 voxels across, and the inverse solves
-def test_twin_fit_plumbing_on_a_tiny_population(tmp_path):
+@pytest.fixture(scope="session")
+def design_cache(tmp_path_factory):
+    """One design cache for the session's twin tests: each small design is measured once, then loaded."""
+    return tmp_path_factory.mktemp("fit-designs")
+
+
+def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cache, monkeypatch):
+    """Fast lane: a tiny twin fit (80 design grains, 40 twins measured at 20 voxels across, one refinement):
+    fit.csv has its columns, pairs every twin with a distinct sand row whose values it copies, gives the twin its
+    sand grain's size, and fit-stats.csv's Spearman correlations are those of fit.csv's columns."""
+    import grainforge.fit as fitmod
+    from grainforge.fit import DESCRIPTORS, TWIN_COLUMNS, fit_sand, spearman, write_outputs
+
+    sand = read_sand(RF_SAND)
+    lines = []
+    result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, cache=design_cache,
+                      log=lines.append)
+    assert [line.split(":")[0] for line in lines] == ["design rf", "twins", "refine 1"]
+    assert result.grains_measured >= 40 and len(result.generated) == 40
+    # two twins' first settings lie in a corner where the generator refuses their seed; refined, they are made
+    assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
+    monkeypatch.setattr(fitmod, "fit_figure", lambda *a: None)  # fit.png: the slow plumbing test draws it
+    paths = write_outputs(sand, result, tmp_path / "out")
+    rows = list(csv.DictReader(paths[1].read_text(encoding="utf-8").splitlines()))
+    settings = [f"setting_{s.name}" for s in FITS["rf"].all_settings]
+    assert list(rows[0]) == [*TWIN_COLUMNS, *settings]
+    assert len(rows) == 40 and len({r["sand_row"] for r in rows}) == 40
+    sand_table, twin_table = np.empty((40, 4)), np.empty((40, 4))
+    for i, r in enumerate(rows):
+        j = int(r["sand_row"]) - 1  # rows of the sand's file, from 1
+        assert int(r["grain"]) == i and j == result.sand_rows[i]
+        assert float(r["d_eq_um"]) == pytest.approx(sand.equivalent_diameter[j], rel=1e-5)
+        assert float(r["sand_d_eq_um"]) == pytest.approx(sand.equivalent_diameter[j], rel=1e-5)
+        for c, k in enumerate(DESCRIPTORS):
+            sand_table[i, c], twin_table[i, c] = float(r[f"sand_{k}"]), float(r[f"twin_{k}"])
+            assert sand_table[i, c] == pytest.approx(sand.values[k][j])
+        err = np.max(np.abs(twin_table[i] - sand_table[i]))
+        assert float(r["max_difference"]) == pytest.approx(err)
+        assert r["within"] == str(err <= fitmod.TWIN_TOL)
+    assert np.allclose(twin_table, result.generated[:, 1:])
+    stats = {r["quantity"]: r for r in csv.DictReader(paths[2].read_text(encoding="utf-8").splitlines())
+             if r["statistic"] == "spearman"}
+    cs, cg = spearman(sand_table), spearman(twin_table)
+    assert len(stats) == 6
+    for pair, r in stats.items():
+        a, b = (DESCRIPTORS.index(k) for k in pair.split("-"))
+        assert float(r["sand"]) == pytest.approx(cs[a, b]) and float(r["generated"]) == pytest.approx(cg[a, b])
+        # even this tiny fit (an 80-grain design, twins measured coarser than the sand) carries the sand's
+        # correlations over, loosely: its last run was within 0.18; 40 grains' rank correlations are noisy
+        # (about ±0.16), so the full criterion (0.1) is checked on Ottawa (benchmarks/fit_twins.py)
+        assert abs(cg[a, b] - cs[a, b]) <= 0.25, pair
+    assert cs[0, 1] > 0.5 and cg[0, 1] > 0.5  # sphericity-convexity: strong in the sand, so in its twins
+    assert fitmod.design_path("rf", "atlas", 20.0, 80, design_cache).exists()
+
+
+@pytest.mark.slow  # about 200 grains at 25 to 40 voxels across (about 10 s of CPU)
+def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     """A tiny design and population: grain i of the recipe, made as batch makes it, measures exactly as the fit
-    measured it; fit.csv pairs each grain with a distinct sand row; the design is cached."""
+    measured it; fit.png is drawn; the design is cached."""
     from grainforge.fit import fit_sand, measure_grain, write_outputs
 
-    sand = read_sand(ANGULAR)
-    result = fit_sand(sand, "rf", count=50, refine=1, design_grains=48, cache=tmp_path / "cache")
-    assert result.grains_measured >= 48 + 50 and len(result.generated) == 50
+    sand = read_sand(RF_SAND)
+    kw = dict(refine=1, design_grains=128, max_across=TEST_ACROSS, cache=design_cache)
+    result = fit_sand(sand, "rf", count=50, **kw)
+    assert len(result.generated) == 50
     for i in (0, 7):
-        again = measure_grain(result.recipe, i, sand.voxel_size)
+        again = measure_grain(result.recipe, i, sand.voxel_size, max_across=TEST_ACROSS)
         assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     assert np.allclose(result.targets, sand.table()[result.sand_rows])
     paths = write_outputs(sand, result, tmp_path / "out")
-    rows = list(csv.DictReader(paths[1].read_text(encoding="utf-8").splitlines()))
-    assert len(rows) == 50 and len({r["sand_row"] for r in rows}) == 50
-    j = int(rows[3]["sand_row"]) - 1
-    assert float(rows[3]["sand_convexity"]) == pytest.approx(sand.values["convexity"][j])
-    assert float(rows[3]["twin_convexity"]) == pytest.approx(result.generated[3, 2])
-    stats = list(csv.DictReader(paths[2].read_text(encoding="utf-8").splitlines()))
-    assert sum(r["statistic"] == "spearman" for r in stats) == 6
-    again = fit_sand(sand, "rf", count=50, refine=0, design_grains=48, cache=tmp_path / "cache")
+    assert paths[3].stat().st_size > 10_000
+    again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0})
     assert again.grains_measured == 50  # the design came from the cache
 
 
-@pytest.mark.slow  # about 340 grains at 30 voxels across
-def test_twins_of_a_small_population_meet_the_criteria(tmp_path):
-    """A twin fit of 60 rows of the synthetic angular sand (rf-made, so every grain is reachable): every
-    criterion holds."""
+@pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, the design shared with the plumbing test
+def test_twins_of_a_small_population_meet_the_criteria(design_cache):
+    """A twin fit of 60 rows of the synthetic rf sand (made by rf, so every grain is reachable): every
+    criterion holds (the full-size criteria on Ottawa and the synthetic sands: benchmarks/fit_twins.py)."""
     from grainforge.fit import TWIN_TOL, fit_sand
 
-    result = fit_sand(read_sand(ANGULAR), "rf", count=60, refine=3, design_grains=160, cache=tmp_path / "cache")
+    result = fit_sand(read_sand(RF_SAND), "rf", count=60, refine=3, design_grains=128, max_across=TEST_ACROSS,
+                      cache=design_cache)
     st = result.stats
     assert st["twin_within"] >= 0.9 and st["reachable"] >= 0.9, st
     for pair, (a, b) in st["corr"].items():
         assert abs(a - b) <= 0.1, (pair, a, b)
     assert st["pass"], st
     assert np.mean(result.twin_error <= TWIN_TOL) >= 0.9
+    # what is identifiable: the aspect's Zingg ratios are recovered (their means within 5 % of the known settings
+    # of the rows twinned); irregularity, roughness and its decay trade against each other (docs/fit.md) and are
+    # not asserted
+    known = list(csv.DictReader(RF_SETTINGS.read_text(encoding="utf-8").splitlines()))
+    for k in ("elongation", "flatness"):
+        truth = np.mean([float(known[j][k]) for j in result.sand_rows])
+        assert np.mean([s[k] for s in result.settings]) == pytest.approx(truth, rel=0.05), k
 
 
-@pytest.mark.slow
-@pytest.mark.xfail(reason="last run (docs/benchmarks.md, Twin fits): the aspect settings are recovered within 1 %, but "
-                          "irregularity +11 % and roughness -27 %: the two trade against each other in the descriptors",
-                   strict=False)
-@pytest.mark.skipif(os.environ.get("GRAINFORGE_FIT_RECOVERY") != "1",
-                    reason="statistical profile (minutes of CPU): GRAINFORGE_FIT_RECOVERY=1 pytest tests/test_fit.py "
-                           "-m slow; see docs/fit.md for its last result")
-def test_fit_recovers_the_known_settings_of_the_synthetic_angular_sand(tmp_path):
-    """Twins of every row of the synthetic angular sand: the criteria hold and the fitted settings' means are
-    within 5 % of the known ones (tests/data/synthetic-angular-sand-settings.csv)."""
-    from grainforge.fit import fit_sand
+def test_angular_grains_are_shaped_by_their_seed_more_than_by_their_settings():
+    """Why the angular method cannot twin the synthetic angular sand (docs/fit.md, Angular sands): one of its
+    grains, remade with its known settings and seed, measures as its row does; with the same settings and another
+    seed, its convexity and elongation move by more than 0.1, beyond what any setting makes up for."""
+    from grainforge.fit import _measure, grain_seed
+    from grainforge.methods import get
 
-    sand = read_sand(ANGULAR)
-    result = fit_sand(sand, "rf", count=None, workers=2, log=lambda line: print(line, flush=True))
-    assert result.stats["pass"], result.stats
-    truth = list(csv.DictReader(ANGULAR_SETTINGS.read_text(encoding="utf-8").splitlines()))
-    for k in ("irregularity", "roughness", "elongation", "flatness"):
-        known = np.mean([float(r[k]) for r in truth])
-        fitted = np.mean([s[k] for s in result.settings])
-        print(k, known, fitted)
-        assert fitted == pytest.approx(known, rel=0.05), k
+    sand, spec = read_sand(ANGULAR_SAND), FITS["angular"]
+    known = list(csv.DictReader(ANGULAR_SAND.with_name("synthetic-angular-sand-settings.csv")
+                                .read_text(encoding="utf-8").splitlines()))
+    i = 1
+    params = get("angular").Params(**{**spec.fixed, **spec.params({k: float(v) for k, v in known[i].items()
+                                                                   if k != "Particle ID"})})
+    across = sand.equivalent_diameter[i] / sand.voxel_size
+    own = np.array(_measure("angular", params, grain_seed(41, i), across, "atlas"))  # the sand's seed (SEED = 41)
+    assert np.allclose(own, sand.table()[i], atol=1e-5)
+    other = np.array(_measure("angular", params, grain_seed(2024, i), across, "atlas"))
+    assert abs(other[1] - own[1]) > 0.1 and abs(other[3] - own[3]) > 0.1, (own, other)
+
+
+def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
+    """rf is capped at 150 voxels across, fso is not (its fractal surface has not converged): on the synthetic 1 µm
+    sand (150 to 290 voxels across) an fso fit is estimated dearer than an rf one and, over a 15-minute budget,
+    refused up front naming --max-voxels-across; capped explicitly it costs what rf does."""
+    from grainforge.estimate import TooLargeError
+    from grainforge.fit import METHOD_CAP, check_fit_size, resolve_cap
+
+    sand = read_sand(RF_SAND.with_name("synthetic-1um-sand.csv"))
+    assert resolve_cap("rf", METHOD_CAP) == 150.0 and resolve_cap("fso", METHOD_CAP) is None
+    kw = dict(count=500, workers=2, cache=tmp_path)
+    rf, fso = check_fit_size(sand, "rf", **kw), check_fit_size(sand, "fso", **kw)
+    assert fso > 1.5 * rf and check_fit_size(sand, "auto", **kw) > fso  # auto: every design, the dearest twins
+    assert check_fit_size(sand, "rf", max_minutes=15, **kw) == rf
+    with pytest.raises(TooLargeError, match=r"fit --method fso .* over --max-minutes 15.* set --max-voxels-across"):
+        check_fit_size(sand, "fso", max_minutes=15, **kw)
+    assert check_fit_size(sand, "fso", max_across=150.0, **kw) == pytest.approx(rf, rel=0.01)
 
 
 def test_bad_tables_are_refused_before_anything_is_written(runner, tmp_path):

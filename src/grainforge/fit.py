@@ -37,9 +37,10 @@ closest setting predicts a twin within :data:`TWIN_TOL`) have a twin within
 :data:`TWIN_TOL` on every descriptor (:func:`compare`).
 
 Resolution: generated grains are measured at min(voxels across,
-``max_across``) (default :data:`MAX_VOXELS_ACROSS`, where their descriptors
-have converged with resolution; ``benchmarks/fit_resolution.py``); the
-sand's own numbers are never rescaled.
+``max_across``), by default the method's own cap (:attr:`MethodFit.max_across`:
+:data:`MAX_VOXELS_ACROSS` where its grains' descriptors have converged with
+resolution, none for ``fso``, whose fractal surface does not converge;
+``benchmarks/fit_resolution.py``); the sand's own numbers are never rescaled.
 
 Adding a method is a few lines: :func:`register` a :class:`MethodFit` that
 names its per-grain settings and their ranges and turns them into a grain's
@@ -64,7 +65,8 @@ __all__ = [
     "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Setting", "MethodFit", "FITS", "register", "fit_sand",
     "compare", "recipe_text", "twin_recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "CORR_TOL",
     "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS",
-    "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "design", "design_path", "measure_grain", "OUTPUTS",
+    "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "METHOD_CAP", "resolve_cap", "design", "design_path", "measure_grain",
+    "OUTPUTS",
 ]
 
 #: the four descriptors that are matched
@@ -100,9 +102,11 @@ MIN_GRAINS = 50
 #: range of grain sizes, in voxels across (d_eq / voxel size), the fit measures: fewer than 5 voxels across
 #: describe no shape; at 1,000 one grain's voxel image holds 10⁹ voxels
 VOXELS_ACROSS = (5.0, 1000.0)
-#: generated grains are measured at most this many voxels across: their descriptors have converged there
-#: (within 0.005 of 300 voxels across on every generator; docs/fit.md, benchmarks/fit_resolution.py)
+#: generated grains of rf, cri and angular are measured at most this many voxels across: their descriptors have
+#: converged there (within 0.005 of 300 voxels across; docs/fit.md, benchmarks/fit_resolution.py)
 MAX_VOXELS_ACROSS = 150.0
+#: ``max_across`` of :func:`fit_sand` and :func:`check_fit_size` meaning "the method's own cap"
+METHOD_CAP = "method"
 #: grains of a method's design, and the smallest resolution it spans (voxels across)
 DESIGN_GRAINS = 400
 DESIGN_ACROSS_LOW = 10.0
@@ -287,12 +291,18 @@ class MethodFit:
     params : callable
         Setting values (dict, the aspect's included) -> the grain's own
         parameters (the recipe's ``[grains]`` columns), ``aspect`` included.
+    max_across : float or None
+        The method's resolution cap: its grains are measured at most this
+        many voxels across, where their descriptors have converged with
+        resolution (``benchmarks/fit_resolution.py``); None: they do not
+        converge, so they are measured at the sand's resolution.
     """
 
     method: str
     settings: tuple[Setting, ...]
     fixed: Mapping[str, Any]
     params: Callable[[Mapping[str, float]], dict]
+    max_across: float | None = MAX_VOXELS_ACROSS
 
     @property
     def all_settings(self) -> tuple[Setting, ...]:
@@ -328,19 +338,35 @@ def _descriptor_params(v: Mapping[str, float]) -> dict:
 
 
 _DESCRIPTOR_SETTINGS = (Setting("irregularity", 0.0, 0.25), Setting("roughness", 0.0, 0.04))
+#: rf's irregularity decay B1 (every grain: the generator's default); its roughness decay B2 is a per-grain
+#: setting: a flatter roughness spectrum (B2 towards 0) puts the roughness into finer surface detail, which
+#: lowers sphericity (surface area) far more than convexity, so B2 trades sphericity at a fixed convexity and
+#: aspect (docs/fit.md), which D3 and D8 alone cannot
+RF_DECAY_B1 = -5.0 / 3.0
 
-register(MethodFit("rf", _DESCRIPTOR_SETTINGS, {"subdivisions": 5}, _descriptor_params))
+
+def _rf_params(v: Mapping[str, float]) -> dict:
+    return {**_descriptor_params(v), "decay": [RF_DECAY_B1, v["roughness_decay"]]}
+
+
+register(MethodFit("rf", _DESCRIPTOR_SETTINGS + (Setting("roughness_decay", -2.5, 0.0),), {"subdivisions": 5},
+                   _rf_params))
 register(MethodFit("cri", _DESCRIPTOR_SETTINGS, {"subdivisions": 5}, _descriptor_params))
 register(MethodFit(
     "fso", (Setting("amplitude", 0.0, 0.15), Setting("fractal_dimension", 2.0, 2.8)),
     {"surface": "seamless", "subdivisions": 5},
     lambda v: {"amplitude": v["amplitude"], "fractal_dimension": v["fractal_dimension"], "aspect": _aspect(v)},
+    # no cap: the FSO overlay's fractal surface keeps gaining area as the voxels resolve it (sphericity 0.044
+    # lower at 300 voxels across than at 150, still 0.009 lower than at 250; docs/fit.md), so fso grains are
+    # measured at the sand's resolution
+    max_across=None,
 ))
 register(MethodFit(
-    # angular grains: edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad,
-    # 16 facets, a fine texture)
+    # crushed, angular grains (Hostun-like): a 7-facet core, so that sphericity falls well below convexity as it
+    # does in crushed sands; edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad);
+    # a fine texture (FSO overlay of RMS 0.02)
     "angular", (Setting("rounding", 0.0, 0.9), Setting("dent_depth", 0.0, 0.7)),
-    {"facets": 16, "dents": 6, "dent_width": 0.5, "roughness": 0.005, "length_ratio": 2.0, "subdivisions": 5},
+    {"facets": 7, "dents": 6, "dent_width": 0.5, "roughness": 0.02, "length_ratio": 2.0, "subdivisions": 5},
     lambda v: {"rounding": v["rounding"], "dent_depth": v["dent_depth"], "aspect": _aspect(v)},
 ))
 
@@ -375,6 +401,20 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int,
     return expected, designs + count * (1 + refine)
 
 
+def resolve_cap(method: str, max_across: float | str | None) -> float | None:
+    """The resolution cap a fit of ``method`` measures at: ``max_across`` itself, or with :data:`METHOD_CAP`
+    the method's own (:attr:`MethodFit.max_across`); None: uncapped.
+
+    Examples
+    --------
+    >>> resolve_cap("rf", METHOD_CAP), resolve_cap("fso", METHOD_CAP), resolve_cap("fso", 200.0)
+    (150.0, None, 200.0)
+    """
+    if max_across == METHOD_CAP:
+        return FITS[method].max_across
+    return float(max_across) if max_across else None
+
+
 def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
     """Voxels across each sand grain's twin is measured at: the sand's, capped at ``max_across``."""
     across = sand.equivalent_diameter / sand.voxel_size
@@ -382,7 +422,7 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
 
 
 def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
-                   max_across: float | None = MAX_VOXELS_ACROSS, workers: int = 1,
+                   max_across: float | str | None = METHOD_CAP, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
                    cache: str | os.PathLike | None = None) -> float:
     """Expected wall-clock seconds of a fit; refuse one over ``max_minutes``, a day or the machine's memory.
@@ -394,11 +434,18 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     """
     from .estimate import TooLargeError, check_job, check_memory, duration
 
-    design_high = _design_high(sand, max_across)
+    methods = list(FITS) if method == "auto" else [method]
+    # per method (each has its own resolution cap): the design's top resolution, the twins' resolutions, and
+    # the cost of one grain; "auto" is costed at its dearest method
+    caps = {m: resolve_cap(m, max_across) for m in methods}
+    highs = {m: _design_high(sand, caps[m]) for m in methods}
+    acrosses = {m: measured_across(sand, caps[m]) for m in methods}
+    costs = {m: FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * float(np.mean((acrosses[m] / FIT_ACROSS_REF) ** 3))
+             for m in methods}
+    dear = max(methods, key=lambda m: costs[m])
+    across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
     expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine,
-                                cached=lambda m: design_path(m, convention, design_high, design_grains, cache).exists())
-    across = measured_across(sand, max_across)
-    each = FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * float(np.mean((across / FIT_ACROSS_REF) ** 3))
+                                cached=lambda m: design_path(m, convention, highs[m], design_grains, cache).exists())
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     cores = max(1, min(int(workers), os.cpu_count() or 1))
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
@@ -477,10 +524,10 @@ def twin_recipe_text(spec: MethodFit, grains: Sequence[Mapping[str, Any]], size_
     Examples
     --------
     >>> from grainforge.population import draw_grain, parse_recipe
-    >>> text = twin_recipe_text(FITS["rf"], [FITS["rf"].grain_params(np.full(4, 0.5))], [0.4], seed=1)
+    >>> text = twin_recipe_text(FITS["rf"], [FITS["rf"].grain_params(np.full(5, 0.5))], [0.4], seed=1)
     >>> _, params, size = draw_grain(parse_recipe(text), 0)
-    >>> params.descriptors, params.aspect, size
-    ((0.0, 0.125, 0.02), (1.0, 0.625, 0.390625), 0.4)
+    >>> params.descriptors, params.decay, params.aspect, size
+    ((0.0, 0.125, 0.02), (-1.66667, -1.25), (1.0, 0.625, 0.390625), 0.4)
     """
     lines = [f"# {line}" if line else "#" for line in header.splitlines()]
     lines += [f"method = {_toml(spec.method)}", f"count = {len(grains)}", f"seed = {int(seed)}",
@@ -711,7 +758,7 @@ def compare(sand: np.ndarray, gen: np.ndarray, *, twin_within: float | None = No
     worst = 0.0
     for j, k in enumerate(DESCRIPTORS):
         a, b = sand[:, j], gen[:, j]
-        ks = float(ks_2samp(a, b).statistic)
+        ks = float(ks_2samp(a, b, method="asymp").statistic)  # the statistic only (its exact p-value can fail)
         dm = float(b.mean() - a.mean())
         out["per"][k] = {"sand_mean": float(a.mean()), "gen_mean": float(b.mean()), "sand_sd": float(a.std(ddof=1)),
                          "gen_sd": float(b.std(ddof=1)), "ks": ks, "mean_diff": dm,
@@ -832,6 +879,11 @@ def _refine(tw: _Twins, model, idx: np.ndarray, y: np.ndarray) -> None:
     pred = np.array([model.predict(tw.u[i], tw.across[i])[0] for i in idx])
     offsets = np.where(np.isfinite(y), y - pred, 0.0)
     u, miss = invert(model, tw.targets[idx], tw.across[idx], offsets=offsets, start=tw.u[idx], scale=tw.tol)
+    # a grain the generator refused to make or measure at its settings (a corner of the design box, with its own
+    # seed) is not re-solved, which would lead back to that corner: its settings move a third of the way
+    # towards the middle of the box
+    refused = ~np.all(np.isfinite(y), axis=1)
+    u[refused] = 0.5 + (tw.u[idx][refused] - 0.5) * (2.0 / 3.0)
     tw.u[idx] = u
     tw.reach[idx] = miss
 
@@ -845,17 +897,19 @@ def _twin_summary(tw: _Twins) -> str:
             f"({', '.join(f'{t:.4f}' for t in tw.tol)}); median error {np.median(e):.4f}")
 
 
-def choose_method(sand: Sand, pool: _Pool, *, high: float, grains: int, cache, progress, say, name) -> str:
+def choose_method(sand: Sand, pool: _Pool, *, max_across: float | str | None, grains: int, cache, progress, say,
+                  name) -> str:
     """``auto``: the method whose inverse model reaches the most of the sand (ties: the smaller median miss)."""
     from .twins import invert
 
-    table, across = sand.table(), measured_across(sand, high)
+    table = sand.table()
     rows = choose_rows(sand.count, min(sand.count, 300), 0)
     best = None
     for m in FITS:
+        cap = resolve_cap(m, max_across)
         name(f"design {m}")
-        model = design(m, pool, high=high, grains=grains, cache=cache, progress=progress).model()
-        _, miss = invert(model, table[rows], across[rows])
+        model = design(m, pool, high=_design_high(sand, cap), grains=grains, cache=cache, progress=progress).model()
+        _, miss = invert(model, table[rows], measured_across(sand, cap)[rows])
         key = (float(np.mean(miss <= TWIN_TOL)), -float(np.median(miss)))
         say(f"auto: {m} reaches {key[0]:.1%} of the sand (model's median miss {-key[1]:.4f})")
         best = max(best or (key, m), (key, m))
@@ -871,7 +925,7 @@ def fit_sand(
     seed: int = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
-    max_across: float | None = MAX_VOXELS_ACROSS,
+    max_across: float | str | None = METHOD_CAP,
     design_grains: int = DESIGN_GRAINS,
     cache: str | os.PathLike | None = None,
     progress: Callable[[Iterable, int], Iterable] | None = None,
@@ -894,9 +948,10 @@ def fit_sand(
         How the generated grains' true sphericity is measured: as the Sand
         Atlas did (spam's cube, the default) or on the whole grain
         (:func:`grainforge.analysis.atlas.voxel_descriptors`).
-    max_across : float or None
+    max_across : float, None or :data:`METHOD_CAP`
         Generated grains are measured at most this many voxels across (None:
-        at the sand's resolution, however fine).
+        at the sand's resolution, however fine; :data:`METHOD_CAP`: the
+        method's own cap, :attr:`MethodFit.max_across`).
     design_grains : int
         Grains of the method's design (cached under ``cache``).
     progress : callable, optional
@@ -912,7 +967,6 @@ def fit_sand(
     check_sand(sand)
     say, name = log or (lambda s: None), desc or (lambda s: None)
     t0 = time.perf_counter()
-    high = _design_high(sand, max_across)
     history: list[str] = []
 
     def note(line: str) -> None:
@@ -921,15 +975,17 @@ def fit_sand(
 
     with _Pool(max(1, int(workers)), sphericity) as pool:
         if method == "auto":
-            method = choose_method(sand, pool, high=high, grains=design_grains, cache=cache, progress=progress,
-                                   say=note, name=name)
+            method = choose_method(sand, pool, max_across=max_across, grains=design_grains, cache=cache,
+                                   progress=progress, say=note, name=name)
             note(f"auto: chose {method}")
         spec = FITS[method]
+        cap = resolve_cap(method, max_across)
         name(f"design {method}")
-        model = design(method, pool, high=high, grains=design_grains, cache=cache, progress=progress).model()
+        model = design(method, pool, high=_design_high(sand, cap), grains=design_grains, cache=cache,
+                       progress=progress).model()
         note(f"design {method}: model rms " + ", ".join(f"{k[:5]} {r:.4f}" for k, r in zip(DESCRIPTORS, model.rms)))
         rows = choose_rows(sand.count, count, seed)
-        tw = _start_twins(spec, model, sand, rows, max_across, seed)
+        tw = _start_twins(spec, model, sand, rows, cap, seed)
         idx = np.arange(len(rows))
         for r in range(refine + 1):
             name("twins" if r == 0 else f"refine {r}/{refine}")

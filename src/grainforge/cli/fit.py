@@ -33,9 +33,10 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
               help="Rounds of per-grain refinement of the twins that miss their sand grain.")
 @click.option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
               help="Grains of the method's design (the inverse model's data; measured once, then cached).")
-@click.option("--max-voxels-across", "max_across", type=click.FloatRange(min=0), default=150.0, show_default=True,
-              help="Measure generated grains at most this many voxels across (where their descriptors have "
-                   "converged; docs/fit.md); 0: at the sand's resolution, however fine.")
+@click.option("--max-voxels-across", "max_across", type=click.FloatRange(min=0), default=None,
+              help="Measure generated grains at most this many voxels across; 0: at the sand's resolution, however "
+                   "fine. [default: the method's cap, where its grains' descriptors have converged: 150 for rf, cri "
+                   "and angular; none for fso (docs/fit.md)]")
 @click.option("--max-minutes", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
               help="Refuse a fit estimated to take longer (wall clock on --workers).")
 @click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
@@ -67,7 +68,7 @@ def fit(sand, out, voxel_size, method, count, refine, design_grains, max_across,
     import sys
 
     from ..estimate import TooLargeError, duration
-    from ..fit import FITS, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
+    from ..fit import FITS, METHOD_CAP, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
     from .interrupts import ready_for_work
 
     if method != "auto" and method not in FITS:
@@ -77,7 +78,7 @@ def fit(sand, out, voxel_size, method, count, refine, design_grains, max_across,
     s = read_sand(sand, voxel_size)
     check_sand(s)
     workers = workers or os.cpu_count() or 1
-    max_across = max_across or None
+    max_across = METHOD_CAP if max_across is None else max_across or None
     try:
         seconds = check_fit_size(s, method, count=count, design_grains=design_grains, refine=refine,
                                  max_across=max_across, workers=workers, max_minutes=max_minutes,
