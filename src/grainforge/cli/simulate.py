@@ -15,7 +15,7 @@ TILT_ONLY = ("tilt_step", "tilt_start")
 ENGINES = ("yade", "liggghts")
 SHAPES = ("clump", "polyhedron", "levelset")
 #: what simulate's scenes can run, per engine
-RUNS = {"yade": ("clump",), "liggghts": ()}
+RUNS = {"yade": ("clump", "levelset"), "liggghts": ()}
 
 
 def check_engine(engine: str, mpi: int | None, shape: str) -> None:
@@ -46,6 +46,24 @@ def check_engine(engine: str, mpi: int | None, shape: str) -> None:
         raise click.UsageError(str(exc)) from None
 
 
+def check_representation(shape: str, spacing: float | None, as_spheres: bool, spheres: int | None) -> None:
+    """Refuse, in one line, options of another grain representation (as ``grainforge dem`` does).
+
+    Raises
+    ------
+    click.UsageError
+        For ``--spacing`` without ``--shape levelset``, or ``--spheres`` or
+        ``--as-spheres`` with it.
+    """
+    if shape != "levelset" and spacing is not None:
+        raise click.UsageError("--spacing is the level set's grid: use it with --shape levelset")
+    if shape == "levelset" and spheres is not None:
+        raise click.UsageError("--spheres sets a clump's size: a level set has none (--spacing sets its grid)")
+    if shape == "levelset" and as_spheres:
+        raise click.UsageError("--as-spheres is the sphere baseline (one sphere per grain): use it without "
+                               "--shape levelset")
+
+
 def _command(test: str, doc: str):
     @click.command(name=test, help=doc)
     @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
@@ -65,13 +83,18 @@ def _command(test: str, doc: str):
                   help="MPI ranks of each run (an engine run under mpirun; Yade runs one process per seed: "
                        "use --workers).")
     @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
-                  help="Grain representation (simulate's scenes take clumps only, yet; --spheres sets their "
-                       "size).")
+                  help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "
+                       "signed distance field, as grainforge dem writes it).")
+    @click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
+                  help="Level set: grid spacing as a fraction of the equivalent diameter (default 0.05, as "
+                       "grainforge dem).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
-    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, overwrite, **values):
+    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, **values):
         check_engine(engine, mpi, shape)
-        _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values)
+        check_representation(shape, spacing, as_spheres, values.get("spheres"))
+        _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, shape=shape,
+             spacing=0.05 if spacing is None else spacing)
 
     return command
 
@@ -90,16 +113,21 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "grainforge.simulate.report", "matplotlib.pyplot", "matplotlib.collections")
 
 
-def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values):
+def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, shape="clump", spacing=0.05):
     import os
 
     from ..estimate import TooLargeError
     from ..simulate import QUICK, Settings, check_inputs, check_size
+    from ..simulate.levelset import check_levelset_run, quick_levelset
     from .interrupts import ready_for_work, signals_held
 
     if quick:
-        values = {**QUICK, **{k: v for k, v in values.items() if v is not None}}
+        values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
     settings = build_params(Settings, values)
+    try:
+        check_levelset_run(test, shape, settings)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
     outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)
@@ -107,7 +135,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     workers = workers or os.cpu_count() or 1
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
-                             as_spheres=as_spheres, workers=workers)
+                             as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     ready_for_work(HEAVY_MODULES, seconds, bound="about")
@@ -131,7 +159,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             bar.total = total
             bar.update(1)
 
-        templates = build_population(inputs, settings, as_spheres=as_spheres, progress=step)
+        templates = build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
+                                     spacing=spacing)
     runs = tqdm(total=settings.seeds * 1000, desc=f"{test} (Yade)", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
 
@@ -157,6 +186,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             raise click.ClickException(f"{message}; its deck and log are in {kept}") from None
         finally:
             runs.close()
+        if shape != "clump":  # the representation, in the rows of a non-default one (clump outputs unchanged)
+            rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
         write_report(rows, stage, test, settings)
         with signals_held():  # the outputs appear together
             commit_stage(stage, out, overwrite=overwrite)

@@ -33,13 +33,16 @@ def yade_executable() -> str:
 
 def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
                     *, overwrite: bool = False) -> list[Path]:
-    """Write the Yade deck of one run of ``test`` into ``out`` (``yade -n -x run.py`` from inside it)."""
-    from ..dem.yade import write_deck
-    from .scenes import REPOSE, TILT
+    """Write the Yade deck of one run of ``test`` into ``out`` (``yade -n -x run.py`` from inside it).
 
-    scene = {"repose": REPOSE, "tilt": TILT}[test]
-    return write_deck(templates, out, scene=scene, settings=scene_settings(settings, test, seed),
-                      overwrite=overwrite)
+    The templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset`) picks the scene.
+    """
+    from ..dem.yade import write_deck
+    from .levelset import scene_extra, scene_text
+
+    shape = templates[0].shape if templates else "clump"
+    return write_deck(templates, out, scene=scene_text(test, shape),
+                      settings={**scene_settings(settings, test, seed), **scene_extra(shape)}, overwrite=overwrite)
 
 
 def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] | None = None,

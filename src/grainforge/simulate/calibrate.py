@@ -1,0 +1,262 @@
+"""Contact-friction calibration: the μ at which a population reaches a measured bulk angle.
+
+A DEM modeller calibrates the contact parameters on one laboratory test and
+predicts the others with them.  :func:`search_friction` finds the contact
+friction μ at which a virtual test (tilt table or angle of repose) gives a
+target angle: a bounded search on the seed-averaged angle, which rises with μ
+(docs/simulate.md).  It is a pure function of a callable ``angle_of(μ)`` —
+the engine runs live in the command (``grainforge simulate calibrate``), the
+search logic is tested with stand-in functions.
+
+Notes
+-----
+The search first brackets the target: from ``start`` it doubles μ (angle
+below the target) or halves it (above), clamped to ``[low, high]``; a bound
+reached without bracketing the target means the target is out of reach (the
+angles reached are in :class:`Unreachable`).  It then narrows the bracket by
+the Illinois variant of the secant (false-position) method, which keeps a
+bracket and does not stall on one side, until an evaluated angle is within
+``tolerance`` of the target, the bracket is narrower than
+``friction_tolerance``, or ``max_evaluations`` are spent.  The estimate is the
+secant root of the final bracket (linear interpolation between its two ends),
+and the local slope dangle/dμ is that bracket's.
+
+The seed-averaged angle is noisy: two runs at the same μ with other seeds
+differ by the standard error of the mean, ``sd / sqrt(seeds)``.  That error,
+divided by the local slope, is the uncertainty of μ
+(:func:`friction_uncertainty`); a tolerance much below the standard error buys
+runs, not accuracy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+__all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "friction_uncertainty", "pooled_sd",
+           "TARGET_RANGE", "FRICTION_RANGE", "check_target"]
+
+#: target angles (degrees) a calibration accepts: bulk friction angles of granular materials
+TARGET_RANGE = (5.0, 80.0)
+#: the default bounds of the μ search
+FRICTION_RANGE = (0.05, 1.5)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluated friction: μ and the (seed-averaged) angle in degrees."""
+
+    friction: float
+    angle: float
+
+
+@dataclass(frozen=True)
+class FrictionSearch:
+    """The result of :func:`search_friction`.
+
+    Attributes
+    ----------
+    friction : float
+        The estimated μ: the secant root of the final bracket.
+    slope : float
+        dangle/dμ over the final bracket, degrees per unit μ.
+    bracket : (Evaluation, Evaluation)
+        The final bracket: angles below and above the target (or one at it).
+    evaluations : tuple of Evaluation
+        Every evaluation, in order.
+    converged : bool
+        Whether the search stopped on ``tolerance`` or ``friction_tolerance``
+        (False: ``max_evaluations`` ran out; the estimate is still the
+        bracket's interpolation, with a wider uncertainty).
+    """
+
+    friction: float
+    slope: float
+    bracket: tuple
+    evaluations: tuple
+    converged: bool
+
+
+class Unreachable(ValueError):
+    """The target angle lies outside the angles reached in the μ range (``reached``: lowest, highest angle)."""
+
+    def __init__(self, message: str, reached: tuple[float, float]):
+        super().__init__(message)
+        self.reached = reached
+
+
+def check_target(target: float) -> None:
+    """Refuse a target angle outside :data:`TARGET_RANGE` (``ValueError``, one line).
+
+    Examples
+    --------
+    >>> check_target(38.0)
+    >>> check_target(85.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: target angle 85° is outside 5–80°: bulk friction angles of granular materials lie there
+    """
+    lo, hi = TARGET_RANGE
+    if not (math.isfinite(target) and lo <= target <= hi):
+        raise ValueError(f"target angle {target:g}° is outside {lo:g}–{hi:g}°: bulk friction angles of granular "
+                         "materials lie there")
+
+
+def search_friction(angle_of: Callable[[float], float], target: float, *, low: float = FRICTION_RANGE[0],
+                    high: float = FRICTION_RANGE[1], start: float = 0.5, tolerance: float = 0.5,
+                    friction_tolerance: float = 0.01, max_evaluations: int = 8,
+                    progress: Callable[[Evaluation], None] | None = None) -> FrictionSearch:
+    """The contact friction μ in ``[low, high]`` at which ``angle_of(μ)`` equals ``target``.
+
+    Parameters
+    ----------
+    angle_of : callable
+        ``angle_of(μ)`` → angle in degrees (seed-averaged), rising with μ. A NaN
+        (no angle measured) stops the search with ``ValueError``.
+    target : float
+        Degrees.
+    low, high : float
+        Bounds of μ (0 ≤ low < high).
+    start : float
+        First μ tried (clamped into the bounds).
+    tolerance : float
+        Degrees: stop when an evaluated angle is this close to the target.
+    friction_tolerance : float
+        Stop when the bracket is narrower than this in μ.
+    max_evaluations : int
+        At most this many calls of ``angle_of`` (≥ 2).
+    progress : callable, optional
+        Called with each :class:`Evaluation` as it is made.
+
+    Returns
+    -------
+    FrictionSearch
+
+    Raises
+    ------
+    Unreachable
+        If the angle at a bound still falls short of (or exceeds) the target.
+    ValueError
+        For bad bounds, or an angle that could not be measured.
+
+    Examples
+    --------
+    A stand-in angle that rises with μ as atan does, with a floor of 15°:
+
+    >>> angle = lambda mu: 15.0 + math.degrees(math.atan(mu))
+    >>> s = search_friction(angle, 40.0, tolerance=0.05)
+    >>> round(s.friction, 2), s.converged, len(s.evaluations) <= 8
+    (0.47, True, True)
+    """
+    if not (0.0 <= low < high and math.isfinite(high)):
+        raise ValueError(f"need 0 ≤ low < high, got low={low!r}, high={high!r}")
+    if int(max_evaluations) < 2:
+        raise ValueError(f"max_evaluations must be ≥ 2, got {max_evaluations!r}")
+    evaluations: list[Evaluation] = []
+
+    def evaluate(mu: float) -> Evaluation:
+        a = float(angle_of(mu))
+        if not math.isfinite(a):
+            raise ValueError(f"no angle could be measured at friction {mu:.4g}")
+        e = Evaluation(float(mu), a)
+        evaluations.append(e)
+        if progress is not None:
+            progress(e)
+        return e
+
+    def done(lo: Evaluation, hi: Evaluation, converged: bool) -> FrictionSearch:
+        slope = (hi.angle - lo.angle) / (hi.friction - lo.friction) if hi.friction != lo.friction else float("nan")
+        if lo.angle == hi.angle:
+            mu = 0.5 * (lo.friction + hi.friction)
+        else:
+            mu = lo.friction + (target - lo.angle) * (hi.friction - lo.friction) / (hi.angle - lo.angle)
+        return FrictionSearch(float(min(max(mu, low), high)), float(slope), (lo, hi), tuple(evaluations), converged)
+
+    # 1. bracket: double (angle too low) or halve (too high) from start, clamped to the bounds
+    e = evaluate(min(max(start, low), high))
+    below = above = None
+    while True:
+        if e.angle <= target:
+            below = e if below is None or e.friction > below.friction else below
+        if e.angle >= target:
+            above = e if above is None or e.friction < above.friction else above
+        if below is not None and above is not None:
+            break
+        if above is None and e.friction >= high or below is None and e.friction <= low:
+            reached = (min(x.angle for x in evaluations), max(x.angle for x in evaluations))
+            side = "highest" if above is None else "lowest"
+            raise Unreachable(f"target angle {target:g}° is not reached for friction in [{low:g}, {high:g}]: the "
+                              f"angles measured span {reached[0]:.1f}–{reached[1]:.1f}° (the {side} at friction "
+                              f"{e.friction:g})", reached)
+        if len(evaluations) >= max_evaluations:
+            raise Unreachable(f"target angle {target:g}° not bracketed in {len(evaluations)} evaluations: the "
+                              f"angles measured span {min(x.angle for x in evaluations):.1f}–"
+                              f"{max(x.angle for x in evaluations):.1f}°",
+                              (min(x.angle for x in evaluations), max(x.angle for x in evaluations)))
+        e = evaluate(min(2.0 * e.friction, high) if above is None else max(0.5 * e.friction, low))
+    # 2. narrow it: Illinois false position on f = angle - target
+    if abs(e.angle - target) <= tolerance:
+        return done(below, above, True)
+    fb, fa = below.angle - target, above.angle - target
+    side = 0
+    while len(evaluations) < max_evaluations:
+        if above.friction - below.friction < friction_tolerance:
+            return done(below, above, True)
+        mu = below.friction - fb * (above.friction - below.friction) / (fa - fb) if fa != fb else \
+            0.5 * (below.friction + above.friction)
+        e = evaluate(mu)
+        if abs(e.angle - target) <= tolerance:
+            return done(e, above, True) if e.angle <= target else done(below, e, True)
+        if e.angle < target:
+            below, fb = e, e.angle - target
+            fa = 0.5 * fa if side == -1 else above.angle - target
+            side = -1
+        else:
+            above, fa = e, e.angle - target
+            fb = 0.5 * fb if side == 1 else below.angle - target
+            side = 1
+    return done(below, above, False)
+
+
+def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
+    """Standard uncertainty of the calibrated μ from the seed spread: ``(sd / sqrt(seeds)) / slope``.
+
+    Parameters
+    ----------
+    slope : float
+        dangle/dμ near the estimate, degrees per unit μ.
+    angle_sd : float
+        Standard deviation of one run's angle over seeds, degrees.
+    seeds : int
+        Seeds averaged at each μ.
+
+    Examples
+    --------
+    >>> round(friction_uncertainty(20.0, 1.5, 3), 3)
+    0.043
+    >>> friction_uncertainty(0.0, 1.5, 3)
+    inf
+    """
+    if not (math.isfinite(slope) and slope > 0):
+        return float("inf")
+    return float(angle_sd / math.sqrt(max(1, int(seeds))) / slope)
+
+
+def pooled_sd(groups: Sequence[Sequence[float]]) -> float:
+    """Pooled standard deviation of several groups of angles (NaN if no group has two values).
+
+    Examples
+    --------
+    >>> round(pooled_sd([[30.0, 32.0], [40.0, 41.0, 42.0]]), 3)
+    1.155
+    """
+    import numpy as np
+
+    num = den = 0.0
+    for g in groups:
+        a = np.asarray([x for x in g if math.isfinite(x)], dtype=np.float64)
+        if len(a) > 1:
+            num += float(((a - a.mean()) ** 2).sum())
+            den += len(a) - 1
+    return math.sqrt(num / den) if den else float("nan")
