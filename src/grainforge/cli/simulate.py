@@ -224,3 +224,8 @@ def simulate():
 
 simulate.add_command(repose)
 simulate.add_command(tilt)
+
+
+from .simulate_calibrate import calibrate  # noqa: E402  (it reuses this module's checks)
+
+simulate.add_command(calibrate)

@@ -35,6 +35,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 __all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "friction_uncertainty", "pooled_sd",
+           "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
            "TARGET_RANGE", "FRICTION_RANGE", "check_target"]
 
 #: target angles (degrees) a calibration accepts: bulk friction angles of granular materials
@@ -260,3 +261,126 @@ def pooled_sd(groups: Sequence[Sequence[float]]) -> float:
             num += float(((a - a.mean()) ** 2).sum())
             den += len(a) - 1
     return math.sqrt(num / den) if den else float("nan")
+
+
+def run_calibration(test: str, templates: Sequence, settings, target: float, out, *, low: float = FRICTION_RANGE[0],
+                    high: float = FRICTION_RANGE[1], start: float = 0.5, tolerance: float = 0.5,
+                    max_evaluations: int = 8, workers: int = 1, label: str = "",
+                    progress: Callable[[int, int, float, str], None] | None = None,
+                    evaluated: Callable[[Evaluation, list], None] | None = None) -> tuple[FrictionSearch, list]:
+    """Calibrate μ on ``test`` with the engine: :func:`search_friction` over seed-averaged Yade runs.
+
+    Each evaluation runs ``settings.seeds`` seeds at friction μ into
+    ``out/runs/e<k>-mu<μ>/`` (:func:`grainforge.simulate.run_test`).
+
+    Parameters
+    ----------
+    progress : callable, optional
+        ``progress(evaluation index, run index, fraction, phase)`` while a run goes on.
+    evaluated : callable, optional
+        ``evaluated(evaluation, rows)`` after each evaluation (its rows: one per seed).
+
+    Returns
+    -------
+    (FrictionSearch, list of dict)
+        The search and every run's row (with ``friction`` and ``evaluation``).
+
+    Raises
+    ------
+    Unreachable
+        With the attribute ``rows`` (the runs made), if the target is out of reach.
+    """
+    from dataclasses import replace
+    from pathlib import Path
+
+    from .engine import run_test, summarise
+
+    rows: list[dict] = []
+
+    def angle_of(mu: float) -> float:
+        k = len({r["evaluation"] for r in rows})
+        report = None if progress is None else (lambda i, f, p: progress(k, i, f, p))
+        s = replace(settings, friction=float(mu))
+        got = run_test(test, templates, s, Path(out) / "runs" / f"e{k}-mu{mu:.4f}", label=label, progress=report,
+                       workers=workers)
+        got = [{"evaluation": k, "friction": float(mu), **r} for r in got]
+        rows.extend(got)
+        mean = summarise(got)["angle_mean_deg"]
+        if evaluated is not None:
+            evaluated(Evaluation(float(mu), mean), got)
+        return mean
+
+    try:
+        search = search_friction(angle_of, target, low=low, high=high, start=start, tolerance=tolerance,
+                                 max_evaluations=max_evaluations)
+    except Unreachable as exc:
+        exc.rows = rows
+        raise
+    return search, rows
+
+
+def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
+                       command: str, *, low: float, high: float) -> dict:
+    """The ``calibration.json`` record: μ, its uncertainty from the seed spread and the local slope, the runs."""
+    from ..params import as_dict
+
+    by_eval: dict[int, list[float]] = {}
+    for r in rows:
+        by_eval.setdefault(int(r["evaluation"]), []).append(float(r["angle_deg"]))
+    sd = pooled_sd(list(by_eval.values()))
+    mu_sd = friction_uncertainty(search.slope, sd, settings.seeds) if math.isfinite(sd) else float("nan")
+    lo, hi = search.bracket
+    return {
+        "test": test, "target_angle_deg": target, "friction": search.friction,
+        "friction_sd": mu_sd, "friction_angle_deg": math.degrees(math.atan(search.friction)),
+        "slope_deg_per_unit_friction": search.slope, "angle_sd_deg": sd, "seeds": settings.seeds,
+        "evaluations": len(search.evaluations), "runs": len(rows), "converged": search.converged,
+        "bracket": [[lo.friction, lo.angle], [hi.friction, hi.angle]], "friction_range": [low, high],
+        "uncertainty": "friction_sd = (angle_sd / sqrt(seeds)) / slope: the seed spread of a seed-averaged angle "
+                       "(angle_sd pooled over the evaluations) over the bracket's slope",
+        "settings": {k: v for k, v in as_dict(settings).items() if k != "friction"}, "command": command,
+    }
+
+
+def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, mu_sd: float):
+    """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2), dpi=120)
+    mu = np.array([float(r["friction"]) for r in rows])
+    a = np.array([float(r["angle_deg"]) for r in rows])
+    ax.plot(mu, a, "o", color="0.5", ms=4, alpha=0.7, label="runs (one per seed)")
+    ev = sorted(search.evaluations, key=lambda e: e.friction)
+    ax.plot([e.friction for e in ev], [e.angle for e in ev], "s-", color="C0", ms=6, label="seed average")
+    ax.axhline(target, color="C3", ls="--", lw=1, label=f"target {target:g}°")
+    ax.axvline(search.friction, color="C2", lw=1.5, label=f"μ = {search.friction:.3f} ± {mu_sd:.3f}")
+    if math.isfinite(mu_sd):
+        ax.axvspan(search.friction - mu_sd, search.friction + mu_sd, color="C2", alpha=0.15)
+    ax.set_xlabel("contact friction μ")
+    ax.set_ylabel(("tilt failure angle" if test == "tilt" else "angle of repose") + " (°)")
+    ax.set_title(f"calibration on the {test} test: {len(search.evaluations)} frictions, {len(rows)} runs")
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    return fig
+
+
+def write_calibration(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
+                      command: str, out, *, low: float, high: float) -> dict:
+    """Write ``calibration.csv`` (every run), ``calibration.json`` and ``calibration.png`` into ``out``."""
+    import json
+    from pathlib import Path
+
+    from ..io import save_figure, write_csv
+
+    out = Path(out)
+    record = calibration_record(search, rows, target, test, settings, command, low=low, high=high)
+    keep = ("evaluation", "friction", "seed", "angle_deg", "label", "grains", "inserted", "lost", "steps", "dt_s",
+            "simulated_time_s", "note")
+    write_csv(out / "calibration.csv", [{k: r.get(k, "") for k in keep} for r in rows])
+    (out / "calibration.json").write_text(json.dumps(record, indent=1) + "\n")
+    save_figure(calibration_figure(search, rows, target, test, record["friction_sd"]), out / "calibration.png")
+    return record
