@@ -67,6 +67,7 @@ def main(argv=None) -> int:
     ap.add_argument("--friction", type=float, default=0.5)
     ap.add_argument("--tilt-start", type=float, default=15.0)
     ap.add_argument("--tilt-step", type=float, default=1.0)
+    ap.add_argument("--presets", default="rough spheres,rough angular", help="presets to run, comma-separated")
     ap.add_argument("--out", type=Path, default=ROOT / "out/simulate-convergence")
     ap.add_argument("--report", action="store_true", help="no runs: print the table (and figure) of the CSV")
     ap.add_argument("--figure", action="store_true", help="write docs/img/simulate-convergence.png")
@@ -88,16 +89,19 @@ def main(argv=None) -> int:
 def run_all(args, spheres, path):
     from grainforge.simulate import Settings, build_population, run_test
 
-    done = {(r["preset"], r["representation"], int(r["seed"])) for r in read_rows(path)
-            if int(r["grains"]) == args.grains}
+    def done():  # read again before each run: another process may be running other cells of the study
+        return {(r["preset"], r["representation"], int(r["seed"])) for r in read_rows(path)
+                if int(r["grains"]) == args.grains}
+
+    chosen = [p.strip() for p in args.presets.split(",")]
     reps = representations(spheres, args.levelset_seeds)
     cache = {}
     for seed in range(max(args.seeds, args.levelset_seeds)):
-        for preset, recipe in PRESETS:
+        for preset, recipe in [(p, r) for p, r in PRESETS if p in chosen]:
             for name, as_spheres, shape, n in reps:
                 if seed >= (args.levelset_seeds if shape == "levelset" else args.seeds):
                     continue
-                if (preset, name, seed) in done:
+                if (preset, name, seed) in done():
                     continue
                 settings = Settings(grains=args.grains, templates=args.templates, spheres=max(n, 1), seeds=1,
                                     seed=seed, friction=args.friction, tilt_start=args.tilt_start,

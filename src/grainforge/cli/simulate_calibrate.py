@@ -141,8 +141,6 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     done = [0.0] * settings.seeds
 
     def progress(k, i, fraction, phase):
-        if fraction == 0.0 and i == 0 and sum(done) >= settings.seeds:
-            done[:] = [0.0] * settings.seeds
         done[i] = fraction
         runs.n = int(1000 * sum(done))
         runs.set_description_str(f"calibrate {test}: friction {k + 1}/{max_evaluations}", refresh=False)
