@@ -86,8 +86,8 @@ def _command(test: str, doc: str):
                   help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "
                        "signed distance field, as grainforge dem writes it).")
     @click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
-                  help="Level set: grid spacing as a fraction of the equivalent diameter (default 0.05, as "
-                       "grainforge dem).")
+                  show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
+                                            "(as grainforge dem).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
     def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, **values):
@@ -224,8 +224,3 @@ def simulate():
 
 simulate.add_command(repose)
 simulate.add_command(tilt)
-
-
-from .simulate_calibrate import calibrate  # noqa: E402  (it reuses this module's checks)
-
-simulate.add_command(calibrate)

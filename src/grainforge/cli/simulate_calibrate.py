@@ -62,7 +62,7 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
               help="Grain representation (as simulate tilt|repose).")
 @click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
-              help="Level set: grid spacing as a fraction of the equivalent diameter (default 0.05).")
+              show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @click.option("--overwrite", is_flag=True, help="Replace an earlier calibration in --out.")
 @param_options(_settings_cls(), exclude=("friction",))
 def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance, max_evaluations, quick, as_spheres,
