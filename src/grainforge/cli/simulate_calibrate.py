@@ -76,6 +76,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     """
     import math
     import os
+    import sys
 
     from ..estimate import TooLargeError
     from ..simulate import QUICK, Settings, check_inputs, check_size
@@ -150,7 +151,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     def evaluated(e, rows):
         done[:] = [0.0] * settings.seeds
         angles = ", ".join(f"{r['angle_deg']:.1f}" for r in rows)
-        runs.write(f"friction {e.friction:.4g}: {e.angle:.1f}° (seeds: {angles})", file=click.get_text_stream("stderr"))
+        runs.write(f"friction {e.friction:.4g}: {e.angle:.1f}° (seeds: {angles})", file=sys.stderr)
 
     stage, created = open_stage(out)
     try:
