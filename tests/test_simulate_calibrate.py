@@ -179,3 +179,16 @@ def test_quick_calibration_in_yade(grains, tmp_path):
     assert rec["command"] in r.stdout
     assert "friction " in r.stderr  # the per-friction progress lines
     assert not list(out.glob(".grainforge-staging-*"))
+
+
+def test_the_local_slope_is_a_line_through_the_nearby_evaluations_not_the_bracket_secant():
+    from grainforge.simulate.calibrate import Evaluation, local_slope
+
+    # a line of slope 10 with noise on two close points: their secant is 60, the fit stays near 10
+    ev = [Evaluation(0.5, 30.0), Evaluation(1.0, 35.0), Evaluation(1.05, 35.0 - 1.0), Evaluation(1.1, 36.0 + 1.0),
+          Evaluation(1.5, 40.0)]
+    assert (37.0 - 34.0) / 0.05 == pytest.approx(60.0)
+    assert local_slope(ev, 1.07) == pytest.approx(10.0, abs=3.0)
+    # fewer than three within the window: every evaluation
+    assert local_slope([Evaluation(0.1, 20.0), Evaluation(1.5, 34.0)], 0.8) == pytest.approx(10.0)
+    assert math.isnan(local_slope([Evaluation(1.0, 20.0)], 1.0))

@@ -19,13 +19,15 @@ bracket and does not stall on one side, until an evaluated angle is within
 ``tolerance`` of the target, the bracket is narrower than
 ``friction_tolerance``, or ``max_evaluations`` are spent.  The estimate is the
 secant root of the final bracket (linear interpolation between its two ends),
-and the local slope dangle/dμ is that bracket's.
+and the slope of that bracket is reported.
 
 The seed-averaged angle is noisy: two runs at the same μ with other seeds
 differ by the standard error of the mean, ``sd / sqrt(seeds)``.  That error,
-divided by the local slope, is the uncertainty of μ
-(:func:`friction_uncertainty`); a tolerance much below the standard error buys
-runs, not accuracy.
+divided by the local slope dangle/dμ, is the uncertainty of μ
+(:func:`friction_uncertainty`).  The local slope is a least-squares line
+through the evaluations near the estimate (:func:`local_slope`), not the
+final bracket's secant: two close frictions differ by little more than their
+noise.  A tolerance much below the standard error buys runs, not accuracy.
 """
 
 from __future__ import annotations
@@ -35,6 +37,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 __all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "friction_uncertainty", "pooled_sd",
+           "local_slope",
            "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
            "TARGET_RANGE", "FRICTION_RANGE", "check_target"]
 
@@ -244,6 +247,32 @@ def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
     return float(angle_sd / math.sqrt(max(1, int(seeds))) / slope)
 
 
+def local_slope(evaluations: Sequence[Evaluation], friction: float, *, window: float = 0.5) -> float:
+    """dangle/dμ near ``friction``: the least-squares line through the evaluations within ``window`` of it.
+
+    With fewer than three evaluations in the window, all of them are used.
+    The seed-averaged angles are noisy: the secant of the final bracket —
+    two close frictions — can be dominated by their noise, a line through
+    the nearby evaluations much less.
+
+    Examples
+    --------
+    >>> ev = [Evaluation(0.5, 30.0), Evaluation(1.0, 35.0), Evaluation(1.1, 35.4), Evaluation(1.5, 39.0)]
+    >>> round(local_slope(ev, 1.05), 2)
+    8.29
+    """
+    import numpy as np
+
+    mu = np.array([e.friction for e in evaluations], dtype=np.float64)
+    a = np.array([e.angle for e in evaluations], dtype=np.float64)
+    near = np.abs(mu - friction) <= window
+    if near.sum() >= 3:
+        mu, a = mu[near], a[near]
+    if len(mu) < 2 or np.ptp(mu) == 0:
+        return float("nan")
+    return float(np.polyfit(mu, a, 1)[0])
+
+
 def pooled_sd(groups: Sequence[Sequence[float]]) -> float:
     """Pooled standard deviation of several groups of angles (NaN if no group has two values).
 
@@ -328,16 +357,19 @@ def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: flo
     for r in rows:
         by_eval.setdefault(int(r["evaluation"]), []).append(float(r["angle_deg"]))
     sd = pooled_sd(list(by_eval.values()))
-    mu_sd = friction_uncertainty(search.slope, sd, settings.seeds) if math.isfinite(sd) else float("nan")
+    slope = local_slope(search.evaluations, search.friction)
+    mu_sd = friction_uncertainty(slope, sd, settings.seeds) if math.isfinite(sd) else float("nan")
     lo, hi = search.bracket
     return {
         "test": test, "target_angle_deg": target, "friction": search.friction,
         "friction_sd": mu_sd, "friction_angle_deg": math.degrees(math.atan(search.friction)),
-        "slope_deg_per_unit_friction": search.slope, "angle_sd_deg": sd, "seeds": settings.seeds,
+        "slope_deg_per_unit_friction": slope, "bracket_slope_deg_per_unit_friction": search.slope,
+        "angle_sd_deg": sd, "seeds": settings.seeds,
         "evaluations": len(search.evaluations), "runs": len(rows), "converged": search.converged,
         "bracket": [[lo.friction, lo.angle], [hi.friction, hi.angle]], "friction_range": [low, high],
-        "uncertainty": "friction_sd = (angle_sd / sqrt(seeds)) / slope: the seed spread of a seed-averaged angle "
-                       "(angle_sd pooled over the evaluations) over the bracket's slope",
+        "uncertainty": "friction_sd = (angle_sd / sqrt(seeds)) / slope: the standard error of a seed-averaged "
+                       "angle (angle_sd pooled over the evaluations) over the local slope (a least-squares line "
+                       "through the evaluations within 0.5 of the friction)",
         "settings": {k: v for k, v in as_dict(settings).items() if k != "friction"}, "command": command,
     }
 
