@@ -85,9 +85,10 @@ TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
 TEMPLATE_SECONDS, TEMPLATE_SPHERE_SECONDS = 0.08, 0.0005
 #: Yade's memory per contact sphere (bytes: the body, its bound, its contacts)
 YADE_SPHERE_BYTES = 4096.0
-#: Yade seconds per level-set grain and run (one core, repose; the tilt factor applies): fitted to the
-#: level-set tilt runs of docs/simulate.md (50 grains, 150 surface nodes each)
-YADE_LEVELSET_GRAIN_SECONDS = 6.0
+#: Yade seconds per level-set grain and run (one core, repose; the tilt factor applies): a 50-grain level-set
+#: tilt of the rough spheres (150 surface nodes a grain) took 611 s, 21 times the 10-sphere clumps' 29 s
+#: (docs/simulate.md); set with the clump model's margin over its measured runs (about 2.4 times)
+YADE_LEVELSET_GRAIN_SECONDS = 12.0
 #: Yade's memory per level-set grid node of each grain (its distance field, copied per body)
 YADE_LEVELSET_NODE_BYTES = 16.0
 
