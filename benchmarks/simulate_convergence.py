@@ -182,7 +182,7 @@ def figure(rows):
         ax.minorticks_off()
         ax.set_xlabel("spheres per clump, N")
         ax.set_title(f"{preset} ({rows[0]['grains']} grains per layer)")
-        ax.legend(fontsize=7, loc="lower right")
+        ax.legend(fontsize=7, loc="best")
     axes[0].set_ylabel(f"tilt failure angle (°), μ = {rows[0]['friction']}")
     fig.tight_layout()
     return fig
