@@ -64,6 +64,54 @@ def check_representation(shape: str, spacing: float | None, as_spheres: bool, sp
                                "--shape levelset")
 
 
+def test_settings(test: str, values: dict, quick: bool, shape: str):
+    """The run's :class:`grainforge.simulate.Settings` from the options (``--quick`` filling what is not given).
+
+    Raises
+    ------
+    click.BadParameter, click.UsageError
+        For a setting out of its range, or a level-set run Yade cannot set up.
+    """
+    from ..simulate import QUICK, Settings
+    from ..simulate.levelset import check_levelset_run, quick_levelset
+
+    if quick:
+        values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
+    settings = build_params(Settings, values)
+    try:
+        check_levelset_run(test, shape, settings)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    return settings
+
+
+def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: float) -> list:
+    """The population's templates (clumps or level sets), with a progress bar."""
+    from tqdm import tqdm
+
+    from ..simulate import build_population
+
+    with tqdm(desc="clumps" if shape == "clump" else "level sets", unit="grain", disable=None, leave=False,
+              dynamic_ncols=True) as bar:
+        def step(done, total):
+            bar.total = total
+            bar.update(1)
+
+        return build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
+                                spacing=spacing)
+
+
+def engine_failed(exc, stage, out) -> click.ClickException:
+    """An engine failure (not an interrupt): its deck and log are kept in ``out``, and the one line that says where."""
+    import os
+
+    from ..simulate import keep_failed
+
+    kept = keep_failed(exc.deck, out)
+    message = str(exc).replace(f"{stage}{os.sep}", "")
+    return click.ClickException(f"{message}; its deck and log are in {kept}")
+
+
 def _command(test: str, doc: str):
     @click.command(name=test, help=doc)
     @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
@@ -117,17 +165,10 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     import os
 
     from ..estimate import TooLargeError
-    from ..simulate import QUICK, Settings, check_inputs, check_size
-    from ..simulate.levelset import check_levelset_run, quick_levelset
+    from ..simulate import check_inputs, check_size
     from .interrupts import ready_for_work, signals_held
 
-    if quick:
-        values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
-    settings = build_params(Settings, values)
-    try:
-        check_levelset_run(test, shape, settings)
-    except ValueError as exc:
-        raise click.UsageError(str(exc)) from None
+    settings = test_settings(test, values, quick, shape)
     outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)
@@ -143,10 +184,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     from ..simulate import (
         EngineFailed,
-        build_population,
         commit_stage,
         discard_stage,
-        keep_failed,
         open_stage,
         run_test,
         summarise,
@@ -154,13 +193,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate.report import write_report
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    with tqdm(desc="clumps", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
-        def step(done, total):
-            bar.total = total
-            bar.update(1)
-
-        templates = build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
-                                     spacing=spacing)
+    templates = make_templates(inputs, settings, as_spheres, shape, spacing)
     runs = tqdm(total=settings.seeds * 1000, desc=f"{test} (Yade)", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
 
@@ -180,10 +213,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             rows = run_test(test, templates, settings, stage, label=label, progress=progress,
                             workers=workers)
         except EngineFailed as exc:
-            # an engine failure (not an interrupt): its deck and log are kept for the diagnosis, nothing else
-            kept = keep_failed(exc.deck, out)
-            message = str(exc).replace(f"{stage}{os.sep}", "")
-            raise click.ClickException(f"{message}; its deck and log are in {kept}") from None
+            raise engine_failed(exc, stage, out) from None
         finally:
             runs.close()
         if shape != "clump":  # the representation, in the rows of a non-default one (clump outputs unchanged)

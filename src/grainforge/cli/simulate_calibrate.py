@@ -7,9 +7,19 @@ from pathlib import Path
 
 import click
 
-from .options import build_params, param_options
+from .options import param_options
 from .paths import OutPath, output_dir
-from .simulate import ENGINES, HEAVY_MODULES, SHAPES, _settings_cls, check_engine, check_representation
+from .simulate import (
+    ENGINES,
+    HEAVY_MODULES,
+    SHAPES,
+    _settings_cls,
+    check_engine,
+    check_representation,
+    engine_failed,
+    make_templates,
+    test_settings,
+)
 
 #: outputs of a calibration in --out (its runs go to runs/)
 OUTPUTS = ("calibration.csv", "calibration.json", "calibration.png", "runs")
@@ -77,11 +87,11 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     import math
     import os
     import sys
+    from dataclasses import replace
 
     from ..estimate import TooLargeError
-    from ..simulate import QUICK, Settings, check_inputs, check_size
+    from ..simulate import check_inputs, check_size
     from ..simulate.calibrate import check_target
-    from ..simulate.levelset import check_levelset_run, quick_levelset
     from .interrupts import ready_for_work, signals_held
 
     try:
@@ -96,13 +106,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     check_engine(engine, None, shape)
     check_representation(shape, spacing, as_spheres, values.get("spheres"))
     given = dict(values)
-    if quick:
-        values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
-    settings = build_params(Settings, values)
-    try:
-        check_levelset_run(test, shape, settings)
-    except ValueError as exc:
-        raise click.UsageError(str(exc)) from None
+    settings = test_settings(test, values, quick, shape)
     out = output_dir(out, overwrite=overwrite, files=[out / name for name in OUTPUTS])
     available, make_seconds = check_inputs(inputs)
     workers = workers or os.cpu_count() or 1
@@ -113,7 +117,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         one = check_size(test, settings, available=available, make_seconds=make_seconds, as_spheres=as_spheres,
                          workers=workers, shape=shape, spacing=ls_spacing)
         # the templates are made once; every friction tried runs every seed
-        make = check_size(test, build_params(Settings, {**values, "seeds": 1, "grains": 2}), available=available,
+        make = check_size(test, replace(settings, seeds=1, grains=2), available=available,
                           make_seconds=make_seconds, as_spheres=as_spheres, workers=workers, shape=shape,
                           spacing=ls_spacing)
     except TooLargeError as exc:
@@ -126,17 +130,11 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     ready_for_work(HEAVY_MODULES + ("grainforge.simulate.calibrate",), seconds, bound="at most about")
     from tqdm import tqdm
 
-    from ..simulate import EngineFailed, build_population, commit_stage, discard_stage, keep_failed, open_stage
+    from ..simulate import EngineFailed, commit_stage, discard_stage, open_stage
     from ..simulate.calibrate import Unreachable, run_calibration, write_calibration
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    with tqdm(desc="templates", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
-        def step(done, total):
-            bar.total = total
-            bar.update(1)
-
-        templates = build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
-                                     spacing=ls_spacing)
+    templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing)
     runs = tqdm(total=settings.seeds * 1000, desc=f"calibrate {test} (Yade)", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} {postfix}")
     done = [0.0] * settings.seeds
@@ -160,9 +158,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
                                            start=start, tolerance=tolerance, max_evaluations=max_evaluations,
                                            workers=workers, label=label, progress=progress, evaluated=evaluated)
         except EngineFailed as exc:
-            kept = keep_failed(exc.deck, out)
-            message = str(exc).replace(f"{stage}{os.sep}", "")
-            raise click.ClickException(f"{message}; its deck and log are in {kept}") from None
+            raise engine_failed(exc, stage, out) from None
         except Unreachable as exc:
             raise click.UsageError(f"{exc}; {len(exc.rows)} run(s) made, nothing kept") from None
         except ValueError as exc:  # an angle that could not be measured
