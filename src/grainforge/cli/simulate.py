@@ -64,7 +64,7 @@ def check_representation(shape: str, spacing: float | None, as_spheres: bool, sp
                                "--shape levelset")
 
 
-def test_settings(test: str, values: dict, quick: bool, shape: str):
+def run_settings(test: str, values: dict, quick: bool, shape: str):
     """The run's :class:`grainforge.simulate.Settings` from the options (``--quick`` filling what is not given).
 
     Raises
@@ -168,7 +168,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate import check_inputs, check_size
     from .interrupts import ready_for_work, signals_held
 
-    settings = test_settings(test, values, quick, shape)
+    settings = run_settings(test, values, quick, shape)
     outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)

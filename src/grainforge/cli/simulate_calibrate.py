@@ -18,7 +18,7 @@ from .simulate import (
     check_representation,
     engine_failed,
     make_templates,
-    test_settings,
+    run_settings,
 )
 
 #: outputs of a calibration in --out (its runs go to runs/)
@@ -106,7 +106,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     check_engine(engine, None, shape)
     check_representation(shape, spacing, as_spheres, values.get("spheres"))
     given = dict(values)
-    settings = test_settings(test, values, quick, shape)
+    settings = run_settings(test, values, quick, shape)
     out = output_dir(out, overwrite=overwrite, files=[out / name for name in OUTPUTS])
     available, make_seconds = check_inputs(inputs)
     workers = workers or os.cpu_count() or 1
