@@ -163,6 +163,14 @@ CASES = [
     Case("simulate-liggghts-huge", _sim("repose", "--engine", "liggghts", "--mpi", "2", *HUGE_SIM),
          r"would take about"),
     Case("simulate-missing-input", ["simulate", "repose", "{in}/nothing", "--out", "o"], r"nothing"),
+    # simulate calibrate: a target out of range, a calibration beyond a day, an unknown test
+    Case("simulate-calibrate-target-85", ["simulate", "calibrate", "tilt", "{in}/ang", "--target-angle", "85",
+                                          "--out", "o"], r"target angle 85° is outside 5–80°"),
+    Case("simulate-calibrate-huge", ["simulate", "calibrate", "tilt", "{in}/ang", "--target-angle", "30", "--out",
+                                     "o", "--grains", "20000", "--seeds", "30", "--workers", "1"],
+         r"(calibration of up to 8 frictions|tilt run\(s\) of 20000 grains).*would take about"),
+    Case("simulate-calibrate-shear", ["simulate", "calibrate", "shear", "{in}/ang", "--target-angle", "30",
+                                      "--out", "o"], r"shear"),
     Case("simulate-empty-folder", ["simulate", "tilt", "{in}/nogrinit", "--out", "o"], r"no grain files"),
     Case("simulate-bad-recipe", ["simulate", "tilt", "{in}/bad.toml", "--out", "o"], r"bad\.toml"),
     Case("simulate-out-is-a-file", _sim("repose")[:-1] + ["afile"], r"afile'? is a file"),
@@ -455,13 +463,16 @@ def _wait_for_yade(work: Path, proc: subprocess.Popen) -> None:
     time.sleep(0.5)
 
 
+@pytest.mark.parametrize("command", [["repose"], ["calibrate", "tilt", "--target-angle", "30"]],
+                         ids=["repose", "calibrate"])
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.slow  # runs Yade
-def test_signal_while_yade_runs_kills_it_and_leaves_nothing(tmp_path, inputs, sig):
+def test_signal_while_yade_runs_kills_it_and_leaves_nothing(tmp_path, inputs, sig, command):
     require_yade()
     work = tmp_path / "work"
     work.mkdir()
-    proc = _start(["simulate", "repose", str(inputs / "ang"), "--quick", "--out", "o"], work)
+    proc = _start(["simulate", *command[:2 if command[0] == "calibrate" else 1], str(inputs / "ang"),
+                   *command[2:], "--quick", "--out", "o"], work)
     _wait_for_yade(work, proc)
     os.killpg(proc.pid, sig)
     _stopped(proc, sig)

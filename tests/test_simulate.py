@@ -6,6 +6,7 @@ Without Yade the engine test is skipped with the reason; with GRAINFORGE_REQUIRE
 """
 
 import csv
+import json
 import math
 import os
 import re
@@ -173,8 +174,12 @@ REFUSED = [
     (["--mpi", "-3"], "--mpi"),
     (["--engine", "liggghts", "--mpi", "0"], "--mpi"),
     (["--mpi", "2"], "--mpi: yade runs one process per seed"),
-    (["--shape", "levelset"], "--shape levelset: simulate's yade scenes take --shape clump only"),
-    (["--shape", "polyhedron"], "--shape polyhedron"),
+    (["--shape", "polyhedron"], "--shape polyhedron: simulate's yade scenes take --shape clump, --shape levelset only"),
+    (["--shape", "levelset", "--spheres", "20"], "--spheres sets a clump's size"),
+    (["--shape", "levelset", "--as-spheres"], "--as-spheres is the sphere baseline"),
+    (["--spacing", "0.1"], "--spacing is the level set's grid"),
+    (["--shape", "levelset", "--spacing", "0.7"], "--spacing"),
+    (["--shape", "levelset", "--grains", "20000", "--seeds", "100", "--spacing", "0.02"], "level sets of spacing"),
     (["--shape", "sphere"], "--shape"),
     (["--engine", "liggghts", "--shape", "levelset"], "--shape levelset: simulate's liggghts scenes take --shape clump only"),
     (["--engine", "liggghts", "--shape", "polyhedron", "--mpi", "2"], "--shape polyhedron: simulate's liggghts"),
@@ -189,6 +194,35 @@ def test_settings_an_engine_cannot_run_are_refused_up_front(runner, grains, tmp_
     _one_line_exit_2(r)
     assert message in r.stderr
     assert not out.exists()
+
+
+def test_a_level_set_tilt_too_narrow_for_yades_periodic_cell_is_refused(runner, grains, tmp_path):
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--shape", "levelset",
+                            "--grains", "30"])
+    _one_line_exit_2(r)
+    assert "needs --grains ≥ 49" in r.stderr
+    assert not out.exists()
+
+
+@pytest.mark.slow
+def test_quick_level_set_tilt_in_yade(runner, grains, tmp_path):
+    """A level-set tilt completes: the fewest grains --quick allows, a coarse grid, few tilt steps (minutes)."""
+    require_yade()
+    out = tmp_path / "ls"
+    r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--quick", "--shape", "levelset",
+                            "--spacing", "0.15", "--templates", "2", "--tilt-start", "30", "--tilt-step", "5",
+                            "--young", "2e5"])
+    assert r.exit_code == 0, r.output
+    (row,) = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
+    assert int(row["inserted"]) == 49 and int(row["lost"]) == 0
+    assert row["shape"] == "levelset" and float(row["spacing"]) == 0.15
+    # the layer was tilted: its displacement record starts at the first tilt angle
+    result = json.loads((out / "tilt-seed0" / "result.json").read_text())
+    assert result["history"][0][0] == pytest.approx(30.0)
+    assert all(np.isfinite(h[1]) for h in result["history"])
+    assert "Ig2_LevelSet_LevelSet_ScGeom" in (out / "tilt-seed0" / "run.py").read_text()
+    assert any((out / "tilt-seed0").glob("*.levelset.json"))
 
 
 def test_an_engine_that_is_not_installed_is_refused_up_front(runner, grains, tmp_path, monkeypatch):

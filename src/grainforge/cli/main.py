@@ -187,9 +187,12 @@ def _register():
         plot,
         render,
         simulate,
+        simulate_calibrate,
         tray,
     )
     from .options import apply_help_style
+
+    simulate.simulate.add_command(simulate_calibrate.calibrate)
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,

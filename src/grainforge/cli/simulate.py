@@ -15,7 +15,7 @@ TILT_ONLY = ("tilt_step", "tilt_start")
 ENGINES = ("yade", "liggghts")
 SHAPES = ("clump", "polyhedron", "levelset")
 #: what simulate's scenes can run, per engine
-RUNS = {"yade": ("clump",), "liggghts": ("clump",)}
+RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
 #: engines simulate runs under mpirun (--mpi)
 MPI_ENGINES = ("liggghts",)
 
@@ -53,6 +53,72 @@ def check_engine(engine: str, mpi: int | None, shape: str) -> None:
             raise click.UsageError(str(exc)) from None
 
 
+def check_representation(shape: str, spacing: float | None, as_spheres: bool, spheres: int | None) -> None:
+    """Refuse, in one line, options of another grain representation (as ``grainforge dem`` does).
+
+    Raises
+    ------
+    click.UsageError
+        For ``--spacing`` without ``--shape levelset``, or ``--spheres`` or
+        ``--as-spheres`` with it.
+    """
+    if shape != "levelset" and spacing is not None:
+        raise click.UsageError("--spacing is the level set's grid: use it with --shape levelset")
+    if shape == "levelset" and spheres is not None:
+        raise click.UsageError("--spheres sets a clump's size: a level set has none (--spacing sets its grid)")
+    if shape == "levelset" and as_spheres:
+        raise click.UsageError("--as-spheres is the sphere baseline (one sphere per grain): use it without "
+                               "--shape levelset")
+
+
+def run_settings(test: str, values: dict, quick: bool, shape: str):
+    """The run's :class:`grainforge.simulate.Settings` from the options (``--quick`` filling what is not given).
+
+    Raises
+    ------
+    click.BadParameter, click.UsageError
+        For a setting out of its range, or a level-set run Yade cannot set up.
+    """
+    from ..simulate import QUICK, Settings
+    from ..simulate.levelset import check_levelset_run, quick_levelset
+
+    if quick:
+        values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
+    settings = build_params(Settings, values)
+    try:
+        check_levelset_run(test, shape, settings)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    return settings
+
+
+def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: float) -> list:
+    """The population's templates (clumps or level sets), with a progress bar."""
+    from tqdm import tqdm
+
+    from ..simulate import build_population
+
+    with tqdm(desc="clumps" if shape == "clump" else "level sets", unit="grain", disable=None, leave=False,
+              dynamic_ncols=True) as bar:
+        def step(done, total):
+            bar.total = total
+            bar.update(1)
+
+        return build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
+                                spacing=spacing)
+
+
+def engine_failed(exc, stage, out) -> click.ClickException:
+    """An engine failure (not an interrupt): its deck and log are kept in ``out``, and the one line that says where."""
+    import os
+
+    from ..simulate import keep_failed
+
+    kept = keep_failed(exc.deck, out)
+    message = str(exc).replace(f"{stage}{os.sep}", "")
+    return click.ClickException(f"{message}; its deck and log are in {kept}")
+
+
 def _command(test: str, doc: str):
     @click.command(name=test, help=doc)
     @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
@@ -74,13 +140,18 @@ def _command(test: str, doc: str):
                   help="LIGGGHTS only: run each seed under `mpirun -np N` (the box cut into N columns). "
                        "Yade runs one process per seed: use --workers.")
     @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
-                  help="Grain representation (simulate's Yade and LIGGGHTS scenes take clumps; --spheres sets "
-                       "their size).")
+                  help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "
+                       "signed distance field, as grainforge dem writes it).")
+    @click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
+                  show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
+                                            "(as grainforge dem).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
-    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, overwrite, **values):
+    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, **values):
         check_engine(engine, mpi, shape)
-        _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi)
+        check_representation(shape, spacing, as_spheres, values.get("spheres"))
+        _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi,
+             shape=shape, spacing=0.05 if spacing is None else spacing)
 
     return command
 
@@ -100,16 +171,15 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "matplotlib.pyplot", "matplotlib.collections")
 
 
-def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine="yade", mpi=None):
+def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
+         shape="clump", spacing=0.05):
     import os
 
     from ..estimate import TooLargeError
-    from ..simulate import QUICK, Settings, check_inputs, check_size
+    from ..simulate import check_inputs, check_size
     from .interrupts import ready_for_work, signals_held
 
-    if quick:
-        values = {**QUICK, **{k: v for k, v in values.items() if v is not None}}
-    settings = build_params(Settings, values)
+    settings = run_settings(test, values, quick, shape)
     outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
                                                              for k in range(settings.seeds)]
     out = output_dir(out, overwrite=overwrite, files=outputs)
@@ -117,7 +187,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
-                             as_spheres=as_spheres, workers=workers)
+                             as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     ready_for_work(HEAVY_MODULES, seconds, bound="about")
@@ -125,10 +195,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     from ..simulate import (
         EngineFailed,
-        build_population,
         commit_stage,
         discard_stage,
-        keep_failed,
         open_stage,
         run_test,
         summarise,
@@ -136,12 +204,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate.report import write_report
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    with tqdm(desc="clumps", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
-        def step(done, total):
-            bar.total = total
-            bar.update(1)
-
-        templates = build_population(inputs, settings, as_spheres=as_spheres, progress=step)
+    templates = make_templates(inputs, settings, as_spheres, shape, spacing)
     name = "Yade" if engine == "yade" else "LIGGGHTS" + (f", {mpi} MPI ranks" if mpi else "")
     runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
@@ -162,12 +225,11 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             rows = run_test(test, templates, settings, stage, label=label, progress=progress,
                             workers=workers, engine=engine, mpi=mpi)
         except EngineFailed as exc:
-            # an engine failure (not an interrupt): its deck and log are kept for the diagnosis, nothing else
-            kept = keep_failed(exc.deck, out)
-            message = str(exc).replace(f"{stage}{os.sep}", "")
-            raise click.ClickException(f"{message}; its deck and log are in {kept}") from None
+            raise engine_failed(exc, stage, out) from None
         finally:
             runs.close()
+        if shape != "clump":  # the representation, in the rows of a non-default one (clump outputs unchanged)
+            rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
         write_report(rows, stage, test, settings)
         with signals_held():  # the outputs appear together
             commit_stage(stage, out, overwrite=overwrite)

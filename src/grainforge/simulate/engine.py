@@ -31,17 +31,20 @@ def yade_executable() -> str:
 def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
                     *, overwrite: bool = False, engine: str = "yade") -> list[Path]:
     """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
-    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts.deck_files`)."""
+    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts.deck_files`).
+
+    In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset`) picks the scene.
+    """
     if engine == "liggghts":
         from .liggghts import write_test_deck as write_liggghts
 
         return write_liggghts(templates, test, settings, seed, out, overwrite=overwrite)
     from ..dem.yade import write_deck
-    from .scenes import REPOSE, TILT
+    from .levelset import scene_extra, scene_text
 
-    scene = {"repose": REPOSE, "tilt": TILT}[test]
-    return write_deck(templates, out, scene=scene, settings=scene_settings(settings, test, seed),
-                      overwrite=overwrite)
+    shape = templates[0].shape if templates else "clump"
+    return write_deck(templates, out, scene=scene_text(test, shape),
+                      settings={**scene_settings(settings, test, seed), **scene_extra(shape)}, overwrite=overwrite)
 
 
 def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] | None = None,

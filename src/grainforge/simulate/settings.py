@@ -85,10 +85,16 @@ TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
 TEMPLATE_SECONDS, TEMPLATE_SPHERE_SECONDS = 0.08, 0.0005
 #: Yade's memory per contact sphere (bytes: the body, its bound, its contacts)
 YADE_SPHERE_BYTES = 4096.0
+#: Yade seconds per level-set grain and run (one core, repose; the tilt factor applies): a 50-grain level-set
+#: tilt of the rough spheres (150 surface nodes a grain) took 611 s, 21 times the 10-sphere clumps' 29 s
+#: (docs/simulate.md); set with the clump model's margin over its measured runs (about 2.4 times)
+YADE_LEVELSET_GRAIN_SECONDS = 12.0
+#: Yade's memory per level-set grid node of each grain (its distance field, copied per body)
+YADE_LEVELSET_NODE_BYTES = 16.0
 
 
 def check_size(test: str, settings: Settings, *, available: int, make_seconds: float = 0.0,
-               as_spheres: bool = False, workers: int = 1) -> float:
+               as_spheres: bool = False, workers: int = 1, shape: str = "clump", spacing: float = 0.05) -> float:
     """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
 
     Parameters
@@ -98,6 +104,10 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         seconds to generate one (a recipe) before it becomes a template.
     workers : int
         Yade runs at once (each on one core).
+    shape, spacing : str, float
+        The grains' representation: clumps of ``settings.spheres``, or level
+        sets of grid ``spacing`` (their grids cost template time and Yade time
+        and memory per grain: :data:`YADE_LEVELSET_GRAIN_SECONDS`).
 
     Raises
     ------
@@ -108,22 +118,35 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     --------
     >>> 60 < check_size("repose", Settings(), available=3) < 600
     True
+    >>> check_size("tilt", Settings(), available=3, shape="levelset") > 5 * check_size("tilt", Settings(), available=3)
+    True
     """
-    from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, duration
+    from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
 
     templates = min(settings.templates, available)
     spheres = 1 if as_spheres else settings.spheres
     make = templates * (make_seconds + TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS * spheres)
     per_run = TEST_FACTOR[test] * settings.grains * (YADE_GRAIN_SECONDS + YADE_SPHERE_SECONDS * spheres)
+    if shape == "levelset":
+        make = templates * (make_seconds + dem_template_seconds("levelset", spacing=spacing))
+        per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
     at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
     total = make + per_run * settings.seeds / at_once
+    grain = f"{spheres} sphere(s)" if shape == "clump" else f"level sets of spacing {spacing:g}"
+    raise_spacing = "" if shape == "clump" else ", or raise --spacing"
     if total > SECONDS_LIMIT:
-        option = "--templates" if make > total / 2 else "--grains, --spheres or --seeds"
+        if make > total / 2:
+            option = "--templates" + raise_spacing
+        else:
+            option = ("--grains, --spheres or --seeds" if shape == "clump" else "--grains or --seeds") + raise_spacing
         raise TooLargeError(
-            f"{settings.seeds} {test} run(s) of {settings.grains} grains of {spheres} sphere(s) from {templates} "
+            f"{settings.seeds} {test} run(s) of {settings.grains} grains of {grain} from {templates} "
             f"template(s) would take about {duration(total)} of computing ({duration(per_run)} a run on "
             f"{at_once} core(s), {duration(make)} for the templates; limit {_limit()}); lower {option}")
-    check_memory(YADE_SPHERE_BYTES * settings.grains * spheres * at_once,
-                 what=f"{at_once} Yade run(s) at once of {settings.grains} grains of {spheres} sphere(s)",
-                 option="--grains, --spheres or --workers")
+    per_grain = (YADE_SPHERE_BYTES * spheres if shape == "clump"
+                 else YADE_LEVELSET_NODE_BYTES * (1.4 / spacing + 7.0) ** 3 + YADE_SPHERE_BYTES)
+    check_memory(per_grain * settings.grains * at_once,
+                 what=f"{at_once} Yade run(s) at once of {settings.grains} grains of {grain}",
+                 option=("--grains, --spheres or --workers" if shape == "clump" else "--grains or --workers")
+                 + raise_spacing)
     return float(total)

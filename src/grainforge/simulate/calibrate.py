@@ -1,0 +1,421 @@
+"""Contact-friction calibration: the μ at which a population reaches a measured bulk angle.
+
+A DEM modeller calibrates the contact parameters on one laboratory test and
+predicts the others with them.  :func:`search_friction` finds the contact
+friction μ at which a virtual test (tilt table or angle of repose) gives a
+target angle: a bounded search on the seed-averaged angle, which rises with μ
+(docs/simulate.md).  It is a pure function of a callable ``angle_of(μ)`` —
+the engine runs live in the command (``grainforge simulate calibrate``), the
+search logic is tested with stand-in functions.
+
+Notes
+-----
+The search first brackets the target: from ``start`` it doubles μ (angle
+below the target) or halves it (above), clamped to ``[low, high]``; a bound
+reached without bracketing the target means the target is out of reach (the
+angles reached are in :class:`Unreachable`).  It then narrows the bracket by
+the Illinois variant of the secant (false-position) method, which keeps a
+bracket and does not stall on one side, until an evaluated angle is within
+``tolerance`` of the target, the bracket is narrower than
+``friction_tolerance``, or ``max_evaluations`` are spent.  The estimate is the
+secant root of the final bracket (linear interpolation between its two ends),
+and the slope of that bracket is reported.
+
+The seed-averaged angle is noisy: two runs at the same μ with other seeds
+differ by the standard error of the mean, ``sd / sqrt(seeds)``.  That error,
+divided by the local slope dangle/dμ, is the uncertainty of μ
+(:func:`friction_uncertainty`).  The local slope is a least-squares line
+through the evaluations near the estimate (:func:`local_slope`), not the
+final bracket's secant: two close frictions differ by little more than their
+noise.  A tolerance much below the standard error buys runs, not accuracy.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+
+__all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "friction_uncertainty", "pooled_sd",
+           "local_slope",
+           "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
+           "TARGET_RANGE", "FRICTION_RANGE", "check_target"]
+
+#: target angles (degrees) a calibration accepts: bulk friction angles of granular materials
+TARGET_RANGE = (5.0, 80.0)
+#: the default bounds of the μ search
+FRICTION_RANGE = (0.05, 1.5)
+
+
+@dataclass(frozen=True)
+class Evaluation:
+    """One evaluated friction: μ and the (seed-averaged) angle in degrees."""
+
+    friction: float
+    angle: float
+
+
+@dataclass(frozen=True)
+class FrictionSearch:
+    """The result of :func:`search_friction`.
+
+    Attributes
+    ----------
+    friction : float
+        The estimated μ: the secant root of the final bracket.
+    slope : float
+        dangle/dμ over the final bracket, degrees per unit μ.
+    bracket : (Evaluation, Evaluation)
+        The final bracket: angles below and above the target (or one at it).
+    evaluations : tuple of Evaluation
+        Every evaluation, in order.
+    converged : bool
+        Whether the search stopped on ``tolerance`` or ``friction_tolerance``
+        (False: ``max_evaluations`` ran out; the estimate is still the
+        bracket's interpolation, with a wider uncertainty).
+    """
+
+    friction: float
+    slope: float
+    bracket: tuple
+    evaluations: tuple
+    converged: bool
+
+
+class Unreachable(ValueError):
+    """The target angle lies outside the angles reached in the μ range (``reached``: lowest, highest angle)."""
+
+    def __init__(self, message: str, reached: tuple[float, float]):
+        super().__init__(message)
+        self.reached = reached
+
+
+def check_target(target: float) -> None:
+    """Refuse a target angle outside :data:`TARGET_RANGE` (``ValueError``, one line).
+
+    Examples
+    --------
+    >>> check_target(38.0)
+    >>> check_target(85.0)
+    Traceback (most recent call last):
+    ...
+    ValueError: target angle 85° is outside 5–80°: bulk friction angles of granular materials lie there
+    """
+    lo, hi = TARGET_RANGE
+    if not (math.isfinite(target) and lo <= target <= hi):
+        raise ValueError(f"target angle {target:g}° is outside {lo:g}–{hi:g}°: bulk friction angles of granular "
+                         "materials lie there")
+
+
+def search_friction(angle_of: Callable[[float], float], target: float, *, low: float = FRICTION_RANGE[0],
+                    high: float = FRICTION_RANGE[1], start: float = 0.5, tolerance: float = 0.5,
+                    friction_tolerance: float = 0.01, max_evaluations: int = 8,
+                    progress: Callable[[Evaluation], None] | None = None) -> FrictionSearch:
+    """The contact friction μ in ``[low, high]`` at which ``angle_of(μ)`` equals ``target``.
+
+    Parameters
+    ----------
+    angle_of : callable
+        ``angle_of(μ)`` → angle in degrees (seed-averaged), rising with μ. A NaN
+        (no angle measured) stops the search with ``ValueError``.
+    target : float
+        Degrees.
+    low, high : float
+        Bounds of μ (0 ≤ low < high).
+    start : float
+        First μ tried (clamped into the bounds).
+    tolerance : float
+        Degrees: stop when an evaluated angle is this close to the target.
+    friction_tolerance : float
+        Stop when the bracket is narrower than this in μ.
+    max_evaluations : int
+        At most this many calls of ``angle_of`` (≥ 2).
+    progress : callable, optional
+        Called with each :class:`Evaluation` as it is made.
+
+    Returns
+    -------
+    FrictionSearch
+
+    Raises
+    ------
+    Unreachable
+        If the angle at a bound still falls short of (or exceeds) the target.
+    ValueError
+        For bad bounds, or an angle that could not be measured.
+
+    Examples
+    --------
+    A stand-in angle that rises with μ as atan does, with a floor of 15°:
+
+    >>> angle = lambda mu: 15.0 + math.degrees(math.atan(mu))
+    >>> s = search_friction(angle, 40.0, tolerance=0.05)
+    >>> round(s.friction, 2), s.converged, len(s.evaluations) <= 8
+    (0.47, True, True)
+    """
+    if not (0.0 <= low < high and math.isfinite(high)):
+        raise ValueError(f"need 0 ≤ low < high, got low={low!r}, high={high!r}")
+    if int(max_evaluations) < 2:
+        raise ValueError(f"max_evaluations must be ≥ 2, got {max_evaluations!r}")
+    evaluations: list[Evaluation] = []
+
+    def evaluate(mu: float) -> Evaluation:
+        a = float(angle_of(mu))
+        if not math.isfinite(a):
+            raise ValueError(f"no angle could be measured at friction {mu:.4g}")
+        e = Evaluation(float(mu), a)
+        evaluations.append(e)
+        if progress is not None:
+            progress(e)
+        return e
+
+    def done(lo: Evaluation, hi: Evaluation, converged: bool) -> FrictionSearch:
+        slope = (hi.angle - lo.angle) / (hi.friction - lo.friction) if hi.friction != lo.friction else float("nan")
+        if lo.angle == hi.angle:
+            mu = 0.5 * (lo.friction + hi.friction)
+        else:
+            mu = lo.friction + (target - lo.angle) * (hi.friction - lo.friction) / (hi.angle - lo.angle)
+        return FrictionSearch(float(min(max(mu, low), high)), float(slope), (lo, hi), tuple(evaluations), converged)
+
+    # 1. bracket: double (angle too low) or halve (too high) from start, clamped to the bounds
+    e = evaluate(min(max(start, low), high))
+    below = above = None
+    while True:
+        if e.angle <= target:
+            below = e if below is None or e.friction > below.friction else below
+        if e.angle >= target:
+            above = e if above is None or e.friction < above.friction else above
+        if below is not None and above is not None:
+            break
+        if above is None and e.friction >= high or below is None and e.friction <= low:
+            reached = (min(x.angle for x in evaluations), max(x.angle for x in evaluations))
+            side = "highest" if above is None else "lowest"
+            raise Unreachable(f"target angle {target:g}° is not reached for friction in [{low:g}, {high:g}]: the "
+                              f"angles measured span {reached[0]:.1f}–{reached[1]:.1f}° (the {side} at friction "
+                              f"{e.friction:g})", reached)
+        if len(evaluations) >= max_evaluations:
+            raise Unreachable(f"target angle {target:g}° not bracketed in {len(evaluations)} evaluations: the "
+                              f"angles measured span {min(x.angle for x in evaluations):.1f}–"
+                              f"{max(x.angle for x in evaluations):.1f}°",
+                              (min(x.angle for x in evaluations), max(x.angle for x in evaluations)))
+        e = evaluate(min(2.0 * e.friction, high) if above is None else max(0.5 * e.friction, low))
+    # 2. narrow it: Illinois false position on f = angle - target
+    if abs(e.angle - target) <= tolerance:
+        return done(below, above, True)
+    fb, fa = below.angle - target, above.angle - target
+    side = 0
+    while len(evaluations) < max_evaluations:
+        if above.friction - below.friction < friction_tolerance:
+            return done(below, above, True)
+        mu = below.friction - fb * (above.friction - below.friction) / (fa - fb) if fa != fb else \
+            0.5 * (below.friction + above.friction)
+        e = evaluate(mu)
+        if abs(e.angle - target) <= tolerance:
+            return done(e, above, True) if e.angle <= target else done(below, e, True)
+        if e.angle < target:
+            below, fb = e, e.angle - target
+            fa = 0.5 * fa if side == -1 else above.angle - target
+            side = -1
+        else:
+            above, fa = e, e.angle - target
+            fb = 0.5 * fb if side == 1 else below.angle - target
+            side = 1
+    return done(below, above, False)
+
+
+def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
+    """Standard uncertainty of the calibrated μ from the seed spread: ``(sd / sqrt(seeds)) / slope``.
+
+    Parameters
+    ----------
+    slope : float
+        dangle/dμ near the estimate, degrees per unit μ.
+    angle_sd : float
+        Standard deviation of one run's angle over seeds, degrees.
+    seeds : int
+        Seeds averaged at each μ.
+
+    Examples
+    --------
+    >>> round(friction_uncertainty(20.0, 1.5, 3), 3)
+    0.043
+    >>> friction_uncertainty(0.0, 1.5, 3)
+    inf
+    """
+    if not (math.isfinite(slope) and slope > 0):
+        return float("inf")
+    return float(angle_sd / math.sqrt(max(1, int(seeds))) / slope)
+
+
+def local_slope(evaluations: Sequence[Evaluation], friction: float, *, window: float = 0.5) -> float:
+    """dangle/dμ near ``friction``: the least-squares line through the evaluations within ``window`` of it.
+
+    With fewer than three evaluations in the window, all of them are used.
+    The seed-averaged angles are noisy: the secant of the final bracket —
+    two close frictions — can be dominated by their noise, a line through
+    the nearby evaluations much less.
+
+    Examples
+    --------
+    >>> ev = [Evaluation(0.5, 30.0), Evaluation(1.0, 35.0), Evaluation(1.1, 35.4), Evaluation(1.5, 39.0)]
+    >>> round(local_slope(ev, 1.05), 2)
+    8.29
+    """
+    import numpy as np
+
+    mu = np.array([e.friction for e in evaluations], dtype=np.float64)
+    a = np.array([e.angle for e in evaluations], dtype=np.float64)
+    near = np.abs(mu - friction) <= window
+    if near.sum() >= 3:
+        mu, a = mu[near], a[near]
+    if len(mu) < 2 or np.ptp(mu) == 0:
+        return float("nan")
+    return float(np.polyfit(mu, a, 1)[0])
+
+
+def pooled_sd(groups: Sequence[Sequence[float]]) -> float:
+    """Pooled standard deviation of several groups of angles (NaN if no group has two values).
+
+    Examples
+    --------
+    >>> round(pooled_sd([[30.0, 32.0], [40.0, 41.0, 42.0]]), 3)
+    1.155
+    """
+    import numpy as np
+
+    num = den = 0.0
+    for g in groups:
+        a = np.asarray([x for x in g if math.isfinite(x)], dtype=np.float64)
+        if len(a) > 1:
+            num += float(((a - a.mean()) ** 2).sum())
+            den += len(a) - 1
+    return math.sqrt(num / den) if den else float("nan")
+
+
+def run_calibration(test: str, templates: Sequence, settings, target: float, out, *, low: float = FRICTION_RANGE[0],
+                    high: float = FRICTION_RANGE[1], start: float = 0.5, tolerance: float = 0.5,
+                    max_evaluations: int = 8, workers: int = 1, label: str = "",
+                    progress: Callable[[int, int, float, str], None] | None = None,
+                    evaluated: Callable[[Evaluation, list], None] | None = None, engine: str = "yade",
+                    mpi: int | None = None) -> tuple[FrictionSearch, list]:
+    """Calibrate μ on ``test`` with the engine: :func:`search_friction` over seed-averaged engine runs.
+
+    Each evaluation runs ``settings.seeds`` seeds at friction μ into
+    ``out/runs/e<k>-mu<μ>/`` (:func:`grainforge.simulate.run_test`).
+
+    Parameters
+    ----------
+    progress : callable, optional
+        ``progress(evaluation index, run index, fraction, phase)`` while a run goes on.
+    evaluated : callable, optional
+        ``evaluated(evaluation, rows)`` after each evaluation (its rows: one per seed).
+    engine, mpi : str, int or None
+        The engine of the runs and its MPI ranks (as :func:`grainforge.simulate.run_test`).
+
+    Returns
+    -------
+    (FrictionSearch, list of dict)
+        The search and every run's row (with ``friction`` and ``evaluation``).
+
+    Raises
+    ------
+    Unreachable
+        With the attribute ``rows`` (the runs made), if the target is out of reach.
+    """
+    from dataclasses import replace
+    from pathlib import Path
+
+    from .engine import run_test, summarise
+
+    rows: list[dict] = []
+
+    def angle_of(mu: float) -> float:
+        k = len({r["evaluation"] for r in rows})
+        report = None if progress is None else (lambda i, f, p: progress(k, i, f, p))
+        s = replace(settings, friction=float(mu))
+        got = run_test(test, templates, s, Path(out) / "runs" / f"e{k}-mu{mu:.4f}", label=label, progress=report,
+                       workers=workers, engine=engine, mpi=mpi)
+        got = [{"evaluation": k, "friction": float(mu), **r} for r in got]
+        rows.extend(got)
+        mean = summarise(got)["angle_mean_deg"]
+        if evaluated is not None:
+            evaluated(Evaluation(float(mu), mean), got)
+        return mean
+
+    try:
+        search = search_friction(angle_of, target, low=low, high=high, start=start, tolerance=tolerance,
+                                 max_evaluations=max_evaluations)
+    except Unreachable as exc:
+        exc.rows = rows
+        raise
+    return search, rows
+
+
+def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
+                       command: str, *, low: float, high: float) -> dict:
+    """The ``calibration.json`` record: μ, its uncertainty from the seed spread and the local slope, the runs."""
+    from ..params import as_dict
+
+    by_eval: dict[int, list[float]] = {}
+    for r in rows:
+        by_eval.setdefault(int(r["evaluation"]), []).append(float(r["angle_deg"]))
+    sd = pooled_sd(list(by_eval.values()))
+    slope = local_slope(search.evaluations, search.friction)
+    mu_sd = friction_uncertainty(slope, sd, settings.seeds) if math.isfinite(sd) else float("nan")
+    lo, hi = search.bracket
+    return {
+        "test": test, "target_angle_deg": target, "friction": search.friction,
+        "friction_sd": mu_sd, "friction_angle_deg": math.degrees(math.atan(search.friction)),
+        "slope_deg_per_unit_friction": slope, "bracket_slope_deg_per_unit_friction": search.slope,
+        "angle_sd_deg": sd, "seeds": settings.seeds,
+        "evaluations": len(search.evaluations), "runs": len(rows), "converged": search.converged,
+        "bracket": [[lo.friction, lo.angle], [hi.friction, hi.angle]], "friction_range": [low, high],
+        "uncertainty": "friction_sd = (angle_sd / sqrt(seeds)) / slope: the standard error of a seed-averaged "
+                       "angle (angle_sd pooled over the evaluations) over the local slope (a least-squares line "
+                       "through the evaluations within 0.5 of the friction)",
+        "settings": {k: v for k, v in as_dict(settings).items() if k != "friction"}, "command": command,
+    }
+
+
+def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, mu_sd: float):
+    """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    import numpy as np
+
+    fig, ax = plt.subplots(figsize=(6.5, 4.2), dpi=120)
+    mu = np.array([float(r["friction"]) for r in rows])
+    a = np.array([float(r["angle_deg"]) for r in rows])
+    ax.plot(mu, a, "o", color="0.5", ms=4, alpha=0.7, label="runs (one per seed)")
+    ev = sorted(search.evaluations, key=lambda e: e.friction)
+    ax.plot([e.friction for e in ev], [e.angle for e in ev], "s-", color="C0", ms=6, label="seed average")
+    ax.axhline(target, color="C3", ls="--", lw=1, label=f"target {target:g}°")
+    ax.axvline(search.friction, color="C2", lw=1.5, label=f"μ = {search.friction:.3f} ± {mu_sd:.3f}")
+    if math.isfinite(mu_sd):
+        ax.axvspan(search.friction - mu_sd, search.friction + mu_sd, color="C2", alpha=0.15)
+    ax.set_xlabel("contact friction μ")
+    ax.set_ylabel(("tilt failure angle" if test == "tilt" else "angle of repose") + " (°)")
+    ax.set_title(f"calibration on the {test} test: {len(search.evaluations)} frictions, {len(rows)} runs")
+    ax.legend(fontsize=8, loc="lower right")
+    fig.tight_layout()
+    return fig
+
+
+def write_calibration(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
+                      command: str, out, *, low: float, high: float) -> dict:
+    """Write ``calibration.csv`` (every run), ``calibration.json`` and ``calibration.png`` into ``out``."""
+    import json
+    from pathlib import Path
+
+    from ..io import save_figure, write_csv
+
+    out = Path(out)
+    record = calibration_record(search, rows, target, test, settings, command, low=low, high=high)
+    keep = ("evaluation", "friction", "seed", "angle_deg", "label", "grains", "inserted", "lost", "steps", "dt_s",
+            "simulated_time_s", "note")
+    write_csv(out / "calibration.csv", [{k: r.get(k, "") for k in keep} for r in rows])
+    (out / "calibration.json").write_text(json.dumps(record, indent=1) + "\n")
+    save_figure(calibration_figure(search, rows, target, test, record["friction_sd"]), out / "calibration.png")
+    return record

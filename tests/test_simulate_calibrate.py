@@ -1,0 +1,194 @@
+"""`grainforge simulate calibrate`: the friction search (pure, on stand-in angle functions), its refusals,
+and one quick engine calibration (slow)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shutil
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from grainforge.cli.main import cli
+from grainforge.simulate.calibrate import (
+    Unreachable,
+    friction_uncertainty,
+    pooled_sd,
+    search_friction,
+)
+
+
+def smooth(mu):
+    """A stand-in that rises with μ and saturates, as the tilt angles do (docs/simulate.md)."""
+    return 15.0 + 30.0 * (1.0 - math.exp(-2.0 * mu))
+
+
+def exact_root(target):
+    return -0.5 * math.log(1.0 - (target - 15.0) / 30.0)
+
+
+@pytest.mark.parametrize("target", [20.0, 30.0, 38.0, 43.0])
+def test_search_finds_the_root_of_a_smooth_angle_in_few_evaluations(target):
+    s = search_friction(smooth, target, tolerance=0.1)
+    assert s.converged
+    assert abs(smooth(s.friction) - target) < 0.15
+    assert s.friction == pytest.approx(exact_root(target), abs=0.02)
+    assert len(s.evaluations) <= 8
+    lo, hi = s.bracket
+    assert lo.angle <= target <= hi.angle and lo.friction <= hi.friction
+    # the slope is the bracket's secant: between the derivatives 60 exp(-2 mu) at its ends (mean value)
+    assert 60.0 * math.exp(-2.0 * hi.friction) <= s.slope <= 60.0 * math.exp(-2.0 * lo.friction)
+
+
+def test_every_evaluation_is_inside_the_bounds_and_reported():
+    seen = []
+    s = search_friction(smooth, 44.0, low=0.1, high=3.0, tolerance=0.05, progress=seen.append)
+    assert [e.friction for e in seen] == [e.friction for e in s.evaluations]
+    assert all(0.1 <= e.friction <= 3.0 for e in s.evaluations)
+    # bracketing from 0.5 doubles μ: 0.5, 1, 2
+    assert [e.friction for e in s.evaluations[:3]] == [0.5, 1.0, 2.0]
+
+
+@pytest.mark.parametrize("target, side", [(50.0, "highest"), (12.0, "lowest")])
+def test_a_target_beyond_the_range_is_unreachable_with_the_angles_reached(target, side):
+    with pytest.raises(Unreachable) as info:
+        search_friction(smooth, target, low=0.05, high=1.5)
+    lo, hi = info.value.reached
+    # the bound on the target's side was evaluated, and the start 0.5
+    if side == "highest":
+        assert (lo, hi) == (pytest.approx(smooth(0.5)), pytest.approx(smooth(1.5)))
+    else:
+        assert (lo, hi) == (pytest.approx(smooth(0.05)), pytest.approx(smooth(0.5)))
+    assert side in str(info.value) and f"{target:g}°" in str(info.value)
+
+
+def test_noisy_angle_still_brackets_and_lands_within_the_noise():
+    rng = np.random.default_rng(3)
+    noise = 0.4
+
+    def noisy(mu):
+        return smooth(mu) + rng.normal(0.0, noise)
+
+    s = search_friction(noisy, 35.0, tolerance=0.5, max_evaluations=10)
+    # within what the noise allows: 3 noise sd over the local slope
+    assert abs(s.friction - exact_root(35.0)) < 3 * noise / (60.0 * math.exp(-2.0 * exact_root(35.0)))
+
+
+def test_a_flat_angle_stops_at_the_evaluation_budget_not_converged():
+    # a step function: the secant lands on a side every time, the bracket narrows slowly
+    def step(mu):
+        return 20.0 if mu < 0.7071 else 40.0
+
+    s = search_friction(step, 30.0, tolerance=0.1, friction_tolerance=1e-9, max_evaluations=5)
+    assert not s.converged and len(s.evaluations) == 5
+    lo, hi = s.bracket
+    assert lo.friction < 0.7071 <= hi.friction
+
+
+def test_a_nan_angle_stops_the_search():
+    with pytest.raises(ValueError, match="no angle could be measured at friction 0.5"):
+        search_friction(lambda mu: float("nan"), 30.0)
+
+
+def test_bad_bounds_are_refused():
+    with pytest.raises(ValueError, match="low < high"):
+        search_friction(smooth, 30.0, low=1.0, high=0.5)
+
+
+def test_uncertainty_from_the_seed_spread_and_slope():
+    # sd 2 over 4 seeds = 1 degree standard error; at 20 degrees per unit mu: 0.05
+    assert friction_uncertainty(20.0, 2.0, 4) == pytest.approx(0.05)
+    assert pooled_sd([[1.0, 3.0], [5.0]]) == pytest.approx(math.sqrt(2.0))
+    assert math.isnan(pooled_sd([[1.0], [2.0]]))
+
+
+# ---- the command: refusals before any work ----------------------------------------------------------
+
+@pytest.fixture
+def grains(tmp_path):
+    out = tmp_path / "g"
+    r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(out), "--count", "3", "--size", "2",
+                                 "--subdivisions", "3", "--preset", "rough-angular"])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--target-angle", "85"], "outside 5–80°"),
+    (["--target-angle", "2"], "outside 5–80°"),
+    (["--target-angle", "nan"], "outside 5–80°"),
+    (["--target-angle", "30", "--friction-range", "1", "0.5"], "low < high"),
+    (["--target-angle", "30", "--friction", "0.5"], "No such option"),
+    (["--target-angle", "30", "--shape", "polyhedron"], "--shape polyhedron"),
+    (["--target-angle", "30", "--spacing", "0.1"], "--spacing is the level set's grid"),
+    (["--target-angle", "30", "--max-frictions", "1"], "--max-frictions"),
+    (["--target-angle", "30", "--grains", "20000", "--seeds", "100"], "lower"),
+])
+def test_bad_calibrations_are_refused_in_one_line(grains, tmp_path, args, message):
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "tilt", str(grains), "--out", str(out), *args])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert "Traceback" not in r.output
+    assert message in r.stderr, r.stderr
+    assert lines[-1].startswith("Error") and message in r.stderr
+    assert not out.exists()
+
+
+def test_tilt_options_are_refused_for_a_repose_calibration(grains, tmp_path):
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "repose", str(grains), "--out", str(tmp_path / "c"),
+                                 "--target-angle", "30", "--tilt-step", "1"])
+    assert r.exit_code == 2 and "calibrate repose takes neither" in r.stderr
+
+
+def test_the_printed_command_uses_the_calibrated_friction():
+    from grainforge.cli.simulate_calibrate import use_command
+
+    cmd = use_command("tilt", ["x.toml"], 0.6321, {"grains": 50, "seeds": None}, quick=False, as_spheres=False,
+                      shape="levelset", spacing=0.1)
+    assert cmd == ("grainforge simulate tilt x.toml --friction 0.632 --grains 50 --shape levelset --spacing 0.1 "
+                   "--out out/tilt-calibrated")
+
+
+@pytest.mark.slow
+def test_quick_calibration_in_yade(grains, tmp_path):
+    """A --quick tilt calibration: a few frictions of one seed, all outputs, the command that uses μ."""
+    if shutil.which("yade") is None:
+        import os
+
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail("yade not installed but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip("yade not installed (apt-get install yade python3-yade)")
+    out = tmp_path / "cal"
+    # a target inside what quick rough-angular layers reach over μ 0.05–1.5 (else: 'not reached', exit 2)
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "tilt", str(grains), "--out", str(out), "--quick",
+                                 "--target-angle", "28", "--tolerance", "3", "--max-frictions", "4",
+                                 "--start", "0.3"])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader((out / "calibration.csv").read_text().splitlines()))
+    assert 2 <= len(rows) <= 4 and {"friction", "seed", "angle_deg"} <= set(rows[0])
+    rec = json.loads((out / "calibration.json").read_text())
+    assert 0.05 <= rec["friction"] <= 1.5 and rec["runs"] == len(rows)
+    (lo_mu, lo_a), (hi_mu, hi_a) = rec["bracket"]
+    assert lo_a <= 28.0 + 3.0 and hi_a >= 28.0 - 3.0
+    assert (out / "calibration.png").stat().st_size > 10_000
+    assert f"--friction {rec['friction']:.3g}" in r.stdout and "grainforge simulate tilt" in r.stdout
+    assert rec["command"] in r.stdout
+    assert "friction " in r.stderr  # the per-friction progress lines
+    assert not list(out.glob(".grainforge-staging-*"))
+
+
+def test_the_local_slope_is_a_line_through_the_nearby_evaluations_not_the_bracket_secant():
+    from grainforge.simulate.calibrate import Evaluation, local_slope
+
+    # a line of slope 10 with noise on two close points: their secant is 60, the fit stays near 10
+    ev = [Evaluation(0.5, 30.0), Evaluation(1.0, 35.0), Evaluation(1.05, 35.0 - 1.0), Evaluation(1.1, 36.0 + 1.0),
+          Evaluation(1.5, 40.0)]
+    assert (37.0 - 34.0) / 0.05 == pytest.approx(60.0)
+    assert local_slope(ev, 1.07) == pytest.approx(10.0, abs=3.0)
+    # fewer than three within the window: every evaluation
+    assert local_slope([Evaluation(0.1, 20.0), Evaluation(1.5, 34.0)], 0.8) == pytest.approx(10.0)
+    assert math.isnan(local_slope([Evaluation(1.0, 20.0)], 1.0))
