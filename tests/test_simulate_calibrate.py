@@ -192,3 +192,19 @@ def test_the_local_slope_is_a_line_through_the_nearby_evaluations_not_the_bracke
     # fewer than three within the window: every evaluation
     assert local_slope([Evaluation(0.1, 20.0), Evaluation(1.5, 34.0)], 0.8) == pytest.approx(10.0)
     assert math.isnan(local_slope([Evaluation(1.0, 20.0)], 1.0))
+
+
+def test_the_printed_command_keeps_the_engine_and_its_mpi_ranks():
+    """A calibration run in LIGGGHTS under MPI prints the command that runs the same engine the same way."""
+    import shlex
+
+    from grainforge.cli.simulate_calibrate import use_command
+
+    words = shlex.split(use_command("tilt", ["g"], 0.2, {"grains": 100}, quick=False, as_spheres=False,
+                                    shape="clump", spacing=None, engine="liggghts", mpi=2))
+    assert words[words.index("--engine") + 1] == "liggghts"
+    assert words[words.index("--mpi") + 1] == "2"
+    assert words[words.index("--friction") + 1] == "0.2"
+    yade = shlex.split(use_command("tilt", ["g"], 0.2, {}, quick=False, as_spheres=False, shape="clump",
+                                   spacing=None))
+    assert "--engine" not in yade and "--mpi" not in yade
