@@ -152,6 +152,8 @@ def check_run(runner, grains, out, test, *extra):
     row = rows[0]
     assert int(row["inserted"]) == QUICK["grains"] and int(row["lost"]) == 0
     assert row["setting_friction"] == "0.5"
+    assert row["engine"] == "liggghts"
+    assert row["mpi_ranks"] == (extra[extra.index("--mpi") + 1] if "--mpi" in extra else "1")
     import json
 
     result = json.loads((out / f"{test}-seed0" / "result.json").read_text())

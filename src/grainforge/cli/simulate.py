@@ -230,6 +230,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             runs.close()
         if shape != "clump":  # the representation, in the rows of a non-default one (clump outputs unchanged)
             rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
+        if engine != "yade":  # likewise the engine and its MPI ranks (Yade's outputs unchanged)
+            rows = [{**r, "engine": engine, "mpi_ranks": mpi or 1} for r in rows]
         write_report(rows, stage, test, settings)
         with signals_held():  # the outputs appear together
             commit_stage(stage, out, overwrite=overwrite)
