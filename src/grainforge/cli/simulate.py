@@ -187,7 +187,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
-                             as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing)
+                             as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing,
+                             engine=engine)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     ready_for_work(HEAVY_MODULES, seconds, bound="about")

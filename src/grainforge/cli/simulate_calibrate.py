@@ -121,11 +121,11 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
 
     try:
         one = check_size(test, settings, available=available, make_seconds=make_seconds, as_spheres=as_spheres,
-                         workers=workers, shape=shape, spacing=ls_spacing)
+                         workers=workers, shape=shape, spacing=ls_spacing, engine=engine)
         # the templates are made once; every friction tried runs every seed
         make = check_size(test, replace(settings, seeds=1, grains=2), available=available,
                           make_seconds=make_seconds, as_spheres=as_spheres, workers=workers, shape=shape,
-                          spacing=ls_spacing)
+                          spacing=ls_spacing, engine=engine)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     seconds = make + (one - make) * max_evaluations

@@ -79,6 +79,10 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
 #: Yade seconds per grain and run (one core): a fixed part and a part per contact sphere, fitted to the
 #: repose runs of docs/simulate.md (200 grains of 1 and of 10 spheres: about 50 and 100 s a run)
 YADE_GRAIN_SECONDS, YADE_SPHERE_SECONDS = 0.25, 0.03
+#: LIGGGHTS's time for a run, as a fraction of the Yade model's: measured 0.30 for a tilt of 200 FSO grains
+#: of 10-sphere clumps (82 s of CPU a run), 0.08-0.19 for repose heaps of 2,000 grains and 0.1 for a tilt of
+#: 100 spheres (docs/benchmarks.md); the largest is kept, so the estimate stays above what was measured
+ENGINE_FACTOR = {"yade": 1.0, "liggghts": 0.3}
 #: a tilt run takes longer than a repose run of as many grains (the tilt steps; docs/simulate.md)
 TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
 #: seconds to make one clump template: about 0.08 s at 10 spheres, 0.15 s at 200
@@ -94,7 +98,8 @@ YADE_LEVELSET_NODE_BYTES = 16.0
 
 
 def check_size(test: str, settings: Settings, *, available: int, make_seconds: float = 0.0,
-               as_spheres: bool = False, workers: int = 1, shape: str = "clump", spacing: float = 0.05) -> float:
+               as_spheres: bool = False, workers: int = 1, shape: str = "clump", spacing: float = 0.05,
+               engine: str = "yade") -> float:
     """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
 
     Parameters
@@ -108,6 +113,10 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         The grains' representation: clumps of ``settings.spheres``, or level
         sets of grid ``spacing`` (their grids cost template time and Yade time
         and memory per grain: :data:`YADE_LEVELSET_GRAIN_SECONDS`).
+    engine : {"yade", "liggghts"}
+        The engine of the runs; a LIGGGHTS run is costed at
+        :data:`ENGINE_FACTOR` of the Yade model (one core's work: MPI ranks
+        are not counted as a speed-up).
 
     Raises
     ------
@@ -120,6 +129,8 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     True
     >>> check_size("tilt", Settings(), available=3, shape="levelset") > 5 * check_size("tilt", Settings(), available=3)
     True
+    >>> check_size("tilt", Settings(), available=3, engine="liggghts") < check_size("tilt", Settings(), available=3)
+    True
     """
     from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
 
@@ -130,6 +141,7 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     if shape == "levelset":
         make = templates * (make_seconds + dem_template_seconds("levelset", spacing=spacing))
         per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
+    per_run *= ENGINE_FACTOR[engine]
     at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
     total = make + per_run * settings.seeds / at_once
     grain = f"{spheres} sphere(s)" if shape == "clump" else f"level sets of spacing {spacing:g}"
