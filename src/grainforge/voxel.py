@@ -284,5 +284,6 @@ def _ray_toggles(v, f, xy, z0, oz, h, nz):
         if len(todo) == 0:
             break
     else:
-        raise ValueError(f"{len(todo)} voxel column(s) cross the surface an odd number of times: the mesh is not closed")
+        raise ValueError(f"{len(todo)} voxel column(s) cross the surface an odd number of times: the mesh is not "
+                         "closed")
     return toggles & 1

@@ -18,6 +18,8 @@ SHAPES = ("clump", "polyhedron", "levelset")
 RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
 #: engines simulate runs under mpirun (--mpi)
 MPI_ENGINES = ("liggghts",)
+#: the engines' names in progress bars
+ENGINE_NAMES = {"yade": "Yade", "liggghts": "LIGGGHTS"}
 
 
 def check_engine(engine: str, mpi: int | None, shape: str) -> None:
@@ -206,7 +208,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
     templates = make_templates(inputs, settings, as_spheres, shape, spacing)
-    name = "Yade" if engine == "yade" else "LIGGGHTS" + (f", {mpi} MPI ranks" if mpi else "")
+    name = ENGINE_NAMES[engine] + (f", {mpi} MPI ranks" if mpi else "")
     runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
 

@@ -10,6 +10,7 @@ import click
 from .options import param_options
 from .paths import OutPath, output_dir
 from .simulate import (
+    ENGINE_NAMES,
     ENGINES,
     HEAVY_MODULES,
     SHAPES,
@@ -141,8 +142,8 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
     templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing)
-    runs = tqdm(total=settings.seeds * 1000, desc=f"calibrate {test} ({'Yade' if engine == 'yade' else 'LIGGGHTS'})", unit="‰", disable=None, leave=False,
-                dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} {postfix}")
+    runs = tqdm(total=settings.seeds * 1000, desc=f"calibrate {test} ({ENGINE_NAMES[engine]})", unit="‰", disable=None,
+                leave=False, dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} {postfix}")
     done = [0.0] * settings.seeds
 
     def progress(k, i, fraction, phase):

@@ -48,7 +48,8 @@ from .deck import (
     xyzr_text,
 )
 
-__all__ = ["write_deck", "deck_files", "pour_settings", "template_fix", "node_insertion", "seed_table", "deck_seeds", "SEED_MIN", "SEED_LIMIT"]
+__all__ = ["write_deck", "deck_files", "pour_settings", "template_fix", "node_insertion", "seed_table", "deck_seeds",
+           "SEED_MIN", "SEED_LIMIT"]
 
 #: LIGGGHTS takes a random seed only if it is a prime > 10000 (it stops otherwise), and the seeds
 #: of an insertion fix, its particle distribution and that distribution's templates must differ

@@ -13,7 +13,8 @@ from .measure import heap_angle, tilt_failure_angle
 from .process import EngineFailed, find_executable, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 
-__all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result", "run_test", "summarise"]
+__all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result",
+           "run_test", "summarise"]
 
 
 def yade_executable() -> str:

@@ -39,8 +39,8 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
     env = dict(os.environ, OMP_NUM_THREADS="1", **env)
     with open(log_path, "w", buffering=1) as log:
         proc = _track(subprocess.Popen(list(cmd), cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                       stdin=subprocess.DEVNULL, text=True, errors="replace", env=env, start_new_session=True,
-                                       preexec_fn=die_with_parent))
+                                       stdin=subprocess.DEVNULL, text=True, errors="replace", env=env,
+                                       start_new_session=True, preexec_fn=die_with_parent))
         try:
             for line in proc.stdout:
                 log.write(line)
