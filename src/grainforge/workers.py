@@ -275,12 +275,13 @@ def close_pool(pool, abort: bool = False) -> None:
     """Shut a pool of :func:`process_pool` down; with ``abort`` (an error, Ctrl-C, SIGTERM) stop its
     workers now instead of letting them finish the tasks they hold.
 
-    The documented shutdown: ``pool.shutdown(wait=False, cancel_futures=True)`` drops the queued
-    tasks; the workers (``multiprocessing.active_children()`` started since the pool was made) are
-    terminated and joined; when fewer workers than asked for had started, one may still be on its
-    way from the fork server, so the fork server and everything it forked are killed
-    (:func:`stop_forkserver`); and the pool's result pipe is unblocked
-    (:func:`_unblock_result_reader`, the one use of a private attribute, for the reason given there).
+    The documented shutdown: the workers (``multiprocessing.active_children()`` started since the pool
+    was made) are terminated and joined; when fewer workers than asked for had started, one may still
+    be on its way from the fork server, so the fork server and everything it forked are killed
+    (:func:`stop_forkserver`); the pool's result pipe is unblocked (:func:`_unblock_result_reader`,
+    the one use of a private attribute, for the reason given there); then
+    ``pool.shutdown(wait=True, cancel_futures=True)`` drops the queued tasks and joins the pool's
+    manager thread.
     """
     if not abort:
         pool.shutdown(wait=True, cancel_futures=True)
@@ -297,10 +298,13 @@ def close_pool(pool, abort: bool = False) -> None:
         # its pid not yet known here); it would start after this process is gone and print a
         # traceback. Stop the fork server and every process it forked.
         stop_forkserver()
-    pool.shutdown(wait=False, cancel_futures=True)
     for p in processes:
         p.join(timeout=5)
     unblock()
+    # the pool's manager thread, unblocked, sees its workers gone and ends: joined here, so that it is not
+    # still closing its wake-up pipe when the interpreter's exit hook writes to that pipe (Python 3.11
+    # takes no lock there: "OSError: Bad file descriptor", printed after "Terminated.")
+    pool.shutdown(wait=True, cancel_futures=True)
 
 
 def _unblock_result_reader(pool) -> Callable[[], None]:
