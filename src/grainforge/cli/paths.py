@@ -93,13 +93,16 @@ def check_writable(path: str | os.PathLike, option: str | None = None) -> None:
     base = _first_existing(target)
     if not base.is_dir():
         raise click.UsageError(f"{_hint(option)}cannot write {path}: {base} is a file, not a folder")
-    try:
-        fd, probe = tempfile.mkstemp(prefix=".grainforge-probe-", dir=base)
-    except OSError as exc:
-        reason = exc.strerror or type(exc).__name__
-        raise click.UsageError(f"{_hint(option)}cannot write into {base} ({reason.lower()})") from None
-    os.close(fd)
-    os.unlink(probe)
+    from .interrupts import signals_held
+
+    with signals_held():  # a Ctrl-C between the probe's creation and removal must not leave it behind
+        try:
+            fd, probe = tempfile.mkstemp(prefix=".grainforge-probe-", dir=base)
+        except OSError as exc:
+            reason = exc.strerror or type(exc).__name__
+            raise click.UsageError(f"{_hint(option)}cannot write into {base} ({reason.lower()})") from None
+        os.close(fd)
+        os.unlink(probe)
 
 
 def refuse_existing(paths: Iterable[Path], overwrite: bool) -> None:
