@@ -311,3 +311,23 @@ def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grai
         assert list(work.iterdir()) == []
     finally:
         kill_sessions(started)
+
+
+def test_an_engine_process_starts_with_ctrl_c_ignored_and_sigterm_default_and_neither_blocked(tmp_path):
+    """The owner blocks SIGINT/SIGTERM while it forks the engine (a signal to the whole group must not run the
+    owner's handler in the half-made child); the engine must not inherit that block, or it could not be
+    stopped with SIGTERM."""
+    import signal
+
+    from grainforge.simulate.process import run_engine_process
+
+    rc = run_engine_process(["sh", "-c", "grep -E '^Sig(Blk|Ign)' /proc/self/status"], tmp_path,
+                            tmp_path / "log.txt", {}, None)
+    assert rc == 0
+    masks = dict(line.split(":") for line in (tmp_path / "log.txt").read_text().splitlines())
+    blocked, ignored = int(masks["SigBlk"], 16), int(masks["SigIgn"], 16)
+    bit = {s: 1 << (s - 1) for s in (signal.SIGINT, signal.SIGTERM)}
+    assert not blocked & (bit[signal.SIGINT] | bit[signal.SIGTERM])
+    assert ignored & bit[signal.SIGINT] and not ignored & bit[signal.SIGTERM]
+    # and the owner's own mask is as it was
+    assert not signal.pthread_sigmask(signal.SIG_BLOCK, set()) & {signal.SIGINT, signal.SIGTERM}

@@ -4,9 +4,12 @@ progress lines read, killed with everything below them (an mpirun's ranks) on an
 from __future__ import annotations
 
 import os
+import signal
 import subprocess
 from collections.abc import Callable, Sequence
 from pathlib import Path
+
+from ..workers import die_with_parent
 
 __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable"]
 
@@ -34,13 +37,19 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
     ``grainforge-progress <fraction> <phase>`` lines go to ``progress``.  On any exception
     (an interrupt) the process and everything below it (an mpirun's ranks) are killed.
     """
-    from ..workers import die_with_parent
-
     env = dict(os.environ, OMP_NUM_THREADS="1", **env)
     with open(log_path, "w", buffering=1) as log:
-        proc = _track(subprocess.Popen(list(cmd), cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                       stdin=subprocess.DEVNULL, text=True, errors="replace", env=env,
-                                       start_new_session=True, preexec_fn=die_with_parent))
+        # SIGINT and SIGTERM are blocked while the child is forked: with a ``preexec_fn`` the child runs
+        # Python's after-fork code with this process's handlers, and a signal sent to the whole group at
+        # that moment would raise this command's Terminated/KeyboardInterrupt inside the child (a
+        # traceback on the shared stderr).  The child unblocks them once its own handlers are set.
+        held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
+        try:
+            proc = _track(subprocess.Popen(list(cmd), cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                           stdin=subprocess.DEVNULL, text=True, errors="replace", env=env,
+                                           start_new_session=True, preexec_fn=_engine_child))
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a signal that came meanwhile is handled now
         try:
             for line in proc.stdout:
                 log.write(line)
@@ -55,6 +64,21 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
             proc.stdout.close()
             _RUNNING.discard(proc)
     return rc
+
+
+_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
+
+
+def _engine_child() -> None:
+    """``preexec_fn`` of an engine process, run in the forked child with SIGINT and SIGTERM blocked.
+
+    Ctrl-C is ignored (it reaches the whole group; the owner decides and kills the engine), SIGTERM
+    takes its default action, the kernel kills the engine if its owner dies; then the two signals are
+    unblocked, so one sent during the fork ends the child quietly instead of running the owner's handler.
+    """
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    die_with_parent()  # also ignores SIGINT
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 class EngineFailed(RuntimeError):
