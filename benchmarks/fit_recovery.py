@@ -11,7 +11,10 @@ difference, and the Spearman correlation between each grain's known and
 fitted setting: a setting is *identifiable* when the fitted values follow the
 known ones grain by grain (their means then agree); two settings that trade
 (the same descriptors from different settings) show as a weak per-grain
-correlation and means that move in opposite directions.  Usage::
+correlation and means that move in opposite directions.  Beside them, the
+design's cross-validated R² of each setting predicted from a grain's four
+descriptors (:func:`grainforge.fit.setting_identifiability`): the most any
+inverse of the descriptors can know of it.  Usage::
 
     nice .venv/bin/python benchmarks/fit_recovery.py [--sand tests/data/synthetic-angular-sand.csv]
         [--method angular] [--design-grains 200] [--max-across 40] [--refine 4] [--workers 1]
@@ -65,15 +68,18 @@ def main() -> None:
     print(f"| unreachable | | {1 - st['reachable']:.1%} | |")
     print(f"passes: {st['pass']}\n")
     rows = result.sand_rows
-    print("| setting | known mean | fitted mean | difference | Spearman known vs fitted, per grain |")
-    print("|---|---|---|---|---|")
+    print("| setting | known mean | fitted mean | difference | Spearman known vs fitted, per grain | "
+          "design: R² of the setting from a grain's descriptors (rms error) |")
+    print("|---|---|---|---|---|---|")
     for k in known[0]:
         if k not in result.settings[0]:  # the row number, or a setting of another generator than the fitted one
             continue
         a = np.array([float(known[j][k]) for j in rows])
         b = np.array([s[k] for s in result.settings])
+        r2, err = result.identifiable[k]
         print(f"| {k} | {a.mean():.4f} | {b.mean():.4f} | {(b.mean() - a.mean()) / a.mean():+.1%} | "
-              f"{spearmanr(a, b)[0]:+.2f} |")
+              f"{spearmanr(a, b)[0]:+.2f} | {r2:.2f} (±{err:.3g}) |")
+    print("(a setting is identifiable when R² >= 0.9: the descriptors then determine it grain by grain)")
 
 
 if __name__ == "__main__":

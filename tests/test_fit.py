@@ -166,7 +166,15 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     lines = []
     result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, cache=design_cache,
                       log=lines.append)
-    assert [line.split(":")[0] for line in lines] == ["design rf", "twins", "refine 1"]
+    assert [line.split(":")[0] for line in lines] == ["design rf", "design rf", "twins", "refine 1"]
+    # what the fitted settings say about the sand: the aspect's ratios are determined by the descriptors, the
+    # roughness decay is not (it trades sphericity with the other settings); said in the log, fit-stats.csv and
+    # the recipe
+    known = result.identifiable
+    assert list(known) == [s.name for s in FITS["rf"].all_settings]
+    assert known["elongation"][0] > 0.9 and known["flatness"][0] > 0.9 and known["roughness_decay"][0] < 0.5
+    assert "elongation 0.9" in lines[1]
+    assert "settings a grain's descriptors determine: " in result.recipe and "roughness_decay (R²" in result.recipe
     assert result.grains_measured >= 40 and len(result.generated) == 40
     # two twins' first settings lie in a corner where the generator refuses their seed; refined, they are made
     assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
@@ -201,6 +209,12 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
         # (about ±0.16), so the full criterion (0.1) is checked on Ottawa (benchmarks/fit_twins.py)
         assert abs(cg[a, b] - cs[a, b]) <= 0.25, pair
     assert cs[0, 1] > 0.5 and cg[0, 1] > 0.5  # sphericity-convexity: strong in the sand, so in its twins
+    setting_rows = {r["quantity"].split()[0]: r for r in csv.DictReader(paths[2].read_text(encoding="utf-8")
+                                                                        .splitlines()) if r["statistic"] == "setting"}
+    assert list(setting_rows) == list(known)
+    for k, r in setting_rows.items():
+        assert float(r["generated"]) == pytest.approx(np.mean([float(t[f"setting_{k}"]) for t in rows]), rel=1e-4)
+        assert float(r["difference"]) == pytest.approx(known[k][1]) and r["pass"] == str(known[k][0] >= 0.9)
     assert fitmod.design_path("rf", "atlas", 20.0, 80, design_cache).exists()
 
 

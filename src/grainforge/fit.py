@@ -723,6 +723,27 @@ def design(method: str, pool: _Pool, *, high: float, grains: int = DESIGN_GRAINS
     return Design(method, u, across, y)
 
 
+#: a setting predicted from a grain's descriptors with at least this cross-validated R² is called identifiable
+IDENTIFIABLE_R2 = 0.9
+
+
+def setting_identifiability(des: Design) -> dict[str, tuple[float, float]]:
+    """Per setting of ``des``'s method: (R², rms error in the setting's units) of predicting it from a grain's
+    four descriptors (:func:`grainforge.twins.identifiability` on the design).
+
+    What the fitted settings of a twin can say about its sand grain: with R² ≥ :data:`IDENTIFIABLE_R2` the
+    descriptors determine the setting (a sand's setting is *acquired* from its scan, within the error);
+    near 0 the grain's seed or another setting shapes the same descriptors, and the fitted value is one
+    choice among many that measure alike.
+    """
+    from .twins import identifiability
+
+    ok = np.all(np.isfinite(des.y), axis=1)
+    r2, rmse = identifiability(des.u[ok], des.across[ok], des.y[ok])
+    return {st.name: (float(a), float(e * (st.high - st.low)))
+            for st, a, e in zip(FITS[des.method].all_settings, r2, rmse)}
+
+
 # --------------------------------------------------------------------------- comparing
 #: the six descriptor pairs whose rank correlations are compared
 PAIRS = tuple((DESCRIPTORS[i], DESCRIPTORS[j]) for i in range(4) for j in range(i + 1, 4))
@@ -802,6 +823,9 @@ class FitResult:
         return np.max(np.abs(self.generated[:, 1:] - self.targets), axis=1)
 
     targets: np.ndarray = field(default_factory=lambda: np.zeros((0, 4)))  # (count, 4) the originals'
+    #: setting -> (cross-validated R², rms error in the setting's units) of predicting it from a grain's four
+    #: descriptors on the method's design (:func:`setting_identifiability`)
+    identifiable: dict[str, tuple[float, float]] = field(default_factory=dict)
 
 
 def choose_rows(n: int, count: int | None, seed: int) -> np.ndarray:
@@ -981,9 +1005,13 @@ def fit_sand(
         spec = FITS[method]
         cap = resolve_cap(method, max_across)
         name(f"design {method}")
-        model = design(method, pool, high=_design_high(sand, cap), grains=design_grains, cache=cache,
-                       progress=progress).model()
+        des = design(method, pool, high=_design_high(sand, cap), grains=design_grains, cache=cache,
+                     progress=progress)
+        model = des.model()
         note(f"design {method}: model rms " + ", ".join(f"{k[:5]} {r:.4f}" for k, r in zip(DESCRIPTORS, model.rms)))
+        known = setting_identifiability(des)
+        note(f"design {method}: each setting from a grain's 4 descriptors (R², rms error): " + ", ".join(
+            f"{k} {r2:.2f} ±{e:.3g}" for k, (r2, e) in known.items()))
         rows = choose_rows(sand.count, count, seed)
         tw = _start_twins(spec, model, sand, rows, cap, seed)
         idx = np.arange(len(rows))
@@ -996,11 +1024,11 @@ def fit_sand(
                 break
             idx, y = idx[keep], y[keep]
             _refine(tw, model, idx, y)
-    return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool)
+    return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool, known)
 
 
 def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int, history: list[str],
-            seconds: float, pool: _Pool) -> FitResult:
+            seconds: float, pool: _Pool, known: dict[str, tuple[float, float]]) -> FitResult:
     """The fit's result from its twins: each grain's closest measurement, its settings and the recipe."""
     ok = np.all(np.isfinite(tw.best_y), axis=1)
     err = tw.error(tw.best_y)
@@ -1012,12 +1040,13 @@ def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int
     st["refused"] = int((~ok).sum())
     size_mm = [_written(float(d) / 1000.0) for d in sand.equivalent_diameter[rows]]
     gen = np.column_stack([np.asarray(size_mm) * 1000.0, tw.best_y])
-    header = _recipe_header(sand, spec.method, st, len(rows))
+    header = _recipe_header(sand, spec.method, st, len(rows), known)
     own = [spec.grain_params(u) for u in tw.best_u]
     text = twin_recipe_text(spec, own, size_mm, seed=seed, header=header)
     return FitResult(method=spec.method, recipe=text, stats=st, generated=gen, sand_rows=rows,
                      settings=[spec.values(u) for u in tw.best_u], reachable=reachable, history=history,
-                     seconds=seconds, cpu_seconds=pool.cpu, grains_measured=pool.grains, targets=tw.targets)
+                     seconds=seconds, cpu_seconds=pool.cpu, grains_measured=pool.grains, targets=tw.targets,
+                     identifiable=known)
 
 
 def _unreachable_by(tw: _Twins, out: np.ndarray) -> dict[str, int]:
@@ -1028,7 +1057,7 @@ def _unreachable_by(tw: _Twins, out: np.ndarray) -> dict[str, int]:
     return {DESCRIPTORS[k]: int(np.sum(worst == k)) for k in range(4) if np.any(worst == k)}
 
 
-def _recipe_header(sand: Sand, method: str, st: dict, n: int) -> str:
+def _recipe_header(sand: Sand, method: str, st: dict, n: int, known: dict[str, tuple[float, float]]) -> str:
     lines = [f"grainforge fit: {n} {method} grains, each the twin of one grain of {sand.name} "
              f"({sand.count} grains, voxel {sand.voxel_size:g} µm)"]
     lines += [f"{k}: sand {p['sand_mean']:.3f} generated {p['gen_mean']:.3f} KS {p['ks']:.3f}"
@@ -1038,6 +1067,10 @@ def _recipe_header(sand: Sand, method: str, st: dict, n: int) -> str:
               "unreachable"]
     lines += [f"{'passes' if st['pass'] else 'does NOT pass'}: KS <= {KS_MAX}, |mean diff| <= {MEAN_TOL}, "
               f"|Spearman diff| <= {CORR_TOL}, twins within {TWIN_TOL} for >= {TWIN_SHARE:.0%}"]
+    sure = [f"{k} (±{e:.2g})" for k, (r2, e) in known.items() if r2 >= IDENTIFIABLE_R2]
+    loose = [f"{k} (R² {r2:.2f})" for k, (r2, e) in known.items() if r2 < IDENTIFIABLE_R2]
+    lines += [f"settings a grain's descriptors determine: {', '.join(sure) or 'none'}; "
+              f"not determined (seed or another setting shapes the same descriptors): {', '.join(loose) or 'none'}"]
     return "\n".join(lines)
 
 
@@ -1090,6 +1123,11 @@ def stat_rows(result: FitResult) -> list[dict[str, Any]]:
     why = ", ".join(f"{n} by {k}" for k, n in st["unreachable_by"].items()) or "none"
     rows.append({"statistic": "twins", "quantity": f"share unreachable ({why})", "sand": "",
                  "generated": 1 - st["reachable"], "difference": "", "criterion": "reported", "pass": ""})
+    for k, (r2, err) in result.identifiable.items():  # how much each fitted setting says about the sand
+        mean = float(np.mean([v[k] for v in result.settings])) if result.settings else float("nan")
+        rows.append({"statistic": "setting", "quantity": f"{k} (mean of the twins; rms error of one grain's)",
+                     "sand": "", "generated": mean, "difference": err,
+                     "criterion": f"identifiable if R² {r2:.2f} >= {IDENTIFIABLE_R2}", "pass": r2 >= IDENTIFIABLE_R2})
     return rows
 
 

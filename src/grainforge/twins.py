@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["design_points", "ForwardModel", "invert"]
+__all__ = ["design_points", "ForwardModel", "invert", "identifiability"]
 
 #: polynomial degree of the forward model
 DEGREE = 3
@@ -54,11 +54,11 @@ def design_points(n: int, dims: int, seed: int) -> np.ndarray:
     return qmc.Sobol(dims, scramble=True, seed=np.random.default_rng(seed)).random_base2(m)[:n]
 
 
-def _features(u: np.ndarray, across: np.ndarray) -> np.ndarray:
-    """Monomials up to :data:`DEGREE` of the settings and log(voxels across) (scaled to about [0, 1])."""
+def _features(u: np.ndarray, across: np.ndarray, degree: int = DEGREE) -> np.ndarray:
+    """Monomials up to ``degree`` of the settings and log(voxels across) (scaled to about [0, 1])."""
     z = np.column_stack([np.asarray(u, np.float64), np.log(np.asarray(across, np.float64)) / np.log(1000.0)])
     cols = [np.ones(len(z))]
-    for d in range(1, DEGREE + 1):
+    for d in range(1, degree + 1):
         for idx in itertools.combinations_with_replacement(range(z.shape[1]), d):
             cols.append(np.prod(z[:, idx], axis=1))
     return np.column_stack(cols)
@@ -89,6 +89,64 @@ class ForwardModel:
     def predict(self, u: np.ndarray, across: np.ndarray) -> np.ndarray:
         u = np.atleast_2d(u)
         return _features(u, np.broadcast_to(across, (len(u),))) @ self.coef
+
+
+def identifiability(u: np.ndarray, across: np.ndarray, y: np.ndarray, *, folds: int = 5,
+                    seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """How well each setting is known from a grain's four measured descriptors, learnt from a design.
+
+    Each setting (unit-box coordinate) is predicted from the descriptors and
+    the resolution by a least-squares polynomial like :class:`ForwardModel`'s,
+    the other way round, and scored on the design grains it was not fitted
+    to (``folds``-fold cross-validation; of degrees 1 to :data:`DEGREE`, the
+    one that predicts best, so that a small design is not over-fitted).  A setting the descriptors
+    determine is predicted closely (R² near 1, a small error); one shaped
+    over by the grain's seed, or traded against another setting (two
+    settings that make the same descriptors), is not (R² near 0).  This
+    bounds what a twin fit can say about a sand grain's settings: no
+    inverse of the four descriptors knows a setting better than its best
+    prediction from them.
+
+    Parameters
+    ----------
+    u : (n, p) array
+        The design's settings in [0, 1].
+    across : (n,) array
+    y : (n, 4) array
+        Their measured descriptors.
+
+    Returns
+    -------
+    r2 : (p,) array
+        Cross-validated coefficient of determination per setting (1 − mean
+        squared error / variance of the setting over the design; 0 when the
+        descriptors predict it no better than its mean).
+    rmse : (p,) array
+        Cross-validated root-mean-square error per setting, in unit-box units
+        (× the setting's range for its own units).
+
+    Examples
+    --------
+    >>> rng = np.random.default_rng(0)
+    >>> u = rng.random((400, 2))                   # setting 0 shapes the grain, setting 1 does nothing
+    >>> y = np.column_stack([u[:, 0], u[:, 0] ** 2, 1 - u[:, 0], rng.random(400)])
+    >>> r2, rmse = identifiability(u, np.full(400, 60.0), y)
+    >>> bool(r2[0] > 0.99 and rmse[0] < 0.01), bool(abs(r2[1]) < 0.1 and rmse[1] > 0.25)
+    (True, True)
+    """
+    u, y = np.asarray(u, np.float64), np.asarray(y, np.float64)
+    fold = np.random.default_rng(seed).permutation(len(u)) % folds
+    mse = np.var(u, axis=0)  # predicting the mean
+    for degree in range(1, DEGREE + 1):
+        X = _features(y, across, degree)
+        pred = np.empty_like(u)
+        for k in range(folds):
+            train, test = fold != k, fold == k
+            A = np.vstack([X[train], np.sqrt(RIDGE * train.sum()) * np.eye(X.shape[1])])
+            b = np.vstack([u[train], np.zeros((X.shape[1], u.shape[1]))])
+            pred[test] = X[test] @ np.linalg.lstsq(A, b, rcond=None)[0]
+        mse = np.minimum(mse, np.mean((np.clip(pred, 0.0, 1.0) - u) ** 2, axis=0))
+    return 1.0 - mse / np.var(u, axis=0), np.sqrt(mse)
 
 
 def invert(model: ForwardModel, targets: np.ndarray, across: np.ndarray, *, offsets: np.ndarray | None = None,
