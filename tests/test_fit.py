@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import csv
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -216,6 +217,21 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
         assert float(r["generated"]) == pytest.approx(np.mean([float(t[f"setting_{k}"]) for t in rows]), rel=1e-4)
         assert float(r["difference"]) == pytest.approx(known[k][1]) and r["pass"] == str(known[k][0] >= 0.9)
     assert fitmod.design_path("rf", "atlas", 20.0, 80, design_cache).exists()
+
+
+def test_a_twin_the_generator_refuses_is_moved_until_it_is_made(design_cache):
+    """Without refinement, the two twins whose first settings the generator refuses (see the test above) would be
+    written to the recipe unmade, and ``batch`` would fail on them: they are moved towards the middle of the
+    design box until they are made."""
+    from grainforge.fit import fit_sand
+
+    lines = []
+    result = fit_sand(read_sand(RF_SAND), "rf", count=40, refine=0, design_grains=80, max_across=20.0,
+                      cache=design_cache, log=lines.append)
+    tries = [line for line in lines if line.startswith("refused twins")]
+    assert tries and all(re.search(r": (\d+) the generator had refused", t) for t in tries), lines
+    assert int(re.search(r": (\d+) the generator", tries[0])[1]) >= 1
+    assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
 
 
 @pytest.mark.slow  # about 200 grains at 25 to 40 voxels across (about 10 s of CPU)

@@ -94,6 +94,9 @@ TWIN_SHARE = 0.9
 #: twins that are close on the scale of the sand's own spread, not just inside the tolerance)
 REFINE_TOL = 0.012
 REFINE_SD = 0.3
+#: extra tries, after the refinement, for a twin the generator refused to make at every settings tried so far
+#: (each moves its settings a third of the way towards the middle of the design box)
+REFUSED_TRIES = 6
 #: largest true sphericity accepted: measured on voxels it can exceed 1 a little (Ottawa's largest is 1.02)
 SPHERICITY_MAX = 1.2
 #: fewest grains a sand must have to be fitted: two samples of 50 grains of one sand already differ by a
@@ -912,6 +915,25 @@ def _refine(tw: _Twins, model, idx: np.ndarray, y: np.ndarray) -> None:
     tw.reach[idx] = miss
 
 
+def _make_refused(tw: _Twins, pool: _Pool, progress, note, name) -> None:
+    """Move the settings of twins never made so far towards the middle of the box until the generator makes them,
+    so that every grain of the recipe can be built; a twin still refused after :data:`REFUSED_TRIES` is an error."""
+    for k in range(REFUSED_TRIES):
+        refused = np.flatnonzero(~np.all(np.isfinite(tw.best_y), axis=1))
+        if not len(refused):
+            return
+        name(f"refused twins, try {k + 1}/{REFUSED_TRIES}")
+        tw.u[refused] = 0.5 + (tw.u[refused] - 0.5) * (2.0 / 3.0)
+        _measure_twins(tw, pool, refused, progress)
+        made = int(np.all(np.isfinite(tw.best_y[refused]), axis=1).sum())
+        note(f"refused twins: {len(refused)} the generator had refused at every settings tried, moved towards the "
+             f"middle of the box; {made} made")
+    if not np.all(np.isfinite(tw.best_y)):
+        raise ValueError(f"{int((~np.all(np.isfinite(tw.best_y), axis=1)).sum())} twin(s) could not be made at "
+                         f"any settings tried: the {tw.spec.method} generator refuses them; try another --method "
+                         "or --seed")
+
+
 def _twin_summary(tw: _Twins) -> str:
     e = tw.error(tw.best_y)
     reach = tw.reach <= TWIN_TOL
@@ -1024,6 +1046,7 @@ def fit_sand(
                 break
             idx, y = idx[keep], y[keep]
             _refine(tw, model, idx, y)
+        _make_refused(tw, pool, progress, note, name)
     return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool, known)
 
 
