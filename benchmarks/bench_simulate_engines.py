@@ -10,11 +10,15 @@ Three measurements, each printing one row per run set (angles per seed, mean ± 
     CPU time per grain and step.
 ``heap``
     The repose heap of the three populations (spheres, rough spheres, rough angular) under
-    ``mpirun -np --mpi``.
+    ``mpirun -np --mpi``; also draws ``heap.png`` (each seed's angle and mean ± sd per population).
+``figure``
+    Draws ``heap.png`` again from the last ``heap.csv`` (``--figure`` copies it elsewhere too).
 
     .venv/bin/python benchmarks/bench_simulate_engines.py compare --grains 100 --seeds 3
     .venv/bin/python benchmarks/bench_simulate_engines.py scaling --grains 300
     .venv/bin/python benchmarks/bench_simulate_engines.py heap --grains 2000 --seeds 3 --mpi 2
+    .venv/bin/python benchmarks/bench_simulate_engines.py figure --grains 2000 --mpi 2 \
+        --figure docs/img/simulate-heap-liggghts.png
 
 It writes out/bench-engines/<mode>-*/ (decks, results.csv, figure) and out/bench-engines/<mode>.csv.
 CPU time: the engine processes' (children, MPI ranks included); the machine's load average is printed.
@@ -66,12 +70,40 @@ def row_text(name, rows, cpu, wall):
              "cpu_us_per_grain_step": 1e6 * cpu / sum(r["grains"] * r["steps"] for r in rows)})
 
 
+def heap_figure(table, args, paths) -> None:
+    """Each population's angles of repose (one dot a seed) with their mean ± sd."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(7.5, 4.2))
+    for i, rec in enumerate(table):
+        angles = [float(a) for a in str(rec["angles"]).split(",")]
+        mean, sd = float(rec["mean_deg"]), float(rec["sd_deg"])
+        ax.errorbar(i, mean, yerr=sd, fmt="s", color="k", capsize=8, ms=7, zorder=3)
+        ax.plot(i + np.linspace(-0.12, 0.12, len(angles)), angles, "o", color="tab:orange", zorder=4)
+        ax.text(i + 0.2, mean, f"{mean:.1f}° ± {sd:.1f}°", va="center")
+    ax.set_xticks(range(len(table)), [str(r["set"]).replace("repose, ", "").replace(" (", "\n(")
+                                      for r in table])
+    ax.set_xlim(-0.5, len(table) - 0.5)
+    ax.set_ylabel("angle of repose (°)")
+    ranks = f"mpirun -np {args.mpi}" if args.mpi else "1 process"
+    ax.set_title(f"LIGGGHTS repose heaps of {args.grains} grains, {ranks}: one dot a seed, mean ± sd", fontsize=10)
+    ax.grid(axis="y", alpha=0.3)
+    fig.tight_layout()
+    for path in paths:
+        if path is not None:
+            fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None) -> int:
     from grainforge.io import write_csv
     from grainforge.simulate import Settings
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("mode", choices=["compare", "scaling", "heap"])
+    ap.add_argument("mode", choices=["compare", "scaling", "heap", "figure"])
     ap.add_argument("--grains", type=int, default=100)
     ap.add_argument("--seeds", type=int, default=3)
     ap.add_argument("--mpi", type=int, default=2, help="ranks of each LIGGGHTS run (heap; 0: no mpirun)")
@@ -82,7 +114,14 @@ def main(argv=None) -> int:
     ap.add_argument("--tilt-step", type=float, default=1.0)
     ap.add_argument("--tilt-start", type=float, default=5.0)
     ap.add_argument("--out", type=Path, default=ROOT / "out/bench-engines")
+    ap.add_argument("--figure", type=Path, default=None, help="also write the heap figure here")
     args = ap.parse_args(argv)
+    if args.mode == "figure":
+        import csv
+
+        with open(args.out / "heap.csv", encoding="utf-8", newline="") as fh:
+            heap_figure(list(csv.DictReader(fh)), args, [args.out / "heap.png", args.figure])
+        return 0
     print(f"# {args.mode}: {args.grains} grains, {args.seeds} seed(s); load average {os.getloadavg()[0]:.1f}")
     print(f"{'run set':44s} {'mean':>6s} {'sd':>5s}  angles (deg)   cpu s  wall s")
     table = []
@@ -114,6 +153,8 @@ def main(argv=None) -> int:
             table.append(rec)
     args.out.mkdir(parents=True, exist_ok=True)
     write_csv(args.out / f"{args.mode}.csv", table)
+    if args.mode == "heap":
+        heap_figure(table, args, [args.out / "heap.png", args.figure])
     for rec in table:
         print(f"# {rec['set']}: {rec['steps_per_run']:.0f} steps per run, "
               f"{rec['cpu_us_per_grain_step']:.2f} µs CPU per grain and step")
