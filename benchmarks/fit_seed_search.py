@@ -27,8 +27,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=20)
     ap.add_argument("--workers", type=int, default=2)
     args = ap.parse_args()
-    from grainforge.fit import (FITS, TWIN_TOL, _Pool, design, grain_seed, measured_across, read_sand,
-                                resolve_cap)
+    from grainforge.fit import FITS, TWIN_TOL, _Pool, design, grain_seed, measured_across, read_sand, resolve_cap
     from grainforge.twins import invert
 
     sand = read_sand(ROOT / "tests" / "data" / "synthetic-angular-sand.csv")
