@@ -872,6 +872,10 @@ class _Twins:
         e = np.max(np.abs(y - self.targets[idx]) / self.tol, axis=1)
         return np.where(np.isfinite(e), e, np.inf)
 
+    def made(self) -> np.ndarray:
+        """(n,) bool: the generator has made and measured the grain at some settings tried."""
+        return np.all(np.isfinite(self.best_y), axis=1)
+
     def keep_best(self, idx: np.ndarray, y: np.ndarray) -> None:
         if self.best_y is None:
             self.best_u, self.best_y = self.u.copy(), np.full_like(self.targets, np.nan)
@@ -907,31 +911,34 @@ def _refine(tw: _Twins, model, idx: np.ndarray, y: np.ndarray) -> None:
     offsets = np.where(np.isfinite(y), y - pred, 0.0)
     u, miss = invert(model, tw.targets[idx], tw.across[idx], offsets=offsets, start=tw.u[idx], scale=tw.tol)
     # a grain the generator refused to make or measure at its settings (a corner of the design box, with its own
-    # seed) is not re-solved, which would lead back to that corner: its settings move a third of the way
-    # towards the middle of the box
+    # seed) is not re-solved, which would lead back to that corner: its settings move towards the middle
     refused = ~np.all(np.isfinite(y), axis=1)
-    u[refused] = 0.5 + (tw.u[idx][refused] - 0.5) * (2.0 / 3.0)
+    u[refused] = _toward_middle(tw.u[idx][refused])
     tw.u[idx] = u
     tw.reach[idx] = miss
+
+
+def _toward_middle(u: np.ndarray) -> np.ndarray:
+    """Unit-box settings moved a third of the way towards the middle of the box (where the generator makes every
+    grain of the design)."""
+    return 0.5 + (u - 0.5) * (2.0 / 3.0)
 
 
 def _make_refused(tw: _Twins, pool: _Pool, progress, note, name) -> None:
     """Move the settings of twins never made so far towards the middle of the box until the generator makes them,
     so that every grain of the recipe can be built; a twin still refused after :data:`REFUSED_TRIES` is an error."""
     for k in range(REFUSED_TRIES):
-        refused = np.flatnonzero(~np.all(np.isfinite(tw.best_y), axis=1))
+        refused = np.flatnonzero(~tw.made())
         if not len(refused):
             return
         name(f"refused twins, try {k + 1}/{REFUSED_TRIES}")
-        tw.u[refused] = 0.5 + (tw.u[refused] - 0.5) * (2.0 / 3.0)
+        tw.u[refused] = _toward_middle(tw.u[refused])
         _measure_twins(tw, pool, refused, progress)
-        made = int(np.all(np.isfinite(tw.best_y[refused]), axis=1).sum())
         note(f"refused twins: {len(refused)} the generator had refused at every settings tried, moved towards the "
-             f"middle of the box; {made} made")
-    if not np.all(np.isfinite(tw.best_y)):
-        raise ValueError(f"{int((~np.all(np.isfinite(tw.best_y), axis=1)).sum())} twin(s) could not be made at "
-                         f"any settings tried: the {tw.spec.method} generator refuses them; try another --method "
-                         "or --seed")
+             f"middle of the box; {int(tw.made()[refused].sum())} made")
+    if not tw.made().all():
+        raise ValueError(f"{int((~tw.made()).sum())} twin(s) could not be made at any settings tried: the "
+                         f"{tw.spec.method} generator refuses them; try another --method or --seed")
 
 
 def _twin_summary(tw: _Twins) -> str:
@@ -1053,7 +1060,7 @@ def fit_sand(
 def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int, history: list[str],
             seconds: float, pool: _Pool, known: dict[str, tuple[float, float]]) -> FitResult:
     """The fit's result from its twins: each grain's closest measurement, its settings and the recipe."""
-    ok = np.all(np.isfinite(tw.best_y), axis=1)
+    ok = tw.made()
     err = tw.error(tw.best_y)
     reachable = (tw.reach <= TWIN_TOL) | (err <= TWIN_TOL)
     within = float(np.mean(err[reachable] <= TWIN_TOL)) if reachable.any() else 0.0
