@@ -96,6 +96,8 @@ def test_measured_edge_radius_tracks_the_requested_one():
     {"dents": 12, "dent_depth": 0.5, "dent_width": 1.2}, {"dents": 12, "dent_depth": 0.5, "dent_width": 0.1},
     {"roughness": 0.1, "length_ratio": 0.05, "fractal_dimension": 2.9}, {"subdivisions": 0},
     {"aspect": (1, 0.1, 0.1), "rounding": 0.0, "roughness": 0.05}, {"aspect": (5e-324, 5e-324, 5e-324)},
+    {"aspect_by": "inertia", "aspect": (20, 1, 1), "facets": 6, "dents": 12, "dent_depth": 0.7},
+    {"aspect_by": "inertia", "aspect": (1, 0.05, 0.05), "rounding": 0.0, "roughness": 0.05},
 ])
 def test_valid_solid_as_read_back(kw):
     g = grainforge.angular(subdivisions=kw.pop("subdivisions", 4), rng=3, **kw)
@@ -103,6 +105,29 @@ def test_valid_solid_as_read_back(kw):
     assert mesh.is_watertight and mesh.is_winding_consistent and mesh.body_count == 1
     assert mesh.volume > 0
     assert len(mesh.vertices) == len(g.vertices)
+
+
+def _inertia_ratios(mesh):
+    """I/L and S/I of the solid's inertia ellipsoid (principal standard deviations), from the read-back mesh."""
+    inertia = np.linalg.eigvalsh(mesh.moment_inertia / mesh.volume)  # I_k = V (var_i + var_j)
+    var = np.sort(np.sum(inertia) / 2 - inertia)[::-1]
+    sd = np.sqrt(var)
+    return sd[1] / sd[0], sd[2] / sd[1]
+
+
+@pytest.mark.parametrize("seed", [1, 2, 3])
+def test_inertia_aspect_gives_the_grain_exactly_its_aspect_and_facets_do_not(seed):
+    """With aspect_by="inertia", the written grain's inertia ellipsoid has the aspect's ratios (what the Sand Atlas
+    measures as elongation and flatness), whatever the few facets, dents and roughness; tangent facets do not."""
+    kw = dict(facets=7, dents=6, dent_depth=0.55, dent_width=0.5, roughness=0.02, length_ratio=2.0, rounding=0.25,
+              aspect=(1.0, 0.7, 0.7 * 0.6), subdivisions=4, rng=seed)
+    exact = _read_back(grainforge.angular(aspect_by="inertia", **kw))
+    assert np.allclose(_inertia_ratios(exact), (0.7, 0.6), atol=2e-3)
+    assert exact.is_watertight and exact.is_winding_consistent and exact.body_count == 1 and exact.volume > 0
+    same = _read_back(grainforge.angular(aspect_by="inertia", **{**kw, "aspect": (1.0, 1.0, 1.0)}))
+    assert abs(exact.volume / same.volume - 1) < 1e-5  # the stretch (of the same isotropic grain) keeps the volume
+    tangent = _read_back(grainforge.angular(**kw))
+    assert np.max(np.abs(np.subtract(_inertia_ratios(tangent), (0.7, 0.6)))) > 0.01
 
 
 def test_same_seed_same_bytes_and_seeds_differ():
@@ -243,17 +268,17 @@ def test_demo_has_the_angular_gallery(tmp_path):
     facets=st.integers(6, 200), ratio1=st.floats(1.0, 20.0), ratio2=st.floats(0.0, 1.0),
     rounding=st.floats(0.0, 0.9), dents=st.integers(0, 12), dent_depth=st.floats(0.0, 0.7),
     dent_width=st.floats(0.1, 1.2), roughness=st.floats(0.0, 0.15), fractal_dimension=st.floats(2.0, 2.99),
-    length_ratio=st.floats(0.05, 20.0), seed=st.integers(0, 2**32),
+    length_ratio=st.floats(0.05, 20.0), seed=st.integers(0, 2**32), aspect_by=st.sampled_from(("facets", "inertia")),
 )
 def test_any_declared_parameters_give_a_valid_solid(facets, ratio1, ratio2, rounding, dents, dent_depth, dent_width,
-                                                    roughness, fractal_dimension, length_ratio, seed):
+                                                    roughness, fractal_dimension, length_ratio, seed, aspect_by):
     """Within the declared ranges: a valid solid as read back, or a ParameterError naming roughness."""
     aspect = (ratio1, 1.0 + ratio2 * (ratio1 - 1.0), 1.0)
     aspect = (aspect[0], aspect[1], aspect[2]) if aspect[0] >= aspect[1] else (aspect[1], aspect[0], 1.0)
     try:
         g = grainforge.angular(facets=facets, aspect=aspect, rounding=rounding, dents=dents, dent_depth=dent_depth,
                                dent_width=dent_width, roughness=roughness, fractal_dimension=fractal_dimension,
-                               length_ratio=length_ratio, subdivisions=3, rng=seed)
+                               length_ratio=length_ratio, subdivisions=3, aspect_by=aspect_by, rng=seed)
     except ParameterError as e:
         assert e.name == "roughness"
         return

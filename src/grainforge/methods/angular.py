@@ -43,7 +43,7 @@ an edge cut it, by at most about one mesh edge length (see
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -69,6 +69,8 @@ MIN_RADIUS = 0.05
 #: icosphere level of the covering check (642 directions, spacing ≈ 9°)
 _COVER_LEVEL = 3
 _MAX_DRAWS = 200
+#: ``aspect_by`` choices: the facets' tangent ellipsoid, or the finished grain's inertia ellipsoid
+ASPECT_BY = ("facets", "inertia")
 
 
 @dataclass(frozen=True)
@@ -99,6 +101,12 @@ class Params:
     surface: str = param("seamless", "FSO overlay form: seamless (3D unit vector, no special latitude) or "
                          "paper (Eqs. 2-3, mirror seam at the equator)", kind="str", choices=("seamless", "paper"))
     subdivisions: int = param(5, "icosphere subdivisions (10·4^s + 2 vertices)", kind="int", low=0, high=8)
+    aspect_by: str = param(
+        "facets", "how the aspect shapes the grain: facets (tangent to the L:I:S ellipsoid; with few facets the "
+        "core's own random shape sets much of the grain's proportions) or inertia (the finished grain is "
+        "stretched so that its inertia ellipsoid has exactly the L:I:S ratios)", kind="str",
+        choices=ASPECT_BY,
+    )
 
     def __post_init__(self):
         validate(self)
@@ -379,7 +387,8 @@ def _roughness_factor(unit: np.ndarray, p: Params, rng: np.random.Generator) -> 
 def build(p: Params, rng: np.random.Generator):
     """Vertices, faces and info of one angular grain (R0 = 1, not yet centred)."""
     unit, faces = icosphere(p.subdivisions)
-    c = core(p, rng)
+    inertia = p.aspect_by == "inertia"
+    c = core(replace(p, aspect=(1.0, 1.0, 1.0)) if inertia else p, rng)
     r, flat = radius(unit, c)
     r = r * _dent_factor(unit, p, rng)
     r = r * _roughness_factor(unit, p, rng)
@@ -390,9 +399,45 @@ def build(p: Params, rng: np.random.Generator):
             f"{p.roughness} is too large for this grain: the smallest radius would be {rmin:.3f}·R0 "
             f"(must stay above {MIN_RADIUS}·R0 for a star-shaped solid); lower it (or the dents)",
         )
-    info = {"rounding_radius": c.rho, "flat_fraction": float(flat.mean()), "min_radius": rmin,
+    faces = np.array(faces)
+    vertices = unit * r[:, None]
+    scale = np.ones(3)
+    if inertia:
+        stretch = _inertia_stretch(vertices, faces, p.aspect)
+        vertices = vertices @ stretch.T
+        scale = np.linalg.svd(stretch, compute_uv=False)
+    info = {"rounding_radius": c.rho * float(scale.min()), "flat_fraction": float(flat.mean()), "min_radius": rmin,
             "max_radius": float(r.max())}
-    return unit * r[:, None], np.array(faces), info
+    return vertices, faces, info
+
+
+def _inertia_stretch(vertices: np.ndarray, faces: np.ndarray, aspect) -> np.ndarray:
+    """The linear map (determinant 1) that turns the solid's inertia ellipsoid into one of semi-axes ∝ ``aspect``
+    along x, y, z (its principal axes rotated onto them, longest on x).
+
+    A linear map of determinant 1 keeps the volume, and keeps a solid star-shaped about the origin a valid
+    star-shaped solid (every face's orientation about the origin has the sign of the determinant).
+
+    Examples
+    --------
+    >>> unit, faces = icosphere(3)
+    >>> v = unit * np.array([0.5, 2.0, 1.0])                      # an ellipsoid with its long axis on y
+    >>> M = _inertia_stretch(v, np.array(faces), (3.0, 2.0, 1.0))
+    >>> from grainforge.solid import second_moments
+    >>> vol, _, C = second_moments(v @ M.T, np.array(faces))
+    >>> sd = np.sqrt(np.diag(C))
+    >>> np.round(sd / sd[2], 4).tolist(), bool(abs(np.linalg.det(M) - 1) < 1e-12)
+    ([3.0, 2.0, 1.0], True)
+    """
+    from ..solid import second_moments
+
+    vol, _, second = second_moments(vertices, faces)
+    var, axes = np.linalg.eigh(second / vol)
+    axes, sd = axes[:, ::-1], np.sqrt(np.maximum(var[::-1], 1e-300))  # longest first
+    if np.linalg.det(axes) < 0:  # a rotation, not a reflection (which would turn the faces inside out)
+        axes[:, 2] = -axes[:, 2]
+    m = np.diag(_semi_axes(aspect) / sd) @ axes.T
+    return m / np.cbrt(np.linalg.det(m))
 
 
 def physical_info(info: dict, scale: float) -> dict:
@@ -419,6 +464,7 @@ def angular(
     length_ratio: float = 1.0,
     surface: str = "seamless",
     subdivisions: int = 5,
+    aspect_by: str = "facets",
     rng=None,
 ):
     """Generate one angular grain: a rounded random polyhedron with dents and roughness.
@@ -443,6 +489,12 @@ def angular(
         FSO overlay form (see :func:`grainforge.methods.fso.overlay`).
     subdivisions : int
         Icosphere level 0–8 (default 5: 10,242 vertices).
+    aspect_by : {"facets", "inertia"}
+        ``facets``: the core's facets are tangent to the L:I:S ellipsoid (few
+        facets leave much of the grain's proportions to its seed);
+        ``inertia``: the grain is built isotropic, then stretched so that its
+        inertia ellipsoid has exactly the L:I:S ratios (measured flatness and
+        elongation then follow ``aspect``).
     rng : None, int or numpy.random.Generator
         Seed or generator.
 
@@ -474,6 +526,6 @@ def angular(
     p = Params(
         facets=facets, aspect=tuple(aspect), rounding=rounding, dents=dents, dent_depth=dent_depth,
         dent_width=dent_width, roughness=roughness, fractal_dimension=fractal_dimension,
-        length_ratio=length_ratio, surface=surface, subdivisions=subdivisions,
+        length_ratio=length_ratio, surface=surface, subdivisions=subdivisions, aspect_by=aspect_by,
     )
     return generate(NAME, p, rng)
