@@ -1,8 +1,8 @@
 """Make the synthetic sands of ``tests/data``: generated grains with known settings, measured into Sand Atlas CSVs.
 
-``angular`` (default): ``synthetic-angular-sand.csv``, 150 grains of the
+``angular`` (default): ``synthetic-angular-sand.csv``, 300 grains of the
 ``angular`` generator (the fit's ``angular`` method: 7 facets, 6 dents, a fine
-texture) whose per-grain settings (edge rounding, dent depth and the Zingg
+texture, the aspect by inertia) whose per-grain settings (edge rounding, dent depth and the Zingg
 ratios of the aspect) are drawn from known truncated normals
 (:data:`KNOWN_ANGULAR`), each measured the Atlas way at about 30 voxels across
 (13.3 µm voxels, d_eq about 400 µm), the drawn settings in
@@ -31,8 +31,9 @@ from pathlib import Path
 DATA = Path(__file__).resolve().parents[1] / "tests" / "data"
 VOXEL_UM = 13.3
 #: the known settings: name -> (mean, sd, low, high) of a truncated normal
-KNOWN_ANGULAR = {"rounding": (0.25, 0.1, 0.05, 0.5), "dent_depth": (0.55, 0.08, 0.35, 0.7),
-                 "elongation": (0.6, 0.08, 0.4, 0.85), "flatness": (0.5, 0.08, 0.3, 0.75)}
+KNOWN_ANGULAR = {"rounding": (0.2, 0.08, 0.02, 0.45), "dent_depth": (0.6, 0.06, 0.42, 0.7),
+                 "elongation": (0.7, 0.08, 0.45, 0.9), "flatness": (0.68, 0.08, 0.45, 0.9)}
+ANGULAR_GRAINS = 300
 KNOWN_RF = {"irregularity": (0.10, 0.05, 0.02, 0.22), "roughness": (0.031, 0.006, 0.015, 0.039),
             "elongation": (0.64, 0.1, 0.4, 0.95), "flatness": (0.70, 0.1, 0.4, 0.95)}
 GRAINS = 150
@@ -54,7 +55,7 @@ def main() -> None:
     elif which == "rf":
         make("rf", "synthetic-rf-sand.csv", KNOWN_RF, GRAINS, VOXEL_UM, 400.0, settings="synthetic-rf-sand-settings.csv")
     else:
-        make("angular", "synthetic-angular-sand.csv", KNOWN_ANGULAR, GRAINS, VOXEL_UM, 400.0,
+        make("angular", "synthetic-angular-sand.csv", KNOWN_ANGULAR, ANGULAR_GRAINS, VOXEL_UM, 400.0,
              settings="synthetic-angular-sand-settings.csv")
 
 

@@ -167,7 +167,8 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     lines = []
     result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, cache=design_cache,
                       log=lines.append)
-    assert [line.split(":")[0] for line in lines] == ["design rf", "design rf", "twins", "refine 1"]
+    assert [line.split(":")[0] for line in lines] == ["design rf", "design rf", "twins", "population 1",
+                                                      "population 2", "population", "refine 1"]
     # what the fitted settings say about the sand: the aspect's ratios are determined by the descriptors, the
     # roughness decay is not (it trades sphericity with the other settings); said in the log, fit-stats.csv and
     # the recipe
@@ -216,6 +217,16 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     for k, r in setting_rows.items():
         assert float(r["generated"]) == pytest.approx(np.mean([float(t[f"setting_{k}"]) for t in rows]), rel=1e-4)
         assert float(r["difference"]) == pytest.approx(known[k][1]) and r["pass"] == str(known[k][0] >= 0.9)
+    # the sand's mean settings from its descriptors' means: in the log, the recipe's header and fit-stats.csv
+    pop = result.population
+    assert list(pop.mean) == list(known) and pop.grains == 40
+    assert pop.text() in lines[5] and f"the sand's mean settings (± standard error): {pop.text()}" in result.recipe
+    pop_rows = [r for r in csv.DictReader(paths[2].read_text(encoding="utf-8").splitlines())
+                if r["statistic"] == "population"]
+    assert [r["quantity"].split()[0] for r in pop_rows] == list(known)
+    for r in pop_rows:
+        k = r["quantity"].split()[0]
+        assert float(r["generated"]) == pytest.approx(pop.mean[k]) and float(r["difference"]) == pytest.approx(pop.se[k])
     assert fitmod.design_path("rf", "atlas", 20.0, 80, design_cache).exists()
 
 
@@ -238,6 +249,7 @@ def test_a_twin_the_generator_refuses_is_moved_until_it_is_made(design_cache):
 def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     """A tiny design and population: grain i of the recipe, made as batch makes it, measures exactly as the fit
     measured it; fit.png is drawn; the design is cached."""
+    import grainforge.fit as fitmod
     from grainforge.fit import fit_sand, measure_grain, write_outputs
 
     sand = read_sand(RF_SAND)
@@ -251,7 +263,7 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     paths = write_outputs(sand, result, tmp_path / "out")
     assert paths[3].stat().st_size > 10_000
     again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0})
-    assert again.grains_measured == 50  # the design came from the cache
+    assert again.grains_measured == 50 * (1 + fitmod.POPULATION_ROUNDS)  # the design came from the cache
 
 
 @pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, the design shared with the plumbing test
@@ -277,10 +289,33 @@ def test_twins_of_a_small_population_meet_the_criteria(design_cache):
         assert np.mean([s[k] for s in result.settings]) == pytest.approx(truth, rel=0.05), k
 
 
-def test_angular_grains_are_shaped_by_their_seed_more_than_by_their_settings():
-    """Why the angular method cannot twin the synthetic angular sand (docs/fit.md, Angular sands): one of its
-    grains, remade with its known settings and seed, measures as its row does; with the same settings and another
-    seed, its convexity and elongation move by more than 0.1, beyond what any setting makes up for."""
+@pytest.mark.slow  # about 600 angular grains at about 30 voxels across (about 40 s of CPU)
+def test_the_synthetic_angular_sands_mean_settings_are_recovered_within_their_standard_errors(design_cache):
+    """The fit's estimate of the sand's mean settings (from its descriptors' means), on the synthetic angular
+    sand, against the known settings' means: the aspect's ratios within 5 % (their standard errors are about
+    1 %), every setting within 3 standard errors; rounding's standard error is wide, as the information in the
+    sand's means allows (docs/fit.md, "What the fitted settings say about the sand")."""
+    from grainforge.fit import fit_sand
+
+    sand = read_sand(ANGULAR_SAND)
+    result = fit_sand(sand, "angular", count=150, refine=0, design_grains=200, max_across=TEST_ACROSS,
+                      cache=design_cache)
+    known = list(csv.DictReader(ANGULAR_SAND.with_name("synthetic-angular-sand-settings.csv")
+                                .read_text(encoding="utf-8").splitlines()))
+    pop = result.population
+    for k in ("rounding", "dent_depth", "elongation", "flatness"):
+        truth = np.mean([float(r[k]) for r in known])
+        assert abs(pop.mean[k] - truth) <= 3 * pop.se[k], (k, truth, pop.mean[k], pop.se[k])
+        if k in ("elongation", "flatness"):
+            assert pop.mean[k] == pytest.approx(truth, rel=0.05) and pop.se[k] < 0.02 * truth, k
+    assert pop.se["rounding"] > 0.1 * np.mean([float(r["rounding"]) for r in known])
+
+
+def test_angular_grains_take_their_aspect_from_their_settings_and_their_surface_partly_from_their_seed():
+    """The synthetic angular sand's grain, remade with its known settings and seed, measures as its row does; with
+    another seed, its flatness and elongation stay (the fit's angular grains are stretched to their aspect's
+    inertia ellipsoid) while its convexity moves by several hundredths: what the seed adds that no grain's
+    settings can be told from (docs/fit.md, Angular sands)."""
     from grainforge.fit import _measure, grain_seed
     from grainforge.methods import get
 
@@ -294,7 +329,7 @@ def test_angular_grains_are_shaped_by_their_seed_more_than_by_their_settings():
     own = np.array(_measure("angular", params, grain_seed(41, i), across, "atlas"))  # the sand's seed (SEED = 41)
     assert np.allclose(own, sand.table()[i], atol=1e-5)
     other = np.array(_measure("angular", params, grain_seed(2024, i), across, "atlas"))
-    assert abs(other[1] - own[1]) > 0.1 and abs(other[3] - own[3]) > 0.1, (own, other)
+    assert np.all(np.abs(other[2:] - own[2:]) < 0.01) and abs(other[1] - own[1]) > 0.05, (own, other)
 
 
 def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):

@@ -367,9 +367,12 @@ register(MethodFit(
 register(MethodFit(
     # crushed, angular grains (Hostun-like): a 7-facet core, so that sphericity falls well below convexity as it
     # does in crushed sands; edge rounding steers sphericity, dent depth convexity (6 dents of width 0.5 rad);
-    # a fine texture (FSO overlay of RMS 0.02)
+    # a fine texture (FSO overlay of RMS 0.02); the grain stretched to its aspect's inertia ellipsoid, so that
+    # its measured flatness and elongation are its settings' (with facets tangent to the aspect's ellipsoid, a
+    # 7-facet core's own random shape sets them: at fixed settings they scatter by sd 0.1 from seed to seed)
     "angular", (Setting("rounding", 0.0, 0.9), Setting("dent_depth", 0.0, 0.7)),
-    {"facets": 7, "dents": 6, "dent_width": 0.5, "roughness": 0.02, "length_ratio": 2.0, "subdivisions": 5},
+    {"facets": 7, "dents": 6, "dent_width": 0.5, "roughness": 0.02, "length_ratio": 2.0, "subdivisions": 5,
+     "aspect_by": "inertia"},
     lambda v: {"rounding": v["rounding"], "dent_depth": v["dent_depth"], "aspect": _aspect(v)},
 ))
 
@@ -390,16 +393,18 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int,
                cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
     """Grains a fit of ``method`` measures: (expected, at most).
 
-    The design's grains (none when it is cached), then each twin once, plus
-    refinements: :data:`EXPECTED_MEASUREMENTS` per twin expected, ``1 +
-    refine`` at most.  ``"auto"`` measures every method's design.
+    The design's grains (none when it is cached), the population estimate's
+    (:data:`POPULATION_ROUNDS` × up to :data:`POPULATION_GRAINS`), then each
+    twin once, plus refinements: :data:`EXPECTED_MEASUREMENTS` per twin
+    expected, ``1 + refine`` at most.  ``"auto"`` measures every method's design.
 
     Examples
     --------
     >>> fit_grains("rf", count=500, design_grains=400, refine=3)
-    (2000, 2400)
+    (2600, 3000)
     """
     designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
+    designs += POPULATION_ROUNDS * min(count, POPULATION_GRAINS)
     expected = designs + int(round(count * min(EXPECTED_MEASUREMENTS, 1 + refine)))
     return expected, designs + count * (1 + refine)
 
@@ -728,6 +733,13 @@ def design(method: str, pool: _Pool, *, high: float, grains: int = DESIGN_GRAINS
 
 #: a setting predicted from a grain's descriptors with at least this cross-validated R² is called identifiable
 IDENTIFIABLE_R2 = 0.9
+#: the population estimate of the sand's mean settings remakes the first this many twins, this many rounds
+POPULATION_GRAINS = 300
+POPULATION_ROUNDS = 2
+#: a setting whose axis the descriptors' means see less than this much is "not determined by the means": a
+#: combination of it with other settings that leaves all four means as they are moves it (more settings than
+#: descriptors: rf's three surface settings), so its estimate is the starting population's, not the sand's
+DETERMINED_MIN = 0.98
 
 
 def setting_identifiability(des: Design) -> dict[str, tuple[float, float]]:
@@ -829,6 +841,8 @@ class FitResult:
     #: setting -> (cross-validated R², rms error in the setting's units) of predicting it from a grain's four
     #: descriptors on the method's design (:func:`setting_identifiability`)
     identifiable: dict[str, tuple[float, float]] = field(default_factory=dict)
+    #: the sand's mean settings estimated from its descriptors' means (:func:`population_settings`)
+    population: Population | None = None
 
 
 def choose_rows(n: int, count: int | None, seed: int) -> np.ndarray:
@@ -941,6 +955,96 @@ def _make_refused(tw: _Twins, pool: _Pool, progress, note, name) -> None:
                          f"{tw.spec.method} generator refuses them; try another --method or --seed")
 
 
+@dataclass(frozen=True)
+class Population:
+    """The sand's mean settings, estimated from the means of its four descriptors (:func:`population_settings`).
+
+    Per setting (its own units): ``mean``, its standard error ``se`` (the sand's finite table and the made
+    grains' scatter, to first order) and ``determined`` (1: the four means pin it down; towards 0: another
+    setting trades with it at equal means, and its mean is the twins' starting one).
+    """
+
+    mean: dict[str, float]
+    se: dict[str, float]
+    determined: dict[str, float]
+    gap: np.ndarray  # (4,) sand's mean descriptors − the made population's, at the last round
+    grains: int  # grains made per round
+
+    def text(self) -> str:
+        """One line: each setting's mean ± standard error, the undetermined ones named."""
+        sure = [f"{k} {self.mean[k]:.4g} ± {self.se[k]:.2g}" for k in self.mean
+                if self.determined[k] >= DETERMINED_MIN]
+        loose = [k for k in self.mean if self.determined[k] < DETERMINED_MIN]
+        return ", ".join(sure) + (f"; not determined by the means: {', '.join(loose)}" if loose else "")
+
+
+def _mean_jacobian(model, u: np.ndarray, across: np.ndarray, h: float = 1e-3) -> np.ndarray:
+    """(4, p): d(mean predicted descriptors) / d(a shift of every grain's unit-box settings), from the model."""
+    cols = []
+    for k in range(u.shape[1]):
+        e = np.zeros(u.shape[1])
+        e[k] = h
+        cols.append((model.predict(u + e, across) - model.predict(u - e, across)).mean(axis=0) / (2 * h))
+    return np.column_stack(cols)
+
+
+def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: np.ndarray, seeds: Sequence[int],
+                        across: np.ndarray, pool: _Pool, progress=None, note=None, name=None,
+                        shrink: Sequence[float] | None = None) -> Population:
+    """Estimate the sand's **mean** settings: shift a population until its mean descriptors are the sand's.
+
+    A twin's settings are not its sand grain's: where the seed shapes a descriptor as much as a setting does,
+    one grain's descriptors cannot say which setting made it (:func:`setting_identifiability`), and the twins'
+    mean is pulled towards the middle of the design box.  The *population*'s mean setting is known far better:
+    the seed's share averages out over the sand's grains.  Starting from the first :data:`POPULATION_GRAINS`
+    twins' first settings ``u0`` (measured as ``y0``), every grain's settings are shifted by one common step
+    (the model's mean Jacobian, solved for the gap between the sand's mean descriptors and the made grains'),
+    remade with its own seed and measured, :data:`POPULATION_ROUNDS` times (a Newton iteration on measured
+    means: the model only steers it, what is compared is measured).  The estimate is the made population's
+    mean settings plus a last linear step for the gap left; its standard error propagates the sand's and the
+    made grains' scatter of their means through the same step (:func:`grainforge.twins.population_error`).
+
+    Returns
+    -------
+    Population
+    """
+    from .twins import population_error, population_step
+
+    say, label = note or (lambda s: None), name or (lambda s: None)
+    m = min(len(u0), POPULATION_GRAINS)
+    u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
+    table = sand.table()
+    target, cov_sand = table.mean(axis=0), np.cov(table.T) / len(table)
+    if shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
+        u = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
+    jac = _mean_jacobian(model, u, across)
+    shift = np.zeros(u.shape[1])
+    start = u.copy()
+    for r in range(POPULATION_ROUNDS + 1):
+        ok = np.all(np.isfinite(y), axis=1)
+        gap = target - y[ok].mean(axis=0)
+        if r == POPULATION_ROUNDS:
+            break
+        step, _ = population_step(jac, gap)
+        shift = shift + step
+        new_u = np.clip(start + shift, 0.0, 1.0)
+        label(f"population {r + 1}/{POPULATION_ROUNDS}")
+        new_y = pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i], float(across[i]))
+                                                     for i in range(m)], progress)
+        both = ok & np.all(np.isfinite(new_y), axis=1)
+        u, y = new_u, new_y
+        say(f"population {r + 1}: {m} grains remade; mean descriptors off the sand's by "
+            + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(DESCRIPTORS, target - y[both].mean(axis=0))))
+    step, pinv = population_step(jac, gap)
+    est = np.clip(u[ok].mean(axis=0) + step, 0.0, 1.0)
+    se, determined = population_error(pinv, cov_sand + np.cov(y[ok].T) / max(int(ok.sum()), 1))
+    width = np.array([st.high - st.low for st in spec.all_settings])
+    names = [st.name for st in spec.all_settings]
+    values = spec.values(est)
+    return Population(mean=values, se={k: float(e) for k, e in zip(names, se * width)},
+                      determined={k: float(d) for k, d in zip(names, determined)}, gap=gap, grains=m)
+
+
 def _twin_summary(tw: _Twins) -> str:
     e = tw.error(tw.best_y)
     reach = tw.reach <= TWIN_TOL
@@ -1044,21 +1148,28 @@ def fit_sand(
         rows = choose_rows(sand.count, count, seed)
         tw = _start_twins(spec, model, sand, rows, cap, seed)
         idx = np.arange(len(rows))
+        population = None
         for r in range(refine + 1):
             name("twins" if r == 0 else f"refine {r}/{refine}")
             y = _measure_twins(tw, pool, idx, progress)
             note(f"{'twins' if r == 0 else f'refine {r}'}: {len(idx)} grains measured; {_twin_summary(tw)}")
+            if r == 0:
+                population = population_settings(spec, model, sand, tw.u, y, tw.seeds, tw.across, pool, progress,
+                                                 note, name, shrink=[r2 for r2, _ in known.values()])
+                note(f"population: the sand's mean settings from its descriptors' means (± standard error; "
+                     f"{sand.count} sand grains, {population.grains} made): {population.text()}")
             keep = tw.relative(tw.best_y[idx], idx) > 1
             if r == refine or not keep.any():
                 break
             idx, y = idx[keep], y[keep]
             _refine(tw, model, idx, y)
         _make_refused(tw, pool, progress, note, name)
-    return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool, known)
+    return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool, known, population)
 
 
 def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int, history: list[str],
-            seconds: float, pool: _Pool, known: dict[str, tuple[float, float]]) -> FitResult:
+            seconds: float, pool: _Pool, known: dict[str, tuple[float, float]],
+            population: Population | None = None) -> FitResult:
     """The fit's result from its twins: each grain's closest measurement, its settings and the recipe."""
     ok = tw.made()
     err = tw.error(tw.best_y)
@@ -1070,13 +1181,13 @@ def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int
     st["refused"] = int((~ok).sum())
     size_mm = [_written(float(d) / 1000.0) for d in sand.equivalent_diameter[rows]]
     gen = np.column_stack([np.asarray(size_mm) * 1000.0, tw.best_y])
-    header = _recipe_header(sand, spec.method, st, len(rows), known)
+    header = _recipe_header(sand, spec.method, st, len(rows), known, population)
     own = [spec.grain_params(u) for u in tw.best_u]
     text = twin_recipe_text(spec, own, size_mm, seed=seed, header=header)
     return FitResult(method=spec.method, recipe=text, stats=st, generated=gen, sand_rows=rows,
                      settings=[spec.values(u) for u in tw.best_u], reachable=reachable, history=history,
                      seconds=seconds, cpu_seconds=pool.cpu, grains_measured=pool.grains, targets=tw.targets,
-                     identifiable=known)
+                     identifiable=known, population=population)
 
 
 def _unreachable_by(tw: _Twins, out: np.ndarray) -> dict[str, int]:
@@ -1087,7 +1198,8 @@ def _unreachable_by(tw: _Twins, out: np.ndarray) -> dict[str, int]:
     return {DESCRIPTORS[k]: int(np.sum(worst == k)) for k in range(4) if np.any(worst == k)}
 
 
-def _recipe_header(sand: Sand, method: str, st: dict, n: int, known: dict[str, tuple[float, float]]) -> str:
+def _recipe_header(sand: Sand, method: str, st: dict, n: int, known: dict[str, tuple[float, float]],
+                   population: Population | None = None) -> str:
     lines = [f"grainforge fit: {n} {method} grains, each the twin of one grain of {sand.name} "
              f"({sand.count} grains, voxel {sand.voxel_size:g} µm)"]
     lines += [f"{k}: sand {p['sand_mean']:.3f} generated {p['gen_mean']:.3f} KS {p['ks']:.3f}"
@@ -1101,6 +1213,8 @@ def _recipe_header(sand: Sand, method: str, st: dict, n: int, known: dict[str, t
     loose = [f"{k} (R² {r2:.2f})" for k, (r2, e) in known.items() if r2 < IDENTIFIABLE_R2]
     lines += [f"settings a grain's descriptors determine: {', '.join(sure) or 'none'}; "
               f"not determined (seed or another setting shapes the same descriptors): {', '.join(loose) or 'none'}"]
+    if population is not None:
+        lines += [f"the sand's mean settings (± standard error): {population.text()}"]
     return "\n".join(lines)
 
 
@@ -1158,6 +1272,12 @@ def stat_rows(result: FitResult) -> list[dict[str, Any]]:
         rows.append({"statistic": "setting", "quantity": f"{k} (mean of the twins; rms error of one grain's)",
                      "sand": "", "generated": mean, "difference": err,
                      "criterion": f"identifiable if R² {r2:.2f} >= {IDENTIFIABLE_R2}", "pass": r2 >= IDENTIFIABLE_R2})
+    pop = result.population
+    for k in pop.mean if pop is not None else ():  # the sand's mean settings, from its descriptors' means
+        rows.append({"statistic": "population", "quantity": f"{k} (the sand's mean; standard error)", "sand": "",
+                     "generated": pop.mean[k], "difference": pop.se[k],
+                     "criterion": f"determined by the means if {pop.determined[k]:.2f} >= {DETERMINED_MIN}",
+                     "pass": pop.determined[k] >= DETERMINED_MIN})
     return rows
 
 

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["design_points", "ForwardModel", "invert", "identifiability"]
+__all__ = ["design_points", "ForwardModel", "invert", "identifiability", "population_step", "population_error"]
 
 #: polynomial degree of the forward model
 DEGREE = 3
@@ -222,3 +222,73 @@ def _gauss_newton(resid, u: np.ndarray, iterations: int = 60, h: float = 1e-6) -
         if np.all(done | (lam > 1e8)):
             break
     return u
+
+
+def population_step(jac: np.ndarray, gap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The shift of a population's mean settings that moves its mean descriptors by ``gap``, to first order.
+
+    Solves ``jac @ step = gap`` in the least-squares sense; with more
+    settings than descriptors (or settings the descriptors' means cannot
+    tell apart) the shortest such step, so that what the means do not
+    determine stays where it is.
+
+    Parameters
+    ----------
+    jac : (4, p) array
+        d(mean descriptors) / d(mean settings), unit-box settings.
+    gap : (4,) array
+        Target mean descriptors minus the population's.
+
+    Returns
+    -------
+    step : (p,) array
+    pinv : (p, 4) array
+        The (pseudo-)inverse used: what :func:`population_error` propagates.
+
+    Examples
+    --------
+    >>> jac = np.array([[1.0, 0.0], [0.0, 2.0], [0.0, 0.0], [0.0, 0.0]])
+    >>> step, _ = population_step(jac, np.array([0.1, 0.1, 0.0, 0.0]))
+    >>> np.round(step, 6).tolist()
+    [0.1, 0.05]
+    """
+    pinv = np.linalg.pinv(np.asarray(jac, np.float64), rcond=1e-6)
+    return pinv @ np.asarray(gap, np.float64), pinv
+
+
+def population_error(pinv: np.ndarray, cov_mean: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Standard errors of mean settings estimated from mean descriptors, and how far the means determine them.
+
+    Parameters
+    ----------
+    pinv : (p, 4) array
+        From :func:`population_step`.
+    cov_mean : (4, 4) array
+        Covariance of the mean-descriptor gap: the sand's covariance over
+        its grain count plus the made population's over its.
+
+    Returns
+    -------
+    se : (p,) array
+        Standard error of each mean setting (unit-box units): the least any
+        estimate from the descriptors' means can have, to first order (for
+        a sand whose descriptors scatter about their means as a Gaussian,
+        no estimator from the table does better).
+    determined : (p,) array
+        1 where the four means pin the setting down, towards 0 where
+        a combination of it with other settings leaves every mean as it is
+        (the part of the setting's axis outside the rows of ``pinv``'s
+        pseudo-inverse): its estimate is then the starting population's.
+
+    Examples
+    --------
+    >>> jac = np.array([[1.0, 1.0], [1.0, 1.0], [0.0, 0.0], [0.0, 0.0]])   # only their sum shows
+    >>> se, det = population_error(np.linalg.pinv(jac), np.eye(4) * 1e-4)
+    >>> np.round(det, 3).tolist()
+    [0.5, 0.5]
+    """
+    pinv = np.asarray(pinv, np.float64)
+    se = np.sqrt(np.maximum(np.einsum("pi,ij,pj->p", pinv, cov_mean, pinv), 0.0))
+    jac = np.linalg.pinv(pinv)  # (4, p): the map back; pinv @ jac projects onto what the means see
+    determined = np.clip(np.diag(pinv @ jac), 0.0, 1.0)
+    return se, determined
