@@ -738,6 +738,8 @@ POPULATION_GRAINS = 300
 POPULATION_ROUNDS = 2
 #: a setting whose axis the descriptors' means see less than this much is "not determined by the means": a
 #: combination of it with other settings that leaves all four means as they are moves it (more settings than
+#: descriptors: rf's three surface settings), so its estimate is the starting population's, not the sand's: a
+#: combination of it with other settings that leaves all four means as they are moves it (more settings than
 #: descriptors: rf's three surface settings), so its estimate is the starting population's, not the sand's
 DETERMINED_MIN = 0.98
 
@@ -1000,8 +1002,8 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     twins' first settings ``u0`` (measured as ``y0``), every grain's settings are shifted by one common step
     (the model's mean Jacobian, solved for the gap between the sand's mean descriptors and the made grains'),
     remade with its own seed and measured, :data:`POPULATION_ROUNDS` times (a Newton iteration on measured
-    means: the model only steers it, what is compared is measured).  The estimate is the made population's
-    mean settings plus a last linear step for the gap left; its standard error propagates the sand's and the
+    means: the model only steers it, what is compared is measured).  The estimate is the mean settings of the
+    round whose means came closest to the sand's, plus a last linear step for the gap left; its standard error propagates the sand's and the
     made grains' scatter of their means through the same step (:func:`grainforge.twins.population_error`).
 
     Returns
@@ -1014,27 +1016,32 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     m = min(len(u0), POPULATION_GRAINS)
     u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
     table = sand.table()
-    target, cov_sand = table.mean(axis=0), np.cov(table.T) / len(table)
-    if shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
-        u = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
-    jac = _mean_jacobian(model, u, across)
-    shift = np.zeros(u.shape[1])
-    start = u.copy()
-    for r in range(POPULATION_ROUNDS + 1):
+    target, cov_sand, scale = table.mean(axis=0), np.cov(table.T) / len(table), table.std(axis=0)
+    rounds = []  # (settings, measured, gap, largest gap in the sand's sds)
+
+    def record(u: np.ndarray, y: np.ndarray) -> np.ndarray:
         ok = np.all(np.isfinite(y), axis=1)
         gap = target - y[ok].mean(axis=0)
-        if r == POPULATION_ROUNDS:
-            break
-        step, _ = population_step(jac, gap)
-        shift = shift + step
+        rounds.append((u, y, gap, float(np.max(np.abs(gap) / scale))))
+        return gap
+
+    gap = record(u, y)
+    start = u
+    if shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
+        start = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
+    jac = _mean_jacobian(model, start, across)
+    shift = np.zeros(u.shape[1])
+    for r in range(1, POPULATION_ROUNDS + 1):
+        shift = shift + population_step(jac, gap)[0]
         new_u = np.clip(start + shift, 0.0, 1.0)
-        label(f"population {r + 1}/{POPULATION_ROUNDS}")
-        new_y = pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i], float(across[i]))
-                                                     for i in range(m)], progress)
-        both = ok & np.all(np.isfinite(new_y), axis=1)
-        u, y = new_u, new_y
-        say(f"population {r + 1}: {m} grains remade; mean descriptors off the sand's by "
-            + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(DESCRIPTORS, target - y[both].mean(axis=0))))
+        label(f"population {r}/{POPULATION_ROUNDS}")
+        gap = record(new_u, pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i],
+                                                                 float(across[i])) for i in range(m)], progress))
+        say(f"population {r}: {m} grains remade; mean descriptors off the sand's by "
+            + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(DESCRIPTORS, gap)))
+    # the round whose means came closest (a step may overshoot where the model's slopes are not the grains')
+    u, y, gap, _ = min(rounds, key=lambda r: r[3])
+    ok = np.all(np.isfinite(y), axis=1)
     step, pinv = population_step(jac, gap)
     est = np.clip(u[ok].mean(axis=0) + step, 0.0, 1.0)
     se, determined = population_error(pinv, cov_sand + np.cov(y[ok].T) / max(int(ok.sum()), 1))
