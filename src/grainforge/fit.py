@@ -24,7 +24,11 @@ How
    bounded, per sand grain for the settings it predicts to measure like it.
 3. **Twins**: grain ``i`` of the recipe (its own seed, as ``batch`` makes it)
    gets its sand grain's size and the model's settings, and is measured.
-4. **Refinement**: a twin more than :data:`REFINE_TOL` off on any descriptor
+4. **The sand's mean settings** (:func:`population_settings`): from the
+   means of its descriptors, with standard errors — what a sand's scan says
+   about the settings even where one grain's descriptors cannot (the seed's
+   share averages out over the grains).
+5. **Refinement**: a twin more than :data:`REFINE_TOL` off on any descriptor
    gets new settings from the model plus its own offset (measured minus
    predicted: what its seed and orientation add) and is measured again, up
    to ``refine`` times; each grain keeps its closest twin.
@@ -66,7 +70,7 @@ __all__ = [
     "compare", "recipe_text", "twin_recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "CORR_TOL",
     "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS",
     "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "METHOD_CAP", "resolve_cap", "design", "design_path", "measure_grain",
-    "OUTPUTS",
+    "OUTPUTS", "setting_identifiability", "population_settings", "Population",
 ]
 
 #: the four descriptors that are matched
