@@ -110,6 +110,15 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
     r = runner.invoke(cli, ["batch", str(tmp_path / "recipe.toml"), "--out", str(tmp_path / "grains")])
     assert r.exit_code == 0, r.output + r.stderr
     assert len(list((tmp_path / "grains").glob("rf-*.stl"))) == 2
+    # seeds: none written while every grain keeps batch's own; a [grains] seed column when one does not, and
+    # batch then gives that grain that seed and draws nothing else differently
+    from grainforge.fit import grain_seed
+
+    assert "\nseed = [" not in twin_recipe_text(spec, own, [0.41, 0.52], seed=3, seeds=[grain_seed(3, 0),
+                                                                                       grain_seed(3, 1)])
+    reseeded = parse_recipe(twin_recipe_text(spec, own, [0.41, 0.52], seed=3, seeds=[grain_seed(3, 0), 77]))
+    assert [draw_grain(reseeded, i)[0] for i in range(2)] == [grain_seed(3, 0), 77]
+    assert draw_grain(reseeded, 1)[1:] == draw_grain(recipe, 1)[1:]
 
 
 @pytest.mark.parametrize("grains, words", [
@@ -118,6 +127,10 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
     ("nope = [1, 2]", "grains.nope: is not a rf parameter"),
     ("aspect = [[1.0, 0.5, 0.4], { distribution = \"uniform\", low = 0.1, high = 0.2 }]", "not a distribution"),
     ("descriptors = [[0.0, 0.1, 0.01], [0.0, 0.9, 0.01]]", "grain 1"),
+    ("seed = [1, -2]", "grains.seed: grain 1: must be a whole number in [0, 2^63)"),
+    ("seed = [1, 2.5]", "grain 1: must be a whole number"),
+    ("seed = [true, 2]", "grain 0: must be a whole number"),
+    ("seed = [1]", "grains.seed: must be a list of count = 2 values"),
 ])
 def test_bad_grains_tables_name_the_field(grains, words):
     from grainforge.population import RecipeError
@@ -167,8 +180,13 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     lines = []
     result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, cache=design_cache,
                       log=lines.append)
-    assert [line.split(":")[0] for line in lines] == ["design rf", "design rf", "twins", "population 1",
-                                                      "population 2", "population", "refine 1"]
+    phases = [line.split(":")[0] for line in lines]
+    assert phases[:7] == ["design rf", "design rf", "twins", "population 1", "population 2", "population",
+                          "refine 1"]
+    # the twins still off by more than 0.03 try other seeds, one line per try, each fewer (or as many) twins
+    tries = [int(re.search(r": (\d+) twins off", line)[1]) for line in lines[7:]]
+    assert phases[7:] == [f"reseed {k + 1}" for k in range(len(phases) - 7)] and 1 <= len(tries) <= fitmod.RESEED
+    assert tries == sorted(tries, reverse=True)
     # what the fitted settings say about the sand: the aspect's ratios are determined by the descriptors, the
     # roughness decay is not (it trades sphericity with the other settings); said in the log, fit-stats.csv and
     # the recipe
@@ -237,7 +255,7 @@ def test_a_twin_the_generator_refuses_is_moved_until_it_is_made(design_cache):
     from grainforge.fit import fit_sand
 
     lines = []
-    result = fit_sand(read_sand(RF_SAND), "rf", count=40, refine=0, design_grains=80, max_across=20.0,
+    result = fit_sand(read_sand(RF_SAND), "rf", count=40, refine=0, reseed=0, design_grains=80, max_across=20.0,
                       cache=design_cache, log=lines.append)
     tries = [line for line in lines if line.startswith("refused twins")]
     assert tries and all(re.search(r": (\d+) the generator had refused", t) for t in tries), lines
@@ -262,7 +280,13 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     assert np.allclose(result.targets, sand.table()[result.sand_rows])
     paths = write_outputs(sand, result, tmp_path / "out")
     assert paths[3].stat().st_size > 10_000
-    again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0})
+    # a twin that kept another seed: the recipe gives it that seed, and batch's grain measures as the fit's did
+    reseeded = [i for i, s in enumerate(result.seeds) if s != fitmod.grain_seed(2024, i)]
+    assert reseeded and "\nseed = [" in result.recipe
+    i = reseeded[0]
+    again = measure_grain(result.recipe, i, sand.voxel_size, max_across=TEST_ACROSS)
+    assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
+    again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0, "reseed": 0})
     assert again.grains_measured == 50 * (1 + fitmod.POPULATION_ROUNDS)  # the design came from the cache
 
 

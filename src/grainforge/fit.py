@@ -101,6 +101,11 @@ REFINE_SD = 0.3
 #: extra tries, after the refinement, for a twin the generator refused to make at every settings tried so far
 #: (each moves its settings a third of the way towards the middle of the design box)
 REFUSED_TRIES = 6
+#: twins still off by more than TWIN_TOL after the refinement try up to this many other seeds (``--reseed``)
+RESEED = 6
+#: the share of twins expected to be reseeded, and the most counted, for the up-front estimate
+RESEED_SHARE = 0.05
+RESEED_MOST = 0.5
 #: largest true sphericity accepted: measured on voxels it can exceed 1 a little (Ottawa's largest is 1.02)
 SPHERICITY_MAX = 1.2
 #: fewest grains a sand must have to be fitted: two samples of 50 grains of one sand already differ by a
@@ -393,14 +398,18 @@ def _written(v: Any) -> Any:
 
 
 # --------------------------------------------------------------------------- estimate
-def fit_grains(method: str, *, count: int, design_grains: int, refine: int,
+def fit_grains(method: str, *, count: int, design_grains: int, refine: int, reseed: int = 0,
                cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
     """Grains a fit of ``method`` measures: (expected, at most).
 
     The design's grains (none when it is cached), the population estimate's
     (:data:`POPULATION_ROUNDS` × up to :data:`POPULATION_GRAINS`), then each
     twin once, plus refinements: :data:`EXPECTED_MEASUREMENTS` per twin
-    expected, ``1 + refine`` at most.  ``"auto"`` measures every method's design.
+    expected, ``1 + refine`` at most, plus two per reseeded twin and try
+    (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most:
+    the twins still off after the refinement; a third of them on a sand the
+    method reaches only with other seeds).
+    ``"auto"`` measures every method's design.
 
     Examples
     --------
@@ -409,8 +418,8 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int,
     """
     designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
     designs += POPULATION_ROUNDS * min(count, POPULATION_GRAINS)
-    expected = designs + int(round(count * min(EXPECTED_MEASUREMENTS, 1 + refine)))
-    return expected, designs + count * (1 + refine)
+    expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
+    return expected, designs + count * (1 + refine) + int(round(count * 2 * reseed * RESEED_MOST))
 
 
 def resolve_cap(method: str, max_across: float | str | None) -> float | None:
@@ -434,6 +443,7 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
 
 
 def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
+                   reseed: int = RESEED,
                    max_across: float | str | None = METHOD_CAP, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
                    cache: str | os.PathLike | None = None) -> float:
@@ -456,7 +466,7 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
              for m in methods}
     dear = max(methods, key=lambda m: costs[m])
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
-    expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine,
+    expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
                                 cached=lambda m: design_path(m, convention, highs[m], design_grains, cache).exists())
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     cores = max(1, min(int(workers), os.cpu_count() or 1))
@@ -465,7 +475,12 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     check_memory(per_worker * max(1, int(workers)) + FIT_ROW_BYTES * most,
                  what=f"fit --method {method} on {workers} worker(s), measuring grains {across.max():.0f} voxels "
                       "across,", option=f"{option}, --max-voxels-across or --workers")
-    seconds = expected * each / cores
+    # the design's grains are spread log-uniformly from DESIGN_ACROSS_LOW to its top resolution: most are far
+    # cheaper than the twins (the mean of across³ over that spread)
+    fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
+    design_seconds = sum(design_grains * (FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * _log_uniform_cube_mean(
+        DESIGN_ACROSS_LOW, highs[m]) / FIT_ACROSS_REF**3) for m in fresh)
+    seconds = ((expected - design_grains * len(fresh)) * each + design_seconds) / cores
     if seconds > 60 * max_minutes:
         cap = (f" or --max-voxels-across (now {max_across:g})" if max_across
                else f" or set --max-voxels-across (e.g. {MAX_VOXELS_ACROSS:g})")
@@ -474,6 +489,19 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
             f"grains at {duration(each) if each >= 1 else f'{each * 1000:.2g} ms'} each, {across.mean():.0f} "
             f"voxels across), over --max-minutes {max_minutes:g}: raise --max-minutes, lower {option}{cap}")
     return seconds
+
+
+def _log_uniform_cube_mean(low: float, high: float) -> float:
+    """The mean of a³ for a log-uniform on [low, high]: (high³ − low³) / (3 ln(high / low)).
+
+    Examples
+    --------
+    >>> round(_log_uniform_cube_mean(10.0, 150.0) / 150.0**3, 3)
+    0.123
+    """
+    if high <= low:
+        return float(low) ** 3
+    return (high**3 - low**3) / (3.0 * math.log(high / low))
 
 
 # --------------------------------------------------------------------------- recipes
@@ -529,9 +557,10 @@ def recipe_text(method: str, params: Mapping[str, Any], sand: Sand, *, count: in
 
 
 def twin_recipe_text(spec: MethodFit, grains: Sequence[Mapping[str, Any]], size_mm: Sequence[float], *,
-                     seed: int, fmt: str = "stl", header: str = "") -> str:
+                     seed: int, fmt: str = "stl", header: str = "", seeds: Sequence[int] | None = None) -> str:
     """A ``grainforge batch`` recipe of twins: ``spec.fixed`` in ``[params]``, each grain's own parameters and
-    size in ``[grains]`` (one value per grain, in grain order).
+    size in ``[grains]`` (one value per grain, in grain order), and each grain's seed when ``seeds`` is given
+    and any differs from the one ``batch`` would give it (:func:`grain_seed`).
 
     Examples
     --------
@@ -550,6 +579,8 @@ def twin_recipe_text(spec: MethodFit, grains: Sequence[Mapping[str, Any]], size_
               f"size_mm = {_toml([float(s) for s in size_mm])}"]
     for name in grains[0]:
         lines.append(f"{name} = {_toml([g[name] for g in grains])}")
+    if seeds is not None and any(int(s) != grain_seed(seed, i) for i, s in enumerate(seeds)):
+        lines.append(f"seed = [{', '.join(str(int(s)) for s in seeds)}]")
     return "\n".join(lines) + "\n"
 
 
@@ -618,6 +649,19 @@ def grain_seed(root: int, index: int) -> int:
     from .population import grain_stream
 
     return int(grain_stream(root, index).integers(0, 2**63))
+
+
+def reseed_seed(root: int, index: int, attempt: int) -> int:
+    """Twin ``index``'s seed at reseed try ``attempt`` (from 0) of a fit with root seed ``root`` (written to the
+    recipe's ``[grains] seed`` column when kept).
+
+    Examples
+    --------
+    >>> a = reseed_seed(2024, 3, 0)
+    >>> a == reseed_seed(2024, 3, 0), a != reseed_seed(2024, 3, 1), a != grain_seed(2024, 3)
+    (True, True, True)
+    """
+    return int(np.random.default_rng([int(root), int(index), 1 + int(attempt), 0x5EED]).integers(0, 2**63))
 
 
 class _Pool:
@@ -849,6 +893,8 @@ class FitResult:
     identifiable: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: the sand's mean settings estimated from its descriptors' means (:func:`population_settings`)
     population: Population | None = None
+    #: each grain's seed (as the recipe makes it)
+    seeds: list[int] = field(default_factory=list)
 
 
 def choose_rows(n: int, count: int | None, seed: int) -> np.ndarray:
@@ -896,6 +942,16 @@ class _Twins:
         """(n,) bool: the generator has made and measured the grain at some settings tried."""
         return np.all(np.isfinite(self.best_y), axis=1)
 
+    def keep_reseeded(self, idx: np.ndarray, u: np.ndarray, y: np.ndarray, seeds: Sequence[int],
+                      reach: np.ndarray) -> np.ndarray:
+        """Keep, for twins ``idx``, the grains made with other ``seeds`` at settings ``u`` that come closer than
+        their best so far; returns which were kept."""
+        better = self.relative(y, idx) < self.relative(self.best_y[idx], idx)
+        for k in np.flatnonzero(better):
+            i = idx[k]
+            self.best_u[i], self.best_y[i], self.u[i], self.seeds[i], self.reach[i] = u[k], y[k], u[k], seeds[k], reach[k]
+        return better
+
     def keep_best(self, idx: np.ndarray, y: np.ndarray) -> None:
         if self.best_y is None:
             self.best_u, self.best_y = self.u.copy(), np.full_like(self.targets, np.nan)
@@ -936,6 +992,37 @@ def _refine(tw: _Twins, model, idx: np.ndarray, y: np.ndarray) -> None:
     u[refused] = _toward_middle(tw.u[idx][refused])
     tw.u[idx] = u
     tw.reach[idx] = miss
+
+
+def _reseed(tw: _Twins, model, pool: _Pool, root: int, tries: int, progress, note, name) -> None:
+    """Twins still off by more than :data:`TWIN_TOL` try other seeds: each is made at its best settings with a
+    new seed, then once more at the settings the model gives with that seed's own offset, and keeps the closer
+    of the two if it beats its best.  Where a grain's seed shapes a descriptor as much as a setting can (the
+    angular method's sphericity and convexity), another seed can put the sand grain within reach."""
+    from .twins import invert
+
+    for k in range(tries):
+        idx = np.flatnonzero(tw.error(tw.best_y) > TWIN_TOL)
+        if not len(idx):
+            return
+        seeds = [reseed_seed(root, int(i), k) for i in idx]
+        u0 = tw.best_u[idx].copy()
+        name(f"reseed {k + 1}/{tries}")
+        jobs = [(tw.spec.grain_params(u0[j]), seeds[j], float(tw.across[i])) for j, i in enumerate(idx)]
+        y0 = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress)
+        pred = model.predict(u0, tw.across[idx])
+        made = np.all(np.isfinite(y0), axis=1)
+        u1, reach = invert(model, tw.targets[idx], tw.across[idx], offsets=np.where(made[:, None], y0 - pred, 0.0),
+                           start=u0, scale=tw.tol)
+        u1[~made] = u0[~made]
+        jobs = [(tw.spec.grain_params(u1[j]), seeds[j], float(tw.across[i])) for j, i in enumerate(idx)]
+        y1 = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress)
+        first = tw.relative(y0, idx) <= tw.relative(y1, idx)
+        u = np.where(first[:, None], u0, u1)
+        y = np.where(first[:, None], y0, y1)
+        kept = tw.keep_reseeded(idx, u, y, seeds, np.where(first, tw.reach[idx], reach))
+        note(f"reseed {k + 1}: {len(idx)} twins off by more than {TWIN_TOL} tried another seed, {int(kept.sum())} "
+             f"came closer; {_twin_summary(tw)}")
 
 
 def _toward_middle(u: np.ndarray) -> np.ndarray:
@@ -1090,6 +1177,7 @@ def fit_sand(
     *,
     count: int | None = 500,
     refine: int = 4,
+    reseed: int = RESEED,
     seed: int = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
@@ -1110,6 +1198,10 @@ def fit_sand(
     refine : int
         Rounds of per-grain refinement of the twins that miss by more than
         :data:`REFINE_TOL`.
+    reseed : int
+        Other seeds tried by each twin still off by more than :data:`TWIN_TOL`
+        after the refinement (:func:`reseed_seed`; a kept seed is written to
+        the recipe's ``[grains] seed``).
     workers : int
         Processes measuring grains (1: this process).
     sphericity : {"atlas", "whole"}
@@ -1174,6 +1266,7 @@ def fit_sand(
                 break
             idx, y = idx[keep], y[keep]
             _refine(tw, model, idx, y)
+        _reseed(tw, model, pool, seed, reseed, progress, note, name)
         _make_refused(tw, pool, progress, note, name)
     return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool, known, population)
 
@@ -1194,11 +1287,11 @@ def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int
     gen = np.column_stack([np.asarray(size_mm) * 1000.0, tw.best_y])
     header = _recipe_header(sand, spec.method, st, len(rows), known, population)
     own = [spec.grain_params(u) for u in tw.best_u]
-    text = twin_recipe_text(spec, own, size_mm, seed=seed, header=header)
+    text = twin_recipe_text(spec, own, size_mm, seed=seed, header=header, seeds=tw.seeds)
     return FitResult(method=spec.method, recipe=text, stats=st, generated=gen, sand_rows=rows,
                      settings=[spec.values(u) for u in tw.best_u], reachable=reachable, history=history,
                      seconds=seconds, cpu_seconds=pool.cpu, grains_measured=pool.grains, targets=tw.targets,
-                     identifiable=known, population=population)
+                     identifiable=known, population=population, seeds=list(tw.seeds))
 
 
 def _unreachable_by(tw: _Twins, out: np.ndarray) -> dict[str, int]:
@@ -1230,7 +1323,7 @@ def _recipe_header(sand: Sand, method: str, st: dict, n: int, known: dict[str, t
 
 
 # --------------------------------------------------------------------------- outputs
-TWIN_COLUMNS = ("grain", "sand_row", "sand_d_eq_um", "d_eq_um",
+TWIN_COLUMNS = ("grain", "seed", "sand_row", "sand_d_eq_um", "d_eq_um",
                 *[f"{w}_{k}" for k in DESCRIPTORS for w in ("sand", "twin")], "max_difference", "within",
                 "reachable")
 
@@ -1241,7 +1334,8 @@ def twin_rows(result: FitResult) -> list[dict[str, Any]]:
     err = result.twin_error
     rows = []
     for i, j in enumerate(result.sand_rows):
-        row: dict[str, Any] = {"grain": i, "sand_row": int(j) + 1, "sand_d_eq_um": result.generated[i, 0],
+        row: dict[str, Any] = {"grain": i, "seed": result.seeds[i] if result.seeds else "",
+                               "sand_row": int(j) + 1, "sand_d_eq_um": result.generated[i, 0],
                                "d_eq_um": result.generated[i, 0]}
         for c, k in enumerate(DESCRIPTORS):
             row[f"sand_{k}"] = float(result.targets[i, c])

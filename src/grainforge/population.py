@@ -284,6 +284,11 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
                   size_definition=definition, sampling=sampling, text=text, source=source, grains=grains)
 
 
+#: ``[grains]`` columns that are not generator parameters: each grain's size, and its own seed (instead of the
+#: one drawn from the recipe's root seed; ``grainforge fit`` writes it for twins it made with another seed)
+GRAIN_COLUMNS = ("size_mm", "seed")
+
+
 def _grains(raw, pspecs, typical, params_type, count, method, fail) -> dict[str, tuple]:
     """``[grains]``: one fixed value per grain for some parameters (and ``size_mm``), each checked,
     and each grain's whole parameter set checked by the method (as ``grainforge fit`` writes twins)."""
@@ -295,9 +300,9 @@ def _grains(raw, pspecs, typical, params_type, count, method, fail) -> dict[str,
 
     out: dict[str, tuple] = {}
     for name, values in raw.items():
-        if name != "size_mm" and name not in pspecs:
-            fail(["grains", name], f"is not a {method} parameter or size_mm (expected one of "
-                                   f"{', '.join(list(pspecs) + ['size_mm'])})")
+        if name not in GRAIN_COLUMNS and name not in pspecs:
+            fail(["grains", name], f"is not a {method} parameter, size_mm or seed (expected one of "
+                                   f"{', '.join(list(pspecs) + list(GRAIN_COLUMNS))})")
         if not isinstance(values, list) or len(values) != count:
             fail(["grains", name], f"must be a list of count = {count} values, one per grain, got "
                                    f"{len(values) if isinstance(values, list) else type(values).__name__}")
@@ -309,13 +314,17 @@ def _grains(raw, pspecs, typical, params_type, count, method, fail) -> dict[str,
                 if not (_number(v) and MIN_SIZE_MM <= v <= MAX_SIZE_MM):
                     fail(["grains", name], f"grain {i}: must be in [{MIN_SIZE_MM:g}, {MAX_SIZE_MM:g}] mm, got {v!r}")
                 checked.append(float(v))
+            elif name == "seed":
+                if not (isinstance(v, int) and not isinstance(v, bool) and 0 <= v < 2**63):
+                    fail(["grains", name], f"grain {i}: must be a whole number in [0, 2^63), got {v!r}")
+                checked.append(int(v))
             else:
                 try:
                     checked.append(pspecs[name].check(v))
                 except ParameterError as exc:
                     fail(["grains", name], f"grain {i}: {exc.reason}")
         out[name] = tuple(checked)
-    names = [n for n in out if n != "size_mm"]
+    names = [n for n in out if n not in GRAIN_COLUMNS]
     for i in range(count if names else 0):
         try:
             params_type(**{**typical, **{n: out[n][i] for n in names}})
@@ -556,6 +565,8 @@ def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
     size = recipe.size.sample(size_quantile(recipe, index, float(rng.random())))
     if "size_mm" in recipe.grains:
         size = recipe.grains["size_mm"][index]
+    if "seed" in recipe.grains:  # the grain's own seed; the stream above is still drawn, so nothing else moves
+        seed = recipe.grains["seed"][index]
     try:
         params = params_type(**values)
     except ParameterError as exc:
