@@ -313,17 +313,23 @@ def test_twins_of_a_small_population_meet_the_criteria(design_cache):
         assert np.mean([s[k] for s in result.settings]) == pytest.approx(truth, rel=0.05), k
 
 
-@pytest.mark.slow  # about 600 angular grains at about 30 voxels across (about 40 s of CPU)
-def test_the_synthetic_angular_sands_mean_settings_are_recovered_within_their_standard_errors(design_cache):
+@pytest.mark.slow  # about 1,300 angular grains at about 30 voxels across (about 70 s of CPU)
+def test_the_synthetic_angular_sands_mean_settings_are_recovered_and_reseeding_reaches_its_grains(design_cache):
     """The fit's estimate of the sand's mean settings (from its descriptors' means), on the synthetic angular
     sand, against the known settings' means: the aspect's ratios within 5 % (their standard errors are about
     1 %), every setting within 3 standard errors; rounding's standard error is wide, as the information in the
-    sand's means allows (docs/fit.md, "What the fitted settings say about the sand")."""
-    from grainforge.fit import fit_sand
+    sand's means allows (docs/fit.md, "What the fitted settings say about the sand").  And the twins that the
+    refinement leaves off by more than 0.03 (a third: their own seed puts them out of the settings' reach) are
+    mostly brought within it by other seeds."""
+    from grainforge.fit import TWIN_TOL, fit_sand
 
     sand = read_sand(ANGULAR_SAND)
-    result = fit_sand(sand, "angular", count=150, refine=0, design_grains=200, max_across=TEST_ACROSS,
-                      cache=design_cache)
+    lines = []
+    result = fit_sand(sand, "angular", count=150, refine=2, design_grains=200, max_across=TEST_ACROSS,
+                      cache=design_cache, log=lines.append)
+    refined = [float(re.search(r"; ([\d.]+)% of twins within", line)[1]) for line in lines
+               if line.startswith("refine ")]
+    assert refined[-1] < 75 and np.mean(result.twin_error <= TWIN_TOL) >= 0.85, (refined, lines[-1])
     known = list(csv.DictReader(ANGULAR_SAND.with_name("synthetic-angular-sand-settings.csv")
                                 .read_text(encoding="utf-8").splitlines()))
     pop = result.population

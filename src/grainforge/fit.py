@@ -32,6 +32,9 @@ How
    gets new settings from the model plus its own offset (measured minus
    predicted: what its seed and orientation add) and is measured again, up
    to ``refine`` times; each grain keeps its closest twin.
+6. **Reseeding** (:func:`_reseed`): a twin still more than :data:`TWIN_TOL`
+   off tries up to ``reseed`` other seeds (:func:`reseed_seed`), written to
+   the recipe's ``[grains] seed`` when one comes closer.
 
 The fit **passes** when, on the population: each descriptor's two-sample KS
 statistic ≤ :data:`KS_MAX` and mean within :data:`MEAN_TOL`; each of the six
