@@ -789,8 +789,6 @@ POPULATION_GRAINS = 300
 POPULATION_ROUNDS = 2
 #: a setting whose axis the descriptors' means see less than this much is "not determined by the means": a
 #: combination of it with other settings that leaves all four means as they are moves it (more settings than
-#: descriptors: rf's three surface settings), so its estimate is the starting population's, not the sand's: a
-#: combination of it with other settings that leaves all four means as they are moves it (more settings than
 #: descriptors: rf's three surface settings), so its estimate is the starting population's, not the sand's
 DETERMINED_MIN = 0.98
 
