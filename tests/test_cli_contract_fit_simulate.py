@@ -30,6 +30,7 @@ import re
 import signal
 import subprocess
 import sys
+import textwrap
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -545,3 +546,57 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
     stage, created = open_stage(fresh)
     discard_stage(stage, fresh, created)  # an interrupted run in a folder it created leaves no folder
     assert created and not fresh.exists()
+
+
+def _python(code: str) -> subprocess.Popen:
+    return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+
+
+def test_a_signal_swallowed_by_a_library_still_ends_the_command_after_the_grace():
+    """A library's ``except BaseException`` (trimesh guards its optional imports so) can swallow the exception a
+    SIGTERM raises; the command then still ends, with the usual line and code, SIGNAL_GRACE seconds later."""
+    code = textwrap.dedent("""
+        import signal, sys, time
+        import grainforge.cli.main as m
+        m.SIGNAL_GRACE = 0.5
+        signal.signal(signal.SIGTERM, m._terminate)
+        while True:
+            try:
+                print("ready", flush=True)
+                time.sleep(60)  # where the one signal lands (inside the try, not on the loop's own line)
+            except BaseException:
+                pass
+    """)
+    proc = _python(code)
+    assert proc.stdout.readline() == b"ready\n"
+    os.killpg(proc.pid, signal.SIGTERM)
+    _, err = proc.communicate(timeout=30)
+    assert proc.returncode == 128 + signal.SIGTERM and err.decode().strip() == "Terminated.", err.decode()
+
+
+def test_a_signal_raised_inside_a_finalizer_is_raised_again_in_the_main_thread():
+    """Python reports an exception raised inside a finalizer and goes on; the command's hook turns a signal's
+    exception there into the signal again, so the command stops at the next line of its own code, no traceback."""
+    code = textwrap.dedent("""
+        import sys
+        import grainforge.cli.main as m
+        import signal
+        signal.signal(signal.SIGTERM, m._terminate)
+        sys.unraisablehook = m._signal_in_finalizer(sys.unraisablehook)
+        class Finalized:
+            def __del__(self):
+                raise m.Terminated()
+        import time
+        try:
+            Finalized()
+            end = time.monotonic() + 5
+            while time.monotonic() < end:
+                pass
+            print("ran on")
+        except m.Terminated:
+            print("stopped")
+    """)
+    proc = _python(code)
+    out, err = proc.communicate(timeout=30)
+    assert out.decode().strip() == "stopped" and b"Traceback" not in err, (out, err)

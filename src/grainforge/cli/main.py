@@ -57,8 +57,56 @@ class Terminated(BaseException):
     """Raised in the main thread on SIGTERM, so every ``finally`` cleans up (staging folders, temp files, pools)."""
 
 
+#: seconds a command has, after SIGINT or SIGTERM, to clean up and leave by the usual path; past them it prints
+#: the signal's line and ends at once.  The exception a signal raises can be lost: raised inside a finalizer
+#: (Python then reports it and goes on) or inside a library's ``except BaseException`` (trimesh guards its
+#: optional imports so), the command would otherwise run on to its end.
+SIGNAL_GRACE = 15.0
+_LEAVING: list[int] = []
+
+
+def _leave_within_grace(signum: int) -> None:
+    if _LEAVING:
+        return
+    _LEAVING.append(signum)
+
+    def leave() -> None:  # pragma: no cover - only when the signal's exception was lost
+        try:
+            sys.stderr.write(("Interrupted." if signum == signal.SIGINT else "Terminated.") + "\n")
+            sys.stderr.flush()
+        finally:
+            os._exit(128 + signum)
+
+    timer = threading.Timer(SIGNAL_GRACE, leave)
+    timer.daemon = True
+    timer.start()
+
+
 def _terminate(signum, frame):
+    _leave_within_grace(signum)
     raise Terminated()
+
+
+def _interrupt(signum, frame):
+    _leave_within_grace(signum)
+    raise KeyboardInterrupt
+
+
+def _signal_in_finalizer(hook):
+    """An unraisable-exception hook: a signal's exception raised inside a finalizer (where Python would print it
+    and go on) is raised again, by the signal, in the main thread; anything else goes to ``hook``."""
+
+    def unraisable(args) -> None:
+        if isinstance(args.exc_value, (Terminated, KeyboardInterrupt)):
+            # sent again a moment later, so that its handler runs after this hook, in the main thread's own code
+            sig = signal.SIGTERM if isinstance(args.exc_value, Terminated) else signal.SIGINT
+            timer = threading.Timer(0.05, os.kill, (os.getpid(), sig))
+            timer.daemon = True
+            timer.start()
+        else:
+            hook(args)
+
+    return unraisable
 
 
 class GrainforgeGroup(click.Group):
@@ -70,9 +118,17 @@ class GrainforgeGroup(click.Group):
 
         main_thread = threading.current_thread() is threading.main_thread()
         previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
+        # Ctrl-C: KeyboardInterrupt as usual, with the same grace (an inherited ignored SIGINT stays ignored)
+        own_int = main_thread and signal.getsignal(signal.SIGINT) is signal.default_int_handler
+        if own_int:
+            signal.signal(signal.SIGINT, _interrupt)
+        hook, sys.unraisablehook = sys.unraisablehook, _signal_in_finalizer(sys.unraisablehook)
         try:
             rv = self._main(args, prog_name, complete_var, standalone_mode, **extra)
         finally:
+            sys.unraisablehook = hook
+            if own_int:
+                signal.signal(signal.SIGINT, signal.default_int_handler)
             if main_thread:
                 signal.signal(signal.SIGTERM, previous)
         return rv
