@@ -469,8 +469,9 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
              for m in methods}
     dear = max(methods, key=lambda m: costs[m])
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
+    fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
     expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
-                                cached=lambda m: design_path(m, convention, highs[m], design_grains, cache).exists())
+                                cached=lambda m: m not in fresh)
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     cores = max(1, min(int(workers), os.cpu_count() or 1))
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
@@ -480,7 +481,6 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
                       "across,", option=f"{option}, --max-voxels-across or --workers")
     # the design's grains are spread log-uniformly from DESIGN_ACROSS_LOW to its top resolution: most are far
     # cheaper than the twins (the mean of across³ over that spread)
-    fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
     design_seconds = sum(design_grains * (FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * _log_uniform_cube_mean(
         DESIGN_ACROSS_LOW, highs[m]) / FIT_ACROSS_REF**3) for m in fresh)
     seconds = ((expected - design_grains * len(fresh)) * each + design_seconds) / cores
@@ -948,9 +948,11 @@ class _Twins:
         """Keep, for twins ``idx``, the grains made with other ``seeds`` at settings ``u`` that come closer than
         their best so far; returns which were kept."""
         better = self.relative(y, idx) < self.relative(self.best_y[idx], idx)
-        for k in np.flatnonzero(better):
-            i = idx[k]
-            self.best_u[i], self.best_y[i], self.u[i], self.seeds[i], self.reach[i] = u[k], y[k], u[k], seeds[k], reach[k]
+        kept = idx[better]
+        self.best_u[kept] = self.u[kept] = u[better]
+        self.best_y[kept], self.reach[kept] = y[better], reach[better]
+        for i, s in zip(kept, np.asarray(seeds)[better]):
+            self.seeds[i] = int(s)
         return better
 
     def keep_best(self, idx: np.ndarray, y: np.ndarray) -> None:
@@ -1061,7 +1063,6 @@ class Population:
     mean: dict[str, float]
     se: dict[str, float]
     determined: dict[str, float]
-    gap: np.ndarray  # (4,) sand's mean descriptors − the made population's, at the last round
     grains: int  # grains made per round
 
     def text(self) -> str:
@@ -1141,7 +1142,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     names = [st.name for st in spec.all_settings]
     values = spec.values(est)
     return Population(mean=values, se={k: float(e) for k, e in zip(names, se * width)},
-                      determined={k: float(d) for k, d in zip(names, determined)}, gap=gap, grains=m)
+                      determined={k: float(d) for k, d in zip(names, determined)}, grains=m)
 
 
 def _twin_summary(tw: _Twins) -> str:

@@ -52,8 +52,8 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
               help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
                    "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
 @click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv and fit.png in --out.")
-def fit(sand, out, voxel_size, method, count, refine, reseed, design_grains, max_across, max_minutes, cache_dir, seed,
-        workers, sphericity, overwrite):
+def fit(sand, out, voxel_size, method, count, refine, reseed, design_grains, max_across, max_minutes, cache_dir,
+        seed, workers, sphericity, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
 
     Every generated grain is the twin of one sand grain: its size, and
@@ -63,9 +63,10 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, design_grains, max
     convexity, flatness and elongation; twins that miss are refined.  Passes
     when per descriptor KS <= 0.1 and mean within 0.01, each Spearman
     correlation within 0.1 of the sand's, and >= 90 % of the reachable twins
-    within 0.03; twins still off after the refinement try other seeds.  Writes DIR/recipe.toml (runs with `grainforge batch` as
-    is), DIR/fit.csv (sand row beside twin), DIR/fit-stats.csv and
-    DIR/fit.png.  See docs/fit.md.
+    within 0.03; twins still off after the refinement try other seeds.
+    Writes DIR/recipe.toml (runs with `grainforge batch` as is), DIR/fit.csv
+    (sand row beside twin), DIR/fit-stats.csv and DIR/fit.png.  See
+    docs/fit.md.
     """
     import os
     import sys
@@ -99,8 +100,8 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, design_grains, max
     click.echo(f"{s.name}: {s.count} grains, voxel {s.voxel_size:g} µm, d_eq {s.equivalent_diameter.mean():.0f} "
                f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
                "across)", err=True)
-    result = fit_sand(s, method, count=count, refine=refine, reseed=reseed, seed=seed, workers=workers, sphericity=sphericity,
-                      max_across=max_across, design_grains=design_grains, cache=cache_dir, progress=progress,
+    result = fit_sand(s, method, count=count, refine=refine, reseed=reseed, seed=seed, workers=workers,
+                      sphericity=sphericity, max_across=max_across, design_grains=design_grains, cache=cache_dir, progress=progress,
                       log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
     paths = write_outputs(s, result, out)
     verdict = "PASSES" if result.stats["pass"] else "does NOT pass"

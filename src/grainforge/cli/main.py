@@ -51,6 +51,7 @@ import click  # noqa: E402
 
 from .._version import __version__  # noqa: E402
 from ..params import ParameterError  # noqa: E402
+from .interrupts import _exit_now  # noqa: E402
 
 
 class Terminated(BaseException):
@@ -69,15 +70,7 @@ def _leave_within_grace(signum: int) -> None:
     if _LEAVING:
         return
     _LEAVING.append(signum)
-
-    def leave() -> None:  # pragma: no cover - only when the signal's exception was lost
-        try:
-            sys.stderr.write(("Interrupted." if signum == signal.SIGINT else "Terminated.") + "\n")
-            sys.stderr.flush()
-        finally:
-            os._exit(128 + signum)
-
-    timer = threading.Timer(SIGNAL_GRACE, leave)
+    timer = threading.Timer(SIGNAL_GRACE, _exit_now, (signum, None))  # the signal's line, then exit 128 + signum
     timer.daemon = True
     timer.start()
 
