@@ -600,3 +600,40 @@ def test_a_signal_raised_inside_a_finalizer_is_raised_again_in_the_main_thread()
     proc = _python(code)
     out, err = proc.communicate(timeout=30)
     assert out.decode().strip() == "stopped" and b"Traceback" not in err, (out, err)
+
+
+def test_a_signal_a_compiled_extension_cannot_pass_on_stops_the_command_without_a_traceback():
+    """A compiled extension (SciPy's Sobol tables were one, in CI) reports an exception it cannot pass on twice:
+    its traceback through ``sys.excepthook``, then the unraisable hook.  Here the command meets the same two
+    calls (the second through a finalizer, as CPython makes it); it prints its one line and exits 143."""
+    code = textwrap.dedent("""
+        import sys, time
+        import click
+        import grainforge.cli.main as m
+
+        class Finalized:
+            def __del__(self):
+                raise m.Terminated()
+
+        @click.group(cls=m.GrainforgeGroup)
+        def cli():
+            pass
+
+        @cli.command()
+        def work():
+            try:
+                raise m.Terminated()
+            except m.Terminated as exc:
+                sys.excepthook(type(exc), exc, exc.__traceback__)  # the traceback Cython prints first
+            Finalized()  # then the unraisable hook
+            end = time.monotonic() + 5
+            while time.monotonic() < end:
+                pass
+            print("ran on")
+
+        cli(["work"])
+    """)
+    proc = _python(code)
+    out, err = proc.communicate(timeout=30)
+    assert proc.returncode == 143 and b"ran on" not in out, (proc.returncode, out, err)
+    assert err.decode().strip() == "Terminated.", err.decode()

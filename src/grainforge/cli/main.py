@@ -102,6 +102,18 @@ def _signal_in_finalizer(hook):
     return unraisable
 
 
+def _quiet_signal(hook):
+    """An exception hook that prints nothing for a signal's exception.  Compiled extensions (SciPy's Sobol
+    tables, for one) report an exception they cannot pass on twice: its traceback through this hook, then the
+    unraisable hook; the second raises the signal again, so the first must stay silent."""
+
+    def excepthook(kind, value, tb) -> None:
+        if not isinstance(value, (Terminated, KeyboardInterrupt)):
+            hook(kind, value, tb)
+
+    return excepthook
+
+
 class GrainforgeGroup(click.Group):
     """A click group that reports errors as a single line."""
 
@@ -116,10 +128,11 @@ class GrainforgeGroup(click.Group):
         if own_int:
             signal.signal(signal.SIGINT, _interrupt)
         hook, sys.unraisablehook = sys.unraisablehook, _signal_in_finalizer(sys.unraisablehook)
+        excepthook, sys.excepthook = sys.excepthook, _quiet_signal(sys.excepthook)
         try:
             rv = self._main(args, prog_name, complete_var, standalone_mode, **extra)
         finally:
-            sys.unraisablehook = hook
+            sys.unraisablehook, sys.excepthook = hook, excepthook
             if own_int:
                 signal.signal(signal.SIGINT, signal.default_int_handler)
             if main_thread:
