@@ -20,7 +20,16 @@ descriptors' means, where the seed's share averages out) against the known
 means of all rows, in per cent and in its own standard errors.  Usage::
 
     nice .venv/bin/python benchmarks/fit_recovery.py [--sand tests/data/synthetic-angular-sand.csv]
-        [--method angular] [--design-grains 200] [--max-across 40] [--refine 4] [--workers 1] [--seed 2024]
+        [--method angular] [--design-grains 200] [--max-across 40] [--refine 4] [--reseed 6]
+        [--population-grains 300] [--workers 1] [--seed 2024]
+
+How the mean settings' error falls with the sand's size: a 20,000-grain synthetic angular sand (its first 300
+rows are the suite's) with every row remade in the estimate::
+
+    nice .venv/bin/python benchmarks/make_synthetic_sand.py --grains 20000 --out benchmarks/out/big-angular \
+        --workers 2
+    nice .venv/bin/python benchmarks/fit_recovery.py --sand benchmarks/out/big-angular/synthetic-angular-sand.csv \
+        --refine 0 --reseed 0 --population-grains 20000 --workers 2
 
 The design is measured into a fresh cache under ``benchmarks/out`` (its
 resolution range is the sand's, 10 to ``--max-across`` voxels across).
@@ -43,13 +52,16 @@ def main() -> None:
     ap.add_argument("--design-grains", type=int, default=200)
     ap.add_argument("--max-across", type=float, default=40.0)
     ap.add_argument("--refine", type=int, default=4)
+    ap.add_argument("--reseed", type=int, default=None, help="[default: the fit's]")
+    ap.add_argument("--population-grains", type=int, default=None,
+                    help="twins remade per round of the mean-settings estimate [default: the fit's, 300]")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--seed", type=int, default=2024, help="the fit's seed (its twins' seeds)")
     args = ap.parse_args()
     import numpy as np
     from scipy.stats import spearmanr
 
-    from grainforge.fit import fit_sand, read_sand
+    from grainforge.fit import POPULATION_GRAINS, RESEED, fit_sand, read_sand
 
     sand = read_sand(args.sand)
     known_path = args.sand.with_name(args.sand.stem + "-settings.csv")
@@ -57,6 +69,8 @@ def main() -> None:
         known = list(csv.DictReader(fh))
     t, cpu = time.perf_counter(), time.process_time()
     result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
+                      reseed=RESEED if args.reseed is None else args.reseed,
+                      population_grains=args.population_grains or POPULATION_GRAINS,
                       max_across=args.max_across, workers=args.workers,
                       cache=ROOT / "benchmarks" / "out" / "fit-recovery-cache", log=lambda s: print(s, flush=True))
     print(f"{sand.name}: {result.method}, {len(result.generated)} twins, {result.grains_measured} grains measured, "

@@ -17,9 +17,14 @@ made and measured the same way, settings in ``synthetic-rf-sand-settings.csv``.
 of d_eq about 200 µm at 1 µm voxels, each measured at its full resolution
 (140 to 290 voxels across): a table at a resolution the fit measures capped.
 
-Deterministic; usage::
+Deterministic (for any ``--workers``); usage::
 
-    nice .venv/bin/python benchmarks/make_synthetic_sand.py [angular|rf|fine]
+    nice .venv/bin/python benchmarks/make_synthetic_sand.py [angular|rf|fine] [--grains N] [--out DIR]
+        [--workers 2]
+
+With ``--grains`` larger than the default, the sand's first rows are the
+default sand's (the draws are made row by row): ``fit_recovery.py --big``
+twins such a sand of 20,000 angular grains.
 """
 
 from __future__ import annotations
@@ -47,49 +52,69 @@ RF_DECAY = -5.0 / 3.0
 
 
 def main() -> None:
-    import sys
+    import argparse
 
-    which = sys.argv[1] if sys.argv[1:] else "angular"
-    if which == "fine":
-        make("rf", "synthetic-1um-sand.csv", FINE, FINE_GRAINS, FINE_VOXEL_UM, FINE_D_UM, settings=None)
-    elif which == "rf":
-        make("rf", "synthetic-rf-sand.csv", KNOWN_RF, GRAINS, VOXEL_UM, 400.0, settings="synthetic-rf-sand-settings.csv")
+    ap = argparse.ArgumentParser()
+    ap.add_argument("which", nargs="?", default="angular", choices=["angular", "rf", "fine"])
+    ap.add_argument("--grains", type=int, default=None,
+                    help="grains of the sand [default: 300 angular, 150 rf, 100 fine]; the first rows of a larger "
+                         "sand are the default sand's rows")
+    ap.add_argument("--out", type=Path, default=DATA, help="folder of the CSVs [default: tests/data]")
+    ap.add_argument("--workers", type=int, default=1)
+    args = ap.parse_args()
+    kw = {"out": args.out, "workers": args.workers}
+    if args.which == "fine":
+        make("rf", "synthetic-1um-sand.csv", FINE, args.grains or FINE_GRAINS, FINE_VOXEL_UM, FINE_D_UM, settings=None,
+             **kw)
+    elif args.which == "rf":
+        make("rf", "synthetic-rf-sand.csv", KNOWN_RF, args.grains or GRAINS, VOXEL_UM, 400.0,
+             settings="synthetic-rf-sand-settings.csv", **kw)
     else:
-        make("angular", "synthetic-angular-sand.csv", KNOWN_ANGULAR, ANGULAR_GRAINS, VOXEL_UM, 400.0,
-             settings="synthetic-angular-sand-settings.csv")
+        make("angular", "synthetic-angular-sand.csv", KNOWN_ANGULAR, args.grains or ANGULAR_GRAINS, VOXEL_UM, 400.0,
+             settings="synthetic-angular-sand-settings.csv", **kw)
 
 
 def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um: float,
-         settings: str | None) -> None:
+         settings: str | None, out: Path = DATA, workers: int = 1) -> None:
     import numpy as np
     from scipy.stats import truncnorm
 
-    from grainforge.fit import DESCRIPTORS, FITS, _measure, grain_seed
-    from grainforge.methods import get
+    from grainforge.fit import DESCRIPTORS, FITS, _Pool, grain_seed
 
     rng = np.random.default_rng(SEED)
     spec = FITS[method]
-    rows, truth = [], []
-    for i in range(grains):
+    drawn = []
+    for _ in range(grains):  # row by row, so that a larger sand begins with the smaller one's rows
         v = {k: float(truncnorm.rvs((lo - m) / s, (hi - m) / s, loc=m, scale=s, random_state=rng))
              for k, (m, s, lo, hi) in known.items()}
-        d_eq = float(d_um * math.exp(0.1 * rng.standard_normal()))
-        params = spec.params({**v, "roughness_decay": RF_DECAY} if method == "rf" else v)
-        d = _measure(method, get(method).Params(**{**spec.fixed, **params}), grain_seed(SEED, i), d_eq / voxel_um,
-                     "atlas")
-        rows.append([i + 1, math.pi / 6 * d_eq**3, d_eq, *d, voxel_um])
-        truth.append([i + 1, *(v[k] for k in known)])
-        print(f"grain {i + 1}/{grains}", end="\r", flush=True)
+        drawn.append((v, float(d_um * math.exp(0.1 * rng.standard_normal()))))
+    jobs = [(spec.params({**v, "roughness_decay": RF_DECAY} if method == "rf" else v), grain_seed(SEED, i),
+             d_eq / voxel_um) for i, (v, d_eq) in enumerate(drawn)]
+
+    def progress(it, total):
+        for n, x in enumerate(it, 1):
+            if n % 50 == 0 or n == total:
+                print(f"grain {n}/{total}", end="\r", flush=True)
+            yield x
+
+    with _Pool(workers) as pool:  # each grain measured the Atlas way (spam's cube)
+        table = pool.run(method, spec.fixed, jobs, progress)
+    print()
+    if not np.all(np.isfinite(table)):
+        raise SystemExit(f"the generator refused {int(np.sum(~np.all(np.isfinite(table), axis=1)))} grains")
+    rows = [[i + 1, math.pi / 6 * d_eq**3, d_eq, *map(float, d), voxel_um] for i, ((_, d_eq), d) in
+            enumerate(zip(drawn, table))]
+    truth = [[i + 1, *(v[k] for k in known)] for i, (v, _) in enumerate(drawn)]
     header = ["Particle ID", "Volume (µm³)", "Equivalent Diameter (µm)", "True Sphericity (-)", "Convexity (-)",
               "Flatness (-)", "Elongation (-)", "Voxel Size (µm)"]
     assert header[3:7] == [f"{'True Sphericity' if k == 'sphericity' else k.title()} (-)" for k in DESCRIPTORS]
     files = [(name, header, rows)] + ([(settings, ["Particle ID", *known], truth)] if settings else [])
+    out.mkdir(parents=True, exist_ok=True)
     for file, head, body in files:
-        with open(DATA / file, "w", newline="", encoding="utf-8") as fh:
+        with open(out / file, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
             w.writerow(head)
             w.writerows([[f"{x:.6g}" if isinstance(x, float) else x for x in r] for r in body])
-    table = np.array([r[3:7] for r in rows])
     print("measured mean ± sd:", ", ".join(f"{k} {table[:, j].mean():.3f} ± {table[:, j].std():.3f}"
                                           for j, k in enumerate(DESCRIPTORS)))
 

@@ -288,6 +288,11 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0, "reseed": 0})
     assert again.grains_measured == 50 * (1 + fitmod.POPULATION_ROUNDS)  # the design came from the cache
+    # the mean-settings estimate remakes as many twins as asked, each round, and the estimate counts them
+    fewer = fit_sand(sand, "rf", count=50, population_grains=20, **{**kw, "refine": 0, "reseed": 0})
+    assert fewer.grains_measured == 50 + 20 * fitmod.POPULATION_ROUNDS and fewer.population.grains == 20
+    assert fitmod.fit_grains("rf", count=50, design_grains=128, refine=0, population_grains=20,
+                             cached=lambda m: True)[0] == fewer.grains_measured
 
 
 @pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, the design shared with the plumbing test

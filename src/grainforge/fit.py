@@ -106,6 +106,9 @@ REFINE_SD = 0.3
 REFUSED_TRIES = 6
 #: twins still off by more than TWIN_TOL after the refinement try up to this many other seeds (``--reseed``)
 RESEED = 6
+#: the population estimate of the sand's mean settings remakes the first this many twins, this many rounds
+POPULATION_GRAINS = 300
+POPULATION_ROUNDS = 2
 #: the share of twins expected to be reseeded, and the most counted, for the up-front estimate
 RESEED_SHARE = 0.05
 RESEED_MOST = 0.5
@@ -402,11 +405,12 @@ def _written(v: Any) -> Any:
 
 # --------------------------------------------------------------------------- estimate
 def fit_grains(method: str, *, count: int, design_grains: int, refine: int, reseed: int = 0,
+               population_grains: int = POPULATION_GRAINS,
                cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
     """Grains a fit of ``method`` measures: (expected, at most).
 
     The design's grains (none when it is cached), the population estimate's
-    (:data:`POPULATION_ROUNDS` × up to :data:`POPULATION_GRAINS`), then each
+    (:data:`POPULATION_ROUNDS` × up to ``population_grains``), then each
     twin once, plus refinements: :data:`EXPECTED_MEASUREMENTS` per twin
     expected, ``1 + refine`` at most, plus two per reseeded twin and try
     (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most:
@@ -418,9 +422,11 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     --------
     >>> fit_grains("rf", count=500, design_grains=400, refine=3)
     (2600, 3000)
+    >>> fit_grains("rf", count=500, design_grains=400, refine=3, population_grains=500)
+    (3000, 3400)
     """
     designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
-    designs += POPULATION_ROUNDS * min(count, POPULATION_GRAINS)
+    designs += POPULATION_ROUNDS * min(count, population_grains)
     expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
     return expected, designs + count * (1 + refine) + int(round(count * 2 * reseed * RESEED_MOST))
 
@@ -446,7 +452,7 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
 
 
 def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
-                   reseed: int = RESEED,
+                   reseed: int = RESEED, population_grains: int = POPULATION_GRAINS,
                    max_across: float | str | None = METHOD_CAP, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
                    cache: str | os.PathLike | None = None) -> float:
@@ -471,7 +477,7 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
     fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
     expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
-                                cached=lambda m: m not in fresh)
+                                population_grains=population_grains, cached=lambda m: m not in fresh)
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     cores = max(1, min(int(workers), os.cpu_count() or 1))
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
@@ -784,9 +790,6 @@ def design(method: str, pool: _Pool, *, high: float, grains: int = DESIGN_GRAINS
 
 #: a setting predicted from a grain's descriptors with at least this cross-validated R² is called identifiable
 IDENTIFIABLE_R2 = 0.9
-#: the population estimate of the sand's mean settings remakes the first this many twins, this many rounds
-POPULATION_GRAINS = 300
-POPULATION_ROUNDS = 2
 #: a setting whose axis the descriptors' means see less than this much is "not determined by the means": a
 #: combination of it with other settings that leaves all four means as they are moves it (more settings than
 #: descriptors: rf's three surface settings), so its estimate is the starting population's, not the sand's
@@ -1085,15 +1088,16 @@ def _mean_jacobian(model, u: np.ndarray, across: np.ndarray, h: float = 1e-3) ->
 
 def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: np.ndarray, seeds: Sequence[int],
                         across: np.ndarray, pool: _Pool, progress=None, note=None, name=None,
-                        shrink: Sequence[float] | None = None) -> Population:
+                        shrink: Sequence[float] | None = None, grains: int = POPULATION_GRAINS) -> Population:
     """Estimate the sand's **mean** settings: shift a population until its mean descriptors are the sand's.
 
     A twin's settings are not its sand grain's: where the seed shapes a descriptor as much as a setting does,
     one grain's descriptors cannot say which setting made it (:func:`setting_identifiability`), and the twins'
     mean is pulled towards the middle of the design box.  The *population*'s mean setting is known far better:
-    the seed's share averages out over the sand's grains.  Starting from the first :data:`POPULATION_GRAINS`
-    twins' first settings ``u0`` (measured as ``y0``), every grain's settings are shifted by one common step
-    (the model's mean Jacobian, solved for the gap between the sand's mean descriptors and the made grains'),
+    the seed's share averages out over the sand's grains.  Starting from the first ``grains`` twins' first
+    settings ``u0`` (measured as ``y0``; :data:`POPULATION_GRAINS` in a fit at its defaults), every grain's
+    settings are shifted by one common step (the model's mean Jacobian, solved for the gap between the sand's
+    mean descriptors and the made grains'),
     remade with its own seed and measured, :data:`POPULATION_ROUNDS` times (a Newton iteration on measured
     means: the model only steers it, what is compared is measured).  The estimate is the mean settings of the
     round whose means came closest to the sand's, plus a last linear step for the gap left; its standard error propagates the sand's and the
@@ -1106,7 +1110,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     from .twins import population_error, population_step
 
     say, label = note or (lambda s: None), name or (lambda s: None)
-    m = min(len(u0), POPULATION_GRAINS)
+    m = min(len(u0), int(grains))
     u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
     table = sand.table()
     target, cov_sand, scale = table.mean(axis=0), np.cov(table.T) / len(table), table.std(axis=0)
@@ -1180,6 +1184,7 @@ def fit_sand(
     count: int | None = 500,
     refine: int = 4,
     reseed: int = RESEED,
+    population_grains: int = POPULATION_GRAINS,
     seed: int = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
@@ -1204,6 +1209,11 @@ def fit_sand(
         Other seeds tried by each twin still off by more than :data:`TWIN_TOL`
         after the refinement (:func:`reseed_seed`; a kept seed is written to
         the recipe's ``[grains] seed``).
+    population_grains : int
+        Twins remade in each round of the estimate of the sand's mean
+        settings (:func:`population_settings`; at most ``count``): its
+        standard errors shrink as one over the square root of the grains,
+        down to what the sand's own grain count allows.
     workers : int
         Processes measuring grains (1: this process).
     sphericity : {"atlas", "whole"}
@@ -1260,7 +1270,8 @@ def fit_sand(
             note(f"{'twins' if r == 0 else f'refine {r}'}: {len(idx)} grains measured; {_twin_summary(tw)}")
             if r == 0:
                 population = population_settings(spec, model, sand, tw.u, y, tw.seeds, tw.across, pool, progress,
-                                                 note, name, shrink=[r2 for r2, _ in known.values()])
+                                                 note, name, shrink=[r2 for r2, _ in known.values()],
+                                                 grains=population_grains)
                 note(f"population: the sand's mean settings from its descriptors' means (± standard error; "
                      f"{sand.count} sand grains, {population.grains} made): {population.text()}")
             keep = tw.relative(tw.best_y[idx], idx) > 1
