@@ -181,9 +181,13 @@ def missing_in(page: Path) -> list[str]:
                 continue
             if prog == "grainforge":
                 inputs, outputs = classify(tokens[1:])
-            else:  # another program (yade, python): the files it is given
-                inputs = [t for t in tokens[1:] if not t.startswith("-") and ("/" in t or FILE_SUFFIX.search(t))]
-                outputs = []
+            else:  # another program (yade, a benchmark script): the files it is given; what follows --out it writes
+                if prog == "nice":  # the program it runs, from the venv made by make
+                    tokens = tokens[1:]
+                rest = tokens[1:]
+                outputs = [v for k, v in zip(rest, rest[1:]) if k == "--out"]
+                inputs = [t for t in rest if not t.startswith("-") and ("/" in t or FILE_SUFFIX.search(t))
+                          and t not in outputs]
             problems += [f"{page.name}: `{' '.join(tokens)}` reads {i}, which nothing provides"
                          for i in inputs if not available(i, created, cwd)]
             created |= {_norm(o, cwd) for o in outputs}
@@ -202,7 +206,8 @@ def test_every_file_an_example_reads_exists(page):
 
 
 def test_the_checker_sees_a_missing_file_and_an_earlier_output(tmp_path):
-    """The rules themselves: a made-up input is reported; an earlier --out, a demo output and a repo file are not."""
+    """The rules themselves: a made-up input is reported; an earlier --out (of grainforge or a script), a demo
+    output and a repo file are not."""
     page = tmp_path / "page.md"
     page.write_text("```sh\n"
                     "grainforge fourier micrograph.png --csv fd.csv\n"
@@ -210,6 +215,8 @@ def test_the_checker_sees_a_missing_file_and_an_earlier_output(tmp_path):
                     "grainforge check out/x/*.stl out/y/*.stl\n"
                     "grainforge generate rf --out out/rf --spectrum fd.csv\n"
                     "grainforge plot zingg out/demo/analysis/cri.csv -o z.png\n"
+                    "nice .venv/bin/python benchmarks/make_synthetic_sand.py --grains 9 --out out/big\n"
+                    "nice .venv/bin/python benchmarks/fit_recovery.py --sand out/big/synthetic-angular-sand.csv\n"
                     "```\n"
                     "See `examples/no-such-recipe.toml` and `examples/cri-sand.toml`.\n")
     problems = missing_in(page)
