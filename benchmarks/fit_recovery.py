@@ -31,6 +31,9 @@ rows are the suite's) with every row remade in the estimate::
     nice .venv/bin/python benchmarks/fit_recovery.py --sand benchmarks/out/big-angular/synthetic-angular-sand.csv \
         --refine 0 --reseed 0 --population-grains 20000 --workers 2
 
+``--measured-slopes`` is a diagnostic: the estimate's Newton steps go through slopes measured on the grains at
+the sand's known settings (which a real sand does not give) instead of the design model's.
+
 The design is measured into a fresh cache under ``benchmarks/out`` (its
 resolution range is the sand's, 10 to ``--max-across`` voxels across).
 """
@@ -57,6 +60,10 @@ def main() -> None:
                     help="twins remade per round of the mean-settings estimate [default: the fit's, 300]")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--seed", type=int, default=2024, help="the fit's seed (its twins' seeds)")
+    ap.add_argument("--measured-slopes", action="store_true",
+                    help="a diagnostic: the mean-settings estimate steps through slopes measured on the grains at "
+                         "the sand's known settings (each of 300 grains remade with a setting raised and lowered by "
+                         "0.04 and its own seed), not the design model's; uses the truth, so not a fit")
     args = ap.parse_args()
     import numpy as np
     from scipy.stats import spearmanr
@@ -67,6 +74,13 @@ def main() -> None:
     known_path = args.sand.with_name(args.sand.stem + "-settings.csv")
     with open(known_path, encoding="utf-8", newline="") as fh:
         known = list(csv.DictReader(fh))
+    if args.measured_slopes:
+        import grainforge.fit as fitmod
+
+        slopes = measured_slopes(args.method, sand, known, args.max_across, args.workers)
+        print("measured slopes of the mean descriptors per unit-box setting (rows: descriptors):\n"
+              + np.array2string(slopes, precision=4), flush=True)
+        fitmod._mean_jacobian = lambda model, u, across, h=1e-3: slopes
     t, cpu = time.perf_counter(), time.process_time()
     result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
                       reseed=RESEED if args.reseed is None else args.reseed,
@@ -109,6 +123,37 @@ def main() -> None:
         a = float(np.mean([float(r[k]) for r in known]))
         print(f"| {k} | {a:.4f} | {pop.mean[k]:.4f} ± {pop.se[k]:.4f} | {(pop.mean[k] - a) / a:+.1%} | "
               f"{(pop.mean[k] - a) / pop.se[k]:+.1f} | {pop.determined[k]:.2f} |")
+
+
+def measured_slopes(method: str, sand, known: list[dict], max_across: float, workers: int, grains: int = 300,
+                    step: float = 0.04):
+    """(4, p) slopes of the mean descriptors per unit-box setting, measured at the known settings of the sand's
+    first ``grains`` rows: each grain remade with one setting raised and lowered by ``step`` (in the setting's
+    units) with the same seed, so that the difference is the setting's (as ``fit_information.py`` does)."""
+    import numpy as np
+
+    from grainforge.fit import FITS, _Pool, grain_seed
+
+    spec = FITS[method]
+    names = [s.name for s in spec.all_settings]
+    width = np.array([s.high - s.low for s in spec.all_settings])
+    rows = np.arange(min(grains, len(known)))
+    base = np.array([[float(known[j][k]) for k in names] for j in rows])
+    across = np.minimum(sand.equivalent_diameter[rows] / sand.voxel_size, max_across)
+    cols = []
+    with _Pool(workers) as pool:
+        def run(delta):
+            jobs = [(spec.params(dict(zip(names, base[i] + delta))), grain_seed(99, i), float(across[i]))
+                    for i in range(len(rows))]
+            return pool.run(method, spec.fixed, jobs, None)
+
+        for k in range(len(names)):
+            d = np.zeros(len(names))
+            d[k] = step
+            up, down = run(d), run(-d)
+            ok = np.all(np.isfinite(up), axis=1) & np.all(np.isfinite(down), axis=1)
+            cols.append((up - down)[ok].mean(axis=0) / (2 * step) * width[k])
+    return np.column_stack(cols)
 
 
 if __name__ == "__main__":
