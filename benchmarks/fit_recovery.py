@@ -60,6 +60,8 @@ def main() -> None:
                     help="twins remade per round of the mean-settings estimate [default: the fit's, 300]")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--seed", type=int, default=2024, help="the fit's seed (its twins' seeds)")
+    ap.add_argument("--population-slopes", default="model", choices=["model", "measured"],
+                    help="the slopes the mean-settings estimate steps through (fit --population-slopes)")
     ap.add_argument("--measured-slopes", action="store_true",
                     help="a diagnostic: the mean-settings estimate steps through slopes measured on the grains at "
                          "the sand's known settings (each of 300 grains remade with a setting raised and lowered by "
@@ -85,6 +87,7 @@ def main() -> None:
     result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
                       reseed=RESEED if args.reseed is None else args.reseed,
                       population_grains=args.population_grains or POPULATION_GRAINS,
+                      population_slopes=args.population_slopes,
                       max_across=args.max_across, workers=args.workers,
                       cache=ROOT / "benchmarks" / "out" / "fit-recovery-cache", log=lambda s: print(s, flush=True))
     print(f"{sand.name}: {result.method}, {len(result.generated)} twins, {result.grains_measured} grains measured, "

@@ -293,6 +293,17 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     assert fewer.grains_measured == 50 + 20 * fitmod.POPULATION_ROUNDS and fewer.population.grains == 20
     assert fitmod.fit_grains("rf", count=50, design_grains=128, refine=0, population_grains=20,
                              cached=lambda m: True)[0] == fewer.grains_measured
+    # with slopes measured on the grains: each of rf's 5 settings raised and lowered on the 20 grains, counted
+    lines = []
+    measured = fit_sand(sand, "rf", count=50, population_grains=20, population_slopes="measured", log=lines.append,
+                        **{**kw, "refine": 0, "reseed": 0})
+    assert measured.grains_measured == 50 + 20 * fitmod.POPULATION_ROUNDS + 2 * 5 * 20
+    assert fitmod.fit_grains("rf", count=50, design_grains=128, refine=0, population_grains=20,
+                             population_slopes="measured", cached=lambda m: True)[0] == measured.grains_measured
+    assert any(line.startswith("population slopes: measured on 20 grains") for line in lines), lines
+    assert all(np.isfinite(v) for v in measured.population.mean.values())
+    with pytest.raises(ValueError, match="slopes"):
+        fit_sand(sand, "rf", count=50, population_slopes="guessed", **kw)
 
 
 @pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, the design shared with the plumbing test

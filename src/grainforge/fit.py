@@ -109,6 +109,10 @@ RESEED = 6
 #: the population estimate of the sand's mean settings remakes the first this many twins, this many rounds
 POPULATION_GRAINS = 300
 POPULATION_ROUNDS = 2
+#: with measured slopes (``slopes="measured"``), this many of the population's grains are each remade with one
+#: unit-box setting raised and lowered by SLOPE_STEP under their own seed
+SLOPE_GRAINS = 300
+SLOPE_STEP = 0.05
 #: the share of twins expected to be reseeded, and the most counted, for the up-front estimate
 RESEED_SHARE = 0.05
 RESEED_MOST = 0.5
@@ -405,7 +409,7 @@ def _written(v: Any) -> Any:
 
 # --------------------------------------------------------------------------- estimate
 def fit_grains(method: str, *, count: int, design_grains: int, refine: int, reseed: int = 0,
-               population_grains: int = POPULATION_GRAINS,
+               population_grains: int = POPULATION_GRAINS, population_slopes: str = "model",
                cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
     """Grains a fit of ``method`` measures: (expected, at most).
 
@@ -427,6 +431,9 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     """
     designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
     designs += POPULATION_ROUNDS * min(count, population_grains)
+    if population_slopes == "measured":  # the dearest method's settings (rf's five)
+        p = max(len(FITS[m].all_settings) for m in (FITS if method == "auto" else [method]))
+        designs += 2 * p * min(count, population_grains, SLOPE_GRAINS)
     expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
     return expected, designs + count * (1 + refine) + int(round(count * 2 * reseed * RESEED_MOST))
 
@@ -453,6 +460,7 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
 
 def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
                    reseed: int = RESEED, population_grains: int = POPULATION_GRAINS,
+                   population_slopes: str = "model",
                    max_across: float | str | None = METHOD_CAP, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
                    cache: str | os.PathLike | None = None) -> float:
@@ -477,7 +485,8 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
     fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
     expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
-                                population_grains=population_grains, cached=lambda m: m not in fresh)
+                                population_grains=population_grains, population_slopes=population_slopes,
+                                cached=lambda m: m not in fresh)
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     cores = max(1, min(int(workers), os.cpu_count() or 1))
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
@@ -1086,9 +1095,29 @@ def _mean_jacobian(model, u: np.ndarray, across: np.ndarray, h: float = 1e-3) ->
     return np.column_stack(cols)
 
 
+def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: Sequence[int], across: np.ndarray,
+                            progress=None) -> np.ndarray:
+    """(4, p): d(mean measured descriptors) / d(a shift of every grain's unit-box settings), measured on the first
+    :data:`SLOPE_GRAINS` grains: each remade with one setting raised and lowered by :data:`SLOPE_STEP` (kept in
+    the box) under its own seed, so that the difference is the setting's and not the seed's."""
+    n = min(len(u), SLOPE_GRAINS)
+    cols = []
+    for k in range(u.shape[1]):
+        up, down = u[:n].copy(), u[:n].copy()
+        up[:, k] = np.clip(up[:, k] + SLOPE_STEP, 0.0, 1.0)
+        down[:, k] = np.clip(down[:, k] - SLOPE_STEP, 0.0, 1.0)
+        jobs = [(spec.grain_params(v[i]), seeds[i], float(across[i])) for v in (up, down) for i in range(n)]
+        y = pool.run(spec.method, spec.fixed, jobs, progress)
+        ok = np.all(np.isfinite(y[:n]), axis=1) & np.all(np.isfinite(y[n:]), axis=1)
+        dy, du = (y[:n] - y[n:])[ok], (up[:, k] - down[:, k])[ok]
+        cols.append(dy.sum(axis=0) / max(float(du.sum()), 1e-12))
+    return np.column_stack(cols)
+
+
 def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: np.ndarray, seeds: Sequence[int],
                         across: np.ndarray, pool: _Pool, progress=None, note=None, name=None,
-                        shrink: Sequence[float] | None = None, grains: int = POPULATION_GRAINS) -> Population:
+                        shrink: Sequence[float] | None = None, grains: int = POPULATION_GRAINS,
+                        slopes: str = "model") -> Population:
     """Estimate the sand's **mean** settings: shift a population until its mean descriptors are the sand's.
 
     A twin's settings are not its sand grain's: where the seed shapes a descriptor as much as a setting does,
@@ -1102,6 +1131,10 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     means: the model only steers it, what is compared is measured).  The estimate is the mean settings of the
     round whose means came closest to the sand's, plus a last linear step for the gap left; its standard error propagates the sand's and the
     made grains' scatter of their means through the same step (:func:`grainforge.twins.population_error`).
+
+    ``slopes="measured"`` steps through slopes measured on the grains instead of the design model's
+    (:func:`_measured_mean_jacobian`, 2 × settings × up to :data:`SLOPE_GRAINS` grains more): where the model's
+    slopes are off (the angular method's surface settings), its rounds do not match the means to their noise.
 
     Returns
     -------
@@ -1126,7 +1159,15 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     start = u
     if shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
         start = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
-    jac = _mean_jacobian(model, start, across)
+    if slopes == "measured":
+        label("population slopes")
+        jac = _measured_mean_jacobian(spec, pool, start, seeds, across, progress)
+        say(f"population slopes: measured on {min(m, SLOPE_GRAINS)} grains, each setting raised and lowered by "
+            f"{SLOPE_STEP:g} of its range under the grain's own seed")
+    elif slopes == "model":
+        jac = _mean_jacobian(model, start, across)
+    else:
+        raise ValueError(f"slopes must be 'model' or 'measured', got {slopes!r}")
     shift = np.zeros(u.shape[1])
     for r in range(1, POPULATION_ROUNDS + 1):
         shift = shift + population_step(jac, gap)[0]
@@ -1185,6 +1226,7 @@ def fit_sand(
     refine: int = 4,
     reseed: int = RESEED,
     population_grains: int = POPULATION_GRAINS,
+    population_slopes: str = "model",
     seed: int = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
@@ -1214,6 +1256,9 @@ def fit_sand(
         settings (:func:`population_settings`; at most ``count``): its
         standard errors shrink as one over the square root of the grains,
         down to what the sand's own grain count allows.
+    population_slopes : {"model", "measured"}
+        The slopes the estimate steps through: the design model's, or
+        measured on the grains (:func:`population_settings`).
     workers : int
         Processes measuring grains (1: this process).
     sphericity : {"atlas", "whole"}
@@ -1236,6 +1281,8 @@ def fit_sand(
 
     if method != "auto" and method not in FITS:
         raise ValueError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
+    if population_slopes not in ("model", "measured"):
+        raise ValueError(f"population_slopes must be 'model' or 'measured', got {population_slopes!r}")
     check_sand(sand)
     say, name = log or (lambda s: None), desc or (lambda s: None)
     t0 = time.perf_counter()
@@ -1271,7 +1318,7 @@ def fit_sand(
             if r == 0:
                 population = population_settings(spec, model, sand, tw.u, y, tw.seeds, tw.across, pool, progress,
                                                  note, name, shrink=[r2 for r2, _ in known.values()],
-                                                 grains=population_grains)
+                                                 grains=population_grains, slopes=population_slopes)
                 note(f"population: the sand's mean settings from its descriptors' means (± standard error; "
                      f"{sand.count} sand grains, {population.grains} made): {population.text()}")
             keep = tw.relative(tw.best_y[idx], idx) > 1

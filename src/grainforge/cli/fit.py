@@ -37,6 +37,9 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.option("--population-grains", type=click.IntRange(min=10, max=10**7), default=300, show_default=True,
               help="Twins remade in each of the 2 rounds that estimate the sand's mean settings (at most --count): "
                    "its standard errors shrink as 1/sqrt(grains), down to what the sand's grain count allows.")
+@click.option("--population-slopes", type=click.Choice(["model", "measured"]), default="model", show_default=True,
+              help="Slopes the mean-settings estimate steps through: the design model's, or measured on the grains "
+                   "(2 x settings x up to 300 grains more; matches the means to their noise on large tables).")
 @click.option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
               help="Grains of the method's design (the inverse model's data; measured once, then cached).")
 @click.option("--max-voxels-across", "max_across", type=click.FloatRange(min=0), default=None,
@@ -55,8 +58,8 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
               help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
                    "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
 @click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv and fit.png in --out.")
-def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains, design_grains, max_across,
-        max_minutes, cache_dir, seed, workers, sphericity, overwrite):
+def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains, population_slopes, design_grains,
+        max_across, max_minutes, cache_dir, seed, workers, sphericity, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
 
     Every generated grain is the twin of one sand grain: its size, and
@@ -88,7 +91,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     max_across = METHOD_CAP if max_across is None else max_across or None
     try:
         seconds = check_fit_size(s, method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
-                                 population_grains=population_grains,
+                                 population_grains=population_grains, population_slopes=population_slopes,
                                  max_across=max_across, workers=workers, max_minutes=max_minutes,
                                  convention=sphericity, cache=cache_dir)
     except TooLargeError as exc:
@@ -105,7 +108,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
                f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
                "across)", err=True)
     result = fit_sand(s, method, count=count, refine=refine, reseed=reseed, population_grains=population_grains,
-                      seed=seed, workers=workers,
+                      population_slopes=population_slopes, seed=seed, workers=workers,
                       sphericity=sphericity, max_across=max_across, design_grains=design_grains, cache=cache_dir, progress=progress,
                       log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
     paths = write_outputs(s, result, out)
