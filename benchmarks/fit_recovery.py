@@ -128,35 +128,23 @@ def main() -> None:
               f"{(pop.mean[k] - a) / pop.se[k]:+.1f} | {pop.determined[k]:.2f} |")
 
 
-def measured_slopes(method: str, sand, known: list[dict], max_across: float, workers: int, grains: int = 300,
-                    step: float = 0.04):
+def measured_slopes(method: str, sand, known: list[dict], max_across: float, workers: int, step: float = 0.04):
     """(4, p) slopes of the mean descriptors per unit-box setting, measured at the known settings of the sand's
-    first ``grains`` rows: each grain remade with one setting raised and lowered by ``step`` (in the setting's
-    units) with the same seed, so that the difference is the setting's (as ``fit_information.py`` does)."""
+    first rows (:func:`grainforge.fit._measured_mean_jacobian`, the fit's own measurement, with a step of
+    ``step`` in each setting's units and the seeds of ``fit_information.py``)."""
     import numpy as np
 
-    from grainforge.fit import FITS, _Pool, grain_seed
+    from grainforge.fit import FITS, SLOPE_GRAINS, _measured_mean_jacobian, _Pool, grain_seed
 
     spec = FITS[method]
     names = [s.name for s in spec.all_settings]
+    low = np.array([s.low for s in spec.all_settings])
     width = np.array([s.high - s.low for s in spec.all_settings])
-    rows = np.arange(min(grains, len(known)))
-    base = np.array([[float(known[j][k]) for k in names] for j in rows])
+    rows = np.arange(min(SLOPE_GRAINS, len(known)))
+    u = (np.array([[float(known[j][k]) for k in names] for j in rows]) - low) / width
     across = np.minimum(sand.equivalent_diameter[rows] / sand.voxel_size, max_across)
-    cols = []
     with _Pool(workers) as pool:
-        def run(delta):
-            jobs = [(spec.params(dict(zip(names, base[i] + delta))), grain_seed(99, i), float(across[i]))
-                    for i in range(len(rows))]
-            return pool.run(method, spec.fixed, jobs, None)
-
-        for k in range(len(names)):
-            d = np.zeros(len(names))
-            d[k] = step
-            up, down = run(d), run(-d)
-            ok = np.all(np.isfinite(up), axis=1) & np.all(np.isfinite(down), axis=1)
-            cols.append((up - down)[ok].mean(axis=0) / (2 * step) * width[k])
-    return np.column_stack(cols)
+        return _measured_mean_jacobian(spec, pool, u, [grain_seed(99, i) for i in rows], across, step=step / width)
 
 
 if __name__ == "__main__":

@@ -23,8 +23,8 @@ Deterministic (for any ``--workers``); usage::
         [--workers 2]
 
 With ``--grains`` larger than the default, the sand's first rows are the
-default sand's (the draws are made row by row): ``fit_recovery.py --big``
-twins such a sand of 20,000 angular grains.
+default sand's (the draws are made row by row); ``fit_recovery.py``'s
+docstring twins such a sand of 20,000 angular grains.
 """
 
 from __future__ import annotations

@@ -429,10 +429,11 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     >>> fit_grains("rf", count=500, design_grains=400, refine=3, population_grains=500)
     (3000, 3400)
     """
-    designs = sum(0 if cached(m) else design_grains for m in (FITS if method == "auto" else [method]))
+    methods = list(FITS) if method == "auto" else [method]
+    designs = sum(0 if cached(m) else design_grains for m in methods)
     designs += POPULATION_ROUNDS * min(count, population_grains)
     if population_slopes == "measured":  # the dearest method's settings (rf's five)
-        p = max(len(FITS[m].all_settings) for m in (FITS if method == "auto" else [method]))
+        p = max(len(FITS[m].all_settings) for m in methods)
         designs += 2 * p * min(count, population_grains, SLOPE_GRAINS)
     expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
     return expected, designs + count * (1 + refine) + int(round(count * 2 * reseed * RESEED_MOST))
@@ -1096,16 +1097,18 @@ def _mean_jacobian(model, u: np.ndarray, across: np.ndarray, h: float = 1e-3) ->
 
 
 def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: Sequence[int], across: np.ndarray,
-                            progress=None) -> np.ndarray:
+                            progress=None, step: float | np.ndarray = SLOPE_STEP) -> np.ndarray:
     """(4, p): d(mean measured descriptors) / d(a shift of every grain's unit-box settings), measured on the first
-    :data:`SLOPE_GRAINS` grains: each remade with one setting raised and lowered by :data:`SLOPE_STEP` (kept in
-    the box) under its own seed, so that the difference is the setting's and not the seed's."""
+    :data:`SLOPE_GRAINS` grains: each remade with one setting raised and lowered by ``step`` (one for all
+    settings, or one each; kept in the box) under its own seed, so that the difference is the setting's and not
+    the seed's."""
     n = min(len(u), SLOPE_GRAINS)
+    steps = np.broadcast_to(np.asarray(step, np.float64), (u.shape[1],))
     cols = []
     for k in range(u.shape[1]):
         up, down = u[:n].copy(), u[:n].copy()
-        up[:, k] = np.clip(up[:, k] + SLOPE_STEP, 0.0, 1.0)
-        down[:, k] = np.clip(down[:, k] - SLOPE_STEP, 0.0, 1.0)
+        up[:, k] = np.clip(up[:, k] + steps[k], 0.0, 1.0)
+        down[:, k] = np.clip(down[:, k] - steps[k], 0.0, 1.0)
         jobs = [(spec.grain_params(v[i]), seeds[i], float(across[i])) for v in (up, down) for i in range(n)]
         y = pool.run(spec.method, spec.fixed, jobs, progress)
         ok = np.all(np.isfinite(y[:n]), axis=1) & np.all(np.isfinite(y[n:]), axis=1)

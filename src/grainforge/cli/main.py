@@ -58,6 +58,10 @@ class Terminated(BaseException):
     """Raised in the main thread on SIGTERM, so every ``finally`` cleans up (staging folders, temp files, pools)."""
 
 
+#: the exceptions the command's signal handlers raise
+_SIGNAL_EXCEPTIONS = (Terminated, KeyboardInterrupt)
+
+
 #: seconds a command has, after SIGINT or SIGTERM, to clean up and leave by the usual path; past them it prints
 #: the signal's line and ends at once.  The exception a signal raises can be lost: raised inside a finalizer
 #: (Python then reports it and goes on) or inside a library's ``except BaseException`` (trimesh guards its
@@ -90,7 +94,7 @@ def _signal_in_finalizer(hook):
     and go on) is raised again, by the signal, in the main thread; anything else goes to ``hook``."""
 
     def unraisable(args) -> None:
-        if isinstance(args.exc_value, (Terminated, KeyboardInterrupt)):
+        if isinstance(args.exc_value, _SIGNAL_EXCEPTIONS):
             # sent again a moment later, so that its handler runs after this hook, in the main thread's own code
             sig = signal.SIGTERM if isinstance(args.exc_value, Terminated) else signal.SIGINT
             timer = threading.Timer(0.05, os.kill, (os.getpid(), sig))
@@ -108,7 +112,7 @@ def _quiet_signal(hook):
     unraisable hook; the second raises the signal again, so the first must stay silent."""
 
     def excepthook(kind, value, tb) -> None:
-        if not isinstance(value, (Terminated, KeyboardInterrupt)):
+        if not isinstance(value, _SIGNAL_EXCEPTIONS):
             hook(kind, value, tb)
 
     return excepthook
