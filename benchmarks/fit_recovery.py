@@ -33,6 +33,8 @@ rows are the suite's) with every row remade in the estimate::
 
 ``--measured-slopes`` is a diagnostic: the estimate's Newton steps go through slopes measured on the grains at
 the sand's known settings (which a real sand does not give) instead of the design model's.
+``--known-spread`` is another: the population the estimate shifts carries the sand's known settings about the
+same starting mean, so that only the spread of its settings differs from a fit's.
 
 The design is measured into a fresh cache under ``benchmarks/out`` (its
 resolution range is the sand's, 10 to ``--max-across`` voxels across).
@@ -60,12 +62,16 @@ def main() -> None:
                     help="twins remade per round of the mean-settings estimate [default: the fit's, 300]")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--seed", type=int, default=2024, help="the fit's seed (its twins' seeds)")
-    ap.add_argument("--population-slopes", default="model", choices=["model", "measured"],
+    ap.add_argument("--population-slopes", default="auto", choices=["auto", "measured", "model"],
                     help="the slopes the mean-settings estimate steps through (fit --population-slopes)")
     ap.add_argument("--measured-slopes", action="store_true",
                     help="a diagnostic: the mean-settings estimate steps through slopes measured on the grains at "
                          "the sand's known settings (each of 300 grains remade with a setting raised and lowered by "
                          "0.04 and its own seed), not the design model's; uses the truth, so not a fit")
+    ap.add_argument("--known-spread", action="store_true",
+                    help="a diagnostic: the mean-settings estimate shifts the grains' known settings (recentred on "
+                         "the shrunk twins' mean) instead of the shrunk twins: the made population's spread of "
+                         "settings is then the sand's; uses the truth, so not a fit")
     args = ap.parse_args()
     import numpy as np
     from scipy.stats import spearmanr
@@ -83,6 +89,10 @@ def main() -> None:
         print("measured slopes of the mean descriptors per unit-box setting (rows: descriptors):\n"
               + np.array2string(slopes, precision=4), flush=True)
         fitmod._mean_jacobian = lambda model, u, across, h=1e-3: slopes
+    if args.known_spread:
+        import grainforge.fit as fitmod
+
+        fitmod.population_settings = known_spread(fitmod.population_settings, known)
     t, cpu = time.perf_counter(), time.process_time()
     result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
                       reseed=RESEED if args.reseed is None else args.reseed,
@@ -126,6 +136,30 @@ def main() -> None:
         a = float(np.mean([float(r[k]) for r in known]))
         print(f"| {k} | {a:.4f} | {pop.mean[k]:.4f} ± {pop.se[k]:.4f} | {(pop.mean[k] - a) / a:+.1%} | "
               f"{(pop.mean[k] - a) / pop.se[k]:+.1f} | {pop.determined[k]:.2f} |")
+
+
+def known_spread(population_settings, known: list[dict]):
+    """``population_settings`` started from the sand's known settings of the rows remade, recentred on the mean
+    of the start it would have used (the twins shrunk by what the descriptors know of each setting): the same
+    starting mean, the sand's own spread."""
+    import numpy as np
+
+    def wrapped(spec, model, sand, u0, y0, *args, shrink=None, grains=300, **kw):
+        names = [s.name for s in spec.all_settings]
+        low = np.array([s.low for s in spec.all_settings])
+        width = np.array([s.high - s.low for s in spec.all_settings])
+        m = min(len(u0), int(grains))  # the fit twins every row once: twin i is row i
+        truth = (np.array([[float(known[j][k]) for k in names] for j in range(m)]) - low) / width
+        u = np.asarray(u0[:m], np.float64)
+        centre = u.mean(axis=0)  # shrinking about the mean keeps it
+        print("known-spread start: settings' sd (unit box) " + ", ".join(
+            f"{k} {a:.3f} (shrunk twins {b:.3f})" for k, a, b in
+            zip(names, truth.std(axis=0), (u - centre).std(axis=0) * np.asarray(shrink or np.ones(len(names))))),
+            flush=True)
+        return population_settings(spec, model, sand, u0, y0, *args, shrink=shrink, grains=grains,
+                                   start=truth - truth.mean(axis=0) + centre, **kw)
+
+    return wrapped
 
 
 def measured_slopes(method: str, sand, known: list[dict], max_across: float, workers: int, step: float = 0.04):

@@ -378,6 +378,26 @@ def test_angular_grains_take_their_aspect_from_their_settings_and_their_surface_
     assert np.all(np.abs(other[2:] - own[2:]) < 0.01) and abs(other[1] - own[1]) > 0.05, (own, other)
 
 
+def test_population_slopes_are_measured_on_large_populations_only_and_costed():
+    """At the defaults ("auto") the mean-settings estimate steps through the design model's slopes below a thousand
+    grains remade per round (where the means' own noise is the larger error) and through slopes measured on the
+    grains from a thousand up (2 x settings x 300 grains more, in the up-front estimate); "model" and "measured"
+    force either; anything else is refused naming the choices."""
+    from grainforge.fit import SLOPE_GRAINS, SLOPES_MEASURED_FROM, fit_grains, slopes_for
+
+    assert [slopes_for("auto", n) for n in (300, SLOPES_MEASURED_FROM - 1, SLOPES_MEASURED_FROM)] == \
+        ["model", "model", "measured"]
+    assert slopes_for("model", 10**6) == "model" and slopes_for("measured", 20) == "measured"
+    kw = dict(count=5000, design_grains=0, refine=0)
+    for n in (300, SLOPES_MEASURED_FROM):
+        auto, model, measured = (fit_grains("angular", population_grains=n, population_slopes=s, **kw)[0]
+                                 for s in ("auto", "model", "measured"))
+        assert measured - model == 2 * 4 * SLOPE_GRAINS  # angular's four settings, each raised and lowered
+        assert auto == (model if n < SLOPES_MEASURED_FROM else measured), n
+    with pytest.raises(ValueError, match="auto, measured, model"):
+        slopes_for("guessed", 300)
+
+
 def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
     """rf is capped at 150 voxels across, fso is not (its fractal surface has not converged): on the synthetic 1 µm
     sand (150 to 290 voxels across) an fso fit is estimated dearer than an rf one and, over a 15-minute budget,

@@ -109,6 +109,12 @@ RESEED = 6
 #: the population estimate of the sand's mean settings remakes the first this many twins, this many rounds
 POPULATION_GRAINS = 300
 POPULATION_ROUNDS = 2
+#: the slopes the population estimate steps through: "measured" on the grains, the design "model"'s, or "auto":
+#: measured from SLOPES_MEASURED_FROM grains remade per round (where the means' noise falls below what the
+#: model's slopes leave of the gap), the model's below
+POPULATION_SLOPES = "auto"
+SLOPE_CHOICES = ("auto", "measured", "model")
+SLOPES_MEASURED_FROM = 1000
 #: with measured slopes (``slopes="measured"``), this many of the population's grains are each remade with one
 #: unit-box setting raised and lowered by SLOPE_STEP under their own seed
 SLOPE_GRAINS = 300
@@ -409,12 +415,13 @@ def _written(v: Any) -> Any:
 
 # --------------------------------------------------------------------------- estimate
 def fit_grains(method: str, *, count: int, design_grains: int, refine: int, reseed: int = 0,
-               population_grains: int = POPULATION_GRAINS, population_slopes: str = "model",
+               population_grains: int = POPULATION_GRAINS, population_slopes: str = POPULATION_SLOPES,
                cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
     """Grains a fit of ``method`` measures: (expected, at most).
 
     The design's grains (none when it is cached), the population estimate's
-    (:data:`POPULATION_ROUNDS` × up to ``population_grains``), then each
+    (:data:`POPULATION_ROUNDS` × up to ``population_grains``, plus with
+    measured slopes 2 × settings × up to :data:`SLOPE_GRAINS`: :func:`slopes_for`), then each
     twin once, plus refinements: :data:`EXPECTED_MEASUREMENTS` per twin
     expected, ``1 + refine`` at most, plus two per reseeded twin and try
     (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most:
@@ -428,15 +435,33 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     (2600, 3000)
     >>> fit_grains("rf", count=500, design_grains=400, refine=3, population_grains=500)
     (3000, 3400)
+    >>> fit_grains("rf", count=500, design_grains=400, refine=3, population_slopes="measured")
+    (5600, 6000)
     """
     methods = list(FITS) if method == "auto" else [method]
     designs = sum(0 if cached(m) else design_grains for m in methods)
     designs += POPULATION_ROUNDS * min(count, population_grains)
-    if population_slopes == "measured":  # the dearest method's settings (rf's five)
+    if slopes_for(population_slopes, min(count, population_grains)) == "measured":  # the dearest method's settings (rf's five)
         p = max(len(FITS[m].all_settings) for m in methods)
         designs += 2 * p * min(count, population_grains, SLOPE_GRAINS)
     expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
     return expected, designs + count * (1 + refine) + int(round(count * 2 * reseed * RESEED_MOST))
+
+
+def slopes_for(slopes: str, grains: int) -> str:
+    """The slopes a population estimate of ``grains`` grains a round steps through: ``slopes`` itself, or for
+    ``"auto"`` measured from :data:`SLOPES_MEASURED_FROM` grains, the design model's below.
+
+    Examples
+    --------
+    >>> slopes_for("auto", 300), slopes_for("auto", 2000), slopes_for("measured", 300)
+    ('model', 'measured', 'measured')
+    """
+    if slopes not in SLOPE_CHOICES:
+        raise ValueError(f"slopes must be one of {', '.join(SLOPE_CHOICES)}, got {slopes!r}")
+    if slopes == "auto":
+        return "measured" if grains >= SLOPES_MEASURED_FROM else "model"
+    return slopes
 
 
 def resolve_cap(method: str, max_across: float | str | None) -> float | None:
@@ -461,7 +486,7 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
 
 def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
                    reseed: int = RESEED, population_grains: int = POPULATION_GRAINS,
-                   population_slopes: str = "model",
+                   population_slopes: str = POPULATION_SLOPES,
                    max_across: float | str | None = METHOD_CAP, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
                    cache: str | os.PathLike | None = None) -> float:
@@ -1120,24 +1145,29 @@ def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: 
 def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: np.ndarray, seeds: Sequence[int],
                         across: np.ndarray, pool: _Pool, progress=None, note=None, name=None,
                         shrink: Sequence[float] | None = None, grains: int = POPULATION_GRAINS,
-                        slopes: str = "model") -> Population:
+                        slopes: str = POPULATION_SLOPES, start: np.ndarray | None = None) -> Population:
     """Estimate the sand's **mean** settings: shift a population until its mean descriptors are the sand's.
 
     A twin's settings are not its sand grain's: where the seed shapes a descriptor as much as a setting does,
     one grain's descriptors cannot say which setting made it (:func:`setting_identifiability`), and the twins'
     mean is pulled towards the middle of the design box.  The *population*'s mean setting is known far better:
     the seed's share averages out over the sand's grains.  Starting from the first ``grains`` twins' first
-    settings ``u0`` (measured as ``y0``; :data:`POPULATION_GRAINS` in a fit at its defaults), every grain's
-    settings are shifted by one common step (the model's mean Jacobian, solved for the gap between the sand's
-    mean descriptors and the made grains'),
-    remade with its own seed and measured, :data:`POPULATION_ROUNDS` times (a Newton iteration on measured
-    means: the model only steers it, what is compared is measured).  The estimate is the mean settings of the
-    round whose means came closest to the sand's, plus a last linear step for the gap left; its standard error propagates the sand's and the
-    made grains' scatter of their means through the same step (:func:`grainforge.twins.population_error`).
+    settings ``u0`` (measured as ``y0``; :data:`POPULATION_GRAINS` in a fit at its defaults; each setting's
+    spread about the mean shrunk by ``shrink``), every grain's settings are shifted by one common step (the
+    slopes of the mean descriptors, solved for the gap between the sand's mean descriptors and the made
+    grains'), remade with its own seed and measured, :data:`POPULATION_ROUNDS` times (a Newton iteration on
+    measured means).  The estimate is the mean settings of the round whose means came closest to the sand's,
+    plus a last linear step for the gap left; its standard error propagates the sand's and the made grains'
+    scatter of their means through the same step (:func:`grainforge.twins.population_error`).
 
-    ``slopes="measured"`` steps through slopes measured on the grains instead of the design model's
-    (:func:`_measured_mean_jacobian`, 2 × settings × up to :data:`SLOPE_GRAINS` grains more): where the model's
-    slopes are off (the angular method's surface settings), its rounds do not match the means to their noise.
+    ``slopes="measured"`` measures the slopes on the grains (:func:`_measured_mean_jacobian`, 2 × settings ×
+    up to :data:`SLOPE_GRAINS` grains more); ``"model"`` takes the design model's, which cost nothing but are
+    off where the model is (the angular method's surface settings: its rounds then leave a gap in the means
+    that counts once their noise is smaller, from about a thousand grains); ``"auto"`` (the default) chooses
+    by the grains remade (:func:`slopes_for`).
+
+    ``start`` (unit-box settings, one row per grain remade) replaces the shrunk twins as the population the
+    common shift moves: the settings' *spread* about their mean is then the caller's.
 
     Returns
     -------
@@ -1145,6 +1175,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     """
     from .twins import population_error, population_step
 
+    start_given = start
     say, label = note or (lambda s: None), name or (lambda s: None)
     m = min(len(u0), int(grains))
     u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
@@ -1160,17 +1191,18 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
 
     gap = record(u, y)
     start = u
-    if shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
+    if start_given is not None:
+        start = np.asarray(start_given, np.float64)[:m]
+    elif shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
         start = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
+    slopes = slopes_for(slopes, m)
     if slopes == "measured":
         label("population slopes")
         jac = _measured_mean_jacobian(spec, pool, start, seeds, across, progress)
         say(f"population slopes: measured on {min(m, SLOPE_GRAINS)} grains, each setting raised and lowered by "
             f"{SLOPE_STEP:g} of its range under the grain's own seed")
-    elif slopes == "model":
-        jac = _mean_jacobian(model, start, across)
     else:
-        raise ValueError(f"slopes must be 'model' or 'measured', got {slopes!r}")
+        jac = _mean_jacobian(model, start, across)
     shift = np.zeros(u.shape[1])
     for r in range(1, POPULATION_ROUNDS + 1):
         shift = shift + population_step(jac, gap)[0]
@@ -1229,7 +1261,7 @@ def fit_sand(
     refine: int = 4,
     reseed: int = RESEED,
     population_grains: int = POPULATION_GRAINS,
-    population_slopes: str = "model",
+    population_slopes: str = POPULATION_SLOPES,
     seed: int = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
@@ -1259,9 +1291,11 @@ def fit_sand(
         settings (:func:`population_settings`; at most ``count``): its
         standard errors shrink as one over the square root of the grains,
         down to what the sand's own grain count allows.
-    population_slopes : {"model", "measured"}
-        The slopes the estimate steps through: the design model's, or
-        measured on the grains (:func:`population_settings`).
+    population_slopes : {"auto", "measured", "model"}
+        The slopes the estimate steps through: measured on the grains, the
+        design model's, or (``"auto"``) measured from
+        :data:`SLOPES_MEASURED_FROM` grains remade per round
+        (:func:`population_settings`).
     workers : int
         Processes measuring grains (1: this process).
     sphericity : {"atlas", "whole"}
@@ -1284,8 +1318,8 @@ def fit_sand(
 
     if method != "auto" and method not in FITS:
         raise ValueError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
-    if population_slopes not in ("model", "measured"):
-        raise ValueError(f"population_slopes must be 'model' or 'measured', got {population_slopes!r}")
+    if population_slopes not in SLOPE_CHOICES:
+        raise ValueError(f"population_slopes must be one of {', '.join(SLOPE_CHOICES)}, got {population_slopes!r}")
     check_sand(sand)
     say, name = log or (lambda s: None), desc or (lambda s: None)
     t0 = time.perf_counter()

@@ -37,9 +37,11 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.option("--population-grains", type=click.IntRange(min=10, max=10**7), default=300, show_default=True,
               help="Twins remade in each of the 2 rounds that estimate the sand's mean settings (at most --count): "
                    "its standard errors shrink as 1/sqrt(grains), down to what the sand's grain count allows.")
-@click.option("--population-slopes", type=click.Choice(["model", "measured"]), default="model", show_default=True,
-              help="Slopes the mean-settings estimate steps through: the design model's, or measured on the grains "
-                   "(2 x settings x up to 300 grains more; matches the means to their noise on large tables).")
+@click.option("--population-slopes", type=click.Choice(["auto", "measured", "model"]), default="auto",
+              show_default=True,
+              help="Slopes the mean-settings estimate steps through: measured on the grains (2 x settings x up to "
+                   "300 grains more; matches the means to their noise on large tables), the design model's "
+                   "(free, off on angular sands), or auto: measured from --population-grains 1000.")
 @click.option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
               help="Grains of the method's design (the inverse model's data; measured once, then cached).")
 @click.option("--max-voxels-across", "max_across", type=click.FloatRange(min=0), default=None,
