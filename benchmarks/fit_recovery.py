@@ -21,7 +21,8 @@ means of all rows, in per cent and in its own standard errors.  Usage::
 
     nice .venv/bin/python benchmarks/fit_recovery.py [--sand tests/data/synthetic-angular-sand.csv]
         [--method angular] [--design-grains 200] [--max-across 40] [--refine 4] [--reseed 6]
-        [--population-grains 300] [--workers 1] [--seed 2024]
+        [--population-grains 300] [--population-slopes auto] [--workers 1] [--seed 2024]
+        [--measured-slopes | --known-spread]
 
 How the mean settings' error falls with the sand's size: a 20,000-grain synthetic angular sand (its first 300
 rows are the suite's) with every row remade in the estimate::
@@ -29,7 +30,7 @@ rows are the suite's) with every row remade in the estimate::
     nice .venv/bin/python benchmarks/make_synthetic_sand.py --grains 20000 --out benchmarks/out/big-angular \
         --workers 2
     nice .venv/bin/python benchmarks/fit_recovery.py --sand benchmarks/out/big-angular/synthetic-angular-sand.csv \
-        --refine 0 --reseed 0 --population-grains 20000 --workers 2
+        --refine 0 --reseed 0 --population-grains 20000 --workers 2 [--population-slopes model] [--known-spread]
 
 ``--measured-slopes`` is a diagnostic: the estimate's Newton steps go through slopes measured on the grains at
 the sand's known settings (which a real sand does not give) instead of the design model's.

@@ -1210,8 +1210,10 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         label(f"population {r}/{POPULATION_ROUNDS}")
         gap = record(new_u, pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i],
                                                                  float(across[i])) for i in range(m)], progress))
-        say(f"population {r}: {m} grains remade; mean descriptors off the sand's by "
-            + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(DESCRIPTORS, gap)))
+        refused = int(np.sum(~np.all(np.isfinite(rounds[-1][1]), axis=1)))
+        say(f"population {r}: {m} grains remade" + (f" ({refused} refused by the generator, left out)"
+                                                     if refused else "")
+            + "; mean descriptors off the sand's by " + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(DESCRIPTORS, gap)))
     # the round whose means came closest (a step may overshoot where the model's slopes are not the grains')
     u, y, gap, _ = min(rounds, key=lambda r: r[3])
     ok = np.all(np.isfinite(y), axis=1)
