@@ -548,6 +548,28 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
     assert created and not fresh.exists()
 
 
+@pytest.mark.parametrize("where", ["tempfile.mkdtemp", "grainforge.run.remove_stale_staging"])
+def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, monkeypatch, where):
+    """A Ctrl-C that lands after --out is made but before its staging folder is (the moment a real signal once
+    hit in CI, leaving an empty --out behind): the folder the run created is gone, one given is kept."""
+    from grainforge.simulate import staged
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(where, interrupted)
+    fresh, given = tmp_path / "fresh", tmp_path / "given"
+    given.mkdir()
+    for out in (fresh, given):
+        with pytest.raises(KeyboardInterrupt), staged(out):
+            pytest.fail("the body must not run")
+    assert not fresh.exists() and given.is_dir() and list(given.iterdir()) == []
+    monkeypatch.undo()
+    with staged(fresh) as stage:  # and without the interrupt, the stage is made and removed with the folder
+        assert stage.parent == fresh and stage.is_dir()
+    assert not fresh.exists()
+
+
 def _python(code: str) -> subprocess.Popen:
     return subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, stderr=subprocess.PIPE,
                             start_new_session=True)

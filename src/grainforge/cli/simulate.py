@@ -199,9 +199,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate import (
         EngineFailed,
         commit_stage,
-        discard_stage,
-        open_stage,
         run_test,
+        staged,
         summarise,
     )
     from ..simulate.report import write_report
@@ -222,8 +221,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     # every output is made in a hidden staging folder and moved into --out when all are complete: an
     # interrupt or a failed run leaves nothing (a SIGKILL leaves the staging folder, which the next run removes)
-    stage, created = open_stage(out)
-    try:
+    with staged(out) as stage:
         try:
             rows = run_test(test, templates, settings, stage, label=label, progress=progress,
                             workers=workers, engine=engine, mpi=mpi)
@@ -238,8 +236,6 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         write_report(rows, stage, test, settings)
         with signals_held():  # the outputs appear together
             commit_stage(stage, out, overwrite=overwrite)
-    finally:
-        discard_stage(stage, out, created)
     summary = summarise(rows)
     sd = summary["angle_sd_deg"]
     spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"

@@ -137,7 +137,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     ready_for_work(HEAVY_MODULES + ("grainforge.simulate.calibrate",), seconds, bound="at most about")
     from tqdm import tqdm
 
-    from ..simulate import EngineFailed, commit_stage, discard_stage, open_stage
+    from ..simulate import EngineFailed, commit_stage, staged
     from ..simulate.calibrate import Unreachable, run_calibration, write_calibration
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
@@ -158,8 +158,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         angles = ", ".join(f"{r['angle_deg']:.1f}" for r in rows)
         runs.write(f"friction {e.friction:.4g}: {e.angle:.1f}° (seeds: {angles})", file=sys.stderr)
 
-    stage, created = open_stage(out)
-    try:
+    with staged(out) as stage:
         try:
             search, rows = run_calibration(test, templates, settings, target_angle, stage, low=low, high=high,
                                            start=start, tolerance=tolerance, max_evaluations=max_evaluations,
@@ -178,8 +177,6 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         record = write_calibration(search, rows, target_angle, test, settings, command, stage, low=low, high=high)
         with signals_held():
             commit_stage(stage, out, overwrite=overwrite)
-    finally:
-        discard_stage(stage, out, created)
     sd = record["friction_sd"]
     spread = f" ± {sd:.3f}" if math.isfinite(sd) else " (one seed: no spread)"
     note = "" if search.converged else f" (not converged in {max_evaluations} frictions: the bracket's interpolation)"

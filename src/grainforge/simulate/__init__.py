@@ -23,8 +23,8 @@ Nothing is tuned to the paper's numbers; the contact friction is an input.
 from .engine import EngineFailed, measure_result, run_test, run_yade, summarise, write_test_deck, yade_executable
 from .population import build_population, check_inputs
 from .settings import QUICK, TESTS, Settings, check_size, scene_settings
-from .staging import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage
+from .staging import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage, staged
 
 __all__ = ["TESTS", "Settings", "QUICK", "yade_executable", "scene_settings", "check_inputs", "build_population",
-           "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage",
+           "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage", "staged",
            "commit_stage", "discard_stage", "EngineFailed", "keep_failed", "FAILED_PREFIX"]

@@ -4,9 +4,11 @@ from __future__ import annotations
 
 import os
 import shutil
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 
-__all__ = ["open_stage", "commit_stage", "discard_stage", "FAILED_PREFIX", "keep_failed"]
+__all__ = ["open_stage", "staged", "commit_stage", "discard_stage", "FAILED_PREFIX", "keep_failed"]
 
 
 def open_stage(out: str | os.PathLike) -> tuple[Path, bool]:
@@ -47,9 +49,26 @@ def commit_stage(stage: Path, out: str | os.PathLike, *, overwrite: bool = False
     return moved
 
 
-def discard_stage(stage: Path, out: str | os.PathLike, created: bool) -> None:
-    """Remove ``stage`` (empty after :func:`commit_stage`) and ``out`` if this run created it and it is empty."""
-    shutil.rmtree(stage, ignore_errors=True)
+@contextmanager
+def staged(out: str | os.PathLike) -> Iterator[Path]:
+    """``with staged(out) as stage:`` a staging folder (:func:`open_stage`), removed on the way out with ``out``
+    itself when this run created it and left it empty (:func:`discard_stage`) — also when a signal lands while
+    the folders are being made: whether ``out`` existed is noted before anything is made, and the clean-up is
+    armed before :func:`open_stage` runs."""
+    out = Path(out)
+    created, stage = not out.exists(), None
+    try:
+        stage = open_stage(out)[0]
+        yield stage
+    finally:
+        discard_stage(stage, out, created)
+
+
+def discard_stage(stage: Path | None, out: str | os.PathLike, created: bool) -> None:
+    """Remove ``stage`` (empty after :func:`commit_stage`; None: none was made) and ``out`` if this run created
+    it and it is empty."""
+    if stage is not None:
+        shutil.rmtree(stage, ignore_errors=True)
     out = Path(out)
     if created and out.is_dir() and not any(out.iterdir()):
         out.rmdir()
