@@ -551,7 +551,8 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
 @pytest.mark.parametrize("where", ["tempfile.mkdtemp", "grainforge.run.remove_stale_staging"])
 def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, monkeypatch, where):
     """A Ctrl-C that lands after --out is made but before its staging folder is (the moment a real signal once
-    hit in CI, leaving an empty --out behind): the folder the run created is gone, one given is kept."""
+    hit in CI, leaving an empty --out behind): the folder the run created is gone, one given is kept; in
+    simulate's staging and in generate's writer."""
     from grainforge.simulate import staged
 
     def interrupted(*args, **kwargs):
@@ -567,6 +568,14 @@ def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, 
     monkeypatch.undo()
     with staged(fresh) as stage:  # and without the interrupt, the stage is made and removed with the folder
         assert stage.parent == fresh and stage.is_dir()
+    assert not fresh.exists()
+    # generate's writer has the same moment
+    import grainforge.methods
+    from grainforge.run import write_run
+
+    monkeypatch.setattr(where, interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        write_run("fso", grainforge.methods.get("fso").Params(subdivisions=2), [0], fresh, size=5.0)
     assert not fresh.exists()
 
 

@@ -186,13 +186,12 @@ def write_run(
             raise FileExistsError(
                 f"{existing[0]} exists ({len(existing)} output file(s) would be replaced); use --overwrite"
             )
-    created = not out.exists()
-    out.mkdir(parents=True, exist_ok=True)
-    remove_stale_staging(out)
-    stage = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
     columns = manifest_columns(method, extra_columns)
-    written = 0
-    try:
+    written, created, stage = 0, not out.exists(), None
+    try:  # armed before any folder is made: a signal while they are made leaves none behind
+        out.mkdir(parents=True, exist_ok=True)
+        remove_stale_staging(out)
+        stage = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
         with open(stage / MANIFEST, "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh, lineterminator="\n")
             from .units import UNITS, headers
@@ -219,7 +218,8 @@ def write_run(
         for p in sorted(earlier):  # the earlier run's grains that this run did not replace
             p.unlink(missing_ok=True)
     finally:  # on success the stage is empty; on failure nothing new is left behind
-        shutil.rmtree(stage, ignore_errors=True)
+        if stage is not None:
+            shutil.rmtree(stage, ignore_errors=True)
         if created and out.is_dir() and not any(out.iterdir()):
             out.rmdir()
     return written
