@@ -466,3 +466,19 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
     assert r.exit_code == 1, r.output + r.stderr
     assert "warning: grainforge batch would refuse this recipe" in r.stderr and "params.descriptors" in r.stderr
     assert (out / "recipe.toml").read_text(encoding="utf-8") == text  # the outputs are kept
+    assert sorted(p.name for p in out.iterdir()) == sorted(fitmod.OUTPUTS)  # and nothing else (no staging)
+
+    # an interrupt while the outputs are written (the figure is the last): none of them appears, nor the
+    # folder the run made; an earlier fit's outputs in a folder given with --overwrite stay as they were
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(fitmod, "fit_figure", interrupted)
+    fresh = tmp_path / "fresh"
+    r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size-um", "7", "--out", str(fresh)])
+    assert r.exit_code != 0 and not fresh.exists(), (r.exit_code, r.stderr)
+    (out / "recipe.toml").write_text("# an earlier fit's recipe\n", encoding="utf-8")
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size-um", "7", "--out", str(out),
+                            "--overwrite"])
+    assert r.exit_code != 0 and {p.name: p.read_bytes() for p in out.iterdir()} == before, r.stderr

@@ -81,7 +81,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
 
     from ..estimate import TooLargeError, duration
     from ..fit import FITS, METHOD_CAP, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
-    from .interrupts import ready_for_work
+    from .interrupts import ready_for_work, signals_held
 
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
@@ -113,7 +113,13 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
                       population_slopes=population_slopes, seed=seed, workers=workers,
                       sphericity=sphericity, max_across=max_across, design_grains=design_grains, cache=cache_dir, progress=progress,
                       log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
-    paths = write_outputs(s, result, out)
+    from ..simulate.staging import commit_stage, staged
+
+    with staged(out) as stage:  # the four outputs appear together, or none of them (an interrupt while writing)
+        write_outputs(s, result, stage)
+        with signals_held():
+            commit_stage(stage, out, overwrite=overwrite)
+    paths = [out / n for n in OUTPUTS]
     verdict = "PASSES" if result.stats["pass"] else "does NOT pass"
     click.echo(f"{result.method}: {verdict} (KS <= 0.1, |mean diff| <= 0.01, |Spearman diff| <= 0.1, "
                f"{result.stats['twin_within']:.0%} of reachable twins within 0.03) in "
