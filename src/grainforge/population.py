@@ -862,8 +862,8 @@ def run_batch(
             raise FileExistsError(f"{first} exists (not made by this batch); {hint}" if resume
                                   else f"{first} exists (a batch is already in {out}); {hint}")
     created = [q for q in [out, *out.parents] if not q.exists()]
-    out.mkdir(parents=True, exist_ok=True)
-    try:
+    try:  # armed before the folder is made: a signal while it is made leaves none behind
+        out.mkdir(parents=True, exist_ok=True)
         return _run_batch(recipe, out, names, workers=workers, scheduler=scheduler, resume=resume,
                           overwrite=overwrite, progress=progress, report=report, in_process=in_process)
     except BaseException:
