@@ -98,7 +98,8 @@ def main() -> None:
     result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
                       reseed=RESEED if args.reseed is None else args.reseed,
                       population_grains=args.population_grains or POPULATION_GRAINS,
-                      population_slopes=args.population_slopes,
+                      # the diagnostic's slopes replace the model's: the estimate must step through the "model"
+                      population_slopes="model" if args.measured_slopes else args.population_slopes,
                       max_across=args.max_across, workers=args.workers,
                       cache=ROOT / "benchmarks" / "out" / "fit-recovery-cache", log=lambda s: print(s, flush=True))
     print(f"{sand.name}: {result.method}, {len(result.generated)} twins, {result.grains_measured} grains measured, "
@@ -145,7 +146,7 @@ def known_spread(population_settings, known: list[dict]):
     starting mean, the sand's own spread."""
     import numpy as np
 
-    def wrapped(spec, model, sand, u0, y0, *args, shrink=None, grains=300, **kw):
+    def wrapped(spec, model, sand, u0, y0, *args, grains, shrink=None, **kw):
         names = [s.name for s in spec.all_settings]
         low = np.array([s.low for s in spec.all_settings])
         width = np.array([s.high - s.low for s in spec.all_settings])

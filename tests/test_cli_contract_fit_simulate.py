@@ -519,8 +519,8 @@ def test_signal_early_in_a_fit_is_honoured(tmp_path, sig, delay):
 def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_removed(tmp_path):
     """The staging behind "all outputs or none": nothing moves while one output would be refused; with
     --overwrite an earlier deck folder is replaced whole; a dead process's staging folder goes."""
-    from grainforge.run import STAGING_PREFIX
     from grainforge.simulate import commit_stage, discard_stage, open_stage
+    from grainforge.staging import STAGING_PREFIX
 
     out = tmp_path / "o"
     (out / "repose-seed0").mkdir(parents=True)
@@ -548,7 +548,7 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
     assert created and not fresh.exists()
 
 
-@pytest.mark.parametrize("where", ["tempfile.mkdtemp", "grainforge.run.remove_stale_staging"])
+@pytest.mark.parametrize("where", ["tempfile.mkdtemp", "grainforge.staging.remove_stale_staging"])
 def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, monkeypatch, where):
     """A Ctrl-C that lands after --out is made but before its staging folder is (the moment a real signal once
     hit in CI, leaving an empty --out behind): the folder the run created is gone, one given is kept; in

@@ -441,8 +441,8 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     methods = list(FITS) if method == "auto" else [method]
     designs = sum(0 if cached(m) else design_grains for m in methods)
     designs += POPULATION_ROUNDS * min(count, population_grains)
-    if slopes_for(population_slopes, min(count, population_grains)) == "measured":  # the dearest method's settings (rf's five)
-        p = max(len(FITS[m].all_settings) for m in methods)
+    if slopes_for(population_slopes, min(count, population_grains)) == "measured":
+        p = max(len(FITS[m].all_settings) for m in methods)  # the dearest method's settings (rf's five)
         designs += 2 * p * min(count, population_grains, SLOPE_GRAINS)
     expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
     return expected, designs + count * (1 + refine) + int(round(count * 2 * reseed * RESEED_MOST))
@@ -1175,7 +1175,6 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     """
     from .twins import population_error, population_step
 
-    start_given = start
     say, label = note or (lambda s: None), name or (lambda s: None)
     m = min(len(u0), int(grains))
     u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
@@ -1190,10 +1189,11 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         return gap
 
     gap = record(u, y)
-    start = u
-    if start_given is not None:
-        start = np.asarray(start_given, np.float64)[:m]
-    elif shrink is not None:  # each twin's settings carry its own seed's share: keep only what the descriptors know
+    if start is not None:
+        start = np.asarray(start, np.float64)[:m]
+    elif shrink is None:
+        start = u
+    else:  # each twin's settings carry its own seed's share: keep only what the descriptors know
         start = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
     slopes = slopes_for(slopes, m)
     if slopes == "measured":
@@ -1320,8 +1320,7 @@ def fit_sand(
 
     if method != "auto" and method not in FITS:
         raise ValueError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
-    if population_slopes not in SLOPE_CHOICES:
-        raise ValueError(f"population_slopes must be one of {', '.join(SLOPE_CHOICES)}, got {population_slopes!r}")
+    slopes_for(population_slopes, 0)  # refuses an unknown choice before any work
     check_sand(sand)
     say, name = log or (lambda s: None), desc or (lambda s: None)
     t0 = time.perf_counter()

@@ -9,8 +9,6 @@ from __future__ import annotations
 import csv
 import os
 import re
-import shutil
-import tempfile
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
@@ -20,6 +18,7 @@ from .fabrication.scale import check_size, to_size
 from .io import FORMATS, _cell, export_bytes, file_mode
 from .methods import generate, get
 from .params import as_dict, specs
+from .staging import staged
 
 __all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files",
            "existing_outputs", "earlier_run_files", "manifest_rows"]
@@ -118,20 +117,6 @@ def manifest_rows(out: str | Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-def remove_stale_staging(out: Path) -> None:
-    """Remove staging folders of runs that were killed (their process is gone)."""
-    from .workers import pid_alive
-
-    if not out.is_dir():
-        return
-    for stage in out.glob(STAGING_PREFIX + "*"):
-        m = re.match(re.escape(STAGING_PREFIX) + r"(\d+)-", stage.name)
-        if stage.is_dir() and m and not pid_alive(int(m.group(1))):
-            shutil.rmtree(stage, ignore_errors=True)
-
-
-#: hidden folder a run stages its files in (``.grainforge-staging-PID-XXXX``)
-STAGING_PREFIX = ".grainforge-staging-"
 
 
 def write_run(
@@ -187,11 +172,8 @@ def write_run(
                 f"{existing[0]} exists ({len(existing)} output file(s) would be replaced); use --overwrite"
             )
     columns = manifest_columns(method, extra_columns)
-    written, created, stage = 0, not out.exists(), None
-    try:  # armed before any folder is made: a signal while they are made leaves none behind
-        out.mkdir(parents=True, exist_ok=True)
-        remove_stale_staging(out)
-        stage = Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out))
+    written = 0
+    with staged(out) as stage:  # on success the stage is empty; on failure nothing new is left behind
         with open(stage / MANIFEST, "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh, lineterminator="\n")
             from .units import UNITS, headers
@@ -217,9 +199,4 @@ def write_run(
         (stage / MANIFEST).replace(out / MANIFEST)
         for p in sorted(earlier):  # the earlier run's grains that this run did not replace
             p.unlink(missing_ok=True)
-    finally:  # on success the stage is empty; on failure nothing new is left behind
-        if stage is not None:
-            shutil.rmtree(stage, ignore_errors=True)
-        if created and out.is_dir() and not any(out.iterdir()):
-            out.rmdir()
     return written

@@ -113,7 +113,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
                       population_slopes=population_slopes, seed=seed, workers=workers,
                       sphericity=sphericity, max_across=max_across, design_grains=design_grains, cache=cache_dir, progress=progress,
                       log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
-    from ..simulate.staging import commit_stage, staged
+    from ..staging import commit_stage, staged
 
     with staged(out) as stage:  # the four outputs appear together, or none of them (an interrupt while writing)
         write_outputs(s, result, stage)

@@ -1,0 +1,93 @@
+"""Staging of a command's outputs: all of a run appears in its output folder or none of it.
+
+A run writes into a hidden folder inside ``out`` (:data:`STAGING_PREFIX` and its process id), then moves
+everything into place at once (:func:`commit_stage`); an interrupt or failure removes the folder, and ``out``
+too when the run made it (:func:`staged`); a SIGKILLed run's folder is removed by the next run in ``out``.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import tempfile
+from collections.abc import Iterator
+from contextlib import contextmanager
+from pathlib import Path
+
+from .workers import pid_alive
+
+__all__ = ["STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
+
+
+def remove_stale_staging(out: Path) -> None:
+    """Remove staging folders of runs that were killed (their process is gone)."""
+    if not out.is_dir():
+        return
+    for stage in out.glob(STAGING_PREFIX + "*"):
+        m = re.match(re.escape(STAGING_PREFIX) + r"(\d+)-", stage.name)
+        if stage.is_dir() and m and not pid_alive(int(m.group(1))):
+            shutil.rmtree(stage, ignore_errors=True)
+
+
+#: hidden folder a run stages its files in (``.grainforge-staging-PID-XXXX``)
+STAGING_PREFIX = ".grainforge-staging-"
+
+
+def open_stage(out: str | os.PathLike) -> tuple[Path, bool]:
+    """A hidden staging folder inside ``out`` for one command's outputs; whether ``out`` was created.
+
+    Staging folders of killed runs (their process gone) are removed first,
+    so a run killed by SIGKILL never blocks the next one.
+    """
+    out = Path(out)
+    created = not out.exists()
+    out.mkdir(parents=True, exist_ok=True)
+    remove_stale_staging(out)
+    return Path(tempfile.mkdtemp(prefix=f"{STAGING_PREFIX}{os.getpid()}-", dir=out)), created
+
+
+def commit_stage(stage: Path, out: str | os.PathLike, *, overwrite: bool = False) -> list[Path]:
+    """Move everything in ``stage`` into ``out`` (folders first, then files): the outputs appear together.
+
+    An existing output is replaced only with ``overwrite`` (else ``FileExistsError``, nothing moved).
+    """
+    out = Path(out)
+    items = sorted(stage.iterdir(), key=lambda p: (not p.is_dir(), p.name))
+    if not overwrite:
+        for p in items:
+            if (out / p.name).exists():
+                raise FileExistsError(f"{out / p.name} exists; use --overwrite")
+    moved = []
+    for p in items:
+        target = out / p.name
+        if target.is_dir() and not target.is_symlink():
+            shutil.rmtree(target)
+        p.replace(target)
+        moved.append(target)
+    return moved
+
+
+@contextmanager
+def staged(out: str | os.PathLike) -> Iterator[Path]:
+    """``with staged(out) as stage:`` a staging folder (:func:`open_stage`), removed on the way out with ``out``
+    itself when this run created it and left it empty (:func:`discard_stage`) — also when a signal lands while
+    the folders are being made: whether ``out`` existed is noted before anything is made, and the clean-up is
+    armed before :func:`open_stage` runs."""
+    out = Path(out)
+    created, stage = not out.exists(), None
+    try:
+        stage = open_stage(out)[0]
+        yield stage
+    finally:
+        discard_stage(stage, out, created)
+
+
+def discard_stage(stage: Path | None, out: str | os.PathLike, created: bool) -> None:
+    """Remove ``stage`` (empty after :func:`commit_stage`; None: none was made) and ``out`` if this run created
+    it and it is empty."""
+    if stage is not None:
+        shutil.rmtree(stage, ignore_errors=True)
+    out = Path(out)
+    if created and out.is_dir() and not any(out.iterdir()):
+        out.rmdir()
