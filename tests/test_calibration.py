@@ -93,7 +93,7 @@ def test_cache_location_and_reuse(tmp_path, monkeypatch):
     assert C.cache_dir() == tmp_path / "xdg" / "grainforge"
 
 
-def test_cli_calibrate_writes_csv_and_png(runner, tmp_path):
+def test_cli_calibrate_writes_csv_and_png(runner, tmp_path, monkeypatch):
     from grainforge.cli.main import cli
 
     out = tmp_path / "cal"
@@ -111,6 +111,19 @@ def test_cli_calibrate_writes_csv_and_png(runner, tmp_path):
     res = runner.invoke(cli, args[:-2] + ["--out", str(tmp_path / "x"), "--exponents", "4:1:1"])
     assert res.exit_code == 2 and len(res.output.strip().splitlines()) == 1
     assert not (tmp_path / "x").exists()
+
+    # an interrupt while the figure is drawn (the last output): neither output appears, nor the folder the run
+    # made; an earlier calibration's outputs in a folder given with --overwrite stay as they were
+    def interrupted(*args):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(C.Calibration, "plot", interrupted)
+    fresh = tmp_path / "fresh"
+    res = runner.invoke(cli, args[:-2] + ["--out", str(fresh)])
+    assert res.exit_code != 0 and not fresh.exists(), res.output
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    res = runner.invoke(cli, args + ["--overwrite"])
+    assert res.exit_code != 0 and {p.name: p.read_bytes() for p in out.iterdir()} == before, res.output
 
 
 def test_generate_with_target_fractal_dimension_records_both(runner, tmp_path, monkeypatch):

@@ -57,9 +57,14 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
         )
     except ParameterError as exc:
         raise bad_parameter(exc) from None
-    out.mkdir(parents=True, exist_ok=True)
-    cal.write_csv(csv_path)
-    cal.plot(png_path)
+    from ..staging import commit_stage, staged
+    from .interrupts import signals_held
+
+    with staged(out) as stage:  # the table and its figure appear together, or neither (an interrupt while drawing)
+        cal.write_csv(stage / csv_path.name)
+        cal.plot(stage / png_path.name)
+        with signals_held():
+            commit_stage(stage, out, overwrite=overwrite)
     e, m = cal.usable()
     if len(m):
         click.echo(f"mean D_A from {m.max():.3f} (ε = {e[0]:g}) to {m.min():.3f} (ε = {e[-1]:g})", err=True)
