@@ -17,7 +17,8 @@ descriptors (:func:`grainforge.fit.setting_identifiability`): the most any
 inverse of the descriptors can know of it.  Last, the fit's estimate of the
 sand's *mean* settings (:func:`grainforge.fit.population_settings`: from the
 descriptors' means, where the seed's share averages out) against the known
-means of all rows, in per cent and in its own standard errors.  Usage::
+means of all rows, in per cent, in its own standard errors and in those and its stated sensitivity
+to the settings' spread (``Population.spread``) added in quadrature.  Usage::
 
     nice .venv/bin/python benchmarks/fit_recovery.py [--sand tests/data/synthetic-angular-sand.csv]
         [--method angular] [--design-grains 200] [--max-across 40] [--refine 4] [--reseed 6]
@@ -129,15 +130,17 @@ def main() -> None:
     print("(a setting is identifiable when R² >= 0.9: the descriptors then determine it grain by grain)\n")
     pop = result.population
     print(f"The sand's mean settings from its descriptors' means ({pop.grains} grains remade per round):\n")
-    print("| setting | known mean (all rows) | estimated mean ± standard error | difference | in standard errors | "
-          "determined by the means |")
-    print("|---|---|---|---|---|---|")
+    print("| setting | known mean (all rows) | estimated mean ± standard error | ± spread | difference | "
+          "in standard errors | in both added | determined by the means |")
+    print("|---|---|---|---|---|---|---|---|")
     for k in known[0]:
         if k not in pop.mean:
             continue
         a = float(np.mean([float(r[k]) for r in known]))
-        print(f"| {k} | {a:.4f} | {pop.mean[k]:.4f} ± {pop.se[k]:.4f} | {(pop.mean[k] - a) / a:+.1%} | "
-              f"{(pop.mean[k] - a) / pop.se[k]:+.1f} | {pop.determined[k]:.2f} |")
+        both = float(np.hypot(pop.se[k], pop.spread.get(k, 0.0)))
+        print(f"| {k} | {a:.4f} | {pop.mean[k]:.4f} ± {pop.se[k]:.4f} | {pop.spread.get(k, 0.0):.4f} | "
+              f"{(pop.mean[k] - a) / a:+.1%} | {(pop.mean[k] - a) / pop.se[k]:+.1f} | {(pop.mean[k] - a) / both:+.1f} | "
+              f"{pop.determined[k]:.2f} |")
 
 
 def known_spread(population_settings, known: list[dict]):

@@ -287,7 +287,10 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     again = measure_grain(result.recipe, i, sand.voxel_size, max_across=TEST_ACROSS)
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0, "reseed": 0})
-    assert again.grains_measured == 50 * (1 + fitmod.POPULATION_ROUNDS)  # the design came from the cache
+    # the design came from the cache; rf's surface settings are not determined by the means (five settings, four
+    # means), so no spread sensitivity is measured for them: the estimate's two rounds remade the 50, no more
+    assert again.grains_measured == 50 * (1 + fitmod.POPULATION_ROUNDS)
+    assert not any(again.population.spread.values())
     # the mean-settings estimate remakes as many twins as asked, each round, and the estimate counts them
     fewer = fit_sand(sand, "rf", count=50, population_grains=20, **{**kw, "refine": 0, "reseed": 0})
     assert fewer.grains_measured == 50 + 20 * fitmod.POPULATION_ROUNDS and fewer.population.grains == 20
@@ -355,6 +358,12 @@ def test_the_synthetic_angular_sands_mean_settings_are_recovered_and_reseeding_r
         if k in ("elongation", "flatness"):
             assert pop.mean[k] == pytest.approx(truth, rel=0.05) and pop.se[k] < 0.02 * truth, k
     assert pop.se["rounding"] > 0.1 * np.mean([float(r["rounding"]) for r in known])
+    # the grains' descriptors do not determine rounding and dent depth: the estimate's sensitivity to their spread
+    # is measured and stated; the aspect, which they determine, hardly moves with it
+    assert pop.spread["rounding"] > 0 and pop.spread["dent_depth"] > 0, pop.spread
+    assert pop.spread["elongation"] < 0.005 and pop.spread["flatness"] < 0.005, pop.spread
+    assert any(line.startswith("population spread: the estimate's move with the spread of rounding, dent_depth")
+               for line in lines)
 
 
 def test_angular_grains_take_their_aspect_from_their_settings_and_their_surface_partly_from_their_seed():
@@ -394,6 +403,11 @@ def test_population_slopes_are_measured_on_large_populations_only_and_costed():
                                  for s in ("auto", "model", "measured"))
         assert measured - model == 2 * 4 * SLOPE_GRAINS  # angular's four settings, each raised and lowered
         assert auto == (model if n < SLOPES_MEASURED_FROM else measured), n
+        # the estimate's rounds, and the spread sensitivity of angular's two surface settings on up to 300 grains
+        assert model == 2 * n + 2 * min(n, SLOPE_GRAINS) + 5000, n  # (refine=0: each twin measured once)
+    # rf's five settings are more than the four means determine: no spread sensitivity is measured, nor costed
+    assert fit_grains("rf", population_grains=300, population_slopes="model", **kw)[0] == \
+        2 * 300 + 5000
     with pytest.raises(ValueError, match="auto, measured, model"):
         slopes_for("guessed", 300)
 
@@ -401,9 +415,11 @@ def test_population_slopes_are_measured_on_large_populations_only_and_costed():
 def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
     """rf is capped at 150 voxels across, fso is not (its fractal surface has not converged): on the synthetic 1 µm
     sand (150 to 290 voxels across) an fso fit is estimated dearer than an rf one and, over a 15-minute budget,
-    refused up front naming --max-voxels-across; capped explicitly it costs what rf does."""
+    refused up front naming --max-voxels-across; capped explicitly its grains cost what rf's do (it remakes 600 more:
+    the spread step of its two surface settings, which the four means determine and rf's five they do not)."""
+    import grainforge.fit as fitmod
     from grainforge.estimate import TooLargeError
-    from grainforge.fit import METHOD_CAP, check_fit_size, resolve_cap
+    from grainforge.fit import METHOD_CAP, check_fit_size, fit_grains, measured_across, resolve_cap
 
     sand = read_sand(RF_SAND.with_name("synthetic-1um-sand.csv"))
     assert resolve_cap("rf", METHOD_CAP) == 150.0 and resolve_cap("fso", METHOD_CAP) is None
@@ -413,7 +429,12 @@ def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
     assert check_fit_size(sand, "rf", max_minutes=15, **kw) == rf
     with pytest.raises(TooLargeError, match=r"fit --method fso .* over --max-minutes 15.* set --max-voxels-across"):
         check_fit_size(sand, "fso", max_minutes=15, **kw)
-    assert check_fit_size(sand, "fso", max_across=150.0, **kw) == pytest.approx(rf, rel=0.01)
+    extra = (fit_grains("fso", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0]
+             - fit_grains("rf", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0])
+    each = fitmod.FIT_GRAIN_SECONDS + fitmod.FIT_VOXEL_SECONDS * float(np.mean(
+        (measured_across(sand, 150.0) / fitmod.FIT_ACROSS_REF) ** 3))
+    assert extra == 600
+    assert check_fit_size(sand, "fso", max_across=150.0, **kw) == pytest.approx(rf + extra * each / 2, rel=0.01)
 
 
 def test_bad_tables_are_refused_before_anything_is_written(runner, tmp_path):
