@@ -364,6 +364,8 @@ def test_the_synthetic_angular_sands_mean_settings_are_recovered_and_reseeding_r
     assert pop.spread["elongation"] < 0.005 and pop.spread["flatness"] < 0.005, pop.spread
     assert any(line.startswith("population spread: the estimate's move with the spread of rounding, dent_depth")
                for line in lines)
+    assert (f"the sand's mean settings (± standard error; ± spread: the estimate's move with a 40% wider spread of "
+            f"the settings a grain's descriptors do not determine): {pop.text()}") in result.recipe
 
 
 def test_angular_grains_take_their_aspect_from_their_settings_and_their_surface_partly_from_their_seed():

@@ -1477,7 +1477,9 @@ def _recipe_header(sand: Sand, method: str, st: dict, n: int, known: dict[str, t
     lines += [f"settings a grain's descriptors determine: {', '.join(sure) or 'none'}; "
               f"not determined (seed or another setting shapes the same descriptors): {', '.join(loose) or 'none'}"]
     if population is not None:
-        lines += [f"the sand's mean settings (± standard error): {population.text()}"]
+        why = (f"; ± spread: the estimate's move with a {SPREAD_DOUBT:.0%} wider spread of the settings a grain's "
+               "descriptors do not determine" if any(population.spread.values()) else "")
+        lines += [f"the sand's mean settings (± standard error{why}): {population.text()}"]
     return "\n".join(lines)
 
 
