@@ -341,6 +341,14 @@ class MethodFit:
     def all_settings(self) -> tuple[Setting, ...]:
         return self.settings + ASPECT_SETTINGS
 
+    @property
+    def spread_step(self) -> bool:
+        """Whether a population estimate measures its sensitivity to the settings' spread: only where the four
+        descriptor means can determine every setting (rf's five they cannot: its surface settings' means are the
+        starting population's along what the means do not see, spread and all), so that its cost is known up
+        front (:func:`fit_grains`, :func:`population_settings`)."""
+        return len(self.all_settings) <= len(DESCRIPTORS)
+
     def values(self, u: np.ndarray) -> dict[str, float]:
         """Unit-box coordinates ``u`` (one per :attr:`all_settings`) -> setting values."""
         return {s.name: float(s.low + float(x) * (s.high - s.low)) for s, x in zip(self.all_settings, u)}
@@ -451,7 +459,7 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     methods = list(FITS) if method == "auto" else [method]
     designs = sum(0 if cached(m) else design_grains for m in methods)
     designs += POPULATION_ROUNDS * min(count, population_grains)
-    designs += max(len(FITS[m].settings) if len(FITS[m].all_settings) <= len(DESCRIPTORS) else 0
+    designs += max(len(FITS[m].settings) if FITS[m].spread_step else 0
                    for m in methods) * min(count, population_grains, SLOPE_GRAINS)
     if slopes_for(population_slopes, min(count, population_grains)) == "measured":
         p = max(len(FITS[m].all_settings) for m in methods)  # the dearest method's settings (rf's five)
@@ -1248,10 +1256,8 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     se, determined = population_error(pinv, cov_sand + np.cov(y[ok].T) / max(int(ok.sum()), 1))
     width = np.array([st.high - st.low for st in spec.all_settings])
     names = [st.name for st in spec.all_settings]
-    # settings whose mean is reported (the means determine it) but whose spread the table does not give; only
-    # where the four means can determine every setting (rf's five cannot: its surface settings' means are the
-    # starting population's along what the means do not see, spread and all), so that the cost is known up front
-    loose = [] if shrink is None or len(names) > len(DESCRIPTORS) else [
+    # settings whose mean is reported (the means determine it) but whose spread the table does not give
+    loose = [] if shrink is None or not spec.spread_step else [
         k for k, r2 in enumerate(shrink) if r2 < IDENTIFIABLE_R2 and determined[k] >= DETERMINED_MIN]
     spread = _spread_sensitivity(spec, pool, u, y, seeds, across, pinv, loose, progress, label)
     if loose:

@@ -117,8 +117,6 @@ def manifest_rows(out: str | Path) -> list[dict[str, str]]:
         return list(csv.DictReader(fh))
 
 
-
-
 def write_run(
     method: str,
     params: Any,
