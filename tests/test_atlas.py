@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 import trimesh
 
-from grainforge.analysis.atlas import _hull_count, atlas_descriptors, voxel_descriptors, voxelise
+from grainforge.analysis.atlas import (
+    _hull_count,
+    atlas_descriptors,
+    opening_fraction,
+    voxel_descriptors,
+    voxel_image,
+    voxelise,
+)
 from grainforge.cli.main import cli
 from grainforge.rotations import random_rotation
 
@@ -182,3 +189,53 @@ def test_straddling_cube_mask_gives_scikit_image_the_same_surface():
             masked = marching_cubes(smooth, 0.5, allow_degenerate=True, mask=straddling_cubes(smooth, 0.5))
             assert np.array_equal(full[0], masked[0]) and np.array_equal(full[1], masked[1])
             assert mesh_surface_area(*masked[:2]) == mesh_surface_area(*full[:2]) > 0
+
+
+def test_voxel_image_is_what_atlas_descriptors_measures():
+    m = _ellipsoid(1, 0.7, 0.5)
+    mask, h, d = voxel_image(m, voxels_across=30, rotation=5)
+    ref = atlas_descriptors(m, voxels_across=30, rotation=5)
+    assert h == ref["voxel_size"] and d / h == pytest.approx(ref["voxels_across"])
+    assert voxel_descriptors(mask, h) == {k: v for k, v in ref.items() if k not in ("voxel_size", "voxels_across")}
+
+
+def test_opening_fraction_against_shapes_with_known_openings():
+    # a ball is its own opening by any smaller ball: all kept but the voxel staircase
+    ball, _, _ = voxel_image(trimesh.creation.icosphere(subdivisions=5), voxels_across=40, rotation=1)
+    assert [opening_fraction(ball, r) for r in (2, 4)] == [pytest.approx(1, abs=0.005)] * 2
+    # an axis-aligned cube loses its edges and corners: the rounded cube's volume, to a voxel
+    a = 60
+    cube = np.ones((a, a, a), bool)
+    for r in (6.0, 9.0):
+        exact = ((a - 2 * r) ** 3 + 6 * (a - 2 * r) ** 2 * r + 3 * np.pi * (a - 2 * r) * r**2 + 4 * np.pi * r**3 / 3)
+        assert opening_fraction(cube, r) == pytest.approx(exact / a**3, abs=0.002)
+    # turned off the grid, the cube's faces become voxel staircases the ball cannot fill: about 1 % less
+    box = trimesh.creation.box(extents=(1, 1, 1))
+    for seed in (0, 1):
+        mask, h, _ = voxel_image(box, voxels_across=80, rotation=seed)
+        side, r = 1 / h, 0.1 / h
+        exact = ((side - 2 * r) ** 3 + 6 * (side - 2 * r) ** 2 * r + 3 * np.pi * (side - 2 * r) * r**2
+                 + 4 * np.pi * r**3 / 3) / side**3
+        assert exact - 0.015 < opening_fraction(mask, r) < exact - 0.005, (seed, exact)
+    # a ball wider than the grain reaches none of it
+    assert opening_fraction(np.ones((4, 4, 4), bool), 5.0) == 0.0
+
+
+def test_opening_fraction_grows_with_a_grains_edge_rounding():
+    from grainforge import angular
+
+    kept = []
+    for rounding in (0.0, 0.3, 0.6):
+        g = angular(facets=10, rounding=rounding, aspect=(1.0, 0.8, 0.6), rng=4)
+        mask, _, _ = voxel_image(g, voxels_across=40, rotation=2)
+        kept.append(opening_fraction(mask, 3.0))
+    assert kept[0] < kept[1] < kept[2], kept
+
+
+def test_opening_fraction_refuses_a_bad_radius_or_an_empty_mask():
+    with pytest.raises(ValueError, match="radius"):
+        opening_fraction(np.ones((5, 5, 5), bool), 0.0)
+    with pytest.raises(ValueError, match="radius"):
+        opening_fraction(np.ones((5, 5, 5), bool), float("nan"))
+    with pytest.raises(ValueError, match="empty"):
+        opening_fraction(np.zeros((5, 5, 5), bool), 1.0)
