@@ -81,7 +81,7 @@ def main() -> None:
     from grainforge.fit import POPULATION_GRAINS, RESEED, fit_sand, read_sand
 
     sand = read_sand(args.sand)
-    known_path = args.sand.with_name(args.sand.stem + "-settings.csv")
+    known_path = args.sand.with_name(args.sand.stem.removesuffix("-opening") + "-settings.csv")
     with open(known_path, encoding="utf-8", newline="") as fh:
         known = list(csv.DictReader(fh))
     if args.measured_slopes:

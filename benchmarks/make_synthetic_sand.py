@@ -7,7 +7,11 @@ ratios of the aspect) are drawn from known truncated normals
 (:data:`KNOWN_ANGULAR`), each measured the Atlas way at about 30 voxels across
 (13.3 µm voxels, d_eq about 400 µm), the drawn settings in
 ``synthetic-angular-sand-settings.csv`` (same row order): a crushed,
-Hostun-like sand (the script prints the measured means and sds).
+Hostun-like sand (the script prints the measured means and sds).  The same
+rows with a sixth column, each grain's opening fraction (``Opening Fraction
+(-)``, :data:`grainforge.fit.OPENING_COLUMN`, measured on the same voxel
+image), are ``synthetic-angular-sand-opening.csv``: the table a study that
+also measured that on its images would have.
 
 ``rf``: ``synthetic-rf-sand.csv``, 150 rf grains (:data:`KNOWN_RF`: irregularity
 D3, roughness D8, the aspect; the roughness decay at the generator's default)
@@ -71,15 +75,15 @@ def main() -> None:
              settings="synthetic-rf-sand-settings.csv", **kw)
     else:
         make("angular", "synthetic-angular-sand.csv", KNOWN_ANGULAR, args.grains or ANGULAR_GRAINS, VOXEL_UM, 400.0,
-             settings="synthetic-angular-sand-settings.csv", **kw)
+             settings="synthetic-angular-sand-settings.csv", opening="synthetic-angular-sand-opening.csv", **kw)
 
 
 def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um: float,
-         settings: str | None, out: Path = DATA, workers: int = 1) -> None:
+         settings: str | None, out: Path = DATA, workers: int = 1, opening: str | None = None) -> None:
     import numpy as np
     from scipy.stats import truncnorm
 
-    from grainforge.fit import DESCRIPTORS, FITS, _Pool, grain_seed
+    from grainforge.fit import DESCRIPTORS, FITS, OPENING_COLUMN, _Pool, grain_seed
 
     rng = np.random.default_rng(SEED)
     spec = FITS[method]
@@ -98,17 +102,19 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
             yield x
 
     with _Pool(workers) as pool:  # each grain measured the Atlas way (spam's cube)
-        table = pool.run(method, spec.fixed, jobs, progress)
+        table = pool.run(method, spec.fixed, jobs, progress, opening=opening is not None)
     print()
     if not np.all(np.isfinite(table)):
         raise SystemExit(f"the generator refused {int(np.sum(~np.all(np.isfinite(table), axis=1)))} grains")
-    rows = [[i + 1, math.pi / 6 * d_eq**3, d_eq, *map(float, d), voxel_um] for i, ((_, d_eq), d) in
+    rows = [[i + 1, math.pi / 6 * d_eq**3, d_eq, *map(float, d[:4]), voxel_um] for i, ((_, d_eq), d) in
             enumerate(zip(drawn, table))]
     truth = [[i + 1, *(v[k] for k in known)] for i, (v, _) in enumerate(drawn)]
     header = ["Particle ID", "Volume (µm³)", "Equivalent Diameter (µm)", "True Sphericity (-)", "Convexity (-)",
               "Flatness (-)", "Elongation (-)", "Voxel Size (µm)"]
     assert header[3:7] == [f"{'True Sphericity' if k == 'sphericity' else k.title()} (-)" for k in DESCRIPTORS]
     files = [(name, header, rows)] + ([(settings, ["Particle ID", *known], truth)] if settings else [])
+    if opening:
+        files.append((opening, header + [OPENING_COLUMN], [r + [float(d[4])] for r, d in zip(rows, table)]))
     out.mkdir(parents=True, exist_ok=True)
     for file, head, body in files:
         with open(out / file, "w", newline="", encoding="utf-8") as fh:

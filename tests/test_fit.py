@@ -505,3 +505,35 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
     r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size-um", "7", "--out", str(out),
                             "--overwrite"])
     assert r.exit_code != 0 and {p.name: p.read_bytes() for p in out.iterdir()} == before, r.stderr
+
+
+def test_an_opening_fraction_column_is_read_checked_and_used_only_at_the_sands_resolution(tmp_path):
+    """A table may carry each grain's opening fraction (not an Atlas column): it is read, checked like the
+    descriptors (in [0, 1], a spread), and used by the mean-settings estimate only where no twin is measured
+    coarser than its sand grain; costed up front (the starting grains measured again, the slopes measured)."""
+    from grainforge.fit import OPENING_COLUMN, check_sand, fit_grains, uses_opening
+
+    sand = read_sand(ANGULAR_SAND.with_name("synthetic-angular-sand-opening.csv"))
+    plain = read_sand(ANGULAR_SAND)
+    assert plain.opening is None and sand.opening is not None and len(sand.opening) == sand.count
+    assert np.array_equal(sand.table(), plain.table()) and 0.98 < sand.opening.mean() < 1
+    across = sand.equivalent_diameter / sand.voxel_size
+    assert uses_opening(sand, None) and uses_opening(sand, float(across.max()))
+    assert not uses_opening(sand, float(across.max()) - 1) and not uses_opening(plain, None)
+    kw = dict(count=500, design_grains=0, refine=0)
+    assert fit_grains("angular", opening=True, **kw)[0] - fit_grains("angular", **kw)[0] == 300 + 2 * 4 * 300
+
+    text = ANGULAR_SAND.with_name("synthetic-angular-sand-opening.csv").read_text(encoding="utf-8").splitlines()
+    assert text[0].endswith("," + OPENING_COLUMN)
+    for cell, words in (("1.2", "out of range (at most 1)"), ("x", "not a number")):
+        bad = tmp_path / f"bad-{cell}.csv"
+        bad.write_text("\n".join([text[0], text[1].rsplit(",", 1)[0] + "," + cell] + text[2:]), encoding="utf-8")
+        with pytest.raises(ValueError, match=re.escape(f"line 2, column '{OPENING_COLUMN}': {words}")):
+            read_sand(bad)
+    zero = tmp_path / "zero.csv"
+    zero.write_text("\n".join([text[0], text[1].rsplit(",", 1)[0] + ",0"] + text[2:]), encoding="utf-8")
+    assert read_sand(zero).opening[0] == 0.0  # a grain no ball of the radius fits in
+    same = tmp_path / "same.csv"
+    same.write_text("\n".join([text[0]] + [r.rsplit(",", 1)[0] + ",0.99" for r in text[1:]]), encoding="utf-8")
+    with pytest.raises(ValueError, match="every grain has the same opening fraction"):
+        check_sand(read_sand(same))

@@ -88,6 +88,12 @@ COLUMNS = {
 }
 #: optional column giving the voxel size (µm) of each grain's scan
 VOXEL_COLUMN = "Voxel Size (µm)"
+#: optional column, not the Sand Atlas's: each grain's opening fraction at a ball of OPENING_RADIUS times its
+#: d_eq (:func:`grainforge.analysis.atlas.opening_fraction`, on the grain's voxel image).  Where a table has it,
+#: the estimate of the sand's mean settings uses it as a fifth descriptor (:func:`population_settings`): it
+#: responds to edge rounding far more than to a grain's seed (docs/fit.md, "What a scan's images add")
+OPENING_COLUMN = "Opening Fraction (-)"
+OPENING_RADIUS = 1.0 / 30.0
 #: acceptance: two-sample KS statistic and |mean difference| per descriptor
 KS_MAX = 0.1
 MEAN_TOL = 0.01
@@ -171,6 +177,7 @@ class Sand:
     voxel_size: float  # µm
     equivalent_diameter: np.ndarray
     values: Mapping[str, np.ndarray]  # descriptor -> (n,)
+    opening: np.ndarray | None = None  # (n,) the OPENING_COLUMN, where the table has it
 
     @property
     def count(self) -> int:
@@ -230,6 +237,8 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
         raise ValueError(f"{path}: no grains (only a header row)")
     if _norm(VOXEL_COLUMN) in header:
         want["voxel_size"] = VOXEL_COLUMN
+    if _norm(OPENING_COLUMN) in header:
+        want["opening"] = OPENING_COLUMN
     data: dict[str, list[float]] = {k: [] for k in want}
     for line, row in enumerate(rows[1:], start=2):
         for key, col in want.items():
@@ -239,10 +248,11 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
                 x = float(cell)
             except ValueError:
                 raise ValueError(f"{path}: line {line}, column {col!r}: not a number: {cell!r}") from None
-            high = SPHERICITY_MAX if key == "sphericity" else 1 + 1e-6 if key in DESCRIPTORS else math.inf
-            if not (math.isfinite(x) and 0 < x <= high):
+            high = SPHERICITY_MAX if key == "sphericity" else 1 + 1e-6 if key in (*DESCRIPTORS, "opening") \
+                else math.inf
+            if not (math.isfinite(x) and (0 <= x if key == "opening" else 0 < x) and x <= high):
                 limit = f" (at most {SPHERICITY_MAX:g})" if key == "sphericity" else \
-                    " (at most 1)" if key in DESCRIPTORS else ""
+                    " (at most 1)" if key in (*DESCRIPTORS, "opening") else ""
                 raise ValueError(f"{path}: line {line}, column {col!r}: out of range{limit}: {cell!r}")
             data[key].append(x)
     if voxel_size is None:
@@ -259,7 +269,8 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
                          "across (is the voxel size in µm?)")
     return Sand(name=path.name, voxel_size=float(voxel_size),
                 equivalent_diameter=np.asarray(data["equivalent_diameter"]),
-                values={k: np.asarray(data[k]) for k in DESCRIPTORS})
+                values={k: np.asarray(data[k]) for k in DESCRIPTORS},
+                opening=np.asarray(data["opening"]) if "opening" in data else None)
 
 
 def check_sand(sand: Sand) -> None:
@@ -285,7 +296,9 @@ def check_sand(sand: Sand) -> None:
     if sand.count < MIN_GRAINS:
         raise ValueError(f"{sand.name}: {sand.count} grain(s); a fit needs at least {MIN_GRAINS} "
                          "(fewer grains say too little about the sand's distributions)")
-    for key, col in [("equivalent diameter", sand.equivalent_diameter)] + [(k, sand.values[k]) for k in DESCRIPTORS]:
+    opening = [] if sand.opening is None else [("opening fraction", sand.opening)]
+    for key, col in [("equivalent diameter", sand.equivalent_diameter)] + [(k, sand.values[k]) for k in DESCRIPTORS] \
+            + opening:
         if float(np.ptp(col)) <= 1e-9 * float(np.max(np.abs(col))):
             raise ValueError(f"{sand.name}: every grain has the same {key} ({float(col[0]):g}): a fit needs a "
                              "spread of sizes and shapes to match")
@@ -429,7 +442,7 @@ def _written(v: Any) -> Any:
 # --------------------------------------------------------------------------- estimate
 def fit_grains(method: str, *, count: int, design_grains: int, refine: int, reseed: int = 0,
                population_grains: int = POPULATION_GRAINS, population_slopes: str = POPULATION_SLOPES,
-               cached: Callable[[str], bool] = lambda m: False) -> tuple[int, int]:
+               cached: Callable[[str], bool] = lambda m: False, opening: bool = False) -> tuple[int, int]:
     """Grains a fit of ``method`` measures: (expected, at most).
 
     The design's grains (none when it is cached), the population estimate's
@@ -437,7 +450,8 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     measured slopes 2 × settings × up to :data:`SLOPE_GRAINS`: :func:`slopes_for`; plus, for its
     sensitivity to the spread, up to :data:`SLOPE_GRAINS` per setting besides the aspect where the
     four means can determine every setting, counted here for each although only those a grain's
-    descriptors do not determine are remade), then each
+    descriptors do not determine are remade; with ``opening``, the sand's opening fraction used
+    (:func:`uses_opening`), the starting grains measured again and the slopes always measured), then each
     twin once, plus refinements: :data:`EXPECTED_MEASUREMENTS` per twin
     expected, ``1 + refine`` at most, plus two per reseeded twin and try
     (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most:
@@ -455,13 +469,17 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     (5600, 6000)
     >>> fit_grains("angular", count=500, design_grains=400, refine=3)   # rounding's and dent depth's spread
     (3200, 3600)
+    >>> fit_grains("angular", count=500, design_grains=400, refine=3, opening=True)   # + 300 + 2 × 4 × 300
+    (5900, 6300)
     """
     methods = list(FITS) if method == "auto" else [method]
     designs = sum(0 if cached(m) else design_grains for m in methods)
     designs += POPULATION_ROUNDS * min(count, population_grains)
     designs += max(len(FITS[m].settings) if FITS[m].spread_step else 0
                    for m in methods) * min(count, population_grains, SLOPE_GRAINS)
-    if slopes_for(population_slopes, min(count, population_grains)) == "measured":
+    if opening:
+        designs += min(count, population_grains)
+    if opening or slopes_for(population_slopes, min(count, population_grains)) == "measured":
         p = max(len(FITS[m].all_settings) for m in methods)  # the dearest method's settings (rf's five)
         designs += 2 * p * min(count, population_grains, SLOPE_GRAINS)
     expected = designs + int(round(count * (min(EXPECTED_MEASUREMENTS, 1 + refine) + 2 * reseed * RESEED_SHARE)))
@@ -504,6 +522,14 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
     return np.minimum(across, max_across) if max_across else across
 
 
+def uses_opening(sand: Sand, max_across: float | None) -> bool:
+    """Whether a fit's mean-settings estimate uses the table's :data:`OPENING_COLUMN`: where it has one and no
+    grain's twin is measured coarser than the sand grain (``max_across``), since the opening fraction, like
+    true sphericity, depends on the voxels across and is compared at the sand's own resolution only."""
+    return sand.opening is not None and not (max_across and bool(np.any(
+        sand.equivalent_diameter / sand.voxel_size > max_across)))
+
+
 def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = DESIGN_GRAINS, refine: int = 4,
                    reseed: int = RESEED, population_grains: int = POPULATION_GRAINS,
                    population_slopes: str = POPULATION_SLOPES,
@@ -532,7 +558,8 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
     expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
                                 population_grains=population_grains, population_slopes=population_slopes,
-                                cached=lambda m: m not in fresh)
+                                cached=lambda m: m not in fresh,
+                                opening=any(uses_opening(sand, caps[m]) for m in methods))
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     cores = max(1, min(int(workers), os.cpu_count() or 1))
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
@@ -678,22 +705,24 @@ def measure_grain(text: str, index: int, voxel_size_um: float, convention: str =
     return (size_mm * 1000.0, *d, time.process_time() - cpu)
 
 
-def _measure(method: str, params: Any, seed: int, across: float, convention: str) -> tuple[float, ...]:
-    from .analysis.atlas import atlas_descriptors
+def _measure(method: str, params: Any, seed: int, across: float, convention: str,
+             opening: bool = False) -> tuple[float, ...]:
+    from .analysis.atlas import opening_fraction, voxel_descriptors, voxel_image
     from .methods import generate
 
     grain = generate(method, params, seed)
-    d = atlas_descriptors(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]),
-                          convention=convention)
-    return tuple(float(d[k]) for k in DESCRIPTORS)
+    mask, h, _ = voxel_image(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]))
+    d = voxel_descriptors(mask, h, convention=convention)
+    return tuple(float(d[k]) for k in DESCRIPTORS) + ((opening_fraction(mask, OPENING_RADIUS * across),)
+                                                      if opening else ())
 
 
 def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, Any], seed: int, across: float,
-                     convention: str = "atlas") -> tuple[float, ...]:
+                     convention: str = "atlas", opening: bool = False) -> tuple[float, ...]:
     """One grain made with ``fixed`` and its ``own`` parameters and ``seed``, measured ``across`` voxels across.
 
-    Returns the four descriptors and the CPU seconds; NaNs if the generator
-    refuses these settings (a design corner, say).
+    Returns the four descriptors (and, with ``opening``, the opening fraction of :data:`OPENING_COLUMN`) and
+    the CPU seconds; NaNs if the generator refuses these settings (a design corner, say).
     """
     import time
 
@@ -702,9 +731,9 @@ def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, An
 
     cpu = time.process_time()
     try:
-        d = _measure(method, get(method).Params(**{**fixed, **own}), seed, across, convention)
+        d = _measure(method, get(method).Params(**{**fixed, **own}), seed, across, convention, opening)
     except (ParameterError, ValueError):
-        d = (math.nan,) * 4
+        d = (math.nan,) * (len(DESCRIPTORS) + bool(opening))
     return (*d, time.process_time() - cpu)
 
 
@@ -756,10 +785,12 @@ class _Pool:
             close_pool(self.ex, abort=exc_type is not None)
 
     def run(self, method: str, fixed: Mapping[str, Any], jobs: Sequence[tuple[dict, int, float]],
-            progress) -> np.ndarray:
-        """(n, 4) descriptors of the jobs (own parameters, seed, voxels across); NaN rows where refused."""
-        out = np.empty((len(jobs), 4))
-        args = [(method, fixed, own, seed, across, self.convention) for own, seed, across in jobs]
+            progress, opening: bool = False) -> np.ndarray:
+        """(n, 4) descriptors of the jobs (own parameters, seed, voxels across); NaN rows where refused.  With
+        ``opening``, (n, 5): the opening fraction of :data:`OPENING_COLUMN` last."""
+        width = len(DESCRIPTORS) + bool(opening)
+        out = np.empty((len(jobs), width))
+        args = [(method, fixed, own, seed, across, self.convention, bool(opening)) for own, seed, across in jobs]
         if self.ex is None:
             it: Iterable = ((i, measure_settings(*a)) for i, a in enumerate(args))
         else:
@@ -773,8 +804,8 @@ class _Pool:
         if progress is not None and jobs:
             it = progress(it, len(jobs))
         for i, row in it:
-            out[i] = row[:4]
-            self.cpu += row[4]
+            out[i] = row[:width]
+            self.cpu += row[width]
             self.grains += 1
         return out
 
@@ -1147,8 +1178,8 @@ def _mean_jacobian(model, u: np.ndarray, across: np.ndarray, h: float = 1e-3) ->
 
 
 def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: Sequence[int], across: np.ndarray,
-                            progress=None, step: float | np.ndarray = SLOPE_STEP) -> np.ndarray:
-    """(4, p): d(mean measured descriptors) / d(a shift of every grain's unit-box settings), measured on the first
+                            progress=None, step: float | np.ndarray = SLOPE_STEP, opening: bool = False) -> np.ndarray:
+    """(4, p) (with ``opening`` (5, p)): d(mean measured descriptors) / d(a shift of every grain's unit-box settings), measured on the first
     :data:`SLOPE_GRAINS` grains: each remade with one setting raised and lowered by ``step`` (one for all
     settings, or one each; kept in the box) under its own seed, so that the difference is the setting's and not
     the seed's."""
@@ -1160,7 +1191,7 @@ def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: 
         up[:, k] = np.clip(up[:, k] + steps[k], 0.0, 1.0)
         down[:, k] = np.clip(down[:, k] - steps[k], 0.0, 1.0)
         jobs = [(spec.grain_params(v[i]), seeds[i], float(across[i])) for v in (up, down) for i in range(n)]
-        y = pool.run(spec.method, spec.fixed, jobs, progress)
+        y = pool.run(spec.method, spec.fixed, jobs, progress, opening=opening)
         ok = np.all(np.isfinite(y[:n]), axis=1) & np.all(np.isfinite(y[n:]), axis=1)
         dy, du = (y[:n] - y[n:])[ok], (up[:, k] - down[:, k])[ok]
         cols.append(dy.sum(axis=0) / max(float(du.sum()), 1e-12))
@@ -1170,7 +1201,8 @@ def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: 
 def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: np.ndarray, seeds: Sequence[int],
                         across: np.ndarray, pool: _Pool, progress=None, note=None, name=None,
                         shrink: Sequence[float] | None = None, grains: int = POPULATION_GRAINS,
-                        slopes: str = POPULATION_SLOPES, start: np.ndarray | None = None) -> Population:
+                        slopes: str = POPULATION_SLOPES, start: np.ndarray | None = None,
+                        opening: bool = False) -> Population:
     """Estimate the sand's **mean** settings: shift a population until its mean descriptors are the sand's.
 
     A twin's settings are not its sand grain's: where the seed shapes a descriptor as much as a setting does,
@@ -1194,6 +1226,11 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     ``start`` (unit-box settings, one row per grain remade) replaces the shrunk twins as the population the
     common shift moves: the settings' *spread* about their mean is then the caller's.
 
+    ``opening`` (the sand has the :data:`OPENING_COLUMN`; :func:`uses_opening`): the opening fraction is a fifth
+    descriptor.  The starting grains are measured again with it (``grains`` more), the slopes are measured
+    (the design model has none for it), and the means' misfit is weighed by the sand's covariance (generalised
+    least squares, :func:`grainforge.twins.population_step`).
+
     Which mean settings match the sand's means depends on that spread (the descriptors respond to the settings
     with curvature), and the table does not give the spread of a setting that a grain's descriptors do not
     determine (``shrink`` below :data:`IDENTIFIABLE_R2`).  For each such setting whose mean the means determine
@@ -1212,7 +1249,17 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     say, label = note or (lambda s: None), name or (lambda s: None)
     m = min(len(u0), int(grains))
     u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
-    table = sand.table()
+    table, weight, short = sand.table(), None, list(DESCRIPTORS)
+    if opening:
+        table, short = np.column_stack([table, sand.opening]), short + ["opening"]
+        try:  # generalised least squares: the misfit in the sand's own scatter, correlations included
+            weight = np.linalg.inv(np.linalg.cholesky(np.cov(table.T)))
+        except np.linalg.LinAlgError:
+            weight = np.diag(1.0 / np.maximum(table.std(axis=0), 1e-12))
+        label("population start")
+        y = pool.run(spec.method, spec.fixed, [(spec.grain_params(u[i]), seeds[i], float(across[i]))
+                                               for i in range(m)], progress, opening=True)
+        say(f"population: the table's opening fraction is a fifth descriptor; {m} grains measured again with it")
     target, cov_sand, scale = table.mean(axis=0), np.cov(table.T) / len(table), table.std(axis=0)
     rounds = []  # (settings, measured, gap, largest gap in the sand's sds)
 
@@ -1229,29 +1276,41 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         start = u
     else:  # each twin's settings carry its own seed's share: keep only what the descriptors know
         start = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
-    slopes = slopes_for(slopes, m)
-    if slopes == "measured":
+    slopes = "measured" if opening else slopes_for(slopes, m)
+
+    def measure_slopes(u: np.ndarray, where: str = "") -> np.ndarray:
         label("population slopes")
-        jac = _measured_mean_jacobian(spec, pool, start, seeds, across, progress)
-        say(f"population slopes: measured on {min(m, SLOPE_GRAINS)} grains, each setting raised and lowered by "
-            f"{SLOPE_STEP:g} of its range under the grain's own seed")
-    else:
-        jac = _mean_jacobian(model, start, across)
+        jac = _measured_mean_jacobian(spec, pool, u, seeds, across, progress, opening=opening)
+        say(f"population slopes: measured on {min(m, SLOPE_GRAINS)} grains{where}, each setting raised and lowered "
+            f"by {SLOPE_STEP:g} of its range under the grain's own seed")
+        return jac
+
+    # with the opening fraction (which the design model does not predict), round 1 steps through the model's
+    # slopes on the four descriptors, and the slopes are measured where it lands, nearer the answer than the
+    # shrunk twins: the opening fraction's response to rounding is curved (it saturates once the edges are
+    # rounder than the ball)
+    jac = measure_slopes(start) if slopes == "measured" and not opening else _mean_jacobian(model, start, across)
     shift = np.zeros(u.shape[1])
     for r in range(1, POPULATION_ROUNDS + 1):
-        shift = shift + population_step(jac, gap)[0]
+        if len(jac) < len(gap):  # the model's four rows: the opening fraction's gap waits for measured slopes
+            shift = shift + population_step(jac, gap[:len(jac)])[0]
+        else:
+            shift = shift + population_step(jac, gap, weight)[0]
         new_u = np.clip(start + shift, 0.0, 1.0)
         label(f"population {r}/{POPULATION_ROUNDS}")
         gap = record(new_u, pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i],
-                                                                 float(across[i])) for i in range(m)], progress))
+                                                                 float(across[i])) for i in range(m)], progress,
+                                     opening=opening))
         refused = int(np.sum(~np.all(np.isfinite(rounds[-1][1]), axis=1)))
         say(f"population {r}: {m} grains remade" + (f" ({refused} refused by the generator, left out)"
                                                      if refused else "")
-            + "; mean descriptors off the sand's by " + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(DESCRIPTORS, gap)))
+            + "; mean descriptors off the sand's by " + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(short, gap)))
+        if len(jac) < len(gap):
+            jac = measure_slopes(new_u, f" of round {r}")
     # the round whose means came closest (a step may overshoot where the model's slopes are not the grains')
     u, y, gap, _ = min(rounds, key=lambda r: r[3])
     ok = np.all(np.isfinite(y), axis=1)
-    step, pinv = population_step(jac, gap)
+    step, pinv = population_step(jac, gap, weight)
     est = np.clip(u[ok].mean(axis=0) + step, 0.0, 1.0)
     se, determined = population_error(pinv, cov_sand + np.cov(y[ok].T) / max(int(ok.sum()), 1))
     width = np.array([st.high - st.low for st in spec.all_settings])
@@ -1259,7 +1318,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     # settings whose mean is reported (the means determine it) but whose spread the table does not give
     loose = [] if shrink is None or not spec.spread_step else [
         k for k, r2 in enumerate(shrink) if r2 < IDENTIFIABLE_R2 and determined[k] >= DETERMINED_MIN]
-    spread = _spread_sensitivity(spec, pool, u, y, seeds, across, pinv, loose, progress, label)
+    spread = _spread_sensitivity(spec, pool, u, y, seeds, across, pinv, loose, progress, label, opening)
     if loose:
         say(f"population spread: the estimate's move with the spread of {', '.join(names[k] for k in loose)} "
             f"{SPREAD_DOUBT:.0%} wider (on {min(int(ok.sum()), SLOPE_GRAINS)} grains remade each): "
@@ -1271,7 +1330,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
 
 def _spread_sensitivity(spec: MethodFit, pool: _Pool, u: np.ndarray, y: np.ndarray, seeds: Sequence[int],
                         across: np.ndarray, pinv: np.ndarray, loose: Sequence[int], progress=None,
-                        label=None) -> np.ndarray:
+                        label=None, opening: bool = False) -> np.ndarray:
     """(p,) unit-box: how far a population estimate (``pinv``, at settings ``u`` measured as ``y``) moves when the
     spread of each of the settings ``loose`` about its mean is :data:`SPREAD_DOUBT` wider; the moves of the
     settings added in quadrature.  Measured on the first :data:`SLOPE_GRAINS` grains made, each remade under its
@@ -1284,7 +1343,7 @@ def _spread_sensitivity(spec: MethodFit, pool: _Pool, u: np.ndarray, y: np.ndarr
         centre = wide[:, k].mean()
         wide[:, k] = np.clip(centre + (wide[:, k] - centre) * (1.0 + SPREAD_DOUBT), 0.0, 1.0)
         yw = pool.run(spec.method, spec.fixed, [(spec.grain_params(wide[j]), seeds[i], float(across[i]))
-                                                for j, i in enumerate(idx)], progress)
+                                                for j, i in enumerate(idx)], progress, opening=opening)
         both = np.all(np.isfinite(yw), axis=1)
         if not both.any():
             continue
@@ -1412,6 +1471,11 @@ def fit_sand(
         known = setting_identifiability(des)
         note(f"design {method}: each setting from a grain's 4 descriptors (R², rms error): " + ", ".join(
             f"{k} {r2:.2f} ±{e:.3g}" for k, (r2, e) in known.items()))
+        opening = uses_opening(sand, cap)
+        if sand.opening is not None and not opening:
+            note(f"population: the table's opening fraction is not used: {method}'s twins of its grains over "
+                 f"{cap:g} voxels across are measured at {cap:g}, where their opening fraction is not the sand "
+                 "grain's (--max-voxels-across 0 measures every grain at the sand's resolution)")
         rows = choose_rows(sand.count, count, seed)
         tw = _start_twins(spec, model, sand, rows, cap, seed)
         idx = np.arange(len(rows))
@@ -1423,8 +1487,10 @@ def fit_sand(
             if r == 0:
                 population = population_settings(spec, model, sand, tw.u, y, tw.seeds, tw.across, pool, progress,
                                                  note, name, shrink=[r2 for r2, _ in known.values()],
-                                                 grains=population_grains, slopes=population_slopes)
-                note(f"population: the sand's mean settings from its descriptors' means (± standard error; "
+                                                 grains=population_grains, slopes=population_slopes,
+                                                 opening=opening)
+                note(f"population: the sand's mean settings from its descriptors' means"
+                     f"{' and its opening fraction' if opening else ''} (± standard error; "
                      f"{sand.count} sand grains, {population.grains} made): {population.text()}")
             keep = tw.relative(tw.best_y[idx], idx) > 1
             if r == refine or not keep.any():

@@ -224,25 +224,33 @@ def _gauss_newton(resid, u: np.ndarray, iterations: int = 60, h: float = 1e-6) -
     return u
 
 
-def population_step(jac: np.ndarray, gap: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def population_step(jac: np.ndarray, gap: np.ndarray, weight: np.ndarray | None = None
+                    ) -> tuple[np.ndarray, np.ndarray]:
     """The shift of a population's mean settings that moves its mean descriptors by ``gap``, to first order.
 
     Solves ``jac @ step = gap`` in the least-squares sense; with more
     settings than descriptors (or settings the descriptors' means cannot
     tell apart) the shortest such step, so that what the means do not
-    determine stays where it is.
+    determine stays where it is.  With more descriptors than settings the
+    misfit is weighed by ``weight`` (``W @ (jac @ step - gap)`` is what is
+    least: with W the inverse of a Cholesky factor of the descriptors'
+    covariance, the generalised least squares whose standard errors are
+    the least the means allow); a square system is solved exactly either way.
 
     Parameters
     ----------
-    jac : (4, p) array
-        d(mean descriptors) / d(mean settings), unit-box settings.
-    gap : (4,) array
+    jac : (d, p) array
+        d(mean descriptors) / d(mean settings), unit-box settings (d = 4, or
+        5 with the opening fraction).
+    gap : (d,) array
         Target mean descriptors minus the population's.
+    weight : (d, d) array, optional
+        Invertible; default: the identity.
 
     Returns
     -------
     step : (p,) array
-    pinv : (p, 4) array
+    pinv : (p, d) array
         The (pseudo-)inverse used: what :func:`population_error` propagates.
 
     Examples
@@ -251,8 +259,21 @@ def population_step(jac: np.ndarray, gap: np.ndarray) -> tuple[np.ndarray, np.nd
     >>> step, _ = population_step(jac, np.array([0.1, 0.1, 0.0, 0.0]))
     >>> np.round(step, 6).tolist()
     [0.1, 0.05]
+
+    A fifth descriptor that sees only the first setting, known ten times better, outweighs a first that
+    disagrees with it:
+
+    >>> jac5 = np.vstack([jac, [[1.0, 0.0]]])
+    >>> step, _ = population_step(jac5, np.array([0.1, 0.1, 0.0, 0.0, 0.2]), np.diag([1, 1, 1, 1, 10.0]))
+    >>> np.round(step, 3).tolist()
+    [0.199, 0.05]
     """
-    pinv = np.linalg.pinv(np.asarray(jac, np.float64), rcond=1e-6)
+    jac = np.asarray(jac, np.float64)
+    if weight is None:
+        pinv = np.linalg.pinv(jac, rcond=1e-6)
+    else:
+        w = np.asarray(weight, np.float64)
+        pinv = np.linalg.pinv(w @ jac, rcond=1e-6) @ w
     return pinv @ np.asarray(gap, np.float64), pinv
 
 
@@ -261,9 +282,9 @@ def population_error(pinv: np.ndarray, cov_mean: np.ndarray) -> tuple[np.ndarray
 
     Parameters
     ----------
-    pinv : (p, 4) array
+    pinv : (p, d) array
         From :func:`population_step`.
-    cov_mean : (4, 4) array
+    cov_mean : (d, d) array
         Covariance of the mean-descriptor gap: the sand's covariance over
         its grain count plus the made population's over its.
 
