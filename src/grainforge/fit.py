@@ -94,6 +94,8 @@ VOXEL_COLUMN = "Voxel Size (µm)"
 #: responds to edge rounding far more than to a grain's seed (docs/fit.md, "What a scan's images add")
 OPENING_COLUMN = "Opening Fraction (-)"
 OPENING_RADIUS = 1.0 / 30.0
+OPENING_ROUNDS = 4
+OPENING_TRUST = 0.1
 #: acceptance: two-sample KS statistic and |mean difference| per descriptor
 KS_MAX = 0.1
 MEAN_TOL = 0.01
@@ -1285,28 +1287,35 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
             f"by {SLOPE_STEP:g} of its range under the grain's own seed")
         return jac
 
-    # with the opening fraction (which the design model does not predict), round 1 steps through the model's
-    # slopes on the four descriptors, and the slopes are measured where it lands, nearer the answer than the
-    # shrunk twins: the opening fraction's response to rounding is curved (it saturates once the edges are
-    # rounder than the ball)
-    jac = measure_slopes(start) if slopes == "measured" and not opening else _mean_jacobian(model, start, across)
+    # with the opening fraction, whose response to rounding is curved (it saturates once the edges are rounder
+    # than the ball), the slopes measured at the start are updated after each round from how the means moved
+    # (Broyden's secant update), each step is held to OPENING_TRUST of the unit box, and there are
+    # OPENING_ROUNDS rounds
+    jac = measure_slopes(start) if slopes == "measured" else _mean_jacobian(model, start, across)
     shift = np.zeros(u.shape[1])
-    for r in range(1, POPULATION_ROUNDS + 1):
-        if len(jac) < len(gap):  # the model's four rows: the opening fraction's gap waits for measured slopes
-            shift = shift + population_step(jac, gap[:len(jac)])[0]
-        else:
-            shift = shift + population_step(jac, gap, weight)[0]
+    prev = None
+    for r in range(1, (OPENING_ROUNDS if opening else POPULATION_ROUNDS) + 1):
+        step = population_step(jac, gap, weight)[0]
+        if opening:
+            step = step * min(1.0, OPENING_TRUST / max(float(np.max(np.abs(step))), 1e-12))
+        shift = shift + step
         new_u = np.clip(start + shift, 0.0, 1.0)
-        label(f"population {r}/{POPULATION_ROUNDS}")
-        gap = record(new_u, pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i],
-                                                                 float(across[i])) for i in range(m)], progress,
-                                     opening=opening))
+        label(f"population {r}")
+        new_y = pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i], float(across[i]))
+                                                   for i in range(m)], progress, opening=opening)
+        gap = record(new_u, new_y)
+        if opening and prev is not None:
+            both = np.all(np.isfinite(prev[1]), axis=1) & np.all(np.isfinite(new_y), axis=1)
+            du = (new_u[both] - prev[0][both]).mean(axis=0)
+            dy = (new_y[both] - prev[1][both]).mean(axis=0)
+            if float(du @ du) > 1e-10:
+                jac = jac + np.outer(dy - jac @ du, du) / float(du @ du)
+        prev = (new_u, new_y)
         refused = int(np.sum(~np.all(np.isfinite(rounds[-1][1]), axis=1)))
         say(f"population {r}: {m} grains remade" + (f" ({refused} refused by the generator, left out)"
                                                      if refused else "")
-            + "; mean descriptors off the sand's by " + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(short, gap)))
-        if len(jac) < len(gap):
-            jac = measure_slopes(new_u, f" of round {r}")
+            + "; mean descriptors off the sand's by " + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(short, gap))
+            + "; mean settings " + ", ".join(f"{v:.4f}" for v in spec.values(new_u.mean(axis=0)).values()))
     # the round whose means came closest (a step may overshoot where the model's slopes are not the grains')
     u, y, gap, _ = min(rounds, key=lambda r: r[3])
     ok = np.all(np.isfinite(y), axis=1)
