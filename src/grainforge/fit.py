@@ -73,7 +73,8 @@ __all__ = [
     "compare", "recipe_text", "twin_recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "CORR_TOL",
     "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS",
     "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "METHOD_CAP", "resolve_cap", "design", "design_path", "measure_grain",
-    "OUTPUTS", "setting_identifiability", "population_settings", "Population",
+    "OUTPUTS", "setting_identifiability", "population_settings", "Population", "OPENING_COLUMN", "OPENING_RADIUS",
+    "uses_opening",
 ]
 
 #: the four descriptors that are matched
@@ -94,6 +95,10 @@ VOXEL_COLUMN = "Voxel Size (µm)"
 #: responds to edge rounding far more than to a grain's seed (docs/fit.md, "What a scan's images add")
 OPENING_COLUMN = "Opening Fraction (-)"
 OPENING_RADIUS = 1.0 / 30.0
+#: with the opening fraction the estimate's rounds are more and shorter: its response to edge rounding saturates
+#: (it hardly moves once the edges are rounder than the ball), so slopes measured at the twins' starting
+#: population are too flat; each round's step is held to OPENING_TRUST of the unit box and the slopes are
+#: updated from how the means moved (docs/fit.md, "What a scan's images add")
 OPENING_ROUNDS = 4
 OPENING_TRUST = 0.1
 #: acceptance: two-sample KS statistic and |mean difference| per descriptor
@@ -453,7 +458,8 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     sensitivity to the spread, up to :data:`SLOPE_GRAINS` per setting besides the aspect where the
     four means can determine every setting, counted here for each although only those a grain's
     descriptors do not determine are remade; with ``opening``, the sand's opening fraction used
-    (:func:`uses_opening`), the starting grains measured again and the slopes always measured), then each
+    (:func:`uses_opening`), the starting grains measured again, the slopes always measured and
+    :data:`OPENING_ROUNDS` rounds), then each
     twin once, plus refinements: :data:`EXPECTED_MEASUREMENTS` per twin
     expected, ``1 + refine`` at most, plus two per reseeded twin and try
     (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most:
@@ -471,12 +477,12 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     (5600, 6000)
     >>> fit_grains("angular", count=500, design_grains=400, refine=3)   # rounding's and dent depth's spread
     (3200, 3600)
-    >>> fit_grains("angular", count=500, design_grains=400, refine=3, opening=True)   # + 300 + 2 × 4 × 300
-    (5900, 6300)
+    >>> fit_grains("angular", count=500, design_grains=400, refine=3, opening=True)   # + 300 + 2 × 4 × 300 + 2 × 300
+    (6500, 6900)
     """
     methods = list(FITS) if method == "auto" else [method]
     designs = sum(0 if cached(m) else design_grains for m in methods)
-    designs += POPULATION_ROUNDS * min(count, population_grains)
+    designs += (OPENING_ROUNDS if opening else POPULATION_ROUNDS) * min(count, population_grains)
     designs += max(len(FITS[m].settings) if FITS[m].spread_step else 0
                    for m in methods) * min(count, population_grains, SLOPE_GRAINS)
     if opening:
@@ -1230,8 +1236,10 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
 
     ``opening`` (the sand has the :data:`OPENING_COLUMN`; :func:`uses_opening`): the opening fraction is a fifth
     descriptor.  The starting grains are measured again with it (``grains`` more), the slopes are measured
-    (the design model has none for it), and the means' misfit is weighed by the sand's covariance (generalised
-    least squares, :func:`grainforge.twins.population_step`).
+    (the design model has none for it), the means' misfit is weighed by the sand's covariance (generalised
+    least squares, :func:`grainforge.twins.population_step`), and, since its response to edge rounding
+    saturates, :data:`OPENING_ROUNDS` rounds are made, each step held to :data:`OPENING_TRUST` of the unit
+    box and the slopes updated after each from how the means moved (Broyden's secant update).
 
     Which mean settings match the sand's means depends on that spread (the descriptors respond to the settings
     with curvature), and the table does not give the spread of a setting that a grain's descriptors do not
@@ -1294,13 +1302,14 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     jac = measure_slopes(start) if slopes == "measured" else _mean_jacobian(model, start, across)
     shift = np.zeros(u.shape[1])
     prev = None
-    for r in range(1, (OPENING_ROUNDS if opening else POPULATION_ROUNDS) + 1):
+    total = OPENING_ROUNDS if opening else POPULATION_ROUNDS
+    for r in range(1, total + 1):
         step = population_step(jac, gap, weight)[0]
         if opening:
             step = step * min(1.0, OPENING_TRUST / max(float(np.max(np.abs(step))), 1e-12))
         shift = shift + step
         new_u = np.clip(start + shift, 0.0, 1.0)
-        label(f"population {r}")
+        label(f"population {r}/{total}")
         new_y = pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i], float(across[i]))
                                                    for i in range(m)], progress, opening=opening)
         gap = record(new_u, new_y)
@@ -1315,7 +1324,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         say(f"population {r}: {m} grains remade" + (f" ({refused} refused by the generator, left out)"
                                                      if refused else "")
             + "; mean descriptors off the sand's by " + ", ".join(f"{k[:5]} {g:+.4f}" for k, g in zip(short, gap))
-            + "; mean settings " + ", ".join(f"{v:.4f}" for v in spec.values(new_u.mean(axis=0)).values()))
+            + "; mean settings " + ", ".join(f"{k} {v:.4g}" for k, v in spec.values(new_u.mean(axis=0)).items()))
     # the round whose means came closest (a step may overshoot where the model's slopes are not the grains')
     u, y, gap, _ = min(rounds, key=lambda r: r[3])
     ok = np.all(np.isfinite(y), axis=1)

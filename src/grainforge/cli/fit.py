@@ -73,8 +73,10 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     correlation within 0.1 of the sand's, and >= 90 % of the reachable twins
     within 0.03; twins still off after the refinement try other seeds.
     Writes DIR/recipe.toml (runs with `grainforge batch` as is), DIR/fit.csv
-    (sand row beside twin), DIR/fit-stats.csv and DIR/fit.png.  See
-    docs/fit.md.
+    (sand row beside twin), DIR/fit-stats.csv and DIR/fit.png.  A column
+    'Opening Fraction (-)' (not the Atlas's: each grain's share of voxels a
+    ball of 1/30 of its d_eq reaches inside it) is used, where present, by the
+    estimate of the sand's mean settings.  See docs/fit.md.
     """
     import os
     import sys
