@@ -21,10 +21,14 @@ resolution, about 30 voxels across), as ``fit_information.py`` does:
   variance that a linear least-squares fit of the setting to the descriptors predicts on grains it was not
   fitted to (5-fold cross-validated R²): how far a grain's descriptors say its own settings.
 
+With ``--curve``, instead: the mean opening fraction at each radius (and the mean sphericity) of the first
+``--grains`` grains remade at their own seeds and other settings with every grain's rounding set to each of
+0.05 … 0.6: how far the response is from linear.
+
 It is not a fit: grainforge does not measure opening fractions of a sand (the Sand Atlas's tables do not
 have them).  Usage::
 
-    nice .venv/bin/python benchmarks/fit_opening.py [--grains 300] [--step 0.04] [--workers 2]
+    nice .venv/bin/python benchmarks/fit_opening.py [--grains 300] [--step 0.04] [--workers 2] [--curve]
 """
 
 from __future__ import annotations
@@ -65,6 +69,7 @@ def main() -> None:
     ap.add_argument("--grains", type=int, default=300)
     ap.add_argument("--step", type=float, default=0.04)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--curve", action="store_true", help="the response to rounding over 0.05-0.6 instead")
     args = ap.parse_args()
     import numpy as np
 
@@ -82,6 +87,21 @@ def main() -> None:
     print(f"{args.grains} grains at the synthetic angular sand's known settings, {across.mean():.0f} voxels across; "
           f"slopes by ±{args.step:g} with the same seeds; opening radii {', '.join(f'{r:.3f}' for r in RADII)} d_eq")
 
+    if args.curve:
+        roundings = (0.05, 0.1, 0.15, 0.2, 0.25, 0.3, 0.4, 0.5, 0.6)
+        k = names.index("rounding")
+        print("\n| rounding | " + " | ".join(f"mean {c}" for c in cols if c != "flatness" and c != "elongation")
+              + " |\n" + "|---" * (len(cols) - 1) + "|")
+        with ProcessPoolExecutor(args.workers) as pool:
+            for r in roundings:
+                jobs = [(spec.params({**dict(zip(names, known[j])), names[k]: r}), dict(spec.fixed),
+                         grain_seed(41, i), float(across[i])) for i, j in enumerate(rows)]
+                y = np.array(list(pool.map(_grain, jobs, chunksize=8)))
+                mean = np.nanmean(y, axis=0)
+                print(f"| {r:g} | " + " | ".join(f"{mean[c]:.4f}" for c in range(len(cols))
+                                                 if cols[c] not in ("flatness", "elongation")) + " |")
+        print(f"\n{time.perf_counter() - t0:.0f} s wall clock")
+        return
     with ProcessPoolExecutor(args.workers) as pool:
         def run(delta, root):
             jobs = [(spec.params(dict(zip(names, known[j] + delta))), dict(spec.fixed), grain_seed(root, i),
