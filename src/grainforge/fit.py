@@ -101,6 +101,8 @@ OPENING_RADIUS = 1.0 / 30.0
 #: updated from how the means moved (docs/fit.md, "What a scan's images add")
 OPENING_ROUNDS = 4
 OPENING_TRUST = 0.1
+#: the slopes are updated from a round's move only where some setting's mean moved this much (unit box)
+OPENING_SECANT_MIN = 0.02
 #: acceptance: two-sample KS statistic and |mean difference| per descriptor
 KS_MAX = 0.1
 MEAN_TOL = 0.01
@@ -1317,7 +1319,8 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
             both = np.all(np.isfinite(prev[1]), axis=1) & np.all(np.isfinite(new_y), axis=1)
             du = (new_u[both] - prev[0][both]).mean(axis=0)
             dy = (new_y[both] - prev[1][both]).mean(axis=0)
-            if float(du @ du) > 1e-10:
+            # a short move's difference is mostly the voxels' quantisation, not the slope: no update
+            if float(np.max(np.abs(du))) >= OPENING_SECANT_MIN:
                 jac = jac + np.outer(dy - jac @ du, du) / float(du @ du)
         prev = (new_u, new_y)
         refused = int(np.sum(~np.all(np.isfinite(rounds[-1][1]), axis=1)))
