@@ -540,12 +540,13 @@ def test_an_opening_fraction_column_is_read_checked_and_used_only_at_the_sands_r
         check_sand(read_sand(same))
 
 
-@pytest.mark.slow  # about 2,300 angular grains at about 30 voxels across (about 2 min of CPU)
+@pytest.mark.slow  # about 2,700 angular grains at about 30 voxels across (about 3 min of CPU)
 def test_the_opening_fraction_pins_the_synthetic_angular_sands_mean_rounding(design_cache):
     """With each grain's opening fraction in the table (a fifth descriptor, measured on its voxel image), the
-    fit's estimate of the sand's mean rounding has a far smaller standard error than from the four Atlas
-    descriptors (whose test above asserts it is over 10 % of the truth) and is within three of them of the
-    known mean (docs/fit.md, "What a scan's images add"); the aspect stays within 5 %."""
+    fit's estimate of the sand's mean rounding is within three standard errors of the known mean, and its
+    standard error is under 15 % of it with 150 grains made (from the four Atlas descriptors alone it is about
+    30 % with 300: docs/fit.md, "The sand's mean settings" and "What a scan's images add"); the aspect stays
+    within 5 %."""
     from grainforge.fit import fit_sand
 
     sand = read_sand(ANGULAR_SAND.with_name("synthetic-angular-sand-opening.csv"))
@@ -562,6 +563,6 @@ def test_the_opening_fraction_pins_the_synthetic_angular_sands_mean_rounding(des
         assert abs(pop.mean[k] - truth) <= 3 * pop.se[k], (k, truth, pop.mean[k], pop.se[k])
         if k in ("elongation", "flatness"):
             assert pop.mean[k] == pytest.approx(truth, rel=0.05), k
-    assert pop.se["rounding"] < 0.08 * np.mean([float(r["rounding"]) for r in known]), pop.se
+    assert pop.se["rounding"] < 0.15 * np.mean([float(r["rounding"]) for r in known]), pop.se
     assert "from its descriptors' means and its opening fraction" in lines[[i for i, x in enumerate(lines)
                                                                             if x.startswith("population:")][-1]]
