@@ -30,6 +30,22 @@ ROOT = Path(__file__).resolve().parents[1]
 SAND = ROOT / "tests" / "data" / "synthetic-angular-sand.csv"
 
 
+def known_angular_sand(grains: int):
+    """The synthetic angular sand, the fit's angular method, its settings' names, the known settings of each row,
+    and the rows and voxels across of ``grains`` grains (the sand's rows in turn)."""
+    import numpy as np
+
+    from grainforge.fit import FITS, read_sand
+
+    sand = read_sand(SAND)
+    spec = FITS["angular"]
+    names = [s.name for s in spec.all_settings]
+    with open(SAND.with_name("synthetic-angular-sand-settings.csv"), encoding="utf-8", newline="") as fh:
+        known = np.array([[float(r[k]) for k in names] for r in csv.DictReader(fh)])
+    rows = np.arange(grains) % len(known)
+    return sand, spec, names, known, rows, sand.equivalent_diameter[rows] / sand.voxel_size
+
+
 def main() -> None:
     ap = argparse.ArgumentParser()
     ap.add_argument("--grains", type=int, default=300)
@@ -39,15 +55,9 @@ def main() -> None:
     args = ap.parse_args()
     import numpy as np
 
-    from grainforge.fit import DESCRIPTORS, FITS, _Pool, grain_seed, read_sand
+    from grainforge.fit import DESCRIPTORS, _Pool, grain_seed
 
-    sand = read_sand(SAND)
-    spec = FITS["angular"]
-    names = [s.name for s in spec.all_settings]
-    with open(SAND.with_name("synthetic-angular-sand-settings.csv"), encoding="utf-8", newline="") as fh:
-        known = np.array([[float(r[k]) for k in names] for r in csv.DictReader(fh)])
-    rows = np.arange(args.grains) % len(known)
-    across = sand.equivalent_diameter[rows] / sand.voxel_size
+    sand, spec, names, known, rows, across = known_angular_sand(args.grains)
     cov = np.cov(sand.table().T)
     t0, cpu = time.perf_counter(), 0.0
     print(f"{args.grains} grains at the synthetic angular sand's known settings, {across.mean():.0f} voxels across; "

@@ -34,13 +34,9 @@ have them).  Usage::
 from __future__ import annotations
 
 import argparse
-import csv
 import time
 from concurrent.futures import ProcessPoolExecutor
-from pathlib import Path
 
-ROOT = Path(__file__).resolve().parents[1]
-SAND = ROOT / "tests" / "data" / "synthetic-angular-sand.csv"
 #: opening radii as fractions of the grain's d_eq (1, 1.5, 2 and 3 voxels at 30 voxels across)
 RADII = (1 / 30, 1.5 / 30, 2 / 30, 3 / 30)
 
@@ -72,16 +68,11 @@ def main() -> None:
     ap.add_argument("--curve", action="store_true", help="the response to rounding over 0.05-0.6 instead")
     args = ap.parse_args()
     import numpy as np
+    from fit_information import known_angular_sand  # this folder's
 
-    from grainforge.fit import DESCRIPTORS, FITS, grain_seed, read_sand
+    from grainforge.fit import DESCRIPTORS, grain_seed
 
-    sand = read_sand(SAND)
-    spec = FITS["angular"]
-    names = [s.name for s in spec.all_settings]
-    with open(SAND.with_name("synthetic-angular-sand-settings.csv"), encoding="utf-8", newline="") as fh:
-        known = np.array([[float(r[k]) for k in names] for r in csv.DictReader(fh)])
-    rows = np.arange(args.grains) % len(known)
-    across = sand.equivalent_diameter[rows] / sand.voxel_size
+    sand, spec, names, known, rows, across = known_angular_sand(args.grains)
     t0 = time.perf_counter()
     cols = [*DESCRIPTORS, *(f"opening {r * 30:g}/30" for r in RADII)]
     print(f"{args.grains} grains at the synthetic angular sand's known settings, {across.mean():.0f} voxels across; "

@@ -257,11 +257,10 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
                 x = float(cell)
             except ValueError:
                 raise ValueError(f"{path}: line {line}, column {col!r}: not a number: {cell!r}") from None
-            high = SPHERICITY_MAX if key == "sphericity" else 1 + 1e-6 if key in (*DESCRIPTORS, "opening") \
-                else math.inf
+            unit = key in (*DESCRIPTORS, "opening")  # a ratio: at most 1
+            high = SPHERICITY_MAX if key == "sphericity" else 1 + 1e-6 if unit else math.inf
             if not (math.isfinite(x) and (0 <= x if key == "opening" else 0 < x) and x <= high):
-                limit = f" (at most {SPHERICITY_MAX:g})" if key == "sphericity" else \
-                    " (at most 1)" if key in (*DESCRIPTORS, "opening") else ""
+                limit = f" (at most {SPHERICITY_MAX:g})" if key == "sphericity" else " (at most 1)" if unit else ""
                 raise ValueError(f"{path}: line {line}, column {col!r}: out of range{limit}: {cell!r}")
             data[key].append(x)
     if voxel_size is None:
@@ -1189,8 +1188,8 @@ def _mean_jacobian(model, u: np.ndarray, across: np.ndarray, h: float = 1e-3) ->
 
 def _measured_mean_jacobian(spec: MethodFit, pool: _Pool, u: np.ndarray, seeds: Sequence[int], across: np.ndarray,
                             progress=None, step: float | np.ndarray = SLOPE_STEP, opening: bool = False) -> np.ndarray:
-    """(4, p) (with ``opening`` (5, p)): d(mean measured descriptors) / d(a shift of every grain's unit-box settings), measured on the first
-    :data:`SLOPE_GRAINS` grains: each remade with one setting raised and lowered by ``step`` (one for all
+    """(4, p), with ``opening`` (5, p): d(mean measured descriptors) / d(a shift of every grain's unit-box
+    settings), measured on the first :data:`SLOPE_GRAINS` grains: each remade with one setting raised and lowered by ``step`` (one for all
     settings, or one each; kept in the box) under its own seed, so that the difference is the setting's and not
     the seed's."""
     n = min(len(u), SLOPE_GRAINS)
@@ -1261,6 +1260,11 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     say, label = note or (lambda s: None), name or (lambda s: None)
     m = min(len(u0), int(grains))
     u, y, across = np.asarray(u0[:m], np.float64), np.asarray(y0[:m], np.float64), np.asarray(across[:m])
+
+    def remake(v: np.ndarray) -> np.ndarray:  # the m grains at settings v, each under its own seed
+        return pool.run(spec.method, spec.fixed, [(spec.grain_params(v[i]), seeds[i], float(across[i]))
+                                                  for i in range(m)], progress, opening=opening)
+
     table, weight, short = sand.table(), None, list(DESCRIPTORS)
     if opening:
         table, short = np.column_stack([table, sand.opening]), short + ["opening"]
@@ -1269,8 +1273,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         except np.linalg.LinAlgError:
             weight = np.diag(1.0 / np.maximum(table.std(axis=0), 1e-12))
         label("population start")
-        y = pool.run(spec.method, spec.fixed, [(spec.grain_params(u[i]), seeds[i], float(across[i]))
-                                               for i in range(m)], progress, opening=True)
+        y = remake(u)
         say(f"population: the table's opening fraction is a fifth descriptor; {m} grains measured again with it")
     target, cov_sand, scale = table.mean(axis=0), np.cov(table.T) / len(table), table.std(axis=0)
     rounds = []  # (settings, measured, gap, largest gap in the sand's sds)
@@ -1288,20 +1291,17 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         start = u
     else:  # each twin's settings carry its own seed's share: keep only what the descriptors know
         start = u.mean(axis=0) + (u - u.mean(axis=0)) * np.clip(np.asarray(shrink, np.float64), 0.0, 1.0)
-    slopes = "measured" if opening else slopes_for(slopes, m)
-
-    def measure_slopes(u: np.ndarray, where: str = "") -> np.ndarray:
+    if opening or slopes_for(slopes, m) == "measured":  # the design model does not predict the opening fraction
         label("population slopes")
-        jac = _measured_mean_jacobian(spec, pool, u, seeds, across, progress, opening=opening)
-        say(f"population slopes: measured on {min(m, SLOPE_GRAINS)} grains{where}, each setting raised and lowered "
-            f"by {SLOPE_STEP:g} of its range under the grain's own seed")
-        return jac
-
+        jac = _measured_mean_jacobian(spec, pool, start, seeds, across, progress, opening=opening)
+        say(f"population slopes: measured on {min(m, SLOPE_GRAINS)} grains, each setting raised and lowered by "
+            f"{SLOPE_STEP:g} of its range under the grain's own seed")
+    else:
+        jac = _mean_jacobian(model, start, across)
     # with the opening fraction, whose response to rounding is curved (it saturates once the edges are rounder
     # than the ball), the slopes measured at the start are updated after each round from how the means moved
     # (Broyden's secant update), each step is held to OPENING_TRUST of the unit box, and there are
     # OPENING_ROUNDS rounds
-    jac = measure_slopes(start) if slopes == "measured" else _mean_jacobian(model, start, across)
     shift = np.zeros(u.shape[1])
     prev = None
     total = OPENING_ROUNDS if opening else POPULATION_ROUNDS
@@ -1312,8 +1312,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
         shift = shift + step
         new_u = np.clip(start + shift, 0.0, 1.0)
         label(f"population {r}/{total}")
-        new_y = pool.run(spec.method, spec.fixed, [(spec.grain_params(new_u[i]), seeds[i], float(across[i]))
-                                                   for i in range(m)], progress, opening=opening)
+        new_y = remake(new_u)
         gap = record(new_u, new_y)
         if opening and prev is not None:
             both = np.all(np.isfinite(prev[1]), axis=1) & np.all(np.isfinite(new_y), axis=1)
