@@ -83,7 +83,7 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
     import numpy as np
     from scipy.stats import truncnorm
 
-    from grainforge.fit import DESCRIPTORS, FITS, OPENING_COLUMN, _Pool, grain_seed
+    from grainforge.fit import DESCRIPTORS, FITS, _Pool, grain_seed, write_sand
 
     rng = np.random.default_rng(SEED)
     spec = FITS[method]
@@ -106,21 +106,18 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
     print()
     if not np.all(np.isfinite(table)):
         raise SystemExit(f"the generator refused {int(np.sum(~np.all(np.isfinite(table), axis=1)))} grains")
-    rows = [[i + 1, math.pi / 6 * d_eq**3, d_eq, *map(float, d[:4]), voxel_um] for i, ((_, d_eq), d) in
-            enumerate(zip(drawn, table))]
     truth = [[i + 1, *(v[k] for k in known)] for i, (v, _) in enumerate(drawn)]
-    header = ["Particle ID", "Volume (µm³)", "Equivalent Diameter (µm)", "True Sphericity (-)", "Convexity (-)",
-              "Flatness (-)", "Elongation (-)", "Voxel Size (µm)"]
-    assert header[3:7] == [f"{'True Sphericity' if k == 'sphericity' else k.title()} (-)" for k in DESCRIPTORS]
-    files = [(name, header, rows)] + ([(settings, ["Particle ID", *known], truth)] if settings else [])
-    if opening:
-        files.append((opening, header + [OPENING_COLUMN], [r + [float(d[4])] for r, d in zip(rows, table)]))
+    d_eq = [d for _, d in drawn]
+    values = {k: table[:, j] for j, k in enumerate(DESCRIPTORS)}
     out.mkdir(parents=True, exist_ok=True)
-    for file, head, body in files:
-        with open(out / file, "w", newline="", encoding="utf-8") as fh:
+    write_sand(out / name, d_eq, values, voxel_um)
+    if opening:
+        write_sand(out / opening, d_eq, values, voxel_um, opening=table[:, 4])
+    if settings:
+        with open(out / settings, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)
-            w.writerow(head)
-            w.writerows([[f"{x:.6g}" if isinstance(x, float) else x for x in r] for r in body])
+            w.writerow(["Particle ID", *known])
+            w.writerows([[f"{x:.6g}" if isinstance(x, float) else x for x in r] for r in truth])
     print("measured mean ± sd:", ", ".join(f"{k} {table[:, j].mean():.3f} ± {table[:, j].std():.3f}"
                                           for j, k in enumerate(DESCRIPTORS)))
 

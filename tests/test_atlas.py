@@ -7,6 +7,7 @@ import pytest
 import trimesh
 
 from grainforge.analysis.atlas import (
+    OPENING_RADIUS,
     _hull_count,
     atlas_descriptors,
     opening_fraction,
@@ -170,6 +171,44 @@ def test_analyse_cli_adds_atlas_columns(runner, tmp_path):
     assert r.exit_code == 2 and "not both" in r.stderr
 
 
+def test_analyse_atlas_csv_is_a_sand_table_that_fit_reads(runner, tmp_path):
+    """--atlas-csv writes the closed bodies' atlas_* measures as a Sand Atlas table in µm (the files in mm), with
+    the opening fraction, that grainforge.fit.read_sand reads back to the analyse table's values; an open body is
+    left out (and said so); without a resolution, or with no closed body, it is one line and exit 2."""
+    import json
+
+    from grainforge.fit import read_sand
+
+    _ellipsoid(1, 0.8, 0.6, 3).export(tmp_path / "a.stl")
+    trimesh.creation.box((1.0, 0.9, 0.7)).export(tmp_path / "b.stl")
+    opened = trimesh.creation.icosphere(2)
+    opened.update_faces(np.arange(len(opened.faces)) != 0)
+    opened.export(tmp_path / "c.stl")
+    out = tmp_path / "sand.csv"
+    r = runner.invoke(cli, ["analyse", str(tmp_path / "a.stl"), str(tmp_path / "b.stl"), str(tmp_path / "c.stl"),
+                            "--voxel-size-mm", "0.04", "--no-fractal", "--no-fourier", "--json",
+                            "--atlas-csv", str(out), "--workers", "1"])
+    assert r.exit_code == 0, r.output
+    assert "wrote 2 grain(s)" in r.stderr and "1 open body/bodies left out" in r.stderr
+    rows = [row for row in json.loads(r.stdout) if row["atlas_sphericity"] is not None]
+    sand = read_sand(out)
+    assert sand.count == 2 and sand.voxel_size == pytest.approx(40.0)
+    for i, row in enumerate(rows):
+        assert sand.equivalent_diameter[i] == pytest.approx(1000 * row["atlas_equivalent_diameter_mm"], rel=1e-5)
+        for k in ("sphericity", "convexity", "flatness", "elongation"):
+            assert sand.values[k][i] == pytest.approx(row["atlas_" + k], rel=1e-5)
+        assert sand.opening[i] == pytest.approx(row["atlas_opening_fraction"], rel=1e-5)
+    # the box's sharp edges and corners are what the ball misses; the ellipsoid has none
+    assert sand.opening[1] < sand.opening[0] - 0.005 and sand.opening[0] > 0.99
+
+    r = runner.invoke(cli, ["analyse", str(tmp_path / "a.stl"), "--atlas-csv", str(tmp_path / "x.csv")])
+    assert r.exit_code == 2 and "--atlas-csv needs --voxel-size-mm" in r.stderr
+    r = runner.invoke(cli, ["analyse", str(tmp_path / "c.stl"), "--voxels-across", "20", "--no-fractal",
+                            "--no-fourier", "--atlas-csv", str(tmp_path / "y.csv")])
+    assert r.exit_code == 2 and "no closed body" in r.stderr
+    assert not (tmp_path / "x.csv").exists() and not (tmp_path / "y.csv").exists()
+
+
 def test_straddling_cube_mask_gives_scikit_image_the_same_surface():
     """The marching-cubes mask only skips cubes without surface: same triangles, same area, bit for bit."""
     from scipy import ndimage
@@ -196,7 +235,9 @@ def test_voxel_image_is_what_atlas_descriptors_measures():
     mask, h, d = voxel_image(m, voxels_across=30, rotation=5)
     ref = atlas_descriptors(m, voxels_across=30, rotation=5)
     assert h == ref["voxel_size"] and d / h == pytest.approx(ref["voxels_across"])
-    assert voxel_descriptors(mask, h) == {k: v for k, v in ref.items() if k not in ("voxel_size", "voxels_across")}
+    assert voxel_descriptors(mask, h) == {k: v for k, v in ref.items()
+                                          if k not in ("voxel_size", "voxels_across", "opening_fraction")}
+    assert ref["opening_fraction"] == opening_fraction(mask, OPENING_RADIUS * d / h)
 
 
 def test_opening_fraction_against_shapes_with_known_openings():

@@ -58,6 +58,7 @@ from __future__ import annotations
 
 import csv
 import hashlib
+import io
 import math
 import os
 from collections.abc import Callable, Iterable, Mapping, Sequence
@@ -68,12 +69,15 @@ from typing import Any
 
 import numpy as np
 
+from .analysis.atlas import OPENING_RADIUS
+
 __all__ = [
     "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Setting", "MethodFit", "FITS", "register", "fit_sand",
     "compare", "recipe_text", "twin_recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "CORR_TOL",
     "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS",
     "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "METHOD_CAP", "resolve_cap", "design", "design_path", "measure_grain",
     "OUTPUTS", "setting_identifiability", "population_settings", "Population", "OPENING_COLUMN", "OPENING_RADIUS",
+    "write_sand", "SAND_HEADER",
     "uses_opening",
 ]
 
@@ -90,11 +94,11 @@ COLUMNS = {
 #: optional column giving the voxel size (µm) of each grain's scan
 VOXEL_COLUMN = "Voxel Size (µm)"
 #: optional column, not the Sand Atlas's: each grain's opening fraction at a ball of OPENING_RADIUS times its
-#: d_eq (:func:`grainforge.analysis.atlas.opening_fraction`, on the grain's voxel image).  Where a table has it,
+#: d_eq (:func:`grainforge.analysis.atlas.opening_fraction`, on the grain's voxel image; ``grainforge analyse
+#: --voxel-size-mm H --atlas-csv FILE`` writes it for mesh files).  Where a table has it,
 #: the estimate of the sand's mean settings uses it as a fifth descriptor (:func:`population_settings`): it
 #: responds to edge rounding far more than to a grain's seed (docs/fit.md, "What a scan's images add")
 OPENING_COLUMN = "Opening Fraction (-)"
-OPENING_RADIUS = 1.0 / 30.0
 #: with the opening fraction the estimate's rounds are more and shorter: its response to edge rounding saturates
 #: (it hardly moves once the edges are rounder than the ball), so slopes measured at the twins' starting
 #: population are too flat; each round's step is held to OPENING_TRUST of the unit box and the slopes are
@@ -279,6 +283,57 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
                 equivalent_diameter=np.asarray(data["equivalent_diameter"]),
                 values={k: np.asarray(data[k]) for k in DESCRIPTORS},
                 opening=np.asarray(data["opening"]) if "opening" in data else None)
+
+
+#: the columns :func:`write_sand` writes, in order (the Sand Atlas's, then the voxel size)
+SAND_HEADER = ("Particle ID", "Volume (µm³)", COLUMNS["equivalent_diameter"], *(COLUMNS[k] for k in DESCRIPTORS),
+               VOXEL_COLUMN)
+
+
+def write_sand(path: str | os.PathLike, equivalent_diameter: Sequence[float], values: Mapping[str, Sequence[float]],
+               voxel_size: float | Sequence[float], opening: Sequence[float] | None = None) -> Path:
+    """Write grains' measurements as a Sand Atlas CSV that :func:`read_sand` reads (atomically).
+
+    Columns :data:`SAND_HEADER` (particle IDs from 1, the volume of a ball of each d_eq, lengths in µm,
+    values to 6 significant digits), and :data:`OPENING_COLUMN` where ``opening`` is given.
+
+    Parameters
+    ----------
+    path : path
+    equivalent_diameter : (n,) array_like
+        µm.
+    values : mapping
+        Each of :data:`DESCRIPTORS` to its (n,) values.
+    voxel_size : float or (n,) array_like
+        µm, per grain or for all.
+    opening : (n,) array_like, optional
+        Each grain's opening fraction (:func:`grainforge.analysis.atlas.opening_fraction`).
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "s.csv"
+    >>> _ = write_sand(p, [500.0], {k: [0.8] for k in DESCRIPTORS}, 7.3, opening=[0.99])
+    >>> s = read_sand(p)
+    >>> s.count, s.voxel_size, float(s.opening[0])
+    (1, 7.3, 0.99)
+    """
+    from .io import atomic_write
+
+    d = np.asarray(equivalent_diameter, dtype=np.float64)
+    cols = [np.arange(1, len(d) + 1), math.pi / 6 * d**3, d, *(np.asarray(values[k], np.float64) for k in DESCRIPTORS),
+            np.broadcast_to(np.asarray(voxel_size, np.float64), d.shape)]
+    header = list(SAND_HEADER)
+    if opening is not None:
+        cols.append(np.asarray(opening, np.float64))
+        header.append(OPENING_COLUMN)
+    if any(len(c) != len(d) for c in cols):
+        raise ValueError("every column needs one value per grain")
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\r\n")
+    w.writerow(header)
+    w.writerows([[int(r[0]), *(f"{float(x):.6g}" for x in r[1:])] for r in zip(*cols)])
+    return atomic_write(path, out.getvalue())
 
 
 def check_sand(sand: Sand) -> None:
@@ -874,8 +929,6 @@ def design(method: str, pool: _Pool, *, high: float, grains: int = DESIGN_GRAINS
     across = DESIGN_ACROSS_LOW * (high / DESIGN_ACROSS_LOW) ** t
     jobs = [(spec.grain_params(u[i]), grain_seed(DESIGN_SEED, i), float(across[i])) for i in range(grains)]
     y = pool.run(method, spec.fixed, jobs, progress)
-    import io
-
     buf = io.BytesIO()
     np.savez(buf, u=u, across=across, y=y)
     path.parent.mkdir(parents=True, exist_ok=True)

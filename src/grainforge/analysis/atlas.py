@@ -43,14 +43,18 @@ import numpy as np
 
 from ..rotations import random_rotation
 
-__all__ = ["voxelise", "voxel_image", "opening_fraction", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS", "SIGMA", "CONVENTIONS"]
+__all__ = ["voxelise", "voxel_image", "opening_fraction", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS",
+           "SIGMA", "CONVENTIONS", "OPENING_RADIUS"]
 
 #: Gaussian filter width (voxels) before marching cubes, as the Sand Atlas (``spam``) uses.
 SIGMA = 0.75
+#: radius of the ball of :func:`atlas_descriptors`' opening fraction, as a share of the grain's equivalent
+#: diameter (one voxel at 30 voxels across; docs/fit.md, "What a scan's images add")
+OPENING_RADIUS = 1.0 / 30.0
 #: the columns of :func:`atlas_descriptors`, in order (prefixed ``atlas_`` in ``grainforge analyse``).
 ATLAS_COLUMNS = (
     "voxel_size", "voxels_across", "voxels", "volume", "equivalent_diameter", "major", "middle", "minor",
-    "sphericity", "convexity", "flatness", "elongation",
+    "sphericity", "convexity", "flatness", "elongation", "opening_fraction",
 )
 def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
     """The binary voxel image of a closed mesh: voxels whose centre is inside.
@@ -457,8 +461,11 @@ def atlas_descriptors(
     Returns
     -------
     dict
-        ``voxel_size``, ``voxels_across`` (the mesh's d_eq / h) and
-        :func:`voxel_descriptors`' values (lengths in the mesh's units).
+        ``voxel_size``, ``voxels_across`` (the mesh's d_eq / h),
+        :func:`voxel_descriptors`' values (lengths in the mesh's units) and
+        ``opening_fraction``: :func:`opening_fraction` at a ball of
+        :data:`OPENING_RADIUS` times the mesh's d_eq (not a Sand Atlas
+        descriptor; the column ``grainforge fit`` reads as ``Opening Fraction (-)``).
 
     Examples
     --------
@@ -467,11 +474,14 @@ def atlas_descriptors(
     >>> d = atlas_descriptors(ball, voxels_across=40)
     >>> round(d["equivalent_diameter"], 2), round(d["elongation"], 2), d["convexity"] > 0.99
     (2.0, 1.0, True)
+    >>> d["opening_fraction"] > 0.99  # a ball has no edge for the smaller ball to miss
+    True
     """
     mask, h, d_mesh = voxel_image(mesh_or_vertices, faces, voxel_size=voxel_size, voxels_across=voxels_across,
                                   rotation=rotation)
     out = {"voxel_size": h, "voxels_across": d_mesh / h}
     out.update(voxel_descriptors(mask, h, convention=convention))
+    out["opening_fraction"] = opening_fraction(mask, OPENING_RADIUS * d_mesh / h)
     return out
 
 

@@ -22,6 +22,7 @@ TABLE = (
     ("fd_LI_8", "FD8", "{:.4f}"), ("atlas_voxels_across", "vox/d", "{:.3g}"),
     ("atlas_sphericity", "a_sph", "{:.3f}"), ("atlas_convexity", "a_conv", "{:.3f}"),
     ("atlas_flatness", "a_flat", "{:.3f}"), ("atlas_elongation", "a_elong", "{:.3f}"),
+    ("atlas_opening_fraction", "a_open", "{:.4f}"),
 )
 
 
@@ -43,6 +44,23 @@ def table_text(rows, columns=TABLE) -> str:
     widths = [max(len(row[i]) for row in cells) for i in range(len(cols))]
     lines = ["  ".join(c.ljust(w) if i < 4 else c.rjust(w) for i, (c, w) in enumerate(zip(row, widths))) for row in cells]
     return "\n".join(line.rstrip() for line in lines)
+
+
+def _write_atlas_table(path: Path, rows) -> None:
+    """The closed bodies' atlas_* columns as a Sand Atlas CSV (mm to µm); one line on stderr says what was written."""
+    from ..analysis.atlas import OPENING_RADIUS
+    from ..fit import DESCRIPTORS, write_sand
+
+    grains = [r for r in rows if math.isfinite(r.get("atlas_sphericity", math.nan))]
+    if not grains:
+        raise ValueError("--atlas-csv: no closed body to measure; nothing written")
+    write_sand(path, [1000.0 * r["atlas_equivalent_diameter"] for r in grains],
+               {k: [r["atlas_" + k] for r in grains] for k in DESCRIPTORS},
+               [1000.0 * r["atlas_voxel_size"] for r in grains],
+               opening=[r["atlas_opening_fraction"] for r in grains])
+    left = len(rows) - len(grains)
+    click.echo(f"wrote {len(grains)} grain(s) to {path} as a Sand Atlas table (µm; opening fraction at a ball of "
+               f"{OPENING_RADIUS:.4g} d_eq)" + (f"; {left} open body/bodies left out" if left else ""), err=True)
 
 
 def _json_value(v):
@@ -71,11 +89,15 @@ def _json_value(v):
               show_default=True,
               help="atlas_sphericity as the Sand Atlas computed it (spam's cube, clipped above the centre of "
                    "mass) or on the whole grain; docs/validation.md.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing --csv file.")
+@click.option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
+              help="Also write the atlas_* columns as a Sand Atlas table that `grainforge fit` reads (lengths in "
+                   "µm, the files being in mm), with each grain's opening fraction; needs --voxel-size-mm or "
+                   "--voxels-across. Bodies that are not closed are left out.")
+@click.option("--overwrite", is_flag=True, help="Replace an existing --csv or --atlas-csv file.")
 @click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
               help="Processes measuring files; rows do not depend on it.")
 def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, sphericity,
-            overwrite, workers):
+            atlas_csv, overwrite, workers):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.
 
     Volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S (minimum-volume
@@ -84,6 +106,8 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     projections and, for aggregates, porosity, R_g and D_A.  Bodies that are not
     closed are analysed and flagged `open`; files with several bodies are
     flagged `multi-body`.  The table goes to stdout; see docs/validation.md.
+    With --atlas-csv the grains' Sand-Atlas measures also become a table that
+    `grainforge fit` reads (docs/fit.md).
     """
     import os
 
@@ -102,6 +126,12 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
         atlas = {"voxels_across": voxels_across, "convention": sphericity}
     if csv_out is not None:
         output_file(csv_out, overwrite=overwrite, option="--csv", suffixes=(".csv",))
+    if atlas_csv is not None:
+        if atlas is None:
+            raise click.UsageError("--atlas-csv needs --voxel-size-mm or --voxels-across (the scan's resolution)")
+        output_file(atlas_csv, overwrite=overwrite, option="--atlas-csv", suffixes=(".csv",))
+        if csv_out is not None and Path(csv_out).resolve() == Path(atlas_csv).resolve():
+            raise click.UsageError("--csv and --atlas-csv must be different files")
     files = mesh_inputs(files)
     n = min(len(files), workers or os.cpu_count() or 1)
     rows = []
@@ -113,6 +143,8 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     if csv_out is not None:
         write_csv(csv_out, rows, columns, units=True)
         click.echo(f"wrote {len(rows)} row(s) to {csv_out}", err=True)
+    if atlas_csv is not None:
+        _write_atlas_table(atlas_csv, rows)
     if as_json:
         click.echo(json.dumps([{with_unit(c): _json_value(r.get(c)) for c in columns} for r in rows], indent=1))
     else:

@@ -35,13 +35,15 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
               help="Other seeds tried by each twin still off by more than 0.03 after the refinement (a kept seed "
                    "is written to the recipe).")
 @click.option("--population-grains", type=click.IntRange(min=10, max=10**7), default=300, show_default=True,
-              help="Twins remade in each of the 2 rounds that estimate the sand's mean settings (at most --count): "
-                   "its standard errors shrink as 1/sqrt(grains), down to what the sand's grain count allows.")
+              help="Twins remade in each round that estimates the sand's mean settings (2 rounds; 4 with an "
+                   "opening-fraction column; at most --count): its standard errors shrink as 1/sqrt(grains), down "
+                   "to what the sand's grain count allows.")
 @click.option("--population-slopes", type=click.Choice(["auto", "measured", "model"]), default="auto",
               show_default=True,
               help="Slopes the mean-settings estimate steps through: measured on the grains (2 x settings x up to "
                    "300 grains more; matches the means to their noise on large tables), the design model's "
-                   "(free, off on angular sands), or auto: measured from --population-grains 1000.")
+                   "(free, off on angular sands), or auto: measured from --population-grains 1000. With an "
+                   "opening-fraction column they are always measured (the model does not predict it).")
 @click.option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
               help="Grains of the method's design (the inverse model's data; measured once, then cached).")
 @click.option("--max-voxels-across", "max_across", type=click.FloatRange(min=0), default=None,

@@ -30,7 +30,7 @@ def check_engine(engine: str, mpi: int | None, shape: str) -> None:
     click.UsageError
         For an engine simulate has no scene for, ``--mpi`` with an engine
         that does not run under MPI, a ``--shape`` the engine's scenes cannot
-        take, or an engine that is not installed.
+        take (whether the engine is installed is :func:`check_installed`'s).
     """
     if not RUNS[engine]:
         raise click.UsageError(f"--engine {engine}: simulate has no {engine} scenes yet (grainforge dem "
@@ -42,6 +42,13 @@ def check_engine(engine: str, mpi: int | None, shape: str) -> None:
         raise click.UsageError(f"--shape {shape}: simulate's {engine} scenes take "
                                f"{', '.join('--shape ' + s for s in RUNS[engine])} only (grainforge dem "
                                f"--shape {shape} writes the deck)")
+
+
+def check_installed(engine: str, mpi: int | None) -> None:
+    """Refuse, in one line, a run whose engine (or ``mpirun``, with ``--mpi``) is not installed.
+
+    Called after every check of the user's input, so that bad input is named first on any machine.
+    """
     from ..simulate import yade_executable
     from ..simulate.liggghts import liggghts_executable, mpirun_executable
 
@@ -193,6 +200,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
                              engine=engine)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
+    check_installed(engine, mpi)
     ready_for_work(HEAVY_MODULES, seconds, bound="about")
     from tqdm import tqdm
 

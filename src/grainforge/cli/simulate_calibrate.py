@@ -16,6 +16,7 @@ from .simulate import (
     SHAPES,
     _settings_cls,
     check_engine,
+    check_installed,
     check_representation,
     engine_failed,
     make_templates,
@@ -134,6 +135,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         raise click.UsageError(f"a calibration of up to {max_evaluations} frictions × {settings.seeds} seed(s) of "
                                f"{settings.grains} grains would take about {duration(seconds)} of computing (limit "
                                f"{_limit()}); lower --max-frictions, --grains or --seeds")
+    check_installed(engine, mpi)
     ready_for_work(HEAVY_MODULES + ("grainforge.simulate.calibrate",), seconds, bound="at most about")
     from tqdm import tqdm
 
