@@ -33,6 +33,9 @@ rows are the suite's) with every row remade in the estimate::
     nice .venv/bin/python benchmarks/fit_recovery.py --sand benchmarks/out/big-angular/synthetic-angular-sand.csv \
         --refine 0 --reseed 0 --population-grains 20000 --workers 2 [--population-slopes model] [--known-spread]
 
+The same with the opening-fraction column (``synthetic-angular-sand-opening.csv`` beside it, with
+``--max-across 48``, its largest grain) is the estimate as a study with the images would run it.
+
 ``--measured-slopes`` is a diagnostic: the estimate's Newton steps go through slopes measured on the grains at
 the sand's known settings (which a real sand does not give) instead of the design model's.
 ``--known-spread`` is another: the population the estimate shifts carries the sand's known settings about the
