@@ -135,10 +135,35 @@ def check_report(report, truth, n=20):
     assert len(report["final"]) == n
 
 
+def turns(q_wxyz):
+    """Rotation matrices of quaternions (w, x, y, z), by scipy."""
+    from scipy.spatial.transform import Rotation
+
+    q = np.asarray(q_wxyz, dtype=np.float64).reshape(-1, 4)
+    return Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+
+
+def check_placed(report, out, truth):
+    """Yade placed grain k of the pour turned by row k of the deck's orientations: every contact
+    sphere, as Yade held it right after insertion, sits at target + R_k · (its template offset)."""
+    deck = json.loads((out / "grains.json").read_text())
+    R = turns(deck["scene"]["orientations"])
+    placed = np.array(report["placed"])
+    for k, r in enumerate(report["inserted"]):
+        rows = np.loadtxt(out / f"{r['name']}.xyzr", comments="#").reshape(-1, 4)
+        mine = placed[placed[:, 3] == r["id"], :3]
+        expect = np.array(r["target"]) + rows[:, :3] @ R[k].T
+        assert len(mine) == len(rows)
+        d = np.linalg.norm(mine[:, None] - expect[None], axis=2).min(axis=1)
+        assert d.max() < REL * truth[r["name"]][2], r["name"]
+
+
 def test_yade_deck_runs(yade, population, tmp_path):  # the engine first: skip before generating grains
     out, truth = make_deck(population, tmp_path, "yade")
     run([yade, "-n", "-x", "run.py"], cwd=out)
-    check_report(json.loads((out / "results-yade.json").read_text()), truth)
+    report = json.loads((out / "results-yade.json").read_text())
+    check_report(report, truth)
+    check_placed(report, out, truth)
     assert any((out / "vtk").glob("*.vtu"))
 
 
@@ -223,6 +248,20 @@ def test_liggghts_deck_runs(liggghts, population, tmp_path):
         assert b[2] == pytest.approx(mass, rel=REL)
         assert np.allclose(np.sort(b[6:9]), principal, rtol=REL, atol=0)
     check_centres(bodies, read_dump(out / "atoms-initial.txt"), deck, truth)
+    # each grain turned by its insertion's `orientation constant` quaternion: its spheres, as LIGGGHTS
+    # placed them, sit at xcm + R · (template offsets)
+    quats = [[float(x) for x in m] for m in re.findall(r"orientation constant (\S+) (\S+) (\S+) (\S+)",
+                                                         (out / "in.insert").read_text())]
+    slot_of = np.cumsum([0] + [t["count"] for t in deck["grains"]])
+    atoms = read_dump(out / "atoms-initial.txt")
+    for b in bodies:
+        k = int(b[1]) - 1
+        t = deck["grains"][k]
+        assert t["count"] == 1
+        rows = np.loadtxt(out / t["xyzr"], comments="#").reshape(-1, 4)
+        expect = b[3:6] + rows[:, :3] @ turns(quats[slot_of[k]])[0].T
+        d = np.linalg.norm(atoms[None, :, 1:4] - expect[:, None], axis=2).min(axis=1)
+        assert d.max() < REL * truth[t["name"]][2], t["name"]
     ke, thr = settle_record(out)
     assert ke < thr
     final = read_dump(out / "bodies-final.txt")

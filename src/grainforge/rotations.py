@@ -19,10 +19,17 @@ outputs depend on them bit for bit:
     :func:`grainforge.analysis.atlas.atlas_descriptors`).
 
 Both are uniform on SO(3); for the same draws they are different rotations.
-The Yade scene scripts (``grainforge.dem.scripts``) run inside Yade's own
-interpreter, cannot import grainforge and draw their orientations with
-Python's :mod:`random`: a deliberate, engine-side copy of the idea, not of
-this code.
+
+Every grain a DEM deck or a virtual-test scene places gets its orientation
+from :func:`random_quaternions` (the same four normal draws, scalar first),
+drawn here in grainforge and written into the deck as numbers: the engine
+scripts read them and draw none of their own.  Drawing a uniform axis and
+an angle uniform in [0, 2π) is *not* uniform on SO(3): it over-weights small
+turns (its rotation angle is uniform on [0, π], where the uniform measure's
+has density (1 − cos ω)/π), so that a layer of grains starts with a fabric
+aligned with the templates' principal frames.  :func:`haar_angle_test` tells
+the two apart and is what the tests apply to orientations read back from
+written decks.
 """
 
 from __future__ import annotations
@@ -31,7 +38,8 @@ from typing import Any
 
 import numpy as np
 
-__all__ = ["random_rotation", "quaternion_matrix", "CONVENTIONS"]
+__all__ = ["random_rotation", "random_quaternions", "quaternion_matrix", "quaternion_axis_angle",
+           "rotation_angles", "haar_angle_test", "CONVENTIONS"]
 
 #: the quaternion conventions :func:`random_rotation` knows
 CONVENTIONS = ("scalar-first", "scipy")
@@ -92,3 +100,113 @@ def random_rotation(rng: Any, convention: str = "scipy") -> np.ndarray:
     from scipy.spatial.transform import Rotation
 
     return Rotation.from_quat(q).as_matrix()
+
+
+def random_quaternions(count: int, rng: Any) -> np.ndarray:
+    """``count`` uniformly random unit quaternions ``(w, x, y, z)``, ``w ≥ 0``, one row each.
+
+    Row ``k`` is what :func:`random_rotation` with ``convention="scalar-first"``
+    would turn into a matrix from the same generator state (four normal draws a
+    row, normalised), with its sign chosen so that ``w ≥ 0`` (``q`` and ``−q`` are
+    the same turn).  The one source of the orientations of every grain that a
+    deck or a scene places.
+
+    Parameters
+    ----------
+    count : int
+        Number of quaternions (≥ 0).
+    rng : numpy.random.Generator, int, SeedSequence, sequence of int or None
+        Anything :func:`numpy.random.default_rng` accepts.
+
+    Returns
+    -------
+    (count, 4) float64 ndarray
+
+    Examples
+    --------
+    >>> q = random_quaternions(3, 7)
+    >>> q.shape, bool(np.allclose(np.linalg.norm(q, axis=1), 1.0)), bool((q[:, 0] >= 0).all())
+    ((3, 4), True, True)
+    >>> R = random_rotation(np.random.default_rng(7), convention="scalar-first")
+    >>> bool(np.allclose(quaternion_matrix(q[0]), R))
+    True
+    """
+    count = int(count)
+    if count < 0:
+        raise ValueError(f"count must be ≥ 0, got {count}")
+    q = np.random.default_rng(rng).standard_normal((count, 4))
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    q *= np.where(q[:, :1] < 0, -1.0, 1.0)
+    return q
+
+
+def quaternion_axis_angle(q) -> tuple[np.ndarray, float]:
+    """Unit axis and angle (radians, in [0, π] for ``w ≥ 0``) of the turn ``q = (w, x, y, z)``.
+
+    A turn by 0 has no axis: ``(1, 0, 0)`` is returned with angle 0.
+
+    Examples
+    --------
+    >>> axis, angle = quaternion_axis_angle([np.cos(0.5), 0.0, 0.0, np.sin(0.5)])
+    >>> axis.tolist(), round(angle, 12)
+    ([0.0, 0.0, 1.0], 1.0)
+    """
+    q = np.asarray(q, dtype=np.float64)
+    q = q / np.linalg.norm(q)
+    s = float(np.linalg.norm(q[1:]))
+    if s == 0.0:
+        return np.array([1.0, 0.0, 0.0]), 0.0
+    return q[1:] / s, 2.0 * float(np.arctan2(s, q[0]))
+
+
+def rotation_angles(rotations) -> np.ndarray:
+    """Rotation angle ω ∈ [0, π] of each 3×3 rotation matrix (from its trace, 1 + 2 cos ω).
+
+    Examples
+    --------
+    >>> np.round(rotation_angles([np.eye(3), quaternion_matrix([0.0, 1.0, 0.0, 0.0])]), 12).tolist()
+    [0.0, 3.14159265359]
+    """
+    R = np.asarray(rotations, dtype=np.float64).reshape(-1, 3, 3)
+    c = (np.trace(R, axis1=1, axis2=2) - 1.0) / 2.0
+    return np.arccos(np.clip(c, -1.0, 1.0))
+
+
+def haar_angle_test(rotations) -> dict:
+    """How far a set of rotations is from uniformly random: their angles against the uniform law.
+
+    Under the uniform (Haar) measure on SO(3) the rotation angle ω has the
+    density ``(1 − cos ω)/π`` on [0, π] (CDF ``(ω − sin ω)/π``) and the trace
+    ``1 + 2 cos ω`` has mean 0 and standard deviation 1.  The one-sample
+    Kolmogorov–Smirnov test of the angles (scipy's ``kstest``) against that CDF
+    gives the p-value; ``mean_trace`` and its standard error ``1/√n`` are
+    returned beside it, as is the share of turns within 90° of the identity
+    (about 0.18 when uniform; 0.5 for a uniform axis with a uniform angle).
+
+    Parameters
+    ----------
+    rotations : (n, 3, 3) array_like
+        Rotation matrices.
+
+    Returns
+    -------
+    dict
+        ``n``, ``ks`` (statistic), ``p`` (p-value), ``mean_trace``, ``trace_se``, ``within_90``.
+
+    Examples
+    --------
+    >>> R = [quaternion_matrix(q) for q in random_quaternions(2000, 1)]
+    >>> t = haar_angle_test(R)
+    >>> t["p"] > 0.01, abs(t["mean_trace"]) < 4 * t["trace_se"], round(t["within_90"], 1)
+    (True, True, 0.2)
+    """
+    from scipy.stats import kstest
+
+    w = rotation_angles(rotations)
+    n = len(w)
+    if n < 2:
+        raise ValueError(f"need at least 2 rotations, got {n}")
+    res = kstest(w, lambda x: (np.asarray(x) - np.sin(x)) / np.pi)
+    trace = 1.0 + 2.0 * np.cos(w)
+    return {"n": n, "ks": float(res.statistic), "p": float(res.pvalue), "mean_trace": float(trace.mean()),
+            "trace_se": float(1.0 / np.sqrt(n)), "within_90": float(np.mean(w < np.pi / 2))}

@@ -11,7 +11,8 @@ import numpy as np
 
 __all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop",
            "settle_report", "settle_schedule", "settle_settings", "GRAVITY",
-           "rotation_matrix", "lattice_slots"]
+           "rotation_matrix", "lattice_slots", "grain_orientations", "orientation_rows", "exact_unit_quaternions",
+           "ORIENTATION_STREAM"]
 
 
 def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> dict:
@@ -150,22 +151,116 @@ def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
     return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
 
 
-def lattice_slots(count: int, side: int, cell: float, rng: np.random.Generator):
-    """Pour positions on a ``side`` × ``side`` lattice of ``cell``, layer after layer, each with a
-    random orientation from ``rng``: yields ``(slot, pos, axis, theta_deg, R)`` for slots 0..count-1.
+#: the second word of the seed of every deck's orientation stream, ``default_rng([seed, ORIENTATION_STREAM])``:
+#: its own stream, so that the orientations do not move when another draw of the deck changes
+ORIENTATION_STREAM = 0x6F7269
+
+
+def grain_orientations(count: int, seed: int) -> np.ndarray:
+    """The orientations of the ``count`` grains a deck or scene of ``seed`` places: ``(count, 4)`` unit
+    quaternions ``(w, x, y, z)``, uniformly random (:func:`grainforge.rotations.random_quaternions`).
+
+    Every engine's deck gets its grains' orientations from here, written out as numbers (the engine
+    scripts draw none); grain ``k`` of the deck's placement order takes row ``k``.
 
     Examples
     --------
-    >>> [(s, p.tolist()) for s, p, *_ in lattice_slots(3, 2, 1.0, np.random.default_rng(0))]
+    >>> q = grain_orientations(4, seed=0)
+    >>> q.shape, bool(np.array_equal(q, grain_orientations(4, seed=0)))
+    ((4, 4), True)
+    >>> bool(np.array_equal(q[:2], grain_orientations(2, seed=0)))
+    True
+    """
+    from ..rotations import random_quaternions
+
+    return random_quaternions(count, np.random.default_rng([int(seed), ORIENTATION_STREAM]))
+
+
+def orientation_rows(q: np.ndarray) -> list[list[float]]:
+    """Quaternions as JSON rows (each component exactly as float64 holds it).
+
+    Examples
+    --------
+    >>> orientation_rows(np.array([[1.0, 0.0, 0.0, 0.0]]))
+    [[1.0, 0.0, 0.0, 0.0]]
+    """
+    return [[float(x) for x in row] for row in np.asarray(q, dtype=np.float64).reshape(-1, 4)]
+
+
+def exact_unit_quaternions(q) -> np.ndarray:
+    """Each row of ``q`` normalised and nudged (by a few units in the last place of its components) until
+    ``w² + x² + y² + z²``, summed in that order in float64, is exactly 1 — what LIGGGHTS demands of an
+    insertion's ``orientation constant`` (it stops with "quaternion not valid" otherwise).
+
+    The turn moves by about 1e-15 rad at most.
+
+    Examples
+    --------
+    >>> q = exact_unit_quaternions([[0.3, 0.4, 0.5, 0.6]])[0]
+    >>> float(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]) == 1.0
+    True
+    """
+    q = np.array(q, dtype=np.float64).reshape(-1, 4)
+    q /= np.linalg.norm(q, axis=1, keepdims=True)
+    out = np.empty_like(q)
+    todo = np.arange(len(q))
+    base = q.copy()
+    for attempt in range(64):
+        if not len(todo):
+            return out
+        found = _unit_candidates(q[todo])
+        done = ~np.isnan(found[:, 0])
+        out[todo[done]] = found[done]
+        todo = todo[~done]
+        # the few rows with no exact neighbour: start again from a direction turned by ~1e-15
+        tilt = base[todo] + (attempt + 1) * 1e-15 * np.array([0.0, 1.0, -1.0, 1.0])
+        q[todo] = tilt / np.linalg.norm(tilt, axis=1, keepdims=True)
+    raise ValueError(f"no float64 quaternion of exact unit norm near {base[todo[0]].tolist()}")
+
+
+#: offsets (units in the last place) tried on each component, nearest first
+_OFFSETS = np.stack(np.meshgrid(*([np.arange(-3, 4)] * 4), indexing="ij"), axis=-1).reshape(-1, 4)
+_OFFSETS = _OFFSETS[np.argsort(np.abs(_OFFSETS).sum(axis=1), kind="stable")]
+
+
+def _unit_candidates(q: np.ndarray) -> np.ndarray:
+    """Per row, the candidate with the fewest ulp moves whose squared norm sums to 1 exactly (NaN: none)."""
+    out = np.full_like(q, np.nan)
+    for lo in range(0, len(q), 256):
+        rows = q[lo:lo + 256]
+        # candidate components: x + n ulp(x), with the ulp of x itself (spacing gives it, sign-aware)
+        ulp = np.spacing(np.abs(rows))[:, None, :]
+        cand = rows[:, None, :] + _OFFSETS[None, :, :] * ulp
+        w, x, y, z = (cand[..., k] for k in range(4))
+        norm2 = w * w + x * x
+        norm2 = norm2 + y * y
+        norm2 = norm2 + z * z
+        ok = norm2 == 1.0
+        hit = ok.any(axis=1)
+        first = np.argmax(ok, axis=1)
+        idx = np.flatnonzero(hit)
+        out[lo + idx] = cand[idx, first[idx]]
+    return out
+
+
+def lattice_slots(count: int, side: int, cell: float, seed: int):
+    """Pour positions on a ``side`` × ``side`` lattice of ``cell``, layer after layer, each with the
+    uniformly random orientation :func:`grain_orientations` gives slot ``k`` for ``seed``: yields
+    ``(slot, pos, axis, theta_deg, R)`` for slots 0..count-1 (the turn by ``theta_deg`` about the unit
+    ``axis``, and its matrix).
+
+    Examples
+    --------
+    >>> [(s, p.tolist()) for s, p, *_ in lattice_slots(3, 2, 1.0, 0)]
     [(0, [0.5, 0.5, 1.0]), (1, [1.5, 0.5, 1.0]), (2, [0.5, 1.5, 1.0])]
     """
-    for slot in range(count):
+    from ..rotations import quaternion_axis_angle, quaternion_matrix
+
+    for slot, q in enumerate(grain_orientations(count, seed)):
         i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
         pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
-        axis = rng.normal(size=3)
-        axis /= np.linalg.norm(axis)
-        theta = float(rng.uniform(0, 360))
-        yield slot, pos, axis, theta, rotation_matrix(axis, math.radians(theta))
+        axis, theta = quaternion_axis_angle(q)
+        yield slot, pos, axis, math.degrees(theta), quaternion_matrix(q)
 
 
 def fmt(x: float) -> str:
@@ -213,6 +308,9 @@ def template_record(t) -> dict:
     if t.clump is not None:
         rec.update({"xyzr": f"{t.name}.xyzr", "spheres": t.clump.count, "coverage": t.clump.coverage,
                     "spill": t.clump.spill, "r_min": float(t.clump.radii.min())})
+        from .clump import accuracy_record
+
+        rec.update(accuracy_record(t.clump))  # a clump built to an accuracy target: its figures (else nothing)
     return rec
 
 
@@ -222,6 +320,9 @@ def json_text(obj) -> str:
 
 def write_files(files: Mapping[str, str | bytes], out: str | Path, *, overwrite: bool = False) -> list[Path]:
     """Write ``{relative path: data}`` under ``out``, each atomically.
+
+    A deck whose ``grains.json`` records clumps built to an accuracy target
+    gets ``clumps.csv`` beside it (:func:`grainforge.dem.clump.clump_table`).
 
     Raises
     ------
@@ -234,6 +335,12 @@ def write_files(files: Mapping[str, str | bytes], out: str | Path, *, overwrite:
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise ValueError(f"{out} exists and is not a folder")
+    if "grains.json" in files and "clumps.csv" not in files:  # clumps built to an accuracy target: their table
+        from .clump import clump_table
+
+        table = clump_table(json.loads(files["grains.json"]).get("grains", []))
+        if table is not None:
+            files = {**files, "clumps.csv": table}
     if not overwrite:
         existing = [out / p for p in files if (out / p).exists()]
         if existing:

@@ -117,7 +117,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     infile = ["# grainforge rigid/small infile: ID mass xcm ycm zcm ixx iyy izz ixy ixz iyz vxcm vycm vzcm lx ly lz"
               " ixcm iycm izcm (SI, box frame)", str(n)]
     placements = []
-    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, rng), population):
+    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, s["seed"]), population):
         t = templates[k]
         # create_atoms puts the molecule's geometric centre (mean of the atom coordinates) at the
         # point and rotates about it: aim it so that the centroid (file origin) lands on pos

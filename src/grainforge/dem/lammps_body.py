@@ -237,7 +237,7 @@ def _pour_plan(templates: Sequence, s: dict) -> SimpleNamespace:
     gamma = total_mass / n / tau  # kg/s
     a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
 
-    return SimpleNamespace(population=population, rng=rng, n=n, r_round=r_round, cell=cell, side=side,
+    return SimpleNamespace(population=population, seed=s["seed"], n=n, r_round=r_round, cell=cell, side=side,
                            width=width, layers=layers, mean_d=mean_d, top=top, tau=tau, kn=kn, dt=dt, c_n=c_n,
                            c_t=c_t, ke_threshold=ke_threshold, sched=sched, cut_inner=cut_inner, gamma=gamma,
                            a_ua=a_ua)
@@ -246,11 +246,11 @@ def _pour_plan(templates: Sequence, s: dict) -> SimpleNamespace:
 def _data_file(templates: Sequence, topo: list, p: SimpleNamespace) -> tuple[str, list, int]:
     """``(data.bodies text, placements, nmax)``: the bodies at their lattice slots, units micro."""
     L, M = MICRO["length"], MICRO["mass"]
-    population, rng, side, cell, r_round = p.population, p.rng, p.side, p.cell, p.r_round
+    population, side, cell, r_round = p.population, p.side, p.cell, p.r_round
     n, width, top = p.n, p.width, p.top
     atoms, bodies, placements = [], [], []
     nmax = 1
-    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, rng), population):
+    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, p.seed), population):
         t = templates[k]
         f, e = topo[k]
         atoms.append(f"{slot + 1} 1 1 {fmt(t.mass * M)} " + " ".join(fmt(x * L) for x in pos))

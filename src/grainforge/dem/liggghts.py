@@ -36,7 +36,9 @@ import numpy as np
 from .deck import (
     GRAVITY,
     clump_vtk_text,
+    exact_unit_quaternions,
     fmt,
+    grain_orientations,
     json_text,
     settle_loop,
     settle_report,
@@ -91,15 +93,21 @@ def template_fix(t, k: int, seed: int, atom_type: int = 1) -> str:
             f"mass {fmt(t.mass)} inertia_tensor {tensor} use_density")
 
 
-def node_insertion(slot: int, node, cell: float, seed: int, distribution: str) -> list[str]:
+def node_insertion(slot: int, node, cell: float, seed: int, distribution: str, quat) -> list[str]:
     """The region and ``insert/pack`` lines that insert one grain of ``distribution`` at ``node``
-    (random orientation), within a box of ``_NODE_BOX`` cells around it (see the notes above ``_NODE_BOX``)."""
+    in the orientation ``quat`` (``w x y z``, a row of :func:`grainforge.dem.deck.grain_orientations` made
+    exactly unit by :func:`grainforge.dem.deck.exact_unit_quaternions`), within a box of ``_NODE_BOX`` cells
+    around it (see the notes above ``_NODE_BOX``).
+
+    LIGGGHTS's own ``orientation random`` turns the template by three angles each uniform in [0, 2π): not
+    uniformly random, so the deck gives every grain its orientation instead."""
     lo, hi = np.asarray(node) - 0.5 * _NODE_BOX * cell, np.asarray(node) + 0.5 * _NODE_BOX * cell
     return [f"region r{slot} block {fmt(lo[0])} {fmt(hi[0])} {fmt(lo[1])} {fmt(hi[1])} "
             f"{fmt(lo[2])} {fmt(hi[2])} units box volume_limit {fmt(0.5 * (_NODE_BOX * cell) ** 3)}",
             f"fix i{slot} all insert/pack seed {seed} "
             f"distributiontemplate {distribution} insert_every once overlapcheck no "
-            f"orientation random all_in no region r{slot} particles_in_region 1 ntry_mc 1000"]
+            f"orientation constant {' '.join(fmt(x) for x in quat)} all_in no region r{slot} particles_in_region 1 "
+            "ntry_mc 1000"]
 
 
 #: input lines that insert the grains as multisphere bodies and define their kinetic energy ``ke`` (J)
@@ -114,7 +122,7 @@ variable ke equal c_kems+c_erms"""
 
 def pour_settings(**kw) -> dict:
     """Default settings of the example pour (SI), updated with ``kw``."""
-    s = {"young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
+    s = {"seed": 0, "young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
          **settle_settings(), "vtk_every": 5000}
     return updated_settings(s, kw, "pour settings")
 
@@ -203,7 +211,8 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     # the highest insertion node's top: where the last grain can start
     sched = settle_schedule(dt, (layers + 0.5) * cell, mean_d, s)
     head = f"each copy at its own lattice node (within {_NODE_BOX:g} cells)"
-    ins = [f"# grainforge: insert every grain `count` times, {head}"]
+    ins = [f"# grainforge: insert every grain `count` times, {head}, uniformly random orientation"]
+    quats = exact_unit_quaternions(grain_orientations(n, s.get("seed", 0)))
     slot = 0
     for k, t in enumerate(templates):
         ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
@@ -211,7 +220,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         for _ in range(t.count):
             i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
             node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
-            ins += node_insertion(slot, node, cell, seeds[2 * n_t + 1 + slot], f"pdd{k + 1}")
+            ins += node_insertion(slot, node, cell, seeds[2 * n_t + 1 + slot], f"pdd{k + 1}", quats[slot])
             slot += 1
     files["in.insert"] = "\n".join(ins) + "\n"
 

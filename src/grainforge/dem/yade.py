@@ -41,7 +41,9 @@ import numpy as np
 from .deck import (
     clump_vtk_text,
     fmt,
+    grain_orientations,
     json_text,
+    orientation_rows,
     settle_settings,
     template_record,
     updated_settings,
@@ -141,8 +143,13 @@ def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict 
         elif t.shape == "levelset":
             rec.update({"levelset": f"{t.name}.levelset.json", "r_min": 0.5 * t.d_eq})
         records.append(rec)
+    scene_settings = dict(settings or pour_settings())
+    if "orientations" not in scene_settings:
+        # the pour places sum(count) grains, grain k of its order in orientation k (uniformly random)
+        n = sum(t.count for t in templates)
+        scene_settings["orientations"] = orientation_rows(grain_orientations(n, scene_settings.get("seed", 0)))
     deck = {"units": "SI (m, kg, s)", "shape": shapes.pop() if shapes else "clump", "grains": records,
-            "scene": settings or pour_settings()}
+            "scene": scene_settings}
     files["grains.json"] = json_text(deck)
     files["run.py"] = render("yade_library.py") + (render("yade_pour.py") if scene is None else scene)
     return files

@@ -290,7 +290,7 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     A fix added or removed between runs needs LIGGGHTS's set-up (``run N`` with ``pre yes``): a
     ``pre no`` run after it keeps the old fix lists and integrates nothing.
     """
-    from ..dem.deck import fmt, json_text, template_record, xyzr_text
+    from ..dem.deck import exact_unit_quaternions, fmt, json_text, template_record, xyzr_text
     from ..dem.liggghts import MULTISPHERE_SETUP, node_insertion, template_fix
 
     for t in templates:
@@ -322,10 +322,13 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
         tpl.append(template_fix(t, q, seeds[q], atom_type=GRAIN))
         tpl.append(f"fix pdd{q + 1} all particledistribution/discrete {seeds[len(used) + q]} 1 pts{q + 1} 1.0")
     files["in.templates"] = "\n".join(tpl) + "\n"
-    ins = ["# grainforge: every grain at its own node of the scene's lattice, random orientation"]
+    ins = ["# grainforge: every grain at its own node of the scene's lattice, uniformly random orientation"]
     clump_type = {k: q + 1 for q, k in enumerate(used)}
+    # the scene's orientations (grains.json's, the same as the Yade scene's grain k), exactly unit for LIGGGHTS
+    quats = exact_unit_quaternions(scene["orientations"])
     for slot, (k, node) in enumerate(zip(pick, geo["nodes"])):
-        ins += node_insertion(slot, node, cell, seeds[2 * len(used) + slot], f"pdd{clump_type[int(k)]}")
+        ins += node_insertion(slot, node, cell, seeds[2 * len(used) + slot], f"pdd{clump_type[int(k)]}",
+                              quats[slot])
     files["in.insert"] = "\n".join(ins) + "\n"
     files["in.unfix"] = "\n".join(f"unfix i{slot}\nregion r{slot} delete" for slot in range(n)) + "\n"
     base = geo["base"]

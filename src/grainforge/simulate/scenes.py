@@ -13,12 +13,12 @@ is measured afterwards, in grainforge, from that file
 (:mod:`grainforge.simulate.measure`).
 
 These texts run inside Yade (its Python, its numpy); they never import
-grainforge.  Their ``random_rotation`` (a Yade ``Quaternion`` about a
-Gaussian axis, from Python's :mod:`random`) is therefore a deliberate
-engine-side copy of what :func:`grainforge.rotations.random_rotation` does
-in grainforge, as is the orientation draw of the deck's example pour
-(``grainforge/dem/scripts/yade_pour.py``): a comment inside the texts would
-change the decks' bytes, so it is said here.
+grainforge.  They draw no orientation: grain ``k`` is placed in row ``k`` of
+``grains.json["scene"]["orientations"]`` (the library's ``orientation``),
+drawn uniformly by :func:`grainforge.dem.deck.grain_orientations`, the one
+draw every deck and scene uses.  ``result.json["placed"]`` records every
+contact body's position right after insertion, as Yade holds it, so the
+orientations the engine received can be read back and checked.
 """
 
 from __future__ import annotations
@@ -42,11 +42,6 @@ def population(grains, n, rnd):
     """n templates drawn (with replacement, weighted by count) from the deck's grains."""
     weights = [t["count"] for t in grains]
     return [rnd.choices(grains, weights)[0] for _ in range(n)]
-
-
-def random_rotation(rnd):
-    return Quaternion(Vector3(rnd.gauss(0, 1), rnd.gauss(0, 1), rnd.gauss(0, 1)).normalized(),
-                      rnd.uniform(0, 2 * math.pi))
 
 
 def engines(extra_geoms=(), extra_bounds=()):
@@ -173,8 +168,9 @@ def repose():
         if layer % 2:
             x, y = (x - y) * 0.7071067811865476, (x + y) * 0.7071067811865476
         ids.append(add_grain(t, (x + 0.1 * d * rnd.uniform(-1, 1), y + 0.1 * d * rnd.uniform(-1, 1), z),
-                             random_rotation(rnd)))
+                             orientation(q)))
     inserted = len(ids)
+    placed = placed_spheres(ids)
     unbound_mass_carriers(ids)
     O.engines = engines([Ig2_Facet_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
                         [Bo1_Facet_Aabb(), Bo1_Wall_Aabb()])
@@ -204,7 +200,7 @@ def repose():
                   "d_mean": d, "base_top": 1.3 * r_base + r_base, "cylinder_radius": R, "base_half_width": half, "base_sphere_radius": r_base,
                   "kinetic_energy": ke, "ke_threshold": threshold, "settled": ke < threshold,
                   "steps": O.iter, "time": O.time, "dt": O.dt, "t_fill": t_fill, "t_lift": t_lift,
-                  "spheres": contact_spheres(ids)})
+                  "spheres": contact_spheres(ids), "placed": placed})
 
 
 repose()
@@ -235,7 +231,8 @@ def tilt():
         # another (a column of spheres is an inverted pendulum that topples much later)
         shift = 0.5 * cell * (layer % 2) + 0.1 * d * rnd.uniform(-1, 1)
         ids.append(add_grain(t, ((i + 0.5) * cell + shift, (j + 0.5) * cell + 0.5 * cell * (layer % 2)
-                                 + 0.1 * d * rnd.uniform(-1, 1), z0 + layer * cell), random_rotation(rnd)))
+                                 + 0.1 * d * rnd.uniform(-1, 1), z0 + layer * cell), orientation(q)))
+    placed = placed_spheres(ids)
     unbound_mass_carriers(ids)
     O.engines = engines()
     O.dt = stable_dt(pop)
@@ -271,7 +268,7 @@ def tilt():
     write_result({"test": "tilt", "grains": n, "inserted": len(ids), "lost": len(lost), "d_mean": d,
                   "base_top": 1.3 * r_base + r_base, "width": width,
                   "base_sphere_radius": r_base, "failure_angle": failed, "history": history,
-                  "steps": O.iter, "time": O.time, "dt": O.dt, "spheres": contact_spheres(ids)})
+                  "steps": O.iter, "time": O.time, "dt": O.dt, "spheres": contact_spheres(ids), "placed": placed})
 
 
 tilt()

@@ -66,6 +66,8 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
     """
     if test not in TESTS:
         raise ValueError(f"test must be one of {', '.join(TESTS)}, got {test!r}")
+    from ..dem.deck import grain_orientations, orientation_rows
+
     return {
         "test": test, "seed": int(seed), "grains": settings.grains, "young": settings.young,
         "poisson": settings.poisson, "friction_deg": math.degrees(math.atan(settings.friction)),
@@ -73,6 +75,8 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
         "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": 0.5,
         "max_time_factor": 8.0, "tilt_step_deg": settings.tilt_step, "tilt_start_deg": settings.tilt_start,
         "tilt_hold": 8.0, "failure_displacement": 0.5, "layer_depth": 4.0,
+        # grain k of the scene is placed in orientation k (w, x, y, z): uniformly random, drawn here
+        "orientations": orientation_rows(grain_orientations(settings.grains, seed)),
     }
 
 

@@ -40,6 +40,26 @@ def load_deck():
     return out
 
 
+def orientation(k):
+    """Grain k's orientation: row k of the deck's orientations (w, x, y, z), drawn uniformly by grainforge."""
+    w, x, y, z = SETTINGS["orientations"][k]
+    return Quaternion(w, x, y, z)
+
+
+def placed_spheres(ids):
+    """[x, y, z, clump id, ax, ay, az, angle] of every contact body of clumps ids as Yade holds it: its
+    position and its own turn (axis, radians): the record of what was placed."""
+    out = []
+    for i in ids:
+        for m in O.bodies[i].shape.members:
+            b = O.bodies[m]
+            if b.mask != 0:
+                p = b.state.pos
+                axis, angle = b.state.ori.toAxisAngle()
+                out.append([p[0], p[1], p[2], i, axis[0], axis[1], axis[2], angle])
+    return out
+
+
 _CONTACT = []
 _PHANTOM_MATS = {}
 

@@ -27,12 +27,12 @@ def pour():
     for k, t in enumerate(population):
         i, j, layer = k % side, (k // side) % side, k // (side * side)
         pos = ((i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell)
-        q = Quaternion(Vector3(rnd.gauss(0, 1), rnd.gauss(0, 1), rnd.gauss(0, 1)).normalized(),
-                       rnd.uniform(0, 2 * math.pi))
+        q = orientation(k)
         ids.append(add_grain(t, pos, q))
         names.append(t["name"])
         targets.append(pos)
         points.append(contact_points(ids[-1], pos, q))
+    placed = placed_spheres(ids)
     inserted = grain_report(ids, names, targets)
     for rec, pts in zip(inserted, points):
         rec["contact_points"] = pts
@@ -77,7 +77,8 @@ def pour():
     report = {"engine": "yade", "grains": n, "inserted": inserted, "final": final, "lost": lost,
               "kinetic_energy": ke, "ke_window": ke_window, "ke_threshold": threshold, "settled": settled,
               "steps": O.iter, "time": O.time, "dt": O.dt, "t_g": t_g, "fall_steps": history[0][0],
-              "check_every": check_every, "max_checks": max_checks, "history": history, "box": [width, width]}
+              "check_every": check_every, "max_checks": max_checks, "history": history, "box": [width, width],
+              "placed": placed}
     with open("results-yade.json", "w") as fh:
         json.dump(report, fh, indent=1)
     print("grainforge: %d grains, %d steps, KE %.3g J (threshold %.3g J), lost %d"
