@@ -164,6 +164,29 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
     assert (out / f"{test}.png").stat().st_size > 10_000
     assert (out / f"{test}-seed0" / "run.py").is_file()
     assert "angle" in r.stderr + r.stdout
+    check_placed_as_the_deck_says(out / f"{test}-seed0")
+
+
+def check_placed_as_the_deck_says(run_dir):
+    """Yade placed grain k turned by row k of grains.json's orientations: every contact sphere, as Yade
+    held it right after insertion, sits at the grain's centre + R_k · (its template offset)."""
+    from scipy.spatial.transform import Rotation
+
+    deck = json.loads((run_dir / "grains.json").read_text())
+    q = np.array(deck["scene"]["orientations"])
+    R = Rotation.from_quat(q[:, [1, 2, 3, 0]]).as_matrix()
+    placed = json.loads((run_dir / "result.json").read_text())["placed"]
+    bodies = np.array(placed["bodies"])
+    ids = np.unique(bodies[:, 3]).astype(int)
+    assert len(ids) == len(placed["drawn"]) == len(placed["centres"])
+    files = {t["name"]: t["xyzr"] for t in deck["grains"]}
+    for k, (cid, name, centre) in enumerate(zip(ids, placed["drawn"], placed["centres"])):
+        rows = np.loadtxt(run_dir / files[name], comments="#").reshape(-1, 4)
+        mine = bodies[bodies[:, 3] == cid, :3]
+        expect = np.array(centre) + rows[:, :3] @ R[k].T
+        assert len(mine) == len(rows)
+        d = np.linalg.norm(mine[:, None] - expect[None], axis=2).min(axis=1)
+        assert d.max() < 1e-9 * np.abs(rows[:, 3]).max() * 1e3, (k, name)
 
 
 # ---- settings an engine cannot run: one line, exit 2, before any engine starts or anything is written ----

@@ -16,9 +16,11 @@ These texts run inside Yade (its Python, its numpy); they never import
 grainforge.  They draw no orientation: grain ``k`` is placed in row ``k`` of
 ``grains.json["scene"]["orientations"]`` (the library's ``orientation``),
 drawn uniformly by :func:`grainforge.dem.deck.grain_orientations`, the one
-draw every deck and scene uses.  ``result.json["placed"]`` records every
-contact body's position right after insertion, as Yade holds it, so the
-orientations the engine received can be read back and checked.
+draw every deck and scene uses.  ``result.json["placed"]`` records, right after
+insertion and as Yade holds them, every contact body (``bodies``: position,
+clump id, its own turn), each grain's centre of mass (``centres``) and the
+template drawn for it (``drawn``), so the orientations the engine received
+can be read back and checked.
 """
 
 from __future__ import annotations
@@ -170,7 +172,8 @@ def repose():
         ids.append(add_grain(t, (x + 0.1 * d * rnd.uniform(-1, 1), y + 0.1 * d * rnd.uniform(-1, 1), z),
                              orientation(q)))
     inserted = len(ids)
-    placed = placed_spheres(ids)
+    placed = {"bodies": placed_spheres(ids), "centres": [list(O.bodies[i].state.pos) for i in ids],
+              "drawn": [t["name"] for t in pop]}
     unbound_mass_carriers(ids)
     O.engines = engines([Ig2_Facet_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
                         [Bo1_Facet_Aabb(), Bo1_Wall_Aabb()])
@@ -232,7 +235,8 @@ def tilt():
         shift = 0.5 * cell * (layer % 2) + 0.1 * d * rnd.uniform(-1, 1)
         ids.append(add_grain(t, ((i + 0.5) * cell + shift, (j + 0.5) * cell + 0.5 * cell * (layer % 2)
                                  + 0.1 * d * rnd.uniform(-1, 1), z0 + layer * cell), orientation(q)))
-    placed = placed_spheres(ids)
+    placed = {"bodies": placed_spheres(ids), "centres": [list(O.bodies[i].state.pos) for i in ids],
+              "drawn": [t["name"] for t in pop]}
     unbound_mass_carriers(ids)
     O.engines = engines()
     O.dt = stable_dt(pop)
