@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from .options import clump_accuracy_option
 from .paths import OutPath, output_dir
 
 #: grainforge.dem.inputs.MAX_POUR_GRAINS, spelt out so that the help does not import numpy (a test compares them)
@@ -15,7 +16,12 @@ MAX_POUR_GRAINS = 100_000
 ENGINE_COMMAND = {"yade": "yade -n -x run.py", "liggghts": "liggghts -in in.run", "lammps": "lmp -in in.run"}
 #: option (parameter name, flag) -> the --shape it applies to
 SHAPE_OPTIONS = {("spheres", "--spheres"): "clump", ("refine", "--refine-iterations"): "clump",
+                 ("clump_accuracy", "--clump-accuracy"): "clump",
                  ("vertices", "--vertices"): "polyhedron", ("spacing", "--spacing"): "levelset"}
+#: engines that refuse a rigid body of one sphere: a clump built to an accuracy target takes two at least there
+TWO_SPHERE_ENGINES = ("liggghts", "lammps")
+#: grains named one by one in the warning about clumps that miss their accuracy target; more are counted
+NAMED_MISSES = 10
 
 
 def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
@@ -36,10 +42,12 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
 @click.option("--density", type=click.FloatRange(1.0, 1e5), default=2650.0, show_default=True,
               help="Solid density, kg/m³.")
 @click.option("--spheres", type=click.IntRange(2, 1000), default=30, show_default=True,
-              help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage).")
+              help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
+                   "With --clump-accuracy, the most a clump may take (100 when --spheres is not given).")
 @click.option("--refine-iterations", "refine", type=click.IntRange(0, 10000), default=0, show_default=True,
               help="Clump: L-BFGS iterations refining all spheres after the greedy placement "
                    "(30: a few points more coverage for several times the CPU; 0: off).")
+@clump_accuracy_option
 @click.option("--vertices", type=click.IntRange(4, 10000), default=None,
               help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts). "
                    "Default: 16 for Yade, 12 for LAMMPS (LAMMPS reads at most 56).")
@@ -54,10 +62,15 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
                    "proportion (each taken grains // inputs times; the rest go to inputs drawn with --seed).")
 @click.option("--seed", type=click.IntRange(0), default=None, show_default="0",
               help="Seed of the --grains draw.")
+@click.option("--templates", "template_count", type=click.IntRange(1), default=None,
+              show_default="every input grain",
+              help="Write K templates chosen from the input grains so that their sphericity, convexity, flatness, "
+                   "elongation and size are distributed as all the inputs' (KS figures printed and written to "
+                   "templates.csv); --count or --grains then apply to them.")
 @click.option("--workers", type=click.IntRange(1), default=None, help="Processes (default: CPU count).")
 @click.option("--overwrite", is_flag=True, help="Replace existing deck files.")
-def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing, unit, count, grains, seed, workers,
-        overwrite):
+def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,
+        seed, workers, overwrite, template_count=None):
     """Write a DEM deck of the grains in INPUTS (mesh files, generate/batch folders, manifests).
 
     Every grain keeps its exact mass, centroid and inertia from the mesh.  Run
@@ -68,7 +81,12 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     from ..dem.inputs import build_templates, grain_paths, pour_counts
     from .progress import progress_bar
 
-    _refuse_foreign_options(click.get_current_context(), shape)
+    ctx = click.get_current_context()
+    _refuse_foreign_options(ctx, shape)
+    if clump_accuracy is not None and ctx.get_parameter_source("spheres") in (None, click.core.ParameterSource.DEFAULT):
+        from ..dem.clump import DEFAULT_SPHERE_CAP
+
+        spheres = DEFAULT_SPHERE_CAP  # the cap of a clump built to an accuracy target, --spheres not given
     if shape not in SUPPORTED[engine]:
         raise click.UsageError(f"--engine {engine} does not support --shape {shape} "
                                f"(supported: {', '.join(SUPPORTED[engine])})")
@@ -87,20 +105,29 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
         raise click.UsageError("--seed draws the --grains pour; give --grains")
     output_dir(out)  # writable, not a file: before any work (write_deck applies the overwrite rule)
     paths = grain_paths(inputs)
+    chosen, n_templates = None, len(paths)
+    if template_count is not None:  # K representative grains (those without a manifest's measures are measured)
+        n_templates = _templates_plan(inputs, paths, template_count, out, overwrite)
     if grains is None:
         count = 1 if count is None else count
-        if count * len(paths) > MAX_POUR_GRAINS:
-            raise click.BadParameter(f"{len(paths)} grain files × {count} = {count * len(paths)} grains; a pour "
+        if count * n_templates > MAX_POUR_GRAINS:
+            raise click.BadParameter(f"{n_templates} grain files × {count} = {count * n_templates} grains; a pour "
                                      f"holds at most {MAX_POUR_GRAINS}", param_hint="--count")
-        counts = [count] * len(paths)
+        counts = [count] * n_templates
     else:
-        counts = pour_counts(len(paths), grains, 0 if seed is None else seed).tolist()
+        counts = pour_counts(n_templates, grains, 0 if seed is None else seed).tolist()
     workers = workers or os.cpu_count() or 1
     files = sum(c > 0 for c in counts)
-    announce = _estimate(files, shape, spheres, refine, spacing, min(workers, files))
-    if shape == "levelset":  # a spacing too fine for a grain: refused before the estimate is said and any work
+    announce = _estimate(files, shape, spheres, refine, spacing, min(workers, files), clump_accuracy is not None)
+    # a spacing too fine for a grain: refused before the estimate is said and any work (--templates: once chosen)
+    if shape == "levelset" and template_count is None:
         _check_level_set_budget([p for p, c in zip(paths, counts) if c > 0], unit, spacing)
-    announce()
+    announce()  # (the measuring of --templates, minutes at most, shows its own progress bar)
+    if template_count is not None:
+        chosen = _choose_templates(inputs, paths, template_count, workers)
+        paths = chosen.paths
+        if shape == "levelset":
+            _check_level_set_budget([p for p, c in zip(paths, counts) if c > 0], unit, spacing)
     from ..dem.inputs import GRAIN_SIZE_RANGE, MIN_GRAIN_SIZE
 
     # every grain's size is checked before its representation is built (the costly part)
@@ -108,15 +135,111 @@ def dem(inputs, out, engine, shape, density, spheres, refine, vertices, spacing,
     templates = build_templates(paths, workers=workers, progress=progress_bar(files, "dem"),
                                 counts=counts, unit=unit, density=density, shape=shape, spheres=spheres,
                                 refine_iterations=refine, polyhedron_vertices=vertices, levelset_spacing=spacing,
-                                size_range=size_range)
+                                size_range=size_range, **({} if clump_accuracy is None else
+                                                          {"target_iou": clump_accuracy,
+                                                           "min_spheres": 2 if engine in TWO_SPHERE_ENGINES else 1}))
     from ..dem.decks import write_deck
 
     placed = [t.clump.count for t in templates if t.clump is not None]
-    if placed and min(placed) < spheres:
+    if clump_accuracy is None and placed and min(placed) < spheres:
         click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
                    "stops when another sphere adds no coverage", err=True)
     written = write_deck(engine, templates, out, overwrite=overwrite)
-    click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
+    if chosen is not None:
+        written.append(_write_templates_csv(out, chosen, unit))
+    if clump_accuracy is None:
+        click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
+        return
+    warning = accuracy_warning(templates, spheres, out / "clumps.csv")
+    if warning:
+        click.echo(warning, err=True)
+    click.echo(f"wrote {len(written)} files to {out}; {accuracy_summary(templates, spheres)}; run from inside it: "
+               f"{ENGINE_COMMAND[engine]}", err=True)
+
+
+def _missing(templates) -> list:
+    return [t for t in templates if t.clump is not None and t.clump.meets_target is False]
+
+
+def accuracy_warning(templates, cap: int, table) -> str | None:
+    """The one warning line naming the clumps that miss their accuracy target within ``cap`` spheres (``None``
+    when every clump reaches it): up to :data:`NAMED_MISSES` grains by name with their intersection over union,
+    more as a count and the table (``clumps.csv``) that lists them.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> miss = NS(name="dpa-0002", clump=NS(meets_target=False, target=0.9, accuracy=NS(iou=0.8123), count=30))
+    >>> print(accuracy_warning([miss], 30, "deck/clumps.csv"))
+    warning: 1 grain does not reach the intersection over union 0.9 within 30 spheres: dpa-0002 (0.812)
+    """
+    missing = _missing(templates)
+    if not missing:
+        return None
+    target = missing[0].clump.target
+    head = (f"warning: {len(missing)} grain{'s do' if len(missing) > 1 else ' does'} not reach the intersection "
+            f"over union {target:g} within {cap} spheres")
+    if len(missing) <= NAMED_MISSES:
+        return head + ": " + ", ".join(f"{t.name} ({t.clump.accuracy.iou:.3f})" for t in missing)
+    return f"{head} (of {len(templates)}); {table} lists them (meets_target false)"
+
+
+def accuracy_summary(templates, cap: int) -> str:
+    """``clumps of 3/12/30 spheres (min/median/max, at most 30); 9 of 10 grains reach IoU 0.85``.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> ts = [NS(clump=NS(count=n, meets_target=n < 30, target=0.85)) for n in (1, 12, 30)]
+    >>> accuracy_summary(ts, 30)
+    'clumps of 1/12/30 spheres (min/median/max, at most 30); 2 of 3 grains reach IoU ≥ 0.85'
+    """
+    import statistics
+
+    clumps = [t.clump for t in templates if t.clump is not None]
+    if not clumps:
+        return "no clumps"
+    counts = [c.count for c in clumps]
+    met = sum(bool(c.meets_target) for c in clumps)
+    return (f"clumps of {min(counts)}/{statistics.median(counts):g}/{max(counts)} spheres (min/median/max, at most "
+            f"{cap}); {met} of {len(clumps)} grains reach IoU ≥ {clumps[0].target:g}")
+
+
+def _templates_plan(inputs, paths, k: int, out: Path, overwrite: bool) -> int:
+    """--templates K: the templates of the deck; refuses an earlier templates.csv without --overwrite before
+    any work."""
+    from ..dem.template_choice import TEMPLATES_CSV
+
+    if (out / TEMPLATES_CSV).exists() and not overwrite:
+        raise click.UsageError(f"{out / TEMPLATES_CSV} exists; use --overwrite")
+    return min(k, len(paths))
+
+
+def _choose_templates(inputs, paths, k: int, workers: int):
+    """The K representative grain files (a progress bar while files are measured); prints the KS line."""
+    from tqdm import tqdm
+
+    from ..dem.template_choice import choose_files
+
+    with tqdm(desc="choosing templates", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
+        def step(done, total):
+            bar.total = total
+            bar.update(1)
+
+        chosen = choose_files(inputs, paths, k, workers=workers, progress=step)
+    click.echo(chosen.summary(k) + "; templates.csv", err=True)
+    return chosen
+
+
+def _write_templates_csv(out: Path, chosen, unit: float) -> Path:
+    """templates.csv: the chosen grains under their deck names, sizes in mm."""
+    from ..dem.inputs import _unique_names
+    from ..dem.template_choice import TEMPLATES_CSV, write_templates_csv
+
+    table = chosen.table.copy()
+    table[:, -1] *= unit * 1e3
+    return write_templates_csv(out / TEMPLATES_CSV, _unique_names(chosen.paths), [str(p) for p in chosen.paths],
+                               table, chosen.choice)
 
 
 def _check_level_set_budget(paths, unit: float, spacing: float) -> None:
@@ -131,13 +254,18 @@ def _check_level_set_budget(paths, unit: float, spacing: float) -> None:
             raise ValueError(f"{p}: {exc}") from None
 
 
-def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int):
+def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int,
+              accuracy: bool = False):
     """Refuse template work estimated beyond a day, naming what to change; return the call that announces
     work over a minute."""
     from ..estimate import TooLargeError, check_job, dem_template_seconds
     from .interrupts import say_estimate
 
     each = dem_template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing)
+    if accuracy and shape == "clump":  # the bisection's measures of the greedy prefixes
+        from ..dem.clump import ACCURACY_MEASURE_SECONDS, accuracy_measures
+
+        each += ACCURACY_MEASURE_SECONDS * accuracy_measures(spheres)
     refining = shape == "clump" and refine > 0  # the model counts every iteration: an upper bound
     if refining:
         advice = "lower --refine-iterations (or --spheres), or give fewer grain files"

@@ -33,6 +33,27 @@ class FloatList(click.ParamType):
         return vals
 
 
+class FiniteFloatRange(click.FloatRange):
+    """``click.FloatRange`` that also refuses ``nan`` (which compares false with both bounds, so the range lets it
+    through): one line, exit code 2, as for a number out of the range."""
+
+    def convert(self, value, param, ctx):
+        import math
+
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
+
+
+#: --clump-accuracy (``dem`` and ``simulate``): build each clump to an intersection over union instead of a
+#: fixed sphere count
+clump_accuracy_option = click.option(
+    "--clump-accuracy", "clump_accuracy", type=FiniteFloatRange(0.0, 1.0, min_open=True, max_open=True), default=None,
+    help="Clump: build each grain's clump to this intersection over union with the grain (e.g. 0.85): the fewest "
+         "spheres that reach it, --spheres being then the most a clump may take (docs/dem.md).")
+
+
 def _click_type(spec: ParamSpec):
     if spec.kind == "int":
         return click.INT

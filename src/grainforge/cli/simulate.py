@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .options import build_params, param_options
+from .options import build_params, clump_accuracy_option, param_options
 from .paths import OutPath, output_dir
 
 #: settings only the tilt test reads: not offered by `simulate repose`
@@ -62,15 +62,20 @@ def check_installed(engine: str, mpi: int | None) -> None:
             raise click.UsageError(str(exc)) from None
 
 
-def check_representation(shape: str, spacing: float | None, as_spheres: bool, spheres: int | None) -> None:
+def check_representation(shape: str, spacing: float | None, as_spheres: bool, spheres: int | None,
+                         clump_accuracy: float | None = None) -> None:
     """Refuse, in one line, options of another grain representation (as ``grainforge dem`` does).
 
     Raises
     ------
     click.UsageError
         For ``--spacing`` without ``--shape levelset``, or ``--spheres`` or
-        ``--as-spheres`` with it.
+        ``--as-spheres`` with it; ``--clump-accuracy`` with a level set or
+        ``--as-spheres`` (one sphere per grain, exactly).
     """
+    if clump_accuracy is not None and (shape != "clump" or as_spheres):
+        raise click.UsageError("--clump-accuracy builds clumps to an accuracy: use it with --shape clump, "
+                               "without --as-spheres")
     if shape != "levelset" and spacing is not None:
         raise click.UsageError("--spacing is the level set's grid: use it with --shape levelset")
     if shape == "levelset" and spheres is not None:
@@ -80,8 +85,11 @@ def check_representation(shape: str, spacing: float | None, as_spheres: bool, sp
                                "--shape levelset")
 
 
-def run_settings(test: str, values: dict, quick: bool, shape: str):
+def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accuracy: float | None = None):
     """The run's :class:`grainforge.simulate.Settings` from the options (``--quick`` filling what is not given).
+
+    With ``clump_accuracy``, ``spheres`` is the cap of every clump: the one given, or ``--quick``'s, or
+    :data:`grainforge.dem.clump.DEFAULT_SPHERE_CAP`.
 
     Raises
     ------
@@ -91,6 +99,10 @@ def run_settings(test: str, values: dict, quick: bool, shape: str):
     from ..simulate import QUICK, Settings
     from ..simulate.levelset import check_levelset_run, quick_levelset
 
+    if clump_accuracy is not None and values.get("spheres") is None and not quick:
+        from ..dem.clump import DEFAULT_SPHERE_CAP
+
+        values = {**values, "spheres": DEFAULT_SPHERE_CAP}
     if quick:
         values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
     settings = build_params(Settings, values)
@@ -101,7 +113,8 @@ def run_settings(test: str, values: dict, quick: bool, shape: str):
     return settings
 
 
-def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: float) -> list:
+def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: float,
+                   clump_accuracy: float | None = None) -> list:
     """The population's templates (clumps or level sets), with a progress bar."""
     from tqdm import tqdm
 
@@ -114,7 +127,21 @@ def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: floa
             bar.update(1)
 
         return build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
-                                spacing=spacing)
+                                spacing=spacing,
+                                **({} if clump_accuracy is None else {"clump_accuracy": clump_accuracy}))
+
+
+def clump_outputs(templates, settings, clump_accuracy: float | None, stage, out) -> str | None:
+    """With an accuracy target: ``clumps.csv`` of the templates in ``stage`` and the warning line that names the
+    clumps missing it (``None`` when all reach it, or without a target)."""
+    if clump_accuracy is None:
+        return None
+    from ..dem.clump import clump_table
+    from ..dem.deck import template_record
+    from .dem import accuracy_warning
+
+    (Path(stage) / "clumps.csv").write_text(clump_table([template_record(t) for t in templates]))
+    return accuracy_warning(templates, settings.spheres, Path(out) / "clumps.csv")
 
 
 def engine_failed(exc, stage, out) -> click.ClickException:
@@ -155,12 +182,14 @@ def _command(test: str, doc: str):
                   show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
                                             "(as grainforge dem).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
+    @clump_accuracy_option
     @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
-    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, **values):
+    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, clump_accuracy,
+                **values):
         check_engine(engine, mpi, shape)
-        check_representation(shape, spacing, as_spheres, values.get("spheres"))
+        check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
         _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi,
-             shape=shape, spacing=0.05 if spacing is None else spacing)
+             shape=shape, spacing=0.05 if spacing is None else spacing, clump_accuracy=clump_accuracy)
 
     return command
 
@@ -181,16 +210,17 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
 
 
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
-         shape="clump", spacing=0.05):
+         shape="clump", spacing=0.05, clump_accuracy=None):
     import os
 
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from .interrupts import ready_for_work, signals_held
 
-    settings = run_settings(test, values, quick, shape)
+    settings = run_settings(test, values, quick, shape, clump_accuracy)
     outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
                                                              for k in range(settings.seeds)]
+    outputs += [out / "clumps.csv"] if clump_accuracy is not None else []
     out = output_dir(out, overwrite=overwrite, files=outputs)
     available, make_seconds = check_inputs(inputs)
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
@@ -214,7 +244,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate.report import write_report
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    templates = make_templates(inputs, settings, as_spheres, shape, spacing)
+    templates = make_templates(inputs, settings, as_spheres, shape, spacing, clump_accuracy=clump_accuracy)
     name = ENGINE_NAMES[engine] + (f", {mpi} MPI ranks" if mpi else "")
     runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
@@ -241,9 +271,14 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
         if engine != "yade":  # likewise the engine and its MPI ranks (Yade's outputs unchanged)
             rows = [{**r, "engine": engine, "mpi_ranks": mpi or 1} for r in rows]
+        if clump_accuracy is not None:  # likewise the clumps' accuracy target
+            rows = [{**r, "clump_accuracy": clump_accuracy} for r in rows]
+        warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         write_report(rows, stage, test, settings)
         with signals_held():  # the outputs appear together
             commit_stage(stage, out, overwrite=overwrite)
+    if warning:
+        click.echo(warning, err=True)
     summary = summarise(rows)
     sd = summary["angle_sd_deg"]
     spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"

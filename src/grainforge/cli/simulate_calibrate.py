@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from .options import param_options
+from .options import clump_accuracy_option, param_options
 from .paths import OutPath, output_dir
 from .simulate import (
     ENGINE_NAMES,
@@ -18,6 +18,7 @@ from .simulate import (
     check_engine,
     check_installed,
     check_representation,
+    clump_outputs,
     engine_failed,
     make_templates,
     run_settings,
@@ -32,7 +33,8 @@ def _option(name: str) -> str:
 
 
 def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool, as_spheres: bool, shape: str,
-                spacing: float | None, engine: str = "yade", mpi: int | None = None) -> str:
+                spacing: float | None, engine: str = "yade", mpi: int | None = None,
+                clump_accuracy: float | None = None) -> str:
     """The ``grainforge simulate TEST ... --friction μ`` command that uses a calibrated μ (same options).
 
     Examples
@@ -48,6 +50,8 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
         words += ["--engine", engine] + (["--mpi", str(mpi)] if mpi else [])
     if shape != "clump":
         words += ["--shape", shape] + (["--spacing", f"{spacing:g}"] if spacing is not None else [])
+    if clump_accuracy is not None:
+        words += ["--clump-accuracy", repr(float(clump_accuracy))]
     return shlex.join(words + ["--out", f"out/{test}-calibrated"])
 
 
@@ -82,9 +86,10 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
               show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @click.option("--overwrite", is_flag=True, help="Replace an earlier calibration in --out.")
+@clump_accuracy_option
 @param_options(_settings_cls(), exclude=("friction",))
 def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance, max_evaluations, quick, as_spheres,
-              label, workers, engine, mpi, shape, spacing, overwrite, **values):
+              label, workers, engine, mpi, shape, spacing, overwrite, clump_accuracy, **values):
     """Find the contact friction μ at which a population reaches a measured angle (tilt or repose).
 
     TEST is tilt or repose; INPUTS as for `simulate tilt`.  A bounded search on the seed-averaged angle
@@ -112,10 +117,11 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     if test == "repose" and (values.get("tilt_step") is not None or values.get("tilt_start") is not None):
         raise click.UsageError("--tilt-step and --tilt-start are the tilt test's: calibrate repose takes neither")
     check_engine(engine, mpi, shape)
-    check_representation(shape, spacing, as_spheres, values.get("spheres"))
+    check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
     given = dict(values)
-    settings = run_settings(test, values, quick, shape)
-    out = output_dir(out, overwrite=overwrite, files=[out / name for name in OUTPUTS])
+    settings = run_settings(test, values, quick, shape, clump_accuracy)
+    outputs = OUTPUTS + (("clumps.csv",) if clump_accuracy is not None else ())
+    out = output_dir(out, overwrite=overwrite, files=[out / name for name in outputs])
     available, make_seconds = check_inputs(inputs)
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
     ls_spacing = 0.05 if spacing is None else spacing
@@ -143,7 +149,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     from ..simulate.calibrate import Unreachable, run_calibration, write_calibration
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing)
+    templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing, clump_accuracy=clump_accuracy)
     runs = tqdm(total=settings.seeds * 1000, desc=f"calibrate {test} ({ENGINE_NAMES[engine]})", unit="‰", disable=None,
                 leave=False, dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} {postfix}")
     done = [0.0] * settings.seeds
@@ -175,14 +181,16 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         finally:
             runs.close()
         command = use_command(test, inputs, search.friction, given, quick=quick, as_spheres=as_spheres,
-                              shape=shape, spacing=spacing, engine=engine, mpi=mpi)
+                              shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
+        warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         record = write_calibration(search, rows, target_angle, test, settings, command, stage, low=low, high=high)
         with signals_held():
             commit_stage(stage, out, overwrite=overwrite)
+    if warning:
+        click.echo(warning, err=True)
     sd = record["friction_sd"]
     spread = f" ± {sd:.3f}" if math.isfinite(sd) else " (one seed: no spread)"
     note = "" if search.converged else f" (not converged in {max_evaluations} frictions: the bracket's interpolation)"
     click.echo(f"{label}: friction {search.friction:.3f}{spread} reaches {target_angle:g}° on the {test} test{note} "
                f"({len(rows)} runs); {out / 'calibration.json'}")
     click.echo(command)
-

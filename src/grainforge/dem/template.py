@@ -105,7 +105,8 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
             density: float = 2650.0, shape: str = "clump", spheres: int = 30, refine_iterations: int = 0,
             polyhedron_vertices: int | None = None, levelset_spacing: float = 0.05,
             source: str = "", count: int = 1, rng=0,
-            size_range: tuple[float, float] | None = None) -> GrainTemplate:
+            size_range: tuple[float, float] | None = None, target_iou: float | None = None,
+            min_spheres: int = 1) -> GrainTemplate:
     """Make a :class:`GrainTemplate` from a closed mesh.
 
     Parameters
@@ -120,7 +121,8 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         kg/m³ (> 0).
     shape : {"clump", "polyhedron", "levelset"}
     spheres : int
-        Sphere count of a clump (see :func:`grainforge.dem.clump.clump`).
+        Sphere count of a clump (see :func:`grainforge.dem.clump.clump`); with
+        ``target_iou``, the most spheres a clump may take.
     refine_iterations : int
         L-BFGS-B iterations refining the clump's centres and radii after the
         greedy placement (0: none; 30 gains a few points of coverage for
@@ -137,6 +139,15 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     size_range : (float, float), optional
         Equivalent diameters (m) the caller accepts; a grain outside is refused
         before its representation is built (the costly part).
+    target_iou : float, optional
+        Build the clump to this intersection over union with the grain, in
+        (0, 1): the fewest spheres, up to ``spheres``, that reach it (measured
+        by :func:`grainforge.dem.clump.clump_accuracy` on the grid of
+        :data:`CLUMP_MEASURE_RESOLUTION` cells per d_eq). ``None``: ``spheres``
+        spheres, as always.
+    min_spheres : int
+        With ``target_iou``: the fewest spheres a clump takes (2 for LIGGGHTS
+        and LAMMPS, which refuse a body of one sphere).
 
     Raises
     ------
@@ -151,6 +162,9 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     >>> t = prepare(box.vertices, box.faces, "box", density=1000.0, spheres=8)
     >>> round(t.mass, 12), t.clump.count      # a 2 mm cube (file units mm) of water: 8 mg
     (8e-06, 8)
+    >>> a = prepare(box.vertices, box.faces, "box", spheres=30, target_iou=0.8)
+    >>> a.clump.count < 30, a.clump.meets_target
+    (True, True)
     """
     from .enclosure import enclosure_problems
 
@@ -164,6 +178,12 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         raise ValueError(f"refine_iterations must be ≥ 0, got {refine_iterations!r}")
     if int(count) < 1:
         raise ValueError(f"count must be ≥ 1, got {count!r}")
+    if target_iou is not None:
+        if shape != "clump":
+            raise ValueError(f"target_iou is a clump's accuracy target; shape {shape!r} has none")
+        from .clump import check_target
+
+        target_iou = check_target(target_iou)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     problems = enclosure_problems(v, f)
@@ -181,7 +201,8 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         from .clump import clump
 
         kw["clump"] = clump(v, f, spheres=spheres, rng=rng, iterations=int(refine_iterations),
-                            measure_resolution=CLUMP_MEASURE_RESOLUTION)
+                            measure_resolution=CLUMP_MEASURE_RESOLUTION, target_iou=target_iou,
+                            min_spheres=min_spheres)
     elif shape == "polyhedron":
         from .polyhedron import convex_polyhedron
 

@@ -27,7 +27,7 @@ def _template(args):
     from ..dem.template import prepare
     from ..solid import signed_volume
 
-    vertices, faces, name, settings, source, k, as_spheres, shape, spacing = args
+    vertices, faces, name, settings, source, k, as_spheres, shape, spacing, clump_accuracy = args
     if as_spheres:
         d = (6.0 * signed_volume(vertices, faces) / math.pi) ** (1.0 / 3.0)
         vertices, faces = _sphere_mesh(d)
@@ -38,7 +38,7 @@ def _template(args):
         sphere = Clump(np.zeros((1, 3)), np.array([t.d_eq / 2.0]), 1.0, 0.0, t.clump.resolution)
         return replace(t, clump=sphere)
     return prepare(vertices, faces, name, unit=1e-3, density=settings.density, spheres=settings.spheres,
-                   source=source, rng=k, shape=shape, levelset_spacing=spacing)
+                   source=source, rng=k, shape=shape, levelset_spacing=spacing, target_iou=clump_accuracy)
 
 
 def _scaled_to(vertices, faces, size):
@@ -85,7 +85,7 @@ def check_inputs(inputs: Sequence[str | os.PathLike]) -> tuple[int, float]:
 
 def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *, as_spheres: bool = False,
                      progress: Callable[[int, int], None] | None = None, shape: str = "clump",
-                     spacing: float = 0.05) -> list:
+                     spacing: float = 0.05, clump_accuracy: float | None = None) -> list:
     """Clump templates (:class:`grainforge.dem.template.GrainTemplate`) of the population.
 
     Parameters
@@ -103,6 +103,10 @@ def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *,
         The grains' contact geometry: clumps of ``settings.spheres`` spheres, or
         level sets (:func:`grainforge.dem.levelset.level_set`) of grid ``spacing``
         (a fraction of the equivalent diameter), as ``grainforge dem`` makes them.
+    clump_accuracy : float, optional
+        Build every clump to this intersection over union with its grain
+        (:func:`grainforge.dem.clump.clump`, ``target_iou``), with at most
+        ``settings.spheres`` spheres.
 
     Raises
     ------
@@ -134,7 +138,7 @@ def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *,
     for k, (v, f, name, source) in enumerate(items):
         if settings.size is not None:
             v = _scaled_to(v, f, settings.size)
-        out.append(_template((v, f, name, settings, source, k, as_spheres, shape, spacing)))
+        out.append(_template((v, f, name, settings, source, k, as_spheres, shape, spacing, clump_accuracy)))
         if progress is not None:
             progress(k + 1, len(items))
     return out
