@@ -516,6 +516,40 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
     assert r.exit_code != 0 and {p.name: p.read_bytes() for p in out.iterdir()} == before, r.stderr
 
 
+def test_a_fit_that_does_not_pass_keeps_its_outputs_names_the_failed_criteria_and_exits_3(runner, tmp_path,
+                                                                                           monkeypatch):
+    """A script must tell a twin population that matches the sand from one that does not: exit 3."""
+    import grainforge.fit as fitmod
+    from grainforge.cli.fit import EXIT_NOT_PASSED
+
+    s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
+    params = {"descriptors": [0.0, 0.05, 0.1], "subdivisions": 3}
+    text = recipe_text("rf", params, s, count=500, seed=1, header="test")
+    gen = np.full((50, 5), 0.8)
+    gen[:, 0], gen[:, 1:] = s.equivalent_diameter, s.table()
+    gen[:, 3] += 0.2  # every twin's flatness off by 0.2: the mean and the KS criteria fail for it
+    stats = compare(s.table(), gen[:, 1:], twin_within=0.5)
+    stats.update(reachable=1.0, unreachable_by={})
+    assert not stats["pass"]
+
+    def fake_fit(sand, method, **kw):
+        return fitmod.FitResult(method="rf", recipe=text, stats=stats, generated=gen, sand_rows=np.arange(50),
+                                settings=[{"irregularity": 0.05}] * 50, reachable=np.ones(50, bool),
+                                targets=s.table())
+
+    monkeypatch.setattr(fitmod, "fit_sand", fake_fit)
+    monkeypatch.setattr("grainforge.population.check_extremes", lambda recipe: None)
+    out = tmp_path / "o"
+    r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size-um", "7", "--out", str(out)])
+    assert r.exit_code == EXIT_NOT_PASSED == 3, r.output + r.stderr
+    assert "does NOT pass" in r.stderr
+    line = next(x for x in r.stderr.splitlines() if x.startswith("not passed: "))
+    names = fitmod.DESCRIPTORS[2]
+    assert f"mean {names}" in line and f"ks {names}" in line and "share within 0.03" in line
+    assert "sphericity" not in line.split("share")[0].replace(names, "")  # the passing descriptors are not named
+    assert sorted(p.name for p in out.iterdir()) == sorted(fitmod.OUTPUTS)  # the outputs are kept
+
+
 def test_an_opening_fraction_column_is_read_checked_and_used_only_at_the_sands_resolution(tmp_path):
     """A table may carry each grain's opening fraction (not an Atlas column): it is read, checked like the
     descriptors (in [0, 1], a spread), and used by the mean-settings estimate only where no twin is measured

@@ -10,6 +10,10 @@ from .options import renamed_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
 
+#: exit status of a fit that ran to the end, wrote its outputs and does not pass its criteria
+#: (docs/cli-contract.md): a script can tell it from success (0) and from a refusal (2)
+EXIT_NOT_PASSED = 3
+
 #: modules a fit loads before any work (see cli.interrupts)
 HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",
                  "grainforge.analysis.atlas", "grainforge.methods", "grainforge.population", "grainforge.workers",
@@ -19,7 +23,7 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.command()
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder for recipe.toml, fit.csv and fit.png.")
+              help="Folder for recipe.toml, fit.csv, fit-stats.csv and fit.png.")
 @click.option("--voxel-size-um", "voxel_size", type=click.FloatRange(min=0, min_open=True), default=None,
               help="Voxel size of the sand's scan in µm; required unless the CSV has a 'Voxel Size (µm)' column.")
 @renamed_option("--voxel-size", "--voxel-size-um", "µm")
@@ -61,7 +65,7 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
               show_default=True,
               help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
                    "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
-@click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv and fit.png in --out.")
+@click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv, fit-stats.csv and fit.png in --out.")
 def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains, population_slopes, design_grains,
         max_across, max_minutes, cache_dir, seed, workers, sphericity, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
@@ -78,7 +82,10 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     (sand row beside twin), DIR/fit-stats.csv and DIR/fit.png.  A column
     'Opening Fraction (-)' (not the Atlas's: each grain's share of voxels a
     ball of 1/30 of its d_eq reaches inside it) is used, where present, by the
-    estimate of the sand's mean settings.  See docs/fit.md.
+    estimate of the sand's mean settings.  Exit status 0 when the fit passes,
+    3 when it ran and does not pass (outputs kept, the failed criteria named),
+    1 when batch would refuse the recipe, 2 for a refused request.  See
+    docs/fit.md.
     """
     import os
     import sys
@@ -138,3 +145,21 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     except RecipeError as exc:
         click.echo(f"warning: grainforge batch would refuse this recipe: {exc}", err=True)
         sys.exit(1)
+    if not result.stats["pass"]:
+        click.echo(f"not passed: {failed_criteria(result)} (the outputs are kept; see {paths[2]}); exit status "
+                   f"{EXIT_NOT_PASSED}", err=True)
+        sys.exit(EXIT_NOT_PASSED)
+
+
+def failed_criteria(result) -> str:
+    """The criteria of ``fit-stats.csv`` a fit fails, in one line: ``'ks flatness 0.14 (KS statistic <= 0.1), …'``."""
+    from ..fit import stat_rows
+
+    # a row's "pass" is a (NumPy) boolean where the row is a criterion, "" where it is only reported
+    bad = [r for r in stat_rows(result) if not isinstance(r["pass"], str) and not r["pass"]]
+    return "; ".join(f"{r['statistic']} {r['quantity']} {_number(r)} ({r['criterion']})" for r in bad) or "none"
+
+
+def _number(row) -> str:
+    v = row["difference"] if row["statistic"] in ("ks", "mean", "spearman") else row["generated"]
+    return f"{v:+.3g}" if row["statistic"] in ("mean", "spearman") else f"{v:.3g}"
