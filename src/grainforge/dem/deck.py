@@ -120,9 +120,10 @@ def settle_loop(fall_steps: int, check_every: int, max_checks: int, window: int 
     return "\n".join(lines)
 
 
-def settle_report(quit_settled: str, quit_not_settled: str) -> str:
+def settle_report(quit_settled: str, quit_not_settled: str, energy_unit: str = "J") -> str:
     """The last input lines: one ``SETTLED in N steps`` or ``NOT SETTLED after N steps (KE … > … J)``
-    line, then the given quit commands (``""`` for none) — see :func:`settle_loop`.
+    line, then the given quit commands (``""`` for none) — see :func:`settle_loop`. ``energy_unit`` names the
+    unit of the deck's kinetic energies (``"J"`` in SI decks; LAMMPS's micro units are pg µm²/µs² = 1e-15 J).
 
     Examples
     --------
@@ -131,7 +132,7 @@ def settle_report(quit_settled: str, quit_not_settled: str) -> str:
     """
     fail = f" '{quit_not_settled}'" if quit_not_settled else ""
     lines = ["if \"${settled} == 1\" then 'print \"SETTLED in ${nsteps} steps\"' "
-             "else 'print \"NOT SETTLED after ${nsteps} steps (KE ${kewin} > ${kethr} J)\"'" + fail]
+             "else 'print \"NOT SETTLED after ${nsteps} steps (KE ${kewin} > ${kethr} " + energy_unit + ")\"'" + fail]
     if quit_settled:
         lines.append(quit_settled)
     return "\n".join(lines)

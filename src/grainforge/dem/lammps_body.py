@@ -16,7 +16,8 @@
   the engine's own state written back (``data.initial``, ``data.final``,
   ``settle.txt``) and vertex dumps in ``post/`` converted to VTK by
   ``dump2vtk.py`` (run by ``in.run`` through ``shell``); the last line is ``SETTLED in N steps``
-  (exit status 0) or ``NOT SETTLED after N steps (KE … > … J)`` (exit status 1).
+  (exit status 0) or ``NOT SETTLED after N steps (KE … > … pg um^2/us^2, micro units = 1e-15 J)`` (exit
+  status 1).
 
 Units: the deck runs in LAMMPS ``units micro`` (µm, pg, µs; force nN, energy
 10⁻¹⁵ J). The BODY package's contact code compares lengths with absolute
@@ -336,8 +337,8 @@ dump last all local 1 post/vertices.final.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[
 dump_modify last format float %.17g
 run 0
 shell python3 dump2vtk.py
-# the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... J) (1)
-{settle_report("quit 0", "quit 1")}
+# the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... in micro units) (1)
+{settle_report("quit 0", "quit 1", energy_unit="pg um^2/us^2, micro units = 1e-15 J")}
 """
 
 
