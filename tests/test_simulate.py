@@ -197,7 +197,7 @@ REFUSED = [
     (["--mpi", "-3"], "--mpi"),
     (["--engine", "liggghts", "--mpi", "0"], "--mpi"),
     (["--mpi", "2"], "--mpi: yade runs one process per seed"),
-    (["--shape", "polyhedron"], "--shape polyhedron: simulate's yade scenes take --shape clump, --shape levelset only"),
+    (["--shape", "polyhedron"], "'polyhedron' is not one of 'clump', 'levelset'"),
     (["--shape", "levelset", "--spheres", "20"], "--spheres sets a clump's size"),
     (["--shape", "levelset", "--as-spheres"], "--as-spheres is the sphere baseline"),
     (["--spacing", "0.1"], "--spacing is the level set's grid"),
@@ -205,7 +205,7 @@ REFUSED = [
     (["--shape", "levelset", "--grains", "20000", "--seeds", "100", "--spacing", "0.02"], "level sets of spacing"),
     (["--shape", "sphere"], "--shape"),
     (["--engine", "liggghts", "--shape", "levelset"], "--shape levelset: simulate's liggghts scenes take --shape clump only"),
-    (["--engine", "liggghts", "--shape", "polyhedron", "--mpi", "2"], "--shape polyhedron: simulate's liggghts"),
+    (["--engine", "liggghts", "--shape", "polyhedron", "--mpi", "2"], "'polyhedron' is not one of"),
 ]
 
 

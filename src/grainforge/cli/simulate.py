@@ -13,7 +13,9 @@ from .paths import OutPath, output_dir
 TILT_ONLY = ("tilt_step", "tilt_start")
 #: engines and grain representations the options name (the DEM decks' ones, grainforge dem)
 ENGINES = ("yade", "liggghts")
-SHAPES = ("clump", "polyhedron", "levelset")
+#: representations the scenes run (Yade: both; LIGGGHTS: clumps). Polyhedra are `grainforge dem`'s only:
+#: neither engine's scenes take them, so --help does not offer them
+SHAPES = ("clump", "levelset")
 #: what simulate's scenes can run, per engine
 RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
 #: engines simulate runs under mpirun (--mpi)
@@ -113,7 +115,24 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
     return settings
 
 
-def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: float,
+def choose_templates(inputs, settings, pool: int | None, workers: int):
+    """The representative grains to make into templates (a progress bar while a pool is measured); prints the
+    one line of the choice and its KS figures."""
+    from tqdm import tqdm
+
+    from ..simulate.population import choose_grains
+
+    with tqdm(desc="choosing templates", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
+        def step(done, total):
+            bar.total = total
+            bar.update(1)
+
+        chosen = choose_grains(inputs, settings, pool=pool, workers=workers, progress=step)
+    click.echo(chosen.summary() + "; templates.csv")  # on stdout with the result: stderr keeps errors alone
+    return chosen
+
+
+def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: float, chosen=None,
                    clump_accuracy: float | None = None) -> list:
     """The population's templates (clumps or level sets), with a progress bar."""
     from tqdm import tqdm
@@ -127,7 +146,7 @@ def make_templates(inputs, settings, as_spheres: bool, shape: str, spacing: floa
             bar.update(1)
 
         return build_population(inputs, settings, as_spheres=as_spheres, progress=step, shape=shape,
-                                spacing=spacing,
+                                spacing=spacing, chosen=chosen,
                                 **({} if clump_accuracy is None else {"clump_accuracy": clump_accuracy}))
 
 
@@ -206,7 +225,8 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
                  "grainforge.dem.clump", "grainforge.dem.enclosure", "grainforge.dem.yade", "grainforge.dem.deck",
                  "grainforge.dem.liggghts", "grainforge.simulate.liggghts", "grainforge.simulate.report",
-                 "matplotlib.pyplot", "matplotlib.collections")
+                 "matplotlib.pyplot", "matplotlib.collections", "scipy.stats", "grainforge.analysis",
+                 "grainforge.workers", "grainforge.dem.representative", "grainforge.dem.template_choice")
 
 
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
@@ -215,14 +235,18 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
+    from ..simulate.population import template_make_seconds
     from .interrupts import ready_for_work, signals_held
 
     settings = run_settings(test, values, quick, shape, clump_accuracy)
-    outputs = [out / "results.csv", out / f"{test}.png"] + [out / f"{test}-seed{settings.seed + k}"
-                                                             for k in range(settings.seeds)]
+    outputs = [out / "results.csv", out / f"{test}.png", out / "templates.csv"] + [
+        out / f"{test}-seed{settings.seed + k}" for k in range(settings.seeds)]
     outputs += [out / "clumps.csv"] if clump_accuracy is not None else []
     out = output_dir(out, overwrite=overwrite, files=outputs)
     available, make_seconds = check_inputs(inputs)
+    # the templates are chosen from a pool of grains generated or measured (--quick: 4 per template)
+    pool = min(available, 4 * settings.templates) if quick else None
+    make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
@@ -244,7 +268,9 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate.report import write_report
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    templates = make_templates(inputs, settings, as_spheres, shape, spacing, clump_accuracy=clump_accuracy)
+    chosen = choose_templates(inputs, settings, pool, workers)
+    templates = make_templates(inputs, settings, as_spheres, shape, spacing, chosen=chosen,
+                               clump_accuracy=clump_accuracy)
     name = ENGINE_NAMES[engine] + (f", {mpi} MPI ranks" if mpi else "")
     runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
                 dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
@@ -275,6 +301,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             rows = [{**r, "clump_accuracy": clump_accuracy} for r in rows]
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         write_report(rows, stage, test, settings)
+        chosen.write_csv(stage / "templates.csv")
         with signals_held():  # the outputs appear together
             commit_stage(stage, out, overwrite=overwrite)
     if warning:
@@ -293,7 +320,9 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 repose = _command("repose", """Angle of repose: a cylinder of grains on a rough base is lifted and the heap measured.
 
     INPUTS: mesh files (mm), a generate/batch folder, a manifest, or one TOML recipe.
-    Each grain becomes a clump with the mesh's exact mass and inertia (grainforge dem);
+    --templates of their grains, chosen so that their shapes and sizes are distributed as the
+    population's (the KS figures are printed and written to templates.csv), each becomes a clump
+    with the mesh's exact mass and inertia (grainforge dem);
     Yade (or LIGGGHTS, --engine liggghts [--mpi N]) runs headless once per seed; the heap's slope is
     fitted in 8 sectors.  See docs/simulate.md.
     """)

@@ -18,6 +18,7 @@ from .simulate import (
     check_engine,
     check_installed,
     check_representation,
+    choose_templates,
     clump_outputs,
     engine_failed,
     make_templates,
@@ -25,7 +26,7 @@ from .simulate import (
 )
 
 #: outputs of a calibration in --out (its runs go to runs/)
-OUTPUTS = ("calibration.csv", "calibration.json", "calibration.png", "runs")
+OUTPUTS = ("calibration.csv", "calibration.json", "calibration.png", "templates.csv", "runs")
 
 
 def _option(name: str) -> str:
@@ -65,7 +66,7 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @click.option("--friction-range", type=(float, float), default=(0.05, 1.5), show_default=True,
               help="Bounds of the μ search.")
 @click.option("--start", type=click.FloatRange(min=0.0), default=0.5, show_default=True,
-              help="First μ tried.")
+              help="First μ tried (inside --friction-range).")
 @click.option("--tolerance", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
               help="Stop when a seed-averaged angle is this close to the target, degrees.")
 @click.option("--max-frictions", "max_evaluations", type=click.IntRange(min=2, max=30), default=8, show_default=True,
@@ -105,6 +106,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from ..simulate.calibrate import check_target
+    from ..simulate.population import template_make_seconds
     from .interrupts import ready_for_work, signals_held
 
     try:
@@ -114,6 +116,8 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     low, high = friction_range
     if not (0.0 <= low < high <= 5.0):
         raise click.BadParameter(f"need 0 ≤ low < high ≤ 5, got {low:g} {high:g}", param_hint="--friction-range")
+    if not low <= start <= high:  # the search starts inside its bounds (and a NaN is no μ)
+        raise click.BadParameter(f"{start:g} is outside --friction-range {low:g} {high:g}", param_hint="--start")
     if test == "repose" and (values.get("tilt_step") is not None or values.get("tilt_start") is not None):
         raise click.UsageError("--tilt-step and --tilt-start are the tilt test's: calibrate repose takes neither")
     check_engine(engine, mpi, shape)
@@ -123,6 +127,9 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     outputs = OUTPUTS + (("clumps.csv",) if clump_accuracy is not None else ())
     out = output_dir(out, overwrite=overwrite, files=[out / name for name in outputs])
     available, make_seconds = check_inputs(inputs)
+    # the templates are chosen from a pool of grains generated or measured (--quick: 4 per template)
+    pool = min(available, 4 * settings.templates) if quick else None
+    make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
     ls_spacing = 0.05 if spacing is None else spacing
     from ..estimate import SECONDS_LIMIT, _limit, duration
@@ -149,7 +156,9 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     from ..simulate.calibrate import Unreachable, run_calibration, write_calibration
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing, clump_accuracy=clump_accuracy)
+    chosen = choose_templates(inputs, settings, pool, workers)
+    templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing, chosen=chosen,
+                               clump_accuracy=clump_accuracy)
     runs = tqdm(total=settings.seeds * 1000, desc=f"calibrate {test} ({ENGINE_NAMES[engine]})", unit="‰", disable=None,
                 leave=False, dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed} {postfix}")
     done = [0.0] * settings.seeds
@@ -184,6 +193,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
                               shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         record = write_calibration(search, rows, target_angle, test, settings, command, stage, low=low, high=high)
+        chosen.write_csv(stage / "templates.csv")
         with signals_held():
             commit_stage(stage, out, overwrite=overwrite)
     if warning:
@@ -194,3 +204,4 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     click.echo(f"{label}: friction {search.friction:.3f}{spread} reaches {target_angle:g}° on the {test} test{note} "
                f"({len(rows)} runs); {out / 'calibration.json'}")
     click.echo(command)
+
