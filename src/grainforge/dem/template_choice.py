@@ -1,0 +1,269 @@
+"""Representative templates of grain files: their descriptors (a manifest's, or measured), the choice, templates.csv.
+
+``grainforge dem --templates K`` and ``grainforge simulate --templates K``
+choose K grains with :func:`grainforge.dem.representative.choose_representative`
+from the descriptors of a pool of candidates. The descriptors are the
+project's standard mesh measures (:func:`grainforge.analysis.basic_descriptors`,
+the columns every manifest carries): Wadell sphericity, convexity V/V_hull,
+the minimum-volume box's L ≥ I ≥ S (elongation I/L, flatness S/I, as
+``grainforge analyse``) and the equivalent diameter. Files listed in a
+manifest among the inputs take the manifest's values (nothing is measured);
+other files are read and measured, at most :func:`pool_size` of them.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from collections.abc import Callable, Iterable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .representative import DESCRIPTORS, TemplateChoice, choose_representative, descriptor_matrix
+
+__all__ = ["POOL_FACTOR", "POOL_MIN", "POOL_MAX", "MAX_CANDIDATES", "MEASURE_SECONDS", "TEMPLATES_CSV",
+           "CHOICE_SEED", "pool_size", "pool_workers", "spread", "mesh_descriptors", "manifest_descriptors", "ChosenFiles",
+           "files_to_measure", "choose_files", "write_templates_csv"]
+
+#: a pool of candidates to measure (grains to generate, files without manifest values): POOL_FACTOR × K grains,
+#: at least POOL_MIN, at most POOL_MAX (or K when K is larger: then every pooled grain is taken)
+POOL_FACTOR, POOL_MIN, POOL_MAX = 4, 200, 2000
+#: files with a manifest's descriptors are all candidates, up to this many (evenly spaced beyond)
+MAX_CANDIDATES = 20_000
+#: grains a measuring worker process gets at least (fewer: measured in this process)
+MIN_PER_WORKER = 10
+#: seconds to read and measure one grain of about 20,000 faces (basic_descriptors: 0.02-0.03 s; reading 0.02-0.03 s)
+MEASURE_SECONDS = 0.06
+#: the file of the chosen grains' names, descriptors and KS figures, in the output folder
+TEMPLATES_CSV = "templates.csv"
+#: seed of the choice's random starts: the same inputs and K give the same templates in every run
+CHOICE_SEED = 0
+
+
+def pool_size(k: int, available: int) -> int:
+    """Candidates to measure for ``k`` templates out of ``available`` grains.
+
+    Examples
+    --------
+    >>> pool_size(40, 500), pool_size(6, 500), pool_size(600, 10_000), pool_size(3000, 10_000), pool_size(40, 90)
+    (200, 200, 2000, 3000, 90)
+    """
+    return int(min(available, max(k, min(max(POOL_FACTOR * k, POOL_MIN), POOL_MAX))))
+
+
+def pool_workers(workers: int, grains: int) -> int:
+    """Processes to measure ``grains`` on: one (this process) below :data:`MIN_PER_WORKER` grains a worker,
+    where starting the processes costs more than it saves.
+
+    Examples
+    --------
+    >>> pool_workers(8, 10), pool_workers(8, 200), pool_workers(2, 200)
+    (1, 8, 2)
+    """
+    return max(1, min(int(workers), grains // MIN_PER_WORKER))
+
+
+def spread(n: int, m: int) -> np.ndarray:
+    """``m`` indices evenly spread over ``range(n)`` (all of them when ``m >= n``), ascending.
+
+    Examples
+    --------
+    >>> spread(10, 4).tolist(), spread(3, 5).tolist()
+    ([1, 3, 6, 8], [0, 1, 2])
+    """
+    if m >= n:
+        return np.arange(n, dtype=np.int64)
+    return ((np.arange(m) + 0.5) * n / m).astype(np.int64)
+
+
+def mesh_descriptors(vertices, faces) -> dict[str, float]:
+    """The five descriptors of one closed mesh (size: its equivalent diameter, in the mesh's unit).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> box = trimesh.creation.box(extents=(4.0, 2.0, 1.0))
+    >>> {k: round(v, 3) for k, v in mesh_descriptors(box.vertices, box.faces).items()}
+    {'sphericity': 0.691, 'convexity': 1.0, 'flatness': 0.5, 'elongation': 0.5, 'size': 2.481}
+    """
+    from types import SimpleNamespace
+
+    from ..analysis import basic_descriptors
+
+    d = basic_descriptors(SimpleNamespace(vertices=vertices, faces=faces))
+    return _from_basic(d)
+
+
+def _from_basic(d: Mapping[str, float]) -> dict[str, float]:
+    L, I, S = float(d["L"]), float(d["I"]), float(d["S"])
+    return {"sphericity": float(d["sphericity"]), "convexity": float(d["convexity"]),
+            "flatness": S / I if I > 0 else 0.0, "elongation": I / L if L > 0 else 0.0,
+            "size": float(d["equivalent_diameter"])}
+
+
+def _manifest_rows(manifest: Path) -> dict[Path, dict[str, float]]:
+    from ..units import plain
+
+    out = {}
+    try:
+        with open(manifest, newline="", encoding="utf-8") as fh:
+            for row in csv.DictReader(fh):
+                row = {plain(k): v for k, v in row.items() if k is not None}
+                try:
+                    out[(manifest.parent / row["file"]).resolve()] = _from_basic(
+                        {k: float(row[k]) for k in ("sphericity", "convexity", "L", "I", "S", "equivalent_diameter")})
+                except (KeyError, TypeError, ValueError):
+                    continue  # a row without the measures: its file is measured
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return {}
+    return out
+
+
+def manifest_descriptors(inputs: Iterable[str | os.PathLike]) -> dict[Path, dict[str, float]]:
+    """Resolved file path -> descriptors, from every manifest among ``inputs`` (folders' or named ``.csv``).
+
+    Rows without the measured columns are left out (those files are measured).
+    """
+    out: dict[Path, dict[str, float]] = {}
+    for p in map(Path, inputs):
+        manifest = p / "manifest.csv" if p.is_dir() else p if p.suffix.lower() == ".csv" else None
+        if manifest is not None and manifest.is_file():
+            out.update(_manifest_rows(manifest))
+    return out
+
+
+def _measure_file(path):
+    from .inputs import read_grain
+
+    v, f = read_grain(path, check=False)
+    return mesh_descriptors(v, f)
+
+
+@dataclass(frozen=True)
+class ChosenFiles:
+    """The files chosen as templates (in input order), their descriptors and the choice."""
+
+    paths: list
+    table: np.ndarray
+    choice: TemplateChoice
+    available: int
+    measured: int
+
+    def summary(self, k: int) -> str:
+        """The one line the commands print: what was chosen from what, and the KS figures."""
+        return _summary(self.choice, k, self.available, self.measured)
+
+
+def _summary(choice: TemplateChoice, k: int, available: int, measured: int) -> str:
+    """``templates: 40 of 500 grains (200 measured); KS against them: sphericity 0.040, ... (largest 0.050)``."""
+    n = choice.candidates
+    if not choice.selected:
+        if n == available:
+            return f"templates: all {available} grains ({k} asked): no selection"
+        return f"templates: {n} grains evenly spread over the {available}: no selection ({k} asked)"
+    of = f"{n} grains" if n == available else f"{n} candidates evenly spread over {available} grains"
+    how = f", {measured} measured" if measured else ", descriptors from the manifest"
+    figures = ", ".join(f"{name} {value:.3f}" for name, value in choice.ks.items())
+    return (f"templates: {len(choice.indices)} of {of}{how}; KS against them: {figures} "
+            f"(largest {choice.largest_ks:.3f})")
+
+
+def _candidates(inputs, paths: Sequence[Path], k: int, pool: int | None):
+    """(candidate indices, manifest descriptors, resolved paths, indices to measure)."""
+    known = manifest_descriptors(inputs)
+    resolved = [p.resolve() for p in paths]
+    n = len(paths)
+    if all(r in known for r in resolved):
+        candidates = spread(n, max(k, MAX_CANDIDATES))
+    else:
+        candidates = spread(n, pool_size(k, n) if pool is None else min(n, max(pool, k)))
+    todo = [int(i) for i in candidates if resolved[i] not in known]
+    return candidates, known, resolved, todo
+
+
+def files_to_measure(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: int,
+                     pool: int | None = None) -> int:
+    """How many files :func:`choose_files` will read and measure (for the commands' estimates).
+
+    Examples
+    --------
+    >>> import tempfile, trimesh
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     files = [Path(d) / f"g{i}.stl" for i in range(3)]
+    ...     for f in files:
+    ...         _ = trimesh.creation.icosphere(subdivisions=1).export(f)
+    ...     files_to_measure([d], files, 2)
+    3
+    """
+    return len(_candidates(inputs, list(paths), k, pool)[3])
+
+
+def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: int, *, workers: int = 1,
+                 progress: Callable[[int, int], None] | None = None, pool: int | None = None,
+                 size: float | None = None) -> ChosenFiles:
+    """Choose ``k`` of ``paths`` (resolved from ``inputs`` by :func:`~grainforge.dem.inputs.grain_paths`).
+
+    Candidates are every file when a manifest among the inputs gives them all
+    (up to :data:`MAX_CANDIDATES`), else ``pool`` (default :func:`pool_size`)
+    files evenly spread over the list; those a manifest does not give are read
+    and measured on ``workers`` processes, ``progress(done, total)`` after each.
+    With ``size``, every grain is to be scaled to it: sizes are not matched
+    (the table's sizes are ``size``).
+
+    Raises
+    ------
+    ValueError
+        For ``k < 1``, or a file that cannot be read (named).
+    """
+    if k < 1:
+        raise ValueError(f"--templates must be at least 1, got {k}")
+    paths = list(paths)
+    candidates, known, resolved, todo = _candidates(inputs, paths, k, pool)
+    measured = {}
+    if todo:
+        from ..workers import ordered_map
+
+        for n, (i, d) in enumerate(zip(todo, ordered_map(_measure_file, [paths[i] for i in todo],
+                                                          pool_workers(workers, len(todo)),
+                                                          preload=["grainforge.analysis"])), start=1):
+            measured[i] = d
+            if progress is not None:
+                progress(n, len(todo))
+    rows = [measured[int(i)] if int(i) in measured else known[resolved[int(i)]] for i in candidates]
+    table = descriptor_matrix(rows)
+    if size is not None:
+        table[:, -1] = size
+    choice = choose_representative(table, k, seed=CHOICE_SEED)
+    picked = candidates[choice.indices]
+    return ChosenFiles([paths[int(i)] for i in picked], table[choice.indices], choice, len(paths), len(todo))
+
+
+def write_templates_csv(path: str | os.PathLike, names: Sequence[str], sources: Sequence[str], table: np.ndarray,
+                        choice: TemplateChoice) -> Path:
+    """``templates.csv``: one row per chosen grain (name, source, the five descriptors, size in mm), then a row
+    ``KS`` holding each descriptor's two-sample KS statistic of the chosen grains against all candidates.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> t = np.array([[0.9, 0.95, 0.7, 0.6, 0.5], [0.8, 0.9, 0.6, 0.5, 0.6]])
+    >>> c = choose_representative(t, 1)
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     lines = write_templates_csv(Path(d) / "t.csv", ["a"], ["a.stl"], t[c.indices], c).read_text().splitlines()
+    >>> lines[0]
+    'template,source,sphericity,convexity,flatness,elongation,size_mm'
+    >>> lines[-1].split(",")[:2]
+    ['KS', 'chosen 1 vs 2 candidates']
+    """
+    path = Path(path)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(["template", "source", *DESCRIPTORS[:-1], "size_mm"])
+        for name, source, row in zip(names, sources, table):
+            w.writerow([name, source, *(f"{x:.6g}" for x in row)])
+        label = (f"chosen {len(choice.indices)} vs {choice.candidates} candidates" if choice.selected
+                 else f"all {choice.candidates} candidates taken")
+        w.writerow(["KS", label, *(f"{choice.ks[d]:.4f}" for d in DESCRIPTORS)])
+    return path
