@@ -71,7 +71,9 @@ def inputs(tmp_path_factory) -> Path:
 
     d = tmp_path_factory.mktemp("inputs")
     header, rows = _sand_rows()
-    (d / "same.csv").write_text("\n".join([header] + [rows[0]] * 700) + "\n", encoding="utf-8")
+    # 700 copies of one grain, each under its own Particle ID (a repeated ID is refused on its own)
+    same = [f"{k}," + rows[0].split(",", 1)[1] for k in range(1, 701)]
+    (d / "same.csv").write_text("\n".join([header] + same) + "\n", encoding="utf-8")
     (d / "two.csv").write_text("\n".join([header] + rows[:2]) + "\n", encoding="utf-8")
     (d / "few.csv").write_text("\n".join([header] + rows[:49]) + "\n", encoding="utf-8")
     (d / "fifty.csv").write_text("\n".join([header] + rows[:50]) + "\n", encoding="utf-8")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import csv
+import gzip
 import math
 import re
 from pathlib import Path
@@ -605,3 +606,62 @@ def test_the_opening_fraction_recovers_the_synthetic_angular_sands_settings_with
     assert pop.se["rounding"] < 0.10 * truth["rounding"], pop.se
     for k, t in truth.items():
         assert pop.mean[k] == pytest.approx(t, rel=0.05), (k, pop.mean[k], t)
+
+
+# ---- sand tables that are not what they claim: one line that says what to fix ---------------------------
+
+def _table_variants(tmp_path):
+    """(file, expected words) for each kind of table the reader must name."""
+    good = _write_sand(tmp_path / "good.csv", _fake_rows(60)).read_text(encoding="utf-8")
+    head, *body = good.splitlines()
+    cases = []
+
+    def add(name, data, words):
+        p = tmp_path / name
+        (p.write_bytes if isinstance(data, bytes) else lambda t: p.write_text(t, encoding="utf-8"))(data)
+        cases.append((p, words))
+
+    add("latin1.csv", good.encode("latin-1"), "not UTF-8 text (byte 0xb5")
+    add("image.png", b"\x89PNG\r\n\x1a\n" + b"\x00" * 64, "the file is a PNG image")
+    add("table.csv.gz", gzip.compress(good.encode("utf-8")), "gzip-compressed (gunzip it first)")
+    add("semicolons.csv", good.replace(",", ";"), "separated by semicolons")
+    add("tabs.csv", good.replace(",", "\t"), "separated by tabs")
+    add("unitless.csv", good.replace("True Sphericity (-)", "True Sphericity"),
+        "missing column(s) 'True Sphericity (-)'; found 'True Sphericity'")
+    add("opening.csv", "\n".join([head + ",Opening Fraction"] + [r + ",0.9" for r in body]),
+        "column 'Opening Fraction' is not read: name it 'Opening Fraction (-)'")
+    dup = body[:]
+    dup[5] = "1" + dup[5][dup[5].index(","):]
+    add("duplicate.csv", "\n".join([head] + dup), "line 7: Particle ID '1' appears again (first on line 2)")
+    neg = body[:]
+    neg[3] = neg[3].split(",", 2)[0] + ",-5," + neg[3].split(",", 2)[2]
+    add("negative.csv", "\n".join([head] + neg), "line 5, column 'Volume (µm³)': a grain's volume must be a positive")
+    return cases
+
+
+def test_tables_in_another_encoding_format_or_separator_are_named(tmp_path):
+    for path, words in _table_variants(tmp_path):
+        with pytest.raises(ValueError) as info:
+            read_sand(path, 7.0)
+        assert words in str(info.value) and str(path) in str(info.value), (path.name, str(info.value))
+        assert "\n" not in str(info.value)
+
+
+def test_a_voxel_size_that_contradicts_the_tables_column_is_refused(tmp_path):
+    from grainforge.fit import write_sand
+
+    rows = _fake_rows(60)
+    p = write_sand(tmp_path / "v.csv", [r["equivalent_diameter"] for r in rows],
+                   {k: [r[k] for r in rows] for k in ("sphericity", "convexity", "flatness", "elongation")}, 7.3)
+    assert read_sand(p).voxel_size == pytest.approx(7.3) and read_sand(p, 7.3).voxel_size == pytest.approx(7.3)
+    with pytest.raises(ValueError, match=r"the voxel size given \(7 µm\) differs from the file's 'Voxel Size"):
+        read_sand(p, 7.0)
+
+
+def test_fit_names_a_bad_table_in_one_line_and_exit_2(runner, tmp_path):
+    for path, words in _table_variants(tmp_path)[:4]:
+        out = tmp_path / ("o-" + path.stem)
+        r = runner.invoke(cli, ["fit", str(path), "--voxel-size-um", "7", "--out", str(out)])
+        lines = [x for x in r.stderr.splitlines() if x.strip()]
+        assert r.exit_code == 2 and len(lines) == 1 and words in lines[0], (path.name, r.stderr)
+        assert "Traceback" not in r.output and not out.exists()

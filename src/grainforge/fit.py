@@ -205,6 +205,87 @@ def _norm(header: str) -> str:
     return " ".join(header.replace("\u03bc", "\u00b5").replace("\ufeff", "").split()).lower()
 
 
+#: the first bytes of files a sand table is sometimes mistaken for, and what they are
+_MAGIC = ((b"\x89PNG", "a PNG image"), (b"\x1f\x8b", "gzip-compressed (gunzip it first)"),
+          (b"PK\x03\x04", "a ZIP archive (an .xlsx workbook? save the sheet as CSV)"), (b"%PDF", "a PDF"),
+          (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"))
+
+
+def _sand_text(path: Path) -> str:
+    """The file's text as UTF-8, or one line saying what the file is and how to make it a table."""
+    try:
+        data = path.read_bytes()
+    except OSError as exc:
+        raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
+    for magic, what in _MAGIC:
+        if data.startswith(magic):
+            raise ValueError(f"{path}: not a CSV table: the file is {what}")
+    if b"\x00" in data[:4096]:
+        raise ValueError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
+    try:
+        return data.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        byte = data[exc.start]
+        guess = data[exc.start:exc.start + 1].decode("latin-1")
+        raise ValueError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
+                         "or Windows-1252): save the table as UTF-8") from None
+
+
+def _check_separator(path: Path, header: Sequence[str]) -> None:
+    """A header read as one or two columns that holds ';' or a tab: another separator, named."""
+    if len(header) <= 2:
+        joined = ",".join(header)
+        for sep, name in ((";", "semicolons"), ("\t", "tabs")):
+            if joined.count(sep) >= 2:
+                raise ValueError(f"{path}: the columns are separated by {name}; a Sand Atlas CSV is "
+                                 "comma-separated: save it with commas (and '.' as the decimal mark)")
+
+
+def _near_misses(header: Sequence[str], missing: Sequence[str]) -> str:
+    """``'; found ...'`` for header names that match a missing column but for its unit or case."""
+    found = []
+    for want in missing:
+        bare = _norm(want.split(" (")[0])
+        found += [repr(h) for h in header if _norm(h).split(" (")[0] == bare]
+    return f"; found {', '.join(found)} (the name must carry the unit as written)" if found else ""
+
+
+def _check_unit_less(path: Path, header: Sequence[str], optional: Sequence[str]) -> None:
+    """An optional column named without its unit would be ignored without a word: name it instead."""
+    names = {_norm(h) for h in header}
+    for col in optional:
+        if _norm(col) in names:
+            continue
+        bare = _norm(col.split(" (")[0])
+        near = [h for h in header if _norm(h).split(" (")[0] == bare]
+        if near:
+            raise ValueError(f"{path}: column {near[0]!r} is not read: name it {col!r} (with its unit) or drop it")
+
+
+def _check_ids_and_volumes(path: Path, rows: Sequence[Sequence[str]], header: Mapping[str, int]) -> None:
+    """Duplicate particle IDs and volumes that are not positive numbers are named (the fit reads neither)."""
+    i = header.get(_norm("Particle ID"))
+    if i is not None:
+        seen: dict[str, int] = {}
+        for line, row in enumerate(rows[1:], start=2):
+            key = row[i].strip() if i < len(row) else ""
+            if key and key in seen:
+                raise ValueError(f"{path}: line {line}: Particle ID {key!r} appears again (first on line "
+                                 f"{seen[key]}): one row per grain")
+            seen[key] = line
+    j = next((k for h, k in header.items() if h.startswith("volume")), None)
+    if j is not None:
+        for line, row in enumerate(rows[1:], start=2):
+            cell = row[j].strip() if j < len(row) else ""
+            try:
+                ok = float(cell) > 0 and math.isfinite(float(cell))
+            except ValueError:
+                ok = False
+            if not ok:
+                raise ValueError(f"{path}: line {line}, column {rows[0][j]!r}: a grain's volume must be a positive "
+                                 f"number, got {cell!r}")
+
+
 def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
     """Read a Sand Atlas CSV (one row per grain; columns as in :data:`COLUMNS`).
 
@@ -218,9 +299,13 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
     Raises
     ------
     ValueError
-        One line naming the file and the problem: unreadable, empty, missing
-        columns (another format), a value that is not a positive finite
-        number, or no voxel size.
+        One line naming the file and the problem: unreadable, not UTF-8 text
+        (the byte and its Latin-1 reading), another kind of file (an image,
+        a gzip or ZIP archive), another separator (semicolons, tabs), empty,
+        missing columns (naming a column that matches but for its unit), an
+        optional column named without its unit, a repeated Particle ID, a
+        volume or value that is not a positive finite number, no voxel size,
+        or a ``voxel_size`` that contradicts the file's voxel-size column.
 
     Examples
     --------
@@ -233,19 +318,19 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
     (1, 0.8, 68.5)
     """
     path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8-sig")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
+    text = _sand_text(path)
     rows = list(csv.reader(text.splitlines()))
     rows = [r for r in rows if any(c.strip() for c in r)]
     if not rows:
         raise ValueError(f"{path}: empty file (expected a Sand Atlas CSV with a header row)")
+    _check_separator(path, rows[0])
     header = {_norm(h): i for i, h in enumerate(rows[0])}
     want = dict(COLUMNS)
     missing = [c for c in want.values() if _norm(c) not in header]
     if missing:
-        raise ValueError(f"{path}: not a Sand Atlas CSV: missing column(s) {', '.join(repr(c) for c in missing)}")
+        raise ValueError(f"{path}: not a Sand Atlas CSV: missing column(s) {', '.join(repr(c) for c in missing)}"
+                         + _near_misses(rows[0], missing))
+    _check_unit_less(path, rows[0], (VOXEL_COLUMN, OPENING_COLUMN))
     if len(rows) < 2:
         raise ValueError(f"{path}: no grains (only a header row)")
     if _norm(VOXEL_COLUMN) in header:
@@ -267,10 +352,17 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
                 limit = f" (at most {SPHERICITY_MAX:g})" if key == "sphericity" else " (at most 1)" if unit else ""
                 raise ValueError(f"{path}: line {line}, column {col!r}: out of range{limit}: {cell!r}")
             data[key].append(x)
+    _check_ids_and_volumes(path, rows, header)
     if voxel_size is None:
         if "voxel_size" not in data:
             raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size-um)")
         voxel_size = float(np.median(data["voxel_size"]))
+    elif "voxel_size" in data:
+        column = np.asarray(data["voxel_size"])
+        if not np.allclose(column, voxel_size, rtol=1e-6, atol=0):
+            raise ValueError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
+                             f"{VOXEL_COLUMN!r} column ({np.median(column):g} µm): give one of them (drop "
+                             "--voxel-size-um to use the column)")
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise ValueError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")
     across = np.asarray(data["equivalent_diameter"]) / voxel_size
