@@ -205,3 +205,46 @@ def test_simulate_population_and_its_decks_carry_the_figures(grain_files, tmp_pa
         rows = list(csv.DictReader(fh))
     assert [r["name"] for r in rows] == [t.name for t in templates]
     assert [float(r["iou"]) for r in rows] == [t.clump.accuracy.iou for t in templates]
+
+
+def test_simulate_cap_is_spheres_or_the_default_or_quicks():
+    from grainforge.cli.simulate import run_settings
+    from grainforge.dem.clump import DEFAULT_SPHERE_CAP
+    from grainforge.simulate import QUICK
+
+    assert run_settings("tilt", {"spheres": None}, False, "clump", 0.8).spheres == DEFAULT_SPHERE_CAP
+    assert run_settings("tilt", {"spheres": 25}, False, "clump", 0.8).spheres == 25
+    assert run_settings("tilt", {"spheres": None}, True, "clump", 0.8).spheres == QUICK["spheres"]
+    # without a target, nothing changes
+    assert run_settings("tilt", {"spheres": None}, False, "clump").spheres == 10
+
+
+def test_calibrate_prints_a_command_with_the_target():
+    from grainforge.cli.simulate_calibrate import use_command
+
+    words = use_command("tilt", ["g"], 0.6, {}, quick=False, as_spheres=False, shape="clump", spacing=None,
+                        clump_accuracy=0.85).split()
+    assert words[words.index("--clump-accuracy") + 1] == "0.85"
+    assert "--clump-accuracy" not in use_command("tilt", ["g"], 0.6, {}, quick=False, as_spheres=False,
+                                                 shape="clump", spacing=None)
+
+
+@pytest.mark.slow
+def test_quick_simulate_with_a_target_in_yade(grain_files, tmp_path):
+    import shutil
+
+    if shutil.which("yade") is None:
+        pytest.skip("yade not installed")
+    out = tmp_path / "tilt"
+    r = CliRunner().invoke(cli, ["simulate", "tilt", str(grain_files), "--out", str(out), "--quick",
+                                 "--clump-accuracy", "0.6"])
+    assert r.exit_code == 0, r.output
+    with open(out / "clumps.csv", newline="") as fh:
+        rows = list(csv.DictReader(fh))
+    assert len(rows) == 3 and all(int(row["spheres"]) <= 6 for row in rows)
+    missing = [row["name"] for row in rows if row["meets_target"] == "false"]
+    warnings = [line for line in r.output.splitlines() if line.startswith("warning:")]
+    assert len(warnings) == (1 if missing else 0) and all(name in warnings[0] for name in missing)
+    assert (out / "tilt-seed0" / "clumps.csv").is_file()
+    results = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
+    assert results[0]["clump_accuracy"] == "0.6"
