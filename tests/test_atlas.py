@@ -280,3 +280,41 @@ def test_opening_fraction_refuses_a_bad_radius_or_an_empty_mask():
         opening_fraction(np.ones((5, 5, 5), bool), float("nan"))
     with pytest.raises(ValueError, match="empty"):
         opening_fraction(np.zeros((5, 5, 5), bool), 1.0)
+
+
+@pytest.mark.parametrize("args, words", [
+    (["--voxels-across", "2"], "2 voxels across its equivalent diameter is below 5"),
+    (["--voxels-across", "4"], "4 voxels across its equivalent diameter is below 5"),
+    (["--voxel-size-mm", "1"], "measure at a voxel size of at most"),
+    (["--voxels-across", "500"], "the largest that fits is --voxels-across "),
+    (["--voxel-size-mm", "0.001"], "the largest that fits is a voxel size of "),
+])
+def test_atlas_measures_that_mean_nothing_or_cannot_fit_are_refused_before_any_image(runner, tmp_path, monkeypatch,
+                                                                                       args, words):
+    """Below 5 voxels across the descriptors leave their ranges (a 4-voxel ball: sphericity ≈ 1.5); past the
+    memory budget (here 1 GiB) the largest resolution that fits is named; nothing is written either way."""
+    import grainforge.estimate
+
+    monkeypatch.setattr(grainforge.estimate, "machine_memory", lambda: 2 * 1024**3)
+    p = tmp_path / "ball.stl"
+    _ellipsoid(1, 0.8, 0.6, 3).export(p)
+    out = tmp_path / "atlas.csv"
+    r = runner.invoke(cli, ["analyse", str(p), *args, "--atlas-csv", str(out), "--no-fractal", "--no-fourier"])
+    lines = [x for x in r.stderr.splitlines() if x.strip()]
+    assert r.exit_code == 2 and len(lines) == 1 and words in lines[0], r.stderr
+    assert not out.exists()
+
+
+def test_the_largest_resolution_named_fits_and_one_more_does_not():
+    from grainforge.analysis.atlas import IMAGE_BYTES_PER_CELL, check_atlas_request, image_cells
+    from grainforge.estimate import TooLargeError
+
+    body = [("g", np.array([1.0, 0.8, 0.6]), 0.8)]
+    budget = 2e8
+    with pytest.raises(TooLargeError) as info:
+        check_atlas_request(body, voxels_across=400, memory=budget)
+    n = int(str(info.value).split("--voxels-across ")[1].split()[0])
+    check_atlas_request(body, voxels_across=n, memory=budget)
+    assert image_cells(body[0][1], 0.8 / n) * IMAGE_BYTES_PER_CELL <= budget
+    with pytest.raises(TooLargeError):  # and a tenth more does not
+        check_atlas_request(body, voxels_across=1.1 * n, memory=budget)

@@ -44,18 +44,105 @@ import numpy as np
 from ..rotations import random_rotation
 
 __all__ = ["voxelise", "voxel_image", "opening_fraction", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS",
-           "SIGMA", "CONVENTIONS", "OPENING_RADIUS"]
+           "SIGMA", "CONVENTIONS", "OPENING_RADIUS", "MIN_VOXELS_ACROSS", "IMAGE_BYTES_PER_CELL", "image_cells",
+           "check_atlas_request"]
 
 #: Gaussian filter width (voxels) before marching cubes, as the Sand Atlas (``spam``) uses.
 SIGMA = 0.75
 #: radius of the ball of :func:`atlas_descriptors`' opening fraction, as a share of the grain's equivalent
 #: diameter (one voxel at 30 voxels across; docs/fit.md, "What a scan's images add")
 OPENING_RADIUS = 1.0 / 30.0
+#: below this many voxels across its equivalent diameter a grain's image no longer measures its shape: the
+#: descriptors leave their ranges (a ball 4 voxels across measures a true sphericity of about 1.5) and
+#: ``grainforge fit`` refuses tables of such grains (5 to 1,000 voxels across)
+MIN_VOXELS_ACROSS = 5.0
+#: peak memory while one grain's image is measured, in bytes per cell of its box (the image, the smoothed
+#: field of the marching cubes, the two distance transforms of the opening fraction and scipy's index
+#: arrays): 67–76 measured with tracemalloc on ellipsoids at 60–180 voxels across, rounded up
+IMAGE_BYTES_PER_CELL = 80.0
 #: the columns of :func:`atlas_descriptors`, in order (prefixed ``atlas_`` in ``grainforge analyse``).
 ATLAS_COLUMNS = (
     "voxel_size", "voxels_across", "voxels", "volume", "equivalent_diameter", "major", "middle", "minor",
     "sphericity", "convexity", "flatness", "elongation", "opening_fraction",
 )
+def image_cells(extents, voxel_size: float) -> float:
+    """Cells of the voxel image of a grain whose bounding box has ``extents``, at ``voxel_size``
+    (:func:`voxelise`'s box: the voxels the box spans and a margin).
+
+    Examples
+    --------
+    >>> image_cells([1.0, 1.0, 1.0], 0.1)
+    2197.0
+    """
+    e = np.asarray(extents, dtype=np.float64)
+    return float(np.prod(np.ceil(e / float(voxel_size)) + 3.0))
+
+
+def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_across: float | None = None,
+                        workers: int = 1, memory: float | None = None) -> None:
+    """Refuse, before any image is made, a Sand-Atlas measurement that means nothing or cannot fit in memory.
+
+    Parameters
+    ----------
+    bodies : iterable of (str, (3,) array_like, float)
+        Each grain's name, bounding-box extents and equivalent diameter (the mesh's units).
+    voxel_size, voxels_across : float
+        The resolution, as :func:`atlas_descriptors` takes it (exactly one).
+    workers : int
+        Grains measured at once (each holds its own image).
+    memory : float, optional
+        Bytes the measurement may use (default: half of this machine's memory,
+        :func:`grainforge.estimate.check_memory`).
+
+    Raises
+    ------
+    ValueError
+        A grain below :data:`MIN_VOXELS_ACROSS` voxels across, named with its resolution.
+    grainforge.estimate.TooLargeError
+        The largest image times ``workers`` over the budget: the message names the
+        largest ``voxels_across`` (or the smallest ``voxel_size``) that fits.
+
+    Examples
+    --------
+    >>> check_atlas_request([("g", [1.0, 1.0, 1.0], 1.0)], voxels_across=40)
+    >>> check_atlas_request([("g", [1.0, 1.0, 1.0], 1.0)], voxels_across=4)
+    Traceback (most recent call last):
+    ...
+    ValueError: g: 4 voxels across its equivalent diameter is below 5, where the Atlas descriptors measure shape (a ball 4 voxels across has a true sphericity of about 1.5); measure at 5 voxels across or more
+    """
+    from ..estimate import TooLargeError, machine_memory
+
+    if (voxel_size is None) == (voxels_across is None):
+        raise ValueError("give exactly one of voxel_size and voxels_across")
+    budget = 0.5 * machine_memory() if memory is None else float(memory)
+    worst, worst_name = 0.0, ""
+    for name, extents, d_eq in bodies:
+        if not (math.isfinite(d_eq) and d_eq > 0):
+            continue  # an open or empty body: analyse flags it and does not image it
+        h = d_eq / voxels_across if voxel_size is None else voxel_size
+        across = d_eq / h
+        if across < MIN_VOXELS_ACROSS:
+            fix = (f"a voxel size of at most {d_eq / MIN_VOXELS_ACROSS:.3g}" if voxel_size is not None
+                   else f"{MIN_VOXELS_ACROSS:g} voxels across or more")
+            raise ValueError(f"{name}: {across:.3g} voxels across its equivalent diameter is below "
+                             f"{MIN_VOXELS_ACROSS:g}, where the Atlas descriptors measure shape (a ball 4 voxels "
+                             f"across has a true sphericity of about 1.5); measure at {fix}")
+        cells = image_cells(extents, h)
+        if cells > worst:
+            worst, worst_name = cells, name
+    need = worst * IMAGE_BYTES_PER_CELL * max(1, int(workers))
+    if need > budget:
+        shrink = (budget / need) ** (1.0 / 3.0) * 0.97  # the image's cells go as the resolution cubed
+        if voxel_size is None:
+            fits = f"--voxels-across {math.floor(voxels_across * shrink)}"
+        else:
+            fits = f"a voxel size of {voxel_size / shrink:.3g} or more"
+        raise TooLargeError(f"{worst_name}: its voxel image ({worst:.3g} cells) would need about "
+                            f"{need / 1024**3:.3g} GiB with {max(1, int(workers))} grain(s) measured at once; the "
+                            f"limit is {budget / 1024**3:.3g} GiB (half this machine's memory): the largest that "
+                            f"fits is {fits} (or fewer --workers)")
+
+
 def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
     """The binary voxel image of a closed mesh: voxels whose centre is inside.
 

@@ -69,6 +69,29 @@ def _json_value(v):
     return v
 
 
+def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
+    """Before any image is made: every body's image means something and the largest fits in memory."""
+    from ..analysis.atlas import check_atlas_request
+    from ..analysis.measure import read_bodies
+    from ..estimate import TooLargeError
+    from ..solid import signed_volume
+    from .progress import progress_bar
+
+    bodies = []
+    for path in progress_bar(total=len(files), desc="check", unit="file")(files):
+        for k, (v, f) in enumerate(read_bodies(path)):
+            vol = signed_volume(v, f) if len(f) else 0.0
+            d_eq = (6.0 * vol / math.pi) ** (1.0 / 3.0) if vol > 0 else math.nan
+            bodies.append((f"{path}" + (f" (body {k})" if k else ""), v.max(axis=0) - v.min(axis=0), d_eq))
+    try:
+        check_atlas_request(bodies, voxel_size=atlas.get("voxel_size"), voxels_across=atlas.get("voxels_across"),
+                            workers=workers)
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint=option) from None
+
+
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("--csv", "csv_out", type=OutPath(dir_okay=False), default=None,
@@ -134,6 +157,8 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
             raise click.UsageError("--csv and --atlas-csv must be different files")
     files = mesh_inputs(files)
     n = min(len(files), workers or os.cpu_count() or 1)
+    if atlas is not None:
+        _check_atlas(files, atlas, n, "--voxel-size-mm" if voxel_size is not None else "--voxels-across")
     rows = []
     bar = progress_bar(total=len(files), desc="analyse", unit="file")
     for file_rows in bar(analyse_files(files, workers=n, fractal=fractal, fourier=fourier,

@@ -10,8 +10,14 @@ from ..voxel import Grid, grid_for, inside_mask
 
 __all__ = ["LevelSet", "level_set", "surface_nodes", "DISTANCE_BLOCK", "MAX_NODES"]
 
-#: grid nodes per exact-distance query (bounds the candidate triangles held at once)
+#: the most grid nodes per exact-distance query
 DISTANCE_BLOCK = 512
+#: the most candidate triangles one exact-distance query may gather (about 250 bytes each in trimesh):
+#: trimesh takes every triangle near a node's nearest vertex as a candidate, which is a few near the
+#: surface and the whole mesh for the nodes of a coarse grid's margin, so the nodes are grouped by
+#: their estimated candidates (twice the vertices within that distance) and the memory of the field stays
+#: that of one bounded query, whatever the spacing
+DISTANCE_CANDIDATES = 200_000
 #: the most grid nodes a level set may have: ~1e6 nodes take ~60 MB of arrays and
 #: minutes of exact distances; a finer grid is refused, naming the spacing
 MAX_NODES = 1_000_000
@@ -88,6 +94,29 @@ def level_set_grid(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 
     return grid
 
 
+def _distance_blocks(vertices: np.ndarray, pts: np.ndarray) -> list[np.ndarray]:
+    """Index blocks of ``pts`` whose exact-distance queries each gather at most about
+    :data:`DISTANCE_CANDIDATES` triangles (and at most :data:`DISTANCE_BLOCK` nodes); see there."""
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(vertices)
+    r, _ = tree.query(pts)
+    # trimesh's candidates are the triangles whose boxes meet the cube of half-side r (the nearest-vertex
+    # distance) about the node: about twice the vertices in that cube (a Chebyshev ball), plus the few that
+    # straddle its faces
+    est = 2.0 * tree.query_ball_point(pts, r * 1.01 + 1e-12, p=np.inf, return_length=True) + 8.0
+    order = np.argsort(est, kind="stable")
+    blocks, start, load = [], 0, 0.0
+    for k, i in enumerate(order.tolist()):
+        if k > start and (load + est[i] > DISTANCE_CANDIDATES or k - start >= DISTANCE_BLOCK):
+            blocks.append(np.sort(order[start:k]))
+            start, load = k, 0.0
+        load += est[i]
+    if start < len(order):
+        blocks.append(np.sort(order[start:]))
+    return blocks
+
+
 def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05, pad: int = 3,
               nodes: int = 500) -> LevelSet:
     """Signed distance to the mesh surface at the nodes of a regular grid.
@@ -129,11 +158,8 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
     ax = grid.axes()
     pts = np.stack(np.meshgrid(*ax, indexing="ij"), axis=-1).reshape(-1, 3)
     mesh = trimesh.Trimesh(v, f, process=False, validate=False)
-    # trimesh gathers every triangle near each query point at once (for a flat
-    # grain, thousands per node): a bounded block of nodes per call keeps the
-    # memory of the whole field to that of one block
     dist = np.empty(len(pts))
-    for i0 in range(0, len(pts), DISTANCE_BLOCK):
-        _, dist[i0 : i0 + DISTANCE_BLOCK], _ = trimesh.proximity.closest_point(mesh, pts[i0 : i0 + DISTANCE_BLOCK])
+    for block in _distance_blocks(v, pts):
+        _, dist[block], _ = trimesh.proximity.closest_point(mesh, pts[block])
     sdf = np.where(inside.reshape(-1), -dist, dist).reshape(grid.shape)
     return LevelSet(grid, sdf, surface_nodes(v, f, nodes))
