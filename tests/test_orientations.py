@@ -124,8 +124,9 @@ def test_lammps_pour_deck(templates, tmp_path):
 
 def test_lammps_body_deck(polyhedra, tmp_path):
     """The bodies' vertices, as data.bodies gives them to LAMMPS, turned from the templates' hulls."""
-    from grainforge.dem.lammps_body import write_deck
     from test_dem_engines import read_lammps_body_data
+
+    from grainforge.dem.lammps_body import write_deck
 
     write_deck(polyhedra, tmp_path)
     bodies = read_lammps_body_data(tmp_path / "data.bodies")

@@ -146,7 +146,8 @@ def test_mpi_command_lets_open_mpi_run_as_root_and_oversubscribe(monkeypatch, tm
 def check_run(runner, grains, out, test, *extra):
     r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick", "--engine", "liggghts",
                             *extra])
-    assert r.exit_code == 0, r.output
+    # exit 3: a run failed its own check (a quick run may measure no angle), named on stderr
+    assert r.exit_code == 0 or (r.exit_code == 3 and "check failed: seed" in r.stderr), r.output
     rows = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
     assert len(rows) == QUICK["seeds"]
     row = rows[0]

@@ -11,6 +11,7 @@ twin population: the 500 grains of ``grainforge fit examples/sand-atlas/ottawa-7
 """
 
 import csv
+import os
 import re
 import shutil
 from pathlib import Path
@@ -219,7 +220,10 @@ def test_simulate_chooses_from_a_recipe_pool_and_from_files(population):
 
 def require_yade():
     if shutil.which("yade") is None:
-        pytest.skip("yade not installed")
+        reason = "yade not installed (apt-get install yade python3-yade)"
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip(reason)
 
 
 @pytest.mark.slow  # a quick Yade run
@@ -228,7 +232,8 @@ def test_simulate_prints_the_ks_line_and_writes_templates_csv(runner, population
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "repose", str(population / "grains"), "--out", str(out), "--quick",
                             "--templates", "8"])
-    assert r.exit_code == 0, r.output
+    # exit 3: a run failed its own check (a quick run may measure no angle), named on stderr
+    assert r.exit_code == 0 or (r.exit_code == 3 and "check failed: seed" in r.stderr), r.output
     line = [ln for ln in r.stdout.splitlines() if ln.startswith("templates:")]
     assert len(line) == 1 and KS_LINE.search(line[0]), r.stdout
     assert "templates: 8 of 24 grains, descriptors from the manifest" in line[0]

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import click
 
-from .options import renamed_option
+from .options import EXIT_CHECK_FAILED, renamed_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
 
 #: exit status of a fit that ran to the end, wrote its outputs and does not pass its criteria
 #: (docs/cli-contract.md): a script can tell it from success (0) and from a refusal (2)
-EXIT_NOT_PASSED = 3
+EXIT_NOT_PASSED = EXIT_CHECK_FAILED
 
 #: modules a fit loads before any work (see cli.interrupts)
 HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",

@@ -180,6 +180,11 @@ def bad_parameter(exc: ParameterError) -> click.BadParameter:
 
 PRINTER_KEY = "grainforge.printer"
 
+#: exit status of a command that ran to its end and wrote its outputs, whose result fails its own check:
+#: a fit that does not pass its criteria, clumps that miss their accuracy target, a virtual test that
+#: measured no angle, did not settle or lost grains (docs/cli-contract.md). 0 is success, 2 a refusal.
+EXIT_CHECK_FAILED = 3
+
 
 def _remember_printer(ctx, param, value):
     if value is not None:

@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import click
 
-from .options import build_params, clump_accuracy_option, param_options
+from .options import EXIT_CHECK_FAILED, build_params, clump_accuracy_option, param_options
 from .paths import OutPath, output_dir
 
 #: settings only the tilt test reads: not offered by `simulate repose`
@@ -315,6 +316,36 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     else:
         click.echo(f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; "
                    f"{out / 'results.csv'}, {out / (test + '.png')}")
+    failed = failed_runs(rows, settings.seed)
+    if failed or warning:  # the outputs are written; the runs or the clumps fail their own check
+        if failed:
+            click.echo(f"check failed: {failed} (results.csv has every run)", err=True)
+        sys.exit(EXIT_CHECK_FAILED)
+
+
+def failed_runs(rows, first_seed: int) -> str:
+    """The runs that fail their own check, in one line: no angle measured, a repose heap not at rest, grains lost.
+
+    Examples
+    --------
+    >>> failed_runs([{"test": "repose", "angle_deg": float("nan"), "settled": True, "lost": 0, "note": "too flat"},
+    ...              {"test": "repose", "angle_deg": 30.0, "settled": False, "lost": 2, "note": ""}], 0)
+    'seed 0: no angle (too flat); seed 1: not at rest at the end, 2 grain(s) lost'
+    """
+    import math
+
+    out = []
+    for k, r in enumerate(rows):
+        why = []
+        if not math.isfinite(float(r["angle_deg"])):
+            why.append(f"no angle ({r.get('note') or 'not measured'})")
+        if r.get("test") == "repose" and not r.get("settled", True):
+            why.append("not at rest at the end")
+        if int(r.get("lost", 0)):
+            why.append(f"{int(r['lost'])} grain(s) lost")
+        if why:
+            out.append(f"seed {r.get('seed', first_seed + k)}: " + ", ".join(why))
+    return "; ".join(out)
 
 
 repose = _command("repose", """Angle of repose: a cylinder of grains on a rough base is lifted and the heap measured.
