@@ -252,6 +252,7 @@ def _register():
         generate,
         plot,
         render,
+        scan,
         simulate,
         simulate_calibrate,
         tray,
@@ -263,6 +264,7 @@ def _register():
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,
         fourier.fourier, analyse.analyse, plot.plot, figures.figures, calibrate.calibrate, dem.dem, fit.fit, simulate.simulate,
+        scan.scan,
     ):
         cli.add_command(command)
     apply_help_style(cli)

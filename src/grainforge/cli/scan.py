@@ -1,0 +1,308 @@
+"""``grainforge scan IMAGE``: the Sand-Atlas descriptors of every grain of a μCT scan (a 3D image)."""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import click
+
+from .analyse import table_text
+from .paths import OutPath, output_dir, output_file
+
+#: columns written after the Sand Atlas's (:data:`grainforge.fit.SAND_HEADER` and the opening fraction)
+EXTRA_COLUMNS = (("voxels", "Voxels (-)"), ("centroid_x", "Centroid X (µm)"), ("centroid_y", "Centroid Y (µm)"),
+                 ("centroid_z", "Centroid Z (µm)"), ("border", "Border (-)"))
+#: the terminal table
+TABLE = (
+    ("label", "label", "{}"), ("voxels", "voxels", "{}"), ("flags", "flags", "{}"),
+    ("equivalent_diameter", "d_eq_um", "{:.4g}"), ("voxels_across", "vox/d", "{:.3g}"),
+    ("sphericity", "a_sph", "{:.3f}"), ("convexity", "a_conv", "{:.3f}"), ("flatness", "a_flat", "{:.3f}"),
+    ("elongation", "a_elong", "{:.3f}"), ("opening_fraction", "a_open", "{:.4f}"),
+    ("centroid_x", "x_um", "{:.5g}"), ("centroid_y", "y_um", "{:.5g}"), ("centroid_z", "z_um", "{:.5g}"),
+)
+#: seconds per cell of a measured grain's box, and per grain (one core; benchmarks/bench_scan.py)
+SECONDS_PER_CELL, SECONDS_PER_GRAIN = 1.5e-6, 0.01
+#: mesh file of a grain
+MESH_NAME = "grain-{:06d}.stl"
+
+
+def scan_table_text(rows, voxel_size_um: float) -> str:
+    """The measured grains as a Sand Atlas CSV (:data:`grainforge.fit.SAND_HEADER`, the opening fraction) plus
+    :data:`EXTRA_COLUMNS`; Particle ID is the grain's label.  Values as :func:`grainforge.fit.write_sand` writes
+    them (6 significant digits, lengths in µm)."""
+    from ..fit import DESCRIPTORS, OPENING_COLUMN, SAND_HEADER
+
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\r\n")
+    w.writerow([*SAND_HEADER, OPENING_COLUMN, *(h for _, h in EXTRA_COLUMNS)])
+    for r in rows:
+        cells = [r["volume"], r["equivalent_diameter"], *(r[k] for k in DESCRIPTORS), voxel_size_um,
+                 r["opening_fraction"], r["voxels"], r["centroid_x"], r["centroid_y"], r["centroid_z"]]
+        w.writerow([int(r["label"]), *(f"{float(x):.6g}" for x in cells), int(bool(r["border"]))])
+    return out.getvalue()
+
+
+class _Outputs:
+    """Every output is written under a temporary name and renamed into place at the end, together; on any failure
+    or interrupt the temporary files go and nothing is left."""
+
+    def __init__(self) -> None:
+        self.temps: list[Path] = []
+        self.moves: list[tuple[Path, Path]] = []
+        self.stage: Path | None = None
+        self.mesh_dir: Path | None = None
+        self.mesh_created = False
+        self.overwrite = False
+
+    def temp(self, final: Path) -> Path:
+        final.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=f".tmp{final.suffix}", dir=final.parent)
+        os.close(fd)
+        self.temps.append(Path(tmp))
+        self.moves.append((Path(tmp), final))
+        return Path(tmp)
+
+    def mesh_stage(self, folder: Path, overwrite: bool) -> Path:
+        from ..staging import open_stage
+
+        self.mesh_created = not folder.exists()
+        self.mesh_dir, self.overwrite = folder, overwrite
+        self.stage = open_stage(folder)[0]
+        return self.stage
+
+    def commit(self) -> None:
+        from ..io import file_mode
+        from ..staging import commit_stage
+        from .interrupts import signals_held
+
+        with signals_held():
+            for tmp, final in self.moves:
+                os.chmod(tmp, file_mode())
+                os.replace(tmp, final)
+            self.temps = []
+            if self.stage is not None:
+                new = {p.name for p in self.stage.iterdir()}
+                if self.overwrite:  # an earlier run's grain meshes that this one does not replace
+                    for old in self.mesh_dir.glob("grain-*.stl"):
+                        if old.name not in new:
+                            old.unlink()
+                commit_stage(self.stage, self.mesh_dir, overwrite=self.overwrite)
+                shutil.rmtree(self.stage, ignore_errors=True)
+                self.stage = None
+
+    def discard(self) -> None:
+        from ..staging import discard_stage
+
+        for tmp in self.temps:
+            try:
+                tmp.unlink()
+            except FileNotFoundError:
+                pass
+        if self.mesh_dir is not None:
+            discard_stage(self.stage, self.mesh_dir, self.mesh_created)
+
+
+def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
+    """One line for an image without grains to measure: empty, one label everywhere, one label (a binary image)."""
+    if not boxes:
+        raise click.UsageError(f"{path}: no grain: every voxel is 0")
+    if len(boxes) == 1 and boxes[0].voxels == total:
+        raise click.UsageError(f"{path}: every voxel is label {boxes[0].label}: no void, so no grains to tell apart")
+    if len(boxes) == 1 and not segmented:
+        raise click.UsageError(f"{path}: one label only ({boxes[0].label}): a binary image? add --segment to split "
+                               "its grains")
+
+
+@click.command()
+@click.argument("image", type=click.Path(path_type=Path))
+@click.option("--voxel-size-um", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="Voxel edge in µm (default: from the TIFF's metadata, where it says).")
+@click.option("--raw-shape", type=click.IntRange(min=1), nargs=3, default=None, metavar="Z Y X",
+              help="IMAGE is raw binary (no header, C order) of this shape.")
+@click.option("--raw-dtype", default=None, metavar="DTYPE",
+              help="The raw image's NumPy dtype (uint8, uint16, uint32, <u2 for little-endian ...; default uint16).")
+@click.option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
+              help="Write the measured grains as a Sand Atlas table that `grainforge fit` reads (µm), with each "
+                   "grain's opening fraction, voxels, centroid and border flag.")
+@click.option("--segment", is_flag=True,
+              help="IMAGE is binary (non-zero is grain): split touching grains by a distance-transform watershed "
+                   "first.")
+@click.option("--marker-distance", type=click.FloatRange(min=0, min_open=True), default=None,
+              help="With --segment: least distance between two grains' markers, as a fraction of the typical "
+                   "grain diameter; larger merges more, smaller splits more.  [default: 0.3]")
+@click.option("--marker-depth", type=click.FloatRange(min=0), default=None,
+              help="With --segment: voxels a distance-map maximum must rise above its saddle to seed a grain.  "
+                   "[default: 1]")
+@click.option("--labels-out", type=OutPath(dir_okay=False), default=None,
+              help="With --segment: write the labels (.npy, .tif or .tiff).")
+@click.option("--meshes", "meshes", type=OutPath(file_okay=False), default=None,
+              help="Write each measured grain as a closed one-body STL in mm, at its place in the scan, into "
+                   "this folder (grain-LABEL.stl).")
+@click.option("--min-voxels", type=click.IntRange(min=1), default=66, show_default=True,
+              help="Labels of fewer voxels are counted, not measured (66: a ball 5 voxels across).")
+@click.option("--keep-border", is_flag=True,
+              help="Also measure grains that touch the image's faces (flagged `border`; left out by default).")
+@click.option("--sphericity-convention", "convention", type=click.Choice(["atlas", "whole"]), default="atlas",
+              show_default=True, help="True sphericity as the Sand Atlas computed it or on the whole grain "
+                                      "(as `analyse`).")
+@click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
+@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU",
+              help="Processes measuring grains; the rows do not depend on it.")
+def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_distance, marker_depth, labels_out,
+         meshes, min_voxels, keep_border, convention, overwrite, workers):
+    """Sand-Atlas descriptors of every grain of a 3D image IMAGE (a μCT scan).
+
+    IMAGE is a labelled volume (one integer per grain, 0 the void) or, with
+    --segment, a binary one: a multi-page TIFF, a folder of TIFF slices, a
+    .npy array, or raw binary (--raw-shape, --raw-dtype).  Each grain is cut
+    out of the image and measured as `analyse --voxel-size-mm` measures a
+    mesh's voxel image; the image is read slab by slab, never whole (but
+    for --segment).  Grains touching the image's faces and labels under
+    --min-voxels are counted and left out.  The table goes to stdout;
+    --atlas-csv writes the table `grainforge fit` reads.  See
+    docs/guide/scan.md.
+    """
+    import numpy as np
+
+    from ..analysis import scan as sc
+    from ..estimate import TooLargeError, check_memory
+    from ..io.volume import LABEL_SUFFIXES, Volume, open_volume
+    from .interrupts import preload, say_estimate
+    from .progress import progress_bar
+
+    if not segment:
+        for name, given in (("--marker-distance", marker_distance), ("--marker-depth", marker_depth),
+                            ("--labels-out", labels_out)):
+            if given is not None:
+                raise click.UsageError(f"{name} needs --segment (the labels of a labelled image are its own)")
+    marker_distance = sc.MARKER_DISTANCE if marker_distance is None else marker_distance
+    marker_depth = sc.MARKER_DEPTH if marker_depth is None else marker_depth
+    if voxel_size_um is not None and not math.isfinite(voxel_size_um):
+        raise click.BadParameter(f"must be a finite size, got {voxel_size_um}", param_hint="'--voxel-size-um'")
+    if not math.isfinite(marker_distance):
+        raise click.BadParameter(f"must be finite, got {marker_distance}", param_hint="'--marker-distance'")
+    if not math.isfinite(marker_depth):
+        raise click.BadParameter(f"must be finite, got {marker_depth}", param_hint="'--marker-depth'")
+    if str(image).strip() == "":
+        raise click.BadParameter("an empty path", param_hint="IMAGE")
+    outs = [p for p in (atlas_csv, labels_out) if p is not None]
+    if len({Path(p).resolve() for p in outs}) < len(outs):
+        raise click.UsageError("--atlas-csv and --labels-out must be different files")
+    if atlas_csv is not None:
+        output_file(atlas_csv, overwrite=overwrite, option="--atlas-csv", suffixes=(".csv",))
+    if labels_out is not None:
+        output_file(labels_out, overwrite=overwrite, option="--labels-out", suffixes=LABEL_SUFFIXES)
+    if meshes is not None:
+        output_dir(meshes, overwrite=None, option="--meshes")
+        if not overwrite and Path(meshes).is_dir() and any(Path(meshes).glob("grain-*.stl")):
+            raise click.UsageError(f"{meshes} holds grain meshes; use --overwrite")
+    try:
+        volume = open_volume(image, raw_shape=raw_shape, raw_dtype=raw_dtype)
+        if voxel_size_um is None:
+            voxel_size_um = volume.voxel_size_um
+            if voxel_size_um is None:
+                raise click.UsageError(f"{image}: no voxel size in the file: give --voxel-size-um")
+            click.echo(f"voxel size from {image}'s metadata: {voxel_size_um:g} µm", err=True)
+        sc.check_labels(volume.dtype, str(image))
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    total = int(np.prod(volume.shape, dtype=np.int64))
+    preload(["scipy.ndimage", "skimage.measure", "skimage.segmentation", "skimage.feature", "skimage.morphology",
+             "trimesh"])
+    seg_info = None
+    if segment:
+        check_memory(total * (sc.SEGMENT_BYTES_PER_VOXEL + volume.dtype.itemsize),
+                     what=f"segmenting a {' x '.join(map(str, volume.shape))} image", option="the image's size "
+                     "(segment sub-volumes)")
+        binary = volume.whole() != 0
+        if not binary.any():
+            raise click.UsageError(f"{image}: no grain: every voxel is 0")
+        if binary.all():
+            raise click.UsageError(f"{image}: every voxel is grain: no void, so no grains to tell apart")
+        labels, seg_info = sc.segment(binary, marker_distance=marker_distance, marker_depth=marker_depth)
+        del binary
+        if labels.max() < 2**16:
+            labels = labels.astype(np.uint16)
+        volume = Volume.from_array(labels, str(image))
+        click.echo(f"segmented: {seg_info['grains']} grain(s) from {seg_info['markers']} marker(s) (typical "
+                   f"diameter {seg_info['typical_diameter']:.3g} voxels, markers at least {seg_info['min_distance']} "
+                   "voxels apart)", err=True)
+    Z = volume.shape[0]
+    slabs = progress_bar(total=-(-Z // sc._slab_size(volume)), desc="boxes", unit="slab")
+    boxes = sc.label_boxes(volume, progress=slabs)
+    _refuse_image(boxes, total, segment, image)
+    todo = [b for b in boxes if b.voxels >= min_voxels and (keep_border or not b.touches(volume.shape))]
+    n_small = sum(1 for b in boxes if b.voxels < min_voxels)
+    n_border = sum(1 for b in boxes if b.voxels >= min_voxels and b.touches(volume.shape))
+    n_workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
+    if not todo:
+        raise click.UsageError(f"{image}: no grain to measure among {len(boxes)} label(s): {n_border} touch the "
+                               f"image's faces (--keep-border measures them), {n_small} are under --min-voxels "
+                               f"{min_voxels}")
+    try:
+        check_memory(sc.scan_memory(boxes, volume.shape, volume.dtype.itemsize, min_voxels=min_voxels,
+                                    border=keep_border, workers=n_workers), what="measuring the largest grain",
+                     option="--workers, or the image (its largest label's box is too large)")
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    say_estimate((sum(b.cells for b in todo) * SECONDS_PER_CELL + len(todo) * SECONDS_PER_GRAIN) / n_workers)
+
+    h_um = float(voxel_size_um)
+    outputs = _Outputs()
+    rows, bad_meshes, pieces = [], [], 0
+    try:
+        stage = outputs.mesh_stage(Path(meshes), overwrite) if meshes is not None else None
+        bar = progress_bar(total=len(boxes), desc="grains", unit="grain")
+        for row in bar(sc.measure_labels(volume, boxes, voxel_size=h_um, min_voxels=min_voxels, border=keep_border,
+                                         convention=convention, workers=n_workers,
+                                         mesh_voxel_size=None if stage is None else h_um / 1000.0)):
+            if row["status"] != "measured":
+                continue
+            mesh = row.pop("mesh", None)
+            if mesh is not None:
+                v, f, dropped, problems = mesh
+                pieces += bool(dropped)
+                if problems:
+                    bad_meshes.append(f"label {row['label']}: {'; '.join(problems)}")
+                else:
+                    import trimesh
+
+                    from ..io import write_mesh
+
+                    write_mesh(trimesh.Trimesh(v, f, process=False), stage / MESH_NAME.format(row["label"]))
+            row["flags"] = "border" if row["border"] else ""
+            rows.append(row)
+        rows.sort(key=lambda r: r["label"])
+        if atlas_csv is not None:
+            outputs.temp(Path(atlas_csv)).write_text(scan_table_text(rows, h_um), encoding="utf-8", newline="")
+        if labels_out is not None:
+            from ..io.volume import write_labels
+
+            write_labels(outputs.temp(Path(labels_out)), volume.whole(), voxel_size_um=h_um)
+        outputs.commit()
+    finally:
+        outputs.discard()
+    click.echo(table_text(rows, TABLE))
+    parts = [f"{len(rows)} grain(s) measured of {len(boxes)} label(s)"]
+    if n_border:
+        parts.append(f"{n_border} touch the image's faces" + (" (measured, flagged border)" if keep_border
+                                                              else " (left out; --keep-border measures them)"))
+    if n_small:
+        parts.append(f"{n_small} under {min_voxels} voxels (left out)")
+    click.echo("; ".join(parts), err=True)
+    if atlas_csv is not None:
+        click.echo(f"wrote {len(rows)} grain(s) to {atlas_csv} as a Sand Atlas table (µm)", err=True)
+    if labels_out is not None:
+        click.echo(f"wrote the labels to {labels_out}", err=True)
+    if meshes is not None:
+        click.echo(f"wrote {len(rows) - len(bad_meshes)} mesh(es) to {meshes}"
+                   + (f"; {pieces} grain(s) in several pieces: their largest piece" if pieces else ""), err=True)
+    if bad_meshes:
+        click.echo(f"warning: {len(bad_meshes)} grain mesh(es) not written, not a valid solid: "
+                   + ", ".join(bad_meshes[:5]) + (" ..." if len(bad_meshes) > 5 else ""), err=True)

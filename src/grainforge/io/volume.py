@@ -1,0 +1,354 @@
+"""Reading 3D images (a μCT scan's labelled or binary volume) slab by slab, and writing label images.
+
+A volume is read a few slices at a time, never whole: :func:`open_volume` returns a :class:`Volume` whose
+:meth:`Volume.read` gives slices ``z0 … z1 − 1`` as an array.  Formats:
+
+- ``.npy`` (:func:`numpy.load` with ``mmap_mode="r"``: the header is read and the slices are mapped);
+- raw binary (any other suffix, ``.raw`` typically), given its shape ``(Z, Y, X)`` and dtype;
+- a multi-page TIFF (``.tif``/``.tiff``) or a folder of single-slice TIFF files (sorted by name, numbers
+  compared as numbers), through `tifffile` (the ``scan`` extra: ``pip install 'grainforge[scan]'``).  An
+  uncompressed TIFF is memory-mapped, a compressed one read a page at a time.  The voxel size is read from
+  the TIFF's ImageJ metadata or resolution tags where present (``unit`` µm or mm).
+
+Axes are the image's own: ``(Z, Y, X)``, slices first, as tifffile and :func:`numpy.save` store them.
+
+Examples
+--------
+>>> import tempfile, pathlib
+>>> import numpy as np
+>>> p = pathlib.Path(tempfile.mkdtemp()) / "labels.npy"
+>>> np.save(p, np.arange(24, dtype=np.uint16).reshape(2, 3, 4))
+>>> v = open_volume(p)
+>>> v.shape, v.dtype.name, int(v.read(1, 2).sum())
+((2, 3, 4), 'uint16', 210)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["Volume", "open_volume", "write_labels", "TIFF_SUFFIXES", "LABEL_SUFFIXES", "tifffile_module"]
+
+#: suffixes read as TIFF images (a folder is read as its TIFF slices)
+TIFF_SUFFIXES = (".tif", ".tiff")
+#: suffixes :func:`write_labels` writes
+LABEL_SUFFIXES = (".npy", ".tif", ".tiff")
+#: how a missing tifffile is reported
+TIFFFILE_HINT = "reading TIFF images needs tifffile: pip install 'grainforge[scan]' (or pip install tifffile)"
+
+
+def tifffile_module():
+    """tifffile, imported on first use; a missing one is one line saying how to install it."""
+    try:
+        import tifffile
+    except ImportError:
+        raise ValueError(TIFFFILE_HINT) from None
+    return tifffile
+
+
+class Volume:
+    """A 3D image read slab by slab.
+
+    Attributes
+    ----------
+    path : Path
+    shape : tuple of int
+        ``(Z, Y, X)``.
+    dtype : numpy.dtype
+    voxel_size_um : float or None
+        From the file's metadata (TIFF), if it says.
+    """
+
+    def __init__(self, path, shape, dtype, reader, voxel_size_um=None, array=None):
+        self.path = Path(path)
+        self.shape = tuple(int(s) for s in shape)
+        self.dtype = np.dtype(dtype)
+        self._reader = reader
+        self.voxel_size_um = voxel_size_um
+        self._array = array
+
+    @classmethod
+    def from_array(cls, array, name: str = "<array>") -> Volume:
+        """A volume over an array already in memory (a segmentation's labels).
+
+        Examples
+        --------
+        >>> Volume.from_array(np.zeros((2, 2, 2), np.uint8)).read(0, 1).shape
+        (1, 2, 2)
+        """
+        a = np.asarray(array)
+        return cls(name, a.shape, a.dtype, lambda z0, z1: a[z0:z1], array=a)
+
+    @property
+    def plane_bytes(self) -> int:
+        """Bytes of one slice."""
+        return int(self.shape[1]) * int(self.shape[2]) * self.dtype.itemsize
+
+    def read(self, z0: int, z1: int) -> np.ndarray:
+        """Slices ``z0 … z1 − 1`` as a ``(z1 − z0, Y, X)`` array."""
+        return np.asarray(self._reader(int(z0), int(z1)))
+
+    def whole(self) -> np.ndarray:
+        """The whole image in memory (for a segmentation, which needs it)."""
+        if self._array is not None:
+            return self._array
+        return self.read(0, self.shape[0])
+
+
+def _mapped_reader(path: Path, offset: int, shape, dtype, order: str = "C"):
+    """Read slices through a fresh memory map each time: the slices are copied out and the map closed, so the
+    process never holds more of the file than one slab (a long-lived map keeps every page it read)."""
+    dtype = np.dtype(dtype)
+    plane = int(shape[1]) * int(shape[2]) * dtype.itemsize
+
+    def read(z0: int, z1: int) -> np.ndarray:
+        if z1 <= z0:
+            return np.zeros((0, *shape[1:]), dtype)
+        if order == "F":  # Fortran order (np.save of a transposed array): the whole file is one map
+            m = np.memmap(path, dtype=dtype, mode="r", offset=offset, shape=tuple(shape), order="F")
+            out = np.ascontiguousarray(m[z0:z1])
+        else:
+            m = np.memmap(path, dtype=dtype, mode="r", offset=offset + z0 * plane, shape=(z1 - z0, *shape[1:]))
+            out = np.array(m)
+        del m
+        return out
+
+    return read
+
+
+def _check_3d(path: Path, shape, what: str) -> tuple[int, int, int]:
+    shape = tuple(int(s) for s in shape)
+    squeezed = tuple(s for s in shape if s != 1) if len(shape) > 3 else shape
+    if len(squeezed) != 3:
+        raise ValueError(f"{path}: not a 3D image: {what} has shape {shape} (a volume has 3 axes, Z Y X)")
+    if min(squeezed) < 1:
+        raise ValueError(f"{path}: the image is empty (shape {shape})")
+    return squeezed  # type: ignore[return-value]
+
+
+def _natural_key(p: Path):
+    return [int(t) if t.isdigit() else t.lower() for t in re.split(r"(\d+)", p.name)]
+
+
+def _tiff_voxel_size(tif) -> float | None:
+    """Isotropic voxel size in µm from a TiffFile's ImageJ metadata / resolution tags, or None."""
+    try:
+        page = tif.pages[0]
+        meta = tif.imagej_metadata or {}
+        unit = str(meta.get("unit", "")).strip().lower().replace("\\u00b5", "µ")
+        tags = page.tags
+        res = tags.get("XResolution")
+        if res is None:
+            return None
+        num, den = res.value
+        if not num:
+            return None
+        xy = den / num
+        scale = {"micron": 1.0, "microns": 1.0, "um": 1.0, "µm": 1.0, "μm": 1.0, "mm": 1000.0,
+                 "millimeter": 1000.0, "nm": 1e-3}.get(unit)
+        if scale is None:
+            unit_tag = tags.get("ResolutionUnit")
+            code = int(unit_tag.value) if unit_tag is not None else 1
+            scale = {3: 1e4}.get(code)  # centimetre; 2 (inch) and 1 (none) say nothing usable
+            if scale is None:
+                return None
+        size = xy * scale
+        z = meta.get("spacing")
+        if z is not None and not math.isclose(float(z) * scale, size, rel_tol=1e-3):
+            raise ValueError(f"{tif.filehandle.path}: anisotropic voxels ({size:g} µm in x and y, "
+                             f"{float(z) * scale:g} µm in z): the descriptors need cubic voxels")
+        return float(size) if math.isfinite(size) and size > 0 else None
+    except ValueError:
+        raise
+    except Exception:  # odd or partial metadata: no voxel size from it
+        return None
+
+
+def _open_tiff(path: Path) -> Volume:
+    tifffile = tifffile_module()
+    try:
+        tif = tifffile.TiffFile(path)
+    except Exception as exc:
+        raise ValueError(f"{path}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+    with tif:
+        series = tif.series[0]
+        shape = _check_3d(path, series.shape, "its first series")
+        dtype = series.dtype
+        size = _tiff_voxel_size(tif)
+        offset = series.dataoffset
+        npages = len(series.pages)
+    if offset is not None:  # uncompressed, contiguous: map it
+        return Volume(path, shape, dtype, _mapped_reader(path, offset, shape, dtype), voxel_size_um=size)
+    if npages != shape[0]:
+        raise ValueError(f"{path}: a compressed TIFF with {npages} page(s) for {shape[0]} slices: save it "
+                         "uncompressed, as one page per slice, or as .npy")
+
+    def read(z0: int, z1: int) -> np.ndarray:
+        with tifffile.TiffFile(path) as t:
+            pages = t.series[0].pages
+            return np.stack([pages[z].asarray().reshape(shape[1:]) for z in range(z0, z1)]) if z1 > z0 else \
+                np.zeros((0, *shape[1:]), dtype)
+
+    return Volume(path, shape, dtype, read, voxel_size_um=size)
+
+
+def _open_slices(path: Path) -> Volume:
+    tifffile = tifffile_module()
+    files = sorted((q for q in path.iterdir() if q.suffix.lower() in TIFF_SUFFIXES and q.is_file()
+                    and not q.name.startswith(".")), key=_natural_key)
+    if not files:
+        raise ValueError(f"{path}: a folder without TIFF slices ({', '.join(TIFF_SUFFIXES)})")
+    try:
+        with tifffile.TiffFile(files[0]) as tif:
+            first = tif.series[0]
+            plane, dtype = tuple(s for s in first.shape if s != 1), first.dtype
+            size = _tiff_voxel_size(tif)
+    except ValueError:
+        raise
+    except Exception as exc:
+        raise ValueError(f"{files[0]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+    if len(plane) != 2:
+        raise ValueError(f"{files[0]}: a slice must be a 2D image; it has shape {first.shape}")
+    if len(files) < 2:
+        raise ValueError(f"{path}: not a 3D image: one TIFF slice")
+
+    def read(z0: int, z1: int) -> np.ndarray:
+        out = np.empty((max(z1 - z0, 0), *plane), dtype)
+        for k, z in enumerate(range(z0, z1)):
+            try:
+                a = tifffile.imread(files[z])
+            except Exception as exc:
+                raise ValueError(f"{files[z]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+            a = np.asarray(a)
+            if a.size != out[k].size or a.dtype != dtype:
+                raise ValueError(f"{files[z]}: slice of shape {a.shape} ({a.dtype}); the first is {plane} ({dtype})")
+            out[k] = a.reshape(plane)
+        return out
+
+    return Volume(path, (len(files), *plane), dtype, read, voxel_size_um=size)
+
+
+def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
+    """Open a 3D image for reading slab by slab (formats: the module's docstring).
+
+    Parameters
+    ----------
+    path : path
+        ``.npy``, ``.tif``/``.tiff``, a folder of TIFF slices, or a raw file (with ``raw_shape``).
+    raw_shape : (3,) sequence of int, optional
+        ``(Z, Y, X)`` of a raw file (C order, no header).
+    raw_dtype : str, optional
+        NumPy dtype of a raw file, e.g. ``"uint16"`` (``"<u2"`` little-endian explicitly); default uint16.
+
+    Raises
+    ------
+    ValueError
+        One line naming the file: missing, not a 3D image, a raw size that does not match its shape and dtype,
+        an unreadable file, no tifffile for a TIFF.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "v.raw"
+    >>> _ = p.write_bytes(np.ones((3, 4, 5), np.uint16).tobytes())
+    >>> open_volume(p, raw_shape=(3, 4, 5)).read(0, 3).sum()
+    np.uint64(60)
+    >>> open_volume(p, raw_shape=(3, 4, 6))
+    Traceback (most recent call last):
+    ...
+    ValueError: ...v.raw: 120 bytes, but a 3 x 4 x 6 uint16 image needs 144 bytes: check --raw-shape and --raw-dtype
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ValueError(f"{path}: no such file or folder")
+    if raw_shape is not None:
+        if path.is_dir():
+            raise ValueError(f"{path}: a folder; a raw image is one file")
+        try:
+            dtype = np.dtype(raw_dtype or "uint16")
+        except TypeError:
+            raise ValueError(f"--raw-dtype {raw_dtype!r}: not a NumPy dtype (uint8, uint16, uint32, int32, ...)") \
+                from None
+        shape = tuple(int(s) for s in raw_shape)
+        if len(shape) != 3 or min(shape) < 1:
+            raise ValueError(f"--raw-shape must be three positive sizes Z Y X, got {raw_shape!r}")
+        need = math.prod(shape) * dtype.itemsize
+        have = path.stat().st_size
+        if have != need:
+            raise ValueError(f"{path}: {have} bytes, but a {shape[0]} x {shape[1]} x {shape[2]} {dtype.name} image "
+                             f"needs {need} bytes: check --raw-shape and --raw-dtype")
+        return Volume(path, shape, dtype, _mapped_reader(path, 0, shape, dtype))
+    if raw_dtype is not None:
+        raise ValueError("--raw-dtype needs --raw-shape (a raw image's Z Y X)")
+    if path.is_dir():
+        return _open_slices(path)
+    suffix = path.suffix.lower()
+    if suffix in TIFF_SUFFIXES:
+        return _open_tiff(path)
+    if suffix == ".npy":
+        try:
+            m = np.load(path, mmap_mode="r", allow_pickle=False)
+        except Exception as exc:
+            raise ValueError(f"{path}: not a readable .npy array ({exc.__class__.__name__}: {exc})") from None
+        if not isinstance(m, np.memmap):
+            raise ValueError(f"{path}: not a .npy array")
+        shape = _check_3d(path, m.shape, "the array")
+        if m.dtype.hasobject or m.dtype.names is not None:
+            raise ValueError(f"{path}: an array of {m.dtype}, not an image")
+        order = "F" if (m.flags.f_contiguous and not m.flags.c_contiguous) else "C"
+        offset, dtype = int(m.offset), m.dtype
+        del m
+        return Volume(path, shape, dtype, _mapped_reader(path, offset, shape, dtype, order))
+    raise ValueError(f"{path}: unknown image format {suffix or '(no suffix)'!r}: give a .npy, a .tif/.tiff, a "
+                     "folder of TIFF slices, or a raw file with --raw-shape Z Y X and --raw-dtype")
+
+
+def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None) -> Path:
+    """Write a label image as ``.npy`` or ``.tif`` (ImageJ metadata with the voxel size in µm), atomically.
+
+    Examples
+    --------
+    >>> import tempfile, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "l.npy"
+    >>> _ = write_labels(p, np.ones((2, 2, 2), np.uint16))
+    >>> int(np.load(p).sum())
+    8
+    """
+    import tempfile
+
+    from . import file_mode
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in LABEL_SUFFIXES:
+        raise ValueError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
+    tifffile = tifffile_module() if suffix != ".npy" else None
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    try:
+        with os.fdopen(fd, "wb") as fh:
+            if suffix == ".npy":
+                np.save(fh, labels)
+            else:
+                if not voxel_size_um:
+                    tifffile.imwrite(fh, labels)
+                elif labels.dtype in (np.uint8, np.uint16):  # ImageJ's own types: its metadata, in µm
+                    tifffile.imwrite(fh, labels, imagej=True, resolution=(1.0 / voxel_size_um, 1.0 / voxel_size_um),
+                                     metadata={"spacing": voxel_size_um, "unit": "um", "axes": "ZYX"})
+                else:  # the resolution tags, per centimetre
+                    tifffile.imwrite(fh, labels, resolution=(1e4 / voxel_size_um, 1e4 / voxel_size_um),
+                                     resolutionunit="CENTIMETER")
+        os.chmod(tmp, file_mode())
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
+    return path
