@@ -1810,7 +1810,8 @@ def fit_figure(sand: Sand, result: FitResult, path: Path) -> None:
                 label=f"{result.method} twins (n={len(gen)})")
         p = result.stats["per"][k]
         ax.set_title(f"{k}: mean {p['sand_mean']:.3f} vs {p['gen_mean']:.3f}, KS {p['ks']:.3f}", fontsize=9)
-        ax.legend(fontsize=7)
+        # a fixed corner: matplotlib's "best" searches every bar, takes seconds on a loaded machine and warns
+        ax.legend(fontsize=7, loc="upper left", framealpha=0.8)
     ax = axes.flat[4]
     err = result.twin_error
     ax.hist(np.minimum(err, 0.1), bins=40, color="tab:blue")
@@ -1825,7 +1826,7 @@ def fit_figure(sand: Sand, result: FitResult, path: Path) -> None:
     ax.hist(d, bins=bins, density=True, alpha=0.55, color="tab:orange", label=result.method)
     ax.set_xlabel("equivalent diameter (µm)")
     ax.set_title("size (each twin has its sand grain's)", fontsize=9)
-    ax.legend(fontsize=7)
+    ax.legend(fontsize=7, loc="upper right", framealpha=0.8)
     labels = [k[:5] for k in DESCRIPTORS]
     for ax, table, who in ((axes.flat[6], st, "sand rows"), (axes.flat[7], gen, f"{result.method} twins")):
         c = spearman(table)

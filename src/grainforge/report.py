@@ -171,13 +171,13 @@ def population_figure(recipe, rows, info: Mapping[str, Any]):
                 bins = np.linspace(0.0, 1.0, 41)
                 ax.hist(ratios["elongation"], bins=bins, color=colour, alpha=0.7, label="elongation I/L")
                 ax.hist(ratios["flatness"], bins=bins, color="tab:blue", alpha=0.5, label="flatness S/I")
-                ax.legend(fontsize=7)
+                ax.legend(fontsize=7, loc="upper left", framealpha=0.8)  # "best" is slow over many bars
             elif name in recipe.params and recipe.params[name].kind == "each":
                 items = recipe.params[name].args["items"]
                 for i, d in enumerate(items):
                     if isinstance(d, Distribution):
                         ax.hist([x[i] for x in vals], bins=30, alpha=0.6, label=f"{name}[{i}]")
-                ax.legend(fontsize=7)
+                ax.legend(fontsize=7, loc="upper right", framealpha=0.8)
             elif name in recipe.params and recipe.params[name].kind == "choice":
                 labels = [_label(x) for x in vals]
                 keys = [_label(c) for c in recipe.params[name].args["values"]]
