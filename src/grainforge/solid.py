@@ -30,7 +30,8 @@ import numpy as np
 __all__ = [
     "signed_volume", "volume_centroid", "face_components", "is_closed", "as_written", "solid_problems",
     "require_solid", "index_problems", "split_bodies", "self_intersections", "star_certificate", "AREA_TOLERANCE",
-    "cross3", "volume_and_centroid", "second_moments", "moller_trumbore",
+    "cross3", "volume_and_centroid", "second_moments", "moller_trumbore", "FLOAT32_OFFSET_LIMIT",
+    "precision_problem", "mesh_size_problem", "winding_numbers", "body_nesting",
 ]
 
 #: smallest face area allowed, relative to the squared bounding-box diagonal of the mesh.
@@ -696,3 +697,148 @@ def split_bodies(
         used, local = np.unique(ff, return_inverse=True)
         bodies.append((v[used], local.reshape(-1, 3)))
     return bodies
+
+
+#: how far from the origin a body's coordinates may lie, in multiples of its size (the largest side of its
+#: bounding box).  float32, in which STL stores coordinates and :func:`solid_problems` checks every mesh,
+#: spaces its values 2^-23·|x| apart near x (24 significant bits), so a coordinate is rounded by up to
+#: 2^-24·|x| ≈ 6e-8·|x|.  At 1e4 sizes from the origin that is 6e-4 of the size, the grid 1.2e-3 of it:
+#: finer than the facets of a grain of 10^5 faces (about d/200), and a sphere of 20,480 faces measures as at
+#: the origin (sphericity within 1e-4).  At 1e5 sizes the same sphere's sphericity is 0.8 % low, at 3e5 it
+#: is no longer a solid, and at 5e8 (a 2 mm grain at 1e9 mm) every vertex rounds onto a few points.
+FLOAT32_OFFSET_LIMIT = 1e4
+
+
+def precision_problem(vertices: np.ndarray, what: str = "the mesh") -> str | None:
+    """Why float32 cannot hold the detail of ``vertices`` (``None`` if it can): coordinates more than
+    :data:`FLOAT32_OFFSET_LIMIT` times the mesh's size from the origin, or no extent left at all.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(radius=1.0)
+    >>> precision_problem(s.vertices) is None
+    True
+    >>> print(precision_problem(s.vertices + 1e9))
+    coordinates reach 1e+09, 5e+08 times the mesh's size (2): float32 (STL's precision, and that of the solid check) rounds them by up to 60, so the shape is lost beyond 1e+04 times its size; translate the mesh near the origin
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    if len(v) == 0 or not np.isfinite(v).all():
+        return None  # (the readers say so in their own words)
+    reach = float(np.abs(v).max())
+    size = float(np.ptp(v, axis=0).max())
+    if reach <= FLOAT32_OFFSET_LIMIT * size:
+        return None
+    step = reach * 2.0**-24
+    if size == 0.0:
+        return (f"every vertex of {what} lies on one point, at coordinates reaching {reach:.3g}: float32 (STL's "
+                f"precision) rounds them by up to {step:.2g}, so the shape is lost; translate the mesh near the "
+                "origin before writing it")
+    return (f"coordinates reach {reach:.3g}, {reach / size:.2g} times {what}'s size ({size:.3g}): float32 (STL's "
+            f"precision, and that of the solid check) rounds them by up to {step:.2g}, so the shape is lost beyond "
+            f"{FLOAT32_OFFSET_LIMIT:.0e} times its size; translate the mesh near the origin")
+
+
+def mesh_size_problem(vertices: np.ndarray, what: str = "the mesh") -> str | None:
+    """Why ``vertices`` (in mm) are no grain's size (``None`` if they are): the largest side of their
+    bounding box outside :data:`grainforge.units.MESH_SIZE_RANGE_MM` (0.1 µm to 100 m).
+
+    Examples
+    --------
+    >>> print(mesh_size_problem(np.array([[0.0, 0, 0], [2e37, 1, 1]])))
+    the mesh is 2e+37 mm across (its bounding box's largest side), outside the 0.0001–100000 mm a grain file is read at (files are in mm); rescale the mesh to millimetres
+    """
+    from .units import MESH_SIZE_RANGE_MM
+
+    v = np.asarray(vertices, dtype=np.float64)
+    if len(v) == 0 or not np.isfinite(v).all():
+        return None
+    size = float(np.ptp(v, axis=0).max())
+    lo, hi = MESH_SIZE_RANGE_MM
+    if lo <= size <= hi:
+        return None
+    return (f"{what} is {size:.3g} mm across (its bounding box's largest side), outside the {lo:g}–{hi:g} mm a grain "
+            "file is read at (files are in mm); rescale the mesh to millimetres")
+
+
+def winding_numbers(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Winding number of a closed, oriented mesh about each of ``points`` (1 inside an outward
+    surface, −1 inside an inward one, 0 outside), from the faces' solid angles (Van Oosterom &
+    Strackee, 1983).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> b = trimesh.creation.box()
+    >>> np.round(winding_numbers(b.vertices, b.faces, [[0, 0, 0], [2, 0, 0]]), 6).tolist()
+    [1.0, 0.0]
+    """
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    out = np.empty(len(points))
+    for k, p in enumerate(np.asarray(points, dtype=np.float64).reshape(-1, 3)):
+        a, b, c = (v[f[:, i]] - p for i in range(3))
+        la, lb, lc = (np.linalg.norm(x, axis=1) for x in (a, b, c))
+        det = np.einsum("ij,ij->i", a, cross3(b, c))
+        den = la * lb * lc + np.einsum("ij,ij->i", a, b) * lc + np.einsum("ij,ij->i", a, c) * lb \
+            + np.einsum("ij,ij->i", b, c) * la
+        out[k] = 2.0 * np.arctan2(det, den).sum() / (4.0 * np.pi)
+    return out
+
+
+#: vertices of a body tested against another body's winding number (spread over the body)
+NESTING_SAMPLE = 64
+
+
+def body_nesting(bodies: list[tuple[np.ndarray, np.ndarray]]) -> tuple[list[int | None], set[int]]:
+    """Which bodies lie inside another and which overlap another.
+
+    A body whose sampled vertices (up to :data:`NESTING_SAMPLE`, spread over
+    it) all lie inside a closed body (winding number away from 0) is an
+    **inner shell** of it: the wall of a cavity (facing inward: negative
+    volume) or a shell nested in the grain; either way not a grain of its
+    own.  Bodies that are partly inside another **overlap** it.
+
+    Returns
+    -------
+    enclosing : list
+        For each body, the index of the outermost body that encloses it, or ``None``.
+    overlapping : set of int
+        Bodies that are partly inside another body (and that other body).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> outer = trimesh.creation.icosphere(radius=1.0)
+    >>> inner = trimesh.creation.icosphere(radius=0.5)
+    >>> _ = inner.invert()
+    >>> body_nesting([(outer.vertices, outer.faces), (inner.vertices, inner.faces)])
+    ([None, 0], set())
+    """
+    n = len(bodies)
+    enclosing: list[int | None] = [None] * n
+    overlapping: set[int] = set()
+    if n < 2:
+        return enclosing, overlapping
+    lo = np.array([np.asarray(v).min(axis=0) for v, _ in bodies])
+    hi = np.array([np.asarray(v).max(axis=0) for v, _ in bodies])
+    inside: list[list[int]] = [[] for _ in range(n)]
+    for j, (vj, fj) in enumerate(bodies):
+        if not is_closed(fj, len(vj)):
+            continue  # an open body has no inside
+        near = np.flatnonzero((lo <= hi[j]).all(axis=1) & (hi >= lo[j]).all(axis=1))
+        for i in near[near != j]:
+            vi = np.asarray(bodies[i][0])
+            sample = vi[np.unique(np.linspace(0, len(vi) - 1, min(len(vi), NESTING_SAMPLE)).astype(np.int64))]
+            within = np.abs(winding_numbers(vj, fj, sample)) > 0.5
+            if within.all():
+                inside[i].append(j)
+            elif within.any():
+                overlapping.update((int(i), j))
+    for i in range(n):
+        outer = [j for j in inside[i] if not inside[j]]
+        if outer:
+            enclosing[i] = outer[0]
+        elif inside[i]:  # (containers all inside one another in a loop: not nested shells)
+            overlapping.add(i)
+    return enclosing, overlapping

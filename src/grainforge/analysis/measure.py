@@ -10,7 +10,8 @@ import numpy as np
 
 from ..solid import solid_problems, split_bodies, volume_and_centroid
 
-__all__ = ["split_bodies", "read_bodies", "analyse_mesh", "analyse_file", "ANALYSE_COLUMNS"]
+__all__ = ["split_bodies", "read_bodies", "body_flags", "analyse_mesh", "analyse_file", "solid_grain",
+           "ANALYSE_COLUMNS"]
 
 #: identity and quality columns that precede the descriptors in ``analyse`` output
 ID_COLUMNS = ("file", "body", "bodies", "faces", "flags")
@@ -30,15 +31,23 @@ def ANALYSE_COLUMNS(fourier: bool = True, atlas: bool = False) -> list[str]:  # 
     return cols
 
 
-def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
+def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, np.ndarray]]:
     """The bodies of a mesh file (STL, OBJ, PLY, 3MF), each as (vertices, faces).
+
+    ``mm``: the file is in millimetres, and a body whose size is no grain's
+    (:func:`grainforge.solid.mesh_size_problem`) is refused; ``False``
+    for a caller with a unit of its own (``dem --unit``), which checks sizes itself.
 
     Raises
     ------
     ValueError
-        If the file is missing, unreadable, corrupt or holds no triangles
-        (the message starts with the file name).
+        If the file is missing, unreadable, corrupt or holds no triangles, or
+        a body lies so far from the origin that float32 loses its shape
+        (:func:`grainforge.solid.precision_problem`), or (``mm``) is absurdly
+        large or small (the message starts with the file name and says what to do).
     """
+    from ..solid import precision_problem
+
     path = Path(path)
     if path.suffix.lower() == ".3mf":
         from ..io import read_parts
@@ -57,7 +66,54 @@ def read_bodies(path: str | Path) -> list[tuple[np.ndarray, np.ndarray]]:
     bodies = split_bodies(v, f)
     if not bodies:
         raise ValueError(f"{path}: holds no triangles")
+    size_problem = None
+    if mm:
+        from ..solid import mesh_size_problem as size_problem
+    for k, (bv, _) in enumerate(bodies):
+        what = "the mesh" if len(bodies) == 1 else f"body {k}"
+        problem = precision_problem(bv, what) or (size_problem(bv, what) if size_problem else None)
+        if problem:
+            raise ValueError(f"{path}: {problem}")
     return bodies
+
+
+def body_flags(vertices, faces, *, merged: bool = False) -> tuple[list[str], np.ndarray, bool, list[str]]:
+    """The flags :func:`analyse_mesh` gives one body, and what they stand for.
+
+    The one check of a body as a solid: ``analyse`` flags with it and ``dem``
+    (:func:`solid_grain`) refuses with it.
+
+    Returns
+    -------
+    flags : list of str
+        ``open``, ``inverted``, ``not-solid`` (see :func:`analyse_mesh`).
+    faces : (F, 3) int64
+        The faces, flipped if the body is inverted.
+    closed : bool
+    problems : list of str
+        :func:`grainforge.solid.solid_problems`'s findings behind ``not-solid``.
+    """
+    from .descriptors import is_closed
+
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    flags = []
+    problems: list[str] = []
+    closed = is_closed(f, len(v))
+    if not closed:
+        flags.append("open")
+    else:
+        volume, centroid = volume_and_centroid(v, f)
+        if volume < 0:
+            f = f[:, ::-1]
+            flags.append("inverted")
+        # fails the solid contract as written (grainforge check says why).  A grain star-shaped about its
+        # volume centroid is proven free of self-intersections in O(F) (solid.star_certificate); others
+        # get the pairwise test.  The flag is the same either way.
+        problems = solid_problems(v, f, star_centre=centroid, merged=merged)
+        if problems:
+            flags.append("not-solid")
+    return flags, f, closed, problems
 
 
 def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = False, **options) -> dict[str, Any]:
@@ -80,24 +136,10 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
     dict
         ``faces``, ``flags`` and :func:`~grainforge.analysis.descriptors.describe`'s values.
     """
-    from .descriptors import describe, is_closed
+    from .descriptors import describe
 
     v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
-    flags = []
-    closed = is_closed(f, len(v))
-    if not closed:
-        flags.append("open")
-    else:
-        volume, centroid = volume_and_centroid(v, f)
-        if volume < 0:
-            f = f[:, ::-1]
-            flags.append("inverted")
-    # fails the solid contract as written (grainforge check says why).  A grain star-shaped about its
-    # volume centroid is proven free of self-intersections in O(F) (solid.star_certificate); others
-    # get the pairwise test.  The flag is the same either way.
-    if "open" not in flags and solid_problems(v, f, star_centre=centroid, merged=merged):
-        flags.append("not-solid")
+    flags, f, closed, _ = body_flags(v, faces, merged=merged)
     row: dict[str, Any] = {"faces": len(f), "flags": " ".join(flags)}
     row.update(describe(SimpleNamespace(vertices=v, faces=f), closed=closed, **options))  # describe() reads .vertices and .faces
     if atlas is not None:
@@ -111,7 +153,15 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
 
 
 def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
-    """One row per body of a mesh file; multi-body files are flagged ``multi-body``.
+    """One row per grain of a mesh file; multi-body files are flagged ``multi-body``.
+
+    A body inside another closed body (:func:`grainforge.solid.body_nesting`:
+    the inner shell of a cavity, facing inward, or a shell nested in the
+    grain) is no grain: it gets no row, and the body that encloses it is
+    flagged ``cavity`` (its row measures its outer surface, the void not
+    subtracted).  Bodies that partly overlap another are flagged
+    ``overlapping`` (each row measures one body, not their union).
+    ``bodies`` counts the rows of the file.
 
     ``options`` go to :func:`~grainforge.analysis.descriptors.describe`.
 
@@ -124,16 +174,69 @@ def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
     >>> row["body"], row["flags"], round(row["volume"], 6), round(row["sphericity"], 3)
     (0, '', 8.0, 0.806)
     """
+    from ..solid import body_nesting
+
     path = Path(path)
     bodies = read_bodies(path)
+    enclosing, overlapping = body_nesting(bodies)
+    grains = [k for k, e in enumerate(enclosing) if e is None]
     rows = []
-    for k, (v, f) in enumerate(bodies):
-        row: dict[str, Any] = {"file": str(path), "body": k, "bodies": len(bodies)}
+    for k, b in enumerate(grains):
+        v, f = bodies[b]
+        row: dict[str, Any] = {"file": str(path), "body": k, "bodies": len(grains)}
         row.update(analyse_mesh(v, f, merged=True, **options))
-        if len(bodies) > 1:
-            row["flags"] = " ".join(x for x in ("multi-body", row["flags"]) if x)
+        extra = ["multi-body"] if len(grains) > 1 else []
+        if b in enclosing:
+            extra.append("cavity")
+        if b in overlapping:
+            extra.append("overlapping")
+        row["flags"] = " ".join(x for x in (*extra, row["flags"]) if x)
         rows.append(row)
     return rows
+
+
+def solid_grain(path: str | Path, *, mm: bool = False) -> tuple[np.ndarray, np.ndarray]:
+    """The one body of a grain file, refused unless ``analyse`` would list it unflagged.
+
+    The same reader (:func:`read_bodies`: float32 precision and, with ``mm``,
+    sizes) and the same checks (:func:`grainforge.solid.body_nesting`,
+    :func:`body_flags`) as :func:`analyse_file`: a file with a cavity, several
+    or overlapping bodies, or a body that is open, inverted or not a solid is
+    refused.  (``dem`` and ``simulate`` read their grain files with it: a DEM
+    grain is one solid, without a void.)
+
+    Raises
+    ------
+    ValueError
+        One line naming the file, the problem and what to do.
+    """
+    from ..solid import body_nesting
+
+    path = Path(path)
+    bodies = read_bodies(path, mm=mm)
+    enclosing, overlapping = body_nesting(bodies)
+    for inner, outer in enumerate(enclosing):
+        if outer is not None:
+            raise ValueError(f"{path}: not a closed solid (cavity: body {inner} is an inner shell of body {outer}, "
+                             "the wall of a void; analyse flags it cavity): a DEM grain has no void; remove the "
+                             "inner shell to fill it")
+    if len(bodies) > 1:
+        kind = "overlapping bodies" if overlapping else "bodies"
+        raise ValueError(f"{path}: not a closed solid ({len(bodies)} {kind}; analyse flags it multi-body"
+                         + (" overlapping" if overlapping else "") + "): a grain file holds one grain; "
+                         + ("merge them into one surface" if overlapping else "write one file per grain"))
+    v, f = bodies[0]
+    flags, _, _, problems = body_flags(v, f, merged=True)
+    if "open" in flags:
+        raise ValueError(f"{path}: not a closed solid (open boundary or inconsistent orientation; analyse flags it "
+                         "open); close the surface, `grainforge check` lists its problems")
+    if "not-solid" in flags:
+        raise ValueError(f"{path}: not a closed solid ({'; '.join(problems)}; analyse flags it not-solid); "
+                         "`grainforge check` lists its problems")
+    if "inverted" in flags:
+        raise ValueError(f"{path}: not a closed solid (non-positive volume: its faces point inward; analyse flags it "
+                         "inverted); flip the faces' orientation")
+    return v, f
 
 
 def _analyse_task(task: tuple[str, dict[str, Any]]) -> list[dict[str, Any]]:

@@ -74,12 +74,15 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
     from ..analysis.atlas import check_atlas_request
     from ..analysis.measure import read_bodies
     from ..estimate import TooLargeError
-    from ..solid import signed_volume
+    from ..solid import body_nesting, signed_volume
     from .progress import progress_bar
 
     bodies = []
     for path in progress_bar(total=len(files), desc="check", unit="file")(files):
-        for k, (v, f) in enumerate(read_bodies(path)):
+        found = read_bodies(path)
+        enclosing, _ = body_nesting(found)
+        grains = [b for b, e in zip(found, enclosing) if e is None]  # an inner shell is no grain (analyse_file)
+        for k, (v, f) in enumerate(grains):
             vol = signed_volume(v, f) if len(f) else 0.0
             d_eq = (6.0 * vol / math.pi) ** (1.0 / 3.0) if vol > 0 else math.nan
             bodies.append((f"{path}" + (f" (body {k})" if k else ""), v.max(axis=0) - v.min(axis=0), d_eq))
@@ -128,7 +131,10 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     surface fractal dimension, Fourier descriptors of the three principal
     projections and, for aggregates, porosity, R_g and D_A.  Bodies that are not
     closed are analysed and flagged `open`; files with several bodies are
-    flagged `multi-body`.  The table goes to stdout; see docs/validation.md.
+    flagged `multi-body`; a body with a cavity (an inner shell inside it) is
+    flagged `cavity` and the inner shell is no row.  Files in another unit than
+    mm (a body outside 0.0001–100000 mm) or too far from the origin for float32
+    are refused.  The table goes to stdout; see docs/validation.md.
     With --atlas-csv the grains' Sand-Atlas measures also become a table that
     `grainforge fit` reads (docs/fit.md).
     """
@@ -176,5 +182,17 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
         click.echo(table_text(rows))
     flagged = [r for r in rows if r["flags"]]
     if flagged:
-        click.echo(f"note: {len(flagged)} body/bodies flagged (open: volume-based values approximate; "
-                   "multi-body: one row per body)", err=True)
+        seen = {w for r in flagged for w in r["flags"].split()}
+        said = "; ".join(f"{flag}: {meaning}" for flag, meaning in FLAG_NOTES.items() if flag in seen)
+        click.echo(f"note: {len(flagged)} body/bodies flagged ({said})", err=True)
+
+
+#: what each flag means, in the note after the table (only the flags present are explained)
+FLAG_NOTES = {
+    "open": "volume-based values approximate",
+    "multi-body": "one row per body",
+    "cavity": "encloses an inner shell, a void: the row measures the outer surface, the void is no row",
+    "overlapping": "overlaps another body of the file: each row measures one body",
+    "inverted": "inside out, measured after flipping",
+    "not-solid": "not a valid solid, `grainforge check` says why",
+}

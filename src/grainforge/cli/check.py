@@ -40,6 +40,7 @@ def check(files, printer_spec, as_csv):
     from ..fabrication.printability import check_mesh, equivalent_diameter
     from ..fabrication.printers import get_printer
     from ..io import csv_text, read_parts
+    from ..solid import mesh_size_problem
     from .paths import mesh_inputs
     from .progress import progress_bar
 
@@ -49,6 +50,10 @@ def check(files, printer_spec, as_csv):
     for path in progress_bar(total=len(files), desc="check", unit="file")(files):
         try:
             parts = read_parts(path)  # ValueError -> exit 2; one file in memory at a time
+            for part in parts:  # a file in another unit than mm: refused before any part is checked
+                problem = mesh_size_problem(part.vertices, "the mesh" if len(parts) == 1 else f"part {part.name}")
+                if problem is not None:
+                    raise ValueError(f"{path}: {problem}")
             for part in parts:
                 small = printer.size_problem(equivalent_diameter(part.vertices, part.faces))
                 if small is not None:  # before the slower tests, so that it is seen at once

@@ -117,13 +117,23 @@ def grain_paths(inputs: Iterable[str | Path]) -> list[Path]:
 def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.ndarray]:
     """Vertices and faces of a mesh file, vertices merged by position (as any reader sees it).
 
-    ``check=False`` skips :func:`enclosure_problems` (for a caller that checks the mesh itself).
+    With ``check`` the file is read and checked as ``analyse`` reads and flags it
+    (:func:`grainforge.analysis.measure.solid_grain`): a file with a cavity, several or
+    overlapping bodies, or a body that is open, inverted or not a solid (self-intersecting)
+    is refused.  ``check=False`` only reads it (for a caller that checks the mesh itself);
+    coordinates too far from the origin for float32 are refused either way
+    (:func:`grainforge.io.read_mesh`).
 
     Raises
     ------
     ValueError
-        If the file is unreadable or (with ``check``) the mesh is not a valid solid.
+        If the file is unreadable or (with ``check``) the mesh is not one valid solid; one line
+        naming the file.
     """
+    if check:
+        from ..analysis.measure import solid_grain
+
+        return solid_grain(path)  # sizes: checked in metres by the caller (dem --unit)
     from ..io import read_mesh
     from ..solid import unique_rows
 
@@ -131,18 +141,15 @@ def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.
     # merge by exact position (sorted by x, y, z, as np.unique(axis=0) would, several times faster)
     v, inv = unique_rows(np.ascontiguousarray(mesh.vertices, dtype=np.float64))
     f = inv[np.asarray(mesh.faces, dtype=np.int64)]
-    if check:
-        problems = enclosure_problems(v, f)
-        if problems:
-            raise ValueError(f"{path}: not a closed solid ({'; '.join(problems)})")
     return v, f
 
 
 def load_template(path: str | Path, name: str, kwargs: dict):
-    """Read ``path`` and :func:`~grainforge.dem.template.prepare` it as ``name`` (mesh dropped)."""
+    """Read and check ``path`` (:func:`read_grain`) and :func:`~grainforge.dem.template.prepare` it as
+    ``name`` (mesh dropped)."""
     from .template import prepare
 
-    v, f = read_grain(path, check=False)  # prepare checks it, naming the file
+    v, f = read_grain(path)
     return prepare(v, f, name, source=str(path), **kwargs).without_mesh()
 
 

@@ -192,7 +192,8 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     v, mp = _in_metres(v, f, unit)
     if size_range is not None and not size_range[0] <= mp.equivalent_diameter <= size_range[1]:
         raise ValueError(f"{source or name}: equivalent diameter {mp.equivalent_diameter:.3g} m is outside "
-                         f"{size_range[0]:g}–{size_range[1]:g} m (at {unit:g} m per file unit)")
+                         f"{size_range[0]:g}–{size_range[1]:g} m (at {unit:g} m per file unit): rescale the mesh or "
+                         "give its unit (metres per file unit)")
     # the grain moves to its centroid; volume, inertia about the centroid and axes do not change
     v = v - mp.centroid
     mp = dataclasses.replace(mp, centroid=np.zeros(3))

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 
 from ..params import ParameterError
+from ..units import MESH_SIZE_RANGE_MM, SIZE_RANGE_MM
 
-__all__ = ["SIZE_DEFINITIONS", "check_size", "scale_factor", "to_size"]
+__all__ = ["SIZE_DEFINITIONS", "MESH_SIZE_RANGE_MM", "SIZE_RANGE_MM", "check_size", "scale_factor", "to_size"]
 
 #: definition -> description
 SIZE_DEFINITIONS = {
@@ -26,9 +27,8 @@ def _current_size(grain, definition: str) -> float:
     return I if definition == "sieve" else L
 
 
-#: physical sizes a grain may be given, in mm: 1 µm to 10 m (beyond them float32 files lose the shape or
-#: the slicer's units overflow).
-SIZE_RANGE_MM = (1e-3, 1e4)
+#: (SIZE_RANGE_MM: the physical sizes a grain may be given, 1 µm to 10 m; MESH_SIZE_RANGE_MM: the sizes a mesh
+#: file is read at; both defined in grainforge.units)
 MIN_SIZE_MM, MAX_SIZE_MM = SIZE_RANGE_MM
 
 

@@ -289,6 +289,12 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
         raise ValueError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
     if task["size"] is not None:
         v = v * scale_factor(part, task["size"], task["size_definition"])
+    else:  # printed as it is, in mm
+        from ..solid import mesh_size_problem
+
+        problem = mesh_size_problem(v)
+        if problem is not None:
+            raise ValueError(f"{path}: {problem} (or give tray --size)")
     return path.stem, str(path), v, f, None
 
 

@@ -192,8 +192,10 @@ def read_mesh(path: str | os.PathLike):
     Raises
     ------
     ValueError
-        If the file is missing, unreadable, corrupt, holds no triangles or
-        non-finite coordinates; the message says what is wrong with the file.
+        If the file is missing, unreadable, corrupt, holds no triangles,
+        non-finite coordinates or coordinates so far from the origin that float32
+        loses the shape (:func:`grainforge.solid.precision_problem`); the message
+        says what is wrong with the file.
     """
     import trimesh
 
@@ -233,7 +235,17 @@ def read_mesh(path: str | os.PathLike):
         raise ValueError(f"{path}: holds no triangles")
     if not np.isfinite(np.asarray(loaded.vertices)).all():
         raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
+    _check_precision(path, loaded.vertices)
     return loaded
+
+
+def _check_precision(path: Path, vertices, what: str = "the mesh") -> None:
+    """Refuse coordinates so far from the origin that float32 loses the shape (:func:`grainforge.solid.precision_problem`)."""
+    from ..solid import precision_problem
+
+    problem = precision_problem(vertices, what)
+    if problem is not None:
+        raise ValueError(f"{path}: {problem}")
 
 
 def read_parts(path: str | os.PathLike) -> list:
@@ -247,14 +259,18 @@ def read_parts(path: str | os.PathLike) -> list:
     Raises
     ------
     ValueError
-        If the file is missing, unreadable or holds no triangles.
+        If the file is missing, unreadable, holds no triangles or a part too far
+        from the origin for float32 (as :func:`read_mesh`).
     """
     from .threemf import Part, read_3mf_file
 
     path = Path(path)
     if path.suffix.lower() == ".3mf":
-        return read_3mf_file(path)
-    mesh = read_mesh(path)
+        parts = read_3mf_file(path)
+        for part in parts:
+            _check_precision(path, part.vertices, f"part {part.name}")
+        return parts
+    mesh = read_mesh(path)  # (checks the precision)
     # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
     from ..solid import unique_rows
 
