@@ -12,7 +12,13 @@ a level set needs:
 - the engines: Yade's level-set contact geometry (``Ig2_LevelSet_LevelSet_ScGeom``,
   ``Ig2_Wall_LevelSet_ScGeom``) under the same contact law as the clumps
   (``Ip2_FrictMat_FrictMat_FrictPhys`` and ``Law2_ScGeom_FrictPhys_CundallStrack``:
-  a linear spring and Coulomb friction, Yade's local damping);
+  a linear spring and Coulomb friction, Yade's local damping), with the law's
+  ``sphericalBodies=False``: each contact force acts at its contact point.  Yade's
+  default (``True``) takes every branch vector as a radius along the contact
+  normal, exact for spheres only: a level set's normal forces then have no
+  moment, and a cube on a plane tips over at a tilt of 1–2° instead of sliding
+  at atan μ (``benchmarks/levelset_block.py``; Yade 2023.02a honours the flag
+  in periodic cells too, across the cell's boundary);
 - the rough base: the same spheres at the same places (the same random
   draws), each a fixed level-set sphere (Yade 2023 has no sphere–level-set
   contact);
@@ -52,14 +58,18 @@ LEVELSET_PART = r'''
 
 # ---- level-set grains: Yade's level-set contact geometry under the same contact law ------
 def engines(extra_geoms=(), extra_bounds=()):
-    """The clumps' contact law (linear spring + Coulomb friction, Cundall-Strack) on level-set contacts."""
+    """The clumps' contact law (linear spring + Coulomb friction, Cundall-Strack) on level-set contacts.
+
+    Torques from the contact point (sphericalBodies=False): Yade's default takes the branch vector as a
+    radius along the normal, right for spheres only; on a level set the normal force would have no moment.
+    """
     return [
         ForceResetter(),
         InsertionSortCollider([Bo1_LevelSet_Aabb(), Bo1_Wall_Aabb(), Bo1_Sphere_Aabb()]),
         InteractionLoop(
             [Ig2_LevelSet_LevelSet_ScGeom(), Ig2_Wall_LevelSet_ScGeom()],
             [Ip2_FrictMat_FrictMat_FrictPhys()],
-            [Law2_ScGeom_FrictPhys_CundallStrack()],
+            [Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)],
         ),
         NewtonIntegrator(gravity=(0, 0, -SETTINGS["gravity"]), damping=SETTINGS["damping"], label="newton"),
     ]
@@ -116,14 +126,11 @@ geom = _LevelSetWalls()
 def contact_spheres(ids):
     """[x, y, z, r, clump id] of every surface node of the level-set grains ids (r: half a grid spacing)."""
     out = []
-    for i in ids:
-        for m in O.bodies[i].shape.members:
-            b = O.bodies[m]
-            if b.mask != 0:
-                r = 0.5 * b.shape.lsGrid.spacing
-                for x in b.shape.surfNodes:
-                    p = b.state.pos + b.state.ori * x
-                    out.append([p[0], p[1], p[2], r, i])
+    for i, b in contact_members(ids):
+        r = 0.5 * b.shape.lsGrid.spacing
+        for x in b.shape.surfNodes:
+            p = b.state.pos + b.state.ori * x
+            out.append([p[0], p[1], p[2], r, i])
     return out
 '''
 
@@ -141,6 +148,8 @@ def scene_text(test: str, shape: str = "clump") -> str:
     True
     >>> text = scene_text("tilt", "levelset")
     >>> text.index("Ig2_LevelSet_LevelSet_ScGeom") < text.index("def tilt():")
+    True
+    >>> "Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)" in text  # torques from the contact points
     True
     """
     from .scenes import COMMON, REPOSE, TILT

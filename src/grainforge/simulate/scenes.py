@@ -95,18 +95,6 @@ def unbound_mass_carriers(ids):
                 O.bodies[m].bounded = False
 
 
-def contact_spheres(ids):
-    """[x, y, z, r, clump id] of every contact sphere (mask != 0) of clumps ids."""
-    out = []
-    for i in ids:
-        for m in O.bodies[i].shape.members:
-            b = O.bodies[m]
-            if b.mask != 0:
-                p = b.state.pos
-                out.append([p[0], p[1], p[2], b.shape.radius, i])
-    return out
-
-
 def settle(ids, threshold, max_time, phase, f0, f1, min_time=0.0):
     """Run until the grains' kinetic energy falls below threshold (J) or max_time (s) passes."""
     t0 = O.time

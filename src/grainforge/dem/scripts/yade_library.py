@@ -46,17 +46,27 @@ def orientation(k):
     return Quaternion(w, x, y, z)
 
 
+def contact_members(ids):
+    """(clump id, body) of every contact body (mask != 0) of clumps ids; the mass carriers have mask 0."""
+    for i in ids:
+        for m in O.bodies[i].shape.members:
+            if O.bodies[m].mask != 0:
+                yield i, O.bodies[m]
+
+
+def contact_spheres(ids):
+    """[x, y, z, r, clump id] of every contact sphere of clumps ids."""
+    return [[b.state.pos[0], b.state.pos[1], b.state.pos[2], b.shape.radius, i] for i, b in contact_members(ids)]
+
+
 def placed_spheres(ids):
     """[x, y, z, clump id, ax, ay, az, angle] of every contact body of clumps ids as Yade holds it: its
     position and its own turn (axis, radians): the record of what was placed."""
     out = []
-    for i in ids:
-        for m in O.bodies[i].shape.members:
-            b = O.bodies[m]
-            if b.mask != 0:
-                p = b.state.pos
-                axis, angle = b.state.ori.toAxisAngle()
-                out.append([p[0], p[1], p[2], i, axis[0], axis[1], axis[2], angle])
+    for i, b in contact_members(ids):
+        p = b.state.pos
+        axis, angle = b.state.ori.toAxisAngle()
+        out.append([p[0], p[1], p[2], i, axis[0], axis[1], axis[2], angle])
     return out
 
 
@@ -159,10 +169,12 @@ def contact_engines():
                 [Ip2_PolyhedraMat_PolyhedraMat_PolyhedraPhys()],
                 [Law2_PolyhedraGeom_PolyhedraPhys_Volumetric()])
     if shape == "levelset":
+        # torques from the contact point: the default (sphericalBodies) takes each branch vector as a
+        # radius along the normal, so a level set's normal forces would have no moment
         return ([Bo1_LevelSet_Aabb(), Bo1_Wall_Aabb(), Bo1_Sphere_Aabb()],
                 [Ig2_LevelSet_LevelSet_ScGeom(), Ig2_Wall_LevelSet_ScGeom()],
                 [Ip2_FrictMat_FrictMat_FrictPhys()],
-                [Law2_ScGeom_FrictPhys_CundallStrack()])
+                [Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)])
     return ([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()],
             [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
             [Ip2_FrictMat_FrictMat_FrictPhys()],
