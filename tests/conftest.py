@@ -47,3 +47,17 @@ def angular_grains(tmp_path_factory):
                                    "--out", str(out)])
     assert res.exit_code == 0, res.output
     return out
+
+
+def require_engine(executable: str, package: str = "yade python3-yade liggghts lammps openmpi-bin") -> str:
+    """The path of a DEM engine (or mpirun) the test needs: skipped with the reason where it is not
+    installed, a failure where GRAINFORGE_REQUIRE_ENGINES=1 (CI: a missing engine is a failure)."""
+    import shutil
+
+    path = shutil.which(executable)
+    if path is None:
+        reason = f"{executable} not installed (apt-get install {package})"
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip(reason)
+    return path

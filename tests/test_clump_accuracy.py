@@ -5,12 +5,12 @@ from __future__ import annotations
 
 import csv
 import json
-import os
 
 import numpy as np
 import pytest
 import trimesh
 from click.testing import CliRunner
+from conftest import require_engine
 
 import grainforge
 from grainforge.cli.main import cli
@@ -232,13 +232,7 @@ def test_calibrate_prints_a_command_with_the_target():
 
 @pytest.mark.slow
 def test_quick_simulate_with_a_target_in_yade(grain_files, tmp_path):
-    import shutil
-
-    if shutil.which("yade") is None:
-        reason = "yade not installed (apt-get install yade python3-yade)"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
+    require_engine("yade")
     out = tmp_path / "tilt"
     r = CliRunner().invoke(cli, ["simulate", "tilt", str(grain_files), "--out", str(out), "--quick",
                                  "--clump-accuracy", "0.6"])

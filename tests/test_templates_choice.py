@@ -11,13 +11,13 @@ twin population: the 500 grains of ``grainforge fit examples/sand-atlas/ottawa-7
 """
 
 import csv
-import os
 import re
 import shutil
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import require_engine
 
 from grainforge.cli.main import cli
 from grainforge.dem.representative import (
@@ -219,11 +219,7 @@ def test_simulate_chooses_from_a_recipe_pool_and_from_files(population):
 
 
 def require_yade():
-    if shutil.which("yade") is None:
-        reason = "yade not installed (apt-get install yade python3-yade)"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
+    require_engine("yade")
 
 
 @pytest.mark.slow  # a quick Yade run
