@@ -228,6 +228,14 @@ def test_tiff_stack_folder_and_raw_read_the_same(scene, saved):
     code, out = _run(["scan", saved / "stack.tif", "--atlas-csv", saved / "t.csv"], saved)
     assert code == 0, out
     assert "voxel size from" in out and read_sand(saved / "t.csv").voxel_size == pytest.approx(H_UM)
+    # --labels-out as a TIFF keeps the voxel size: it can be scanned again as a labelled image
+    tifffile.imwrite(saved / "binary.tif", (vol > 0).astype(np.uint8), imagej=True, resolution=(1 / H_UM, 1 / H_UM),
+                     metadata={"spacing": H_UM, "unit": "um", "axes": "ZYX"})
+    code, out = _run(["scan", saved / "binary.tif", "--segment", "--labels-out", saved / "seg.tif"], saved)
+    assert code == 0, out
+    again = open_volume(saved / "seg.tif")
+    assert again.voxel_size_um == pytest.approx(H_UM) and again.shape == vol.shape
+    assert compare_labels(vol, again.read(0, vol.shape[0]))["found"] == len(label_boxes(Volume.from_array(vol)))
 
 
 def _bad_inputs(d: Path, vol: np.ndarray):

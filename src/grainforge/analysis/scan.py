@@ -67,10 +67,12 @@ MEASURE_BYTES_PER_CELL = 90.0
 #: reconstruction's float64 copies, the markers and labels; measured with tracemalloc: 55-58 bytes at 100³-160³)
 SEGMENT_BYTES_PER_VOXEL = 64.0
 #: :func:`segment`'s default marker distance, a fraction of the typical grain diameter (:func:`typical_diameter`)
-MARKER_DISTANCE = 0.3
-#: :func:`segment`'s default marker depth, in voxels: a maximum of the distance map must rise this much above the
-#: saddle that joins it to a higher one to seed a grain of its own
-MARKER_DEPTH = 1.0
+MARKER_DISTANCE = 0.4
+#: :func:`segment`'s default marker depth, a fraction of the typical grain diameter: a maximum of the distance map
+#: must rise this much above the saddle that joins it to a higher one to seed a grain of its own (2 voxels for
+#: grains 24 voxels across: exact recovery of examples/scan/make_scan.py's 64 CRI grains, where 1 voxel
+#: splits off 6 fragments of a few voxels at the contacts and a distance of 0.5 merges 2 pairs)
+MARKER_DEPTH = 0.08
 
 
 @dataclass(frozen=True)
@@ -345,9 +347,10 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
 
     1. ``D`` = the Euclidean distance of each grain voxel to the void
        (:func:`scipy.ndimage.distance_transform_edt`).
-    2. Markers: the maxima of ``D`` that rise at least ``marker_depth`` voxels above the saddle joining them to
-       a higher one (h-maxima, :func:`skimage.morphology.h_maxima`), at least ``marker_distance`` × the typical
-       grain diameter (:func:`typical_diameter`) apart (:func:`skimage.feature.peak_local_max`).
+    2. Markers: the maxima of ``D`` that rise at least ``marker_depth`` × the typical grain diameter ``d``
+       (:func:`typical_diameter`) above the saddle joining them to a higher one (h-maxima,
+       :func:`skimage.morphology.h_maxima`), at least ``marker_distance`` × ``d`` apart
+       (:func:`skimage.feature.peak_local_max`).
     3. :func:`skimage.segmentation.watershed` of ``−D`` from the markers, inside the grains.  A connected piece
        of the image that got no marker becomes a grain of its own.
 
@@ -359,14 +362,15 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
         Least distance between two grains' markers, as a fraction of the typical diameter (> 0).  Larger
         merges more (an elongated grain keeps one marker), smaller splits more.
     marker_depth : float
-        Voxels (≥ 0); larger ignores the shallow maxima of rough surfaces.
+        Fraction of the typical diameter (≥ 0); larger ignores more of the shallow maxima that rough surfaces
+        and the necks between grains make (each of which would split a fragment off a grain).
 
     Returns
     -------
     labels : (Z, Y, X) int32 ndarray
         1 … n, 0 the void.
     info : dict
-        ``typical_diameter`` (voxels), ``min_distance`` (voxels), ``markers``, ``grains``.
+        ``typical_diameter``, ``min_distance`` and ``depth`` (voxels), ``markers``, ``grains``.
 
     Examples
     --------
@@ -386,15 +390,16 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
     if not (math.isfinite(marker_distance) and marker_distance > 0):
         raise ValueError(f"marker distance must be a positive fraction of the typical grain size, got {marker_distance!r}")
     if not (math.isfinite(marker_depth) and marker_depth >= 0):
-        raise ValueError(f"marker depth must be a number of voxels >= 0, got {marker_depth!r}")
+        raise ValueError(f"marker depth must be a fraction of the typical grain size >= 0, got {marker_depth!r}")
     b = np.asarray(binary) != 0
     if not b.any():
         raise ValueError("the binary image has no grain voxel")
     d = ndimage.distance_transform_edt(b).astype(np.float32)
     typical = typical_diameter(d, b)
     md = max(1, int(round(marker_distance * typical)))
-    if marker_depth > 0:
-        peaks_mask = h_maxima(d.astype(np.float64), marker_depth).astype(bool)
+    depth = marker_depth * typical
+    if depth > 0:
+        peaks_mask = h_maxima(d.astype(np.float64), depth).astype(bool)
         cand = np.where(peaks_mask, d, 0.0).astype(np.float32)
         del peaks_mask
     else:
@@ -411,17 +416,19 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
         extra, n_extra = ndimage.label(left)
         labels[left] = extra[left] + len(peaks)
     n = int(labels.max())
-    return labels, {"typical_diameter": typical, "min_distance": md, "markers": int(len(peaks)), "grains": n}
+    return labels, {"typical_diameter": typical, "min_distance": md, "depth": depth, "markers": int(len(peaks)),
+                    "grains": n}
 
 
-def compare_labels(truth: np.ndarray, found: np.ndarray, *, share: float = 0.5) -> dict[str, int]:
+def compare_labels(truth: np.ndarray, found: np.ndarray, *, share: float = 0.5, min_voxels: int = 0) -> dict[str, int]:
     """How a segmentation recovers known grains, by their overlaps.
 
     A true grain is **found** when one segmented label holds more than ``share`` of its voxels and that label
     is more than ``share`` this grain; **split** when no label holds ``share`` of it but several hold part;
     **merged** when the label that holds most of it is mostly made of other grains too (it holds more than
-    ``share`` of two or more true grains).  ``spurious`` counts segmented labels that hold no true grain's
-    majority and are not mostly one true grain.
+    ``share`` of two or more true grains).  ``spurious`` counts segmented labels of at least ``min_voxels``
+    voxels that hold no true grain's majority and are not mostly one true grain (smaller ones are the
+    ``small`` labels :func:`measure_labels` counts apart).
 
     Examples
     --------
@@ -465,7 +472,8 @@ def compare_labels(truth: np.ndarray, found: np.ndarray, *, share: float = 0.5) 
     for (a, c), k in zip(pairs.T, overlap):
         if k > share * f_size[c]:
             majority[int(c)] = int(a)
-    out["spurious"] = int(sum(1 for c in found_ids if int(c) not in majority and int(c) not in holds))
+    out["spurious"] = int(sum(1 for c in found_ids if int(c) not in majority and int(c) not in holds
+                              and f_size[c] >= min_voxels))
     return out
 
 

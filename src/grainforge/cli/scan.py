@@ -26,8 +26,9 @@ TABLE = (
     ("elongation", "a_elong", "{:.3f}"), ("opening_fraction", "a_open", "{:.4f}"),
     ("centroid_x", "x_um", "{:.5g}"), ("centroid_y", "y_um", "{:.5g}"), ("centroid_z", "z_um", "{:.5g}"),
 )
-#: seconds per cell of a measured grain's box, and per grain (one core; benchmarks/bench_scan.py)
-SECONDS_PER_CELL, SECONDS_PER_GRAIN = 1.5e-6, 0.01
+#: seconds per cell of a measured grain's box, and per grain (one core: 0.085 s for a grain 45 voxels across in
+#: a box of 57³; benchmarks/bench_scan.py)
+SECONDS_PER_CELL, SECONDS_PER_GRAIN = 4.5e-7, 0.01
 #: mesh file of a grain
 MESH_NAME = "grain-{:06d}.stl"
 
@@ -135,10 +136,11 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
                    "first.")
 @click.option("--marker-distance", type=click.FloatRange(min=0, min_open=True), default=None,
               help="With --segment: least distance between two grains' markers, as a fraction of the typical "
-                   "grain diameter; larger merges more, smaller splits more.  [default: 0.3]")
+                   "grain diameter; larger merges more, smaller splits more.  [default: 0.4]")
 @click.option("--marker-depth", type=click.FloatRange(min=0), default=None,
-              help="With --segment: voxels a distance-map maximum must rise above its saddle to seed a grain.  "
-                   "[default: 1]")
+              help="With --segment: how far a distance-map maximum must rise above its saddle to seed a grain, "
+                   "as a fraction of the typical grain diameter; larger ignores more shallow maxima.  "
+                   "[default: 0.08]")
 @click.option("--labels-out", type=OutPath(dir_okay=False), default=None,
               help="With --segment: write the labels (.npy, .tif or .tiff).")
 @click.option("--meshes", "meshes", type=OutPath(file_okay=False), default=None,
@@ -231,8 +233,8 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
             labels = labels.astype(np.uint16)
         volume = Volume.from_array(labels, str(image))
         click.echo(f"segmented: {seg_info['grains']} grain(s) from {seg_info['markers']} marker(s) (typical "
-                   f"diameter {seg_info['typical_diameter']:.3g} voxels, markers at least {seg_info['min_distance']} "
-                   "voxels apart)", err=True)
+                   f"diameter {seg_info['typical_diameter']:.3g} voxels; markers at least {seg_info['min_distance']} "
+                   f"voxels apart and {seg_info['depth']:.2g} voxels deep)", err=True)
     Z = volume.shape[0]
     slabs = progress_bar(total=-(-Z // sc._slab_size(volume)), desc="boxes", unit="slab")
     boxes = sc.label_boxes(volume, progress=slabs)

@@ -329,20 +329,19 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None) -
         raise ValueError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
     tifffile = tifffile_module() if suffix != ".npy" else None
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}", dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            if suffix == ".npy":
-                np.save(fh, labels)
-            else:
-                if not voxel_size_um:
-                    tifffile.imwrite(fh, labels)
-                elif labels.dtype in (np.uint8, np.uint16):  # ImageJ's own types: its metadata, in µm
-                    tifffile.imwrite(fh, labels, imagej=True, resolution=(1.0 / voxel_size_um, 1.0 / voxel_size_um),
-                                     metadata={"spacing": voxel_size_um, "unit": "um", "axes": "ZYX"})
-                else:  # the resolution tags, per centimetre
-                    tifffile.imwrite(fh, labels, resolution=(1e4 / voxel_size_um, 1e4 / voxel_size_um),
-                                     resolutionunit="CENTIMETER")
+        if suffix == ".npy":
+            np.save(tmp, labels)
+        elif not voxel_size_um:
+            tifffile.imwrite(tmp, labels)
+        elif labels.dtype in (np.uint8, np.uint16):  # ImageJ's own types: its metadata, in µm
+            tifffile.imwrite(tmp, labels, imagej=True, resolution=(1.0 / voxel_size_um, 1.0 / voxel_size_um),
+                             metadata={"spacing": voxel_size_um, "unit": "um", "axes": "ZYX"})
+        else:  # the resolution tags, per centimetre
+            tifffile.imwrite(tmp, labels, resolution=(1e4 / voxel_size_um, 1e4 / voxel_size_um),
+                             resolutionunit="CENTIMETER")
         os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
