@@ -298,3 +298,14 @@ def test_existing_outputs_need_overwrite(saved):
     code, out = _run(["scan", saved / "labels.npy", "--voxel-size-um", H_UM, "--atlas-csv", saved / "sand.csv",
                       "--overwrite"], saved)
     assert code == 0 and math.isfinite(read_sand(saved / "sand.csv").voxel_size)
+
+
+def test_tiff_without_tifffile_says_how_to_install(saved, monkeypatch):
+    import sys
+
+    (saved / "x.tif").write_bytes(b"II*\x00" + bytes(16))
+    monkeypatch.setitem(sys.modules, "tifffile", None)  # import tifffile now raises ImportError
+    result = CliRunner().invoke(cli, ["scan", str(saved / "x.tif"), "--voxel-size-um", "10"])
+    err = result.output.strip()
+    assert result.exit_code == 2 and len(err.splitlines()) == 1, err
+    assert "pip install 'grainforge[scan]'" in err

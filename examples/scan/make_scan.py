@@ -1,6 +1,6 @@
 """Make a small synthetic μCT scan to try ``grainforge scan`` on: a labelled 3D TIFF of packed CRI grains.
 
-    python examples/scan/make_scan.py out/scan            # labels.tif (and binary.tif), 10 µm voxels
+    python examples/scan/make_scan.py --out out/scan      # labels.tif (and binary.tif), 10 µm voxels
 
 64 CRI grains, each with its own irregularity, roughness and aspect (so that a fit has spread to match), in a
 random orientation, are voxelised as ``grainforge.analysis.atlas.voxel_image`` voxelises a grain (16 to 32
@@ -13,7 +13,7 @@ made by grainforge itself: no real scan is in this repository (docs/guide/scan.m
 
 from __future__ import annotations
 
-import sys
+import argparse
 from pathlib import Path
 
 import numpy as np
@@ -84,4 +84,6 @@ def main(out: Path) -> None:
 
 
 if __name__ == "__main__":
-    main(Path(sys.argv[1] if len(sys.argv) > 1 else "out/scan"))
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--out", type=Path, default=Path("out/scan"), help="folder of labels.tif and binary.tif")
+    main(ap.parse_args().out)

@@ -134,13 +134,12 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
 @click.option("--segment", is_flag=True,
               help="IMAGE is binary (non-zero is grain): split touching grains by a distance-transform watershed "
                    "first.")
-@click.option("--marker-distance", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--marker-distance", type=click.FloatRange(min=0, min_open=True), default=None, show_default="0.4",
               help="With --segment: least distance between two grains' markers, as a fraction of the typical "
-                   "grain diameter; larger merges more, smaller splits more.  [default: 0.4]")
-@click.option("--marker-depth", type=click.FloatRange(min=0), default=None,
+                   "grain diameter; larger merges more, smaller splits more.")
+@click.option("--marker-depth", type=click.FloatRange(min=0), default=None, show_default="0.08",
               help="With --segment: how far a distance-map maximum must rise above its saddle to seed a grain, "
-                   "as a fraction of the typical grain diameter; larger ignores more shallow maxima.  "
-                   "[default: 0.08]")
+                   "as a fraction of the typical grain diameter; larger ignores more shallow maxima.")
 @click.option("--labels-out", type=OutPath(dir_okay=False), default=None,
               help="With --segment: write the labels (.npy, .tif or .tiff).")
 @click.option("--meshes", "meshes", type=OutPath(file_okay=False), default=None,
