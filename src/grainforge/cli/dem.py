@@ -145,9 +145,12 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
     if clump_accuracy is None and placed and min(placed) < spheres:
         click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
                    "stops when another sphere adds no coverage", err=True)
-    written = write_deck(engine, templates, out, overwrite=overwrite)
-    if chosen is not None:
-        written.append(_write_templates_csv(out, chosen, unit))
+    from .interrupts import signals_held
+
+    with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
+        written = write_deck(engine, templates, out, overwrite=overwrite)
+        if chosen is not None:
+            written.append(_write_templates_csv(out, chosen, unit))
     if clump_accuracy is None:
         click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
         return

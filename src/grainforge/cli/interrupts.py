@@ -23,7 +23,12 @@ import threading
 from collections.abc import Iterable, Iterator
 from contextlib import contextmanager
 
-__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate"]
+__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "STARTUP_MODULES"]
+
+#: modules every working command needs, loaded by ``cli.main`` at start-up, while a signal still ends the
+#: process at once (nothing written, no process started): trimesh swallows a ``KeyboardInterrupt`` raised
+#: while it loads, and it is the longest import (a second or more on a busy machine)
+STARTUP_MODULES = ("numpy", "scipy.spatial", "trimesh")
 
 #: the signals a command stops on, with the line it prints
 SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}

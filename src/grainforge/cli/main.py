@@ -6,52 +6,60 @@ ends as one line on stderr and exit code 2; no traceback.
 
 from __future__ import annotations
 
+import atexit
 import os
 import signal
 import sys
 import threading
+import time
 
+from .interrupts import SIGNALS, _exit_now  # the standard library only: quick
 
-def _interrupted_while_starting(signum, frame):  # pragma: no cover - exercised by a real signal
-    """Ctrl-C while the command line loads its modules: nothing is written yet, so leave at once."""
-    try:
-        sys.stderr.write("Interrupted.\n")
-        sys.stderr.flush()
-    finally:
-        os._exit(130)
+# A signal is honoured at every moment of a command's life, one mechanism for every command:
+#
+# 1. start-up (this module's imports, click's parsing, the heavy modules every working command needs:
+#    ``interrupts.STARTUP_MODULES``): nothing is written and no process started yet, so SIGINT or SIGTERM
+#    ends the process at once with its line and code (``_exit_now``), raising nothing into the code
+#    that imports (trimesh swallows a KeyboardInterrupt raised while it loads);
+# 2. the command (``GrainforgeGroup.main``): the signal raises ``KeyboardInterrupt`` or ``Terminated`` in the
+#    main thread, so every ``finally`` cleans up (staging folders, temp files, pools, engine processes); a
+#    watcher sends the signal again while its exception seems lost (swallowed by a library, or raised inside
+#    a finalizer) and ends the process after ``SIGNAL_GRACE`` whatever happens;
+# 3. after the command (the outputs are in place or removed): a signal is recorded, and the process leaves
+#    from an exit hook the moment the interpreter is done, with the signal's line and code if one came
+#    (``_at_exit``), so none is lost during the interpreter's (slow) teardown.
+#
+# An inherited *ignored* SIGINT stays ignored (the POSIX convention for background jobs), so does an
+# ignored SIGTERM.  A multiprocessing worker imports the program's main module too (as ``__mp_main__``): it
+# keeps the default handlers, or a worker stopped by its owner would print the owner's line.
 
-
-# Loading click and the commands (NumPy, SciPy, ...) takes a second or two: a Ctrl-C meanwhile ends
-# the command with the usual line and code instead of an import traceback. (An inherited *ignored*
-# SIGINT stays ignored, the POSIX convention for background jobs.)
-# A multiprocessing worker imports the program's main module too (as ``__mp_main__``): it must keep
-# the default handlers, or a worker stopped by its owner would print the owner's line.
 _WORKER = "__mp_main__" in sys.modules
-_STARTING = not _WORKER and threading.current_thread() is threading.main_thread() \
-    and signal.getsignal(signal.SIGINT) is signal.default_int_handler
-if _STARTING:
-    signal.signal(signal.SIGINT, _interrupted_while_starting)
 
 
-def _terminated_while_starting(signum, frame):  # pragma: no cover - exercised by a real signal
-    """SIGTERM while the command line loads its modules: the usual line and code, as later."""
-    try:
-        sys.stderr.write("Terminated.\n")
-        sys.stderr.flush()
-    finally:
-        os._exit(128 + signal.SIGTERM)
+def _usual(signum: int):
+    return signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
 
 
-_TERM_STARTING = not _WORKER and threading.current_thread() is threading.main_thread() \
-    and signal.getsignal(signal.SIGTERM) is signal.SIG_DFL
-if _TERM_STARTING:
-    signal.signal(signal.SIGTERM, _terminated_while_starting)
+def _owned() -> list[int]:
+    """The stop signals this process handles itself (not inherited ignored), outside a pool worker."""
+    if _WORKER or threading.current_thread() is not threading.main_thread():
+        return []
+    return [s for s in SIGNALS if signal.getsignal(s) in (_usual(s), _exit_now)]
+
+
+def _arm_starting() -> None:
+    for s in _owned():
+        signal.signal(s, _exit_now)
+
+
+# loading click and the commands takes a second on a busy machine
+_arm_starting()
 
 import click  # noqa: E402
 
 from .._version import __version__  # noqa: E402
 from ..params import ParameterError  # noqa: E402
-from .interrupts import _exit_now  # noqa: E402
+from .interrupts import STARTUP_MODULES, preload  # noqa: E402
 
 
 class Terminated(BaseException):
@@ -63,30 +71,124 @@ _SIGNAL_EXCEPTIONS = (Terminated, KeyboardInterrupt)
 
 
 #: seconds a command has, after SIGINT or SIGTERM, to clean up and leave by the usual path; past them it prints
-#: the signal's line and ends at once.  The exception a signal raises can be lost: raised inside a finalizer
-#: (Python then reports it and goes on) or inside a library's ``except BaseException`` (trimesh guards its
-#: optional imports so), the command would otherwise run on to its end.
+#: the signal's line and ends at once (a cleanup that hangs, a compiled extension that never returns).
 SIGNAL_GRACE = 15.0
+#: seconds the main thread may run on while the signal's exception seems lost before the signal is sent again.
+#: The exception can be lost: raised inside a finalizer (Python then reports it and goes on) or inside a
+#: library's ``except BaseException`` (trimesh guards its optional imports so); the command would otherwise
+#: run on to its end.  A finalizer that runs while the exception unwinds hides it for a moment, hence the wait.
+RESEND_AFTER = 0.4
+#: the signals that stopped the command, the first first (its handlers raise once; the watcher runs once)
 _LEAVING: list[int] = []
+#: the signal whose line was printed (the command has left its code by the signal's path)
+_SAID: list[int] = []
+#: signals that came after the command ended (recorded, answered as the process leaves)
+_LATE: list[int] = []
+#: the exit code of the command (set by ``main``, the console script)
+_CODE: list = []
+#: set by ``main``: this process is the console script (not click's test runner in another program)
+_CONSOLE: list[bool] = []
 
 
-def _leave_within_grace(signum: int) -> None:
+def _say(signum: int) -> int:
+    """Print the signal's line (once in the console script's life) and return its exit code."""
+    if not (_CONSOLE and _SAID):
+        _SAID.append(signum)
+        click.echo(SIGNALS[signum], err=True)
+    return 128 + _SAID[0] if _CONSOLE else 128 + signum
+
+
+def _carries_signal(exc) -> bool:
+    """Whether ``exc`` is a signal's exception, or was raised while one was handled (chained to it)."""
+    seen, todo = set(), [exc]
+    while todo:
+        e = todo.pop()
+        if e is None or id(e) in seen:
+            continue
+        if isinstance(e, _SIGNAL_EXCEPTIONS):
+            return True
+        seen.add(id(e))
+        todo += [e.__cause__, e.__context__]
+    return False
+
+
+def _unwinding(thread_id: int) -> bool:
+    """Whether thread ``thread_id`` is handling a signal's exception (cleaning up in an ``except`` or
+    ``finally``, or in a ``with`` block's exit)."""
+    exc = sys._current_exceptions().get(thread_id)
+    if isinstance(exc, tuple):  # Python 3.11: sys.exc_info()'s triple
+        exc = exc[1]
+    return _carries_signal(exc)
+
+
+def _watch(signum: int) -> None:
+    """After a signal: send it again to the main thread while its exception seems lost; past the grace, leave."""
+    main = threading.main_thread().ident
+    deadline = time.monotonic() + SIGNAL_GRACE
+    lost_since = None
+    while (now := time.monotonic()) < deadline:
+        time.sleep(0.1)
+        if _SAID or _LATE:  # the command has left its code: only the grace remains (in the console script)
+            if not _CONSOLE:
+                return
+            continue
+        if _unwinding(main):
+            lost_since = None
+        elif lost_since is None:
+            lost_since = now
+        elif now - lost_since >= RESEND_AFTER:
+            lost_since = None
+            signal.pthread_kill(main, signum)
+    _exit_now(signum, None)  # the signal's line, then exit 128 + signum
+
+
+def _leave_within_grace(signum: int) -> bool:
+    """Note the signal; False if the command is already cleaning up after one (let it finish)."""
     if _LEAVING:
-        return
+        return not _carries_signal(sys.exc_info()[1])
     _LEAVING.append(signum)
-    timer = threading.Timer(SIGNAL_GRACE, _exit_now, (signum, None))  # the signal's line, then exit 128 + signum
-    timer.daemon = True
-    timer.start()
+    threading.Thread(target=_watch, args=(signum,), name="grainforge-signal", daemon=True).start()
+    return True
 
 
 def _terminate(signum, frame):
-    _leave_within_grace(signum)
-    raise Terminated()
+    if _leave_within_grace(signum):
+        raise Terminated()
 
 
 def _interrupt(signum, frame):
-    _leave_within_grace(signum)
-    raise KeyboardInterrupt
+    if _leave_within_grace(signum):
+        raise KeyboardInterrupt
+
+
+#: the handler that raises each stop signal's exception during the command
+_RAISING = {signal.SIGINT: _interrupt, signal.SIGTERM: _terminate}
+
+
+def _late(signum, frame):  # pragma: no cover - exercised by a real signal
+    """A signal after the command ended: its outputs are in place (or removed); answered as the process leaves."""
+    _LATE.append(signum)
+
+
+def _at_exit() -> None:  # pragma: no cover - runs as the console script leaves
+    """The console script's last exit hook (registered first, so run last): leave now, with the code of the
+    signal that came while the command ended or the interpreter finished (threads, other exit hooks), if any;
+    the interpreter's teardown, during which a signal would be lost, is skipped."""
+    if threading.current_thread() is threading.main_thread():
+        signal.pthread_sigmask(signal.SIG_BLOCK, set(SIGNALS))
+    pending = (_LEAVING + _LATE)[:1]
+    if not _CODE and not pending:  # an unexpected error: Python reports it and leaves as usual
+        return
+    code = _CODE[0] if _CODE else 1
+    if pending and not _SAID:
+        code = _say(pending[0])
+    for stream in (sys.stdout, sys.stderr):
+        try:
+            stream.flush()
+        except Exception:  # a closed pipe: nothing more can be said
+            pass
+    if code is None or isinstance(code, int):
+        os._exit(code or 0)
 
 
 def _signal_in_finalizer(hook):
@@ -118,43 +220,41 @@ def _quiet_signal(hook):
     return excepthook
 
 
+def _will_work(args) -> bool:
+    """Whether the command line runs a command (not only help or the version)."""
+    words = [str(w) for w in (sys.argv[1:] if args is None else args)]
+    return bool(words) and not any(w in ("-h", "--help", "--version") for w in words)
+
+
 class GrainforgeGroup(click.Group):
     """A click group that reports errors as a single line."""
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
-        import signal
-        import threading
-
-        main_thread = threading.current_thread() is threading.main_thread()
-        previous = signal.signal(signal.SIGTERM, _terminate) if main_thread else None
-        # Ctrl-C: KeyboardInterrupt as usual, with the same grace (an inherited ignored SIGINT stays ignored)
-        own_int = main_thread and signal.getsignal(signal.SIGINT) is signal.default_int_handler
-        if own_int:
-            signal.signal(signal.SIGINT, _interrupt)
+        owned = _owned()
+        if owned and _will_work(args):
+            # still at start-up: a signal meanwhile ends the process at once (nothing to clean up yet)
+            preload(STARTUP_MODULES)
+        previous = {s: signal.getsignal(s) for s in owned}
+        for s in owned:
+            signal.signal(s, _RAISING[s])
         hook, sys.unraisablehook = sys.unraisablehook, _signal_in_finalizer(sys.unraisablehook)
         excepthook, sys.excepthook = sys.excepthook, _quiet_signal(sys.excepthook)
         try:
             rv = self._main(args, prog_name, complete_var, standalone_mode, **extra)
         finally:
+            for s in owned:  # the console script records a later signal; in-process, the usual handlers
+                signal.signal(s, _late if _CONSOLE else _usual(s) if previous[s] is _exit_now else previous[s])
             sys.unraisablehook, sys.excepthook = hook, excepthook
-            if own_int:
-                signal.signal(signal.SIGINT, signal.default_int_handler)
-            if main_thread:
-                signal.signal(signal.SIGTERM, previous)
         return rv
 
     def _main(self, args, prog_name, complete_var, standalone_mode, **extra):
-        import signal
-
         try:
             rv = super().main(args, prog_name, complete_var, standalone_mode=False, **extra)
         except Terminated:
-            click.echo("Terminated.", err=True)
-            sys.exit(128 + signal.SIGTERM)
+            sys.exit(_say(signal.SIGTERM))
         except click.exceptions.Abort as exc:
             if isinstance(exc.__cause__, KeyboardInterrupt):  # click turns Ctrl-C into Abort
-                click.echo("Interrupted.", err=True)
-                sys.exit(130)
+                sys.exit(_say(signal.SIGINT))
             click.echo("Aborted.", err=True)
             sys.exit(1)
         except click.ClickException as exc:
@@ -171,8 +271,7 @@ class GrainforgeGroup(click.Group):
             click.echo(f"Error: {memory_message(self._command_name(args), what)}", err=True)
             sys.exit(2)
         except KeyboardInterrupt:
-            click.echo("Interrupted.", err=True)
-            sys.exit(130)
+            sys.exit(_say(signal.SIGINT))
         if standalone_mode:
             sys.exit(rv if isinstance(rv, int) else 0)
         return rv
@@ -271,11 +370,23 @@ def _register():
 
 
 _register()
-if _STARTING and signal.getsignal(signal.SIGINT) is _interrupted_while_starting:
-    signal.signal(signal.SIGINT, signal.default_int_handler)  # from here on: KeyboardInterrupt, cleaned up
-if _TERM_STARTING and signal.getsignal(signal.SIGTERM) is _terminated_while_starting:
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # GrainforgeGroup.main raises Terminated from here on
+if os.path.basename(sys.argv[0]) != "grainforge":  # imported by another program (tests): its usual handlers
+    for _s in SIGNALS:
+        if signal.getsignal(_s) is _exit_now:
+            signal.signal(_s, _usual(_s))
 
 
 def main() -> None:  # console-script entry point
-    cli.main(prog_name="grainforge")
+    """Run the command line as the process: signals at every moment (see the top of this module)."""
+    _CONSOLE.append(True)
+    _arm_starting()
+    atexit.register(_at_exit)  # the first exit hook, so the last to run
+    try:
+        cli.main(prog_name="grainforge")
+    except SystemExit as exc:
+        _CODE.append(exc.code)
+        raise
+    except _SIGNAL_EXCEPTIONS as exc:  # raised as the command ended, before its handlers were switched
+        code = _say(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)  # (once)
+        _CODE.append(code)
+        raise SystemExit(code) from None

@@ -555,18 +555,23 @@ def run_liggghts(deck: str | os.PathLike, *, mpi: int | None = None,
     """Run the deck in ``deck`` (``liggghts -in in.run``, under ``mpirun -np mpi`` if given); its result.
 
     The deck's ``grainforge-progress`` lines go to ``progress(fraction, phase)``; LIGGGHTS's output to
-    ``deck/liggghts.log``.  An interrupt kills mpirun with every rank.
+    ``deck/liggghts.log``.  An interrupt kills mpirun with every rank, and removes its session folder
+    (:func:`grainforge.simulate.process.mpi_session_folder`).
 
     Raises
     ------
     EngineFailed
         If LIGGGHTS exits with an error or writes no final state.
     """
-    from .process import EngineFailed, run_engine_process
+    from contextlib import nullcontext
+
+    from .process import EngineFailed, mpi_session_folder, run_engine_process
 
     deck = Path(deck)
     cmd, env = engine_command(mpi)
-    rc = run_engine_process(cmd, deck, deck / "liggghts.log", env, progress, timeout=timeout)
+    # mpirun's session folder in one of this run's own, removed after the run (a killed mpirun leaves its own)
+    with mpi_session_folder() if mpi is not None else nullcontext({}) as session:
+        rc = run_engine_process(cmd, deck, deck / "liggghts.log", {**env, **session}, progress, timeout=timeout)
     needed = ("record.txt", "bodies-initial.txt", "bodies-final.txt", "spheres-final.txt")
     if rc != 0 or not all((deck / f).is_file() for f in needed):
         tail = [ln.strip() for ln in (deck / "liggghts.log").read_text(errors="replace").splitlines() if ln.strip()]

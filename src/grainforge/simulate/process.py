@@ -6,12 +6,13 @@ from __future__ import annotations
 import os
 import signal
 import subprocess
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
+from contextlib import contextmanager
 from pathlib import Path
 
 from ..workers import die_with_parent
 
-__all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable"]
+__all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder"]
 
 
 def find_executable(variable: str, name: str, missing: str) -> str:
@@ -109,3 +110,64 @@ def _kill(proc: subprocess.Popen) -> None:
 
     kill_process_tree(proc.pid)
     proc.wait()
+
+
+#: the name of a run's own temporary folder for mpirun, followed by the pid of the process that made it
+MPI_TMP_PREFIX = "grainforge-mpi-"
+
+
+@contextmanager
+def mpi_session_folder() -> Iterator[dict]:
+    """A temporary folder of one ``mpirun`` run for Open MPI's session folder; yields the environment that puts
+    it there, and removes the folder after the run, whatever happened.
+
+    ``mpirun`` keeps its session folder (Open MPI 4: ``ompi.HOST.UID/pid.N``, with the PMIx segments; 5:
+    ``prte.*``) under ``$TMPDIR`` or ``/tmp`` and removes it as it ends, but not when it is killed (an
+    interrupted run); here the folder lies in one of this run's own, removed after the kill.  The folders of a
+    run whose owner was killed (SIGKILL: nothing could clean up) are removed by the next run.
+
+    Examples
+    --------
+    >>> with mpi_session_folder() as env:
+    ...     folder = env["TMPDIR"]
+    ...     os.path.isdir(folder)
+    True
+    >>> os.path.exists(folder)
+    False
+    """
+    import tempfile
+
+    _remove_stale_mpi_folders()
+    folder = tempfile.mkdtemp(prefix=f"{MPI_TMP_PREFIX}{os.getpid()}-")
+    try:
+        # TMPDIR: Open MPI's and PMIx's default; the MCA settings name it for Open MPI 4 (ORTE) and 5 (PRRTE)
+        yield {"TMPDIR": folder, "OMPI_MCA_orte_tmpdir_base": folder, "PRTE_MCA_prte_tmpdir_base": folder}
+    finally:
+        _remove_folder(folder)
+
+
+def _remove_folder(folder: str) -> None:
+    import shutil
+
+    try:
+        shutil.rmtree(folder, ignore_errors=True)
+    finally:  # again if a signal stopped the first pass (the command ignores a second signal while cleaning up)
+        if os.path.lexists(folder):
+            shutil.rmtree(folder, ignore_errors=True)
+
+
+def _remove_stale_mpi_folders() -> None:
+    """Remove the mpirun folders (:func:`mpi_session_folder`) of processes that no longer run."""
+    import tempfile
+
+    base = Path(tempfile.gettempdir())
+    for folder in base.glob(f"{MPI_TMP_PREFIX}*-*"):
+        pid = folder.name[len(MPI_TMP_PREFIX):].split("-", 1)[0]
+        if not pid.isdigit() or int(pid) == os.getpid():
+            continue
+        try:
+            os.kill(int(pid), 0)
+        except ProcessLookupError:
+            _remove_folder(str(folder))
+        except OSError:  # another user's process: alive
+            continue

@@ -1,0 +1,409 @@
+"""Ctrl-C and SIGTERM at the edges of a run's life, for every command that writes files.
+
+The CLI contract (docs/cli-contract.md) promises that a signal at any moment ends the command
+quickly with exit 130 (SIGINT) or 143 (SIGTERM) and one line (``Interrupted.`` / ``Terminated.``),
+with nothing partial in or beside the output and no process left.  The moments tested here are
+the ones that used to lose the signal:
+
+- start-up, while the command line loads its modules (trimesh swallowed a KeyboardInterrupt raised
+  during its import: the command ran to its end and exited 0, or stopped only after the 15 s
+  fallback, leaving a tray's temporary file);
+- the end of a short run, the moment its first output appears (the signal came while the
+  interpreter was finishing: exit 0, or death by the signal with no line);
+- an MPI LIGGGHTS run, whose interrupted ``mpirun`` used to leave Open MPI's session folder
+  (``ompi.HOST.UID/pid.N``) behind.
+
+Each command runs as a real process, as a terminal's foreground job (SIGINT at its default), in
+its own session, and the signal goes to its whole process group, as a terminal sends Ctrl-C.  At
+the end of a run the test freezes the group (SIGSTOP) before signalling it, so it knows whether
+the command had already finished (exited before the signal: then it must have succeeded) or
+was still running (then the signal must be honoured).
+
+Run: ``.venv/bin/python -m pytest tests/test_cli_signals.py -q -n 0`` (a few minutes; all slow).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from _processes import child_processes, kill_sessions, session_processes
+
+ROOT = Path(__file__).resolve().parents[1]
+OTTAWA = ROOT / "examples" / "sand-atlas" / "ottawa-7.3um.csv"
+#: the console script a user runs (the package this interpreter imports), else the same entry point
+_SCRIPT = Path(sys.executable).parent / "grainforge"
+CLI = [str(_SCRIPT)] if _SCRIPT.is_file() else [sys.executable, "-c", "from grainforge.cli.main import main; main()"]
+#: seconds from the signal to the command's exit: the contract says 2; measured 0.01-0.2 s, the margin is for
+#: a machine loaded by other jobs (and well under the 15 s fallback, SIGNAL_GRACE, that a lost signal meets)
+STOP_WITHIN = 5.0
+LINES = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
+
+#: every command that writes files (``check`` prints its table only, and is here for its start-up), short
+#: runs: name -> (arguments, the files of a complete run, relative to the command's folder). ``{in}`` is the
+#: shared inputs folder, ``{yade}`` a stand-in Yade that only sleeps (the start-up cases never reach it).
+COMMANDS = {
+    "generate": (["generate", "fso", "--count", "3", "--subdivisions", "2", "--out", "g"],
+                 ["g/fso-0000.stl", "g/fso-0001.stl", "g/fso-0002.stl", "g/manifest.csv"]),
+    "batch": (["batch", "{in}/r.toml", "--out", "b", "--workers", "1"],
+              ["b/fso-0000.stl", "b/fso-0001.stl", "b/manifest.csv", "b/manifest.json", "b/population.png",
+               "b/.grainforge-batch/recipe.toml", "b/.grainforge-batch/grain-000000.json",
+               "b/.grainforge-batch/grain-000001.json"]),
+    "tray": (["tray", "{in}/grains", "--out", "t.3mf", "--workers", "1"], ["t.3mf", "t.csv", "t-plate1.png"]),
+    "check": (["check", "{in}/grains"], []),
+    "render": (["render", "{in}/grains", "-o", "r.png"], ["r.png"]),
+    "analyse": (["analyse", "{in}/grains", "--csv", "a.csv", "--workers", "1"], ["a.csv"]),
+    "dem": (["dem", "{in}/grains", "--out", "d", "--workers", "1"],
+            ["d/grains.json", "d/run.py"] + [f"d/fso-000{k}.{ext}" for k in range(3) for ext in ("clump.vtk", "xyzr")]),
+    "dem-levelset": (["dem", "{in}/grains", "--shape", "levelset", "--out", "d", "--workers", "1"],
+                     ["d/grains.json", "d/run.py"] + [f"d/fso-000{k}.levelset.json" for k in range(3)]),
+    "calibrate-dpa": (["calibrate", "dpa", "--primaries", "10", "--exponents", "1:2:1", "--repeats", "2",
+                       "--workers", "1", "--out", "c"], ["c/calibration.csv", "c/calibration.png"]),
+    "fit": (["fit", str(OTTAWA), "--voxel-size-um", "7.3", "--out", "f", "--workers", "1"], None),
+    "simulate": (["simulate", "repose", "{in}/ang", "--quick", "--out", "o"], None),
+    "simulate-calibrate": (["simulate", "calibrate", "tilt", "{in}/ang", "--target-angle", "30", "--quick",
+                            "--out", "o"], None),
+}
+
+#: commands whose interrupted run keeps what it finished, for ``--resume`` (``batch`` writes its grains as they
+#: are made): command -> its journal, which must then be there (and no file outside the complete run's)
+RESUMABLE = {"batch": "b/.grainforge-batch/recipe.toml"}
+
+#: the start-up moments (seconds after the start), each signal early and late
+START_UP = [(signal.SIGINT, 0.1), (signal.SIGTERM, 0.4), (signal.SIGINT, 0.8), (signal.SIGTERM, 1.2)]
+
+
+@pytest.fixture(scope="module")
+def inputs(tmp_path_factory) -> Path:
+    """Three small grains, three angular ones (simulate), a four-grain recipe and a stand-in Yade."""
+    from grainforge.methods import get
+    from grainforge.run import write_run
+
+    d = tmp_path_factory.mktemp("inputs")
+    write_run("fso", get("fso").Params(subdivisions=2), [0, 1, 2], d / "grains", size=5.0)
+    write_run("angular", get("angular").Params(subdivisions=3), [0, 1, 2], d / "ang", size=2.0)
+    (d / "r.toml").write_text('method = "fso"\ncount = 2\nseed = 1\n[params]\nsubdivisions = 2\n[size]\nmm = 1.0\n')
+    fake = d / "fake-yade"
+    fake.write_text("#!/bin/sh\nexec sleep 60\n")
+    fake.chmod(0o755)
+    return d
+
+
+_STARTED: list[subprocess.Popen] = []
+
+
+@pytest.fixture(autouse=True)
+def _no_strays():
+    """After each test, even a failed one: kill whatever its command left running."""
+    yield
+    kill_sessions(_STARTED)
+
+
+def _start(args: list[str], cwd: Path, inputs: Path, **env) -> subprocess.Popen:
+    def foreground():
+        signal.signal(signal.SIGINT, signal.SIG_DFL)  # as a foreground job of a terminal's shell
+
+    argv = CLI + [a.replace("{in}", str(inputs)) for a in args]
+    env = {**os.environ, "COLUMNS": "200", "GRAINFORGE_YADE": str(inputs / "fake-yade"), **env}
+    proc = subprocess.Popen(argv, cwd=cwd, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                            stderr=subprocess.PIPE, start_new_session=True, preexec_fn=foreground, env=env)
+    _STARTED.append(proc)
+    return proc
+
+
+def _stat(pid: int) -> list[str]:
+    """/proc/PID/stat's fields after the command name (state, parent, group, session, tty, tpgid, flags, ...)."""
+    try:
+        return (Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1]).split()
+    except OSError:
+        return ["X", "0", "0", "0", "0", "0", "4"]
+
+
+def _signal_running(proc: subprocess.Popen, sig: int) -> bool:
+    """Send ``sig`` to the command's group if it still runs; whether it did (False: it had finished).
+
+    The group is frozen first (SIGSTOP), so that "still running" is not a guess: a process that has begun
+    to exit (PF_EXITING) or is gone has finished; a stopped one gets the signal as it resumes."""
+    try:
+        os.killpg(proc.pid, signal.SIGSTOP)
+    except ProcessLookupError:
+        return False
+    while True:
+        fields = _stat(proc.pid)
+        if fields[0] in "ZX" or int(fields[6]) & 0x4:  # PF_EXITING
+            os.killpg(proc.pid, signal.SIGCONT)
+            return False
+        if fields[0] == "T":
+            break
+        time.sleep(0.001)
+    os.killpg(proc.pid, sig)
+    os.killpg(proc.pid, signal.SIGCONT)
+    return True
+
+
+def _processes_in(folder: Path) -> list[int]:
+    """Processes (not zombies) whose working directory is inside ``folder`` (engines run in their decks)."""
+    pids = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                cwd = os.readlink(entry / "cwd")
+            except OSError:
+                continue
+            if cwd.startswith(str(folder) + os.sep) and _stat(int(entry.name))[0] not in "ZX":
+                pids.append(int(entry.name))
+    return pids
+
+
+def _assert_gone(pids_of, grace: float = 5.0) -> None:
+    deadline = time.monotonic() + grace
+    while (left := pids_of()) and time.monotonic() < deadline:
+        time.sleep(0.1)
+    for pid in left:
+        try:
+            os.kill(pid, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    assert not left, f"processes left behind: {left}"
+
+
+def _stopped(proc: subprocess.Popen, sig: int, sent: float, folder: Path) -> list[str]:
+    """Wait for the command after ``sig``: exit 128 + sig within STOP_WITHIN, the signal's line last, no error
+    or traceback, no process of its session or working in ``folder`` left; its stderr lines."""
+    try:
+        _, err = proc.communicate(timeout=60)  # a hang guard; the time is asserted below
+    except subprocess.TimeoutExpired:
+        os.killpg(proc.pid, signal.SIGKILL)
+        proc.communicate()
+        pytest.fail("the command still ran 60 s after the signal")
+    took = time.monotonic() - sent
+    err = err.decode("utf-8", "replace")
+    lines = err.strip().splitlines()
+    assert proc.returncode == 128 + sig and "Traceback" not in err, (proc.returncode, err)
+    # the command's own report lines may come first (a run that ended as the signal came says what it wrote)
+    assert lines and lines[-1] == LINES[sig] and lines.count(LINES[sig]) == 1, err
+    assert not any(ln.startswith(("Error", "Traceback", "Exception ignored")) for ln in lines), err
+    assert took < STOP_WITHIN, f"the command left {took:.1f} s after the signal"
+    _assert_gone(lambda: session_processes(proc.pid) + _processes_in(folder))
+    return lines
+
+
+def _files(folder: Path) -> set[str]:
+    return {str(p.relative_to(folder)) for p in folder.rglob("*") if not p.is_dir()}
+
+
+@pytest.mark.slow  # a real process per command, signal and moment
+@pytest.mark.parametrize("sig, delay", START_UP, ids=[f"{signal.Signals(s).name}-{d}" for s, d in START_UP])
+@pytest.mark.parametrize("command", list(COMMANDS))
+def test_a_signal_at_start_up_is_honoured(tmp_path, inputs, command, sig, delay):
+    """While the command line loads its modules (well before any work): exit 130/143 in one line, nothing
+    written, no process left."""
+    args, _ = COMMANDS[command]
+    work = tmp_path / "work"
+    work.mkdir()
+    proc = _start(args, work, inputs)
+    time.sleep(delay)
+    sent = time.monotonic()
+    if not _signal_running(proc, sig):  # a very fast machine: done before the signal
+        proc.communicate(timeout=60)
+        assert proc.returncode == 0
+        pytest.skip("the command finished before the signal")
+    _stopped(proc, sig, sent, work)
+    assert _files(work) == set() and list(work.iterdir()) == []
+
+
+@pytest.mark.slow  # runs each short command to its end
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+@pytest.mark.parametrize("command", [c for c, (_, files) in COMMANDS.items() if files])
+def test_a_signal_as_the_outputs_appear_is_honoured(tmp_path, inputs, command, sig):
+    """The signal the moment the run's first output appears (most commands move their outputs into place
+    together, under held signals, at their very end): exit 130/143 in one line, the outputs complete or absent
+    (a batch: what --resume continues from), no temporary file beside them, no process left; or, if the
+    command had already finished, its success."""
+    args, files = COMMANDS[command]
+    work = tmp_path / "work"
+    work.mkdir()
+    proc = _start(args, work, inputs)
+    deadline = time.monotonic() + 300
+    while not any((work / f).exists() for f in files):
+        if proc.poll() is not None:
+            pytest.fail(f"the command ended before its outputs appeared: {proc.communicate()[1].decode()}")
+        assert time.monotonic() < deadline, "the outputs never appeared"
+        time.sleep(0.005)
+    sent = time.monotonic()
+    if _signal_running(proc, sig):
+        _stopped(proc, sig, sent, work)
+    else:  # it had finished: the signal came too late to count
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 0 and _files(work) == set(files), err.decode()
+        pytest.skip("the command had finished before the signal")
+    left = _files(work)
+    if command in RESUMABLE and left and left != set(files):  # stopped mid-way: what --resume continues from
+        assert left <= set(files) and RESUMABLE[command] in left, sorted(left)
+    else:
+        assert left in (set(), set(files)), sorted(left)
+
+
+def require(*engines: str) -> None:
+    missing = [e for e in engines if shutil.which(e) is None]
+    if missing:
+        reason = f"{', '.join(missing)} not installed"
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip(reason)
+
+
+@pytest.mark.slow  # runs Yade (half a minute)
+def test_a_signal_as_a_simulation_commits_its_outputs_is_honoured(tmp_path, inputs):
+    """A quick Yade repose run, Ctrl-C the moment its results table is written (then all its outputs move into
+    --out together): exit 130, one line, all outputs or none, no Yade left."""
+    require("yade")
+    work = tmp_path / "work"
+    work.mkdir()
+    proc = _start(["simulate", "repose", "{in}/ang", "--quick", "--out", "o"], work, inputs,
+                  GRAINFORGE_YADE=shutil.which("yade"))
+    deadline = time.monotonic() + 600
+    # the results table appears in the staging folder, then everything moves into --out under held signals
+    while not (any(work.glob("o/.grainforge-staging-*/results.csv")) or (work / "o" / "results.csv").exists()):
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended before its results appeared: {proc.communicate()[1].decode()}")
+        assert time.monotonic() < deadline, "the results never appeared"
+        time.sleep(0.005)
+    sent = time.monotonic()
+    if _signal_running(proc, signal.SIGINT):
+        _stopped(proc, signal.SIGINT, sent, work)
+    else:  # 3: a quick run's heap may be too small to give an angle (its outputs are written all the same)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode in (0, 3), err.decode()
+        pytest.skip("the run had finished before the signal")
+    left = sorted(p.name for p in (work / "o").iterdir()) if (work / "o").exists() else []
+    assert left in ([], ["repose-seed0", "repose.png", "results.csv", "templates.csv"]), left
+
+
+def _mpi_session_folders(pid: int, *bases: Path) -> list[Path]:
+    """Open MPI 4's session folders of the mpirun ``pid`` (``ompi.HOST.UID/pid.PID``) under ``bases``."""
+    return [p for base in bases for p in base.glob(f"ompi.*/pid.{pid}")]
+
+
+@pytest.mark.slow  # runs LIGGGHTS under mpirun
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_signal_while_mpi_ranks_run_leaves_no_rank_and_no_session_folder(tmp_path, inputs, sig):
+    """``simulate --engine liggghts --mpi 2`` stopped while its ranks run: mpirun and both ranks gone, Open MPI's
+    session folder of that run gone (it lies in a folder of the run's own, under $TMPDIR), nothing in --out."""
+    require("liggghts", "mpirun")
+    work, tmp = tmp_path / "work", tmp_path / "tmp"
+    work.mkdir()
+    tmp.mkdir()
+    proc = _start(["simulate", "repose", "{in}/ang", "--quick", "--engine", "liggghts", "--mpi", "2", "--out", "o"],
+                  work, inputs, TMPDIR=str(tmp))
+
+    def engines() -> dict[int, str]:
+        out = {}
+        for pid in child_processes(proc.pid):
+            try:
+                out[pid] = Path(f"/proc/{pid}/comm").read_text().strip()
+            except OSError:
+                pass
+        return out
+
+    deadline = time.monotonic() + 300
+    while list(engines().values()).count("liggghts") < 2:
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended before its ranks started: {proc.communicate()[1].decode()}")
+        assert time.monotonic() < deadline, "the ranks never started"
+        time.sleep(0.05)
+    time.sleep(1.0)  # mid-way: the ranks stepping, the session folder in use
+    running = engines()
+    mpirun = [pid for pid, name in running.items() if name == "mpirun"]
+    assert mpirun and _mpi_session_folders(mpirun[0], *tmp.glob("grainforge-mpi-*")), \
+        "the session folder is not in the run's own folder"
+    sent = time.monotonic()
+    os.killpg(proc.pid, sig)
+    _stopped(proc, sig, sent, work)
+    _assert_gone(lambda: [pid for pid in running if _stat(pid)[0] not in "ZX"])  # mpirun and every rank
+    assert list(tmp.iterdir()) == []  # the run's own folder, with the session folder, removed
+    assert not _mpi_session_folders(mpirun[0], Path("/tmp"), tmp)
+    assert list(work.iterdir()) == []
+
+
+def _group_script(body: str) -> str:
+    """A program whose one command ``work`` runs ``body`` under grainforge's command group (its signal handling)."""
+    import textwrap
+
+    return textwrap.dedent("""
+        import sys, time
+        import click
+        import grainforge.cli.main as m
+
+        @click.group(cls=m.GrainforgeGroup)
+        def cli():
+            pass
+
+        @cli.command()
+        def work():
+        {body}
+
+        cli(["work"])
+    """).format(body=textwrap.indent(textwrap.dedent(body), "    "))
+
+
+def _python(code: str, cwd: Path) -> subprocess.Popen:
+    proc = subprocess.Popen([sys.executable, "-c", code], cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True, preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    _STARTED.append(proc)
+    return proc
+
+
+@pytest.mark.slow  # a real process
+def test_a_signal_a_library_swallows_is_sent_again_at_once(tmp_path):
+    """A library's ``except BaseException`` swallows the KeyboardInterrupt; the command works on.  The signal is
+    sent again within a second (RESEND_AFTER), not at the 15 s fallback, and the command leaves by its clean-up."""
+    proc = _python(_group_script("""
+        try:
+            print("ready", flush=True)
+            time.sleep(30)  # the signal lands here, and is swallowed
+        except BaseException:
+            pass
+        try:
+            end = time.monotonic() + 20
+            while time.monotonic() < end:  # the command works on
+                sum(range(1000))
+            print("ran on", flush=True)
+        finally:
+            open("cleaned", "w").close()
+    """), tmp_path)
+    assert proc.stdout.readline() == b"ready\n"
+    sent = time.monotonic()
+    os.killpg(proc.pid, signal.SIGINT)
+    out, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.decode().strip() == "Interrupted." and b"ran on" not in out, (out, err)
+    assert time.monotonic() - sent < STOP_WITHIN and (tmp_path / "cleaned").exists()
+
+
+@pytest.mark.slow  # a real process
+def test_a_second_signal_does_not_cut_the_clean_up_short(tmp_path):
+    """Ctrl-C twice: the second, while the command cleans up after the first, does not stop the clean-up."""
+    proc = _python(_group_script("""
+        try:
+            print("ready", flush=True)
+            time.sleep(30)
+        finally:
+            print("cleaning", flush=True)
+            end = time.monotonic() + 1.5  # a clean-up that takes a while (removing a large staging folder)
+            while time.monotonic() < end:
+                sum(range(1000))
+            open("cleaned", "w").close()
+    """), tmp_path)
+    assert proc.stdout.readline() == b"ready\n"
+    os.killpg(proc.pid, signal.SIGINT)
+    assert proc.stdout.readline() == b"cleaning\n"
+    os.killpg(proc.pid, signal.SIGINT)
+    _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130 and err.decode().strip() == "Interrupted.", err
+    assert (tmp_path / "cleaned").exists()
