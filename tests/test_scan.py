@@ -309,3 +309,10 @@ def test_tiff_without_tifffile_says_how_to_install(saved, monkeypatch):
     err = result.output.strip()
     assert result.exit_code == 2 and len(err.splitlines()) == 1, err
     assert "pip install 'grainforge[scan]'" in err
+
+
+def test_analyse_points_an_image_to_scan(saved):
+    result = CliRunner().invoke(cli, ["analyse", str(saved / "labels.npy")])
+    err = result.output.strip()
+    assert result.exit_code == 2 and len(err.splitlines()) == 1, err
+    assert "not a mesh file" in err and "grainforge scan" in err

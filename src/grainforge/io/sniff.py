@@ -8,7 +8,10 @@ __all__ = ["what_is"]
 _MAGIC = (
     (b"\x89PNG", "a PNG image"), (b"\xff\xd8\xff", "a JPEG image"), (b"GIF8", "a GIF image"),
     (b"%PDF", "a PDF document"), (b"PK\x03\x04", "a zip archive"), (b"PK\x05\x06", "an empty zip archive"),
-    (b"\x1f\x8b", "a gzip archive"), (b"II*\x00", "a TIFF image"), (b"MM\x00*", "a TIFF image"),
+    (b"\x1f\x8b", "a gzip archive"),
+    (b"II*\x00", "a TIFF image; a 3D scan's labels or grains are measured by `grainforge scan`"),
+    (b"MM\x00*", "a TIFF image; a 3D scan's labels or grains are measured by `grainforge scan`"),
+    (b"\x93NUMPY", "a NumPy array; a 3D scan's labels or grains are measured by `grainforge scan`"),
 )
 
 
