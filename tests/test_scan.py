@@ -316,3 +316,16 @@ def test_analyse_points_an_image_to_scan(saved):
     err = result.output.strip()
     assert result.exit_code == 2 and len(err.splitlines()) == 1, err
     assert "not a mesh file" in err and "grainforge scan" in err
+
+
+def test_beyond_memory_is_refused_before_any_work(saved, monkeypatch):
+    import grainforge.estimate
+
+    monkeypatch.setattr(grainforge.estimate, "machine_memory", lambda: 2_000_000)  # 1 MB allowed
+    before = sorted(p.name for p in saved.rglob("*"))
+    for extra in (["--segment"], []):
+        result = CliRunner().invoke(cli, ["scan", str(saved / "labels.npy"), "--voxel-size-um", "10",
+                                          "--atlas-csv", str(saved / "o.csv"), "--meshes", str(saved / "m"), *extra])
+        err = result.output.strip()
+        assert result.exit_code == 2 and len(err.splitlines()) == 1 and "GiB" in err, err
+        assert sorted(p.name for p in saved.rglob("*")) == before

@@ -63,9 +63,10 @@ SLAB_VOXELS = 2**23
 #: memory of one grain's measurement per cell of its box (:data:`grainforge.analysis.atlas.IMAGE_BYTES_PER_CELL`
 #: and the crop and mask)
 MEASURE_BYTES_PER_CELL = 90.0
-#: memory of :func:`segment` per voxel of the image (the distance map in float32, the h-maxima
-#: reconstruction's float64 copies, the markers and labels; measured with tracemalloc: 55-58 bytes at 100³-160³)
-SEGMENT_BYTES_PER_VOXEL = 64.0
+#: memory of :func:`segment` per voxel of the image (scipy's feature transform behind the distance map, the
+#: h-maxima reconstruction's float64 arrays, the local-maximum filter, the watershed's queue, markers and labels;
+#: tracemalloc's peak: 138 bytes at 100³ and 114 at 190 × 190 × 115 voxels, on examples/scan/make_scan.py's image)
+SEGMENT_BYTES_PER_VOXEL = 150.0
 #: :func:`segment`'s default marker distance, a fraction of the typical grain diameter (:func:`typical_diameter`)
 MARKER_DISTANCE = 0.4
 #: :func:`segment`'s default marker depth, a fraction of the typical grain diameter: a maximum of the distance map
