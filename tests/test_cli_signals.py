@@ -65,6 +65,8 @@ COMMANDS = {
                      ["d/grains.json", "d/run.py"] + [f"d/fso-000{k}.levelset.json" for k in range(3)]),
     "calibrate-dpa": (["calibrate", "dpa", "--primaries", "10", "--exponents", "1:2:1", "--repeats", "2",
                        "--workers", "1", "--out", "c"], ["c/calibration.csv", "c/calibration.png"]),
+    "scan": (["scan", "{in}/scan.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv", "--meshes", "m",
+              "--workers", "1"], ["s.csv", "m/grain-000001.stl", "m/grain-000002.stl", "m/grain-000003.stl"]),
     "fit": (["fit", str(OTTAWA), "--voxel-size-um", "7.3", "--out", "f", "--workers", "1"], None),
     "simulate": (["simulate", "repose", "{in}/ang", "--quick", "--out", "o"], None),
     "simulate-calibrate": (["simulate", "calibrate", "tilt", "{in}/ang", "--target-angle", "30", "--quick",
@@ -81,7 +83,8 @@ START_UP = [(signal.SIGINT, 0.1), (signal.SIGTERM, 0.4), (signal.SIGINT, 0.8), (
 
 @pytest.fixture(scope="module")
 def inputs(tmp_path_factory) -> Path:
-    """Three small grains, three angular ones (simulate), a four-grain recipe and a stand-in Yade."""
+    """Three small grains, three angular ones (simulate), a four-grain recipe, a labelled image of three grains
+    (scan) and a stand-in Yade."""
     from grainforge.methods import get
     from grainforge.run import write_run
 
@@ -89,6 +92,13 @@ def inputs(tmp_path_factory) -> Path:
     write_run("fso", get("fso").Params(subdivisions=2), [0, 1, 2], d / "grains", size=5.0)
     write_run("angular", get("angular").Params(subdivisions=3), [0, 1, 2], d / "ang", size=2.0)
     (d / "r.toml").write_text('method = "fso"\ncount = 2\nseed = 1\n[params]\nsubdivisions = 2\n[size]\nmm = 1.0\n')
+    import numpy as np
+
+    z, y, x = np.indices((40, 40, 60))
+    scan = np.zeros(z.shape, np.uint16)
+    for k, cx in enumerate((12, 30, 48), start=1):  # three ellipsoids, clear of the image's faces
+        scan[((z - 20) / 12.0) ** 2 + ((y - 20) / 10.0) ** 2 + ((x - cx) / 8.0) ** 2 <= 1] = k
+    np.save(d / "scan.npy", scan)
     fake = d / "fake-yade"
     fake.write_text("#!/bin/sh\nexec sleep 60\n")
     fake.chmod(0o755)
