@@ -224,6 +224,9 @@ def test_tiff_stack_folder_and_raw_read_the_same(scene, saved):
         assert label_boxes(v) == ref, v.path
         assert np.array_equal(v.read(5, 9), vol[5:9])
     assert open_volume(saved / "stack.tif").voxel_size_um == pytest.approx(H_UM)
+    vol.astype(">u2").tofile(saved / "big.raw")  # big-endian raw
+    big = open_volume(saved / "big.raw", raw_shape=vol.shape, raw_dtype=">u2")
+    assert label_boxes(big) == ref and big.read(3, 4).dtype.isnative
     # the voxel size from the TIFF's metadata
     code, out = _run(["scan", saved / "stack.tif", "--atlas-csv", saved / "t.csv"], saved)
     assert code == 0, out
@@ -329,3 +332,13 @@ def test_beyond_memory_is_refused_before_any_work(saved, monkeypatch):
         err = result.output.strip()
         assert result.exit_code == 2 and len(err.splitlines()) == 1 and "GiB" in err, err
         assert sorted(p.name for p in saved.rglob("*")) == before
+
+
+def test_a_label_in_two_pieces_meshes_its_largest():
+    from grainforge.analysis.scan import grain_mesh
+
+    z, y, x = np.indices((24, 24, 40))
+    mask = ((z - 12) ** 2 + (y - 12) ** 2 + (x - 12) ** 2 <= 64) | ((z - 12) ** 2 + (y - 12) ** 2 + (x - 30) ** 2 <= 16)
+    v, f, dropped = grain_mesh(mask, (0, 0, 0), 0.01)
+    assert dropped == 1 and solid_problems(v, f) == []
+    assert v[:, 0].max() < 0.21  # the big ball (x up to 20 voxels), not the small one

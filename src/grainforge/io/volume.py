@@ -116,7 +116,7 @@ def _mapped_reader(path: Path, offset: int, shape, dtype, order: str = "C"):
             m = np.memmap(path, dtype=dtype, mode="r", offset=offset + z0 * plane, shape=(z1 - z0, *shape[1:]))
             out = np.array(m)
         del m
-        return out
+        return out if out.dtype.isnative else out.astype(dtype.newbyteorder("="))  # big-endian raw: native
 
     return read
 
@@ -282,7 +282,7 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
         if have != need:
             raise ValueError(f"{path}: {have} bytes, but a {shape[0]} x {shape[1]} x {shape[2]} {dtype.name} image "
                              f"needs {need} bytes: check --raw-shape and --raw-dtype")
-        return Volume(path, shape, dtype, _mapped_reader(path, 0, shape, dtype))
+        return Volume(path, shape, dtype.newbyteorder("="), _mapped_reader(path, 0, shape, dtype))
     if raw_dtype is not None:
         raise ValueError("--raw-dtype needs --raw-shape (a raw image's Z Y X)")
     if path.is_dir():
