@@ -342,3 +342,16 @@ def test_a_label_in_two_pieces_meshes_its_largest():
     v, f, dropped = grain_mesh(mask, (0, 0, 0), 0.01)
     assert dropped == 1 and solid_problems(v, f) == []
     assert v[:, 0].max() < 0.21  # the big ball (x up to 20 voxels), not the small one
+
+
+def test_thin_labels_are_counted_not_measured(tmp_path):
+    img = np.zeros((12, 12, 40), np.uint16)
+    img[6, 6, 2:5] = 1  # a line of 3 voxels: no voxel of the smoothed image reaches 0.5
+    z, y, x = np.indices(img.shape)
+    img[(z - 6) ** 2 + (y - 6) ** 2 + (x - 25) ** 2 <= 16] = 2
+    np.save(tmp_path / "thin.npy", img)
+    result = CliRunner().invoke(cli, ["scan", str(tmp_path / "thin.npy"), "--voxel-size-um", "10", "--min-voxels",
+                                      "1", "--atlas-csv", str(tmp_path / "t.csv"), "--workers", "1"])
+    assert result.exit_code == 0, result.output
+    assert "1 grain(s) measured of 2 label(s)" in result.output and "1 a voxel or so thin" in result.output
+    assert read_sand(tmp_path / "t.csv").count == 1

@@ -236,7 +236,11 @@ def _measure_task(task) -> dict:
                centroid_z=(float(pz @ idx[0]) / n + lo[0] + 0.5) * h,
                centroid_y=(float(py @ idx[1]) / n + lo[1] + 0.5) * h,
                centroid_x=(float(px @ idx[2]) / n + lo[2] + 0.5) * h)
-    row.update(measure_grain(mask, h, convention=convention))
+    try:
+        row.update(measure_grain(mask, h, convention=convention))
+    except ValueError:  # no voxel of the smoothed image reaches 0.5: a grain a voxel or so thick has no surface
+        row["status"] = "thin"
+        return row
     if mesh_h is not None:
         from ..solid import solid_problems
 
@@ -273,7 +277,8 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
     ------
     dict
         Per label, the unmeasured first, then in order of the boxes' first slice: ``label``, ``voxels``,
-        ``status`` (``"measured"``, ``"border"``, ``"small"``), ``border`` (bool) and, when measured,
+        ``status`` (``"measured"``, ``"border"``, ``"small"``, or ``"thin"``: so thin — a voxel or so — that
+        the Atlas's smoothed image has no surface, left unmeasured), ``border`` (bool) and, when measured,
         ``centroid_x``, ``centroid_y``, ``centroid_z`` (voxel centres at ``h·(index + ½)``) and
         :func:`measure_grain`'s values.
     """

@@ -256,13 +256,15 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
 
     h_um = float(voxel_size_um)
     outputs = _Outputs()
-    rows, bad_meshes, pieces = [], [], 0
+    rows, bad_meshes, pieces, thin = [], [], 0, []
     try:
         stage = outputs.mesh_stage(Path(meshes), overwrite) if meshes is not None else None
         bar = progress_bar(total=len(boxes), desc="grains", unit="grain")
         for row in bar(sc.measure_labels(volume, boxes, voxel_size=h_um, min_voxels=min_voxels, border=keep_border,
                                          convention=convention, workers=n_workers,
                                          mesh_voxel_size=None if stage is None else h_um / 1000.0)):
+            if row["status"] == "thin":
+                thin.append(row["label"])
             if row["status"] != "measured":
                 continue
             mesh = row.pop("mesh", None)
@@ -296,6 +298,9 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
                                                               else " (left out; --keep-border measures them)"))
     if n_small:
         parts.append(f"{n_small} under {min_voxels} voxels (left out)")
+    if thin:
+        parts.append(f"{len(thin)} a voxel or so thin, without a surface at the Atlas's smoothing (left out: label "
+                     + ", ".join(map(str, thin[:5])) + (" ..." if len(thin) > 5 else "") + ")")
     click.echo("; ".join(parts), err=True)
     if atlas_csv is not None:
         click.echo(f"wrote {len(rows)} grain(s) to {atlas_csv} as a Sand Atlas table (µm)", err=True)
