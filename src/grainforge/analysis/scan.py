@@ -244,8 +244,11 @@ def _measure_task(task) -> dict:
     if mesh_h is not None:
         from ..solid import solid_problems
 
-        v, f, dropped = grain_mesh(mask, lo, mesh_h)
-        row["mesh"] = (v, f, dropped, solid_problems(v, f, intersections=False))
+        try:
+            v, f, dropped = grain_mesh(mask, lo, mesh_h)
+            row["mesh"] = (v, f, dropped, solid_problems(v, f, intersections=False))
+        except ValueError as exc:  # too thin for a surface at level 0.5 once smoothed
+            row["mesh"] = (None, None, 0, [str(exc)])
     return row
 
 
