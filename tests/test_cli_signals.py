@@ -8,8 +8,9 @@ the ones that used to lose the signal:
 - start-up, while the command line loads its modules (trimesh swallowed a KeyboardInterrupt raised
   during its import: the command ran to its end and exited 0, or stopped only after the 15 s
   fallback, leaving a tray's temporary file);
-- the end of a short run, the moment its first output (or the temporary file it is written to) appears (the signal came while the
-  interpreter was finishing: exit 0, or death by the signal with no line);
+- the end of a short run, the moment its first output (or the temporary file it is written to)
+  appears (the signal came while the interpreter was finishing: exit 0, or death by the signal
+  with no line);
 - an MPI LIGGGHTS run, whose interrupted ``mpirun`` used to leave Open MPI's session folder
   (``ompi.HOST.UID/pid.N``) behind.
 
@@ -233,9 +234,9 @@ def test_a_signal_at_start_up_is_honoured(tmp_path, inputs, command, sig, delay)
 @pytest.mark.parametrize("command", [c for c, (_, files) in COMMANDS.items() if files])
 def test_a_signal_as_the_outputs_appear_is_honoured(tmp_path, inputs, command, sig):
     """The signal the moment the run's first output, or the temporary file it is written to, appears (most
-    commands move their outputs into place together, under held signals, at their very end): exit 130/143 in one line, the outputs complete or absent
-    (a batch: what --resume continues from), no temporary file beside them, no process left; or, if the
-    command had already finished, its success."""
+    commands move their outputs into place together, under held signals, at their very end): exit 130/143 in
+    one line, the outputs complete or absent (a batch: what --resume continues from), no temporary file beside
+    them, no process left; or, if the command had already finished, its success."""
     args, files = COMMANDS[command]
     work = tmp_path / "work"
     work.mkdir()
