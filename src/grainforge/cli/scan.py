@@ -63,7 +63,7 @@ class _Outputs:
 
     def temp(self, final: Path) -> Path:
         final.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=f".tmp{final.suffix}", dir=final.parent)
+        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
         os.close(fd)
         self.temps.append(Path(tmp))
         self.moves.append((Path(tmp), final))
@@ -287,7 +287,8 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
         if labels_out is not None:
             from ..io.volume import write_labels
 
-            write_labels(outputs.temp(Path(labels_out)), volume.whole(), voxel_size_um=h_um)
+            write_labels(outputs.temp(Path(labels_out)), volume.whole(), voxel_size_um=h_um,
+                         fmt=Path(labels_out).suffix)
         outputs.commit()
     finally:
         outputs.discard()

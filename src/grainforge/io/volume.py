@@ -308,8 +308,10 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
                      "folder of TIFF slices, or a raw file with --raw-shape Z Y X and --raw-dtype")
 
 
-def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None) -> Path:
+def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, fmt: str | None = None) -> Path:
     """Write a label image as ``.npy`` or ``.tif`` (ImageJ metadata with the voxel size in µm), atomically.
+
+    ``fmt`` (``".npy"``, ``".tif"``, ``".tiff"``) is the format; by default the path's suffix.
 
     Examples
     --------
@@ -324,16 +326,17 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None) -
     from . import file_mode
 
     path = Path(path)
-    suffix = path.suffix.lower()
+    suffix = (fmt or path.suffix).lower()
     if suffix not in LABEL_SUFFIXES:
         raise ValueError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
     tifffile = tifffile_module() if suffix != ".npy" else None
     path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=f".tmp{suffix}", dir=path.parent)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     try:
         if suffix == ".npy":
-            np.save(tmp, labels)
+            with open(tmp, "wb") as fh:  # (np.save would add .npy to the name)
+                np.save(fh, labels)
         elif not voxel_size_um:
             tifffile.imwrite(tmp, labels)
         elif labels.dtype in (np.uint8, np.uint16):  # ImageJ's own types: its metadata, in µm
