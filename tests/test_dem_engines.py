@@ -22,6 +22,7 @@ import numpy as np
 import pytest
 import trimesh
 from click.testing import CliRunner
+from conftest import require_engine
 
 from grainforge.cli.main import cli
 
@@ -33,14 +34,8 @@ UNIT = 1e-3  # grain files are in mm
 REL = 1e-6
 
 
-def require(executable: str, package: str = "yade python3-yade liggghts lammps") -> str:
-    path = shutil.which(executable)
-    if path is None:
-        reason = f"{executable} not installed (apt-get install {package})"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
-    return path
+#: the engine (or mpirun) a test needs: skipped with the reason, a failure under GRAINFORGE_REQUIRE_ENGINES=1
+require = require_engine
 
 
 @pytest.fixture

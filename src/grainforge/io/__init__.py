@@ -11,6 +11,7 @@ nothing above it: fabrication, dem and the commands import it.
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import io as _io
 import os
@@ -25,7 +26,7 @@ from .._version import __version__
 from .sniff import what_is
 from .stl import check_stl, read_stl, stl_header
 
-__all__ = ["FORMATS", "READABLE_MESHES", "export_bytes", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
+__all__ = ["FORMATS", "READABLE_MESHES", "export_bytes", "atomic_file", "atomic_write", "file_mode", "write_mesh", "write_csv", "read_mesh", "read_parts", "check_stl", "save_figure"]
 
 
 def _as_trimesh(obj):
@@ -91,19 +92,27 @@ def file_mode() -> int:
     return 0o666 & ~mask
 
 
-def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write ``data`` to ``path`` through a temporary file and an atomic rename.
+@contextlib.contextmanager
+def atomic_file(path: str | os.PathLike):
+    """A temporary path beside ``path`` to write to; renamed onto ``path`` when the block ends without an
+    exception, removed otherwise (an interrupt included). The file gets the permissions an ordinary
+    write would give (umask honoured).
 
-    The file gets the permissions an ordinary write would give (umask honoured).
+    Examples
+    --------
+    >>> import tempfile
+    >>> target = Path(tempfile.mkdtemp()) / "a.txt"
+    >>> with atomic_file(target) as tmp:
+    ...     _ = tmp.write_text("x")
+    >>> target.read_text(), sorted(p.name for p in target.parent.iterdir())
+    ('x', ['a.txt'])
     """
     path = Path(path)
-    if isinstance(data, str):
-        data = data.encode("utf-8")
     path.parent.mkdir(parents=True, exist_ok=True)
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
+    os.close(fd)
     try:
-        with os.fdopen(fd, "wb") as fh:
-            fh.write(data)
+        yield Path(tmp)
         os.chmod(tmp, file_mode())
         os.replace(tmp, path)
     except BaseException:
@@ -112,6 +121,15 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
         except FileNotFoundError:
             pass
         raise
+
+
+def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
+    """Write ``data`` to ``path`` through a temporary file and an atomic rename (:func:`atomic_file`)."""
+    path = Path(path)
+    if isinstance(data, str):
+        data = data.encode("utf-8")
+    with atomic_file(path) as tmp:
+        tmp.write_bytes(data)
     return path
 
 

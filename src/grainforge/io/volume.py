@@ -26,7 +26,6 @@ Examples
 from __future__ import annotations
 
 import math
-import os
 import re
 from pathlib import Path
 
@@ -321,19 +320,15 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, f
     >>> int(np.load(p).sum())
     8
     """
-    import tempfile
 
-    from . import file_mode
+    from . import atomic_file
 
     path = Path(path)
     suffix = (fmt or path.suffix).lower()
     if suffix not in LABEL_SUFFIXES:
         raise ValueError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
     tifffile = tifffile_module() if suffix != ".npy" else None
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
-    os.close(fd)
-    try:
+    with atomic_file(path) as tmp:
         if suffix == ".npy":
             with open(tmp, "wb") as fh:  # (np.save would add .npy to the name)
                 np.save(fh, labels)
@@ -345,12 +340,4 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, f
         else:  # the resolution tags, per centimetre
             tifffile.imwrite(tmp, labels, resolution=(1e4 / voxel_size_um, 1e4 / voxel_size_um),
                              resolutionunit="CENTIMETER")
-        os.chmod(tmp, file_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        try:
-            os.unlink(tmp)
-        except FileNotFoundError:
-            pass
-        raise
     return path
