@@ -209,12 +209,14 @@ def _signal_in_finalizer(hook):
 
 
 def _quiet_signal(hook):
-    """An exception hook that prints nothing for a signal's exception.  Compiled extensions (SciPy's Sobol
+    """An exception hook that prints nothing for a signal's exception, nor for any once a signal is honoured.  Compiled extensions (SciPy's Sobol
     tables, for one) report an exception they cannot pass on twice: its traceback through this hook, then the
     unraisable hook; the second raises the signal again, so the first must stay silent."""
 
     def excepthook(kind, value, tb) -> None:
-        if not isinstance(value, _SIGNAL_EXCEPTIONS):
+        # once a stop signal is being honoured, an exception reported on its way (an extension whose
+        # initialisation the signal broke reports "ImportError: initialization failed") is its echo: silent
+        if not isinstance(value, _SIGNAL_EXCEPTIONS) and not _LEAVING:
             hook(kind, value, tb)
 
     return excepthook
@@ -272,6 +274,12 @@ class GrainforgeGroup(click.Group):
             sys.exit(2)
         except KeyboardInterrupt:
             sys.exit(_say(signal.SIGINT))
+        except Exception:
+            # a stop signal is being honoured and broke something on its way (an extension whose
+            # initialisation it interrupted raises "ImportError: initialization failed"): its echo, not an error
+            if _LEAVING:
+                sys.exit(_say(_LEAVING[0]))
+            raise
         if standalone_mode:
             sys.exit(rv if isinstance(rv, int) else 0)
         return rv
