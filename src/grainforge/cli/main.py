@@ -95,6 +95,8 @@ def _say(signum: int) -> int:
     if not (_CONSOLE and _SAID):
         _SAID.append(signum)
         click.echo(SIGNALS[signum], err=True)
+    if _CONSOLE:  # the process is leaving on the signal: a finalizer that an interrupted write left half-closed
+        sys.unraisablehook = lambda unraisable: None  # (a ZipFile's __del__) says nothing after the line
     return 128 + _SAID[0] if _CONSOLE else 128 + signum
 
 
@@ -246,7 +248,8 @@ class GrainforgeGroup(click.Group):
         finally:
             for s in owned:  # the console script records a later signal; in-process, the usual handlers
                 signal.signal(s, _late if _CONSOLE else _usual(s) if previous[s] is _exit_now else previous[s])
-            sys.unraisablehook, sys.excepthook = hook, excepthook
+            if not (_CONSOLE and _SAID):  # leaving on a signal: _say's silence stays
+                sys.unraisablehook, sys.excepthook = hook, excepthook
         return rv
 
     def _main(self, args, prog_name, complete_var, standalone_mode, **extra):
