@@ -35,6 +35,7 @@ from pathlib import Path
 
 import pytest
 from _processes import child_processes, kill_sessions, session_processes
+from test_cli_contract_fit_simulate import _assert_gone
 
 ROOT = Path(__file__).resolve().parents[1]
 OTTAWA = ROOT / "examples" / "sand-atlas" / "ottawa-7.3um.csv"
@@ -170,18 +171,6 @@ def _processes_in(folder: Path) -> list[int]:
             if cwd.startswith(str(folder) + os.sep) and _stat(int(entry.name))[0] not in "ZX":
                 pids.append(int(entry.name))
     return pids
-
-
-def _assert_gone(pids_of, grace: float = 5.0) -> None:
-    deadline = time.monotonic() + grace
-    while (left := pids_of()) and time.monotonic() < deadline:
-        time.sleep(0.1)
-    for pid in left:
-        try:
-            os.kill(pid, signal.SIGKILL)
-        except ProcessLookupError:
-            pass
-    assert not left, f"processes left behind: {left}"
 
 
 def _stopped(proc: subprocess.Popen, sig: int, sent: float, folder: Path) -> list[str]:

@@ -241,12 +241,15 @@ def _check_separator(path: Path, header: Sequence[str]) -> None:
                                  "comma-separated: save it with commas (and '.' as the decimal mark)")
 
 
+def _same_but_unit(header: Sequence[str], col: str) -> list[str]:
+    """Header names that match ``col`` but for its unit (or its case and spacing)."""
+    bare = _norm(col.split(" (")[0])
+    return [h for h in header if _norm(h).split(" (")[0] == bare]
+
+
 def _near_misses(header: Sequence[str], missing: Sequence[str]) -> str:
     """``'; found ...'`` for header names that match a missing column but for its unit or case."""
-    found = []
-    for want in missing:
-        bare = _norm(want.split(" (")[0])
-        found += [repr(h) for h in header if _norm(h).split(" (")[0] == bare]
+    found = [repr(h) for want in missing for h in _same_but_unit(header, want)]
     return f"; found {', '.join(found)} (the name must carry the unit as written)" if found else ""
 
 
@@ -254,10 +257,7 @@ def _check_unit_less(path: Path, header: Sequence[str], optional: Sequence[str])
     """An optional column named without its unit would be ignored without a word: name it instead."""
     names = {_norm(h) for h in header}
     for col in optional:
-        if _norm(col) in names:
-            continue
-        bare = _norm(col.split(" (")[0])
-        near = [h for h in header if _norm(h).split(" (")[0] == bare]
+        near = [] if _norm(col) in names else _same_but_unit(header, col)
         if near:
             raise ValueError(f"{path}: column {near[0]!r} is not read: name it {col!r} (with its unit) or drop it")
 
