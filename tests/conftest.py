@@ -61,3 +61,16 @@ def require_engine(executable: str, package: str = "yade python3-yade liggghts l
             pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
         pytest.skip(reason)
     return path
+
+
+@pytest.fixture(scope="session")
+def grain_files(tmp_path_factory):
+    """A folder of three grains of 4 mm-ish scale: an FSO, a CRI and a DPA grain (seeds 0, 1, 2)."""
+    import grainforge
+    import grainforge.io
+
+    d = tmp_path_factory.mktemp("grains")
+    for i, method in enumerate(["fso", "cri", "dpa"]):
+        g = getattr(grainforge, method)(rng=i).scaled(4.0)
+        grainforge.io.write_mesh(g, d / f"{method}-{i:04d}.stl")
+    return d

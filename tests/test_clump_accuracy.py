@@ -34,15 +34,6 @@ def rough():
     return g.vertices, g.faces
 
 
-@pytest.fixture(scope="module")
-def grain_files(tmp_path_factory):
-    d = tmp_path_factory.mktemp("grains")
-    for i, method in enumerate(["fso", "cri", "dpa"]):
-        g = getattr(grainforge, method)(rng=i).scaled(4.0)
-        grainforge.io.write_mesh(g, d / f"{method}-{i:04d}.stl")
-    return d
-
-
 def test_a_ball_needs_one_sphere_at_a_modest_target(ball):
     v, f = ball
     c = clump(v, f, spheres=30, target_iou=0.85, measure_resolution=40)

@@ -123,15 +123,6 @@ def test_prepare_units_and_centroid():
 
 # ---- the `dem` command -------------------------------------------------------------------
 
-@pytest.fixture(scope="module")
-def grain_files(tmp_path_factory):
-    d = tmp_path_factory.mktemp("grains")
-    for i, method in enumerate(["fso", "cri", "dpa"]):
-        g = getattr(grainforge, method)(rng=i).scaled(4.0)
-        grainforge.io.write_mesh(g, d / f"{method}-{i:04d}.stl")
-    return d
-
-
 def test_dem_cli_yade_deck(grain_files, tmp_path):
     out = tmp_path / "deck"
     r = CliRunner().invoke(cli, ["dem", str(grain_files), "--out", str(out), "--engine", "yade",
