@@ -147,6 +147,23 @@ def row(grain, tool, part, requested, setting, acc=None, count=None, cpu=None, s
     return r
 
 
+def target_rows(grain, tool, runs):
+    """One row per accuracy target from a tool's sweep ``runs`` of (setting, accuracy, spheres, CPU): the fewest
+    spheres (then the least CPU) that reach it, else the best run, marked not reached."""
+    rows, total = [], sum(x[3] for x in runs)
+    for t in TARGETS:
+        ok = [x for x in runs if x[1].iou >= t]
+        if ok:
+            s, acc, count, cpu = min(ok, key=lambda x: (x[2], x[3]))
+            rows.append(row(grain, tool, "target", t, s, acc, count, cpu, total))
+        elif runs:
+            best = max(runs, key=lambda x: x[1].iou)
+            rows.append(row(grain, tool, "target", t, "best: " + best[0], best[1], None, None, total, False))
+        else:
+            rows.append(row(grain, tool, "target", t, "every run failed", None, None, None, total, False))
+    return rows
+
+
 def grainforge_rows(grain, tool, resolution):
     from grainforge.dem.clump import clump
 
@@ -225,16 +242,7 @@ def multisphere_rows(grain):
                          for t in more])
         for t in more:
             add(res, keys[t], f"div=100, precision={t + step:.2f}")
-    total = sum(x[3] for x in runs)
-    for t in TARGETS:
-        ok = [x for x in runs if x[1].iou >= t]
-        if ok:
-            s, acc, count, cpu = min(ok, key=lambda x: (x[2], x[3]))
-            rows.append(row(grain, tool, "target", t, s, acc, count, cpu, total))
-        else:
-            best = max(runs, key=lambda x: x[1].iou)
-            rows.append(row(grain, tool, "target", t, "best: " + best[0], best[1], None, None, total, False))
-    return rows
+    return rows + target_rows(grain, tool, runs)
 
 
 def edt_rows(grain):
@@ -301,18 +309,7 @@ def favier_rows(grain):
         runs.append((f"chooseDistance={ch}, N={n}", acc, count, cpu))
         if ch == "min" and n in COUNTS:
             rows.append(row(grain, tool, "count", n, "chooseDistance=min", acc, count, cpu, cpu))
-    total = sum(x[3] for x in runs)
-    for t in TARGETS:
-        ok = [x for x in runs if x[1].iou >= t]
-        if ok:
-            s, acc, count, cpu = min(ok, key=lambda x: (x[2], x[3]))
-            rows.append(row(grain, tool, "target", t, s, acc, count, cpu, total))
-        elif runs:
-            best = max(runs, key=lambda x: x[1].iou)
-            rows.append(row(grain, tool, "target", t, "best: " + best[0], best[1], None, None, total, False))
-        else:
-            rows.append(row(grain, tool, "target", t, "every run failed", None, None, None, total, False))
-    return rows
+    return rows + target_rows(grain, tool, runs)
 
 
 # --------------------------------------------------------------------------- report
