@@ -172,7 +172,7 @@ def test_virtual_test_scenes(templates, tmp_path, test, engine):
     assert_uniform(matrices(q))
 
 
-def test_seeds_give_other_orientations(templates, tmp_path):
+def test_seeds_give_other_orientations():
     from grainforge.simulate.settings import Settings, scene_settings
 
     a = scene_settings(Settings(grains=50), "tilt", 0)["orientations"]

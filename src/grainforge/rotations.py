@@ -28,8 +28,8 @@ an angle uniform in [0, 2π) is *not* uniform on SO(3): it over-weights small
 turns (its rotation angle is uniform on [0, π], where the uniform measure's
 has density (1 − cos ω)/π), so that a layer of grains starts with a fabric
 aligned with the templates' principal frames.  :func:`haar_angle_test` tells
-the two apart and is what the tests apply to orientations read back from
-written decks.
+the two apart (the suite applies its own copy of that check, written
+independently, to orientations read back from written decks).
 """
 
 from __future__ import annotations
