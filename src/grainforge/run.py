@@ -18,7 +18,7 @@ from .fabrication.scale import check_size, to_size
 from .io import FORMATS, _cell, export_bytes, file_mode
 from .methods import generate, get
 from .params import as_dict, specs
-from .staging import staged
+from .staging import signals_held, staged
 
 __all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files",
            "existing_outputs", "earlier_run_files", "manifest_rows"]
@@ -190,11 +190,12 @@ def write_run(
                 written += 1
         earlier = set(earlier_run_files(out)) if overwrite else set()
         os.chmod(stage / MANIFEST, file_mode())
-        for i in range(count):
-            name = grain_file_name(method, i, fmt)
-            (stage / name).replace(out / name)
-            earlier.discard(out / name)
-        (stage / MANIFEST).replace(out / MANIFEST)
-        for p in sorted(earlier):  # the earlier run's grains that this run did not replace
-            p.unlink(missing_ok=True)
+        with signals_held():  # the grains and the manifest appear together; a signal is answered after them
+            for i in range(count):
+                name = grain_file_name(method, i, fmt)
+                (stage / name).replace(out / name)
+                earlier.discard(out / name)
+            (stage / MANIFEST).replace(out / MANIFEST)
+            for p in sorted(earlier):  # the earlier run's grains that this run did not replace
+                p.unlink(missing_ok=True)
     return written

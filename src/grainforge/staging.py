@@ -1,8 +1,9 @@
 """Staging of a command's outputs: all of a run appears in its output folder or none of it.
 
 A run writes into a hidden folder inside ``out`` (:data:`STAGING_PREFIX` and its process id), then moves
-everything into place at once (:func:`commit_stage`); an interrupt or failure removes the folder, and ``out``
-too when the run made it (:func:`staged`); a SIGKILLed run's folder is removed by the next run in ``out``.
+everything into place at once (:func:`commit_stage`, with SIGINT and SIGTERM held by :func:`signals_held` while
+the files move, so a signal then is answered after the last one); an interrupt or failure removes the folder, and
+``out`` too when the run made it (:func:`staged`); a SIGKILLed run's folder is removed by the next run in ``out``.
 """
 
 from __future__ import annotations
@@ -10,14 +11,56 @@ from __future__ import annotations
 import os
 import re
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
 from .workers import pid_alive
 
-__all__ = ["STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
+__all__ = ["signals_held", "STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
+
+
+#: the signals a command stops on (Ctrl-C and a polite kill)
+HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+
+
+@contextmanager
+def _handled(handler) -> Iterator[None]:
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    previous = {s: signal.getsignal(s) for s in HELD_SIGNALS}
+    for s, usual in previous.items():
+        if usual is not signal.SIG_IGN:  # an ignored signal (SIGINT of a background job) stays ignored
+            signal.signal(s, handler)
+    try:
+        yield
+    finally:
+        for s, usual in previous.items():
+            signal.signal(s, usual if usual is not None else signal.SIG_DFL)
+
+
+@contextmanager
+def signals_held() -> Iterator[list]:
+    """Hold SIGINT and SIGTERM during the block; deliver the first one that came as it ends.
+
+    Yields the list of signals held so far.  Outside the main thread (where
+    Python cannot set handlers) nothing is held.
+
+    Examples
+    --------
+    >>> with signals_held() as got:
+    ...     got
+    []
+    """
+    got: list[int] = []
+    with _handled(lambda signum, frame: got.append(signum)):
+        yield got
+    if got:
+        signal.raise_signal(got[0])  # the usual handler now: KeyboardInterrupt, Terminated, or the default
 
 
 def remove_stale_staging(out: Path) -> None:
@@ -59,12 +102,13 @@ def commit_stage(stage: Path, out: str | os.PathLike, *, overwrite: bool = False
             if (out / p.name).exists():
                 raise FileExistsError(f"{out / p.name} exists; use --overwrite")
     moved = []
-    for p in items:
-        target = out / p.name
-        if target.is_dir() and not target.is_symlink():
-            shutil.rmtree(target)
-        p.replace(target)
-        moved.append(target)
+    with signals_held():  # a signal meanwhile is answered once every output is in place
+        for p in items:
+            target = out / p.name
+            if target.is_dir() and not target.is_symlink():
+                shutil.rmtree(target)
+            p.replace(target)
+            moved.append(target)
     return moved
 
 

@@ -20,8 +20,9 @@ import os
 import signal
 import sys
 import threading
-from collections.abc import Iterable, Iterator
-from contextlib import contextmanager
+from collections.abc import Iterable
+
+from ..staging import _handled, signals_held
 
 __all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "STARTUP_MODULES"]
 
@@ -32,42 +33,6 @@ STARTUP_MODULES = ("numpy", "scipy.spatial", "trimesh")
 
 #: the signals a command stops on, with the line it prints
 SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
-
-
-@contextmanager
-def _handled(handler) -> Iterator[None]:
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    previous = {s: signal.getsignal(s) for s in SIGNALS}
-    for s, usual in previous.items():
-        if usual is not signal.SIG_IGN:  # an ignored signal (SIGINT of a background job) stays ignored
-            signal.signal(s, handler)
-    try:
-        yield
-    finally:
-        for s, usual in previous.items():
-            signal.signal(s, usual if usual is not None else signal.SIG_DFL)
-
-
-@contextmanager
-def signals_held() -> Iterator[list]:
-    """Hold SIGINT and SIGTERM during the block; deliver the first one that came as it ends.
-
-    Yields the list of signals held so far.  Outside the main thread (where
-    Python cannot set handlers) nothing is held.
-
-    Examples
-    --------
-    >>> with signals_held() as got:
-    ...     got
-    []
-    """
-    got: list[int] = []
-    with _handled(lambda signum, frame: got.append(signum)):
-        yield got
-    if got:
-        signal.raise_signal(got[0])  # the usual handler now: KeyboardInterrupt, Terminated, or the default
 
 
 def _exit_now(signum, frame):  # pragma: no cover - exercised by a real signal
