@@ -375,6 +375,66 @@ def test_a_signal_while_mpi_ranks_run_leaves_no_rank_and_no_session_folder(tmp_p
     assert list(work.iterdir()) == []
 
 
+def _marked(marker: str) -> list[int]:
+    """Processes whose command line holds ``marker`` (zombies aside)."""
+    found = []
+    for d in Path("/proc").iterdir():
+        if d.name.isdigit():
+            try:
+                if marker.encode() in (d / "cmdline").read_bytes() and _stat(int(d.name))[0] not in "ZX":
+                    found.append(int(d.name))
+            except OSError:
+                pass
+    return found
+
+
+@pytest.mark.slow  # starts mpirun with 64 ranks
+@pytest.mark.parametrize("delay", [0.0, 0.3, 1.5], ids=["as-mpirun-starts", "ranks-starting", "ranks-running"])
+def test_a_killed_run_of_many_ranks_leaves_none(tmp_path, inputs, delay):
+    """``--mpi 64`` in a 64-slot batch allocation (on any machine: the ranks are a stand-in engine that only
+    sleeps), stopped as mpirun starts its ranks or once they run: mpirun and every rank gone, none adopted by
+    init (a run stopped while mpirun was still starting ranks used to leave hundreds)."""
+    require("mpirun")
+    marker = f"{tmp_path.name}-fake-liggghts"
+    fake = tmp_path / marker
+    fake.write_text("#!/bin/sh\nsleep 3600\n")
+    fake.chmod(0o755)
+    work = tmp_path / "work"
+    work.mkdir()
+    proc = _start(["simulate", "repose", "{in}/ang", "--quick", "--engine", "liggghts", "--mpi", "64", "--out", "o"],
+                  work, inputs, GRAINFORGE_LIGGGHTS=str(fake), SLURM_NTASKS="64")
+    deadline = time.monotonic() + 300
+    while "mpirun" not in {Path(f"/proc/{pid}/comm").read_text().strip() for pid in child_processes(proc.pid)
+                           if Path(f"/proc/{pid}/comm").exists()}:
+        if proc.poll() is not None:
+            pytest.fail(f"the run ended before mpirun started: {proc.communicate()[1].decode()}")
+        assert time.monotonic() < deadline, "mpirun never started"
+        time.sleep(0.01)
+    time.sleep(delay)
+    sent = time.monotonic()
+    os.killpg(proc.pid, signal.SIGTERM)
+    _stopped(proc, signal.SIGTERM, sent, work)
+    _assert_gone(lambda: _marked(marker))  # every rank (and the shell of the stand-in)
+    assert list(work.iterdir()) == []
+
+
+def test_more_ranks_than_cores_are_refused_before_anything_starts(tmp_path, inputs):
+    """``--mpi`` beyond the cores (no batch allocation or hostfile giving more): one line naming the cores, exit 2,
+    before any engine or folder exists; the same with the ranks of --workers runs at once."""
+    cores = len(os.sched_getaffinity(0))
+    env = {k: v for k, v in os.environ.items() if k not in ("SLURM_NTASKS", "SLURM_NPROCS", "PBS_NP", "NSLOTS",
+                                                              "LSB_DJOB_NUMPROC", "PBS_NODEFILE")}
+    for extra in (["--mpi", str(cores + 1)], ["--mpi", "1000"], ["--mpi", str(cores), "--workers", "2"]):
+        for cmd in (["simulate", "repose", str(inputs / "ang")],
+                    ["simulate", "calibrate", "tilt", str(inputs / "ang"), "--target-angle", "30"]):
+            r = subprocess.run(CLI + cmd + ["--quick", "--engine", "liggghts", *extra, "--out", str(tmp_path / "o")],
+                               capture_output=True, text=True, env=env, timeout=120)
+            lines = r.stderr.strip().splitlines()
+            assert r.returncode == 2 and len(lines) == 1, r.stderr
+            assert f"{cores} core(s) here" in lines[0] and "--mpi" in lines[0], lines[0]
+            assert not (tmp_path / "o").exists()
+
+
 def _group_script(body: str) -> str:
     """A program whose one command ``work`` runs ``body`` under grainforge's command group (its signal handling)."""
     import textwrap

@@ -236,6 +236,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
+    from ..simulate.process import check_mpi_ranks
     from ..simulate.population import template_make_seconds
     from .interrupts import ready_for_work, signals_held
 
@@ -249,6 +250,10 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+    try:
+        check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
                              as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing,

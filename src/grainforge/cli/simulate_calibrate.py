@@ -105,6 +105,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
 
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
+    from ..simulate.process import check_mpi_ranks
     from ..simulate.calibrate import check_target
     from ..simulate.population import template_make_seconds
     from .interrupts import ready_for_work, signals_held
@@ -131,6 +132,10 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
     workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+    try:
+        check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
     ls_spacing = 0.05 if spacing is None else spacing
     from ..estimate import SECONDS_LIMIT, _limit, duration
 

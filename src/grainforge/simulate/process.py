@@ -12,7 +12,8 @@ from pathlib import Path
 
 from ..workers import die_with_parent
 
-__all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder"]
+__all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder",
+           "mpi_slots", "check_mpi_ranks"]
 
 
 def find_executable(variable: str, name: str, missing: str) -> str:
@@ -171,3 +172,80 @@ def _remove_stale_mpi_folders() -> None:
             _remove_folder(str(folder))
         except OSError:  # another user's process: alive
             continue
+
+
+#: environment variables through which batch systems give a job its number of MPI slots
+ALLOCATION_VARIABLES = ("SLURM_NTASKS", "SLURM_NPROCS", "PBS_NP", "NSLOTS", "LSB_DJOB_NUMPROC")
+#: environment variables naming a file with one host per line (Open MPI hostfile syntax: ``host slots=N``)
+HOSTFILE_VARIABLES = ("PBS_NODEFILE", "OMPI_MCA_orte_default_hostfile", "OMPI_MCA_rmaps_default_hostfile",
+                      "PRTE_MCA_prte_default_hostfile")
+
+
+def mpi_slots(environ: dict | None = None) -> tuple[int, str]:
+    """How many MPI ranks this run may start, and where that number comes from.
+
+    The cores this process may use (its CPU affinity), or more when a batch allocation
+    (:data:`ALLOCATION_VARIABLES`) or a hostfile (:data:`HOSTFILE_VARIABLES`: a line per host, ``slots=N``
+    counted, else one slot a line) provides them.
+
+    Examples
+    --------
+    >>> mpi_slots({"SLURM_NTASKS": "4096"})
+    (4096, 'SLURM_NTASKS=4096')
+    >>> mpi_slots({})[0] >= 1
+    True
+    """
+    import re
+
+    env = os.environ if environ is None else environ
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    best = (cores, f"{cores} core(s) here")
+    for name in ALLOCATION_VARIABLES:
+        value = env.get(name, "").strip()
+        if value.isdigit() and int(value) > best[0]:
+            best = (int(value), f"{name}={value}")
+    for name in HOSTFILE_VARIABLES:
+        path = env.get(name)
+        if not path:
+            continue
+        try:
+            lines = Path(path).read_text(errors="replace").splitlines()
+        except OSError:
+            continue
+        slots = 0
+        for line in lines:
+            line = line.split("#", 1)[0].strip()
+            if line:
+                m = re.search(r"\bslots\s*=\s*(\d+)", line)
+                slots += int(m.group(1)) if m else 1
+        if slots > best[0]:
+            best = (slots, f"{slots} slot(s) in {name}")
+    return best
+
+
+def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict | None = None) -> None:
+    """Refuse ``mpi`` ranks per run (× ``workers`` runs at once) beyond :func:`mpi_slots`.
+
+    Raises
+    ------
+    ValueError
+        Naming the cores (or the allocation) and the largest ``--mpi`` that fits.
+
+    Examples
+    --------
+    >>> check_mpi_ranks(100000, environ={})  # doctest: +ELLIPSIS
+    Traceback (most recent call last):
+    ...
+    ValueError: --mpi 100000: only ... rank(s) available (... core(s) here); use --mpi ... or fewer, or run ...
+    >>> check_mpi_ranks(64, environ={"SLURM_NTASKS": "100000"})  # a batch allocation provides them
+    """
+    if mpi is None:
+        return
+    slots, source = mpi_slots(environ)
+    runs = workers or 1
+    if mpi * runs > slots:
+        what = f"--mpi {mpi}" + (f" × --workers {runs}" if runs > 1 else "")
+        largest = max(1, slots // runs)
+        raise ValueError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
+                         + (" (or fewer --workers)" if runs > 1 else "")
+                         + ", or run inside a batch allocation or with a hostfile that provides more")
