@@ -316,11 +316,27 @@ def test_tiff_without_tifffile_says_how_to_install(saved, monkeypatch):
     assert "pip install 'grainforge[scan]'" in err
 
 
-def test_analyse_points_an_image_to_scan(saved):
-    result = CliRunner().invoke(cli, ["analyse", str(saved / "labels.npy")])
+def test_analyse_of_an_image_is_the_scan(saved):
+    """`analyse IMAGE` takes scan's options and writes scan's table, byte for byte; an image among meshes (not
+    first) is refused in one line that points to the scan."""
+    for command, name in (("analyse", "a.csv"), ("scan", "s.csv")):
+        code, out = _run([command, saved / "labels.npy", "--voxel-size-um", H_UM, "--atlas-csv", saved / name], saved)
+        assert code == 0, out
+    assert (saved / "a.csv").read_bytes() == (saved / "s.csv").read_bytes()
+    stack = saved / "slices"
+    stack.mkdir()
+    (stack / "z000.tif").write_bytes(b"II*\x00")
+    from grainforge.cli.main import _is_image_request
+
+    assert _is_image_request([str(stack)]) and _is_image_request(["x.bin", "--raw-shape", "1", "2", "3"])
+    assert not _is_image_request([str(saved)]) and not _is_image_request(["grain.stl", "--csv", "x.tif"])
+    import trimesh
+
+    trimesh.creation.box().export(saved / "g.stl")
+    result = CliRunner().invoke(cli, ["analyse", str(saved / "g.stl"), str(saved / "labels.npy")])
     err = result.output.strip()
     assert result.exit_code == 2 and len(err.splitlines()) == 1, err
-    assert "not a mesh file" in err and "grainforge scan" in err
+    assert "grainforge scan" in err
 
 
 def test_beyond_memory_is_refused_before_any_work(saved, monkeypatch):

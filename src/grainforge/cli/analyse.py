@@ -137,6 +137,10 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     are refused.  The table goes to stdout; see docs/validation.md.
     With --atlas-csv the grains' Sand-Atlas measures also become a table that
     `grainforge fit` reads (docs/fit.md).
+
+    A 3D image instead of meshes (a labelled or binary μCT volume: .tif/.tiff,
+    a folder of TIFF slices, .npy, or raw with --raw-shape) is measured grain by
+    grain with the options of `grainforge scan` (docs/guide/scan.md).
     """
     import os
 

@@ -12,6 +12,7 @@ import signal
 import sys
 import threading
 import time
+from pathlib import Path
 
 from .interrupts import SIGNALS, _exit_now  # the standard library only: quick
 
@@ -230,8 +231,38 @@ def _will_work(args) -> bool:
     return bool(words) and not any(w in ("-h", "--help", "--version") for w in words)
 
 
+#: suffixes of a 3D image (a μCT scan's volume) that ``analyse`` hands to ``scan``
+IMAGE_SUFFIXES = (".tif", ".tiff", ".npy", ".raw")
+
+
+def _is_image_request(args: list[str]) -> bool:
+    """Whether ``analyse``'s arguments name a 3D image (measured by ``scan``) rather than meshes: the first
+    argument a file with an image suffix, a folder of TIFF slices only, or a raw image (``--raw-shape``)."""
+    if "--raw-shape" in args:
+        return True
+    first = next((a for a in args if not a.startswith("-")), None)
+    if first is None:
+        return False
+    path = Path(first)
+    if path.suffix.lower() in IMAGE_SUFFIXES:
+        return True
+    if path.is_dir():
+        try:
+            suffixes = {q.suffix.lower() for q in path.iterdir() if q.is_file() and not q.name.startswith(".")}
+        except OSError:
+            return False
+        return bool(suffixes) and suffixes <= {".tif", ".tiff"}
+    return False
+
+
 class GrainforgeGroup(click.Group):
-    """A click group that reports errors as a single line."""
+    """A click group that reports errors as a single line; ``analyse`` of a 3D image runs ``scan``."""
+
+    def resolve_command(self, ctx, args):
+        name, command, rest = super().resolve_command(ctx, args)
+        if name == "analyse" and _is_image_request(rest) and "scan" in self.commands:
+            return "scan", self.commands["scan"], rest
+        return name, command, rest
 
     def main(self, args=None, prog_name=None, complete_var=None, standalone_mode=True, **extra):
         owned = _owned()
