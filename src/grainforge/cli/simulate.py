@@ -1,4 +1,5 @@
-"""``grainforge simulate repose|tilt INPUTS --out DIR``: virtual bulk tests in Yade or LIGGGHTS (under mpirun)."""
+"""``grainforge simulate repose|tilt|triaxial INPUTS --out DIR``: virtual bulk tests in Yade or LIGGGHTS (under
+mpirun; the triaxial test in Yade only)."""
 
 from __future__ import annotations
 
@@ -19,13 +20,15 @@ ENGINES = ("yade", "liggghts")
 SHAPES = ("clump", "levelset")
 #: what simulate's scenes can run, per engine
 RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
+#: what a test's scenes run where it differs from RUNS: the triaxial scene is Yade's, on clumps
+TEST_RUNS = {"triaxial": {"yade": ("clump",), "liggghts": ()}}
 #: engines simulate runs under mpirun (--mpi)
 MPI_ENGINES = ("liggghts",)
 #: the engines' names in progress bars
 ENGINE_NAMES = {"yade": "Yade", "liggghts": "LIGGGHTS"}
 
 
-def check_engine(engine: str, mpi: int | None, shape: str) -> None:
+def check_engine(engine: str, mpi: int | None, shape: str, test: str | None = None) -> None:
     """Refuse, in one line and before any work, an engine/representation/MPI combination simulate cannot run.
 
     Raises
@@ -33,17 +36,21 @@ def check_engine(engine: str, mpi: int | None, shape: str) -> None:
     click.UsageError
         For an engine simulate has no scene for, ``--mpi`` with an engine
         that does not run under MPI, a ``--shape`` the engine's scenes cannot
-        take (whether the engine is installed is :func:`check_installed`'s).
+        take (whether the engine is installed is :func:`check_installed`'s); ``test`` names the test whose
+        scenes run (:data:`TEST_RUNS`).
     """
-    if not RUNS[engine]:
-        raise click.UsageError(f"--engine {engine}: simulate has no {engine} scenes yet (grainforge dem "
+    runs = TEST_RUNS.get(test, RUNS)
+    if not runs[engine]:
+        what = f"simulate {test}" if test in TEST_RUNS else "simulate"
+        raise click.UsageError(f"--engine {engine}: {what} has no {engine} scene yet (grainforge dem "
                                f"--engine {engine} writes a pour deck); use --engine yade")
     if mpi is not None and engine not in MPI_ENGINES:
         raise click.UsageError(f"--mpi: {engine} runs one process per seed here, not under mpirun; "
                                "use --workers for runs at once (or --engine liggghts --mpi N)")
-    if shape not in RUNS[engine]:
-        raise click.UsageError(f"--shape {shape}: simulate's {engine} scenes take "
-                               f"{', '.join('--shape ' + s for s in RUNS[engine])} only (grainforge dem "
+    if shape not in runs[engine]:
+        what = f"simulate {test}'s {engine} scene takes" if test in TEST_RUNS else f"simulate's {engine} scenes take"
+        raise click.UsageError(f"--shape {shape}: {what} "
+                               f"{', '.join('--shape ' + s for s in runs[engine])} only (grainforge dem "
                                f"--shape {shape} writes the deck)")
 
 
@@ -94,23 +101,31 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
     With ``clump_accuracy``, ``spheres`` is the cap of every clump: the one given, or ``--quick``'s, or
     :data:`grainforge.dem.clump.DEFAULT_SPHERE_CAP`.
 
+    A triaxial test's settings are :class:`grainforge.simulate.TriaxialSettings` (``--quick``:
+    :data:`grainforge.simulate.QUICK_TRIAXIAL`).
+
     Raises
     ------
     click.BadParameter, click.UsageError
-        For a setting out of its range, or a level-set run Yade cannot set up.
+        For a setting out of its range, a level-set run Yade cannot set up, or a triaxial specimen too small
+        for its periodic cell.
     """
-    from ..simulate import QUICK, Settings
+    from ..simulate import QUICK, QUICK_TRIAXIAL
     from ..simulate.levelset import check_levelset_run, quick_levelset
+    from ..simulate.settings import check_triaxial_run
 
     if clump_accuracy is not None and values.get("spheres") is None and not quick:
         from ..dem.clump import DEFAULT_SPHERE_CAP
 
         values = {**values, "spheres": DEFAULT_SPHERE_CAP}
     if quick:
-        values = {**QUICK, **quick_levelset(test, shape), **{k: v for k, v in values.items() if v is not None}}
-    settings = build_params(Settings, values)
+        quick_values = QUICK_TRIAXIAL if test == "triaxial" else {**QUICK, **quick_levelset(test, shape)}
+        values = {**quick_values, **{k: v for k, v in values.items() if v is not None}}
+    settings = build_params(_settings_cls(test), values)
     try:
         check_levelset_run(test, shape, settings)
+        if test == "triaxial":
+            check_triaxial_run(settings)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     return settings
@@ -181,7 +196,8 @@ def _command(test: str, doc: str):
     @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
                   help="Folder for the decks (one per seed), results.csv and the figure.")
     @click.option("--quick", is_flag=True,
-                  help="A few tens of grains, seconds per run: checks the set-up, measures nothing meaningful.")
+                  help="A few tens of grains (triaxial: 100, a short shearing at a larger strain rate), seconds to a "
+                       "minute per run: checks the set-up, measures nothing meaningful.")
     @click.option("--as-spheres", is_flag=True,
                   help="Replace every grain by its volume-equivalent sphere (the sphere baseline).")
     @click.option("--label", default=None, show_default="the inputs' names",
@@ -203,10 +219,10 @@ def _command(test: str, doc: str):
                                             "(as grainforge dem).")
     @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
     @clump_accuracy_option
-    @param_options(_settings_cls(), exclude=TILT_ONLY if test != "tilt" else ())
+    @param_options(_settings_cls(test), exclude=TILT_ONLY if test == "repose" else ())
     def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, clump_accuracy,
                 **values):
-        check_engine(engine, mpi, shape)
+        check_engine(engine, mpi, shape, test)
         check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
         _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi,
              shape=shape, spacing=0.05 if spacing is None else spacing, clump_accuracy=clump_accuracy)
@@ -214,10 +230,11 @@ def _command(test: str, doc: str):
     return command
 
 
-def _settings_cls():
-    from ..simulate import Settings
+def _settings_cls(test: str = "repose"):
+    """The settings class of ``test``'s options and runs."""
+    from ..simulate import Settings, TriaxialSettings
 
-    return Settings
+    return TriaxialSettings if test == "triaxial" else Settings
 
 
 #: modules a run loads before any work (cli.interrupts.preload: a lazy import later could swallow a Ctrl-C)
@@ -269,7 +286,6 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         commit_stage,
         run_test,
         staged,
-        summarise,
     )
     from ..simulate.report import write_report
 
@@ -312,15 +328,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             commit_stage(stage, out, overwrite=overwrite)
     if warning:
         click.echo(warning, err=True)
-    summary = summarise(rows)
-    sd = summary["angle_sd_deg"]
-    spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"
-    name = "angle of repose" if test == "repose" else "tilt failure angle"
-    if summary["runs"] == 0:
-        click.echo(f"{label}: no {name} measured ({rows[0].get('note', '')}); {out / 'results.csv'}")
-    else:
-        click.echo(f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; "
-                   f"{out / 'results.csv'}, {out / (test + '.png')}")
+    click.echo(result_line(test, rows, label, out))
     failed = failed_runs(rows, settings.seed)
     if failed or warning:  # the outputs are written; the runs or the clumps fail their own check
         if failed:
@@ -328,21 +336,44 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         sys.exit(EXIT_CHECK_FAILED)
 
 
+def result_line(test: str, rows, label: str, out: Path) -> str:
+    """The line a finished run prints: the measured angle(s) over the seeds and where the outputs are."""
+    from ..simulate import summarise
+
+    where = f"{out / 'results.csv'}, {out / (test + '.png')}"
+    if test == "triaxial":
+        from ..simulate.triaxial import summarise_triaxial
+
+        return f"{label}: {summarise_triaxial(rows)}; {where}"
+    summary = summarise(rows)
+    sd = summary["angle_sd_deg"]
+    spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"
+    name = "angle of repose" if test == "repose" else "tilt failure angle"
+    if summary["runs"] == 0:
+        return f"{label}: no {name} measured ({rows[0].get('note', '')}); {out / 'results.csv'}"
+    return f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; {where}"
+
+
 def failed_runs(rows, first_seed: int) -> str:
-    """The runs that fail their own check, in one line: no angle measured, a repose heap not at rest, grains lost.
+    """The runs that fail their own check, in one line: no angle measured, a repose heap not at rest, grains lost;
+    a triaxial run's own ``problems`` (:func:`grainforge.simulate.triaxial.measure_triaxial`).
 
     Examples
     --------
     >>> failed_runs([{"test": "repose", "angle_deg": float("nan"), "settled": True, "lost": 0, "note": "too flat"},
     ...              {"test": "repose", "angle_deg": 30.0, "settled": False, "lost": 2, "note": ""}], 0)
     'seed 0: no angle (too flat); seed 1: not at rest at the end, 2 grain(s) lost'
+    >>> failed_runs([{"test": "triaxial", "seed": 4, "problems": "no stress ratio recorded", "lost": 0}], 0)
+    'seed 4: no stress ratio recorded'
     """
     import math
 
     out = []
     for k, r in enumerate(rows):
         why = []
-        if not math.isfinite(float(r["angle_deg"])):
+        if r.get("test") == "triaxial":
+            why += [r["problems"]] if r.get("problems") else []
+        elif not math.isfinite(float(r["angle_deg"])):
             why.append(f"no angle ({r.get('note') or 'not measured'})")
         if r.get("test") == "repose" and not r.get("settled", True):
             why.append("not at rest at the end")
@@ -367,12 +398,23 @@ tilt = _command("tilt", """Tilt table: a layer of grains on a rough plate is til
     INPUTS as for `simulate repose`.  The layer is periodic (an infinite slope); failure is the
     tilt at which the layer's mean downslope displacement exceeds half a grain diameter.
     """)
+triaxial = _command("triaxial", """Drained triaxial compression of a periodic cell of grains, in Yade.
+
+    INPUTS as for `simulate repose`.  The grains are compacted isotropically to --confining-kpa
+    (dense: without friction; loose: with it), then the cell is shortened in z at the strain rate
+    of --inertial-number while x and y are held at the confining stress, to --axial-strain.
+    Writes each seed's triaxial.csv (q/p', volumetric strain, void ratio, coordination against the
+    axial strain), results.csv (peak and ultimate friction angles, largest dilatancy angle) and
+    triaxial.png.  Stresses and strains compression positive.  See docs/simulate.md.
+    """)
 
 
 @click.group()
 def simulate():
-    """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table): shape's effect on bulk friction."""
+    """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table; triaxial, Yade): shape's effect on
+    bulk friction."""
 
 
 simulate.add_command(repose)
 simulate.add_command(tilt)
+simulate.add_command(triaxial)

@@ -1,4 +1,5 @@
-"""Virtual bulk tests in Yade: angle of repose and tilt table (the paper's §3.2, in silico).
+"""Virtual bulk tests in Yade: angle of repose and tilt table (the paper's §3.2, in silico), and a drained
+triaxial test in a periodic cell (:mod:`grainforge.simulate.triaxial`).
 
 The paper printed 8,000 CRI grains of two shapes and measured, on a tilt
 table, ultimate friction angles of about 38° for "rough spheres" and 43–48° for
@@ -22,9 +23,9 @@ Nothing is tuned to the paper's numbers; the contact friction is an input.
 
 from .engine import EngineFailed, measure_result, run_test, run_yade, summarise, write_test_deck, yade_executable
 from .population import build_population, check_inputs
-from .settings import QUICK, TESTS, Settings, check_size, scene_settings
+from .settings import QUICK, QUICK_TRIAXIAL, TESTS, Settings, TriaxialSettings, check_size, scene_settings
 from .staging import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage, staged
 
-__all__ = ["TESTS", "Settings", "QUICK", "yade_executable", "scene_settings", "check_inputs", "build_population",
+__all__ = ["TESTS", "Settings", "TriaxialSettings", "QUICK", "QUICK_TRIAXIAL", "yade_executable", "scene_settings", "check_inputs", "build_population",
            "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage", "staged",
            "commit_stage", "discard_stage", "EngineFailed", "keep_failed", "FAILED_PREFIX"]

@@ -34,7 +34,8 @@ def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: in
     """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
     ``engine="liggghts"``: :func:`grainforge.simulate.liggghts.deck_files`).
 
-    In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset`) picks the scene.
+    In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset`) picks the scene;
+    ``settings`` of a triaxial test are :class:`~grainforge.simulate.TriaxialSettings`.
     """
     if engine == "liggghts":
         from .liggghts import write_test_deck as write_liggghts
@@ -44,8 +45,14 @@ def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: in
     from .levelset import scene_extra, scene_text
 
     shape = templates[0].shape if templates else "clump"
-    return write_deck(templates, out, scene=scene_text(test, shape),
-                      settings={**scene_settings(settings, test, seed), **scene_extra(shape)}, overwrite=overwrite)
+    if test == "triaxial":
+        from .triaxial import triaxial_scene_settings
+
+        scene = triaxial_scene_settings(settings, seed)
+    else:
+        scene = scene_settings(settings, test, seed)
+    return write_deck(templates, out, scene=scene_text(test, shape), settings={**scene, **scene_extra(shape)},
+                      overwrite=overwrite)
 
 
 def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] | None = None,
@@ -73,13 +80,18 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
 
 
 def measure_result(result: dict) -> dict:
-    """The measured angle of one finished run (``result.json`` of a scene).
+    """The measured angle of one finished run (``result.json`` of a scene; a triaxial run's row is
+    :func:`grainforge.simulate.triaxial.measure_triaxial`'s).
 
     Returns a dict with ``angle_deg``, ``sector_sd_deg`` (over the heap's
     sectors, repose only), the number of grains inserted and lost, the
     engine's step count and time step, and a ``note`` saying why the angle is
     NaN when it could not be measured (a heap of a few grains).
     """
+    if result["test"] == "triaxial":
+        from .triaxial import measure_triaxial
+
+        return measure_triaxial(result)
     d = float(result["d_mean"])
     row = {"test": result["test"], "grains": result["grains"], "inserted": result["inserted"],
            "lost": result["lost"], "steps": result["steps"], "dt_s": result["dt"],
@@ -112,7 +124,7 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
 
     Parameters
     ----------
-    test : {"repose", "tilt"}
+    test : {"repose", "tilt", "triaxial"}
     templates : sequence of GrainTemplate
         From :func:`build_population`.
     settings : Settings

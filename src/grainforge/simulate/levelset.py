@@ -152,9 +152,9 @@ def scene_text(test: str, shape: str = "clump") -> str:
     >>> "Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)" in text  # torques from the contact points
     True
     """
-    from .scenes import COMMON, REPOSE, TILT
+    from .scenes import COMMON, REPOSE, TILT, TRIAXIAL
 
-    scene = {"repose": REPOSE, "tilt": TILT}[test]
+    scene = {"repose": REPOSE, "tilt": TILT, "triaxial": TRIAXIAL}[test]
     if shape == "clump":
         return scene
     if shape != "levelset":

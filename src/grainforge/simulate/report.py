@@ -17,12 +17,20 @@ __all__ = ["write_report", "figure"]
 
 
 def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> list[Path]:
-    """Write ``out/results.csv`` (one row per seed, the settings in every row) and ``out/<test>.png``."""
+    """Write ``out/results.csv`` (one row per seed, the settings in every row) and ``out/<test>.png``; for a
+    triaxial test also each seed's ``triaxial-seed<k>/triaxial.csv``."""
     out = Path(out)
     extra = {f"setting_{k}": v for k, v in as_dict(settings).items()}
     table = [{**r, **extra} for r in rows]
     paths = [write_csv(out / "results.csv", table)]
     results = [json.loads((out / f"{test}-seed{r['seed']}" / "result.json").read_text()) for r in rows]
+    if test == "triaxial":  # each seed's curve in its folder; the figure of q/p' and volumetric strain
+        from .triaxial import triaxial_figure, write_triaxial_csv
+
+        paths += [write_triaxial_csv(res, out / f"{test}-seed{r['seed']}" / "triaxial.csv")
+                  for res, r in zip(results, rows)]
+        paths.append(save_figure(triaxial_figure(results, rows), out / f"{test}.png"))
+        return paths
     paths.append(save_figure(figure(test, results, rows), out / f"{test}.png"))
     return paths
 

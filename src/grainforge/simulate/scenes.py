@@ -25,7 +25,7 @@ can be read back and checked.
 
 from __future__ import annotations
 
-__all__ = ["COMMON", "REPOSE", "TILT"]
+__all__ = ["COMMON", "REPOSE", "TILT", "TRIAXIAL"]
 
 COMMON = r'''
 
@@ -264,4 +264,224 @@ def tilt():
 
 
 tilt()
+'''
+
+TRIAXIAL = COMMON + r'''
+
+# ---- scene: drained triaxial compression of a periodic cell ---------------------------------
+import numpy
+
+
+def grain_index(ids):
+    """{member body id: grain index k} of every body of clumps ids (a contact names member spheres)."""
+    out = {}
+    for k, i in enumerate(ids):
+        for m in O.bodies[i].shape.members:
+            out[m] = k
+    return out
+
+
+def set_friction(mu):
+    """Contact friction mu for new contacts (the grains' material) and for every existing one."""
+    O.materials[contact_material()].frictionAngle = math.atan(mu)
+    for c in O.interactions:
+        if c.isReal:
+            c.phys.tangensOfFrictionAngle = mu
+
+
+def cell_state(ids, index):
+    """The cell's stress and contacts.
+
+    stress: 3x3, Pa, compression positive: Yade's getStress (a Love-Weber sum over the contacts: in this
+    Yade each branch vector joins the two grains' centres of mass, the clumps', across the periodic boundary).
+    p_love_weber: the mean stress of the same sum done here over the grains' centres (a check of the above).
+    modulus: per axis, (1/V) sum k_n n_i^2 l_i^2 (Pa): the affine stiffness the servo divides by.
+    unbalanced: mean norm of the net contact force on a grain over the mean contact force.
+    coordination: 2 x (pairs of grains in contact) / grains.
+    """
+    n = len(ids)
+    X = numpy.array([[O.bodies[i].state.pos[0], O.bodies[i].state.pos[1], O.bodies[i].state.pos[2]] for i in ids])
+    k1, k2, f, cd, kn, nrm, pen = [], [], [], [], [], [], []
+    for c in O.interactions:
+        if not c.isReal:
+            continue
+        a, b = index.get(c.id1), index.get(c.id2)
+        if a is None or b is None:
+            continue
+        F = c.phys.normalForce + c.phys.shearForce  # the force on body 2
+        s, nv = c.cellDist, c.geom.normal
+        k1.append(a)
+        k2.append(b)
+        f.append((F[0], F[1], F[2]))
+        cd.append((s[0], s[1], s[2]))
+        kn.append(c.phys.kn)
+        nrm.append((nv[0], nv[1], nv[2]))
+        pen.append(c.geom.penetrationDepth)
+    V = O.cell.volume
+    h = O.cell.hSize
+    H = numpy.array([[h[r, q] for q in range(3)] for r in range(3)])
+    g = utils.getStress()
+    S = -numpy.array([[g[r, q] for q in range(3)] for r in range(3)])
+    S = 0.5 * (S + S.T)
+    if not k1:
+        return {"stress": S, "modulus": numpy.zeros(3), "unbalanced": 1.0, "coordination": 0.0, "overlap": 0.0,
+                "contacts": 0, "p_love_weber": 0.0}
+    k1, k2, f, cd = numpy.array(k1), numpy.array(k2), numpy.array(f), numpy.array(cd, dtype=float)
+    kn, nrm, pen = numpy.array(kn), numpy.array(nrm), numpy.array(pen)
+    L = X[k1] - X[k2] - cd.dot(H.T)  # grain 1's centre minus grain 2's image next to it
+    p_love_weber = -numpy.einsum("ci,ci->", f, L) / (3.0 * V)
+    modulus = (kn[:, None] * nrm ** 2 * L ** 2).sum(axis=0) / V
+    net = numpy.zeros((n, 3))
+    numpy.add.at(net, k2, f)
+    numpy.add.at(net, k1, -f)
+    fmean = numpy.linalg.norm(f, axis=1).mean()
+    unbalanced = numpy.linalg.norm(net, axis=1).mean() / fmean if fmean > 0 else 1.0
+    pairs = numpy.unique(numpy.minimum(k1, k2) * n + numpy.maximum(k1, k2)).size
+    return {"stress": S, "modulus": modulus, "unbalanced": float(unbalanced), "coordination": 2.0 * pairs / n,
+            "overlap": float(pen.mean()), "contacts": int(len(k1)), "p_love_weber": float(p_love_weber)}
+
+
+def servo(st, axes, goal, limit, every, held):
+    """Strain rates (1/s, positive = the cell grows) that bring the stress on ``axes`` to ``goal`` (Pa).
+
+    A proportional-integral servo on the rate c that would close the error in the next ``every`` steps were
+    the packing as stiff as its affine modulus: rate = SETTINGS["servo_gain"] * c + the integral term, which
+    adds SETTINGS["servo_integral"] * c at every call (the packing is softer than affine, and a dilating
+    specimen needs a lateral strain rate of its own at no error: the integral term learns it). Both are kept
+    within ``limit``; an axis without contacts closes at ``-limit``. ``held`` (the integral terms) is updated.
+    """
+    rates = [0.0, 0.0, 0.0]
+    for a in axes:
+        m = st["modulus"][a]
+        if m > 0:
+            c = (st["stress"][a, a] - goal) / (m * every * O.dt)
+            held[a] = max(-limit, min(limit, held[a] + SETTINGS["servo_integral"] * c))
+            r = held[a] + SETTINGS["servo_gain"] * c
+        else:
+            r = -limit
+        rates[a] = max(-limit, min(limit, r))
+    return rates
+
+
+def strain_rates(r):
+    O.cell.velGrad = Matrix3(r[0], 0, 0, 0, r[1], 0, 0, 0, r[2])
+
+
+def isotropic(ids, index, goal, limit, max_time, phase, f0, f1):
+    """Servo the three axes to ``goal`` until the stress is within the tolerance on every axis and the grains
+    are in equilibrium (unbalanced force below its bound) at three checks in a row, or ``max_time`` passes."""
+    every = SETTINGS["control_every"]
+    t0 = O.time
+    ok = 0
+    held = [0.0, 0.0, 0.0]
+    st = cell_state(ids, index)
+    while O.time - t0 < max_time:
+        strain_rates(servo(st, (0, 1, 2), goal, limit, every, held))
+        O.run(every, True)
+        st = cell_state(ids, index)
+        err = max(abs(st["stress"][a, a] / goal - 1.0) for a in range(3))
+        ok = ok + 1 if err < SETTINGS["stress_tolerance"] and st["unbalanced"] < SETTINGS["unbalanced"] else 0
+        p = sum(st["stress"][a, a] for a in range(3)) / 3.0
+        progress(f0 + (f1 - f0) * min(0.99, max(0.0, p / goal)), phase)
+        if O.iter % (50 * every) == 0:
+            print("grainforge-state t=%.5f steps=%d p=%.4g unbalanced=%.3g contacts=%d" % (
+                O.time, O.iter, p, st["unbalanced"], st["contacts"]))
+        if ok >= 3:
+            break
+    strain_rates((0.0, 0.0, 0.0))
+    return st, ok >= 3
+
+
+def triaxial():
+    rnd = random.Random(SETTINGS["seed"])
+    grains = load_deck()
+    pop = population(grains, SETTINGS["grains"], rnd)
+    n = len(pop)
+    d = sum(t["d_eq"] for t in pop) / n
+    solid = sum(t["volume"] for t in pop)  # the meshes' exact volumes
+    rho = sum(t["mass"] for t in pop) / solid
+    # a loose cubic lattice in a periodic cube (no gravity), a little jitter
+    cell = 2.05 * max(t["bounding_radius"] for t in pop)
+    m = 1
+    while m ** 3 < n:
+        m += 1
+    width = m * cell
+    O.periodic = True
+    O.cell.setBox(width, width, width)
+    ids = []
+    for q, t in enumerate(pop):
+        i, j, k = q % m, (q // m) % m, q // (m * m)
+        ids.append(add_grain(t, ((i + 0.5) * cell + 0.1 * d * rnd.uniform(-1, 1),
+                                 (j + 0.5) * cell + 0.1 * d * rnd.uniform(-1, 1),
+                                 (k + 0.5) * cell + 0.1 * d * rnd.uniform(-1, 1)), orientation(q)))
+    placed = {"bodies": placed_spheres(ids), "centres": [list(O.bodies[i].state.pos) for i in ids],
+              "drawn": [t["name"] for t in pop]}
+    unbound_mass_carriers(ids)
+    O.engines = engines()
+    O.dt = stable_dt(pop)
+    index = grain_index(ids)
+    goal = 1e3 * SETTINGS["confining_kpa"]
+    mu = math.tan(math.radians(SETTINGS["friction_deg"]))
+    # strain rates from the inertial number I = rate * d * sqrt(rho / p'), at p' = the confining stress
+    # (the smallest p' of the test: the largest I)
+    rate = SETTINGS["inertial_number"] * math.sqrt(goal / rho) / d
+    rate_c = SETTINGS["compaction_inertial_number"] * math.sqrt(goal / rho) / d
+    every = SETTINGS["control_every"]
+    # isotropic compaction: frictionless for a dense specimen, with the contact friction for a loose one
+    dense = SETTINGS["packing"] == "dense"
+    set_friction(0.0 if dense else mu)
+    max_time = SETTINGS["compaction_time_factor"] / rate_c
+    st, compacted = isotropic(ids, index, goal, rate_c, max_time, "compaction", 0.0, 0.15)
+    e_compacted = (O.cell.volume - solid) / solid
+    t_compaction, steps_compaction = O.time, O.iter
+    if dense:  # the contact friction back on, then in equilibrium again at the confining stress
+        set_friction(mu)
+        st, settled = isotropic(ids, index, goal, rate_c, 0.25 * max_time, "friction on", 0.15, 0.2)
+        compacted = compacted and settled
+    # drained shearing: z shortened at a constant engineering strain rate, x and y held at the confining stress
+    L0, V0 = O.cell.size[2], O.cell.volume
+    e0 = (V0 - solid) / solid
+    target = SETTINGS["axial_strain"]
+    lateral = SETTINGS["lateral_rate_factor"] * rate
+    record_step = target / SETTINGS["records"]
+    held = [0.0, 0.0, 0.0]
+    records = []
+    next_record = 0.0
+    t_shear = O.time
+    while True:
+        ea = 1.0 - O.cell.size[2] / L0
+        if ea >= next_record or ea >= target:
+            s = st["stress"]
+            sx, sy, sz = s[0, 0], s[1, 1], s[2, 2]
+            q, p = sz - 0.5 * (sx + sy), (sx + sy + sz) / 3.0
+            V = O.cell.volume
+            records.append([ea, sx, sy, sz, q, p, q / p if p > 0 else float("nan"), 1.0 - V / V0,
+                            (V - solid) / solid, st["coordination"], st["p_love_weber"], st["unbalanced"],
+                            st["overlap"] / d])
+            while next_record <= ea:
+                next_record += record_step
+        if ea >= target:
+            break
+        r = servo(st, (0, 1), goal, lateral, every, held)
+        r[2] = -rate * L0 / O.cell.size[2]  # dLz/dt = -rate * L0: constant engineering strain rate
+        strain_rates(r)
+        O.run(every, True)
+        st = cell_state(ids, index)
+        progress(0.2 + 0.8 * ea / target, "shear %.3f" % ea)
+    strain_rates((0.0, 0.0, 0.0))
+    progress(1.0, "done")
+    write_result({"test": "triaxial", "grains": n, "inserted": len(ids), "lost": 0, "d_mean": d,
+                  "grain_density": rho, "solid_volume": solid, "confining": goal, "packing": SETTINGS["packing"],
+                  "strain_rate": rate, "compaction_strain_rate": rate_c,
+                  "inertial_number": rate * d * math.sqrt(rho / goal), "compacted": compacted,
+                  "void_ratio_compacted": e_compacted, "void_ratio_initial": e0, "cell_final": list(O.cell.size),
+                  "t_compaction": t_compaction, "steps_compaction": steps_compaction, "t_shear": t_shear,
+                  "columns": ["axial_strain", "sigma_x", "sigma_y", "sigma_z", "q", "p", "q_over_p",
+                              "volumetric_strain", "void_ratio", "coordination", "p_love_weber", "unbalanced",
+                              "overlap_over_d"],
+                  "records": records, "steps": O.iter, "time": O.time, "dt": O.dt,
+                  "spheres": contact_spheres(ids), "placed": placed})
+
+
+triaxial()
 '''

@@ -8,15 +8,17 @@ from dataclasses import dataclass
 
 from ..params import param, validate
 
-__all__ = ["TESTS", "Settings", "QUICK", "scene_settings", "check_size"]
+__all__ = ["TESTS", "GrainSettings", "Settings", "TriaxialSettings", "QUICK", "QUICK_TRIAXIAL", "scene_settings",
+           "check_size", "MIN_TRIAXIAL_GRAINS", "check_triaxial_run", "triaxial_steps"]
 
-#: the virtual tests
+#: the virtual tests under gravity (their scene settings: :func:`scene_settings`)
 TESTS = ("repose", "tilt")
 
 
 @dataclass(frozen=True)
-class Settings:
-    """Settings of a virtual bulk test, SI units unless stated.
+class GrainSettings:
+    """The settings every virtual test shares: the grains, their material and contact, the seeds (SI units
+    unless stated).
 
     The same settings apply to every shape in a comparison.
     """
@@ -42,17 +44,107 @@ class Settings:
     seeds: int = param(3, "independent runs (seeds seed, seed+1, ...); the angle is reported with its spread",
                        kind="int", low=1, high=100)
     seed: int = param(0, "first seed", kind="int", low=0, high=2**31 - 1)
-    base_roughness: float = param(0.3, "radius of the fixed spheres of the rough base, in mean grain diameters",
-                                  low=0.05, high=2.0)
-    tilt_step: float = param(0.5, "tilt increment of the tilt test", unit="deg", low=0.05, high=5.0)
-    tilt_start: float = param(10.0, "first tilt angle of the tilt test", unit="deg", low=0.0, high=60.0)
 
     def __post_init__(self):
         validate(self)
 
 
+@dataclass(frozen=True)
+class Settings(GrainSettings):
+    """Settings of a virtual bulk test under gravity (angle of repose, tilt table), SI units unless stated."""
+
+    base_roughness: float = param(0.3, "radius of the fixed spheres of the rough base, in mean grain diameters",
+                                  low=0.05, high=2.0)
+    tilt_step: float = param(0.5, "tilt increment of the tilt test", unit="deg", low=0.05, high=5.0)
+    tilt_start: float = param(10.0, "first tilt angle of the tilt test", unit="deg", low=0.0, high=60.0)
+
+
 #: settings of ``--quick``: a few tens of grains, seconds per run (plumbing, not a measurement)
 QUICK = dict(grains=30, templates=6, spheres=6, seeds=1, tilt_step=1.0, tilt_start=15.0)
+
+
+#: the densest solid fraction a triaxial specimen is assumed to reach (random close packing of spheres, 0.64)
+DENSEST_FRACTION = 0.64
+#: a triaxial cell is at least this many mean grain diameters wide when shearing starts
+MIN_CELL_DIAMETERS = 4.0
+#: fewest grains of a triaxial specimen: a cube of MIN_CELL_DIAMETERS diameters at DENSEST_FRACTION (79)
+MIN_TRIAXIAL_GRAINS = math.ceil(MIN_CELL_DIAMETERS ** 3 * DENSEST_FRACTION / (math.pi / 6.0))
+
+
+@dataclass(frozen=True)
+class TriaxialSettings(GrainSettings):
+    """Settings of the drained triaxial test in a periodic cell (``grainforge simulate triaxial``).
+
+    The contacts are a hundred times stiffer than the gravity tests' (``young`` 10⁸ Pa): at the default
+    confining stress the stiffness number k_n / (p′ d) is about 10³, so overlaps stay near 0.1 % of a grain.
+    """
+
+    young: float = param(1e8, "contact modulus E: normal stiffness k_n = E·r of a sphere contact; 100 times the "
+                         "gravity tests' (stiffness number k_n/(σ′₃·d) about 10³ at 20 kPa)", unit="Pa", low=1e3,
+                         high=1e11, shown_default="1e8")
+    confining_kpa: float = param(20.0, "effective confining stress σ′₃ of the isotropic compaction and of the "
+                                 "drained shearing (the paper's test: 20 kPa)", unit="kPa", low=0.0, high=1e4,
+                                 low_open=True)
+    axial_strain: float = param(0.25, "axial strain at the end of the shearing (compression positive)", low=0.0,
+                                high=1.0, low_open=True, high_open=True)
+    packing: str = param("dense", "dense: isotropic compaction without friction; loose: compaction with the "
+                         "contact friction (the void ratio reached is reported)", kind="str",
+                         choices=("dense", "loose"))
+    inertial_number: float = param(1e-3, "inertial number I = ε̇·d·√(ρ/σ′₃) that sets the axial strain rate "
+                                   "(quasi-static below about 1e-3)", low=1e-6, high=0.1)
+
+
+#: settings of ``simulate triaxial --quick``: the fewest grains a periodic cell takes, a tenth of the shearing at
+#: ten times the default strain rate (seconds to a minute per run; plumbing, not a measurement)
+QUICK_TRIAXIAL = dict(grains=MIN_TRIAXIAL_GRAINS + 21, templates=6, spheres=6, seeds=1, axial_strain=0.06,
+                      inertial_number=1e-2)
+
+
+#: inertial number of the triaxial compaction's largest strain rate (the servo slows it near the goal)
+COMPACTION_INERTIAL_NUMBER = 1e-2
+#: the triaxial scene's time step over d·√(ρ/E) (0.3 √(m/(E r_max)) for clumps of a few spheres: 0.31 measured)
+TRIAXIAL_DT_FACTOR = 0.3
+#: steps of the isotropic compaction (and, dense, of the friction switched on) over √(E/σ′₃)/(0.3 I_c): the
+#: quick runs' 23,000 steps at I_c = 0.01 and E/σ′₃ = 5000
+TRIAXIAL_COMPACTION_FACTOR = 1.0
+#: Yade seconds per grain and step of the triaxial scene (one core): a fixed part (the clump, its six mass
+#: spheres, the servo's sum over the contacts every 10 steps) and a part per contact sphere; fitted to runs of
+#: 100 grains of 6 spheres (7.5e-6 s a grain-step)
+TRIAXIAL_GRAIN_STEP_SECONDS, TRIAXIAL_SPHERE_STEP_SECONDS = 3e-6, 0.75e-6
+
+
+def triaxial_steps(settings: TriaxialSettings) -> float:
+    """Estimated time steps of one triaxial run: the compaction's and the shearing's.
+
+    The shearing takes ε_a / (ε̇ dt) steps, with ε̇ = I √(σ′₃/ρ)/d and dt ≈ 0.3 d √(ρ/E): that is
+    ε_a √(E/σ′₃) / (0.3 I), whatever the grains' size and density.
+
+    Examples
+    --------
+    >>> round(triaxial_steps(TriaxialSettings()))  # 58,926 shearing + 23,570 compaction
+    82496
+    """
+    stiffness = math.sqrt(settings.young / (1e3 * settings.confining_kpa))
+    shear = settings.axial_strain * stiffness / (TRIAXIAL_DT_FACTOR * settings.inertial_number)
+    compaction = TRIAXIAL_COMPACTION_FACTOR * stiffness / (TRIAXIAL_DT_FACTOR * COMPACTION_INERTIAL_NUMBER)
+    return float(shear + compaction)
+
+
+def check_triaxial_run(settings: TriaxialSettings) -> None:
+    """Refuse (``ValueError``, one line) a triaxial specimen too small for a periodic cell.
+
+    Examples
+    --------
+    >>> check_triaxial_run(TriaxialSettings(grains=200))
+    >>> check_triaxial_run(TriaxialSettings(grains=30))
+    Traceback (most recent call last):
+    ...
+    ValueError: --grains 30: a periodic triaxial cell needs --grains ≥ 79 (a cell at least 4 grain diameters wide at a solid fraction of 0.64)
+    """
+    if settings.grains < MIN_TRIAXIAL_GRAINS:
+        raise ValueError(f"--grains {settings.grains}: a periodic triaxial cell needs --grains ≥ "
+                         f"{MIN_TRIAXIAL_GRAINS} (a cell at least {MIN_CELL_DIAMETERS:g} grain diameters wide at "
+                         f"a solid fraction of {DENSEST_FRACTION:g})")
 
 
 def scene_settings(settings: Settings, test: str, seed: int) -> dict:
@@ -106,6 +198,9 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
                engine: str = "yade") -> float:
     """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
 
+    A triaxial test (``settings`` a :class:`TriaxialSettings`) is costed per time step
+    (:func:`triaxial_steps`, :data:`TRIAXIAL_GRAIN_STEP_SECONDS`).
+
     Parameters
     ----------
     available, make_seconds : int, float
@@ -135,13 +230,19 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     True
     >>> check_size("tilt", Settings(), available=3, engine="liggghts") < check_size("tilt", Settings(), available=3)
     True
+    >>> 100 < check_size("triaxial", TriaxialSettings(), available=3) < 3600  # 3 runs of 200 grains, 2 at once
+    True
     """
     from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
 
     templates = min(settings.templates, available)
     spheres = 1 if as_spheres else settings.spheres
     make = templates * (make_seconds + TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS * spheres)
-    per_run = TEST_FACTOR[test] * settings.grains * (YADE_GRAIN_SECONDS + YADE_SPHERE_SECONDS * spheres)
+    if test == "triaxial":  # its own model: steps from the strain rate and the time step (triaxial_steps)
+        per_run = triaxial_steps(settings) * settings.grains * (TRIAXIAL_GRAIN_STEP_SECONDS
+                                                                + TRIAXIAL_SPHERE_STEP_SECONDS * spheres)
+    else:
+        per_run = TEST_FACTOR[test] * settings.grains * (YADE_GRAIN_SECONDS + YADE_SPHERE_SECONDS * spheres)
     if shape == "levelset":
         make = templates * (make_seconds + dem_template_seconds("levelset", spacing=spacing))
         per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
