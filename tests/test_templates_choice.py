@@ -186,6 +186,25 @@ def test_dem_with_templates_at_least_the_inputs_takes_all_and_says_so(runner, po
     assert len(rows) == 25 and rows[-1]["source"] == "all 24 candidates taken"
 
 
+def test_a_candidate_that_is_not_a_solid_is_named_before_the_choice(runner, population, tmp_path):
+    """Candidates measured from their files are checked as templates are: a hollow grain among them is named
+    in one line (it is not left to sway the choice, nor dropped unseen when another grain is chosen)."""
+    import trimesh
+
+    folder = tmp_path / "mixed"
+    shutil.copytree(population / "loose", folder)
+    outer, inner = trimesh.creation.icosphere(radius=0.5), trimesh.creation.icosphere(subdivisions=1, radius=0.25)
+    inner.invert()
+    trimesh.util.concatenate([outer, inner]).export(folder / "rf-0003.stl")  # replaces a grain: a cavity
+    out = tmp_path / "deck"
+    r = runner.invoke(cli, ["dem", str(folder), "--out", str(out), "--templates", "3", "--spheres", "4",
+                            "--workers", "1"])
+    lines = [ln for ln in r.stderr.splitlines() if ln.startswith("Error")]
+    assert r.exit_code == 2 and len(lines) == 1, r.output
+    assert "rf-0003.stl: not a closed solid (cavity" in lines[0]
+    assert not out.exists() or not any(out.iterdir())
+
+
 @pytest.mark.parametrize("command", [["dem"], ["simulate", "repose"], ["simulate", "tilt"]])
 @pytest.mark.parametrize("k", ["0", "-2"])
 def test_templates_below_one_is_refused_in_one_line(runner, population, tmp_path, command, k):

@@ -135,9 +135,11 @@ def manifest_descriptors(inputs: Iterable[str | os.PathLike]) -> dict[Path, dict
 
 
 def _measure_file(path):
+    """A candidate's descriptors, read and checked as a template is (:func:`~grainforge.dem.inputs.read_grain`):
+    a file that is not one solid is named now, before its descriptors could sway the choice."""
     from .inputs import read_grain
 
-    v, f = read_grain(path, check=False)
+    v, f = read_grain(path)
     return mesh_descriptors(v, f)
 
 
