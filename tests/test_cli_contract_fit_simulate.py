@@ -150,6 +150,14 @@ CASES = [
          r"100 repose run\(s\) of 20000 grains of 200 sphere\(s\) .*would take about .*; lower --grains, --spheres "
          r"or --seeds"),
     Case("simulate-tilt-huge", _sim("tilt", *HUGE_SIM), r"100 tilt run\(s\) .*would take about"),
+    Case("simulate-triaxial-huge", _sim("triaxial", *HUGE_SIM), r"100 triaxial run\(s\) .*would take about"),
+    Case("simulate-triaxial-slow", _sim("triaxial", "--grains", "2000", "--inertial-number", "1e-6"),
+         r"3 triaxial run\(s\) of 2000 grains .*would take about"),
+    # simulate triaxial: a confining stress, an axial strain or a specimen no periodic test takes
+    *[Case(f"simulate-triaxial-{'-'.join(a)}", _sim("triaxial", *a), message)
+      for a, message in ((["--confining-kpa", "0"], r"--confining-kpa"), (["--confining-kpa", "1e5"], r"--confining-kpa"),
+                         (["--axial-strain", "1"], r"--axial-strain"), (["--packing", "medium"], r"--packing"),
+                         (["--grains", "50"], r"--grains 50: a periodic triaxial cell needs --grains ≥ 79"))],
     Case("simulate-recipe-count-2**63-1", ["simulate", "repose", "{in}/huge.toml", "--quick", "--out", "o"],
          r"huge\.toml: 9223372036854775807 fso grains would take about .*; lower count"),
     # simulate: bad options and inputs
