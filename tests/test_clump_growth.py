@@ -74,3 +74,31 @@ def test_same_inputs_same_bytes(cri):
 def test_bad_growth_is_refused(cri, bad):
     with pytest.raises(ValueError, match="growth"):
         clump(*cri, spheres=5, growth=bad)
+
+
+@pytest.mark.parametrize("target", [0.7, 0.8, 0.85, 0.9])
+def test_the_search_finds_the_first_prefix_that_reaches_the_target(cri, target, monkeypatch):
+    """The prefixes of 8, 16, 32, … spheres, then a bisection: the count is the one a scan of every prefix
+    finds, within accuracy_measures(cap) measures."""
+    from grainforge.dem import clump as module
+
+    v, f = cri
+    calls = []
+    real = module._Measure.__call__
+
+    def counted(self, centres, radii):
+        calls.append(len(radii))
+        return real(self, centres, radii)
+
+    monkeypatch.setattr(module._Measure, "__call__", counted)
+    c = clump(v, f, spheres=100, target_iou=target, measure_resolution=40)
+    assert 1 <= len(calls) <= module.accuracy_measures(100)
+    monkeypatch.setattr(module._Measure, "__call__", real)
+    fixed = clump(v, f, spheres=100)
+    scan = [clump_accuracy(v, f, fixed.centres[:k], fixed.radii[:k], resolution=40).iou for k in range(1, 101)]
+    first = next((k for k, iou in enumerate(scan, 1) if iou >= target), 100)
+    assert c.count == first and c.meets_target == (scan[first - 1] >= target)
+    assert np.array_equal(c.centres, fixed.centres[:c.count]) and np.array_equal(c.radii, fixed.radii[:c.count])
+    # no prefix measured is more than twice the count found (nor than the first prefix, 8)
+    if c.meets_target:
+        assert max(calls) <= max(8, 2 * c.count)
