@@ -27,7 +27,7 @@ ALGORITHMS = ("grainforge.methods", "grainforge.analysis", "grainforge.fabricati
 LAYERS = (
     # the base: data, geometry kernels, files, processes
     ("_version", "params", "units", "solid", "geodesic", "harmonics", "spectra", "rotations", "voxel", "imaging",
-     "contours", "grain", "io", "workers", "staging"),
+     "contours", "grain", "io", "workers", "cluster", "staging"),
     # algorithms on grains
     ("methods", "analysis", "fabrication", "render", "plots", "estimate", "distributions", "calibration", "twins",
      "report"),

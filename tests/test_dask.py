@@ -57,7 +57,7 @@ def test_dask_cluster_output_is_byte_identical_to_local(cluster, runner, tmp_pat
 
 
 def test_unreachable_scheduler_is_one_line(monkeypatch, runner, tmp_path):
-    monkeypatch.setattr("grainforge.population.DASK_CONNECT_TIMEOUT", "2s")
+    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
     recipe = tmp_path / "pop.toml"
     recipe.write_text(RECIPE)
     res = runner.invoke(cli, ["batch", str(recipe), "--out", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"])
@@ -71,4 +71,4 @@ def test_missing_dask_names_the_extra(monkeypatch, runner, tmp_path):
     monkeypatch.setitem(sys.modules, "distributed", None)  # import fails as if not installed
     res = runner.invoke(cli, ["batch", str(recipe), "--out", str(tmp_path / "o"), "--scheduler", "tcp://x:8786"])
     assert res.exit_code == 2
-    assert "pip install grainforge[dask]" in res.output
+    assert "pip install 'grainforge[dask]'" in res.output

@@ -691,8 +691,12 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
                    population_slopes: str = POPULATION_SLOPES,
                    max_across: float | str | None = METHOD_CAP, workers: int = 1,
                    max_minutes: float = MAX_MINUTES, convention: str = "atlas",
-                   cache: str | os.PathLike | None = None) -> float:
+                   cache: str | os.PathLike | None = None, cores: int | None = None) -> float:
     """Expected wall-clock seconds of a fit; refuse one over ``max_minutes``, a day or the machine's memory.
+
+    ``workers`` processes share this machine's cores and memory; ``cores``
+    (a Dask cluster's worker threads, each with its own memory) divides the
+    time instead, and the memory is then checked for one worker.
 
     Raises
     ------
@@ -717,7 +721,10 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
                                 cached=lambda m: m not in fresh,
                                 opening=any(uses_opening(sand, caps[m]) for m in methods))
     option = "--count" + (" or fit one --method" if method == "auto" else "")
-    cores = max(1, min(int(workers), os.cpu_count() or 1))
+    if cores is None:
+        cores = max(1, min(int(workers), os.cpu_count() or 1))
+    else:
+        cores, workers = max(1, int(cores)), 1
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)
     per_worker = FIT_VOXEL_BYTES * float(max(across.max(), design_high)) ** 3
     check_memory(per_worker * max(1, int(workers)) + FIT_ROW_BYTES * most,
@@ -914,17 +921,19 @@ def reseed_seed(root: int, index: int, attempt: int) -> int:
 
 
 class _Pool:
-    """Runs :func:`measure_settings` jobs, in this process or on a worker pool."""
+    """Runs :func:`measure_settings` jobs, in this process, on a worker pool or on the caller's ``executor`` (a
+    :class:`grainforge.cluster.DaskExecutor`): the same jobs and seeds, each result in its job's place."""
 
-    def __init__(self, workers: int, convention: str = "atlas"):
+    def __init__(self, workers: int, convention: str = "atlas", executor=None):
         self.workers = workers
         self.convention = convention
-        self.ex = None
+        self.ex = executor
+        self.own = executor is None  # a pool of our own is closed on leaving; the caller's executor is not
         self.cpu = 0.0  # CPU seconds the workers spent generating and measuring
         self.grains = 0
 
     def __enter__(self):
-        if self.workers > 1:
+        if self.own and self.workers > 1:
             from .workers import process_pool
 
             self.ex = process_pool(self.workers, ["grainforge.fit", "grainforge.analysis.atlas",
@@ -933,7 +942,7 @@ class _Pool:
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        if self.ex is not None:
+        if self.ex is not None and self.own:
             from .workers import close_pool
 
             # an error, Ctrl-C or SIGTERM: stop the workers now (waiting for them from inside an
@@ -959,10 +968,17 @@ class _Pool:
             it = ((futs[f], f.result()) for f in as_completed(futs))
         if progress is not None and jobs:
             it = progress(it, len(jobs))
-        for i, row in it:
-            out[i] = row[:width]
-            self.cpu += row[width]
-            self.grains += 1
+        done = False
+        try:
+            for i, row in it:
+                out[i] = row[:width]
+                self.cpu += row[width]
+                self.grains += 1
+            done = True
+        finally:
+            if not done and self.ex is not None:  # an error or interrupt: drop the jobs not started
+                for f in futs:
+                    f.cancel()
         return out
 
 
@@ -1564,6 +1580,7 @@ def fit_sand(
     progress: Callable[[Iterable, int], Iterable] | None = None,
     log: Callable[[str], None] | None = None,
     desc: Callable[[str], None] | None = None,
+    executor: Any = None,
 ) -> FitResult:
     """Make ``count`` twins of ``sand``'s grains with ``method``; see the module docstring.
 
@@ -1591,6 +1608,10 @@ def fit_sand(
         (:func:`population_settings`).
     workers : int
         Processes measuring grains (1: this process).
+    executor : concurrent.futures.Executor, optional
+        Measure the grains on it instead (a :class:`grainforge.cluster.DaskExecutor`:
+        a Dask cluster); the same jobs and seeds, so the same result.  The
+        caller opens and closes it.
     sphericity : {"atlas", "whole"}
         How the generated grains' true sphericity is measured: as the Sand
         Atlas did (spam's cube, the default) or on the whole grain
@@ -1621,7 +1642,7 @@ def fit_sand(
         history.append(line)
         say(line)
 
-    with _Pool(max(1, int(workers)), sphericity) as pool:
+    with _Pool(max(1, int(workers)), sphericity, executor) as pool:
         if method == "auto":
             method = choose_method(sand, pool, max_across=max_across, grains=design_grains, cache=cache,
                                    progress=progress, say=note, name=name)

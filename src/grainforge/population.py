@@ -89,8 +89,6 @@ _DIST_KEYS = {
     "choice": ("values",),
     "zingg": ("elongation", "flatness"),
 }
-#: how long ``--scheduler`` waits for the scheduler to answer.
-DASK_CONNECT_TIMEOUT = "20s"
 _TOP_KEYS = ("method", "count", "seed", "format", "params", "size", "grains")
 
 
@@ -661,47 +659,47 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process
         for i in todo:
             yield make_grain(recipe, i)
         return
-    from concurrent.futures import FIRST_COMPLETED, wait
-
     from .methods import METHODS
-    from .workers import close_pool, process_pool, single_threaded_children
+    from .workers import close_pool, process_pool
 
     ex = process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.run",
                                 "trimesh", "scipy.special"])
     ok = False
     try:
-        it = iter(todo)
-        ahead = 4 * workers  # futures in flight: memory does not grow with the count
-        with single_threaded_children():  # workers (and the fork server) start during submit
-            pending = {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, ahead)}
-        while pending:
-            done, pending = wait(pending, return_when=FIRST_COMPLETED)
-            pending |= {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, len(done))}
-            for f in sorted(done, key=lambda f: f.exception() is None):
-                yield f.result()
+        yield from _executor_results(ex, recipe, todo, workers)
         ok = True
     finally:
         close_pool(ex, abort=not ok)
 
 
 def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterable[GrainResult]:
+    from .cluster import dask_executor
+
+    with dask_executor(scheduler) as ex:
+        yield from _executor_results(ex, recipe, todo, ex.workers)
+
+
+def _executor_results(ex, recipe: Recipe, todo: Sequence[int], workers: int) -> Iterable[GrainResult]:
+    """:func:`make_grain` of each of ``todo`` on executor ``ex`` (a process pool or a Dask cluster), in the order
+    they finish, ``4 × workers`` in flight (memory does not grow with the count); the owner closes ``ex``."""
+    from concurrent.futures import FIRST_COMPLETED, wait
+
+    from .workers import single_threaded_children
+
+    it = iter(todo)
+    ahead = 4 * workers
+    pending: set = set()
     try:
-        from distributed import Client, as_completed
-    except ImportError:
-        raise ValueError("--scheduler needs Dask distributed: pip install grainforge[dask]") from None
-    try:
-        client = Client(scheduler, timeout=DASK_CONNECT_TIMEOUT, set_as_default=False)
-    except (OSError, TimeoutError) as exc:
-        raise ValueError(f"cannot connect to the Dask scheduler at {scheduler}: {exc}") from None
-    try:
-        futures = client.map(make_grain, [recipe] * len(todo), list(todo), pure=False)
-        try:
-            for fut in as_completed(futures, loop=client.loop):
-                yield fut.result()
-        finally:
-            client.cancel(futures)
+        with single_threaded_children():  # local workers (and the fork server) start during submit
+            pending = {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, ahead)}
+        while pending:
+            done, pending = wait(pending, return_when=FIRST_COMPLETED)
+            pending |= {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, len(done))}
+            for f in sorted(done, key=lambda f: f.exception() is None):
+                yield f.result()
     finally:
-        client.close()
+        for f in pending:  # an error or interrupt: the grains not started are dropped
+            f.cancel()
 
 
 def check_recipe_size(recipe: Recipe, workers: int = 1) -> float:

@@ -233,27 +233,31 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
 
 
 def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, preload: Sequence[str] = (),
-                inflight: int = 3) -> Iterator[Any]:
+                inflight: int = 3, executor=None) -> Iterator[Any]:
     """``map(fn, items)`` on ``workers`` processes, results in input order, memory bounded.
 
     At most ``inflight × workers`` items are submitted ahead of the one being
     yielded, so ``items`` may be a long generator.  ``workers <= 1`` runs in
     this process.  An exception in ``fn`` is raised here, for its item, and
-    the pool is shut down (pending work cancelled).
+    the pool is shut down (pending work cancelled).  With ``executor`` (a
+    :class:`grainforge.cluster.DaskExecutor`, say) the items run there
+    instead, ``workers`` of them at a time; the executor stays open (its
+    owner closes it), and an error or interrupt cancels the items submitted.
 
     Examples
     --------
     >>> list(ordered_map(abs, [-1, 2, -3], workers=1))
     [1, 2, 3]
     """
-    if workers <= 1:
+    if workers <= 1 and executor is None:
         for item in items:
             yield fn(item)
         return
-    pool = process_pool(workers, preload)
+    pool = process_pool(workers, preload) if executor is None else executor
+    workers = max(1, workers)
     ok = False
+    pending: deque = deque()
     try:
-        pending: deque = deque()
         it = iter(items)
         with single_threaded_children():  # the workers start with the first submissions
             for item in it:
@@ -268,7 +272,11 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
             yield result
         ok = True
     finally:
-        close_pool(pool, abort=not ok)
+        if executor is None:
+            close_pool(pool, abort=not ok)
+        elif not ok:
+            for f in pending:
+                f.cancel()
 
 
 def close_pool(pool, abort: bool = False) -> None:
@@ -283,7 +291,8 @@ def close_pool(pool, abort: bool = False) -> None:
     ``pool.shutdown(wait=True, cancel_futures=True)`` drops the queued tasks and joins the pool's
     manager thread.
     """
-    if not abort:
+    if not abort or not hasattr(pool, "worker_processes"):
+        # another executor (a :class:`grainforge.cluster.DaskExecutor`): its own shutdown cancels what is left
         pool.shutdown(wait=True, cancel_futures=True)
         return
     processes = pool.worker_processes()

@@ -244,14 +244,40 @@ def _analyse_task(task: tuple[str, dict[str, Any]]) -> list[dict[str, Any]]:
     return analyse_file(path, **options)
 
 
-def analyse_files(paths, *, workers: int = 1, **options):
+def _analyse_data(task: tuple[str, bytes, dict[str, Any]]) -> list[dict[str, Any]]:
+    """:func:`analyse_file` of a file sent as its bytes (a cluster's worker need not see this machine's files):
+    written under its own name into a temporary folder, measured, then named as given."""
+    import tempfile
+
+    name, data, options = task
+    with tempfile.TemporaryDirectory(prefix="grainforge-analyse-") as tmp:
+        local = Path(tmp) / Path(name).name
+        local.write_bytes(data)
+        try:
+            rows = analyse_file(local, **options)
+        except ValueError as exc:
+            raise ValueError(str(exc).replace(str(local), name)) from None
+    for row in rows:
+        row["file"] = name
+    return rows
+
+
+def analyse_files(paths, *, workers: int = 1, executor=None, **options):
     """Rows of :func:`analyse_file` for each of ``paths``, in order, on ``workers`` processes.
 
     Yields one list of rows per file as it is done (memory bounded: a few
-    files are in flight).  The rows do not depend on ``workers``.
+    files are in flight).  The rows do not depend on ``workers``.  With
+    ``executor`` (a :class:`grainforge.cluster.DaskExecutor`) each file is
+    measured there, sent as its bytes, ``workers`` files at a time (times
+    :func:`grainforge.workers.ordered_map`'s in-flight factor); the rows are
+    the same.
     """
     from ..workers import ordered_map
 
+    if executor is not None:
+        tasks = ((str(p), Path(p).read_bytes(), options) for p in paths)
+        yield from ordered_map(_analyse_data, tasks, workers, executor=executor)
+        return
     tasks = ((str(p), options) for p in paths)
     yield from ordered_map(_analyse_task, tasks, workers, preload=PRELOAD)
 

@@ -122,8 +122,12 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
 @click.option("--overwrite", is_flag=True, help="Replace an existing --csv or --atlas-csv file.")
 @click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
               help="Processes measuring files; rows do not depend on it.")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Measure the files on an existing Dask distributed cluster, e.g. tcp://host:8786 (each file is "
+                   "sent to a worker; needs grainforge[dask] and the same grainforge on the workers); the rows are "
+                   "the same.")
 def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, sphericity,
-            atlas_csv, overwrite, workers):
+            atlas_csv, overwrite, workers, scheduler):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.
 
     Volume, area, d_eq, Wadell sphericity, convexity, L ≥ I ≥ S (minimum-volume
@@ -142,12 +146,18 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     a folder of TIFF slices, .npy, or raw with --raw-shape) is measured grain by
     grain with the options of `grainforge scan` (docs/guide/scan.md).
     """
+    import contextlib
     import os
 
-    from ..analysis.measure import ANALYSE_COLUMNS, analyse_files
+    from ..analysis.measure import ANALYSE_COLUMNS
     from ..io import write_csv
-    from .progress import progress_bar
 
+    if scheduler is not None and workers is not None:
+        raise click.UsageError("--workers is for the local processes; the Dask cluster (--scheduler) has its own")
+    if scheduler is not None:
+        from ..cluster import check_address
+
+        check_address(scheduler)
     if primary_volume is not None and not math.isfinite(primary_volume):
         raise click.BadParameter(f"must be a finite volume, got {primary_volume}", param_hint="'--primary-volume'")
     if voxel_size is not None and voxels_across is not None:
@@ -166,14 +176,20 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
         if csv_out is not None and Path(csv_out).resolve() == Path(atlas_csv).resolve():
             raise click.UsageError("--csv and --atlas-csv must be different files")
     files = mesh_inputs(files)
-    n = min(len(files), workers or os.cpu_count() or 1)
-    if atlas is not None:
-        _check_atlas(files, atlas, n, "--voxel-size-mm" if voxel_size is not None else "--voxels-across")
-    rows = []
-    bar = progress_bar(total=len(files), desc="analyse", unit="file")
-    for file_rows in bar(analyse_files(files, workers=n, fractal=fractal, fourier=fourier,
-                                       primary_volume=primary_volume, atlas=atlas)):
-        rows += file_rows
+    with contextlib.ExitStack() as stack:
+        executor = None
+        if scheduler is not None:
+            from ..cluster import dask_executor
+
+            executor = stack.enter_context(dask_executor(scheduler))  # refused in one line before any work
+            n = executor.workers
+        else:
+            n = min(len(files), workers or os.cpu_count() or 1)
+        if atlas is not None:  # the memory a worker needs: each Dask worker has its own
+            _check_atlas(files, atlas, 1 if executor else n,
+                         "--voxel-size-mm" if voxel_size is not None else "--voxels-across")
+        rows = _measure_files(files, n, executor, dict(fractal=fractal, fourier=fourier,
+                                                       primary_volume=primary_volume, atlas=atlas))
     columns = ANALYSE_COLUMNS(fourier, atlas=atlas is not None)
     if csv_out is not None:
         write_csv(csv_out, rows, columns, units=True)
@@ -189,6 +205,23 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
         seen = {w for r in flagged for w in r["flags"].split()}
         said = "; ".join(f"{flag}: {meaning}" for flag, meaning in FLAG_NOTES.items() if flag in seen)
         click.echo(f"note: {len(flagged)} body/bodies flagged ({said})", err=True)
+
+
+def _measure_files(files, workers: int, executor, options: dict) -> list:
+    """Every file's rows, in the files' order, under a progress bar; a lost Dask scheduler is one line (exit 1)."""
+    from ..analysis.measure import analyse_files
+    from ..cluster import SchedulerLost
+    from .progress import progress_bar
+
+    rows = []
+    bar = progress_bar(total=len(files), desc="analyse", unit="file")
+    try:
+        for file_rows in bar(analyse_files(files, workers=workers, executor=executor, **options)):
+            rows += file_rows
+    except SchedulerLost as exc:
+        raise click.ClickException(f"{exc}; nothing written (the rows are written once every file is "
+                                   "measured): rerun when the cluster is back") from None
+    return rows
 
 
 #: what each flag means, in the note after the table (only the flags present are explained)

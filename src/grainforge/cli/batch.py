@@ -35,11 +35,24 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
         raise click.UsageError("--workers is for the local pool; the Dask cluster decides its own workers")
     output_dir(out)  # run_batch decides what may be replaced (--resume, --overwrite)
     r = load_recipe(recipe)
+    from ..cluster import SchedulerLost
+
+    if scheduler:
+        from ..cluster import check_address
+
+        check_address(scheduler)
     try:
         result = run_batch(r, out, workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,
                            progress=progress_bar(total=r.count, desc=f"{r.method} population"))
     except FileExistsError as exc:
         raise click.UsageError(str(exc)) from None
+    except SchedulerLost as exc:
+        from ..population import JOURNAL
+
+        kept = len(list((out / JOURNAL).glob("grain-*.json"))) if (out / JOURNAL).is_dir() else 0
+        raise click.ClickException(
+            f"{exc}; kept the {kept} grain(s) finished in {out} (no manifest.csv yet): rerun with --resume "
+            "to make the rest" if kept else f"{exc}; nothing kept in {out}: rerun when the cluster is back") from None
     if result["generated"] == 0 and result["reused"] == r.count:
         click.echo(f"the batch in {out} is already complete: all {r.count} {r.method} grains are intact, "
                    "none generated; manifest.csv, manifest.json and population.png rewritten", err=True)

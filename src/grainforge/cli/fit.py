@@ -61,13 +61,16 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.option("--seed", type=click.IntRange(min=0), default=2024, show_default=True, help="Root seed of the recipe.")
 @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
               help="Worker processes [default: CPU count].")
+@click.option("--scheduler", metavar="ADDRESS", default=None,
+              help="Measure the grains on an existing Dask distributed cluster, e.g. tcp://host:8786 (needs "
+                   "grainforge[dask] and the same grainforge on the workers); the outputs are the same.")
 @click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
               show_default=True,
               help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
                    "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
 @click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv, fit-stats.csv and fit.png in --out.")
 def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains, population_slopes, design_grains,
-        max_across, max_minutes, cache_dir, seed, workers, sphericity, overwrite):
+        max_across, max_minutes, cache_dir, seed, workers, scheduler, sphericity, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).
 
     Every generated grain is the twin of one sand grain: its size, and
@@ -87,43 +90,34 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     1 when batch would refuse the recipe, 2 for a refused request.  See
     docs/fit.md.
     """
-    import os
+    import contextlib
     import sys
 
-    from ..estimate import TooLargeError, duration
-    from ..fit import FITS, METHOD_CAP, OUTPUTS, check_fit_size, check_sand, fit_sand, read_sand, write_outputs
-    from .interrupts import ready_for_work, signals_held
+    from ..fit import FITS, OUTPUTS, check_sand, read_sand, write_outputs
+    from .interrupts import signals_held
 
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
                                  param_hint="--method")
+    if scheduler is not None and workers is not None:
+        raise click.UsageError("--workers is for the local processes; the Dask cluster (--scheduler) has its own")
+    if scheduler is not None:
+        from ..cluster import check_address
+
+        check_address(scheduler)
     output_dir(out, overwrite=overwrite, files=[out / n for n in OUTPUTS])  # before any work
     s = read_sand(sand, voxel_size)
     check_sand(s)
-    workers = workers or os.cpu_count() or 1
-    max_across = METHOD_CAP if max_across is None else max_across or None
-    try:
-        seconds = check_fit_size(s, method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
-                                 population_grains=population_grains, population_slopes=population_slopes,
-                                 max_across=max_across, workers=workers, max_minutes=max_minutes,
-                                 convention=sphericity, cache=cache_dir)
-    except TooLargeError as exc:
-        raise click.UsageError(str(exc)) from None
-    ready_for_work(HEAVY_MODULES, 0.0)
-    click.echo(f"estimated time: about {duration(seconds)} on {min(workers, os.cpu_count() or 1)} core(s) (a rough "
-               "model; each phase's progress bar shows the measured rate)", err=True)
-    state = {"desc": "fit"}
+    with contextlib.ExitStack() as stack:
+        executor = None
+        if scheduler is not None:
+            from ..cluster import dask_executor
 
-    def progress(it, total):
-        return progress_bar(total=total, desc=state["desc"])(it)
-
-    click.echo(f"{s.name}: {s.count} grains, voxel {s.voxel_size:g} µm, d_eq {s.equivalent_diameter.mean():.0f} "
-               f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
-               "across)", err=True)
-    result = fit_sand(s, method, count=count, refine=refine, reseed=reseed, population_grains=population_grains,
-                      population_slopes=population_slopes, seed=seed, workers=workers,
-                      sphericity=sphericity, max_across=max_across, design_grains=design_grains, cache=cache_dir, progress=progress,
-                      log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
+            executor = stack.enter_context(dask_executor(scheduler))  # refused in one line before any work
+        result = _run_fit(s, out, executor, dict(
+            method=method, count=count, refine=refine, reseed=reseed, population_grains=population_grains,
+            population_slopes=population_slopes, seed=seed, workers=workers, sphericity=sphericity,
+            max_across=max_across, design_grains=design_grains, cache=cache_dir), max_minutes)
     from ..staging import commit_stage, staged
 
     with staged(out) as stage:  # the four outputs appear together, or none of them (an interrupt while writing)
@@ -149,6 +143,48 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
         click.echo(f"not passed: {failed_criteria(result)} (the outputs are kept; see {paths[2]}); exit status "
                    f"{EXIT_NOT_PASSED}", err=True)
         sys.exit(EXIT_NOT_PASSED)
+
+
+def _run_fit(s, out, executor, kw: dict, max_minutes: float):
+    """Check the fit's size, announce it and run it (on ``executor``, a Dask cluster, if given); its result."""
+    import os
+
+    from ..cluster import SchedulerLost
+    from ..estimate import TooLargeError, duration
+    from ..fit import METHOD_CAP, check_fit_size, fit_sand
+    from .interrupts import ready_for_work
+
+    cores = executor.workers if executor is not None else None
+    kw["workers"] = kw["workers"] or os.cpu_count() or 1
+    kw["max_across"] = METHOD_CAP if kw["max_across"] is None else kw["max_across"] or None
+    try:
+        seconds = check_fit_size(s, kw["method"], count=kw["count"], design_grains=kw["design_grains"],
+                                 refine=kw["refine"], reseed=kw["reseed"], population_grains=kw["population_grains"],
+                                 population_slopes=kw["population_slopes"], max_across=kw["max_across"],
+                                 workers=kw["workers"], max_minutes=max_minutes, convention=kw["sphericity"],
+                                 cache=kw["cache"], cores=cores)
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    ready_for_work(HEAVY_MODULES, 0.0)
+    where = (f"the Dask cluster's {cores} worker thread(s)" if executor is not None
+             else f"{min(kw['workers'], os.cpu_count() or 1)} core(s)")
+    click.echo(f"estimated time: about {duration(seconds)} on {where} (a rough model; each phase's progress bar "
+               "shows the measured rate)", err=True)
+    state = {"desc": "fit"}
+
+    def progress(it, total):
+        return progress_bar(total=total, desc=state["desc"])(it)
+
+    click.echo(f"{s.name}: {s.count} grains, voxel {s.voxel_size:g} µm, d_eq {s.equivalent_diameter.mean():.0f} "
+               f"± {s.equivalent_diameter.std():.0f} µm ({s.equivalent_diameter.mean() / s.voxel_size:.0f} voxels "
+               "across)", err=True)
+    method = kw.pop("method")
+    try:
+        return fit_sand(s, method, **kw, progress=progress, executor=executor,
+                        log=lambda line: click.echo(line, err=True), desc=lambda d: state.update(desc=d))
+    except SchedulerLost as exc:
+        raise click.ClickException(f"{exc}; nothing written to {out} (the outputs are written once the fit ends; "
+                                   "a design measured in full stays cached): rerun when the cluster is back") from None
 
 
 def failed_criteria(result) -> str:

@@ -1,0 +1,304 @@
+"""Independent tasks on a Dask distributed cluster (``--scheduler ADDRESS`` of batch, analyse and fit).
+
+The commands run their per-grain or per-file work through a
+:class:`concurrent.futures.Executor`: a local process pool
+(:func:`grainforge.workers.process_pool`) or, with ``--scheduler``, a
+:class:`DaskExecutor` on a cluster that is already running.  The code that
+submits the tasks and puts their results in order is the same for both, so
+the outputs are byte-identical; this process keeps the progress bar, the
+estimate, the refusals and the writing of the outputs.
+
+Dask is an optional extra (``pip install 'grainforge[dask]'``), imported here
+only when a scheduler is given.  :func:`dask_executor` refuses, in one line
+(a ``ValueError``), an address that is not one, a scheduler that does not
+answer within :data:`CONNECT_TIMEOUT` and workers that run another grainforge
+version; a scheduler lost during the run raises :class:`SchedulerLost`.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import logging
+import re
+import threading
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
+from typing import Any
+
+from ._version import __version__
+
+__all__ = ["CONNECT_TIMEOUT", "INSTALL", "DaskExecutor", "SchedulerLost", "VersionMismatch", "check_address",
+           "connect", "dask_executor"]
+
+#: how long ``--scheduler`` waits for the scheduler to answer
+CONNECT_TIMEOUT = "20s"
+
+#: how to install what ``--scheduler`` needs
+INSTALL = "pip install 'grainforge[dask]'"
+
+#: the communication protocols a Dask scheduler listens on
+SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+
+
+class SchedulerLost(RuntimeError):
+    """The connection to the Dask scheduler was lost during a run.
+
+    Attributes
+    ----------
+    address : str
+    done, total : int
+        Tasks finished before the loss, tasks submitted.
+    """
+
+    def __init__(self, address: str, done: int, total: int, reason: str = ""):
+        self.address, self.done, self.total = address, int(done), int(total)
+        super().__init__(f"lost the Dask scheduler at {address} after {done} of {total} task(s) had finished"
+                         + (f" ({reason})" if reason else ""))
+
+
+class VersionMismatch(ValueError):
+    """A Dask worker runs another grainforge version than this process (its results could differ)."""
+
+
+def check_address(address: str) -> str:
+    """``address`` if it can name a Dask scheduler (``tcp://HOST:PORT``, ``HOST:PORT``, ``tls://…``), else refuse.
+
+    Raises
+    ------
+    ValueError
+        One line saying what an address looks like.
+
+    Examples
+    --------
+    >>> check_address("tcp://10.0.0.5:8786"), check_address("node12:8786")
+    ('tcp://10.0.0.5:8786', 'node12:8786')
+    >>> check_address("http://node12")
+    Traceback (most recent call last):
+    ...
+    ValueError: --scheduler 'http://node12': not a Dask scheduler address; give tcp://HOST:PORT, the address the scheduler prints (e.g. tcp://10.0.0.5:8786)
+    """
+    text = str(address).strip()
+    scheme, sep, rest = text.rpartition("://")
+    if not sep:
+        scheme, rest = "tcp", text
+    ok = scheme in SCHEMES and bool(rest) and not re.search(r"[\s/]", rest)
+    if ok and scheme != "inproc":
+        host, colon, port = rest.rpartition(":")
+        host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+        ok = bool(colon and host and port.isdigit() and 0 < int(port) < 65536)
+    if not ok:
+        raise ValueError(f"--scheduler {address!r}: not a Dask scheduler address; give tcp://HOST:PORT, the address "
+                         "the scheduler prints (e.g. tcp://10.0.0.5:8786)")
+    return text
+
+
+def _distributed():
+    try:
+        import distributed
+    except ImportError:
+        raise ValueError(f"--scheduler needs Dask distributed: {INSTALL}") from None
+    return distributed
+
+
+@contextmanager
+def _quiet_dask_logs() -> Iterator[None]:
+    """Dask's own log lines off meanwhile (a lost scheduler is logged with tracebacks; the command says it in
+    one line)."""
+    names = ["distributed"] + [n for n in logging.root.manager.loggerDict if n.startswith("distributed.")]
+    loggers = [logging.getLogger(n) for n in names]
+    saved = [lg.level for lg in loggers]
+    for lg in loggers:
+        lg.setLevel(logging.CRITICAL + 1)
+    try:
+        yield
+    finally:
+        for lg, level in zip(loggers, saved):
+            lg.setLevel(level)
+
+
+def _worker_versions(client) -> dict[str, str]:
+    def version() -> str:  # a local function, sent by value: it runs whatever grainforge the worker has
+        try:
+            import grainforge
+        except ImportError:
+            return "none (not installed)"
+        return str(getattr(grainforge, "__version__", "unknown"))
+
+    return client.run(version)
+
+
+def check_versions(client, address: str) -> None:
+    """Refuse workers that run another grainforge version than this process.
+
+    Raises
+    ------
+    VersionMismatch
+        Naming both versions and one worker.
+    """
+    try:
+        versions = _worker_versions(client)
+    except Exception as exc:  # noqa: BLE001 - whatever a worker that cannot run the check says
+        raise VersionMismatch(f"the Dask workers at {address} cannot run grainforge's check of their version "
+                              f"({type(exc).__name__}: {exc}); install grainforge {__version__} on them") from None
+    other = {w: v for w, v in versions.items() if v != __version__}
+    if other:
+        worker, version = sorted(other.items())[0]
+        raise VersionMismatch(f"the Dask worker {worker} (and {len(other) - 1} more) runs grainforge {version}, "
+                              f"this process grainforge {__version__}; install the same version on the workers"
+                              if len(other) > 1 else
+                              f"the Dask worker {worker} runs grainforge {version}, this process grainforge "
+                              f"{__version__}; install the same version on the workers")
+
+
+@contextmanager
+def connect(address: str, *, timeout: str | None = None) -> Iterator[Any]:
+    """A ``distributed.Client`` of the scheduler at ``address`` whose workers run this grainforge version.
+
+    Dask's log lines are off while it is open; the client is closed on leaving.
+
+    Raises
+    ------
+    ValueError
+        Dask not installed, a bad address, no answer within ``timeout``
+        (default :data:`CONNECT_TIMEOUT`), workers of another version.
+    """
+    address = check_address(address)
+    distributed = _distributed()
+    with _quiet_dask_logs():
+        try:
+            client = distributed.Client(address, timeout=timeout or CONNECT_TIMEOUT, set_as_default=False)
+        except (OSError, TimeoutError, ValueError) as exc:
+            reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
+            raise ValueError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
+        try:
+            check_versions(client, address)
+            yield client
+        finally:
+            try:
+                client.close(timeout=5)
+            except Exception:  # noqa: BLE001 - a lost scheduler: nothing left to close cleanly
+                pass
+
+
+def _call(version: str, fn: Callable, args: tuple, kwargs: dict) -> Any:
+    """Run ``fn(*args, **kwargs)`` on a Dask worker, first checking it runs grainforge ``version`` (a worker that
+    joined after :func:`check_versions`)."""
+    if __version__ != version:
+        raise VersionMismatch(f"a Dask worker runs grainforge {__version__}, this process grainforge {version}; "
+                              "install the same version on the workers")
+    return fn(*args, **kwargs)
+
+
+class DaskExecutor(cf.Executor):
+    """A :class:`concurrent.futures.Executor` whose tasks run on a Dask cluster.
+
+    Its futures are ordinary :class:`concurrent.futures.Future` objects (so
+    ``wait``, ``as_completed`` and the code written for a process pool work
+    unchanged).  Every task is submitted with ``pure=False`` and checks that
+    its worker runs this grainforge version.  A task's own error is raised by
+    its future's ``result()``; a task the scheduler lost (the connection
+    gone) raises :class:`SchedulerLost`.  A task whose worker dies is rerun
+    by Dask elsewhere.
+
+    Parameters
+    ----------
+    client : distributed.Client
+    address : str
+        The scheduler's address, for messages.
+    """
+
+    def __init__(self, client, address: str = ""):
+        self.client = client
+        self.address = address
+        self._pending: set = set()
+        self._lock = threading.Lock()
+        self._closing = False
+        self.submitted = 0
+        self.finished = 0
+
+    @property
+    def workers(self) -> int:
+        """Worker threads of the cluster now (at least 1): what the callers size their windows and estimates by."""
+        try:
+            info = self.client.scheduler_info(n_workers=-1)
+        except TypeError:  # an older distributed
+            info = self.client.scheduler_info()
+        except Exception:  # noqa: BLE001 - a scheduler that does not answer: one
+            return 1
+        return max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
+
+    def submit(self, fn, /, *args, **kwargs) -> cf.Future:
+        if self._closing:
+            raise RuntimeError("cannot schedule new tasks after shutdown")
+        out: cf.Future = cf.Future()
+        try:
+            fut = self.client.submit(_call, __version__, fn, args, kwargs, pure=False)
+        except Exception as exc:  # noqa: BLE001 - a client whose scheduler is gone refuses new tasks
+            raise SchedulerLost(self.address, self.finished, self.submitted, f"{type(exc).__name__}: {exc}") from None
+        with self._lock:
+            self._pending.add(fut)
+            self.submitted += 1
+
+        def cancelled(f: cf.Future) -> None:
+            if f.cancelled():
+                fut.cancel()
+
+        out.add_done_callback(cancelled)
+        fut.add_done_callback(lambda f: self._settle(f, out))
+        return out
+
+    def _settle(self, fut, out: cf.Future) -> None:
+        """Pass the Dask future's outcome to ``out`` (in Dask's callback thread)."""
+        with self._lock:
+            self._pending.discard(fut)
+        if out.done():
+            return
+        status = fut.status
+        try:
+            if status == "finished":
+                result = fut.result()
+                with self._lock:
+                    self.finished += 1
+                out.set_result(result)
+                return
+            if status == "error":
+                out.set_exception(fut.exception())
+                return
+        except Exception as exc:  # noqa: BLE001 - the result could not be fetched: the scheduler is gone
+            reason = f"{type(exc).__name__}: {exc}" if str(exc) else type(exc).__name__
+        else:
+            reason = f"task {status}"
+        try:
+            if self._closing:
+                out.cancel()
+                out.set_running_or_notify_cancel()
+            else:
+                out.set_exception(SchedulerLost(self.address, self.finished, self.submitted, reason))
+        except cf.InvalidStateError:
+            pass
+
+    def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
+        """Stop: with ``cancel_futures`` (or without ``wait``) cancel the tasks not done, else wait for them."""
+        with self._lock:
+            pending = list(self._pending)
+        if cancel_futures or not wait:
+            self._closing = True
+            if pending:
+                try:
+                    self.client.cancel(pending)
+                except Exception:  # noqa: BLE001 - a lost scheduler holds nothing to cancel
+                    pass
+        elif pending:
+            _distributed().wait(pending)
+        self._closing = True
+
+
+@contextmanager
+def dask_executor(address: str) -> Iterator[DaskExecutor]:
+    """:func:`connect`, then a :class:`DaskExecutor` on that client; tasks not done on leaving are cancelled."""
+    with connect(address) as client:
+        ex = DaskExecutor(client, check_address(address))
+        try:
+            yield ex
+        finally:
+            ex.shutdown(wait=False, cancel_futures=True)
