@@ -341,21 +341,23 @@ def cell_state(ids, index):
             "overlap": float(pen.mean()), "contacts": int(len(k1)), "p_love_weber": float(p_love_weber)}
 
 
-def servo(st, axes, goal, limit, every, held):
+def servo(st, axes, goal, limit, every, held, integral):
     """Strain rates (1/s, positive = the cell grows) that bring the stress on ``axes`` to ``goal`` (Pa).
 
     A proportional-integral servo on the rate c that would close the error in the next ``every`` steps were
     the packing as stiff as its affine modulus: rate = SETTINGS["servo_gain"] * c + the integral term, which
-    adds SETTINGS["servo_integral"] * c at every call (the packing is softer than affine, and a dilating
-    specimen needs a lateral strain rate of its own at no error: the integral term learns it). Both are kept
-    within ``limit``; an axis without contacts closes at ``-limit``. ``held`` (the integral terms) is updated.
+    adds ``integral`` * c at every call (while shearing: the packing is softer than affine, and a dilating
+    specimen needs a lateral strain rate of its own at no error, which the integral term learns; none while
+    compacting, where the rate at rest is 0 and an integral term would keep the cell swinging about the goal).
+    Both are kept within ``limit``; an axis without contacts closes at ``-limit``. ``held`` (the integral
+    terms) is updated.
     """
     rates = [0.0, 0.0, 0.0]
     for a in axes:
         m = st["modulus"][a]
         if m > 0:
             c = (st["stress"][a, a] - goal) / (m * every * O.dt)
-            held[a] = max(-limit, min(limit, held[a] + SETTINGS["servo_integral"] * c))
+            held[a] = max(-limit, min(limit, held[a] + integral * c))
             r = held[a] + SETTINGS["servo_gain"] * c
         else:
             r = -limit
@@ -376,7 +378,7 @@ def isotropic(ids, index, goal, limit, max_time, phase, f0, f1):
     held = [0.0, 0.0, 0.0]
     st = cell_state(ids, index)
     while O.time - t0 < max_time:
-        strain_rates(servo(st, (0, 1, 2), goal, limit, every, held))
+        strain_rates(servo(st, (0, 1, 2), goal, limit, every, held, 0.0))
         O.run(every, True)
         st = cell_state(ids, index)
         err = max(abs(st["stress"][a, a] / goal - 1.0) for a in range(3))
@@ -462,7 +464,7 @@ def triaxial():
                 next_record += record_step
         if ea >= target:
             break
-        r = servo(st, (0, 1), goal, lateral, every, held)
+        r = servo(st, (0, 1), goal, lateral, every, held, SETTINGS["servo_integral"])
         r[2] = -rate * L0 / O.cell.size[2]  # dLz/dt = -rate * L0: constant engineering strain rate
         strain_rates(r)
         O.run(every, True)
