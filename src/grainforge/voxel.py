@@ -29,7 +29,7 @@ gives balanced crossings in every column.  Each crossing steps the winding
 number (±1 by the triangle's orientation) of every centre beyond it; one
 sweep along the columns turns the steps into the image.  A column whose
 crossings do not balance (possible only for an open or degenerate mesh) is
-cast again as a ray with trimesh (``mesh.ray``, what trimesh does well),
+cast again as a ray with trimesh (its float64 ``RayMeshIntersector``, what trimesh does well),
 a little to the side, and its parity is used.
 
 The independent references in the tests: analytic solids (box and ball
@@ -259,7 +259,11 @@ def _crossings(mesh, origins: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """(ray index, z) of every surface crossing of the +z rays from ``origins``."""
     direction = np.zeros_like(origins)
     direction[:, 2] = 1.0
-    loc, ray, _ = mesh.ray.intersects_location(origins, direction, multiple_hits=True)
+    from trimesh.ray.ray_triangle import RayMeshIntersector
+
+    # trimesh's own float64 intersector, not ``mesh.ray`` (Embree's float32 one when embreex is installed): the
+    # crossings, and so the voxels, do not depend on what else is installed
+    loc, ray, _ = RayMeshIntersector(mesh).intersects_location(origins, direction, multiple_hits=True)
     return np.asarray(ray, dtype=np.int64), np.asarray(loc, dtype=np.float64).reshape(-1, 3)[:, 2]
 
 

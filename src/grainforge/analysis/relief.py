@@ -61,8 +61,11 @@ def radii_along(vertices: np.ndarray, faces: np.ndarray, directions: np.ndarray,
     c = volume_centroid(v, np.asarray(faces)) if centre is None else np.asarray(centre, dtype=np.float64)
     d = np.asarray(directions, dtype=np.float64)
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
+    from trimesh.ray.ray_triangle import RayMeshIntersector
+
     mesh = trimesh.Trimesh(v, faces, process=False)
-    loc, ray, _ = mesh.ray.intersects_location(np.broadcast_to(c, d.shape), d, multiple_hits=True)
+    # trimesh's float64 intersector whatever else is installed (``mesh.ray`` would be Embree's, in float32)
+    loc, ray, _ = RayMeshIntersector(mesh).intersects_location(np.broadcast_to(c, d.shape), d, multiple_hits=True)
     out = np.full(len(d), np.nan)
     np.fmax.at(out, ray, np.linalg.norm(loc - c, axis=1))
     return out
