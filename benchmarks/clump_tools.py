@@ -427,6 +427,20 @@ def figure(rows, path: Path):
     fig.savefig(path, dpi=110)
 
 
+def read_rows(path: Path):
+    """The rows of a results CSV, numbers as numbers (counts as int, as they were written)."""
+
+    def value(k, v):
+        if v == "" or k not in ("requested", "iou", "coverage", "spill", "volume_error", "inertia_error", "cpu_s",
+                                "search_cpu_s", "spheres"):
+            return v
+        x = float(v)
+        return int(x) if k in ("requested", "spheres") and x.is_integer() else x
+
+    with open(path, encoding="utf-8", newline="") as fh:
+        return [{k: value(k, v) for k, v in r.items()} for r in csv.DictReader(fh)]
+
+
 ARGS = None
 
 
@@ -443,33 +457,47 @@ def main():
     ap.add_argument("--csv", type=Path, default=ROOT / "benchmarks" / "results" / "clump_tools.csv")
     ap.add_argument("--figure", type=Path, default=ROOT / "docs" / "img" / "clump_tools.png")
     ap.add_argument("--report-only", action="store_true", help="tables and figure from --csv, no runs")
+    ap.add_argument("--only", nargs="+", choices=TOOLS, metavar="TOOL",
+                    help="run only these tools (quoted names, e.g. 'grainforge r80'); the other tools' rows are kept "
+                         "from --csv (the same grains: their clumps do not depend on ours)")
     ARGS = ap.parse_args()
     if ARGS.report_only:
-        with open(ARGS.csv, encoding="utf-8", newline="") as fh:
-            rows = [{k: (float(v) if k in ("requested", "iou", "coverage", "spill", "volume_error", "inertia_error",
-                                           "cpu_s", "search_cpu_s", "spheres") and v != "" else v)
-                     for k, v in r.items()} for r in csv.DictReader(fh)]
+        rows = read_rows(ARGS.csv)
         print(tables(rows))
         figure(rows, ARGS.figure)
         return
+    kept = []
+    if ARGS.only:
+        kept = [r for r in read_rows(ARGS.csv) if r["tool"] not in ARGS.only]
     ARGS.out.mkdir(parents=True, exist_ok=True)
     wall = time.perf_counter()
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores", flush=True)
-    rows = []
+    rows, done = [], set()
     for fam, name, g in grains(ARGS.out, ARGS.grains, ARGS.families):
         t0 = time.perf_counter()
         grain = Grain(fam, name, g, ARGS.out / "grains")
-        new = grainforge_rows(grain, "grainforge", 40) + grainforge_rows(grain, "grainforge r80", 80)
-        new += multisphere_rows(grain) + edt_rows(grain) + favier_rows(grain)
+        makers = {"grainforge": lambda: grainforge_rows(grain, "grainforge", 40),
+                  "grainforge r80": lambda: grainforge_rows(grain, "grainforge r80", 80),
+                  "multisphere": lambda: multisphere_rows(grain), "CLUMP-EDT": lambda: edt_rows(grain),
+                  "CLUMP-Favier": lambda: favier_rows(grain)}
+        new = []
+        for tool in TOOLS:
+            if not ARGS.only or tool in ARGS.only:
+                new += makers[tool]()
+            else:
+                new += [r for r in kept if (r["family"], r["grain"], r["tool"]) == (fam, name, tool)]
         rows += new
         brief = "; ".join(f"{r['tool']}: {r['iou']:.3f}" for r in new
                           if r["part"] == "count" and r["requested"] == 30 and r["iou"] != "")
         print(f"{fam} {name}: {time.perf_counter() - t0:.0f} s wall; IoU at 30 — {brief}", flush=True)
+        done.add((fam, name))
         ARGS.csv.parent.mkdir(parents=True, exist_ok=True)
         with open(ARGS.csv, "w", encoding="utf-8", newline="") as fh:
             w = csv.DictWriter(fh, fieldnames=FIELDS)
             w.writeheader()
             w.writerows(rows)
+            # with --only, the kept rows of the grains still to come (an interrupted run loses none)
+            w.writerows(r for r in kept if (r["family"], r["grain"]) not in done)
     print(f"\n{(time.perf_counter() - wall) / 60:.1f} min wall; load average {os.getloadavg()[0]:.2f}\n")
     print(tables(rows))
     figure(rows, ARGS.figure)
