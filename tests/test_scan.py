@@ -373,3 +373,32 @@ def test_thin_labels_are_counted_not_measured(tmp_path):
     assert result.exit_code == 0, result.output
     assert "1 grain(s) measured of 2 label(s)" in result.output and "1 a voxel or so thin" in result.output
     assert read_sand(tmp_path / "t.csv").count == 1
+
+
+SPAM_SCAN = Path(__file__).parent / "data" / "spam-scan.npz"
+
+
+def test_scan_matches_spam_on_the_same_labelled_image(tmp_path):
+    """Four grains touching in one labelled volume: each label's true sphericity from `grainforge scan` equals
+    spam's on that volume (``benchmarks/spam_reference.py --scan`` stored spam 0.9.1's values; float32 there)."""
+    data = np.load(SPAM_SCAN)
+    labels, spam = data["labels"], data["spam_sphericity"]
+    np.save(tmp_path / "labels.npy", labels)
+    code, out = _run(["scan", tmp_path / "labels.npy", "--voxel-size-um", "29", "--atlas-csv", tmp_path / "s.csv"],
+                     tmp_path)
+    assert code == 0 and f"{len(spam)} grain(s) measured of {len(spam)} label(s)" in out, out
+    import csv
+
+    with open(tmp_path / "s.csv", encoding="utf-8", newline="") as fh:
+        rows = {int(r["Particle ID"]): float(r["True Sphericity (-)"]) for r in csv.DictReader(fh)}
+    assert sorted(rows) == list(range(1, len(spam) + 1))
+    for k, value in enumerate(spam, start=1):
+        assert rows[k] == pytest.approx(value, abs=1e-6), (k, data["names"][k - 1])
+
+
+def test_the_stored_spam_values_are_live_spams_if_installed():
+    """The reference above is spam's own today (run where spam is installed, e.g. its throwaway environment)."""
+    spam_label = pytest.importorskip("spam.label", reason="spam (the Sand Atlas's library) is not installed")
+    labels = np.load(SPAM_SCAN)["labels"]
+    live = np.asarray(spam_label.trueSphericity(labels.astype(np.uint32)), dtype=np.float64)[1:5]
+    assert live == pytest.approx(np.load(SPAM_SCAN)["spam_sphericity"], abs=1e-6)
