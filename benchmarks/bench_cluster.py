@@ -1,0 +1,110 @@
+"""``analyse`` and ``fit`` on a Dask cluster (``--scheduler``): 1 vs 2 workers of a LocalCluster, against the
+local run in this process.
+
+Each Dask run goes through what the commands run (:func:`grainforge.analysis.measure.analyse_files` and
+:func:`grainforge.fit.fit_sand` with a :class:`grainforge.cluster.DaskExecutor`); the script checks that
+every run's output is byte-identical to the local one and prints a table of wall times, with the load
+average (the project machine is shared: read the 2-worker speed-up against it).
+
+Usage: ``python benchmarks/bench_cluster.py [--files 40] [--twins 20]``
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import tempfile
+import time
+from pathlib import Path
+
+RF_SAND = Path(__file__).resolve().parents[1] / "tests" / "data" / "synthetic-rf-sand.csv"
+
+
+def make_grains(folder: Path, count: int) -> list[Path]:
+    from grainforge.methods import get
+    from grainforge.run import grain_file_name, write_run
+
+    names = [folder / grain_file_name("fso", i, "stl") for i in range(count)]
+    if not all(p.is_file() for p in names):
+        write_run("fso", get("fso").Params(subdivisions=4), range(count), folder, overwrite=True)
+    return names
+
+
+def analyse(files, executor=None) -> tuple[float, str]:
+    """Wall seconds and the CSV text of ``analyse FILES --csv`` (every descriptor)."""
+    from grainforge.analysis.measure import ANALYSE_COLUMNS, analyse_files
+    from grainforge.io import csv_text
+
+    t = time.perf_counter()
+    rows = [r for file_rows in analyse_files(files, workers=executor.workers if executor else 1,
+                                             executor=executor, fractal=True, fourier=True) for r in file_rows]
+    return time.perf_counter() - t, csv_text(rows, ANALYSE_COLUMNS(True, atlas=False), units=True)
+
+
+def fit(twins: int, executor=None) -> tuple[float, dict[str, bytes]]:
+    """Wall seconds and the four outputs' bytes of a small rf fit (its design measured afresh)."""
+    from grainforge.fit import fit_sand, read_sand, write_outputs
+
+    sand = read_sand(RF_SAND)
+    with tempfile.TemporaryDirectory() as tmp:
+        t = time.perf_counter()
+        result = fit_sand(sand, "rf", count=twins, refine=1, reseed=1, design_grains=50, population_grains=10,
+                          population_slopes="model", max_across=12.0, cache=Path(tmp) / "cache", workers=1,
+                          executor=executor)
+        seconds = time.perf_counter() - t
+        paths = write_outputs(sand, result, Path(tmp) / "out")
+        return seconds, {p.name: p.read_bytes() for p in paths}
+
+
+def warm() -> bool:
+    """Import what the tasks use (untimed: a long run pays it once per worker)."""
+    import importlib
+
+    for name in ("grainforge.fit", "grainforge.analysis.measure", "grainforge.analysis.atlas", "grainforge.methods.rf",
+                 "grainforge.methods.fso", "grainforge.population", "skimage.measure", "scipy.ndimage", "trimesh"):
+        importlib.import_module(name)
+    return True
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--files", type=int, default=40)
+    ap.add_argument("--twins", type=int, default=20)
+    ap.add_argument("--cache", type=Path, default=Path(__file__).parent / "out" / "cluster-grains")
+    args = ap.parse_args()
+
+    import distributed
+
+    from grainforge.cluster import dask_executor
+
+    files = make_grains(args.cache, args.files)
+    warm()
+    load0 = os.getloadavg()
+    rows = []
+    a_local, csv_local = analyse(files)
+    f_local, out_local = fit(args.twins)
+    rows.append(("local, this process", a_local, f_local, "reference"))
+    for n in (1, 2):
+        with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                                      silence_logs=40) as cluster:
+            with dask_executor(cluster.scheduler_address) as ex:
+                ex.client.run(warm)
+                a, csv = analyse(files, ex)
+                f, out = fit(args.twins, ex)
+        same = csv == csv_local and out == out_local
+        rows.append((f"Dask LocalCluster, {n} worker(s)", a, f, "yes" if same else "NO"))
+    load1 = os.getloadavg()
+    print(f"analyse {args.files} FSO grains (5,120 faces, every descriptor); fit: rf, {args.twins} twins, "
+          "50 design grains, 12 voxels across")
+    print("| run | analyse (s) | fit (s) | byte-identical to local |")
+    print("|---|---|---|---|")
+    for name, a, f, same in rows:
+        print(f"| {name} | {a:.1f} | {f:.1f} | {same} |")
+    print(f"load average (1, 5, 15 min): before {load0[0]:.1f} {load0[1]:.1f} {load0[2]:.1f}, "
+          f"after {load1[0]:.1f} {load1[1]:.1f} {load1[2]:.1f}; {os.cpu_count()} cores")
+    if any(r[3] == "NO" for r in rows):
+        raise SystemExit("a Dask run's output differs from the local run's")
+
+
+if __name__ == "__main__":
+    main()
