@@ -13,8 +13,9 @@ The algorithm ("greedy inscribed spheres + SDF refinement", ours):
    analytically (sphere volume, minus ``1 + spill_weight`` times the cap beyond its depth, minus the lens
    overlaps with the spheres already placed); the best 8 are then counted exactly on the grid, and when
    none of them gains, the next 8. The greedy ends at the sphere count or when no candidate gains.
-3. Optional refinement (``iterations > 0``, off by default: it costs ~10×
-   the time for a few points of coverage): all centres and radii are optimised together (L-BFGS-B) to
+3. Optional refinement (``iterations > 0``, off by default: it costs several
+   times the greedy's time, and from about 20 spheres on it trades coverage for
+   less spill): all centres and radii are optimised together (L-BFGS-B) to
    maximise the covered grain volume minus ``spill_weight`` × the volume
    outside the grain, measured on a random sample of cell centres inside the
    grain and in a band around it, with a smooth (sigmoid) inside-the-union
@@ -484,7 +485,7 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     grid (uncovered inside cells − ``spill_weight`` × uncovered outside cells) and places the best;
     then the estimate of every candidate the new sphere overlaps loses the lens volume.  The
     estimate starts at the sphere's volume less ``1 + spill_weight`` times the cap it reaches
-    beyond its depth (the loss were the surface flat there).  When none of the 8 gains, those 8
+    beyond its depth (its loss if the surface were flat there).  When none of the 8 gains, those 8
     are dropped and the next 8 are counted: the greedy ends when no candidate is left with a
     positive estimate, or at ``n`` spheres.
     """
