@@ -219,6 +219,22 @@ CASES: list[Case] = [
     Case("check-folder", ["check", "{in}/grains", "--printer", "generic-sla"], code=0, err=r"2 part\(s\)"),
     Case("fourier-skips-white", ["fourier", "{in}/grain.png", "{in}/white.png", "{in}/grain.png"], code=1, lines=3,
          err=r"skipped .*white\.png(.|\n)*skipped 1 of 3 image\(s\): .*white\.png"),
+    # §7: 3D images (scan, and analyse of an image, which is the scan): one line, nothing written
+    *[Case(f"{cmd}-{name}", [cmd, f"{{in}}/{name}.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv"], err=err)
+      for cmd in ("scan", "analyse")
+      for name, err in (("flat", r"not a 3D image"), ("float", r"float32 image cannot hold labels"),
+                        ("void", r"no grain: every voxel is 0"), ("one-label", r"every voxel is label 1"))],
+    Case("scan-raw-size", ["scan", "{in}/labels.raw", "--raw-shape", "12", "12", "13", "--raw-dtype", "uint16",
+                           "--voxel-size-um", "10", "--atlas-csv", "s.csv"], err=r"needs \d+ bytes: check --raw-shape"),
+    *[Case(f"scan-voxel-size-{v}", ["scan", "{in}/labels.npy", "--voxel-size-um", v, "--atlas-csv", "s.csv"],
+           err=r"--voxel-size-um") for v in ("0", "-1", "nan", "inf")],
+    Case("scan-no-voxel-size", ["scan", "{in}/labels.npy", "--atlas-csv", "s.csv"], err=r"give --voxel-size-um"),
+    Case("scan-missing", ["scan", "{in}/nothere.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv"],
+         err=r"no such file"),
+    Case("scan-unwritable", ["scan", "{in}/labels.npy", "--voxel-size-um", "10", "--atlas-csv", "ro/s.csv"],
+         err=r"--atlas-csv: cannot write", readonly=True),
+    Case("scan-labels", ["scan", "{in}/labels.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv"], code=0,
+         lines=2, err=r"2 grain\(s\) measured of 2 label\(s\)\n.*wrote 2 grain\(s\) to s\.csv", creates=("s.csv",)),
 ]
 
 
@@ -277,6 +293,16 @@ def inputs(tmp_path_factory) -> Path:
     (d / "huge_count.toml").write_text(_recipe(count=2**63 - 1))
     (d / "bad_amplitude.toml").write_text(  # 0.45 is valid for some grains, not for grain 1
         _recipe('amplitude = { distribution = "uniform", low = 0.2, high = 0.45 }', count=4))
+    z, y, x = np.indices((12, 12, 24))
+    labels = np.zeros(z.shape, np.uint16)  # two balls, labels 1 and 2, clear of the faces
+    for k, cx in ((1, 6), (2, 17)):
+        labels[((z - 6) ** 2 + (y - 6) ** 2 + (x - cx) ** 2) < 16] = k
+    np.save(d / "labels.npy", labels)
+    labels.tofile(d / "labels.raw")
+    np.save(d / "flat.npy", labels[6])
+    np.save(d / "float.npy", labels.astype(np.float32))
+    np.save(d / "void.npy", np.zeros_like(labels))
+    np.save(d / "one-label.npy", np.ones_like(labels))
     return d
 
 
