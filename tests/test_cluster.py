@@ -251,3 +251,37 @@ def test_a_scheduler_lost_mid_run_is_one_line_exit_1_and_nothing_written(own_sch
     assert len(res.stderr.strip().splitlines()) == 1, res.stderr
     assert list(tmp_path.iterdir()) == []
     assert time.monotonic() - t0 < 60
+
+
+@pytest.mark.parametrize("sig, code, line", [(signal.SIGINT, 130, "Interrupted."), (signal.SIGTERM, 143, "Terminated.")],
+                         ids=["SIGINT", "SIGTERM"])
+def test_a_signal_during_a_fit_on_the_cluster_stops_it_and_its_tasks(sig, code, line, cluster, tmp_path):
+    """A real `grainforge fit --scheduler` process (500 twins: minutes of work) signalled mid-run: its line, its
+    code, nothing in --out, and the cluster's tasks cancelled."""
+    exe = Path(sys.executable).with_name("grainforge")
+    out = tmp_path / "out"
+    proc = subprocess.Popen([str(exe), "fit", str(RF_SAND), "--out", str(out), *FIT_ARGS, "--cache-dir",
+                             str(tmp_path / "cache"), "--scheduler", cluster.scheduler_address],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        with distributed.Client(cluster.scheduler_address, set_as_default=False) as client:
+            deadline = time.monotonic() + 60
+            while time.monotonic() < deadline and not any(client.processing().values()):
+                time.sleep(0.1)  # until the fit's grains run on the workers
+            assert any(client.processing().values()), "the fit never reached the cluster"
+            t0 = time.monotonic()
+            proc.send_signal(sig)
+            _, err = proc.communicate(timeout=30)
+            assert time.monotonic() - t0 < 10
+            assert proc.returncode == code, err
+            assert err.strip().splitlines()[-1] == line, err
+            assert not out.exists()
+            deadline = time.monotonic() + 20
+            while time.monotonic() < deadline and any(client.processing().values()):
+                time.sleep(0.2)
+            assert not any(client.processing().values())  # its tasks were dropped, not left running on
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
