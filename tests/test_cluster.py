@@ -1,6 +1,6 @@
-"""``analyse`` and ``fit`` with ``--scheduler``: a real distributed.LocalCluster (two worker processes) gives
-byte-identical outputs to the local run, also when a worker dies mid-run; the refusals are one line, before any
-work; a scheduler lost mid-run is one line, exit 1, nothing written."""
+"""``analyse`` and ``fit`` (and ``batch``) with ``--scheduler``: a real distributed.LocalCluster (two worker
+processes) gives byte-identical outputs to the local run, also when a worker dies mid-run; the refusals are one
+line, before any work; a scheduler lost mid-run is one line, exit 1, nothing partial written."""
 
 from __future__ import annotations
 
@@ -285,3 +285,51 @@ def test_a_signal_during_a_fit_on_the_cluster_stops_it_and_its_tasks(sig, code, 
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def test_a_bad_file_is_named_as_the_local_run_names_it(cluster, grains, runner, tmp_path):
+    """The workers measure copies of the files: an error still names the file as given, in the local run's line."""
+    folder = tmp_path / "in"
+    folder.mkdir()
+    (folder / "a.stl").write_bytes((grains / "fso-0000.stl").read_bytes())
+    (folder / "b.stl").write_bytes((grains / "fso-0001.stl").read_bytes()[:1000])  # truncated
+    local = runner.invoke(cli, ["analyse", str(folder), "--workers", "1"])
+    dask = runner.invoke(cli, ["analyse", str(folder), "--scheduler", cluster.scheduler_address])
+    assert local.exit_code == dask.exit_code == 2, (local.output, dask.output)
+    assert dask.stderr == local.stderr and str(folder / "b.stl") in dask.stderr, dask.stderr
+
+
+def test_a_batch_that_lost_its_scheduler_keeps_its_grains_and_resumes_to_the_local_run(own_scheduler, runner,
+                                                                                        tmp_path, monkeypatch):
+    import grainforge.cli.batch as batch_cli
+
+    address, scheduler = own_scheduler
+    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
+    recipe = tmp_path / "pop.toml"
+    recipe.write_text(RECIPE)
+    real_bar = batch_cli.progress_bar
+
+    def bar_that_kills_the_scheduler(**kw):
+        wrap = real_bar(**kw)
+
+        def it(items):
+            for k, item in enumerate(wrap(items)):
+                if k == 0:
+                    scheduler.kill()
+                    scheduler.wait(timeout=30)
+                yield item
+
+        return it
+
+    monkeypatch.setattr(batch_cli, "progress_bar", bar_that_kills_the_scheduler)
+    out = tmp_path / "dask"
+    res = runner.invoke(cli, ["batch", str(recipe), "--out", str(out), "--scheduler", address])
+    assert res.exit_code == 1, res.output
+    assert f"lost the Dask scheduler at {address}" in res.stderr and "--resume" in res.stderr, res.stderr
+    assert len(res.stderr.strip().splitlines()) == 1, res.stderr
+    assert not (out / "manifest.csv").exists() and any(out.glob("*.stl"))
+    monkeypatch.setattr(batch_cli, "progress_bar", real_bar)
+    res = runner.invoke(cli, ["batch", str(recipe), "--out", str(out), "--resume", "--workers", "1"])
+    assert res.exit_code == 0, res.output
+    run_batch(parse_recipe(RECIPE, source=str(recipe)), tmp_path / "local", workers=1)
+    assert tree(out) == tree(tmp_path / "local")
