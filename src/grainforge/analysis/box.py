@@ -195,13 +195,13 @@ def _volumes(X: np.ndarray, fn: np.ndarray, edges: np.ndarray, edge_faces: np.nd
 
 
 def _rotation(r: np.ndarray) -> np.ndarray:
-    """Rotation matrix of the rotation vector r (Rodrigues)."""
+    """Rotation matrix of the rotation vector r (:func:`grainforge.rotations.axis_angle_matrix`)."""
+    from ..rotations import axis_angle_matrix
+
     t = float(np.linalg.norm(r))
     if t == 0.0:
         return np.eye(3)
-    k = r / t
-    K = np.array([[0.0, -k[2], k[1]], [k[2], 0.0, -k[0]], [-k[1], k[0], 0.0]])
-    return np.eye(3) + np.sin(t) * K + (1.0 - np.cos(t)) * (K @ K)
+    return axis_angle_matrix(r / t, t)
 
 
 def _polish(X: np.ndarray, axes: np.ndarray) -> np.ndarray:

@@ -139,17 +139,16 @@ def settle_report(quit_settled: str, quit_not_settled: str, energy_unit: str = "
 
 
 def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
-    """Right-handed rotation by ``theta`` radians about ``axis`` (Rodrigues).
+    """Right-handed rotation by ``theta`` radians about ``axis``: :func:`grainforge.rotations.axis_angle_matrix`.
 
     Examples
     --------
     >>> np.round(rotation_matrix(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
     [0.0, 1.0, 0.0]
     """
-    a = np.asarray(axis, dtype=np.float64)
-    a = a / np.linalg.norm(a)
-    K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]])
-    return np.eye(3) + math.sin(theta) * K + (1 - math.cos(theta)) * K @ K
+    from ..rotations import axis_angle_matrix
+
+    return axis_angle_matrix(axis, theta)
 
 
 #: the second word of the seed of every deck's orientation stream, ``default_rng([seed, ORIENTATION_STREAM])``:

@@ -102,10 +102,10 @@ def mirror(points: np.ndarray, centre: np.ndarray, normal: np.ndarray) -> np.nda
 
 
 def rotation_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    """(3, 3) rotation by ``angle`` about unit ``axis`` (Rodrigues' formula)."""
-    x, y, z = axis
-    K = np.array([[0, -z, y], [z, 0, -x], [-y, x, 0]])
-    return np.eye(3) + np.sin(angle) * K + (1 - np.cos(angle)) * (K @ K)
+    """(3, 3) rotation by ``angle`` about ``axis``: :func:`grainforge.rotations.axis_angle_matrix`."""
+    from ..rotations import axis_angle_matrix
+
+    return axis_angle_matrix(axis, angle)
 
 
 def rotate_about(points: np.ndarray, centre: np.ndarray, axis: np.ndarray, angle: float) -> np.ndarray:
