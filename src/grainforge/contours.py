@@ -45,6 +45,7 @@ __all__ = [
     "DEFAULT_DECAY",
     "descriptor_spectrum",
     "descriptors_of_radii",
+    "polygon_area_centroid",
     "polygon_contour",
     "mask_contour",
     "scan_image",
@@ -602,20 +603,37 @@ def polygon_contour(points, *, n_angles: int = DEFAULT_ANGLES, source: str = "po
     return Contour(radii, 1.0, (cx, cy), star, source)
 
 
+def polygon_area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float, float]:
+    """Signed area and area centroid ``(area, cx, cy)`` of the closed polygon (x, y) (shoelace formula).
+
+    The one implementation of a polygon's centroid; each caller decides what a polygon of (near) zero
+    area means. With zero area the centroid is NaN.
+
+    Examples
+    --------
+    >>> polygon_area_centroid(np.array([0.0, 2.0, 2.0, 0.0]), np.array([0.0, 0.0, 1.0, 1.0]))
+    (2.0, 1.0, 0.5)
+    """
+    x1, y1 = np.roll(x, -1), np.roll(y, -1)
+    cross = x * y1 - x1 * y
+    area = float(cross.sum() / 2.0)
+    if area == 0.0:
+        return 0.0, float("nan"), float("nan")
+    return area, float(((x + x1) * cross).sum() / (6.0 * area)), float(((y + y1) * cross).sum() / (6.0 * area))
+
+
 def _area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
-    """Area centroid of the closed polygon (x, y) (shoelace formula).
+    """Area centroid of the closed polygon (x, y) (:func:`polygon_area_centroid`).
 
     Raises
     ------
     ValueError
         If the polygon encloses no area.
     """
-    x1, y1 = np.roll(x, -1), np.roll(y, -1)
-    cross = x * y1 - x1 * y
-    area = cross.sum() / 2.0
+    area, cx, cy = polygon_area_centroid(x, y)
     if abs(area) < 1e-12:
         raise ValueError("grain is too small to trace a contour")
-    return ((x + x1) * cross).sum() / (6.0 * area), ((y + y1) * cross).sum() / (6.0 * area)
+    return cx, cy
 
 
 def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, bool]:

@@ -43,13 +43,14 @@ def fd_columns() -> list[str]:
 
 
 def _polygon_centroid(poly: np.ndarray) -> np.ndarray:
-    x, y = poly[:, 0], poly[:, 1]
-    xn, yn = np.roll(x, -1), np.roll(y, -1)
-    cross = x * yn - xn * y
-    a = cross.sum() / 2
+    """Area centroid of the closed polygon ``poly`` (:func:`grainforge.contours.polygon_area_centroid`); the
+    vertices' mean when it encloses no area."""
+    from ..contours import polygon_area_centroid
+
+    a, cx, cy = polygon_area_centroid(poly[:, 0], poly[:, 1])
     if abs(a) < 1e-300:
         return poly.mean(0)
-    return np.array([((x + xn) * cross).sum(), ((y + yn) * cross).sum()]) / (6 * a)
+    return np.array([cx, cy])
 
 
 def descriptors_from_radii(r: np.ndarray, orders=FD_ORDERS) -> np.ndarray:
