@@ -832,6 +832,9 @@ def run_batch(
     ValueError
         For a recipe that does not match the interrupted batch, an unreachable
         scheduler, or a grain that cannot be made (named by index and seed).
+    grainforge.cluster.SchedulerLost
+        The Dask scheduler lost mid-run: the grains recorded so far stay, with
+        their journal, for ``resume``.
     """
     from .run import MANIFEST
 
