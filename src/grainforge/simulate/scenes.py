@@ -341,7 +341,7 @@ def cell_state(ids, index):
             "overlap": float(pen.mean()), "contacts": int(len(k1)), "p_love_weber": float(p_love_weber)}
 
 
-def servo(st, axes, goal, limit, every, held, integral):
+def servo(st, axes, goal, limit, every, held, integral, gain, deadband=0.0):
     """Strain rates (1/s, positive = the cell grows) that bring the stress on ``axes`` to ``goal`` (Pa).
 
     A proportional-integral servo on the rate c that would close the error in the next ``every`` steps were
@@ -349,16 +349,18 @@ def servo(st, axes, goal, limit, every, held, integral):
     adds ``integral`` * c at every call (while shearing: the packing is softer than affine, and a dilating
     specimen needs a lateral strain rate of its own at no error, which the integral term learns; none while
     compacting, where the rate at rest is 0 and an integral term would keep the cell swinging about the goal).
-    Both are kept within ``limit``; an axis without contacts closes at ``-limit``. ``held`` (the integral
-    terms) is updated.
+    Both are kept within ``limit``; an axis without contacts closes at ``-limit``; an axis within
+    ``deadband`` (a fraction of ``goal``) of it is left still. ``held`` (the integral terms) is updated.
     """
     rates = [0.0, 0.0, 0.0]
     for a in axes:
         m = st["modulus"][a]
-        if m > 0:
+        if abs(st["stress"][a, a] - goal) < deadband * goal:
+            r = 0.0
+        elif m > 0:
             c = (st["stress"][a, a] - goal) / (m * every * O.dt)
             held[a] = max(-limit, min(limit, held[a] + integral * c))
-            r = held[a] + SETTINGS["servo_gain"] * c
+            r = held[a] + gain * c
         else:
             r = -limit
         rates[a] = max(-limit, min(limit, r))
@@ -378,7 +380,9 @@ def isotropic(ids, index, goal, limit, max_time, phase, f0, f1):
     held = [0.0, 0.0, 0.0]
     st = cell_state(ids, index)
     while O.time - t0 < max_time:
-        strain_rates(servo(st, (0, 1, 2), goal, limit, every, held, 0.0))
+        # proportional only, gently, and the cell left still near the goal: the grains come to rest
+        strain_rates(servo(st, (0, 1, 2), goal, limit, every, held, 0.0, SETTINGS["compaction_servo_gain"],
+                           0.5 * SETTINGS["stress_tolerance"]))
         O.run(every, True)
         st = cell_state(ids, index)
         err = max(abs(st["stress"][a, a] / goal - 1.0) for a in range(3))
@@ -464,7 +468,7 @@ def triaxial():
                 next_record += record_step
         if ea >= target:
             break
-        r = servo(st, (0, 1), goal, lateral, every, held, SETTINGS["servo_integral"])
+        r = servo(st, (0, 1), goal, lateral, every, held, SETTINGS["servo_integral"], SETTINGS["servo_gain"])
         r[2] = -rate * L0 / O.cell.size[2]  # dLz/dt = -rate * L0: constant engineering strain rate
         strain_rates(r)
         O.run(every, True)

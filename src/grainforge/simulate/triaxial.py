@@ -59,6 +59,8 @@ def triaxial_scene_settings(settings: TriaxialSettings, seed: int) -> dict:
         # the servo, every 10 steps: the rate that would close the error in 10 steps at the affine modulus, plus
         # its integral at 0.3; the lateral strain rate at most 10 times the axial one
         "control_every": 10, "servo_gain": 1.0, "servo_integral": 0.3, "lateral_rate_factor": 10.0,
+        # the compaction's servo: proportional only, 0.3 of that rate, still within half the tolerance of the goal
+        "compaction_servo_gain": 0.3,
         # the isotropic state: every normal stress within 1 % of the goal and the mean net force on a grain under
         # 1 % of the mean contact force, at three checks in a row; given up after 3/rate_c of simulated time
         # (the quick runs came to rest in about 0.9/rate_c)
