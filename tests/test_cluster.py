@@ -223,15 +223,10 @@ def own_scheduler():
             p.wait(timeout=30)
 
 
-def test_a_scheduler_lost_mid_run_is_one_line_exit_1_and_nothing_written(own_scheduler, grains, runner, tmp_path,
-                                                                          monkeypatch):
-    import grainforge.cli.progress as progress
+def _bar_that_kills(real_bar, scheduler):
+    """A progress bar like ``real_bar`` that kills the scheduler process as the first result comes in."""
 
-    address, scheduler = own_scheduler
-    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
-    real_bar = progress.progress_bar
-
-    def bar_that_kills_the_scheduler(**kw):
+    def bar(**kw):
         wrap = real_bar(**kw)
 
         def it(items):
@@ -243,7 +238,16 @@ def test_a_scheduler_lost_mid_run_is_one_line_exit_1_and_nothing_written(own_sch
 
         return it
 
-    monkeypatch.setattr(progress, "progress_bar", bar_that_kills_the_scheduler)
+    return bar
+
+
+def test_a_scheduler_lost_mid_run_is_one_line_exit_1_and_nothing_written(own_scheduler, grains, runner, tmp_path,
+                                                                          monkeypatch):
+    import grainforge.cli.progress as progress
+
+    address, scheduler = own_scheduler
+    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
+    monkeypatch.setattr(progress, "progress_bar", _bar_that_kills(progress.progress_bar, scheduler))
     t0 = time.monotonic()
     res = runner.invoke(cli, ["analyse", str(grains), "--csv", str(tmp_path / "out.csv"), "--scheduler", address])
     assert res.exit_code == 1, res.output
@@ -308,20 +312,7 @@ def test_a_batch_that_lost_its_scheduler_keeps_its_grains_and_resumes_to_the_loc
     recipe = tmp_path / "pop.toml"
     recipe.write_text(RECIPE)
     real_bar = batch_cli.progress_bar
-
-    def bar_that_kills_the_scheduler(**kw):
-        wrap = real_bar(**kw)
-
-        def it(items):
-            for k, item in enumerate(wrap(items)):
-                if k == 0:
-                    scheduler.kill()
-                    scheduler.wait(timeout=30)
-                yield item
-
-        return it
-
-    monkeypatch.setattr(batch_cli, "progress_bar", bar_that_kills_the_scheduler)
+    monkeypatch.setattr(batch_cli, "progress_bar", _bar_that_kills(real_bar, scheduler))
     out = tmp_path / "dask"
     res = runner.invoke(cli, ["batch", str(recipe), "--out", str(out), "--scheduler", address])
     assert res.exit_code == 1, res.output
