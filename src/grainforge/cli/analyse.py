@@ -9,7 +9,7 @@ from pathlib import Path
 import click
 
 from ..units import with_unit
-from .options import renamed_option
+from .options import FiniteFloatRange, overwrite_option, renamed_option, workers_option
 from .paths import OutPath, mesh_inputs, output_file
 
 #: columns of the terminal table (all columns go to --csv and --json)
@@ -103,13 +103,13 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
 @click.option("--fractal/--no-fractal", default=True, show_default=True, help="Estimate the surface fractal dimension.")
 @click.option("--fourier/--no-fourier", default=True, show_default=True,
               help="Fourier descriptors D2…D16 of the three principal projections.")
-@click.option("--primary-volume", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--primary-volume", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
-@click.option("--voxel-size-mm", "voxel_size", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--voxel-size-mm", "voxel_size", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help="Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
                    "in mm (the files' unit: 7.3 µm is 0.0073); see docs/validation.md.")
 @renamed_option("--voxel-size", "--voxel-size-mm", "mm")
-@click.option("--voxels-across", type=click.FloatRange(min=2), default=None,
+@click.option("--voxels-across", type=FiniteFloatRange(min=2), default=None,
               help="As --voxel-size-mm, with the voxel size set to d_eq / this number.")
 @click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
               show_default=True,
@@ -119,9 +119,8 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
               help="Also write the atlas_* columns as a Sand Atlas table that `grainforge fit` reads (lengths in "
                    "µm, the files being in mm), with each grain's opening fraction; needs --voxel-size-mm or "
                    "--voxels-across. Bodies that are not closed are left out.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing --csv or --atlas-csv file.")
-@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU, at most one per file",
-              help="Processes measuring files; rows do not depend on it.")
+@overwrite_option("Replace an existing --csv or --atlas-csv file.")
+@workers_option("Processes measuring files; rows do not depend on it.", default_text="one per CPU, at most one per file")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Measure the files on an existing Dask distributed cluster, e.g. tcp://host:8786 (each file is "
                    "sent to a worker; needs grainforge[dask] and the same grainforge on the workers); the rows are "

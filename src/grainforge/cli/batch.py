@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from .options import overwrite_option, workers_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
 
@@ -14,13 +15,12 @@ from .progress import progress_bar
 @click.argument("recipe", type=click.Path(exists=True, dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for the grains, manifest.csv, manifest.json and population.png.")
-@click.option("--workers", type=click.IntRange(min=1), default=None, show_default="the CPU count",
-              help="Local worker processes.")
+@workers_option("Local worker processes.", default_text="the CPU count")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
                    "(needs grainforge[dask]; workers must import the same grainforge).")
 @click.option("--resume", is_flag=True, help="Continue an interrupted batch: keep intact grains, make the rest.")
-@click.option("--overwrite", is_flag=True, help="Replace the outputs of an earlier batch in --out.")
+@overwrite_option("Replace the outputs of an earlier batch in --out.")
 def batch(recipe, out, workers, scheduler, resume, overwrite):
     """Generate the population described by RECIPE (TOML) into --out.
 

@@ -6,7 +6,7 @@ import click
 
 from ..methods.dpa import PRIMITIVES
 from ..params import ParameterError
-from .options import bad_parameter
+from .options import bad_parameter, overwrite_option, seed_option, workers_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
 
@@ -26,13 +26,11 @@ def calibrate():
               help="The ε grid: A:B:STEP (inclusive) or a comma-separated list.")
 @click.option("--repeats", default=10, show_default=True, type=click.IntRange(min=1),
               help="Aggregates (seeds) per ε.")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
-              help="Root seed (aggregate k uses SeedSequence(seed).spawn(...)[k]).")
-@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU",
-              help="Worker processes; results do not depend on it.")
+@seed_option("Root seed (aggregate k uses SeedSequence(seed).spawn(...)[k]).")
+@workers_option("Worker processes; results do not depend on it.", default_text="one per CPU")
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for calibration.csv and calibration.png.")
-@click.option("--overwrite", is_flag=True, help="Replace existing output files.")
+@overwrite_option()
 def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, overwrite):
     """Mean and spread of D_A (Eq. 5) and porosity over seeds, for each ε of a grid.
 

@@ -8,7 +8,14 @@ from pathlib import Path
 
 import click
 
-from .options import EXIT_CHECK_FAILED, clump_accuracy_option
+from .options import (
+    EXIT_CHECK_FAILED,
+    FiniteFloatRange,
+    clump_accuracy_option,
+    overwrite_option,
+    seed_option,
+    workers_option,
+)
 from .paths import OutPath, output_dir
 
 #: grainforge.dem.inputs.MAX_POUR_GRAINS, spelt out so that the help does not import numpy (a test compares them)
@@ -40,7 +47,7 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
 @click.option("--engine", type=click.Choice(["yade", "liggghts", "lammps"]), default="yade", show_default=True)
 @click.option("--shape", type=click.Choice(["clump", "polyhedron", "levelset"]), default="clump",
               show_default=True, help="Grain representation (what the engine supports).")
-@click.option("--density", type=click.FloatRange(1.0, 1e5), default=2650.0, show_default=True,
+@click.option("--density", type=FiniteFloatRange(1.0, 1e5), default=2650.0, show_default=True,
               help="Solid density, kg/m³.")
 @click.option("--spheres", type=click.IntRange(2, 1000), default=30, show_default=True,
               help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
@@ -52,24 +59,23 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
 @click.option("--vertices", type=click.IntRange(4, 10000), default=None,
               help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts). "
                    "Default: 16 for Yade, 12 for LAMMPS (LAMMPS reads at most 56).")
-@click.option("--spacing", type=click.FloatRange(0.01, 0.5), default=0.05, show_default=True,
+@click.option("--spacing", type=FiniteFloatRange(0.01, 0.5), default=0.05, show_default=True,
               help="Level set: grid spacing as a fraction of the equivalent diameter.")
-@click.option("--unit", type=click.FloatRange(1e-9, 1e3), default=1e-3, show_default=True,
+@click.option("--unit", type=FiniteFloatRange(1e-9, 1e3), default=1e-3, show_default=True,
               help="Metres per file unit (grainforge files are in mm: 0.001).")
 @click.option("--count", type=click.IntRange(1), default=None, show_default="1",
               help="Copies of each grain in the example pour.")
 @click.option("--grains", type=click.IntRange(1, MAX_POUR_GRAINS), default=None,
               help="Instead of --count: the pour's total number of grains, drawn from the input grains in "
                    "proportion (each taken grains // inputs times; the rest go to inputs drawn with --seed).")
-@click.option("--seed", type=click.IntRange(0), default=None, show_default="0",
-              help="Seed of the --grains draw.")
+@seed_option("Seed of the --grains draw.", default=None, default_text="0")
 @click.option("--templates", "template_count", type=click.IntRange(1), default=None,
               show_default="every input grain",
               help="Write K templates chosen from the input grains so that their sphericity, convexity, flatness, "
                    "elongation and size are distributed as all the inputs' (KS figures printed and written to "
                    "templates.csv); --count or --grains then apply to them.")
-@click.option("--workers", type=click.IntRange(1), default=None, help="Processes (default: CPU count).")
-@click.option("--overwrite", is_flag=True, help="Replace existing deck files.")
+@workers_option("Processes.", default_text="CPU count")
+@overwrite_option("Replace existing deck files.")
 def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,
         seed, workers, overwrite, template_count=None):
     """Write a DEM deck of the grains in INPUTS (mesh files, generate/batch folders, manifests).

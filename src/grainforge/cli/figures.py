@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .options import overwrite_option
 from .paths import OutPath, output_dir
 
 
@@ -12,7 +13,7 @@ from .paths import OutPath, output_dir
 @click.option("--only", "only", multiple=True, type=click.IntRange(1, 9), help="Only this figure (repeatable).")
 @click.option("--subdivisions", type=click.IntRange(2, 6), default=5, show_default=True,
               help="Icosphere level of the FSO and CRI grains (lower is faster).")
-@click.option("--overwrite", is_flag=True, help="Replace existing figure files.")
+@overwrite_option("Replace existing figure files.")
 def figures(out, only, subdivisions, overwrite):
     """Regenerate the paper's Figures 1-6 (FSO, contours, CRI, DPA) into OUT, plus 7-9.
 

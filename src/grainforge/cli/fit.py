@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from .options import EXIT_CHECK_FAILED, renamed_option
+from .options import EXIT_CHECK_FAILED, FiniteFloatRange, overwrite_option, renamed_option, seed_option, workers_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
 
@@ -24,7 +24,7 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for recipe.toml, fit.csv, fit-stats.csv and fit.png.")
-@click.option("--voxel-size-um", "voxel_size", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--voxel-size-um", "voxel_size", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help="Voxel size of the sand's scan in µm; required unless the CSV has a 'Voxel Size (µm)' column.")
 @renamed_option("--voxel-size", "--voxel-size-um", "µm")
 @click.option("--method", default="rf", show_default=True,
@@ -50,17 +50,16 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
                    "opening-fraction column they are always measured (the model does not predict it).")
 @click.option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
               help="Grains of the method's design (the inverse model's data; measured once, then cached).")
-@click.option("--max-voxels-across", "max_across", type=click.FloatRange(min=0), default=None,
+@click.option("--max-voxels-across", "max_across", type=FiniteFloatRange(min=0), default=None,
               help="Measure generated grains at most this many voxels across; 0: at the sand's resolution, however "
                    "fine. [default: the method's cap, where its grains' descriptors have converged: 150 for rf, cri "
                    "and angular; none for fso (docs/fit.md)]")
-@click.option("--max-minutes", type=click.FloatRange(min=0, min_open=True), default=60.0, show_default=True,
+@click.option("--max-minutes", type=FiniteFloatRange(min=0, min_open=True), default=60.0, show_default=True,
               help="Refuse a fit estimated to take longer (wall clock on --workers).")
 @click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
               help="Where designs are cached (see docs/fit.md) [default: $GRAINFORGE_CACHE or ~/.cache/grainforge]")
-@click.option("--seed", type=click.IntRange(min=0), default=2024, show_default=True, help="Root seed of the recipe.")
-@click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
-              help="Worker processes [default: CPU count].")
+@seed_option("Root seed of the recipe.", default=2024)
+@workers_option("Worker processes.", default_text="CPU count")
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Measure the grains on an existing Dask distributed cluster, e.g. tcp://host:8786 (needs "
                    "grainforge[dask] and the same grainforge on the workers); the outputs are the same.")
@@ -68,7 +67,7 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
               show_default=True,
               help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
                    "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
-@click.option("--overwrite", is_flag=True, help="Replace recipe.toml, fit.csv, fit-stats.csv and fit.png in --out.")
+@overwrite_option("Replace recipe.toml, fit.csv, fit-stats.csv and fit.png in --out.")
 def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains, population_slopes, design_grains,
         max_across, max_minutes, cache_dir, seed, workers, scheduler, sphericity, overwrite):
     """Fit a generated population to the grains of SAND (a Sand Atlas CSV).

@@ -19,7 +19,6 @@ import importlib
 import os
 import signal
 import sys
-import threading
 from collections.abc import Iterable
 
 from ..staging import _handled, signals_held

@@ -35,7 +35,12 @@ class FloatList(click.ParamType):
 
 class FiniteFloatRange(click.FloatRange):
     """``click.FloatRange`` that also refuses ``nan`` (which compares false with both bounds, so the range lets it
-    through): one line, exit code 2, as for a number out of the range."""
+    through) and ``inf`` or ``-inf`` on a side without a bound: one line, exit code 2, as for a number out of the
+    range.
+
+    Every float option of the command line has this type (or :class:`FiniteFloat` where it has no range), so
+    ``nan``, ``inf`` and ``-inf`` are refused by click, before the command does any work.
+    """
 
     def convert(self, value, param, ctx):
         import math
@@ -44,6 +49,89 @@ class FiniteFloatRange(click.FloatRange):
         if not math.isfinite(rv):
             self.fail(f"{value!r} is not a finite number", param, ctx)
         return rv
+
+
+class FiniteFloat(click.types.FloatParamType):
+    """A float option without a range that refuses ``nan``, ``inf`` and ``-inf`` (one line, exit code 2).
+
+    Its help shows no range (``FiniteFloatRange()`` without bounds would show ``(-inf, inf)``).
+    """
+
+    def convert(self, value, param, ctx):
+        import math
+
+        rv = super().convert(value, param, ctx)
+        if not math.isfinite(rv):
+            self.fail(f"{value!r} is not a finite number", param, ctx)
+        return rv
+
+
+#: the type of a float option without a range
+FINITE_FLOAT = FiniteFloat()
+
+#: most worker processes any command starts at once (``--workers``)
+MAX_WORKERS = 256
+
+
+def workers_option(help: str = "Worker processes.", default_text: str | None = None, default: int | None = None):
+    """--workers, the same range for every command: 1 to :data:`MAX_WORKERS`.
+
+    Parameters
+    ----------
+    help : str
+        The command's help text (what the workers do).
+    default_text : str, optional
+        What the default is, in words (``"one per CPU"``), for a command whose default is computed
+        (``default=None``).
+    default : int, optional
+        A fixed default (``tray``: 2), shown as such in the help.
+
+    Returns
+    -------
+    callable
+        The click option decorator.
+    """
+    show = default_text if default_text is not None else default is not None
+    return click.option("--workers", type=click.IntRange(min=1, max=MAX_WORKERS), default=default,
+                        show_default=show, help=help)
+
+
+def overwrite_option(help: str = "Replace existing output files."):
+    """--overwrite, the flag of every command that writes files (docs/cli-contract.md: an existing output is
+    refused without it).
+
+    Parameters
+    ----------
+    help : str
+        What it replaces, for this command.
+
+    Returns
+    -------
+    callable
+        The click option decorator.
+    """
+    return click.option("--overwrite", is_flag=True, help=help)
+
+
+def seed_option(help: str = "Seed S of the first grain.", default: int | None = 0, default_text: str | None = None):
+    """--seed, a non-negative integer.
+
+    Parameters
+    ----------
+    help : str
+        What the seed seeds, for this command.
+    default : int or None
+        The default seed (``None``: the command picks it, described by ``default_text``).
+    default_text : str, optional
+        The default in words, shown in the help when ``default`` is None.
+
+    Returns
+    -------
+    callable
+        The click option decorator.
+    """
+    show = default_text if default_text is not None else default is not None
+    return click.option("--seed", type=click.IntRange(min=0), default=default, show_default=show, help=help)
 
 
 #: --clump-accuracy (``dem`` and ``simulate``): build each clump to an intersection over union instead of a
@@ -203,13 +291,10 @@ def count_option(help="Number of grains; grain i uses seed S + i."):
     return click.option("--count", default=1, show_default=True, type=click.IntRange(min=1), help=help)
 
 
-#: --seed, --size-definition and --overwrite, shared by ``generate`` and ``tray``
-seed_option = click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0),
-                           help="Seed S of the first grain.")
+#: --size-definition, shared by ``generate`` and ``tray``
 size_definition_option = click.option(
     "--size-definition", default="equivalent", show_default=True, type=click.Choice(list(SIZE_DEFINITIONS)),
     help="equivalent: sphere of equal volume; sieve: intermediate dimension I; longest: L.")
-overwrite_option = click.option("--overwrite", is_flag=True, help="Replace existing output files.")
 
 
 def output_options(f=None, *, printer: bool = True):
@@ -225,13 +310,13 @@ def output_options(f=None, *, printer: bool = True):
         click.option("--out", "out", required=True, type=OutPath(file_okay=False),
                      help="Folder to write the grains and manifest.csv into."),
         count_option(),
-        seed_option,
-        click.option("--size", default=10.0, show_default=True, type=click.FloatRange(min=1e-3, max=1e4),
+        seed_option(),
+        click.option("--size", default=10.0, show_default=True, type=FiniteFloatRange(min=1e-3, max=1e4),
                      help="Grain size in millimetres, 0.001 (1 µm) to 10000 (10 m) (see --size-definition)."),
         size_definition_option,
         click.option("--format", "fmt", default="stl", show_default=True, type=click.Choice(list(FORMATS)),
                      help="Mesh file format (binary STL, OBJ or binary PLY)."),
-        overwrite_option,
+        overwrite_option(),
     ]
     if printer:
         opts.append(click.option(

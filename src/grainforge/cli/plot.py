@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..plots import KINDS
+from .options import overwrite_option
 from .paths import OutPath, output_file
 
 
@@ -15,7 +16,7 @@ from .paths import OutPath, output_file
 @click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
 @click.option("-o", "--out", required=True, type=OutPath(dir_okay=False), help="PNG to write.")
 @click.option("--title", default=None, help="Plot title.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
+@overwrite_option("Replace an existing OUT.")
 def plot(kind, manifests, out, title, overwrite):
     """Plot KIND for one or more MANIFEST CSVs (overlaid, with a legend).
 

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from .options import overwrite_option
 from .paths import OutPath, mesh_inputs, output_file
 
 #: image formats the sheet can be written in (by the suffix of -o)
@@ -19,7 +20,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 @click.option("--columns", type=click.IntRange(min=1), default=None, show_default="about square",
               help="Panels per row (at most the number of panels).")
 @click.option("--title", default=None, help="Title above the panels.")
-@click.option("--overwrite", is_flag=True, help="Replace an existing OUT.")
+@overwrite_option("Replace an existing OUT.")
 def render(files, out, columns, title, overwrite):
     """Render mesh FILES (STL, OBJ, PLY, 3MF, or folders of them) as a labelled contact sheet."""
     from ..io import read_mesh

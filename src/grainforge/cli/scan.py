@@ -13,6 +13,7 @@ from pathlib import Path
 import click
 
 from .analyse import table_text
+from .options import FiniteFloatRange, overwrite_option, workers_option
 from .paths import OutPath, output_dir, output_file
 
 #: columns written after the Sand Atlas's (:data:`grainforge.fit.SAND_HEADER` and the opening fraction)
@@ -122,7 +123,7 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
 
 @click.command()
 @click.argument("image", type=click.Path(path_type=Path))
-@click.option("--voxel-size-um", type=click.FloatRange(min=0, min_open=True), default=None,
+@click.option("--voxel-size-um", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help="Voxel edge in µm (default: from the TIFF's metadata, where it says).")
 @click.option("--raw-shape", type=click.IntRange(min=1), nargs=3, default=None, metavar="Z Y X",
               help="IMAGE is raw binary (no header, C order) of this shape.")
@@ -134,10 +135,10 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
 @click.option("--segment", is_flag=True,
               help="IMAGE is binary (non-zero is grain): split touching grains by a distance-transform watershed "
                    "first.")
-@click.option("--marker-distance", type=click.FloatRange(min=0, min_open=True), default=None, show_default="0.4",
+@click.option("--marker-distance", type=FiniteFloatRange(min=0, min_open=True), default=None, show_default="0.4",
               help="With --segment: least distance between two grains' markers, as a fraction of the typical "
                    "grain diameter; larger merges more, smaller splits more.")
-@click.option("--marker-depth", type=click.FloatRange(min=0), default=None, show_default="0.08",
+@click.option("--marker-depth", type=FiniteFloatRange(min=0), default=None, show_default="0.08",
               help="With --segment: how far a distance-map maximum must rise above its saddle to seed a grain, "
                    "as a fraction of the typical grain diameter; larger ignores more shallow maxima.")
 @click.option("--labels-out", type=OutPath(dir_okay=False), default=None,
@@ -152,9 +153,8 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
 @click.option("--sphericity-convention", "convention", type=click.Choice(["atlas", "whole"]), default="atlas",
               show_default=True, help="True sphericity as the Sand Atlas computed it or on the whole grain "
                                       "(as `analyse`).")
-@click.option("--overwrite", is_flag=True, help="Replace existing outputs.")
-@click.option("--workers", default=None, type=click.IntRange(min=1), show_default="one per CPU",
-              help="Processes measuring grains; the rows do not depend on it.")
+@overwrite_option("Replace existing outputs.")
+@workers_option("Processes measuring grains; the rows do not depend on it.", default_text="one per CPU")
 def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_distance, marker_depth, labels_out,
          meshes, min_voxels, keep_border, convention, overwrite, workers):
     """Sand-Atlas descriptors of every grain of a 3D image IMAGE (a μCT scan).

@@ -8,7 +8,15 @@ import click
 
 from ..fabrication.tray import DEFAULT_TRIANGLE_BUDGET
 from ..params import ParameterError
-from .options import bad_parameter, count_option, overwrite_option, seed_option, size_definition_option
+from .options import (
+    FiniteFloatRange,
+    bad_parameter,
+    count_option,
+    overwrite_option,
+    seed_option,
+    size_definition_option,
+    workers_option,
+)
 from .paths import OutPath, output_file
 from .progress import progress_bar
 
@@ -61,20 +69,19 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
               help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
 @count_option("Number of generated grains; grain i uses seed S + i.")
-@seed_option
-@click.option("--size", default=None, type=click.FloatRange(min=1e-3, max=1e4),
+@seed_option()
+@click.option("--size", default=None, type=FiniteFloatRange(min=1e-3, max=1e4),
               show_default="10 for generated grains; files keep their size",
               help="Grain size in mm, 0.001 (1 µm) to 10000 (10 m) (see --size-definition).")
 @size_definition_option
-@click.option("--gap", default=None, type=click.FloatRange(min=0, min_open=True),
+@click.option("--gap", default=None, type=FiniteFloatRange(min=0, min_open=True),
               show_default="two printer resolutions", help="Minimum distance between grains in mm.")
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
               show_default="6", help="Finest mesh level resolution matching may choose.")
 @click.option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
               help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
-@click.option("--workers", default=2, show_default=True, type=click.IntRange(min=1),
-              help="Processes making grains (the output does not depend on it).")
-@overwrite_option
+@workers_option("Processes making grains (the output does not depend on it).", default=2)
+@overwrite_option()
 def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, size_definition, gap,
          max_subdivisions, max_triangles, workers, overwrite):
     """Lay out grains on the build plates of a printer, at least --gap apart, in one print file.
