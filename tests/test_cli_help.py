@@ -83,3 +83,36 @@ def test_command_listings_are_not_cut_mid_sentence(runner, path, cmd):
         assert shown.endswith(".") or shown == first, f"{name}: cut mid-sentence: {shown!r}"
     if path == ("calibrate",):
         assert "(Eq. 5) and porosity over seeds" in " ".join(listing.split())
+
+
+def _section(text: str, title: str) -> list[str]:
+    """The names of a help section's rows (``simulate repose`` in ``Subcommands:``)."""
+    block = text.split(f"\n{title}:\n", 1)[1].split("\n\n", 1)[0]
+    return [re.split(r"\s{2,}", line.strip())[0] for line in block.splitlines() if re.match(r"  \S", line)]
+
+
+def test_group_help_names_every_command_subcommand_and_method(runner):
+    from grainforge.methods import METHODS
+
+    res = runner.invoke(cli, ["--help"], terminal_width=100)
+    assert res.exit_code == 0
+    assert _section(res.output, "Generator methods (grainforge generate METHOD)") == sorted(METHODS)
+    assert set(_section(res.output, "Commands")) == set(cli.commands)
+    groups = [(n, c) for n, c in cli.commands.items() if isinstance(c, click.Group) and n != "generate"]
+    assert _section(res.output, "Subcommands") == sorted(f"{n} {s}" for n, c in groups for s in c.commands)
+    assert {"simulate triaxial", "simulate calibrate", "calibrate dpa"} <= set(_section(res.output, "Subcommands"))
+
+
+def test_group_help_follows_the_registries(runner, monkeypatch):
+    """A method added to the registry and a subcommand added to a group appear in ``grainforge --help``:
+    the listing is made from them, not written by hand."""
+    from grainforge.methods import METHODS
+
+    monkeypatch.setitem(METHODS, "zzmethod", "grainforge.methods.rf")
+    extra = click.Command("zzsub", help="A subcommand added by the test.")
+    monkeypatch.setitem(cli.commands["calibrate"].commands, "zzsub", extra)
+    res = runner.invoke(cli, ["--help"], terminal_width=100)
+    assert res.exit_code == 0
+    assert "zzmethod" in _section(res.output, "Generator methods (grainforge generate METHOD)")
+    assert "calibrate zzsub" in _section(res.output, "Subcommands")
+    assert "A subcommand added by the test." in res.output

@@ -258,6 +258,17 @@ def _is_image_request(args: list[str]) -> bool:
 class GrainforgeGroup(click.Group):
     """A click group that reports errors as a single line; ``analyse`` of a 3D image runs ``scan``."""
 
+    def format_help_text(self, ctx, formatter):
+        """The docstring, then the generator methods (from :data:`grainforge.methods.METHODS`) and the
+        subcommands of every group, so that ``grainforge --help`` names everything a user can run."""
+        super().format_help_text(ctx, formatter)
+        if ctx.parent is not None:
+            return
+        for title, rows in help_sections(self):
+            if rows:
+                with formatter.section(title):
+                    formatter.write_dl(rows)
+
     def resolve_command(self, ctx, args):
         name, command, rest = super().resolve_command(ctx, args)
         if name == "analyse" and _is_image_request(rest) and "scan" in self.commands:
@@ -336,6 +347,35 @@ MEMORY_HINTS = {
 DEFAULT_MEMORY_HINT = "not enough memory for this request; ask for fewer or smaller grains"
 
 
+def help_sections(group: click.Group) -> list[tuple[str, list[tuple[str, str]]]]:
+    """The sections ``grainforge --help`` adds to its docstring: the registered generator methods
+    (``generate METHOD``, with the first sentence of the method's docstring) and the subcommands of the other
+    groups (``simulate repose``, with their short help).
+
+    Parameters
+    ----------
+    group : click.Group
+        The root group (:func:`cli`).
+
+    Returns
+    -------
+    list of (str, list of (str, str))
+        Each section's title and its (name, description) rows.
+    """
+    from ..methods import METHODS, get
+    from .options import _first_sentence
+
+    generate = group.commands.get("generate")
+    methods = [(name, _first_sentence(get(name).__doc__ or "")) for name in sorted(METHODS)] if generate else []
+    subcommands = [
+        (f"{name} {sub_name}", sub.get_short_help_str(limit=200))
+        for name, cmd in sorted(group.commands.items())
+        if isinstance(cmd, click.Group) and cmd is not generate
+        for sub_name, sub in sorted(cmd.commands.items())
+    ]
+    return [("Generator methods (grainforge generate METHOD)", methods), ("Subcommands", subcommands)]
+
+
 def memory_message(command: str | None, what: str = "") -> str:
     """The one line said when ``command`` runs out of memory while working on ``what``.
 
@@ -370,12 +410,9 @@ def _os_error(exc: OSError) -> str:
 def cli():
     """grainforge: realistic, printable 3D grain shapes for geotechnical research.
 
-    Generators (paper: Hanaor et al., 3D printable geomaterials): FSO (fractal
-    surface overlay), CRI (contour rotation interpolation; `grainforge fourier`
-    measures the Fourier descriptors of grain images), DPA (directed polyhedra
-    aggregation; `grainforge calibrate dpa` links its exponent to D_A).
-    Populations from a TOML recipe: `grainforge batch` (local processes or
-    Dask).  Run `grainforge COMMAND --help` for each command.
+    FSO, CRI and DPA follow the paper (Hanaor et al., 3D printable
+    geomaterials).  Populations from a TOML recipe: `grainforge batch` (local
+    processes or Dask).  Run `grainforge COMMAND --help` for each command.
     """
 
 
