@@ -1,8 +1,8 @@
 """The per-item costs behind the up-front estimates of ``fit`` and ``simulate``, measured beside their models.
 
 ``grainforge fit`` refuses a search estimated beyond a day with a per-grain
-cost of ``FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS·(voxels across / 69)³``
-(:func:`grainforge.fit.check_fit_size`); ``grainforge simulate`` counts
+cost of ``FIT_GRAIN_SECONDS + FIT_MAKE_SECONDS[method] + FIT_VOXEL_SECONDS·(voxels across / 69)³``
+(:func:`grainforge.fit.grain_seconds`, :func:`grainforge.fit.check_fit_size`); ``grainforge simulate`` counts
 ``TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS·spheres`` per clump template
 (:func:`grainforge.simulate.check_size`; its Yade part comes from the runs
 of docs/simulate.md and ``benchmarks/bench_simulate.py``).  This prints, per
@@ -48,8 +48,17 @@ def main() -> None:
             atlas_descriptors(g, voxels_across=across, rotation=np.random.default_rng(k))
 
         best, med = cpu_seconds(one, args.repeat)
-        model = fit.FIT_GRAIN_SECONDS + fit.FIT_VOXEL_SECONDS * (across / fit.FIT_ACROSS_REF) ** 3
+        model = fit.grain_seconds("rf", across)
         print(f"{across:>14} {best:8.3f} {med:8.3f} {model:8.3f}")
+
+    print("\nfit: making one grain of each fitted method at its fit resolution, CPU s")
+    print(f"{'method':>14} {'best':>8} {'median':>8} {'model':>8}")
+    for m, mf in fit.FITS.items():
+        values = {"sphericity": 0.85, "convexity": 0.95, "flatness": 0.8, "elongation": 0.8,
+                  **{s.name: (s.low + s.high) / 2 for s in mf.settings}}
+        mp = get(m).Params(**{**mf.fixed, **mf.params(values)})
+        best, med = cpu_seconds(lambda k, m=m, mp=mp: generate(m, mp, k), max(args.repeat, 5))
+        print(f"{m:>14} {best:8.3f} {med:8.3f} {fit.FIT_MAKE_SECONDS.get(m, float('nan')):8.3f}")
 
     g = generate("angular", get("angular").Params(subdivisions=3), 0)
     v, f = np.asarray(g.vertices) * 2.0, np.asarray(g.faces)

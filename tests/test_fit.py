@@ -443,10 +443,12 @@ def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
         check_fit_size(sand, "fso", max_minutes=15, **kw)
     extra = (fit_grains("fso", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0]
              - fit_grains("rf", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0])
-    each = fitmod.FIT_GRAIN_SECONDS + fitmod.FIT_VOXEL_SECONDS * float(np.mean(
-        (measured_across(sand, 150.0) / fitmod.FIT_ACROSS_REF) ** 3))
+    each = fitmod.grain_seconds("fso", measured_across(sand, 150.0))
+    rf_grains = fit_grains("rf", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0]
+    making = fitmod.FIT_MAKE_SECONDS["fso"] - fitmod.FIT_MAKE_SECONDS["rf"]  # every grain pays fso's making
     assert extra == 600
-    assert check_fit_size(sand, "fso", max_across=150.0, **kw) == pytest.approx(rf + extra * each / 2, rel=0.01)
+    assert check_fit_size(sand, "fso", max_across=150.0, **kw) == pytest.approx(
+        rf + (extra * each + rf_grains * making) / 2, rel=0.01)
 
 
 def test_bad_tables_are_refused_before_anything_is_written(runner, tmp_path):

@@ -74,7 +74,7 @@ from .analysis.atlas import OPENING_RADIUS
 __all__ = [
     "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Setting", "MethodFit", "FITS", "register", "fit_sand",
     "compare", "recipe_text", "twin_recipe_text", "FitResult", "write_outputs", "KS_MAX", "MEAN_TOL", "CORR_TOL",
-    "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "MIN_GRAINS", "VOXELS_ACROSS",
+    "TWIN_TOL", "TWIN_SHARE", "check_sand", "fit_grains", "check_fit_size", "grain_seconds", "MIN_GRAINS", "VOXELS_ACROSS",
     "SPHERICITY_MAX", "MAX_VOXELS_ACROSS", "METHOD_CAP", "resolve_cap", "design", "design_path", "measure_grain",
     "OUTPUTS", "setting_identifiability", "population_settings", "Population", "OPENING_COLUMN", "OPENING_RADIUS",
     "write_sand", "SAND_HEADER",
@@ -166,9 +166,14 @@ DESIGN_ACROSS_LOW = 10.0
 #: when a generator or the measurement changes, so that cached designs are not reused
 DESIGN_SEED = 20261202
 DESIGN_VERSION = 1
-#: per-grain cost of a fit (s, one core): making the grain, plus voxelising and measuring it, which grows
-#: with the cube of the voxels across (0.05 s at Ottawa's 69; docs/benchmarks.md)
-FIT_GRAIN_SECONDS, FIT_VOXEL_SECONDS, FIT_ACROSS_REF = 0.1, 0.05, 69.0
+#: per-grain cost of a fit (s, one core): a fixed part, making the grain (:data:`FIT_MAKE_SECONDS`, the
+#: method's), and voxelising and measuring it, which grows with the cube of the voxels across (0.05 s at
+#: Ottawa's 69; docs/benchmarks.md, ``benchmarks/bench_estimates.py``)
+FIT_GRAIN_SECONDS, FIT_VOXEL_SECONDS, FIT_ACROSS_REF = 0.085, 0.05, 69.0
+#: CPU seconds to make one grain of each fitted method at its fit resolution (subdivisions 5; median of 5
+#: seeds, ``benchmarks/bench_estimates.py``): a seamless FSO grain is ten times an rf grain, which made the
+#: estimate of an FSO fit about half its time when one figure stood for every method
+FIT_MAKE_SECONDS = {"rf": 0.015, "cri": 0.077, "fso": 0.159, "angular": 0.048}
 #: measurements per twin the estimate expects (the first, and the refinements of the twins that miss;
 #: the Ottawa rf fit measured 3.17 per twin, docs/fit.md)
 EXPECTED_MEASUREMENTS = 3.2
@@ -711,8 +716,7 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     caps = {m: resolve_cap(m, max_across) for m in methods}
     highs = {m: _design_high(sand, caps[m]) for m in methods}
     acrosses = {m: measured_across(sand, caps[m]) for m in methods}
-    costs = {m: FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * float(np.mean((acrosses[m] / FIT_ACROSS_REF) ** 3))
-             for m in methods}
+    costs = {m: grain_seconds(m, acrosses[m]) for m in methods}
     dear = max(methods, key=lambda m: costs[m])
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
     fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
@@ -732,8 +736,9 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
                       "across,", option=f"{option}, --max-voxels-across or --workers")
     # the design's grains are spread log-uniformly from DESIGN_ACROSS_LOW to its top resolution: most are far
     # cheaper than the twins (the mean of across³ over that spread)
-    design_seconds = sum(design_grains * (FIT_GRAIN_SECONDS + FIT_VOXEL_SECONDS * _log_uniform_cube_mean(
-        DESIGN_ACROSS_LOW, highs[m]) / FIT_ACROSS_REF**3) for m in fresh)
+    design_seconds = sum(design_grains * (FIT_GRAIN_SECONDS + _make_seconds(m) + FIT_VOXEL_SECONDS
+                                          * _log_uniform_cube_mean(DESIGN_ACROSS_LOW, highs[m]) / FIT_ACROSS_REF**3)
+                         for m in fresh)
     seconds = ((expected - design_grains * len(fresh)) * each + design_seconds) / cores
     if seconds > 60 * max_minutes:
         cap = (f" or --max-voxels-across (now {max_across:g})" if max_across
@@ -743,6 +748,25 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
             f"grains at {duration(each) if each >= 1 else f'{each * 1000:.2g} ms'} each, {across.mean():.0f} "
             f"voxels across), over --max-minutes {max_minutes:g}: raise --max-minutes, lower {option}{cap}")
     return seconds
+
+
+def grain_seconds(method: str, across) -> float:
+    """The estimate's CPU seconds for one grain of ``method`` measured at ``across`` voxels across (the mean over
+    an array): :data:`FIT_GRAIN_SECONDS` + the method's :data:`FIT_MAKE_SECONDS` + :data:`FIT_VOXEL_SECONDS` ×
+    (across / :data:`FIT_ACROSS_REF`)³. A method without a measured making time is costed at the dearest's.
+
+    Examples
+    --------
+    >>> round(grain_seconds("rf", 69.0), 3), round(grain_seconds("fso", 69.0), 3)
+    (0.15, 0.294)
+    """
+    return FIT_GRAIN_SECONDS + _make_seconds(method) + FIT_VOXEL_SECONDS * float(np.mean(
+        (np.asarray(across, dtype=float) / FIT_ACROSS_REF) ** 3))
+
+
+def _make_seconds(method: str) -> float:
+    """:data:`FIT_MAKE_SECONDS` of ``method``; the dearest's for a method not measured."""
+    return FIT_MAKE_SECONDS.get(method, max(FIT_MAKE_SECONDS.values()))
 
 
 def _log_uniform_cube_mean(low: float, high: float) -> float:
