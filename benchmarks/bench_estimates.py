@@ -34,10 +34,11 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
 
-    from grainforge import fit, simulate
+    from grainforge import fit
     from grainforge.analysis.atlas import atlas_descriptors
     from grainforge.dem.template import prepare
     from grainforge.methods import generate, get
+    from grainforge.simulate import settings
 
     params = get("rf").Params(subdivisions=5)  # the fitted rf grains' resolution
     print("fit: one rf grain (subdivisions 5) made and measured the Atlas way, CPU s")
@@ -67,7 +68,7 @@ def main() -> None:
     for spheres in (1, 10, 50, 200):
         best, med = cpu_seconds(lambda k, s=spheres: prepare(v, f, "g", unit=1e-3, density=1180.0, spheres=s,
                                                              source="bench", rng=k), args.repeat)
-        model = simulate.TEMPLATE_SECONDS + simulate.TEMPLATE_SPHERE_SECONDS * spheres
+        model = settings.TEMPLATE_SECONDS + settings.TEMPLATE_SPHERE_SECONDS * spheres
         print(f"{spheres:>14} {best:8.3f} {med:8.3f} {model:8.3f}")
 
 
