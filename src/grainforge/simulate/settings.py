@@ -104,13 +104,14 @@ QUICK_TRIAXIAL = dict(grains=MIN_TRIAXIAL_GRAINS + 21, templates=6, spheres=6, s
 COMPACTION_INERTIAL_NUMBER = 1e-2
 #: the triaxial scene's time step over d·√(ρ/E) (0.3 √(m/(E r_max)) for clumps of a few spheres: 0.31 measured)
 TRIAXIAL_DT_FACTOR = 0.3
-#: steps of the isotropic compaction (and, dense, of the friction switched on) over √(E/σ′₃)/(0.3 I_c): the
-#: quick runs' 23,000 steps at I_c = 0.01 and E/σ′₃ = 5000
-TRIAXIAL_COMPACTION_FACTOR = 1.0
+#: steps of the isotropic compaction (and, dense, of the friction switched on) over √(E/σ′₃)/(0.3 I_c): 16,000
+#: for 100 grains, 31,500 for 500 (dense rough spheres, I_c = 0.01, E/σ′₃ = 5000: 23,570 × 1.34)
+TRIAXIAL_COMPACTION_FACTOR = 1.4
 #: Yade seconds per grain and step of the triaxial scene (one core): a fixed part (the clump, its six mass
-#: spheres, the servo's sum over the contacts every 10 steps) and a part per contact sphere; fitted to runs of
-#: 100 grains of 6 spheres (7.5e-6 s a grain-step)
-TRIAXIAL_GRAIN_STEP_SECONDS, TRIAXIAL_SPHERE_STEP_SECONDS = 3e-6, 0.75e-6
+#: spheres, the servo's sum over the contacts every 10 steps) and a part per contact sphere; set to the
+#: 500-grain run of 10-sphere clumps (1.9e-5 s a grain-step on a loaded machine), above the 100-grain runs of
+#: 6 spheres (7.9e-6 measured, 1.2e-5 modelled)
+TRIAXIAL_GRAIN_STEP_SECONDS, TRIAXIAL_SPHERE_STEP_SECONDS = 2e-6, 1.7e-6
 
 
 def triaxial_steps(settings: TriaxialSettings) -> float:
@@ -121,8 +122,8 @@ def triaxial_steps(settings: TriaxialSettings) -> float:
 
     Examples
     --------
-    >>> round(triaxial_steps(TriaxialSettings()))  # 58,926 shearing + 23,570 compaction
-    82496
+    >>> round(triaxial_steps(TriaxialSettings()))  # 58,926 shearing + 32,998 compaction
+    91924
     """
     stiffness = math.sqrt(settings.young / (1e3 * settings.confining_kpa))
     shear = settings.axial_strain * stiffness / (TRIAXIAL_DT_FACTOR * settings.inertial_number)
