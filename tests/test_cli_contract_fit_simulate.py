@@ -132,7 +132,7 @@ CASES = [
          r"--count.*not in the range"),
     Case("fit-count-1e6", _fit("--voxel-size-um", "7.3", "--count", "1000000", "--workers", "1"),
          r"fit --method rf, measuring up to \d+ grains, would take about .* days? .*; lower --count"),
-    Case("fit-auto-count-3e4", _fit("--voxel-size-um", "7.3", "--method", "auto", "--count", "30000", "--workers", "1"),
+    Case("fit-auto-count-1e4", _fit("--voxel-size-um", "7.3", "--method", "auto", "--count", "10000", "--workers", "1"),
          r"fit --method auto would take about .* over --max-minutes 60: raise --max-minutes, lower --count or fit "
          r"one --method"),
     # fit: over the --max-minutes budget, or a resolution measured uncapped, refused up front saying what to change

@@ -381,8 +381,8 @@ SPAM_SCAN = Path(__file__).parent / "data" / "spam-scan.npz"
 def test_scan_matches_spam_on_the_same_labelled_image(tmp_path):
     """Four grains touching in one labelled volume: each label's true sphericity from `grainforge scan` equals
     spam's on that volume (``benchmarks/spam_reference.py --scan`` stored spam 0.9.1's values; float32 there)."""
-    data = np.load(SPAM_SCAN)
-    labels, spam = data["labels"], data["spam_sphericity"]
+    with np.load(SPAM_SCAN) as data:
+        labels, spam, names = data["labels"], data["spam_sphericity"], data["names"]
     np.save(tmp_path / "labels.npy", labels)
     code, out = _run(["scan", tmp_path / "labels.npy", "--voxel-size-um", "29", "--atlas-csv", tmp_path / "s.csv"],
                      tmp_path)
@@ -393,12 +393,13 @@ def test_scan_matches_spam_on_the_same_labelled_image(tmp_path):
         rows = {int(r["Particle ID"]): float(r["True Sphericity (-)"]) for r in csv.DictReader(fh)}
     assert sorted(rows) == list(range(1, len(spam) + 1))
     for k, value in enumerate(spam, start=1):
-        assert rows[k] == pytest.approx(value, abs=1e-6), (k, data["names"][k - 1])
+        assert rows[k] == pytest.approx(value, abs=1e-6), (k, names[k - 1])
 
 
 def test_the_stored_spam_values_are_live_spams_if_installed():
     """The reference above is spam's own today (run where spam is installed, e.g. its throwaway environment)."""
     spam_label = pytest.importorskip("spam.label", reason="spam (the Sand Atlas's library) is not installed")
-    labels = np.load(SPAM_SCAN)["labels"]
+    with np.load(SPAM_SCAN) as data:
+        labels, stored = data["labels"], data["spam_sphericity"]
     live = np.asarray(spam_label.trueSphericity(labels.astype(np.uint32)), dtype=np.float64)[1:5]
-    assert live == pytest.approx(np.load(SPAM_SCAN)["spam_sphericity"], abs=1e-6)
+    assert live == pytest.approx(stored, abs=1e-6)
