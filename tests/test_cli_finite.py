@@ -56,18 +56,9 @@ REQUIRES: dict[str, list[str]] = {
 }
 NO_REQUIRES = {("simulate triaxial", "--spacing")}
 
-#: (command, option, value) that get through click today: what the command still has to refuse (in files this
-#: change could not edit); strict, so that the fix shows as an unexpected pass and the mark is removed
-KNOWN: dict[tuple[str, str, str], str] = {
-    **{(c, "--spacing", "nan"): "--spacing is a click.FloatRange (simulate.py, simulate_calibrate.py): nan passes it "
-                                "and is refused only after the clump templates are made, by a line that does not "
-                                "name --spacing ('spacing must be in (0, 0.5] of d_eq, got nan')"
-       for c in ("simulate repose", "simulate tilt", "simulate calibrate")},
-    **{("simulate calibrate", "--tolerance", v): f"--tolerance is a click.FloatRange (simulate_calibrate.py): {v} "
-                                                 f"passes it and the calibration starts (here stopped by the time "
-                                                 f"budget lowered to nothing)"
-       for v in ("nan", "inf")},
-}
+#: (command, option, value) known to get through click, with why: none today. An entry marks its case as a strict
+#: xfail, so that the fix shows as an unexpected pass and the entry is removed
+KNOWN: dict[tuple[str, str, str], str] = {}
 
 
 def _commands(group: click.Group = cli, path: tuple[str, ...] = ()):

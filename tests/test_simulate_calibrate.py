@@ -119,7 +119,7 @@ def grains(tmp_path):
 @pytest.mark.parametrize("args, message", [
     (["--target-angle", "85"], "outside 5–80°"),
     (["--target-angle", "2"], "outside 5–80°"),
-    (["--target-angle", "nan"], "outside 5–80°"),
+    (["--target-angle", "nan"], "'nan' is not a finite number"),
     (["--target-angle", "30", "--friction-range", "1", "0.5"], "low < high"),
     (["--target-angle", "30", "--friction", "0.5"], "No such option"),
     (["--target-angle", "30", "--shape", "polyhedron"], "'polyhedron' is not one of"),

@@ -8,7 +8,15 @@ from pathlib import Path
 
 import click
 
-from .options import EXIT_CHECK_FAILED, build_params, clump_accuracy_option, param_options
+from .options import (
+    EXIT_CHECK_FAILED,
+    FiniteFloatRange,
+    build_params,
+    clump_accuracy_option,
+    overwrite_option,
+    param_options,
+    workers_option,
+)
 from .paths import OutPath, output_dir
 
 #: settings only the tilt test reads: not offered by `simulate repose`
@@ -202,9 +210,8 @@ def _command(test: str, doc: str):
                   help="Replace every grain by its volume-equivalent sphere (the sphere baseline).")
     @click.option("--label", default=None, show_default="the inputs' names",
                   help="Name of this population in results.csv.")
-    @click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
-                  help="Engine runs (seeds) at once, each on one core or on --mpi ranks (default: CPU count "
-                       "divided by --mpi).")
+    @workers_option("Engine runs (seeds) at once, each on one core or on --mpi ranks.",
+                    default_text="CPU count divided by --mpi")
     @click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
                   help="DEM engine of the runs: Yade, or LIGGGHTS (the same scenes as multisphere clumps; "
                        "docs/simulate.md says where the engines differ).")
@@ -214,10 +221,10 @@ def _command(test: str, doc: str):
     @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
                   help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "
                        "signed distance field, as grainforge dem writes it).")
-    @click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
+    @click.option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
                   show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
                                             "(as grainforge dem).")
-    @click.option("--overwrite", is_flag=True, help="Replace an earlier result in --out.")
+    @overwrite_option("Replace an earlier result in --out.")
     @clump_accuracy_option
     @param_options(_settings_cls(test), exclude=TILT_ONLY if test == "repose" else ())
     def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, clump_accuracy,
@@ -253,8 +260,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
 
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
-    from ..simulate.process import check_mpi_ranks
     from ..simulate.population import template_make_seconds
+    from ..simulate.process import check_mpi_ranks
     from .interrupts import ready_for_work, signals_held
 
     settings = run_settings(test, values, quick, shape, clump_accuracy)

@@ -7,7 +7,14 @@ from pathlib import Path
 
 import click
 
-from .options import clump_accuracy_option, param_options
+from .options import (
+    FINITE_FLOAT,
+    FiniteFloatRange,
+    clump_accuracy_option,
+    overwrite_option,
+    param_options,
+    workers_option,
+)
 from .paths import OutPath, output_dir
 from .simulate import (
     ENGINE_NAMES,
@@ -59,15 +66,15 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @click.command(name="calibrate")
 @click.argument("test", type=click.Choice(["tilt", "repose"]))
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--target-angle", type=float, required=True,
+@click.option("--target-angle", type=FINITE_FLOAT, required=True,
               help="The measured angle to reach, degrees (5 to 80): a tilt failure angle or an angle of repose.")
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for calibration.csv, calibration.json, calibration.png and the runs (runs/).")
-@click.option("--friction-range", type=(float, float), default=(0.05, 1.5), show_default=True,
+@click.option("--friction-range", type=(FINITE_FLOAT, FINITE_FLOAT), default=(0.05, 1.5), show_default=True,
               help="Bounds of the μ search.")
-@click.option("--start", type=click.FloatRange(min=0.0), default=0.5, show_default=True,
+@click.option("--start", type=FiniteFloatRange(min=0.0), default=0.5, show_default=True,
               help="First μ tried (inside --friction-range).")
-@click.option("--tolerance", type=click.FloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
+@click.option("--tolerance", type=FiniteFloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
               help="Stop when a seed-averaged angle is this close to the target, degrees.")
 @click.option("--max-frictions", "max_evaluations", type=click.IntRange(min=2, max=30), default=8, show_default=True,
               help="At most this many frictions tried (each runs every seed).")
@@ -75,18 +82,17 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
               help="A few tens of grains, seconds per run: checks the set-up, calibrates nothing meaningful.")
 @click.option("--as-spheres", is_flag=True, help="Replace every grain by its volume-equivalent sphere.")
 @click.option("--label", default=None, show_default="the inputs' names", help="Name of the population.")
-@click.option("--workers", type=click.IntRange(min=1, max=256), default=None,
-              help="Engine runs (seeds) at once, each on one core or on --mpi ranks (default: CPU count divided "
-                   "by --mpi).")
+@workers_option("Engine runs (seeds) at once, each on one core or on --mpi ranks.",
+                default_text="CPU count divided by --mpi")
 @click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
               help="DEM engine (as simulate tilt|repose).")
 @click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
               help="LIGGGHTS only: run each seed under `mpirun -np N`.")
 @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
               help="Grain representation (as simulate tilt|repose).")
-@click.option("--spacing", type=click.FloatRange(min=0.0, max=0.5, min_open=True), default=None,
+@click.option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
               show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter.")
-@click.option("--overwrite", is_flag=True, help="Replace an earlier calibration in --out.")
+@overwrite_option("Replace an earlier calibration in --out.")
 @clump_accuracy_option
 @param_options(_settings_cls(), exclude=("friction",))
 def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance, max_evaluations, quick, as_spheres,
@@ -105,9 +111,9 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
 
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
-    from ..simulate.process import check_mpi_ranks
     from ..simulate.calibrate import check_target
     from ..simulate.population import template_make_seconds
+    from ..simulate.process import check_mpi_ranks
     from .interrupts import ready_for_work, signals_held
 
     try:
