@@ -187,15 +187,89 @@ def clump_outputs(templates, settings, clump_accuracy: float | None, stage, out)
     return accuracy_warning(templates, settings.spheres, Path(out) / "clumps.csv")
 
 
-def engine_failed(exc, stage, out) -> click.ClickException:
-    """An engine failure (not an interrupt): its deck and log are kept in ``out``, and the one line that says where."""
+def engine_failed(exc, stage, out, journal=None) -> click.ClickException:
+    """An engine failure (not an interrupt): its deck and log are kept in ``out``, and the one line that says where
+    (and, with a ``journal`` holding finished runs, that ``--resume`` reuses them)."""
     import os
 
     from ..simulate import keep_failed
 
     kept = keep_failed(exc.deck, out)
     message = str(exc).replace(f"{stage}{os.sep}", "")
-    return click.ClickException(f"{message}; its deck and log are in {kept}")
+    return click.ClickException(f"{message}; its deck and log are in {kept}{journal_kept(journal)}")
+
+
+def journal_kept(journal) -> str:
+    """``"; N finished run(s) kept in DIR for --resume"`` when the sweep's journal keeps runs, else ``""``."""
+    runs = [] if journal is None else journal.finished()
+    return f"; {len(runs)} finished run(s) kept in {journal.folder} for --resume" if runs else ""
+
+
+#: ``--scheduler`` of simulate and simulate calibrate
+scheduler_option = click.option(
+    "--scheduler", metavar="ADDRESS", default=None,
+    help="Run each engine run (one seed at one friction) as a task on an existing Dask distributed cluster, e.g. "
+         "tcp://host:8786 (needs grainforge[dask], and grainforge and the engine on the workers); the outputs are "
+         "the local run's. With --mpi each task runs `mpirun -np N` on its worker: the cluster's workers decide "
+         "the cores (the local check of --mpi against this machine's cores does not apply).")
+#: ``--resume`` of simulate and simulate calibrate
+resume_option = click.option(
+    "--resume", is_flag=True,
+    help="Continue an interrupted run from the engine runs it finished (kept in --out/.grainforge-sweep), with "
+         "the same settings: those are not run again.")
+
+
+def check_cluster_options(scheduler: str | None, workers: int | None, resume: bool, overwrite: bool) -> None:
+    """Refuse, in one line and before any work, ``--scheduler`` with ``--workers``, a bad address, ``--resume``
+    with ``--overwrite``."""
+    if resume and overwrite:
+        raise click.UsageError("--resume and --overwrite exclude each other")
+    if scheduler is not None:
+        from ..cluster import check_address
+
+        if workers is not None:
+            raise click.UsageError("--workers is for the local pool; the Dask cluster (--scheduler) decides its "
+                                   "own workers")
+        try:
+            check_address(scheduler)
+        except ValueError as exc:
+            raise click.UsageError(str(exc)) from None
+
+
+def sweep_fingerprint(test: str, inputs, settings, **options) -> dict:
+    """The settings of a sweep that decide its runs, keyed as the user names them (the journal's ``sweep.json``)."""
+    from dataclasses import asdict
+
+    record = {"test": test, "inputs": [str(Path(p).resolve()) for p in inputs]}
+    for key, value in {**asdict(settings), **options}.items():
+        record["--" + key.replace("_", "-")] = value
+    return record
+
+
+def open_sweep(out: Path, fingerprint: dict, resume: bool, overwrite: bool):
+    """The sweep's journal (:func:`grainforge.simulate.sweep.open_journal`), refusals as one-line usage errors."""
+    from ..simulate.sweep import open_journal
+
+    try:
+        return open_journal(out, fingerprint, resume=resume, overwrite=overwrite)
+    except (FileExistsError, ValueError) as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def cluster_executor(scheduler: str):
+    """A :class:`grainforge.cluster.DaskExecutor` open until the command ends (refused in one line: exit 2)."""
+    from ..cluster import dask_executor
+
+    try:
+        return click.get_current_context().with_resource(dask_executor(scheduler))
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
+def scheduler_lost(exc, journal) -> click.ClickException:
+    """The one line of a scheduler lost mid-run (exit 1): what the journal keeps for ``--resume``."""
+    kept = journal_kept(journal)
+    return click.ClickException(f"{exc}{kept}" if kept else f"{exc}; no run finished, nothing kept")
 
 
 def _command(test: str, doc: str):
@@ -225,14 +299,18 @@ def _command(test: str, doc: str):
                   show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
                                             "(as grainforge dem).")
     @overwrite_option("Replace an earlier result in --out.")
+    @scheduler_option
+    @resume_option
     @clump_accuracy_option
     @param_options(_settings_cls(test), exclude=TILT_ONLY if test == "repose" else ())
-    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, clump_accuracy,
-                **values):
+    def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, scheduler,
+                resume, clump_accuracy, **values):
+        check_cluster_options(scheduler, workers, resume, overwrite)
         check_engine(engine, mpi, shape, test)
         check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
         _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi,
-             shape=shape, spacing=0.05 if spacing is None else spacing, clump_accuracy=clump_accuracy)
+             shape=shape, spacing=0.05 if spacing is None else spacing, clump_accuracy=clump_accuracy,
+             scheduler=scheduler, resume=resume)
 
     return command
 
@@ -255,9 +333,10 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
 
 
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
-         shape="clump", spacing=0.05, clump_accuracy=None):
+         shape="clump", spacing=0.05, clump_accuracy=None, scheduler=None, resume=False):
     import os
 
+    from ..cluster import SchedulerLost
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from ..simulate.population import template_make_seconds
@@ -269,22 +348,31 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         out / f"{test}-seed{settings.seed + k}" for k in range(settings.seeds)]
     outputs += [out / "clumps.csv"] if clump_accuracy is not None else []
     out = output_dir(out, overwrite=overwrite, files=outputs)
+    journal = open_sweep(out, sweep_fingerprint(test, inputs, settings, engine=engine, mpi=mpi, shape=shape,
+                                                spacing=spacing, as_spheres=as_spheres,
+                                                clump_accuracy=clump_accuracy), resume, overwrite)
     available, make_seconds = check_inputs(inputs)
     # the templates are chosen from a pool of grains generated or measured (--quick: 4 per template)
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
-    workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
-    try:
-        check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
-    except ValueError as exc:
-        raise click.UsageError(str(exc)) from None
+    executor = None
+    if scheduler is not None:  # the cluster's workers run the engine: its threads size the estimate
+        executor = cluster_executor(scheduler)
+        workers = executor.workers
+    else:
+        workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+        try:
+            check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
+        except ValueError as exc:
+            raise click.UsageError(str(exc)) from None
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
                              as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing,
                              engine=engine)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    check_installed(engine, mpi)
+    if executor is None:  # on a cluster, the engine is the workers'
+        check_installed(engine, mpi)
     ready_for_work(HEAVY_MODULES, seconds, bound="about")
     from tqdm import tqdm
 
@@ -295,9 +383,10 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         staged,
     )
     from ..simulate.report import write_report
+    from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    chosen = choose_templates(inputs, settings, pool, workers)
+    chosen = choose_templates(inputs, settings, pool, workers if executor is None else (os.cpu_count() or 1))
     templates = make_templates(inputs, settings, as_spheres, shape, spacing, chosen=chosen,
                                clump_accuracy=clump_accuracy)
     name = ENGINE_NAMES[engine] + (f", {mpi} MPI ranks" if mpi else "")
@@ -317,9 +406,13 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     with staged(out) as stage:
         try:
             rows = run_test(test, templates, settings, stage, label=label, progress=progress,
-                            workers=workers, engine=engine, mpi=mpi)
+                            workers=workers, engine=engine, mpi=mpi, executor=executor, journal=journal.bind(stage))
         except EngineFailed as exc:
-            raise engine_failed(exc, stage, out) from None
+            raise engine_failed(exc, stage, out, journal) from None
+        except SchedulerLost as exc:
+            raise scheduler_lost(exc, journal) from None
+        except JournalMismatch as exc:  # --resume: a kept run's deck is not this one's
+            raise click.UsageError(str(exc)) from None
         finally:
             runs.close()
         if shape != "clump":  # the representation, in the rows of a non-default one (clump outputs unchanged)
@@ -331,8 +424,9 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         write_report(rows, stage, test, settings)
         chosen.write_csv(stage / "templates.csv")
-        with signals_held():  # the outputs appear together
+        with signals_held():  # the outputs appear together; the finished runs' journal is then no longer needed
             commit_stage(stage, out, overwrite=overwrite)
+            journal.remove()
     if warning:
         click.echo(warning, err=True)
     click.echo(result_line(test, rows, label, out))

@@ -297,7 +297,7 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
                     max_evaluations: int = 8, workers: int = 1, label: str = "",
                     progress: Callable[[int, int, float, str], None] | None = None,
                     evaluated: Callable[[Evaluation, list], None] | None = None, engine: str = "yade",
-                    mpi: int | None = None) -> tuple[FrictionSearch, list]:
+                    mpi: int | None = None, executor=None, journal=None) -> tuple[FrictionSearch, list]:
     """Calibrate μ on ``test`` with the engine: :func:`search_friction` over seed-averaged engine runs.
 
     Each evaluation runs ``settings.seeds`` seeds at friction μ into
@@ -311,6 +311,9 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
         ``evaluated(evaluation, rows)`` after each evaluation (its rows: one per seed).
     engine, mpi : str, int or None
         The engine of the runs and its MPI ranks (as :func:`grainforge.simulate.run_test`).
+    executor, journal : optional
+        A Dask executor for the runs and the journal of finished (friction, seed) runs
+        (as :func:`grainforge.simulate.run_test`).
 
     Returns
     -------
@@ -334,7 +337,7 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
         report = None if progress is None else (lambda i, f, p: progress(k, i, f, p))
         s = replace(settings, friction=float(mu))
         got = run_test(test, templates, s, Path(out) / "runs" / f"e{k}-mu{mu:.4f}", label=label, progress=report,
-                       workers=workers, engine=engine, mpi=mpi)
+                       workers=workers, engine=engine, mpi=mpi, executor=executor, journal=journal)
         got = [{"evaluation": k, "friction": float(mu), **r} for r in got]
         rows.extend(got)
         mean = summarise(got)["angle_mean_deg"]

@@ -14,7 +14,7 @@ from .process import EngineFailed, find_executable, kill_running, run_engine_pro
 from .settings import Settings, scene_settings
 
 __all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result",
-           "run_test", "summarise"]
+           "run_deck", "run_test", "summarise"]
 
 
 def yade_executable() -> str:
@@ -116,10 +116,24 @@ def measure_result(result: dict) -> dict:
     return row
 
 
+def run_deck(deck: str | os.PathLike, *, engine: str = "yade", mpi: int | None = None,
+             progress: Callable[[float, str], None] | None = None) -> dict:
+    """Run the deck in ``deck`` in ``engine`` (LIGGGHTS under ``mpirun -np mpi`` if given); its ``result.json``.
+
+    The one engine run of :func:`run_test`, in the local pool and in a Dask task
+    (:func:`grainforge.simulate.sweep.run_remote`).
+    """
+    if engine == "liggghts":
+        from .liggghts import run_liggghts
+
+        return run_liggghts(deck, mpi=mpi, progress=progress)
+    return run_yade(deck, progress=progress)
+
+
 def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.PathLike, *,
              label: str = "", progress: Callable[[int, float, str], None] | None = None,
              overwrite: bool = False, workers: int = 1, engine: str = "yade",
-             mpi: int | None = None) -> list[dict]:
+             mpi: int | None = None, executor=None, journal=None) -> list[dict]:
     """Run ``test`` once per seed into ``out/<test>-seed<k>/`` and measure each run.
 
     Parameters
@@ -141,6 +155,13 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     engine : {"yade", "liggghts"}
     mpi : int, optional
         LIGGGHTS only: ranks of each run under ``mpirun``.
+    executor : grainforge.cluster.DaskExecutor, optional
+        Run each seed as a Dask task (:func:`grainforge.simulate.sweep.run_remote`: the deck's files go to the
+        worker, the run's files come back into its folder); ``workers`` is then unused, and ``progress`` says
+        when each run starts and ends.
+    journal : grainforge.simulate.sweep.SweepJournal, optional
+        Reuse the runs it keeps (their decks byte-identical to the ones written now) and record each run as it
+        finishes.
 
     Returns
     -------
@@ -150,18 +171,35 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     out = Path(out)
     seeds = [settings.seed + k for k in range(settings.seeds)]
     decks = [out / f"{test}-seed{seed}" for seed in seeds]
-    for seed, deck in zip(seeds, decks):
-        write_test_deck(templates, test, settings, seed, deck, overwrite=overwrite, engine=engine)
+    written = [write_test_deck(templates, test, settings, seed, deck, overwrite=overwrite, engine=engine)
+               for seed, deck in zip(seeds, decks)]
+
+    def row(k, result):
+        return {"label": label, "seed": seeds[k], **measure_result(result)}
+
+    kept = {}
+    if journal is not None:
+        for k in range(len(seeds)):
+            result = journal.reuse(decks[k], written[k])
+            if result is not None:
+                kept[k] = result
+                if progress is not None:
+                    progress(k, 1.0, "kept from the interrupted sweep")
+    if executor is not None:
+        from .sweep import run_on_cluster
+
+        results = run_on_cluster(executor, decks, [k for k in range(len(seeds)) if k not in kept], engine=engine,
+                                 mpi=mpi, progress=progress, journal=journal)
+        return [row(k, kept[k] if k in kept else results[k]) for k in range(len(seeds))]
 
     def one(k):
+        if k in kept:
+            return row(k, kept[k])
         report = None if progress is None else (lambda f, p: progress(k, f, p))
-        if engine == "liggghts":
-            from .liggghts import run_liggghts
-
-            result = run_liggghts(decks[k], mpi=mpi, progress=report)
-        else:
-            result = run_yade(decks[k], progress=report)
-        return {"label": label, "seed": seeds[k], **measure_result(result)}
+        result = run_deck(decks[k], engine=engine, mpi=mpi, progress=report)
+        if journal is not None:
+            journal.record(decks[k])
+        return row(k, result)
 
     if workers <= 1 or len(seeds) == 1:
         return [one(k) for k in range(len(seeds))]
