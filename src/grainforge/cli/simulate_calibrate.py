@@ -22,14 +22,21 @@ from .simulate import (
     HEAVY_MODULES,
     SHAPES,
     _settings_cls,
+    check_cluster_options,
     check_engine,
     check_installed,
     check_representation,
     choose_templates,
     clump_outputs,
+    cluster_executor,
     engine_failed,
     make_templates,
+    open_sweep,
+    resume_option,
     run_settings,
+    scheduler_lost,
+    scheduler_option,
+    sweep_fingerprint,
 )
 
 #: outputs of a calibration in --out (its runs go to runs/)
@@ -93,10 +100,12 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @click.option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
               show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @overwrite_option("Replace an earlier calibration in --out.")
+@scheduler_option
+@resume_option
 @clump_accuracy_option
 @param_options(_settings_cls(), exclude=("friction",))
 def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance, max_evaluations, quick, as_spheres,
-              label, workers, engine, mpi, shape, spacing, overwrite, clump_accuracy, **values):
+              label, workers, engine, mpi, shape, spacing, overwrite, scheduler, resume, clump_accuracy, **values):
     """Find the contact friction μ at which a population reaches a measured angle (tilt or repose).
 
     TEST is tilt or repose; INPUTS as for `simulate tilt`.  A bounded search on the seed-averaged angle
@@ -109,6 +118,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     import sys
     from dataclasses import replace
 
+    from ..cluster import SchedulerLost
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from ..simulate.calibrate import check_target
@@ -127,22 +137,35 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         raise click.BadParameter(f"{start:g} is outside --friction-range {low:g} {high:g}", param_hint="--start")
     if test == "repose" and (values.get("tilt_step") is not None or values.get("tilt_start") is not None):
         raise click.UsageError("--tilt-step and --tilt-start are the tilt test's: calibrate repose takes neither")
+    check_cluster_options(scheduler, workers, resume, overwrite)
     check_engine(engine, mpi, shape)
     check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
     given = dict(values)
     settings = run_settings(test, values, quick, shape, clump_accuracy)
     outputs = OUTPUTS + (("clumps.csv",) if clump_accuracy is not None else ())
     out = output_dir(out, overwrite=overwrite, files=[out / name for name in outputs])
+    ls_spacing = 0.05 if spacing is None else spacing
+    # every (friction, seed) run is journaled; the search's settings decide which frictions are tried
+    journal = open_sweep(out, sweep_fingerprint(f"calibrate {test}", inputs, settings, engine=engine, mpi=mpi,
+                                                shape=shape, spacing=ls_spacing, as_spheres=as_spheres,
+                                                clump_accuracy=clump_accuracy, target_angle=target_angle,
+                                                friction_range=list(friction_range), start=start,
+                                                tolerance=tolerance, max_frictions=max_evaluations),
+                         resume, overwrite)
     available, make_seconds = check_inputs(inputs)
     # the templates are chosen from a pool of grains generated or measured (--quick: 4 per template)
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
-    workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
-    try:
-        check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
-    except ValueError as exc:
-        raise click.UsageError(str(exc)) from None
-    ls_spacing = 0.05 if spacing is None else spacing
+    executor = None
+    if scheduler is not None:  # the cluster's workers run the engine: its threads size the estimate
+        executor = cluster_executor(scheduler)
+        workers = executor.workers
+    else:
+        workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+        try:
+            check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
+        except ValueError as exc:
+            raise click.UsageError(str(exc)) from None
     from ..estimate import SECONDS_LIMIT, _limit, duration
 
     try:
@@ -159,15 +182,17 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         raise click.UsageError(f"a calibration of up to {max_evaluations} frictions × {settings.seeds} seed(s) of "
                                f"{settings.grains} grains would take about {duration(seconds)} of computing (limit "
                                f"{_limit()}); lower --max-frictions, --grains or --seeds")
-    check_installed(engine, mpi)
+    if executor is None:  # on a cluster, the engine is the workers'
+        check_installed(engine, mpi)
     ready_for_work(HEAVY_MODULES + ("grainforge.simulate.calibrate",), seconds, bound="at most about")
     from tqdm import tqdm
 
     from ..simulate import EngineFailed, commit_stage, staged
     from ..simulate.calibrate import Unreachable, run_calibration, write_calibration
+    from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
-    chosen = choose_templates(inputs, settings, pool, workers)
+    chosen = choose_templates(inputs, settings, pool, workers if executor is None else (os.cpu_count() or 1))
     templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing, chosen=chosen,
                                clump_accuracy=clump_accuracy)
     runs = tqdm(total=settings.seeds * 1000, desc=f"calibrate {test} ({ENGINE_NAMES[engine]})", unit="‰", disable=None,
@@ -191,12 +216,18 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
             search, rows = run_calibration(test, templates, settings, target_angle, stage, low=low, high=high,
                                            start=start, tolerance=tolerance, max_evaluations=max_evaluations,
                                            workers=workers, label=label, progress=progress, evaluated=evaluated,
-                                           engine=engine, mpi=mpi)
+                                           engine=engine, mpi=mpi, executor=executor, journal=journal.bind(stage))
         except EngineFailed as exc:
-            raise engine_failed(exc, stage, out) from None
+            raise engine_failed(exc, stage, out, journal) from None
+        except SchedulerLost as exc:
+            raise scheduler_lost(exc, journal) from None
+        except JournalMismatch as exc:  # --resume: a kept run's deck is not this one's
+            raise click.UsageError(str(exc)) from None
         except Unreachable as exc:
+            journal.remove()  # an answer, not an interruption: nothing to resume
             raise click.UsageError(f"{exc}; {len(exc.rows)} run(s) made, nothing kept") from None
         except ValueError as exc:  # an angle that could not be measured
+            journal.remove()
             raise click.ClickException(f"{exc}; nothing kept") from None
         finally:
             runs.close()
@@ -205,8 +236,9 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         record = write_calibration(search, rows, target_angle, test, settings, command, stage, low=low, high=high)
         chosen.write_csv(stage / "templates.csv")
-        with signals_held():
+        with signals_held():  # the outputs appear together; the finished runs' journal is then no longer needed
             commit_stage(stage, out, overwrite=overwrite)
+            journal.remove()
     if warning:
         click.echo(warning, err=True)
     sd = record["friction_sd"]

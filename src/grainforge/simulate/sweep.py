@@ -131,9 +131,9 @@ def run_on_cluster(executor, decks: Sequence[Path], which: Sequence[int], *, eng
             if progress is not None:
                 progress(k, 0.0, "sent to the cluster")
         results = {}
-        for fut in cf.as_completed(futures):
+
+        def take(fut, made, result, error):
             k = futures[fut]
-            made, result, error = fut.result()
             write_files(decks[k], made)
             if error is not None:
                 raise EngineFailed(error.replace(DECK_MARK, str(decks[k])), decks[k])
@@ -142,6 +142,18 @@ def run_on_cluster(executor, decks: Sequence[Path], which: Sequence[int], *, eng
             results[k] = result
             if progress is not None:
                 progress(k, 1.0, "done")
+
+        for fut in cf.as_completed(futures):
+            try:
+                outcome = fut.result()
+            except BaseException:  # a lost scheduler (or an interrupt): the runs already back are kept first
+                for other in futures:
+                    if (other is not fut and futures[other] not in results and other.done()
+                            and not other.cancelled() and other.exception() is None
+                            and other.result()[2] is None):
+                        take(other, *other.result())
+                raise
+            take(fut, *outcome)
         return results
     finally:
         for fut in futures:
