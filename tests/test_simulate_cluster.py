@@ -1,0 +1,193 @@
+"""``simulate`` with ``--scheduler`` and ``--resume``: on a real distributed.LocalCluster (two worker processes) a
+quick repose sweep gives the local run's files; a sweep whose driver is killed after its first seed resumes from
+its journal without running that seed again and ends with the uninterrupted run's files; the refusals are one line
+before any work; a scheduler lost mid-run is one line, exit 1, saying what the journal keeps.
+
+Yade is deterministic across processes here: two local runs of the same settings give byte-identical
+``result.json``, ``results.csv`` and figure.  Only each run's ``yade.log`` differs between any two runs (it names
+the random auth cookie and port of Yade's Python prompt), so it is compared by presence only.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from grainforge.cli.main import cli
+
+pytestmark = pytest.mark.slow
+
+distributed = pytest.importorskip("distributed")
+
+#: a two-seed quick repose sweep, one run at a time locally (the interrupt lands between the seeds)
+ARGS = ["--quick", "--seeds", "2"]
+#: the file every engine run writes that differs between any two runs (see the module text)
+ENGINE_LOG = "yade.log"
+
+
+def require_yade():
+    import shutil
+
+    if shutil.which("yade") is None:
+        reason = "yade not installed (apt-get install yade python3-yade)"
+        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
+            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
+        pytest.skip(reason)
+
+
+def tree(folder: Path) -> dict[str, bytes]:
+    """Every file under ``folder`` (hidden ones too) by relative path; an engine log by presence only."""
+    return {str(p.relative_to(folder)): b"" if p.name == ENGINE_LOG else p.read_bytes()
+            for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  silence_logs=40) as c:
+        yield c
+
+
+@pytest.fixture(scope="module")
+def grains(tmp_path_factory) -> Path:
+    from click.testing import CliRunner
+
+    out = tmp_path_factory.mktemp("grains") / "g"
+    r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(out), "--count", "3", "--size", "2",
+                                 "--subdivisions", "3", "--preset", "rough-angular"])
+    assert r.exit_code == 0, r.output
+    return out
+
+
+@pytest.fixture(scope="module")
+def local(grains, tmp_path_factory) -> Path:
+    """The uninterrupted local sweep: the reference of every other run here."""
+    from click.testing import CliRunner
+
+    require_yade()
+    out = tmp_path_factory.mktemp("local") / "sim"
+    r = CliRunner().invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS, "--workers", "1"])
+    assert r.exit_code in (0, 3), r.output  # 3: a quick heap may be too flat to measure (the files are written)
+    return out
+
+
+def test_a_sweep_on_the_cluster_writes_the_local_runs_files(cluster, grains, local, runner, tmp_path):
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS,
+                            "--scheduler", cluster.scheduler_address])
+    assert r.exit_code in (0, 3), r.output
+    got, want = tree(out), tree(local)
+    assert sorted(got) == sorted(want)  # the same files, and no journal left
+    assert {"results.csv", "repose.png", "repose-seed0/result.json", f"repose-seed1/{ENGINE_LOG}"} <= set(got)
+    assert got == want
+    assert r.stdout.splitlines()[-1].startswith("g: ")
+
+
+def test_an_interrupted_sweep_resumes_without_rerunning_its_finished_seed(cluster, grains, local, runner, tmp_path):
+    from _processes import kill_sessions
+
+    work = tmp_path / "work"
+    work.mkdir()
+    out = work / "sim"
+    journal = out / ".grainforge-sweep"
+    proc = subprocess.Popen([sys.executable, "-c", "from grainforge.cli.main import main; main()", "simulate",
+                             "repose", str(grains), "--out", str(out), *ARGS, "--workers", "1"],
+                            stdin=subprocess.DEVNULL, stdout=subprocess.PIPE, stderr=subprocess.PIPE,
+                            start_new_session=True)
+    started = [proc]
+    try:
+        deadline = time.monotonic() + 120  # a hang guard
+        while not list(journal.glob("repose-seed*")):
+            assert proc.poll() is None, proc.communicate()[1].decode()
+            assert time.monotonic() < deadline, "the first seed never finished"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        kill_sessions(started)
+    assert proc.returncode == 128 + signal.SIGTERM, err.decode()
+    kept = sorted(p.name for p in journal.glob("repose-seed*"))
+    assert kept == ["repose-seed0"]  # one run at a time: the second was cut short, not journaled
+    assert not (out / "results.csv").exists() and not list(out.glob("repose-seed*"))  # nothing committed
+    finished = (journal / "repose-seed0" / "result.json").stat().st_mtime_ns
+
+    # a rerun without --resume, or with other settings, is refused in one line before any work
+    again = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS])
+    assert again.exit_code == 2 and "use --resume" in again.stderr and len(again.stderr.strip().splitlines()) == 1
+    other = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS, "--friction", "0.6",
+                                "--resume"])
+    assert other.exit_code == 2, other.output
+    assert "--friction 0.5 (now 0.6)" in other.stderr and len(other.stderr.strip().splitlines()) == 1
+
+    # resumed on the cluster: seed 0 is the journal's (its result.json not rewritten), seed 1 runs
+    resumed_at = time.time_ns()
+    r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS, "--resume",
+                            "--scheduler", cluster.scheduler_address])
+    assert r.exit_code in (0, 3), r.output
+    assert (out / "repose-seed0" / "result.json").stat().st_mtime_ns == finished < resumed_at
+    assert (out / "repose-seed1" / "result.json").stat().st_mtime_ns > resumed_at
+    assert not journal.exists()
+    assert tree(out) == tree(local)
+
+
+def test_refusals_are_one_line_before_any_work(cluster, grains, runner, tmp_path, monkeypatch):
+    out = tmp_path / "sim"
+    cases = [
+        (["--scheduler", cluster.scheduler_address, "--workers", "2"], "--workers is for the local pool"),
+        (["--scheduler", "http://node12"], "not a Dask scheduler address"),
+        (["--resume", "--overwrite"], "--resume and --overwrite exclude each other"),
+    ]
+    for extra, message in cases:
+        r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick", *extra])
+        assert r.exit_code == 2, r.output
+        assert message in r.stderr and len(r.stderr.strip().splitlines()) == 1 and "Traceback" not in r.output
+        assert not out.exists()
+    calibrate = runner.invoke(cli, ["simulate", "calibrate", "tilt", str(grains), "--target-angle", "30", "--out",
+                                    str(out), "--quick", "--scheduler", "node12"])
+    assert calibrate.exit_code == 2 and "not a Dask scheduler address" in calibrate.stderr
+    monkeypatch.setitem(sys.modules, "distributed", None)  # Dask not installed
+    r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick",
+                            "--scheduler", cluster.scheduler_address])
+    assert r.exit_code == 2 and "--scheduler needs Dask distributed: pip install" in r.stderr, r.output
+    assert len(r.stderr.strip().splitlines()) == 1 and not out.exists()
+
+
+class _LosingExecutor:
+    """Runs the first task here, then answers as a client whose scheduler is gone."""
+
+    workers = 2
+
+    def submit(self, fn, *args):
+        import concurrent.futures as cf
+
+        from grainforge.cluster import SchedulerLost
+
+        fut = cf.Future()
+        if not hasattr(self, "ran"):
+            self.ran = True
+            fut.set_result(fn(*args))
+        else:
+            fut.set_exception(SchedulerLost("tcp://10.0.0.5:8786", 1, 2, "connection closed"))
+        return fut
+
+
+def test_a_scheduler_lost_mid_run_is_one_line_and_keeps_the_finished_runs(grains, runner, tmp_path, monkeypatch):
+    require_yade()
+    import grainforge.cli.simulate as simulate_cli
+
+    monkeypatch.setattr(simulate_cli, "cluster_executor", lambda address: _LosingExecutor())
+    out = tmp_path / "sim"
+    r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS,
+                            "--scheduler", "tcp://10.0.0.5:8786"])
+    assert r.exit_code == 1, r.output
+    lines = r.stderr.strip().splitlines()
+    assert len(lines) == 1 and "lost the Dask scheduler at tcp://10.0.0.5:8786" in lines[0], r.stderr
+    assert "1 finished run(s) kept in" in lines[0] and "for --resume" in lines[0]
+    assert sorted(p.name for p in out.iterdir()) == [".grainforge-sweep"]  # no output committed
+    assert (out / ".grainforge-sweep" / "repose-seed0" / "result.json").is_file()
