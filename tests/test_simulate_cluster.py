@@ -191,3 +191,38 @@ def test_a_scheduler_lost_mid_run_is_one_line_and_keeps_the_finished_runs(grains
     assert "1 finished run(s) kept in" in lines[0] and "for --resume" in lines[0]
     assert sorted(p.name for p in out.iterdir()) == [".grainforge-sweep"]  # no output committed
     assert (out / ".grainforge-sweep" / "repose-seed0" / "result.json").is_file()
+
+
+def test_an_interrupted_calibration_resumes_from_its_finished_friction_seed_runs(grains, runner, tmp_path):
+    """Each friction tried is a set of runs: the (friction, seed) runs finished before the interrupt are reused."""
+    from _processes import kill_sessions
+
+    require_yade()
+    args = ["simulate", "calibrate", "tilt", str(grains), "--target-angle", "30", "--quick", "--max-frictions", "2",
+            "--workers", "1"]
+    ref = runner.invoke(cli, [*args, "--out", str(tmp_path / "ref")])
+    assert ref.exit_code == 0, ref.output
+    out = tmp_path / "cal"
+    journal = out / ".grainforge-sweep"
+    proc = subprocess.Popen([sys.executable, "-c", "from grainforge.cli.main import main; main()", *args,
+                             "--out", str(out)], stdin=subprocess.DEVNULL, stdout=subprocess.PIPE,
+                            stderr=subprocess.PIPE, start_new_session=True)
+    try:
+        deadline = time.monotonic() + 120
+        while not list(journal.glob("runs+e0-*+tilt-seed0")):
+            assert proc.poll() is None, proc.communicate()[1].decode()
+            assert time.monotonic() < deadline, "the first friction never finished"
+            time.sleep(0.05)
+        proc.send_signal(signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        kill_sessions([proc])
+    assert proc.returncode == 128 + signal.SIGTERM, err.decode()
+    [first] = journal.glob("runs+e0-*+tilt-seed0")
+    finished = (first / "result.json").stat().st_mtime_ns
+    r = runner.invoke(cli, [*args, "--out", str(out), "--resume"])
+    assert r.exit_code == 0, r.output
+    assert (out / "runs" / first.name.split("+")[1] / "tilt-seed0" / "result.json").stat().st_mtime_ns == finished
+    assert not journal.exists()
+    assert tree(out) == tree(tmp_path / "ref")
+    assert r.stdout.replace(str(out), "OUT") == ref.stdout.replace(str(tmp_path / "ref"), "OUT")
