@@ -356,3 +356,14 @@ def test_an_engine_process_starts_with_ctrl_c_ignored_and_sigterm_default_and_ne
     assert ignored & bit[signal.SIGINT] and not ignored & bit[signal.SIGTERM]
     # and the owner's own mask is as it was
     assert not signal.pthread_sigmask(signal.SIG_BLOCK, set()) & {signal.SIGINT, signal.SIGTERM}
+
+
+def test_a_heap_whose_surface_does_not_fall_outwards_has_no_angle():
+    """30 quick-run grains (a Yade heap's spheres, stored) whose fitted surface rises outwards: refused as too flat
+    (the run then reports NaN with that note), not reported as a negative angle of repose (it was -11.9°)."""
+    from pathlib import Path
+
+    with np.load(Path(__file__).parent / "data" / "tiny-heap.npz") as data:
+        spheres, base, d = data["spheres"], float(data["base_top"]), float(data["d_mean"])
+    with pytest.raises(ValueError, match="too flat or too small .*does not fall outwards"):
+        heap_angle(spheres, bin_width=0.5 * d, grain_size=d, base=base)

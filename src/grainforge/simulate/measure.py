@@ -148,6 +148,9 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     ok_all = sel[None, :] & np.isfinite(surface)
     rr = np.broadcast_to(centres, surface.shape)[ok_all]
     b, a = np.polyfit(rr, surface[ok_all], 1)
+    if not b < 0:  # the fitted surface does not fall outwards: a pile of a few grains, no slope to speak of
+        raise ValueError("the heap is too flat or too small to measure an angle (its surface does not fall "
+                         "outwards)")
     prof = np.column_stack([centres, mean_profile])
     return HeapAngle(angle=float(np.degrees(np.arctan(-b))), spread=float(np.nanstd(per_sector)),
                      sectors=per_sector, foot=foot, height=height, profile=prof[np.isfinite(prof[:, 1])],
