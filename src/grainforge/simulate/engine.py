@@ -188,8 +188,8 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     if executor is not None:
         from .sweep import run_on_cluster
 
-        results = run_on_cluster(executor, decks, [k for k in range(len(seeds)) if k not in kept], engine=engine,
-                                 mpi=mpi, progress=progress, journal=journal)
+        results = run_on_cluster(executor, run_deck, decks, [k for k in range(len(seeds)) if k not in kept],
+                                 engine=engine, mpi=mpi, progress=progress, journal=journal)
         return [row(k, kept[k] if k in kept else results[k]) for k in range(len(seeds))]
 
     def one(k):

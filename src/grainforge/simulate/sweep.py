@@ -66,12 +66,14 @@ def write_files(folder: str | os.PathLike, files: dict[str, bytes]) -> None:
 DECK_MARK = "\0deck\0"
 
 
-def run_remote(files: dict[str, bytes], name: str, engine: str = "yade",
+def run_remote(run, files: dict[str, bytes], name: str, engine: str = "yade",
                mpi: int | None = None) -> tuple[dict[str, bytes], dict | None, str | None]:
-    """One engine run on a Dask worker: the deck ``files`` in a temporary folder ``name``, run there.
+    """One engine run on a Dask worker: the deck ``files`` in a temporary folder ``name``, run there by ``run``.
 
     Parameters
     ----------
+    run : callable
+        :func:`grainforge.simulate.engine.run_deck` (passed in: this module does not import the engine's).
     files : dict of str to bytes
         The deck (:func:`deck_files`).
     name : str
@@ -85,7 +87,6 @@ def run_remote(files: dict[str, bytes], name: str, engine: str = "yade",
         The files the run made or changed, its ``result.json`` (``None`` if it failed) and, if it failed, the
         engine's one-line error with the folder's path replaced by :data:`DECK_MARK`.
     """
-    from .engine import run_deck
     from .process import EngineFailed
 
     with tempfile.TemporaryDirectory(prefix="grainforge-run-") as tmp:
@@ -94,16 +95,17 @@ def run_remote(files: dict[str, bytes], name: str, engine: str = "yade",
         write_files(deck, files)
         result = error = None
         try:
-            result = run_deck(deck, engine=engine, mpi=mpi)
+            result = run(deck, engine=engine, mpi=mpi)
         except EngineFailed as exc:
             error = str(exc).replace(str(deck), DECK_MARK)
         made = {k: v for k, v in deck_files(deck).items() if files.get(k) != v}
     return made, result, error
 
 
-def run_on_cluster(executor, decks: Sequence[Path], which: Sequence[int], *, engine: str = "yade",
+def run_on_cluster(executor, run, decks: Sequence[Path], which: Sequence[int], *, engine: str = "yade",
                    mpi: int | None = None, progress=None, journal: SweepJournal | None = None) -> dict[int, dict]:
-    """Run the decks ``decks[k]`` for ``k`` in ``which`` as tasks of ``executor`` (:func:`run_remote`).
+    """Run the decks ``decks[k]`` for ``k`` in ``which`` as tasks of ``executor`` (:func:`run_remote` with ``run``,
+    :func:`grainforge.simulate.engine.run_deck`).
 
     Each run's files are written into its folder as it comes back (and recorded in ``journal``);
     ``progress(k, fraction, phase)`` says when a run is sent and when it is done.
@@ -127,7 +129,7 @@ def run_on_cluster(executor, decks: Sequence[Path], which: Sequence[int], *, eng
     futures = {}
     try:
         for k in which:
-            futures[executor.submit(run_remote, deck_files(decks[k]), decks[k].name, engine, mpi)] = k
+            futures[executor.submit(run_remote, run, deck_files(decks[k]), decks[k].name, engine, mpi)] = k
             if progress is not None:
                 progress(k, 0.0, "sent to the cluster")
         results = {}
