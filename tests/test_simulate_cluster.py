@@ -226,3 +226,23 @@ def test_an_interrupted_calibration_resumes_from_its_finished_friction_seed_runs
     assert not journal.exists()
     assert tree(out) == tree(tmp_path / "ref")
     assert r.stdout.replace(str(out), "OUT") == ref.stdout.replace(str(tmp_path / "ref"), "OUT")
+
+
+def test_mpi_ranks_on_a_cluster_are_the_workers_to_decide(grains, runner, tmp_path, monkeypatch):
+    """``--mpi`` beyond this machine's cores is refused locally, not with ``--scheduler`` (the command goes on to
+    connect: a stand-in connection that stops it there)."""
+    import click
+
+    import grainforge.cli.simulate as simulate_cli
+
+    args = ["simulate", "repose", str(grains), "--out", str(tmp_path / "sim"), "--quick", "--engine", "liggghts",
+            "--mpi", "4096"]
+    local = runner.invoke(cli, args, env={"SLURM_NTASKS": ""})
+    assert local.exit_code == 2 and "--mpi 4096: only" in local.stderr, local.output
+
+    def connect(address):
+        raise click.UsageError(f"connected to {address}")
+
+    monkeypatch.setattr(simulate_cli, "cluster_executor", connect)
+    r = runner.invoke(cli, [*args, "--scheduler", "tcp://10.0.0.5:8786"])
+    assert r.exit_code == 2 and "connected to tcp://10.0.0.5:8786" in r.stderr, r.output
