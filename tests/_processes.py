@@ -73,3 +73,38 @@ def assert_gone(pids, wait: float = 5.0) -> None:
     for p in left:
         os.kill(p, signal.SIGKILL)
     assert not left, f"engine processes left behind: {left}"
+
+
+def interrupt_simulate_run(args: list[str], tmp_path: Path) -> None:
+    """``grainforge simulate ARGS --out o --quick`` with a stand-in Yade that starts a child and waits; SIGINT to
+    the command while the engine runs: exit 130 with ``Interrupted.`` last, the engine and its child gone (the
+    engine's whole process group: an mpirun's ranks are its children), and nothing in the working folder."""
+    import sys
+    import time
+
+    work = tmp_path / "work"
+    work.mkdir()
+    fake = tmp_path / "yade"
+    fake.write_text(f'#!/bin/sh\nsleep 60 &\necho $! > "{tmp_path}/child.pid"\necho $$ > "{tmp_path}/engine.pid"\n'
+                    "wait\n")
+    fake.chmod(0o755)
+    proc = subprocess.Popen([sys.executable, "-c", "from grainforge.cli.main import main; main()", "simulate",
+                             *args, "--out", "o", "--quick"], cwd=work, stdin=subprocess.DEVNULL,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
+                            env=dict(os.environ, GRAINFORGE_YADE=str(fake)))
+    try:
+        deadline = time.monotonic() + 120  # a hang guard
+        while not (tmp_path / "child.pid").exists() or not (tmp_path / "engine.pid").exists():
+            assert proc.poll() is None, proc.communicate()[1].decode()
+            assert time.monotonic() < deadline, "the stand-in engine never started"
+            time.sleep(0.05)
+        time.sleep(0.3)
+        pids = [int((tmp_path / f).read_text()) for f in ("child.pid", "engine.pid")]
+        os.kill(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+        assert proc.returncode == 130, err.decode()
+        assert err.decode().strip().splitlines()[-1] == "Interrupted."
+        assert_gone(pids)
+        assert list(work.iterdir()) == []
+    finally:
+        kill_sessions([proc])

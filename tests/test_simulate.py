@@ -8,7 +8,6 @@ Without Yade the engine test is skipped with the reason; with GRAINFORGE_REQUIRE
 import csv
 import json
 import math
-import os
 import re
 import shutil
 
@@ -137,11 +136,9 @@ def test_a_mesh_yade_cannot_load_is_refused(runner, tmp_path):
 
 
 def require_yade():
-    if shutil.which("yade") is None:
-        reason = "yade not installed (apt-get install yade python3-yade)"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
+    from conftest import require_engine
+
+    require_engine("yade", "yade python3-yade")
 
 
 @pytest.mark.slow
@@ -304,38 +301,9 @@ def test_a_failed_engine_run_keeps_its_deck_and_log_and_says_where(runner, grain
 def test_an_interrupt_kills_the_engine_with_its_children_and_leaves_nothing(grains, tmp_path):
     """The engine's whole process group goes (an mpirun's ranks are its children): a stand-in engine that
     starts a child and waits; SIGINT to the command; both gone, --out not created."""
-    import signal
-    import subprocess
-    import sys
-    import time
+    from _processes import interrupt_simulate_run
 
-    from _processes import assert_gone, kill_sessions
-
-    work = tmp_path / "work"
-    work.mkdir()
-    fake = _fake_engine(tmp_path / "yade", f'sleep 60 &\necho $! > "{tmp_path}/child.pid"\n'
-                                           f'echo $$ > "{tmp_path}/engine.pid"\nwait\n')
-    proc = subprocess.Popen([sys.executable, "-c", "from grainforge.cli.main import main; main()", "simulate",
-                             "repose", str(grains), "--out", "o", "--quick"], cwd=work, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
-                            env=dict(os.environ, GRAINFORGE_YADE=str(fake)))
-    started = [proc]
-    try:
-        deadline = time.monotonic() + 120  # a hang guard
-        while not (tmp_path / "child.pid").exists() or not (tmp_path / "engine.pid").exists():
-            assert proc.poll() is None, proc.communicate()[1].decode()
-            assert time.monotonic() < deadline, "the stand-in engine never started"
-            time.sleep(0.05)
-        time.sleep(0.3)
-        pids = [int((tmp_path / f).read_text()) for f in ("child.pid", "engine.pid")]
-        os.kill(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-        assert proc.returncode == 130, err.decode()
-        assert err.decode().strip().splitlines()[-1] == "Interrupted."
-        assert_gone(pids)
-        assert list(work.iterdir()) == []
-    finally:
-        kill_sessions(started)
+    interrupt_simulate_run(["repose", str(grains)], tmp_path)
 
 
 def test_an_engine_process_starts_with_ctrl_c_ignored_and_sigterm_default_and_neither_blocked(tmp_path):

@@ -10,7 +10,6 @@ the random auth cookie and port of Yade's Python prompt), so it is compared by p
 
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -18,6 +17,7 @@ import time
 from pathlib import Path
 
 import pytest
+from conftest import require_engine
 
 from grainforge.cli.main import cli
 
@@ -32,13 +32,7 @@ ENGINE_LOG = "yade.log"
 
 
 def require_yade():
-    import shutil
-
-    if shutil.which("yade") is None:
-        reason = "yade not installed (apt-get install yade python3-yade)"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
+    require_engine("yade", "yade python3-yade")
 
 
 def tree(folder: Path) -> dict[str, bytes]:

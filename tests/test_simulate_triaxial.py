@@ -9,7 +9,6 @@ failure (``require_engine``).
 import csv
 import json
 import math
-import os
 
 import numpy as np
 import pytest
@@ -156,39 +155,9 @@ def test_bad_triaxial_settings_are_refused_in_one_line(runner, spheres, tmp_path
 
 def test_an_interrupted_triaxial_run_leaves_no_engine_and_no_folder(spheres, tmp_path):
     """SIGINT while the (stand-in) engine runs: exit 130, the engine and its child gone, --out never made."""
-    import signal
-    import subprocess
-    import sys
-    import time
+    from _processes import interrupt_simulate_run
 
-    from _processes import assert_gone, kill_sessions
-
-    work = tmp_path / "work"
-    work.mkdir()
-    fake = tmp_path / "yade"
-    fake.write_text(f'#!/bin/sh\nsleep 60 &\necho $! > "{tmp_path}/child.pid"\necho $$ > "{tmp_path}/engine.pid"\n'
-                    "wait\n")
-    fake.chmod(0o755)
-    proc = subprocess.Popen([sys.executable, "-c", "from grainforge.cli.main import main; main()", "simulate",
-                             "triaxial", str(spheres), "--out", "o", "--quick"], cwd=work, stdin=subprocess.DEVNULL,
-                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, start_new_session=True,
-                            env=dict(os.environ, GRAINFORGE_YADE=str(fake)))
-    try:
-        deadline = time.monotonic() + 120  # a hang guard
-        while not (tmp_path / "child.pid").exists() or not (tmp_path / "engine.pid").exists():
-            assert proc.poll() is None, proc.communicate()[1].decode()
-            assert time.monotonic() < deadline, "the stand-in engine never started"
-            time.sleep(0.05)
-        time.sleep(0.3)
-        pids = [int((tmp_path / f).read_text()) for f in ("child.pid", "engine.pid")]
-        os.kill(proc.pid, signal.SIGINT)
-        _, err = proc.communicate(timeout=60)
-        assert proc.returncode == 130, err.decode()
-        assert err.decode().strip().splitlines()[-1] == "Interrupted."
-        assert_gone(pids)
-        assert list(work.iterdir()) == []
-    finally:
-        kill_sessions([proc])
+    interrupt_simulate_run(["triaxial", str(spheres)], tmp_path)
 
 
 # ---- quick runs in Yade ----------------------------------------------------------------------------------

@@ -266,6 +266,25 @@ def cluster_executor(scheduler: str):
         raise click.UsageError(str(exc)) from None
 
 
+def engine_runners(scheduler: str | None, workers: int | None, mpi: int | None):
+    """Who runs the engine: ``(executor, workers)`` — the cluster's (:func:`cluster_executor`; its threads size
+    the estimate, and its workers decide how many ranks they hold), or ``(None, workers)`` on this machine's
+    cores (default: the cores divided by ``mpi``), with MPI ranks beyond them refused in one line (exit 2)."""
+    import os
+
+    from ..simulate.process import check_mpi_ranks
+
+    if scheduler is not None:
+        executor = cluster_executor(scheduler)
+        return executor, executor.workers
+    workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+    try:
+        check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
+    return None, workers
+
+
 def scheduler_lost(exc, journal) -> click.ClickException:
     """The one line of a scheduler lost mid-run (exit 1): what the journal keeps for ``--resume``."""
     kept = journal_kept(journal)
@@ -340,7 +359,6 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from ..simulate.population import template_make_seconds
-    from ..simulate.process import check_mpi_ranks
     from .interrupts import ready_for_work, signals_held
 
     settings = run_settings(test, values, quick, shape, clump_accuracy)
@@ -355,16 +373,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     # the templates are chosen from a pool of grains generated or measured (--quick: 4 per template)
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
-    executor = None
-    if scheduler is not None:  # the cluster's workers run the engine: its threads size the estimate
-        executor = cluster_executor(scheduler)
-        workers = executor.workers
-    else:
-        workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
-        try:
-            check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
-        except ValueError as exc:
-            raise click.UsageError(str(exc)) from None
+    executor, workers = engine_runners(scheduler, workers, mpi)
     try:
         seconds = check_size(test, settings, available=available, make_seconds=make_seconds,
                              as_spheres=as_spheres, workers=workers, shape=shape, spacing=spacing,

@@ -28,8 +28,8 @@ from .simulate import (
     check_representation,
     choose_templates,
     clump_outputs,
-    cluster_executor,
     engine_failed,
+    engine_runners,
     make_templates,
     open_sweep,
     resume_option,
@@ -123,7 +123,6 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     from ..simulate import check_inputs, check_size
     from ..simulate.calibrate import check_target
     from ..simulate.population import template_make_seconds
-    from ..simulate.process import check_mpi_ranks
     from .interrupts import ready_for_work, signals_held
 
     try:
@@ -156,16 +155,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     # the templates are chosen from a pool of grains generated or measured (--quick: 4 per template)
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
-    executor = None
-    if scheduler is not None:  # the cluster's workers run the engine: its threads size the estimate
-        executor = cluster_executor(scheduler)
-        workers = executor.workers
-    else:
-        workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
-        try:
-            check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
-        except ValueError as exc:
-            raise click.UsageError(str(exc)) from None
+    executor, workers = engine_runners(scheduler, workers, mpi)
     from ..estimate import SECONDS_LIMIT, _limit, duration
 
     try:
