@@ -372,13 +372,42 @@ def _descendants(pid: int) -> list[int]:
     return found
 
 
+def _session_members(sid: int) -> list[int]:
+    """Live processes (zombies aside) of session ``sid`` (Linux ``/proc``; empty elsewhere)."""
+    found = []
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return found
+    for name in entries:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", "rb") as fh:
+                fields = fh.read().rsplit(b")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        if int(fields[3]) == sid and fields[0] not in (b"Z", b"X"):
+            found.append(int(name))
+    return found
+
+
+#: passes over a killed session's members (each a few ms): a process forked while the previous pass ran
+SESSION_PASSES = 20
+
+
 def kill_process_tree(pid: int) -> None:
     """SIGKILL process ``pid``, every process below it and, when it leads a process group of its own
-    (``start_new_session=True``), that group: the one kill path of grainforge's child processes.
+    (``start_new_session=True``), that group and every process of its session: the one kill path of
+    grainforge's child processes.
 
-    ``pid`` is stopped (SIGSTOP) first, so it cannot start new children while they are listed. The
-    caller still reaps ``pid`` if it is its child (``Popen.wait``). A process already gone is no
-    error. Never signals this process's own group.
+    ``pid`` is stopped (SIGSTOP) first, so it cannot start new children while they are listed. Its
+    descendants can still fork while they are killed one by one, and a launcher may put them in process
+    groups of their own (Open MPI's ``mpirun`` puts each rank in one): an orphan forked at that moment
+    escapes the tree and the group. No process leaves a session but by ``setsid``, so when ``pid`` leads
+    a session of its own, its members are killed pass after pass until none is left. The caller still
+    reaps ``pid`` if it is its child (``Popen.wait``). A process already gone is no error. Never signals
+    this process's own group or session.
 
     Examples
     --------
@@ -409,6 +438,20 @@ def kill_process_tree(pid: int) -> None:
             os.kill(pid, signal.SIGKILL)
     except (ProcessLookupError, PermissionError):
         pass
+    try:
+        own_session = os.getsid(0) == pid
+    except OSError:
+        own_session = True
+    if own_group and not own_session:
+        for _ in range(SESSION_PASSES):
+            members = [m for m in _session_members(pid) if m != os.getpid()]
+            if not members:
+                break
+            for m in members:
+                try:
+                    os.kill(m, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
 
 
 def _forkserver_pids() -> list[int]:
