@@ -63,11 +63,14 @@ class _Outputs:
         self.overwrite = False
 
     def temp(self, final: Path) -> Path:
+        from ..staging import signals_held
+
         final.parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
-        os.close(fd)
-        self.temps.append(Path(tmp))
-        self.moves.append((Path(tmp), final))
+        with signals_held():  # the file is made and noted for the clean-up together: a signal waits for both
+            fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
+            os.close(fd)
+            self.temps.append(Path(tmp))
+            self.moves.append((Path(tmp), final))
         return Path(tmp)
 
     def mesh_stage(self, folder: Path, overwrite: bool) -> Path:

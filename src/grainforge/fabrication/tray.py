@@ -599,6 +599,8 @@ def build_tray(
         source, resolution = _matched_source(source, printer, max_subdivisions, max_triangles)
     _check_size_of_job(source, workers)
 
+    from ..staging import signals_held
+
     made = [q for q in [out.parent, *out.parent.parents] if not q.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
@@ -622,8 +624,9 @@ def build_tray(
                 if writer is not None:
                     writer.close()
                     fh.close()
-                fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(out, os.getpid()), suffix=".tmp", dir=out.parent)
-                temps.append(Path(tmp))
+                with signals_held():  # made and noted for the clean-up together: a signal waits for both
+                    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(out, os.getpid()), suffix=".tmp", dir=out.parent)
+                    temps.append(Path(tmp))
                 os.chmod(tmp, file_mode())
                 fh = os.fdopen(fd, "w+b")
                 writer = ThreeMFWriter(fh) if fmt == ".3mf" else STLWriter(fh)
@@ -646,10 +649,11 @@ def build_tray(
             written.append(path)
         write_csv(csv_path, rows, units=True)
         written.append(csv_path)
-        for tmp, final in zip(temps, files):  # the print files last: all outputs or none
-            os.replace(tmp, final)
-            written.append(final)
-        temps = []
+        with signals_held():  # the print files last, together: all outputs or none
+            for tmp, final in zip(temps, files):
+                os.replace(tmp, final)
+                written.append(final)
+            temps = []
     except BaseException:
         if stream is not None:
             stream.close()  # stops the workers now (an error, Ctrl-C, SIGTERM), not after their current chunks
