@@ -305,7 +305,8 @@ def require(*engines: str) -> None:
 @pytest.mark.slow  # runs Yade (half a minute)
 def test_a_signal_as_a_simulation_commits_its_outputs_is_honoured(tmp_path, inputs):
     """A quick Yade repose run, Ctrl-C the moment its results table is written (then all its outputs move into
-    --out together): exit 130, one line, all outputs or none, no Yade left."""
+    --out together): exit 130, one line, all outputs or none, no Yade left — or, when the signal came before
+    the outputs moved, only the sweep's journal of finished runs, from which ``--resume`` completes the run."""
     require("yade")
     work = tmp_path / "work"
     work.mkdir()
@@ -325,8 +326,15 @@ def test_a_signal_as_a_simulation_commits_its_outputs_is_honoured(tmp_path, inpu
         _, err = proc.communicate(timeout=60)
         assert proc.returncode in (0, 3), err.decode()
         pytest.skip("the run had finished before the signal")
+    complete = ["repose-seed0", "repose.png", "results.csv", "templates.csv"]
     left = sorted(p.name for p in (work / "o").iterdir()) if (work / "o").exists() else []
-    assert left in ([], ["repose-seed0", "repose.png", "results.csv", "templates.csv"]), left
+    assert left in ([], complete, [".grainforge-sweep"]), left
+    if left == [".grainforge-sweep"]:  # what --resume continues from: the finished run is not made again
+        resumed = _start(["simulate", "repose", "{in}/ang", "--quick", "--out", "o", "--resume"], work, inputs,
+                         GRAINFORGE_YADE=shutil.which("yade"))
+        _, err = resumed.communicate(timeout=300)
+        assert resumed.returncode in (0, 3), err.decode()
+        assert sorted(p.name for p in (work / "o").iterdir()) == complete
 
 
 def _mpi_session_folders(pid: int, *bases: Path) -> list[Path]:
