@@ -85,7 +85,7 @@ def main() -> None:
     f_local, out_local = fit(args.twins)
     rows.append(("local, this process", a_local, f_local, "reference"))
     for n in (1, 2):
-        with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+        with distributed.LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                       silence_logs=40) as cluster:
             with dask_executor(cluster.scheduler_address) as ex:
                 ex.client.run(warm)
