@@ -74,3 +74,14 @@ def grain_files(tmp_path_factory):
         g = getattr(grainforge, method)(rng=i).scaled(4.0)
         grainforge.io.write_mesh(g, d / f"{method}-{i:04d}.stl")
     return d
+
+
+@pytest.fixture(scope="module")
+def cluster():
+    """A ``dask.distributed`` LocalCluster of 2 single-threaded worker processes, one per test module (what
+    ``--scheduler`` runs on; the dashboard on a random port, so clusters of two test processes never collide).
+    Skipped where Dask distributed is not installed."""
+    distributed = pytest.importorskip("distributed")
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  silence_logs=40) as c:
+        yield c

@@ -50,13 +50,6 @@ def tree(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                  silence_logs=40) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
 def grains(tmp_path_factory) -> Path:
     out = tmp_path_factory.mktemp("grains") / "pop"
     run_batch(parse_recipe(RECIPE, source="grains.toml"), out, workers=1, report=False)

@@ -36,13 +36,6 @@ def tree(folder):
     return {str(p.relative_to(folder)): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
 
-@pytest.fixture(scope="module")
-def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
-                                  dashboard_address=":0", silence_logs=40) as c:
-        yield c
-
-
 def test_dask_cluster_output_is_byte_identical_to_local(cluster, runner, tmp_path):
     recipe = tmp_path / "pop.toml"
     recipe.write_text(RECIPE)

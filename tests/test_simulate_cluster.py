@@ -42,13 +42,6 @@ def tree(folder: Path) -> dict[str, bytes]:
 
 
 @pytest.fixture(scope="module")
-def cluster():
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
-                                  silence_logs=40) as c:
-        yield c
-
-
-@pytest.fixture(scope="module")
 def grains(tmp_path_factory) -> Path:
     from click.testing import CliRunner
 

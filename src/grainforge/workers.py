@@ -342,13 +342,13 @@ def _unblock_result_reader(pool) -> Callable[[], None]:
     return close
 
 
-def _children_of(pid: int) -> list[int]:
-    """Processes whose parent is ``pid`` (Linux ``/proc``; empty elsewhere)."""
-    found = []
+def _proc_stats():
+    """``(pid, fields)`` of every process, ``fields`` its ``/proc/PID/stat`` after the command name (state,
+    parent, group, session, ...); nothing where there is no ``/proc``."""
     try:
         entries = os.listdir("/proc")
     except OSError:
-        return found
+        return
     for name in entries:
         if not name.isdigit():
             continue
@@ -357,9 +357,12 @@ def _children_of(pid: int) -> list[int]:
                 fields = fh.read().rsplit(b")", 1)[1].split()
         except (OSError, IndexError):
             continue
-        if int(fields[1]) == pid:
-            found.append(int(name))
-    return found
+        yield int(name), fields
+
+
+def _children_of(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (Linux ``/proc``; empty elsewhere)."""
+    return [p for p, fields in _proc_stats() if int(fields[1]) == pid]
 
 
 def _descendants(pid: int) -> list[int]:
@@ -374,22 +377,7 @@ def _descendants(pid: int) -> list[int]:
 
 def _session_members(sid: int) -> list[int]:
     """Live processes (zombies aside) of session ``sid`` (Linux ``/proc``; empty elsewhere)."""
-    found = []
-    try:
-        entries = os.listdir("/proc")
-    except OSError:
-        return found
-    for name in entries:
-        if not name.isdigit():
-            continue
-        try:
-            with open(f"/proc/{name}/stat", "rb") as fh:
-                fields = fh.read().rsplit(b")", 1)[1].split()
-        except (OSError, IndexError):
-            continue
-        if int(fields[3]) == sid and fields[0] not in (b"Z", b"X"):
-            found.append(int(name))
-    return found
+    return [p for p, fields in _proc_stats() if int(fields[3]) == sid and fields[0] not in (b"Z", b"X")]
 
 
 #: passes over a killed session's members (each a few ms): a process forked while the previous pass ran
