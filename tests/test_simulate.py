@@ -335,3 +335,17 @@ def test_a_heap_whose_surface_does_not_fall_outwards_has_no_angle():
         spheres, base, d = data["spheres"], float(data["base_top"]), float(data["d_mean"])
     with pytest.raises(ValueError, match="too flat or too small .*does not fall outwards"):
         heap_angle(spheres, bin_width=0.5 * d, grain_size=d, base=base)
+
+
+def test_an_as_spheres_template_is_bounded_by_its_sphere():
+    """--as-spheres: the template's clump is the volume-equivalent sphere and its bounding radius (by which the
+    scenes space the grains) is that sphere's, not the one-sphere clump's it replaces (a grown clump sphere
+    reached 11 % past the grain)."""
+    from grainforge.methods import generate, get
+    from grainforge.simulate.population import _template
+
+    g = generate("cri", get("cri").Params(subdivisions=3), 2)
+    v = np.asarray(g.vertices) * 2.0  # about 2 mm
+    t = _template((v, np.asarray(g.faces), "g", Settings(), "test", 0, True, "clump", 0.05, None))
+    assert t.clump.radii.tolist() == [pytest.approx(t.d_eq / 2.0)]
+    assert t.bounding_radius == pytest.approx(t.d_eq / 2.0, rel=0.01)

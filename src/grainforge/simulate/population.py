@@ -36,7 +36,10 @@ def _template(args):
         from ..dem.clump import Clump
 
         sphere = Clump(np.zeros((1, 3)), np.array([t.d_eq / 2.0]), 1.0, 0.0, t.clump.resolution)
-        return replace(t, clump=sphere)
+        # and its bounding radius the sphere's (or the mesh's, the larger): not that of the one-sphere clump
+        # prepare() made and this replaces, which may reach past the mesh (the scene spaces grains by it)
+        radius = max(t.d_eq / 2.0, float(np.linalg.norm(t.vertices, axis=1).max()))
+        return replace(t, clump=sphere, info={**t.info, "bounding_radius": radius})
     return prepare(vertices, faces, name, unit=1e-3, density=settings.density, spheres=settings.spheres,
                    source=source, rng=k, shape=shape, levelset_spacing=spacing, target_iou=clump_accuracy)
 
