@@ -16,8 +16,8 @@ import argparse
 import numpy as np
 
 from grainforge.analysis.atlas import voxel_descriptors, voxelise
+from grainforge.geometry.rotations import random_rotation
 from grainforge.methods import generate, get
-from grainforge.rotations import random_rotation
 
 
 def main():

@@ -22,7 +22,7 @@ from pathlib import Path
 
 def make_grains(folder: Path, count: int) -> list[Path]:
     from grainforge.methods import get
-    from grainforge.run import grain_file_name, write_run
+    from grainforge.population.generate import grain_file_name, write_run
 
     names = [folder / grain_file_name("fso", i, "stl") for i in range(count)]
     if not all(p.is_file() for p in names):
@@ -54,7 +54,7 @@ def main():
     args = ap.parse_args()
 
     from grainforge.analysis.measure import PRELOAD
-    from grainforge.workers import ordered_map
+    from grainforge.runtime.workers import ordered_map
 
     files = make_grains(args.cache, args.count)
     load0 = os.getloadavg()

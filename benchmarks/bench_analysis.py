@@ -31,7 +31,7 @@ def main():
     from grainforge import fso
     from grainforge.analysis import descriptors as D
     from grainforge.analysis import fourier, fractal
-    from grainforge.render import render_image
+    from grainforge.viz.render import render_image
 
     g = fso(subdivisions=5, rng=1)
     v, f = np.asarray(g.vertices), np.asarray(g.faces)

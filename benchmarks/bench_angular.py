@@ -29,9 +29,9 @@ def main(argv=None):
     ap.add_argument("--repeat", type=int, default=9)
     a = ap.parse_args(argv)
 
-    from grainforge.geodesic import icosphere
+    from grainforge.geometry.geodesic import icosphere
+    from grainforge.geometry.solid import require_solid, volume_centroid
     from grainforge.methods import angular, generate
-    from grainforge.solid import require_solid, volume_centroid
 
     print(load())
     unit, _ = icosphere(5)

@@ -44,9 +44,9 @@ def main():
         straddling_cubes,
         voxelise,
     )
+    from grainforge.geometry.rotations import random_rotation
+    from grainforge.geometry.solid import signed_volume
     from grainforge.methods import get
-    from grainforge.rotations import random_rotation
-    from grainforge.solid import signed_volume
 
     print(f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
           f"OPENBLAS_NUM_THREADS={os.environ.get('OPENBLAS_NUM_THREADS')}")

@@ -2,7 +2,7 @@
 against the local run (``analyse`` and ``fit`` in this process, ``simulate`` as the command with ``--workers 1``).
 
 Each Dask run goes through what the commands run (:func:`grainforge.analysis.measure.analyse_files` and
-:func:`grainforge.fit.fit_sand` with a :class:`grainforge.cluster.DaskExecutor`); the script checks that
+:func:`grainforge.fit.fit_sand` with a :class:`grainforge.runtime.cluster.DaskExecutor`); the script checks that
 every run's output is byte-identical to the local one and prints a table of wall times, with the load
 average (the project machine is shared: read the 2-worker speed-up against it).
 
@@ -25,7 +25,7 @@ RF_SAND = Path(__file__).resolve().parents[1] / "tests" / "data" / "synthetic-rf
 
 def make_grains(folder: Path, count: int) -> list[Path]:
     from grainforge.methods import get
-    from grainforge.run import grain_file_name, write_run
+    from grainforge.population.generate import grain_file_name, write_run
 
     names = [folder / grain_file_name("fso", i, "stl") for i in range(count)]
     if not all(p.is_file() for p in names):
@@ -98,13 +98,13 @@ def main() -> None:
 
     import distributed
 
-    from grainforge.cluster import dask_executor
+    from grainforge.runtime.cluster import dask_executor
 
     files = make_grains(args.cache, args.files)
     angular = args.cache / "angular"
     if args.seeds and not (angular / "manifest.csv").is_file():
         from grainforge.methods import get
-        from grainforge.run import write_run
+        from grainforge.population.generate import write_run
 
         write_run("angular", get("angular").Params(subdivisions=3), range(3), angular, size=2.0, overwrite=True)
     warm()

@@ -56,8 +56,8 @@ def bench_grains():
 def bench_fourier():
     from PIL import Image
 
-    from grainforge.contours import Contour
-    from grainforge.imaging import draw_contours
+    from grainforge.outline.contours import Contour
+    from grainforge.outline.imaging import draw_contours
 
     rng = np.random.default_rng(0)
     items = []
@@ -82,7 +82,7 @@ def bench_fourier():
             times.append(time.perf_counter() - t)
         print(f"grainforge fourier, 2048×2048 PNG, {len(items)} drawn grains: best {min(times):.2f} s "
               f"(whole command incl. interpreter start-up), {res.stderr.strip()}")
-        from grainforge.contours import scan_image
+        from grainforge.outline.contours import scan_image
 
         t = time.perf_counter()
         scan = scan_image(str(path), n_angles=128)

@@ -6,7 +6,7 @@ Two 2 mm grains of 20,480 faces (angular and CRI, seed 0) are made into
 templates (:func:`grainforge.dem.template.prepare`) at several ``--spheres`` /
 ``--refine-iterations`` settings (and, with ``--levelset``, level-set
 spacings, minutes each). For each: the CPU seconds (``time.process_time``, one
-core), the spheres placed, and :func:`grainforge.estimate.dem_template_seconds`.
+core), the spheres placed, and :func:`grainforge.runtime.estimate.dem_template_seconds`.
 The model is an upper bound for the refinement (it counts every iteration; the
 L-BFGS-B search often converges sooner) and is meant to tell hours from days,
 not to predict within 10 %.
@@ -35,7 +35,7 @@ def main() -> None:
     from grainforge.cli.main import cli
     from grainforge.dem.inputs import read_grain
     from grainforge.dem.template import prepare
-    from grainforge.estimate import dem_template_seconds
+    from grainforge.runtime.estimate import dem_template_seconds
 
     with tempfile.TemporaryDirectory() as tmp:
         grains = {}

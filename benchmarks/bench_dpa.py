@@ -33,8 +33,8 @@ def main() -> None:
     reps = 2 if args.quick else 5
 
     import grainforge
-    from grainforge.calibration import calibrate
-    from grainforge.methods import dpa as D
+    from grainforge.methods.dpa import aggregation as D
+    from grainforge.methods.dpa.calibration import calibrate
 
     print(f"load average: {os.getloadavg()}")
     D.aggregate("octahedron", 20, 1.0, np.random.default_rng(0))  # imports, caches

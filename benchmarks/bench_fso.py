@@ -44,7 +44,7 @@ def best(fn, repeat):
 
 def bench_kernel(levels, quick):
     import grainforge
-    from grainforge.geodesic import icosphere
+    from grainforge.geometry.geodesic import icosphere
     from grainforge.methods import fso
 
     p = fso.Params()  # M = n_max = 40, D = 2.4, L/R0 = 7, γ = 1.5, amplitude 0.1

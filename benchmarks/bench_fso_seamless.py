@@ -34,7 +34,7 @@ def main(argv=None):
     args = ap.parse_args(argv)
 
     import grainforge
-    from grainforge.geodesic import icosphere
+    from grainforge.geometry.geodesic import icosphere
     from grainforge.methods import fso
 
     print(f"load average before: {os.getloadavg()}")

@@ -120,7 +120,7 @@ def main() -> None:
             two.append(timed_batch(recipe, 2, tmp, False))
         t_loop, t1, t2 = min(loop), min(one), min(two)
         t0 = time.perf_counter()
-        from grainforge.report import population_report
+        from grainforge.population.report import population_report
 
         rows = run_batch(recipe, tmp / "w1-True", resume=True, report=False)["rows"]
         population_report(recipe, rows, tmp / "w1-True")

@@ -25,7 +25,7 @@ def best(fn, repeat=7, number=10, clock=time.perf_counter):
 
 
 def main():
-    from grainforge.harmonics import _cached
+    from grainforge.geometry.harmonics import _cached
     from grainforge.io import export_bytes
     from grainforge.methods import generate
     from grainforge.methods.rf import Params, build

@@ -42,7 +42,7 @@ PAPER = {"rough spheres (0, 0, 0.02)": (38.0, 38.0), "rough angular (0.15, 0.10,
 def main(argv=None) -> int:
     from grainforge.io import save_figure, write_csv
     from grainforge.simulate import Settings, build_population, measure_result, run_test, summarise
-    from grainforge.simulate.report import write_report
+    from grainforge.simulate.results import write_report
 
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--test", choices=["repose", "tilt"], default="repose")

@@ -46,7 +46,7 @@ POPULATIONS = [
 def run_set(test, population, settings, out, engine, mpi=None, workers=1):
     """Run one population's seeds; its rows and (cpu s, wall s) of the engine runs."""
     from grainforge.simulate import build_population, run_test
-    from grainforge.simulate.report import write_report
+    from grainforge.simulate.results import write_report
 
     label, recipe, as_spheres = population
     templates = build_population([recipe], settings, as_spheres=as_spheres)

@@ -1,4 +1,4 @@
-"""Time the one voxeliser (grainforge.voxel.inside_mask) in the conventions of its two callers.
+"""Time the one voxeliser (grainforge.geometry.voxel.inside_mask) in the conventions of its two callers.
 
 The DEM grids (clump coverage, level-set signs: ``anchor="centred"``, ``axis=2``,
 ``rule="winding"``) and the Sand-Atlas images (``anchor="lattice"``, ``axis=0``,
@@ -24,7 +24,7 @@ def main() -> None:
     args = ap.parse_args()
 
     import grainforge
-    from grainforge.voxel import grid_for, inside_mask
+    from grainforge.geometry.voxel import grid_for, inside_mask
 
     grains = [grainforge.cri(rng=s) for s in range(args.grains)]
     conventions = {"dem (centred, z, winding)": ("centred", 2, "winding"),

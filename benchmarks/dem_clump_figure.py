@@ -35,7 +35,7 @@ def main():
     import grainforge
     from grainforge.dem.clump import clump
     from grainforge.io import save_figure
-    from grainforge.render import render_image
+    from grainforge.viz.render import render_image
 
     ap = argparse.ArgumentParser()
     ap.add_argument("--out", default="docs/img/dem-clump-tradeoff.png")

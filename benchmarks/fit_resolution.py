@@ -34,8 +34,8 @@ def main() -> None:
     import numpy as np
 
     from grainforge.fit import DESCRIPTORS, FITS, _measure, grain_seed
+    from grainforge.fit.twins import design_points
     from grainforge.methods import get
-    from grainforge.twins import design_points
 
     print(f"| method | cap | grains | {' | '.join(f'max abs Δ {k}' for k in DESCRIPTORS)} | "
           f"s per grain at {args.full:g} |")

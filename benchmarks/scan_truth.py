@@ -35,7 +35,7 @@ def _meshes(n: int, seed: int):
     import trimesh
 
     import grainforge
-    from grainforge.rotations import random_rotation
+    from grainforge.geometry.rotations import random_rotation
 
     rng = np.random.default_rng(seed)
     out = []

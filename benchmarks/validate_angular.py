@@ -20,10 +20,10 @@ import trimesh
 
 from grainforge.analysis.facets import edge_radius, facet_flatness
 from grainforge.fabrication.scale import to_size
+from grainforge.geometry.solid import volume_centroid
 from grainforge.io import export_bytes
 from grainforge.methods import generate
 from grainforge.methods.angular import Params, build, core, core_edges
-from grainforge.solid import volume_centroid
 
 SIZE_MM = 2.0
 

@@ -19,7 +19,7 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=10)
     ap.add_argument("--primaries", type=int, default=200)
     args = ap.parse_args()
-    from grainforge.methods import dpa as D
+    from grainforge.methods.dpa import aggregation as D
 
     print(f"load average: {os.getloadavg()}; N = {args.primaries}, seeds 0..{args.seeds - 1}")
     print(f"{'primitive':21s} {'eps':>5s} {'intruding %':>11s} {'contact rule %':>14s} "

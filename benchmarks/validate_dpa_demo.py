@@ -2,7 +2,7 @@
 must read back as a valid solid and pass ``grainforge check``.
 
 Run: ``nice .venv/bin/python benchmarks/validate_dpa_demo.py [--out DIR]`` (≈ 5 min under load).
-Writes ``grainforge.demo.dpa_sweeps`` (300 primaries: cubes, smoothed cubes, octahedra; ε 0.1–100;
+Writes ``grainforge.viz.demo.dpa_sweeps`` (300 primaries: cubes, smoothed cubes, octahedra; ε 0.1–100;
 3 seeds), then reads every STL back with trimesh (merging vertices by position) and with admesh,
 and runs ``grainforge check`` on all of them.  Prints the counts; asserts nothing.
 """
@@ -24,8 +24,8 @@ def main() -> None:
     args = ap.parse_args()
     import trimesh
 
-    from grainforge.demo import dpa_sweeps
-    from grainforge.solid import solid_problems
+    from grainforge.geometry.solid import solid_problems
+    from grainforge.viz.demo import dpa_sweeps
 
     out = args.out or Path(tempfile.mkdtemp(prefix="dpa-demo-"))
     t = time.time()

@@ -20,7 +20,7 @@ existed (the same draws), shown alongside where it matters.
    n = 2..16 of 50-grain means, in many disjoint sets of 50 (Gaussian and fixed amplitudes; one
    central section per axis, and 7 parallel sections per axis at |h| <= 0.45 r0).
 3. Measured spectra: 200 grains (and 4 disjoint sets of 50) from a ``grainforge fourier`` CSV of a synthetic sample
-   micrograph (``grainforge.demo.sample_micrograph``) against the table's mean spectrum.
+   micrograph (``grainforge.viz.demo.sample_micrograph``) against the table's mean spectrum.
 4. Aspect: I/L and S/I of 20 grains (minimum box and inertia-ellipsoid axes).
 5. Validity: share of seeds raising ParameterError (radius ≤ 0.05 r0) over a descriptor grid.
 
@@ -64,7 +64,7 @@ def axis_great_circles(a_all, degree, offsets=(0.0,), n_pts=128):
     ray from (h e_k) is found by the fixed point ρ = √(r² − h²) (6 steps).  D_n = 2|c_n|/c_0 of ρ
     with rays from the plane's centre (the field's own origin projected).
     """
-    from grainforge.harmonics import real_harmonics
+    from grainforge.geometry.harmonics import real_harmonics
 
     psi = 2 * np.pi * np.arange(n_pts) / n_pts
     out = np.zeros((len(a_all), 3, len(offsets), 15))
@@ -109,7 +109,7 @@ def part_random(n_grains, quick):
 
     print(f"\n### 1–2. Sections of {n_grains} rf grains, rough-angular (0.15, 0.10, 0.03), L = 32\n")
     p = Params(preset="rough-angular")
-    from grainforge.contours import descriptor_spectrum
+    from grainforge.outline.contours import descriptor_spectrum
 
     want = descriptor_spectrum(0.15, 0.1, 0.03, modes=32)[2:17]
     t = time.time()
@@ -153,9 +153,9 @@ def part_random(n_grains, quick):
 def part_analytic(n_grains):
     """The same statistics without a mesh: r on great circles straight from the harmonics."""
     from grainforge.analysis.sections import plane_basis, random_normals
-    from grainforge.contours import Contour, descriptor_spectrum
-    from grainforge.harmonics import real_harmonics
+    from grainforge.geometry.harmonics import real_harmonics
     from grainforge.methods.rf import angular_spectrum, coefficients
+    from grainforge.outline.contours import Contour, descriptor_spectrum
 
     print(f"\n### 1b. Without a mesh: {n_grains} fields, 8 random great circles each (256 points)\n")
     t = time.time()
@@ -187,8 +187,8 @@ def part_analytic(n_grains):
 
 def part_ideal(n_fields, n_cut_fields):
     """x/y/z agreement of 50-grain means for ideal isotropic fields (no mesh), disjoint sets of 50."""
-    from grainforge.contours import descriptor_spectrum
     from grainforge.methods.rf import angular_spectrum, coefficients
+    from grainforge.outline.contours import descriptor_spectrum
 
     print("\n### 2c. What an ideal isotropic field gives: x/y/z spread of 50-grain means, no mesh\n")
     t = time.time()
@@ -232,9 +232,9 @@ def part_isotropy(n_grains, want):
 
 
 def part_spectrum(n_grains):
-    from grainforge.demo import sample_micrograph, write_fourier_csv
     from grainforge.methods.rf import Params
-    from grainforge.spectra import read_spectra
+    from grainforge.outline.spectra import read_spectra
+    from grainforge.viz.demo import sample_micrograph, write_fourier_csv
 
     print(f"\n### 3. Measured spectra: {n_grains} grains from a 'grainforge fourier' table\n")
     with tempfile.TemporaryDirectory() as d:
@@ -325,8 +325,8 @@ def part_validity(n_seeds):
                 build(p, np.random.default_rng(s))
             except ParameterError:
                 bad += 1
-        from grainforge.contours import descriptor_spectrum
         from grainforge.methods.rf import angular_spectrum
+        from grainforge.outline.contours import descriptor_spectrum
 
         C = angular_spectrum(descriptor_spectrum(*d, modes=32))
         rms = np.sqrt(np.sum(C * (2 * np.arange(33) + 1)) / (4 * np.pi))

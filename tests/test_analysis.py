@@ -247,7 +247,7 @@ def test_descriptors_from_radii_round_trip():
 
 
 def test_polygon_and_mask_contours():
-    from grainforge.contours import mask_contour, polygon_contour
+    from grainforge.outline.contours import mask_contour, polygon_contour
 
     sq = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]], dtype=float)
     c = polygon_contour(sq, n_angles=8)

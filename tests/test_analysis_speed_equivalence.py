@@ -173,8 +173,8 @@ def test_variogram_matches_brute_force(subdivisions):
 def test_analyse_not_solid_flag_same_with_the_star_certificate():
     """analyse proves star-shaped bodies free of self-intersections in O(F); the flag is the pair test's."""
     from grainforge.analysis.measure import analyse_mesh
-    from grainforge.geodesic import icosphere
-    from grainforge.solid import self_intersections
+    from grainforge.geometry.geodesic import icosphere
+    from grainforge.geometry.solid import self_intersections
 
     v, f = icosphere(2)
     poked = v.copy()
@@ -188,8 +188,8 @@ def test_analyse_not_solid_flag_same_with_the_star_certificate():
 
 def test_solid_problems_same_answer_with_the_star_certificate():
     """The certificate short cut (one body, no pinch, positive volume, no crossing) changes no answer."""
-    from grainforge.geodesic import icosphere
-    from grainforge.solid import solid_problems
+    from grainforge.geometry.geodesic import icosphere
+    from grainforge.geometry.solid import solid_problems
 
     v, f = icosphere(2)
     poked = v.copy()
@@ -211,7 +211,7 @@ def test_solid_problems_same_answer_with_the_star_certificate():
 @pytest.mark.parametrize("exact32", [True, False])
 def test_unique_rows_matches_np_unique(dtype, exact32):
     """Both sorting paths of unique_rows (packed float32 keys; lexsort) give np.unique's rows and inverse."""
-    from grainforge.solid import unique_rows
+    from grainforge.geometry.solid import unique_rows
 
     rng = np.random.default_rng(4)
     p = rng.integers(-3, 4, size=(4000, 3)).astype(np.float64) * 0.5  # many duplicates, negatives

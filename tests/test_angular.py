@@ -175,7 +175,7 @@ def test_too_small_a_radius_is_named(monkeypatch):
 
 def test_radius_matches_brute_force_over_all_features():
     """The feature filter of radius() never drops the exit feature: same r as max over every capsule."""
-    from grainforge.geodesic import icosphere
+    from grainforge.geometry.geodesic import icosphere
 
     unit, _ = icosphere(4)
     cases = [(0.1, 0, 24, (2.0, 1.3, 1.0)), (0.5, 1, 24, (2.0, 1.3, 1.0)), (0.9, 2, 24, (2.0, 1.3, 1.0)),
@@ -258,7 +258,7 @@ def test_recipe_batch_tray_check(runner, tmp_path):
 
 
 def test_demo_has_the_angular_gallery(tmp_path):
-    from grainforge.demo import SECTIONS, angular_gallery
+    from grainforge.viz.demo import SECTIONS, angular_gallery
 
     assert angular_gallery in [f for _, f in SECTIONS]
 

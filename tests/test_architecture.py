@@ -25,14 +25,14 @@ ALGORITHMS = ("grainforge.methods", "grainforge.analysis", "grainforge.fabricati
 
 #: the layers, bottom first: a module imports from its own layer and those below, never above
 LAYERS = (
-    # the base: data, geometry kernels, files, processes
-    ("_version", "params", "units", "solid", "geodesic", "harmonics", "spectra", "rotations", "voxel", "imaging",
-     "contours", "grain", "io", "workers", "cluster", "staging"),
+    # the base: data, geometry kernels, outlines, files, processes
+    ("_version", "params", "units", "grain", "geometry", "outline", "io", "runtime"),
     # algorithms on grains
-    ("methods", "analysis", "fabrication", "render", "plots", "estimate", "distributions", "calibration", "twins",
-     "report"),
+    ("methods", "analysis", "fabrication"),
     # jobs built from them
-    ("run", "population", "fit", "dem", "simulate", "figures", "demo"),
+    ("population", "fit", "dem", "simulate"),
+    # pictures of their results, and the demo that runs them
+    ("viz",),
     # the commands
     ("cli",),
 )
@@ -156,7 +156,7 @@ def test_graph_counts_parent_packages():
         "grainforge.fabrication.threemf", "grainforge.fabrication"}
     # a package's own modules importing each other is no import of the package from outside
     assert _with_parents("grainforge.io.stl", "grainforge.io.threemf") == {"grainforge.io.threemf"}
-    assert "grainforge.methods" in _graph()["grainforge.run"]
+    assert "grainforge.methods" in _graph()["grainforge.population.generate"]
 
 
 def test_cycle_detector_finds_a_cycle():

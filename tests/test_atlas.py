@@ -16,7 +16,7 @@ from grainforge.analysis.atlas import (
     voxelise,
 )
 from grainforge.cli.main import cli
-from grainforge.rotations import random_rotation
+from grainforge.geometry.rotations import random_rotation
 
 
 def _ellipsoid(a, b, c, subdivisions=5):
@@ -94,8 +94,8 @@ def test_scanline_voxeliser_equals_ray_parity_and_hull_count_equals_brute_force_
     from scipy.spatial import ConvexHull, Delaunay
 
     import grainforge
+    from grainforge.geometry.voxel import _ray_toggles
     from grainforge.methods import get
-    from grainforge.voxel import _ray_toggles
 
     g = grainforge.generate("cri", get("cri").Params(descriptors=(0, 0.12, 0.012), aspect=(1, 0.7, 0.55),
                                                      subdivisions=4), 2)
@@ -293,9 +293,9 @@ def test_atlas_measures_that_mean_nothing_or_cannot_fit_are_refused_before_any_i
                                                                                        args, words):
     """Below 5 voxels across the descriptors leave their ranges (a 4-voxel ball: sphericity ≈ 1.5); past the
     memory budget (here 1 GiB) the largest resolution that fits is named; nothing is written either way."""
-    import grainforge.estimate
+    import grainforge.runtime.estimate
 
-    monkeypatch.setattr(grainforge.estimate, "machine_memory", lambda: 2 * 1024**3)
+    monkeypatch.setattr(grainforge.runtime.estimate, "machine_memory", lambda: 2 * 1024**3)
     p = tmp_path / "ball.stl"
     _ellipsoid(1, 0.8, 0.6, 3).export(p)
     out = tmp_path / "atlas.csv"
@@ -307,7 +307,7 @@ def test_atlas_measures_that_mean_nothing_or_cannot_fit_are_refused_before_any_i
 
 def test_the_largest_resolution_named_fits_and_one_more_does_not():
     from grainforge.analysis.atlas import IMAGE_BYTES_PER_CELL, check_atlas_request, image_cells
-    from grainforge.estimate import TooLargeError
+    from grainforge.runtime.estimate import TooLargeError
 
     body = [("g", np.array([1.0, 0.8, 0.6]), 0.8)]
     budget = 2e8

@@ -5,7 +5,7 @@ import csv
 import numpy as np
 import pytest
 
-from grainforge import calibration as C
+from grainforge.methods.dpa import calibration as C
 from grainforge.params import ParameterError
 
 
@@ -149,7 +149,7 @@ def test_generate_with_target_fractal_dimension_records_both(runner, tmp_path, m
 
 
 def test_old_calibration_files_without_scaling_columns_still_read(tmp_path):
-    from grainforge.calibration import COLUMNS, Calibration, calibrate
+    from grainforge.methods.dpa.calibration import COLUMNS, Calibration, calibrate
 
     c = calibrate("cube", 40, [0.5, 20.0], repeats=2, seed=3)
     assert np.all(np.isfinite(c.D_A_scaling_mean)) and np.all(c.D_A_scaling_std >= 0)
@@ -157,7 +157,7 @@ def test_old_calibration_files_without_scaling_columns_still_read(tmp_path):
     again = Calibration.read_csv(path)
     assert np.array_equal(again.D_A_scaling_mean, c.D_A_scaling_mean)
     # a file written before the scaling columns existed (and before headers stated units: R_g_mean)
-    from grainforge.calibration import UNITS
+    from grainforge.methods.dpa.calibration import UNITS
     from grainforge.units import with_unit
 
     old = [col for col in COLUMNS if not col.startswith("D_A_scaling")]

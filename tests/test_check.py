@@ -18,8 +18,8 @@ from grainforge.fabrication.printability import (
     self_intersections,
     triangle_grid,
 )
+from grainforge.geometry.solid import moller_trumbore
 from grainforge.io.threemf import ThreeMFWriter, mesh_xml
-from grainforge.solid import moller_trumbore
 
 
 def _neck(radius):

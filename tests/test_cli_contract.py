@@ -261,7 +261,7 @@ def inputs(tmp_path_factory) -> Path:
 
     import grainforge
     from grainforge.io import write_mesh
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
 
     d = tmp_path_factory.mktemp("inputs")
     g = grainforge.fso(subdivisions=2, rng=0)
@@ -276,8 +276,8 @@ def inputs(tmp_path_factory) -> Path:
     v[0] = np.nan
     (d / "nan.stl").write_bytes(_binary_stl(v, np.asarray(g.faces)))
     zipfile.ZipFile(d / "empty.3mf", "w").close()
-    from grainforge.contours import Contour
-    from grainforge.imaging import draw_contours
+    from grainforge.outline.contours import Contour
+    from grainforge.outline.imaging import draw_contours
 
     img = draw_contours((160, 160), [(Contour.from_descriptors("rough-sphere", rng=0), (80, 80), 50.0)])
     Image.fromarray(img).save(d / "grain.png")

@@ -10,7 +10,7 @@ refusals that come after the Yade check run with ``GRAINFORGE_YADE=true``
 
 Two hypothesis tests draw ``fit`` and ``simulate`` options from their
 declared ranges (read from the click commands themselves), with the time
-budget lowered to nothing (:data:`grainforge.estimate.SECONDS_LIMIT` = 0):
+budget lowered to nothing (:data:`grainforge.runtime.estimate.SECONDS_LIMIT` = 0):
 every request, valid or not, must then be refused up front in one line,
 before any heavy work.
 
@@ -67,7 +67,7 @@ def _sand_rows():
 def inputs(tmp_path_factory) -> Path:
     """Sand tables, a folder of 3 angular grains and recipes; made once, never written by a case."""
     from grainforge.methods import get
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
 
     d = tmp_path_factory.mktemp("inputs")
     header, rows = _sand_rows()
@@ -295,7 +295,7 @@ def _draw_args(data, strategies: dict) -> list[str]:
 
 
 def _refused_in_one_line(args: list[str], cwd: Path) -> None:
-    import grainforge.estimate as estimate
+    import grainforge.runtime.estimate as estimate
 
     before = _snapshot(cwd)
     with pytest.MonkeyPatch.context() as mp:
@@ -334,7 +334,7 @@ def test_fuzz_simulate_options_are_refused_up_front_without_a_budget(data, tmp_p
     inputs = tmp_path_factory.getbasetemp() / "fuzz-ang"
     if not inputs.exists():
         from grainforge.methods import get
-        from grainforge.run import write_run
+        from grainforge.population.generate import write_run
 
         write_run("angular", get("angular").Params(subdivisions=2), [0, 1], inputs, size=2.0)
     cwd = tmp_path_factory.mktemp("fuzz-sim")
@@ -529,8 +529,8 @@ def test_signal_early_in_a_fit_is_honoured(tmp_path, sig, delay):
 def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_removed(tmp_path):
     """The staging behind "all outputs or none": nothing moves while one output would be refused; with
     --overwrite an earlier deck folder is replaced whole; a dead process's staging folder goes."""
+    from grainforge.runtime.staging import STAGING_PREFIX
     from grainforge.simulate import commit_stage, discard_stage, open_stage
-    from grainforge.staging import STAGING_PREFIX
 
     out = tmp_path / "o"
     (out / "repose-seed0").mkdir(parents=True)
@@ -558,7 +558,7 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
     assert created and not fresh.exists()
 
 
-@pytest.mark.parametrize("where", ["tempfile.mkdtemp", "grainforge.staging.remove_stale_staging"])
+@pytest.mark.parametrize("where", ["tempfile.mkdtemp", "grainforge.runtime.staging.remove_stale_staging"])
 def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, monkeypatch, where):
     """A Ctrl-C that lands after --out is made but before its staging folder is (the moment a real signal once
     hit in CI, leaving an empty --out behind): the folder the run created is gone, one given is kept; in
@@ -581,7 +581,7 @@ def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, 
     assert not fresh.exists()
     # generate's writer has the same moment
     import grainforge.methods
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
 
     monkeypatch.setattr(where, interrupted)
     with pytest.raises(KeyboardInterrupt):

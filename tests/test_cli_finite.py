@@ -9,7 +9,7 @@ the command's minimal valid invocation from :data:`INVOCATIONS` plus that option
 asserts: exit code 2, one line on stderr that names the option, no traceback, nothing written (the folder
 and the shared inputs unchanged).
 
-The time budget is lowered to nothing (:data:`grainforge.estimate.SECONDS_LIMIT` = 0) and the DEM engines are
+The time budget is lowered to nothing (:data:`grainforge.runtime.estimate.SECONDS_LIMIT` = 0) and the DEM engines are
 stand-ins (``GRAINFORGE_YADE=true``), so a value that slipped through would be refused by the budget (a line
 that does not name the option: the test fails) instead of starting a long run.
 
@@ -113,9 +113,9 @@ def inputs(tmp_path_factory) -> Path:
     from PIL import Image
 
     import grainforge
-    from grainforge.contours import Contour
-    from grainforge.imaging import draw_contours
     from grainforge.io import write_mesh
+    from grainforge.outline.contours import Contour
+    from grainforge.outline.imaging import draw_contours
 
     d = tmp_path_factory.mktemp("finite-inputs")
     write_mesh(grainforge.fso(subdivisions=2, rng=0), d / "grain.stl")
@@ -149,7 +149,7 @@ def test_every_command_with_a_float_option_has_an_invocation():
 def test_non_finite_value_is_refused_in_one_line(command, option, bad, inputs, tmp_path, monkeypatch):
     from click.testing import CliRunner
 
-    import grainforge.estimate as estimate
+    import grainforge.runtime.estimate as estimate
 
     opt = next(o for o in _float_options(COMMANDS[command]) if o.opts[0] == option)
     args = [a.replace("{in}", str(inputs)) for a in INVOCATIONS[command]]

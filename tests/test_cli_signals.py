@@ -88,7 +88,7 @@ def inputs(tmp_path_factory) -> Path:
     """Three small grains, three angular ones (simulate), a four-grain recipe, a labelled image of three grains
     (scan) and a stand-in Yade."""
     from grainforge.methods import get
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
 
     d = tmp_path_factory.mktemp("inputs")
     write_run("fso", get("fso").Params(subdivisions=2), [0, 1, 2], d / "grains", size=5.0)
@@ -266,8 +266,8 @@ def test_a_signal_while_outputs_move_into_place_waits_for_the_last(tmp_path, mon
     import pathlib
 
     from grainforge.methods import get
-    from grainforge.run import write_run
-    from grainforge.staging import commit_stage, staged
+    from grainforge.population.generate import write_run
+    from grainforge.runtime.staging import commit_stage, staged
 
     moved, usual = [], pathlib.Path.replace
 

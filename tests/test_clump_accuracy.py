@@ -212,7 +212,7 @@ def test_simulate_cap_is_spheres_or_the_default_or_quicks():
 
 
 def test_calibrate_prints_a_command_with_the_target():
-    from grainforge.cli.simulate_calibrate import use_command
+    from grainforge.cli.simulate_friction import use_command
 
     words = use_command("tilt", ["g"], 0.6, {}, quick=False, as_spheres=False, shape="clump", spacing=None,
                         clump_accuracy=0.85).split()

@@ -158,7 +158,7 @@ COMMANDS = {
 ])
 def test_a_bad_or_unreachable_scheduler_is_one_line_before_any_work(command, address, words, grains, runner,
                                                                      tmp_path, monkeypatch):
-    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "1s")
+    monkeypatch.setattr("grainforge.runtime.cluster.CONNECT_TIMEOUT", "1s")
     t0 = time.monotonic()
     res = runner.invoke(cli, [*COMMANDS[command](grains, tmp_path), "--scheduler", address])
     assert res.exit_code == 2, res.output
@@ -174,7 +174,7 @@ def test_scheduler_with_workers_missing_dask_or_another_version_is_refused(comma
     res = runner.invoke(cli, [*args, "--workers", "2"])
     assert res.exit_code == 2 and "--workers is for the local processes" in res.stderr, res.output
     # the workers run this grainforge; this process pretends to run another
-    monkeypatch.setattr("grainforge.cluster.__version__", "0.0.0+other")
+    monkeypatch.setattr("grainforge.runtime.cluster.__version__", "0.0.0+other")
     res = runner.invoke(cli, args)
     import grainforge
 
@@ -239,7 +239,7 @@ def test_a_scheduler_lost_mid_run_is_one_line_exit_1_and_nothing_written(own_sch
     import grainforge.cli.progress as progress
 
     address, scheduler = own_scheduler
-    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
+    monkeypatch.setattr("grainforge.runtime.cluster.CONNECT_TIMEOUT", "2s")
     monkeypatch.setattr(progress, "progress_bar", _bar_that_kills(progress.progress_bar, scheduler))
     t0 = time.monotonic()
     res = runner.invoke(cli, ["analyse", str(grains), "--csv", str(tmp_path / "out.csv"), "--scheduler", address])
@@ -301,7 +301,7 @@ def test_a_batch_that_lost_its_scheduler_keeps_its_grains_and_resumes_to_the_loc
     import grainforge.cli.batch as batch_cli
 
     address, scheduler = own_scheduler
-    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
+    monkeypatch.setattr("grainforge.runtime.cluster.CONNECT_TIMEOUT", "2s")
     recipe = tmp_path / "pop.toml"
     recipe.write_text(RECIPE)
     real_bar = batch_cli.progress_bar

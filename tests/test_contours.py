@@ -5,8 +5,8 @@ import pytest
 from hypothesis import given
 from hypothesis import strategies as st
 
-from grainforge.contours import PRESETS, Contour, descriptor_spectrum, scan_image
-from grainforge.imaging import draw_contours, load_image
+from grainforge.outline.contours import PRESETS, Contour, descriptor_spectrum, scan_image
+from grainforge.outline.imaging import draw_contours, load_image
 from grainforge.params import ParameterError
 
 
@@ -228,7 +228,7 @@ def test_recentred_circle_and_symmetric_contours():
     """A centred circle sampled at the ray angles puts vertices exactly on rays: none may be missed."""
     import numpy as np
 
-    from grainforge.contours import Contour
+    from grainforge.outline.contours import Contour
 
     th = 2 * np.pi * np.arange(256) / 256
     for r in (np.ones(256), 1 + 0.05 * np.cos(3 * th)):

@@ -8,9 +8,9 @@ import pytest
 import trimesh
 
 import grainforge
+from grainforge.geometry.solid import require_solid, solid_problems
 from grainforge.io import atomic_write, export_bytes, read_mesh
 from grainforge.params import ParameterError
-from grainforge.solid import require_solid, solid_problems
 
 
 def test_grain_is_immutable():

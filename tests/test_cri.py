@@ -7,13 +7,13 @@ from hypothesis import given
 from hypothesis import strategies as st
 
 import grainforge
-from grainforge.contours import Contour, descriptor_spectrum
-from grainforge.imaging import draw_contours
+from grainforge.geometry.solid import solid_problems
 from grainforge.io import export_bytes
 from grainforge.methods import generate
 from grainforge.methods.cri import GRID, PLANES, Params, build, construct
+from grainforge.outline.contours import Contour, descriptor_spectrum
+from grainforge.outline.imaging import draw_contours
 from grainforge.params import ParameterError
-from grainforge.solid import solid_problems
 
 # angle of a point in each principal plane, measured as in docs/design/algorithms.md §2d
 _ANGLE = {
@@ -229,7 +229,7 @@ def test_bad_generation_inputs(tmp_path):
 @pytest.mark.slow
 def test_demo_section(tmp_path):
     """The demo's CRI section writes its figures, grains and manifests (quick mode)."""
-    from grainforge.demo import SECTIONS, cri_gallery
+    from grainforge.viz.demo import SECTIONS, cri_gallery
 
     assert cri_gallery in [f for _, f in SECTIONS]
     written = cri_gallery(tmp_path, quick=True)

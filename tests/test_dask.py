@@ -50,7 +50,7 @@ def test_dask_cluster_output_is_byte_identical_to_local(cluster, runner, tmp_pat
 
 
 def test_unreachable_scheduler_is_one_line(monkeypatch, runner, tmp_path):
-    monkeypatch.setattr("grainforge.cluster.CONNECT_TIMEOUT", "2s")
+    monkeypatch.setattr("grainforge.runtime.cluster.CONNECT_TIMEOUT", "2s")
     recipe = tmp_path / "pop.toml"
     recipe.write_text(RECIPE)
     res = runner.invoke(cli, ["batch", str(recipe), "--out", str(tmp_path / "o"), "--scheduler", "tcp://127.0.0.1:9"])

@@ -15,7 +15,7 @@ from grainforge.cli.main import cli
 from grainforge.dem.clump import clump, clump_quality
 from grainforge.dem.massprops import mass_properties, rotation_to_quaternion
 from grainforge.dem.template import prepare
-from grainforge.voxel import grid_for, inside_mask
+from grainforge.geometry.voxel import grid_for, inside_mask
 
 
 def test_mass_properties_box_analytic():
@@ -313,7 +313,7 @@ def test_dem_cli_clump_refinement(tmp_path):
 def test_vertex_merge_of_soups_and_small_sets():
     """solid.unique_rows (read_grain's merge) on a grain's float32 soup and 300 small sets with
     repeats and -0.0: np.unique's rows and inverse, each group's first occurrence kept (its sign)."""
-    from grainforge.solid import unique_rows
+    from grainforge.geometry.solid import unique_rows
 
     rng = np.random.default_rng(6)
     g = grainforge.fso(rng=7)

@@ -258,8 +258,8 @@ def test_dem_announces_template_work_over_a_minute(angular_grains, tmp_path, mon
     """Valid heavy work runs, saying first how long it may take (the model's upper bound)."""
     from click.testing import CliRunner
 
-    from grainforge import estimate
     from grainforge.cli.main import cli
+    from grainforge.runtime import estimate
 
     # a model 1000 times slower than measured: three grains look like minutes of work
     monkeypatch.setattr(estimate, "DEM_TEMPLATE_SECONDS", 80.0)

@@ -226,10 +226,10 @@ def test_the_checker_sees_a_missing_file_and_an_earlier_output(tmp_path):
 
 
 def test_example_images_are_what_the_code_makes(tmp_path):
-    """examples/images/ holds what ``grainforge.demo.example_images`` writes (same pixels), and nothing else."""
+    """examples/images/ holds what ``grainforge.viz.demo.example_images`` writes (same pixels), and nothing else."""
     from PIL import Image
 
-    from grainforge.demo import EXAMPLE_IMAGES, example_images
+    from grainforge.viz.demo import EXAMPLE_IMAGES, example_images
 
     folder = ROOT / "examples" / "images"
     assert sorted(p.name for p in folder.glob("*.png")) == sorted(EXAMPLE_IMAGES)

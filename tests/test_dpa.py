@@ -13,10 +13,10 @@ from grainforge.analysis.aggregate import (
     porosity,
     radius_of_gyration,
 )
-from grainforge.methods import dpa as D
+from grainforge.geometry.solid import index_problems, signed_volume, solid_problems
+from grainforge.methods.dpa import aggregation as D
 from grainforge.methods._polyhedra import PRIMITIVES, intrudes, mirror, solid
 from grainforge.params import ParameterError
-from grainforge.solid import index_problems, signed_volume, solid_problems
 
 # ---------------------------------------------------------------- primaries
 

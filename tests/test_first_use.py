@@ -140,7 +140,7 @@ def test_ratio_defaults_are_shown_in_the_notation_the_help_asks_for(runner):
 @pytest.fixture
 def fake_demo(monkeypatch):
     """``run_demo`` replaced by one that writes a single file (the command's own logic is under test)."""
-    import grainforge.demo
+    import grainforge.viz.demo
 
     def run_demo(out, quick=False, echo=print):
         out = Path(out)
@@ -148,7 +148,7 @@ def fake_demo(monkeypatch):
         (out / "gallery.png").write_bytes(b"png")
         return [out / "gallery.png"]
 
-    monkeypatch.setattr(grainforge.demo, "run_demo", run_demo)
+    monkeypatch.setattr(grainforge.viz.demo, "run_demo", run_demo)
 
 
 def test_demo_refuses_an_earlier_demo_without_overwrite(runner, tmp_path, fake_demo):
@@ -248,7 +248,7 @@ def _scale_bars(fig):
 def test_common_scale_sheet_has_one_scale_bar_and_true_relative_sizes():
     import matplotlib.pyplot as plt
 
-    from grainforge.render import contact_sheet_figure
+    from grainforge.viz.render import contact_sheet_figure
 
     small, large = trimesh.creation.icosphere(3, radius=1.0), trimesh.creation.icosphere(3, radius=4.0)
     fig = contact_sheet_figure([small, large], ["1 mm", "4 mm"], unit="mm", dpi=60, common_scale=True)
@@ -264,8 +264,8 @@ def test_common_scale_sheet_has_one_scale_bar_and_true_relative_sizes():
 
 
 def test_dpa_figure_sheets_use_one_scale(monkeypatch, tmp_path):
-    import grainforge.render
-    from grainforge import figures
+    import grainforge.viz.render
+    from grainforge.viz import figures
 
     seen = {}
 
@@ -273,7 +273,7 @@ def test_dpa_figure_sheets_use_one_scale(monkeypatch, tmp_path):
         seen.update(kw)
         return Path(out)
 
-    monkeypatch.setattr(grainforge.render, "contact_sheet", capture)
+    monkeypatch.setattr(grainforge.viz.render, "contact_sheet", capture)
     monkeypatch.setattr(figures, "DPA_PRIMARIES", 20)
     figures.figure6(tmp_path / "f6.png")
     assert seen["common_scale"] is True and seen["unit"] == "mm"
@@ -281,8 +281,8 @@ def test_dpa_figure_sheets_use_one_scale(monkeypatch, tmp_path):
 
 def test_demo_dpa_gallery_is_drawn_at_one_scale(monkeypatch, tmp_path):
     """The demo's three DPA sheets share one scale: that of the largest aggregate of all three."""
-    import grainforge.demo as demo
-    import grainforge.render
+    import grainforge.viz.demo as demo
+    import grainforge.viz.render
 
     sizes = iter([1.0, 2.0, 5.0])  # the largest aggregate of each sweep (mm)
 
@@ -297,7 +297,7 @@ def test_demo_dpa_gallery_is_drawn_at_one_scale(monkeypatch, tmp_path):
         return Path(out)
 
     monkeypatch.setattr(demo, "_sweep_panels", panels)
-    monkeypatch.setattr(grainforge.render, "contact_sheet", capture)
+    monkeypatch.setattr(grainforge.viz.render, "contact_sheet", capture)
     demo.dpa_sweeps(tmp_path, quick=True)
     assert sorted(sheets) == ["dpa-cubes-smoothed.png", "dpa-cubes.png", "dpa-octahedra.png"]
     assert [kw["radius"] for kw in sheets.values()] == pytest.approx([5.0, 5.0, 5.0])
@@ -321,7 +321,7 @@ def _overlapping_tick_labels(fig):
 def test_size_distribution_tick_labels_do_not_overlap(tmp_path, lo, hi):
     import matplotlib.pyplot as plt
 
-    from grainforge.plots import figure
+    from grainforge.viz.plots import figure
 
     d = np.linspace(lo, hi, 20)
     p = tmp_path / "m.csv"
@@ -336,7 +336,7 @@ def test_size_distribution_tick_labels_do_not_overlap(tmp_path, lo, hi):
 def test_zingg_legend_is_inside_the_figure_and_class_names_are_not_hidden(tmp_path):
     import matplotlib.pyplot as plt
 
-    from grainforge.plots import figure
+    from grainforge.viz.plots import figure
 
     rng = np.random.default_rng(0)
     manifests = []

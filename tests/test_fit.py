@@ -430,8 +430,8 @@ def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
     refused up front naming --max-voxels-across; capped explicitly its grains cost what rf's do (it remakes 600 more:
     the spread step of its two surface settings, which the four means determine and rf's five they do not)."""
     import grainforge.fit as fitmod
-    from grainforge.estimate import TooLargeError
     from grainforge.fit import METHOD_CAP, check_fit_size, fit_grains, measured_across, resolve_cap
+    from grainforge.runtime.estimate import TooLargeError
 
     sand = read_sand(RF_SAND.with_name("synthetic-1um-sand.csv"))
     assert resolve_cap("rf", METHOD_CAP) == 150.0 and resolve_cap("fso", METHOD_CAP) is None

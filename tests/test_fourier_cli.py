@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from grainforge.cli.main import cli
-from grainforge.contours import Contour
-from grainforge.imaging import draw_contours
+from grainforge.outline.contours import Contour
+from grainforge.outline.imaging import draw_contours
 
 
 def _save(path, img):

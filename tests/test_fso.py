@@ -8,10 +8,10 @@ from scipy.stats import mannwhitneyu
 
 import grainforge
 from grainforge.analysis.descriptors import principal_dimensions
-from grainforge.geodesic import icosphere
+from grainforge.geometry.geodesic import icosphere
+from grainforge.geometry.solid import solid_problems, volume_centroid
 from grainforge.methods import fso as fso_mod
 from grainforge.params import ParameterError
-from grainforge.solid import solid_problems, volume_centroid
 
 
 def assert_valid_solid(g):

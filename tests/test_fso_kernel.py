@@ -19,7 +19,7 @@ import pytest
 from hypothesis import assume, example, given
 from hypothesis import strategies as st
 
-from grainforge.geodesic import icosphere
+from grainforge.geometry.geodesic import icosphere
 from grainforge.methods import fso
 from grainforge.params import ParameterError
 
@@ -133,7 +133,7 @@ def test_deterministic_and_independent_of_block_size():
 
 _THREADS_SCRIPT = """
 import hashlib, numpy as np
-from grainforge.geodesic import icosphere
+from grainforge.geometry.geodesic import icosphere
 from grainforge.methods import fso
 f = fso.draw_field(fso.Params(), np.random.default_rng(11))
 u, _ = icosphere(3)

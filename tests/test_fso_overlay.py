@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import grainforge
-from grainforge.geodesic import icosphere
+from grainforge.geometry.geodesic import icosphere
 from grainforge.methods import fso
 from grainforge.params import ParameterError
 

@@ -1,4 +1,4 @@
-"""The one mass-integral implementation (grainforge.solid.second_moments) against trimesh and analytic solids."""
+"""The one mass-integral implementation (grainforge.geometry.solid.second_moments) against trimesh and analytic solids."""
 
 import numpy as np
 import pytest
@@ -6,7 +6,7 @@ import trimesh
 
 from grainforge.analysis.mass import mass_properties as analysis_mass
 from grainforge.dem.massprops import mass_properties as dem_mass
-from grainforge.solid import second_moments
+from grainforge.geometry.solid import second_moments
 
 TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
 TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])

@@ -21,7 +21,7 @@ from click.testing import CliRunner
 from grainforge.analysis.measure import analyse_file, solid_grain
 from grainforge.cli.main import cli
 from grainforge.fabrication.scale import MESH_SIZE_RANGE_MM, SIZE_RANGE_MM
-from grainforge.solid import FLOAT32_OFFSET_LIMIT, body_nesting, precision_problem
+from grainforge.geometry.solid import FLOAT32_OFFSET_LIMIT, body_nesting, precision_problem
 
 FAST = ["--no-fractal", "--no-fourier", "--workers", "1"]
 

@@ -41,7 +41,7 @@ def _manifest(path, sizes, name_col="equivalent_diameter_mm"):
 
 @pytest.mark.parametrize("kind", ["zingg", "sphericity-convexity", "size-distribution"])
 def test_population_plots_are_labelled(tmp_path, kind):
-    from grainforge.plots import figure
+    from grainforge.viz.plots import figure
 
     a = _manifest(tmp_path / "a.csv", [1.0, 2.0, 3.0])
     fig = figure(kind, [a])
@@ -50,7 +50,7 @@ def test_population_plots_are_labelled(tmp_path, kind):
 
 
 def test_size_distribution_has_mm_and_does_not_hide_equal_sets(tmp_path):
-    from grainforge.plots import figure
+    from grainforge.viz.plots import figure
 
     a = _manifest(tmp_path / "a.csv", [10.0] * 4)
     b = _manifest(tmp_path / "b.csv", [10.0] * 3)     # the same sizes: the same curve
@@ -70,7 +70,7 @@ def test_size_distribution_has_mm_and_does_not_hide_equal_sets(tmp_path):
 
 
 def test_fd_spectrum_is_labelled(tmp_path):
-    from grainforge.plots import figure
+    from grainforge.viz.plots import figure
 
     cols = [f"fd_{p}_{n}" for p in ("LI", "LS", "IS") for n in (2, 3, 4, 8)]
     rows = [",".join(["g.stl"] + [str(0.1 / n) for _ in ("LI", "LS", "IS") for n in (2, 3, 4, 8)])] * 3
@@ -81,7 +81,7 @@ def test_fd_spectrum_is_labelled(tmp_path):
 
 
 def _calibration():
-    from grainforge.calibration import Calibration
+    from grainforge.methods.dpa.calibration import Calibration
 
     e = np.array([0.5, 1.0, 2.0, 4.0, 8.0])
     m = np.array([2.6, 2.4, 2.2, 2.0, 1.9])
@@ -102,7 +102,7 @@ def test_calibration_figure_legend_covers_no_curve():
 
 def test_population_figure_has_y_labels_and_no_empty_panels(tmp_path):
     from grainforge.population import parse_recipe, run_batch
-    from grainforge.report import population_figure, summary
+    from grainforge.population.report import population_figure, summary
 
     recipe = parse_recipe(
         'method = "fso"\ncount = 5\nseed = 3\n[params]\nsubdivisions = 1\n'
@@ -118,7 +118,7 @@ def test_population_figure_has_y_labels_and_no_empty_panels(tmp_path):
 
 
 def test_cri_sections_share_one_scale_and_state_units():
-    from grainforge.demo import cri_sections
+    from grainforge.viz.demo import cri_sections
 
     fig = cri_sections(subdivisions=2)
     axes = fig.axes
@@ -136,7 +136,7 @@ def test_cri_sections_share_one_scale_and_state_units():
 def test_render_has_a_scale_bar_when_the_grain_has_a_physical_size():
     import trimesh
 
-    from grainforge.render import contact_sheet_figure
+    from grainforge.viz.render import contact_sheet_figure
 
     sphere = trimesh.creation.icosphere(2, radius=1.0)   # a 2 mm grain
     fig = contact_sheet_figure([sphere, sphere], ["a", "b"], unit="mm", panel_size=1.0, dpi=60)
@@ -164,7 +164,7 @@ def test_tray_preview_is_labelled_in_mm_with_a_layer_scale():
 
 
 def test_figure3_traces_the_whole_grain_not_its_lit_half():
-    from grainforge.figures import _traced_micrograph
+    from grainforge.viz.figures import _traced_micrograph
 
     image, traced = _traced_micrograph(subdivisions=2)
     grain = image > 0.11  # every pixel brighter than the 0.08-0.10 background
@@ -179,7 +179,7 @@ def test_figure_contact_sheets_have_mm_scale_bars(monkeypatch, tmp_path, number)
     """The paper's 3D figures show grains at a printed size (d_eq = 10 mm) with a scale bar in mm per panel."""
     import trimesh
 
-    from grainforge import figures, render
+    from grainforge.viz import figures, render
 
     seen = {}
 

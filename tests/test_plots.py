@@ -3,7 +3,7 @@
 import pytest
 
 from grainforge.io import write_csv
-from grainforge.plots import KINDS, plot, read_manifest
+from grainforge.viz.plots import KINDS, plot, read_manifest
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -14,7 +14,7 @@ def manifests(tmp_path_factory):
     from grainforge import fso
     from grainforge.analysis.descriptors import describe
     from grainforge.methods.fso import Params
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
 
     d = tmp_path_factory.mktemp("m")
     out = {}
@@ -46,7 +46,7 @@ def test_fd_spectrum_needs_descriptors(manifests, tmp_path):
 
 def test_fd_spectrum_with_cri_input(tmp_path):
     from grainforge.methods.cri import Params
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
 
     write_run("cri", Params(descriptors=(0.15, 0.1, 0.03), subdivisions=2), [0, 1], tmp_path / "cri")
     table = read_manifest(tmp_path / "cri" / "manifest.csv")
@@ -93,15 +93,15 @@ def test_cli_figures_fso(runner, tmp_path):
 
 
 def test_figures_contours_and_cri(tmp_path):
-    from grainforge.figures import make_figures
+    from grainforge.viz.figures import make_figures
 
     written, skipped = make_figures(tmp_path, (3, 4), subdivisions=2)
     assert [p.name for p in written] == ["figure3-contours.png", "figure4-cri.png"] and not skipped
 
 
 def test_figures_dpa_written_or_skipped_with_reason(tmp_path):
-    from grainforge.figures import make_figures
     from grainforge.methods import METHODS
+    from grainforge.viz.figures import make_figures
 
     written, skipped = make_figures(tmp_path, (6,), subdivisions=2)
     if "dpa" in METHODS:
@@ -116,7 +116,7 @@ def test_shape_control_figures(tmp_path):
     """Figures 7–9 (FSO aspect, paper vs seamless views, CRI before/after) are written as PNGs."""
     from PIL import Image
 
-    from grainforge.figures import make_figures
+    from grainforge.viz.figures import make_figures
 
     written, skipped = make_figures(tmp_path, (7, 8, 9), subdivisions=2)
     assert skipped == []
@@ -129,8 +129,8 @@ def test_shape_control_figures(tmp_path):
 
 def test_demo_plots(tmp_path):
     from grainforge.methods.fso import Params
-    from grainforge.plots import demo_plots
-    from grainforge.run import write_run
+    from grainforge.population.generate import write_run
+    from grainforge.viz.plots import demo_plots
 
     assert demo_plots(tmp_path) == []
     write_run("fso", Params(subdivisions=2), [0, 1, 2], tmp_path / "fso" / "L=7")

@@ -8,7 +8,7 @@ import pytest
 import grainforge
 from grainforge.fabrication.printers import PRINTERS, get_printer, load_printers
 from grainforge.fabrication.resolution import _midpoint_index, chordal_deviation, match_subdivisions
-from grainforge.geodesic import icosphere
+from grainforge.geometry.geodesic import icosphere
 from grainforge.methods.fso import Params as FsoParams
 
 

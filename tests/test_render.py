@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import trimesh
 
-from grainforge.render import contact_sheet, rasterize, render_image, silhouette, view_rotation
+from grainforge.viz.render import contact_sheet, rasterize, render_image, silhouette, view_rotation
 
 PNG = b"\x89PNG\r\n\x1a\n"
 

@@ -27,7 +27,7 @@ pytestmark = pytest.mark.slow
 _SCRIPT = r"""
 import hashlib, json, os, tempfile
 import numpy as np
-from grainforge.geodesic import icosphere
+from grainforge.geometry.geodesic import icosphere
 from grainforge.methods import METHODS, get, generate, fso
 from grainforge.io import write_mesh
 from grainforge.dem.clump import clump

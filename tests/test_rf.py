@@ -10,15 +10,15 @@ from hypothesis import strategies as st
 
 import grainforge
 from grainforge.analysis.sections import random_normals, section_descriptors
-from grainforge.contours import Contour, descriptor_spectrum
-from grainforge.geodesic import icosphere
-from grainforge.harmonics import degree_order, real_harmonics, synthesis
-from grainforge.imaging import draw_contours
+from grainforge.geometry.geodesic import icosphere
+from grainforge.geometry.harmonics import degree_order, real_harmonics, synthesis
+from grainforge.geometry.solid import solid_problems
 from grainforge.io import export_bytes
 from grainforge.methods import generate
 from grainforge.methods.rf import Params, angular_spectrum, build, coefficients, section_spectrum
+from grainforge.outline.contours import Contour, descriptor_spectrum
+from grainforge.outline.imaging import draw_contours
 from grainforge.params import ParameterError
-from grainforge.solid import solid_problems
 
 
 def _gauss_grid(L):
@@ -129,7 +129,7 @@ def test_fixed_and_gaussian_amplitudes_are_the_same_draws():
 
 def _equator_c(a, L, orders):
     """c_n of the equator of Σ a_lm Y_lm (rows of a: fields), n in orders: (N, len(orders)) complex."""
-    from grainforge.harmonics import legendre_equator
+    from grainforge.geometry.harmonics import legendre_equator
 
     P = legendre_equator(L)
     l, m = degree_order(L, 2)
@@ -310,7 +310,7 @@ def spectrum_csv(tmp_path_factory):
 
 
 def test_grains_draw_measured_spectra(spectrum_csv):
-    from grainforge.spectra import read_spectra
+    from grainforge.outline.spectra import read_spectra
 
     table = read_spectra(spectrum_csv)
     assert len(table) == 6
@@ -323,7 +323,7 @@ def test_grains_draw_measured_spectra(spectrum_csv):
     assert len(rows) >= 4  # the population varies as the measured grains do
     # the last grain's field carries its measured grain's D2..D16 (exactly, or from above where no
     # isotropic field can: then the recorded misfit says by how much)
-    from grainforge.spectra import extend_spectrum
+    from grainforge.outline.spectra import extend_spectrum
 
     D = extend_spectrum(table.D[row], -5 / 3, 32)
     got = section_spectrum(angular_spectrum(D))[2:17]
@@ -339,7 +339,7 @@ def test_sections_carry_measured_spectra(spectrum_csv):
     here 4 sections per grain give a standard error of ~4 %, n = 7 carries a systematic +5 %
     (sections measured about their area centroid, docs/validation.md rf.1b) and level 4 loses a few %
     at n ≥ 9 (measured: n = 7 +10 %, n = 9 −11 %), so 15 % is the target plus those."""
-    from grainforge.spectra import read_spectra
+    from grainforge.outline.spectra import read_spectra
 
     table = read_spectra(spectrum_csv)
     got, want = [], []
@@ -358,7 +358,7 @@ def test_sections_carry_measured_spectra(spectrum_csv):
 
 
 def test_cri_accepts_the_same_spectrum(spectrum_csv):
-    from grainforge.spectra import read_spectra
+    from grainforge.outline.spectra import read_spectra
 
     table = read_spectra(spectrum_csv)
     g = grainforge.cri(spectrum=spectrum_csv, subdivisions=3, rng=1)
@@ -432,8 +432,8 @@ def test_any_declared_parameters_give_a_valid_solid_or_a_named_refusal(d, decay,
 @pytest.mark.slow
 def test_demo_section(tmp_path):
     """The demo's rf section: a sample micrograph, its D2..D16 table, grains and a contact sheet."""
-    from grainforge.demo import SECTIONS, rf_gallery
-    from grainforge.spectra import read_spectra
+    from grainforge.outline.spectra import read_spectra
+    from grainforge.viz.demo import SECTIONS, rf_gallery
 
     assert rf_gallery in [f for _, f in SECTIONS]
     written = rf_gallery(tmp_path, quick=True)

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
 
-from grainforge.rotations import quaternion_matrix, random_rotation
+from grainforge.geometry.rotations import quaternion_matrix, random_rotation
 
 
 @pytest.mark.parametrize("seed", [0, 1, 7, 12345])

@@ -22,9 +22,9 @@ from grainforge.analysis.atlas import atlas_descriptors, voxel_image
 from grainforge.analysis.scan import compare_labels, label_boxes, measure_labels, segment
 from grainforge.cli.main import cli
 from grainforge.fit import DESCRIPTORS, read_sand
+from grainforge.geometry.solid import signed_volume, solid_problems
 from grainforge.io import read_mesh
 from grainforge.io.volume import Volume, open_volume
-from grainforge.solid import signed_volume, solid_problems
 
 H = 0.05  # voxel edge, mesh units (grains ~1 across: ~20 voxels across)
 H_UM = 10.0  # the scan's voxel size in µm
@@ -33,7 +33,7 @@ H_UM = 10.0  # the scan's voxel size in µm
 def _ellipsoid(axes, seed):
     m = trimesh.creation.icosphere(subdivisions=4, radius=1.0)
     m.apply_scale(axes)
-    from grainforge.rotations import random_rotation
+    from grainforge.geometry.rotations import random_rotation
 
     R = random_rotation(seed)
     m.vertices = m.vertices @ R.T
@@ -340,9 +340,9 @@ def test_analyse_of_an_image_is_the_scan(saved):
 
 
 def test_beyond_memory_is_refused_before_any_work(saved, monkeypatch):
-    import grainforge.estimate
+    import grainforge.runtime.estimate
 
-    monkeypatch.setattr(grainforge.estimate, "machine_memory", lambda: 2_000_000)  # 1 MB allowed
+    monkeypatch.setattr(grainforge.runtime.estimate, "machine_memory", lambda: 2_000_000)  # 1 MB allowed
     before = sorted(p.name for p in saved.rglob("*"))
     for extra in (["--segment"], []):
         result = CliRunner().invoke(cli, ["scan", str(saved / "labels.npy"), "--voxel-size-um", "10",

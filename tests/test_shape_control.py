@@ -83,7 +83,7 @@ def test_fso_aspect_correction_is_a_volume_preserving_symmetric_map():
 
     assert rms_log_error(v) == pytest.approx(res, rel=1e-6, abs=1e-9)  # the residual is what it says
     assert rms_log_error(v) < 0.5 * rms_log_error(scaled)
-    from grainforge.solid import star_certificate
+    from grainforge.geometry.solid import star_certificate
 
     assert star_certificate(v, f)  # a linear map keeps the grain star-shaped about the origin
 
@@ -195,8 +195,8 @@ def test_cri_field_roughness_keeps_the_form_and_is_a_valid_solid():
     """The form (modes 0-2 of the contours) is the swept grain's, smoothed: with the field's relief removed
     (r / (1 + f)), the radius equals the band-limited construction exactly; the grains are valid, deterministic
     solids; the default (swept) is not touched by the option."""
+    from grainforge.geometry.solid import solid_problems
     from grainforge.io import export_bytes
-    from grainforge.solid import solid_problems
 
     for seed in range(2):
         g = grainforge.cri(preset="rough-angular", roughness="field", subdivisions=4, rng=seed)

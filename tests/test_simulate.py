@@ -342,7 +342,7 @@ def test_an_as_spheres_template_is_bounded_by_its_sphere():
     scenes space the grains) is that sphere's, not the one-sphere clump's it replaces (a grown clump sphere
     reached 11 % past the grain)."""
     from grainforge.methods import generate, get
-    from grainforge.simulate.population import _template
+    from grainforge.simulate.specimen import _template
 
     g = generate("cri", get("cri").Params(subdivisions=3), 2)
     v = np.asarray(g.vertices) * 2.0  # about 2 mm

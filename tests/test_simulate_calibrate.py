@@ -13,7 +13,7 @@ import pytest
 from click.testing import CliRunner
 
 from grainforge.cli.main import cli
-from grainforge.simulate.calibrate import (
+from grainforge.simulate.friction_search import (
     Unreachable,
     friction_uncertainty,
     pooled_sd,
@@ -148,7 +148,7 @@ def test_tilt_options_are_refused_for_a_repose_calibration(grains, tmp_path):
 
 
 def test_the_printed_command_uses_the_calibrated_friction():
-    from grainforge.cli.simulate_calibrate import use_command
+    from grainforge.cli.simulate_friction import use_command
 
     cmd = use_command("tilt", ["x.toml"], 0.6321, {"grains": 50, "seeds": None}, quick=False, as_spheres=False,
                       shape="levelset", spacing=0.1)
@@ -185,7 +185,7 @@ def test_quick_calibration_in_yade(grains, tmp_path):
 
 
 def test_the_local_slope_is_a_line_through_the_nearby_evaluations_not_the_bracket_secant():
-    from grainforge.simulate.calibrate import Evaluation, local_slope
+    from grainforge.simulate.friction_search import Evaluation, local_slope
 
     # a line of slope 10 with noise on two close points: their secant is 60, the fit stays near 10
     ev = [Evaluation(0.5, 30.0), Evaluation(1.0, 35.0), Evaluation(1.05, 35.0 - 1.0), Evaluation(1.1, 36.0 + 1.0),
@@ -201,7 +201,7 @@ def test_the_printed_command_keeps_the_engine_and_its_mpi_ranks():
     """A calibration run in LIGGGHTS under MPI prints the command that runs the same engine the same way."""
     import shlex
 
-    from grainforge.cli.simulate_calibrate import use_command
+    from grainforge.cli.simulate_friction import use_command
 
     words = shlex.split(use_command("tilt", ["g"], 0.2, {"grains": 100}, quick=False, as_spheres=False,
                                     shape="clump", spacing=None, engine="liggghts", mpi=2))

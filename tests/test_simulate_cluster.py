@@ -153,7 +153,7 @@ class _LosingExecutor:
     def submit(self, fn, *args):
         import concurrent.futures as cf
 
-        from grainforge.cluster import SchedulerLost
+        from grainforge.runtime.cluster import SchedulerLost
 
         fut = cf.Future()
         if not hasattr(self, "ran"):

@@ -22,8 +22,8 @@ from test_dem_engines import require  # skips, or fails under GRAINFORGE_REQUIRE
 
 from grainforge.cli.main import cli
 from grainforge.simulate import QUICK, Settings, build_population
-from grainforge.simulate import liggghts as lg
-from grainforge.simulate.scenes import REPOSE, TILT
+from grainforge.simulate import liggghts_scenes as lg
+from grainforge.simulate.yade_scenes import REPOSE, TILT
 
 
 @pytest.fixture(scope="module")

@@ -7,8 +7,7 @@ import trimesh
 
 import grainforge
 from grainforge.cli.main import cli
-from grainforge.params import ParameterError
-from grainforge.solid import (
+from grainforge.geometry.solid import (
     AREA_TOLERANCE,
     is_closed,
     require_solid,
@@ -16,6 +15,7 @@ from grainforge.solid import (
     solid_problems,
     star_certificate,
 )
+from grainforge.params import ParameterError
 
 
 def _two_boxes(offset):
@@ -113,7 +113,7 @@ def test_dpa_cube_repros_are_valid_as_written(kwargs, tmp_path):
 
 
 def test_dpa_cube_pinch_separation_volume_effect():
-    from grainforge.methods import dpa as D
+    from grainforge.methods.dpa import aggregation as D
 
     for seed in range(3):
         agg = D.aggregate("cube", 300, 1.0, np.random.default_rng(seed))
@@ -121,7 +121,7 @@ def test_dpa_cube_pinch_separation_volume_effect():
         pinch_points = int((np.unique(v, axis=0, return_counts=True)[1] > 1).sum())
         w = D.separate_pinches(v, f)
         assert solid_problems(w, f) == []
-        from grainforge.solid import signed_volume
+        from grainforge.geometry.solid import signed_volume
 
         removed = 300 + cav - signed_volume(w, f)
         # documented in docs/validation.md: about 4e-4 primary volumes per pinch point, never more than 1e-3
@@ -135,7 +135,7 @@ def test_fso_gamma_overflow_is_a_parameter_error():
 
 
 def test_cri_fractal_errors_name_fractal_amplitude(monkeypatch):
-    from grainforge import contours
+    from grainforge.outline import contours
 
     def boom(**kw):
         raise ParameterError("amplitude", "gives a contour with non-positive radii")
@@ -273,8 +273,8 @@ def test_cri_tiny_equal_aspect_is_scale_free():
 def test_star_shaped_generators_prove_it(name):
     """Every star-shaped generator declares it, and its grains (as written) carry the star
     certificate about the origin of ``build``, so the contract needs no pair test for them."""
+    from grainforge.geometry.solid import as_written
     from grainforge.methods import get
-    from grainforge.solid import as_written
 
     module = get(name)
     assert getattr(module, "STAR_SHAPED", False)
@@ -288,7 +288,7 @@ def test_star_shaped_generators_prove_it(name):
 def test_candidate_pairs_in_blocks_are_the_overlapping_boxes_once(block):
     # self_intersections builds its candidate pairs block by block (bounded memory); a pair is reported
     # once, by the first cell of its boxes' overlap, so the blocks hold exactly the overlapping pairs
-    from grainforge.solid import _candidate_pairs
+    from grainforge.geometry.solid import _candidate_pairs
 
     s = trimesh.creation.icosphere(3)
     big = trimesh.creation.box(extents=(1.5, 0.2, 0.2))  # a few large triangles across many cells

@@ -108,7 +108,7 @@ def _spectrum_csv() -> str:
     import tempfile
     from pathlib import Path
 
-    from grainforge.demo import sample_micrograph, write_fourier_csv
+    from grainforge.viz.demo import sample_micrograph, write_fourier_csv
 
     d = Path(tempfile.mkdtemp(prefix="gf-sweep-"))
     atexit.register(shutil.rmtree, d, True)

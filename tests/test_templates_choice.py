@@ -220,7 +220,7 @@ def test_templates_below_one_is_refused_in_one_line(runner, population, tmp_path
 
 def test_simulate_chooses_from_a_recipe_pool_and_from_files(population):
     from grainforge.simulate import Settings
-    from grainforge.simulate.population import build_population, choose_grains
+    from grainforge.simulate.specimen import build_population, choose_grains
 
     recipe = ROOT / "examples" / "angular-sand.toml"
     s = Settings(templates=5, spheres=4)

@@ -18,11 +18,11 @@ from grainforge.fabrication.tray import (
     min_mesh_distance,
     orient_stable,
 )
+from grainforge.geometry.solid import solid_problems, volume_centroid
 from grainforge.io.stl import read_stl_parts
 from grainforge.io.threemf import read_3mf
 from grainforge.methods.fso import Params as FsoParams
-from grainforge.run import write_run
-from grainforge.solid import solid_problems, volume_centroid
+from grainforge.population.generate import write_run
 
 SMALL = FsoParams(subdivisions=2)
 

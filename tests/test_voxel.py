@@ -1,4 +1,4 @@
-"""The one voxeliser (grainforge.voxel) against independent references: analytic solids and
+"""The one voxeliser (grainforge.geometry.voxel) against independent references: analytic solids and
 trimesh's own point-in-mesh test (``contains``, ray parity with trimesh's own ray engine)."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 import trimesh
 
 import grainforge
-from grainforge.voxel import ANCHORS, RULES, grid_for, inside_mask
+from grainforge.geometry.voxel import ANCHORS, RULES, grid_for, inside_mask
 
 
 def _centres(grid):

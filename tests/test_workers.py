@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import os
 
-from grainforge.workers import THREAD_VARS, ordered_map
+from grainforge.runtime.workers import THREAD_VARS, ordered_map
 
 
 def test_pool_workers_get_one_blas_thread():
@@ -43,7 +43,7 @@ def test_private_standard_library_internals_stay_in_one_documented_place():
     pool's result pipe) is read in ``_unblock_result_reader`` only."""
     import inspect
 
-    import grainforge.workers as workers
+    import grainforge.runtime.workers as workers
 
     assert private_names(inspect.getsource(workers)) == []
     # the detector sees what the pools used to read

@@ -26,7 +26,7 @@ GRAINS = 64
 def grains(n: int, seed: int = 0):
     """``n`` CRI grains (vertices, faces) of equivalent diameter about 2, in random orientations."""
     import grainforge
-    from grainforge.rotations import random_rotation
+    from grainforge.geometry.rotations import random_rotation
 
     rng = np.random.default_rng(seed)
     for i in range(n):

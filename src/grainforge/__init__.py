@@ -4,7 +4,7 @@ The three generators of Hanaor et al., *3D printable geomaterials*:
 :func:`fso` (Fractal Surface Overlay), and the others as they land, each
 returning an immutable :class:`Grain`.
 
-The names below, and the submodules (``grainforge.solid``, ...), are imported
+The names below, and the submodules (``grainforge.geometry.solid``, ...), are imported
 on first use, so that ``import grainforge`` is quick (the command line starts,
 and answers Ctrl-C, before NumPy and SciPy are loaded).
 """
@@ -13,9 +13,9 @@ from ._version import __version__
 
 #: public name -> module that defines it
 _EXPORTS = {
-    "Contour": ".contours", "build_tray": ".fabrication", "check_mesh": ".fabrication",
+    "Contour": ".outline.contours", "build_tray": ".fabrication", "check_mesh": ".fabrication",
     "get_printer": ".fabrication", "Grain": ".grain", "generate": ".methods", "angular": ".methods.angular",
-    "cri": ".methods.cri", "dpa": ".calibration", "fso": ".methods.fso", "rf": ".methods.rf",
+    "cri": ".methods.cri", "dpa": ".methods.dpa", "fso": ".methods.fso", "rf": ".methods.rf",
     "ParameterError": ".params", "load_recipe": ".population", "run_batch": ".population",
 }
 

@@ -26,7 +26,7 @@ __all__ = ["UNITS", "SIZE_RANGE_MM", "MESH_SIZE_RANGE_MM", "with_unit", "plain",
 #: the slicer's units overflow); grainforge.fabrication.scale checks them
 SIZE_RANGE_MM = (1e-3, 1e4)
 #: sizes (the largest side of the bounding box, mm) at which ``analyse``, ``check`` and ``tray`` take a file's
-#: body for a grain (:func:`grainforge.solid.mesh_size_problem`): a decade beyond :data:`SIZE_RANGE_MM` on
+#: body for a grain (:func:`grainforge.geometry.solid.mesh_size_problem`): a decade beyond :data:`SIZE_RANGE_MM` on
 #: each side, so that every grain grainforge makes is read whatever its shape (the largest side is at least
 #: 0.8 d_eq), 0.1 µm to 100 m in all; beyond, the file is in another unit or scaled by mistake
 MESH_SIZE_RANGE_MM = (SIZE_RANGE_MM[0] / 10, SIZE_RANGE_MM[1] * 10)

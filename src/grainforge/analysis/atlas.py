@@ -6,7 +6,7 @@ to a mesh:
 
 1. **Voxelise** at voxel size ``h``: a voxel belongs to the grain when its
    centre is inside the mesh (:func:`voxelise`, which is
-   :func:`grainforge.voxel.inside_mask` with the scanner's conventions:
+   :func:`grainforge.geometry.voxel.inside_mask` with the scanner's conventions:
    centres on the lattice ``h·(k + 1/2)``, parity along x).
 2. ``V = n h³`` for ``n`` voxels, ``d_eq = (6V/π)^(1/3)``.
 3. **True sphericity** ``π^(1/3) (6V)^(2/3) / A`` with ``A`` the area of the
@@ -41,7 +41,7 @@ from typing import Any
 
 import numpy as np
 
-from ..rotations import random_rotation
+from ..geometry.rotations import random_rotation
 
 __all__ = ["voxelise", "voxel_image", "opening_fraction", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS",
            "SIGMA", "CONVENTIONS", "OPENING_RADIUS", "MIN_VOXELS_ACROSS", "IMAGE_BYTES_PER_CELL", "image_cells",
@@ -92,13 +92,13 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
         Grains measured at once (each holds its own image).
     memory : float, optional
         Bytes the measurement may use (default: half of this machine's memory,
-        :func:`grainforge.estimate.check_memory`).
+        :func:`grainforge.runtime.estimate.check_memory`).
 
     Raises
     ------
     ValueError
         A grain below :data:`MIN_VOXELS_ACROSS` voxels across, named with its resolution.
-    grainforge.estimate.TooLargeError
+    grainforge.runtime.estimate.TooLargeError
         The largest image times ``workers`` over the budget: the message names the
         largest ``voxels_across`` (or the smallest ``voxel_size``) that fits.
 
@@ -110,7 +110,7 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
     ...
     ValueError: g: 4 voxels across its equivalent diameter is below 5, where the Atlas descriptors measure shape (a ball 4 voxels across has a true sphericity of about 1.5); measure at 5 voxels across or more
     """
-    from ..estimate import TooLargeError, machine_memory
+    from ..runtime.estimate import TooLargeError, machine_memory
 
     if (voxel_size is None) == (voxels_across is None):
         raise ValueError("give exactly one of voxel_size and voxels_across")
@@ -146,7 +146,7 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
 def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
     """The binary voxel image of a closed mesh: voxels whose centre is inside.
 
-    :func:`grainforge.voxel.inside_mask` (the one voxeliser) with the
+    :func:`grainforge.geometry.voxel.inside_mask` (the one voxeliser) with the
     conventions of a scan: voxel centres on the lattice ``h·(k + 1/2)``
     whatever the mesh's position (``anchor="lattice"``), and the parity rule
     along x (``axis=0, rule="parity"``).
@@ -183,7 +183,7 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
     >>> int(voxelise(cube.vertices, cube.faces, 1.0)[0].sum())   # those on one side of each pair count
     27
     """
-    from ..voxel import grid_for, inside_mask
+    from ..geometry.voxel import grid_for, inside_mask
 
     h = float(voxel_size)
     if not (math.isfinite(h) and h > 0):
@@ -541,7 +541,7 @@ def atlas_descriptors(
     rotation : (3, 3) array_like or seed, optional
         Turn the grain before voxelising (a scan sees grains in any
         orientation): a rotation matrix, or a seed/Generator for
-        :func:`grainforge.rotations.random_rotation` (scipy's convention).  Default: as given.
+        :func:`grainforge.geometry.rotations.random_rotation` (scipy's convention).  Default: as given.
     convention : {"atlas", "whole"}
         How true sphericity cuts the grain out (:func:`voxel_descriptors`).
 
@@ -587,7 +587,7 @@ def voxel_image(
     >>> round(d / h), bool(abs(mask.sum() * h**3 / (4 / 3 * 3.14159) - 1) < 0.05)
     (20, True)
     """
-    from ..solid import is_closed, signed_volume
+    from ..geometry.solid import is_closed, signed_volume
 
     if faces is None:
         v, f = np.asarray(mesh_or_vertices.vertices, np.float64), np.asarray(mesh_or_vertices.faces, np.int64)

@@ -195,8 +195,8 @@ def _volumes(X: np.ndarray, fn: np.ndarray, edges: np.ndarray, edge_faces: np.nd
 
 
 def _rotation(r: np.ndarray) -> np.ndarray:
-    """Rotation matrix of the rotation vector r (:func:`grainforge.rotations.axis_angle_matrix`)."""
-    from ..rotations import axis_angle_matrix
+    """Rotation matrix of the rotation vector r (:func:`grainforge.geometry.rotations.axis_angle_matrix`)."""
+    from ..geometry.rotations import axis_angle_matrix
 
     t = float(np.linalg.norm(r))
     if t == 0.0:

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solid import is_closed
+from ..geometry.solid import is_closed
 from .mass import mass_properties
 
 __all__ = [

@@ -10,8 +10,8 @@ printed, scanned or generated grains can be compared with descriptors
 measured on micrographs.  The silhouette radii are computed exactly from the
 projected triangles (:func:`silhouette_radii`), not from a raster, so they
 carry no pixel noise.  Outlines given as polygons or images (micrographs)
-go through :func:`grainforge.contours.polygon_contour` and
-:func:`grainforge.contours.mask_contour`, with the same convention.
+go through :func:`grainforge.outline.contours.polygon_contour` and
+:func:`grainforge.outline.contours.mask_contour`, with the same convention.
 """
 
 from __future__ import annotations
@@ -43,9 +43,9 @@ def fd_columns() -> list[str]:
 
 
 def _polygon_centroid(poly: np.ndarray) -> np.ndarray:
-    """Area centroid of the closed polygon ``poly`` (:func:`grainforge.contours.polygon_area_centroid`); the
+    """Area centroid of the closed polygon ``poly`` (:func:`grainforge.outline.contours.polygon_area_centroid`); the
     vertices' mean when it encloses no area."""
-    from ..contours import polygon_area_centroid
+    from ..outline.contours import polygon_area_centroid
 
     a, cx, cy = polygon_area_centroid(poly[:, 0], poly[:, 1])
     if abs(a) < 1e-300:
@@ -63,7 +63,7 @@ def descriptors_from_radii(r: np.ndarray, orders=FD_ORDERS) -> np.ndarray:
     >>> np.round(descriptors_from_radii(r, orders=(2, 3, 8)), 6).tolist()
     [0.2, 0.0, 0.05]
     """
-    from ..contours import descriptors_of_radii
+    from ..outline.contours import descriptors_of_radii
 
     r = np.asarray(r, dtype=np.float64)
     if not r.mean() > 0:

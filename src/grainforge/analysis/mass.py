@@ -14,7 +14,7 @@ __all__ = ["mass_properties", "principal_moments"]
 def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """Volume, area, centroid and second central moments of a closed triangle mesh.
 
-    The integrals are :func:`grainforge.solid.second_moments` (the one
+    The integrals are :func:`grainforge.geometry.solid.second_moments` (the one
     implementation, shared with :func:`grainforge.dem.massprops.mass_properties`);
     this adds the surface area and per-face areas, and does not reject a
     non-positive volume (``analyse`` reports open and inverted bodies).
@@ -26,7 +26,7 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
         second central moment per unit volume (its trace is R_g²), and
         ``face_areas`` (F,).
     """
-    from ..solid import cross3, second_moments
+    from ..geometry.solid import cross3, second_moments
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)

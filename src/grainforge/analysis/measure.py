@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import solid_problems, split_bodies, volume_and_centroid
+from ..geometry.solid import solid_problems, split_bodies, volume_and_centroid
 
 __all__ = ["split_bodies", "read_bodies", "body_flags", "analyse_mesh", "analyse_file", "solid_grain",
            "ANALYSE_COLUMNS"]
@@ -35,7 +35,7 @@ def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, 
     """The bodies of a mesh file (STL, OBJ, PLY, 3MF), each as (vertices, faces).
 
     ``mm``: the file is in millimetres, and a body whose size is no grain's
-    (:func:`grainforge.solid.mesh_size_problem`) is refused; ``False``
+    (:func:`grainforge.geometry.solid.mesh_size_problem`) is refused; ``False``
     for a caller with a unit of its own (``dem --unit``), which checks sizes itself.
 
     Raises
@@ -43,10 +43,10 @@ def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, 
     ValueError
         If the file is missing, unreadable, corrupt or holds no triangles, or
         a body lies so far from the origin that float32 loses its shape
-        (:func:`grainforge.solid.precision_problem`), or (``mm``) is absurdly
+        (:func:`grainforge.geometry.solid.precision_problem`), or (``mm``) is absurdly
         large or small (the message starts with the file name and says what to do).
     """
-    from ..solid import precision_problem
+    from ..geometry.solid import precision_problem
 
     path = Path(path)
     if path.suffix.lower() == ".3mf":
@@ -68,7 +68,7 @@ def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, 
         raise ValueError(f"{path}: holds no triangles")
     size_problem = None
     if mm:
-        from ..solid import mesh_size_problem as size_problem
+        from ..geometry.solid import mesh_size_problem as size_problem
     for k, (bv, _) in enumerate(bodies):
         what = "the mesh" if len(bodies) == 1 else f"body {k}"
         problem = precision_problem(bv, what) or (size_problem(bv, what) if size_problem else None)
@@ -91,7 +91,7 @@ def body_flags(vertices, faces, *, merged: bool = False) -> tuple[list[str], np.
         The faces, flipped if the body is inverted.
     closed : bool
     problems : list of str
-        :func:`grainforge.solid.solid_problems`'s findings behind ``not-solid``.
+        :func:`grainforge.geometry.solid.solid_problems`'s findings behind ``not-solid``.
     """
     from .descriptors import is_closed
 
@@ -123,12 +123,12 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
     Sand-Atlas voxel descriptors (:func:`~grainforge.analysis.atlas.atlas_descriptors`)
     as ``atlas_*`` columns; they are NaN for a body that is not closed.
     ``merged``: the vertices are distinct positions (a body of :func:`read_bodies`),
-    which spares the solid check its own merge (see :func:`grainforge.solid.solid_problems`).
+    which spares the solid check its own merge (see :func:`grainforge.geometry.solid.solid_problems`).
 
     Flags (space separated): ``open`` (not closed or not consistently
     oriented: volume-based values are approximate), ``inverted`` (closed
     but inside out; measured after flipping), ``not-solid`` (closed but
-    failing the solid contract of :func:`grainforge.solid.solid_problems`,
+    failing the solid contract of :func:`grainforge.geometry.solid.solid_problems`,
     the same definition ``grainforge check`` uses).
 
     Returns
@@ -155,7 +155,7 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
 def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
     """One row per grain of a mesh file; multi-body files are flagged ``multi-body``.
 
-    A body inside another closed body (:func:`grainforge.solid.body_nesting`:
+    A body inside another closed body (:func:`grainforge.geometry.solid.body_nesting`:
     the inner shell of a cavity, facing inward, or a shell nested in the
     grain) is no grain: it gets no row, and the body that encloses it is
     flagged ``cavity`` (its row measures its outer surface, the void not
@@ -174,7 +174,7 @@ def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
     >>> row["body"], row["flags"], round(row["volume"], 6), round(row["sphericity"], 3)
     (0, '', 8.0, 0.806)
     """
-    from ..solid import body_nesting
+    from ..geometry.solid import body_nesting
 
     path = Path(path)
     bodies = read_bodies(path)
@@ -199,7 +199,7 @@ def solid_grain(path: str | Path, *, mm: bool = False) -> tuple[np.ndarray, np.n
     """The one body of a grain file, refused unless ``analyse`` would list it unflagged.
 
     The same reader (:func:`read_bodies`: float32 precision and, with ``mm``,
-    sizes) and the same checks (:func:`grainforge.solid.body_nesting`,
+    sizes) and the same checks (:func:`grainforge.geometry.solid.body_nesting`,
     :func:`body_flags`) as :func:`analyse_file`: a file with a cavity, several
     or overlapping bodies, or a body that is open, inverted or not a solid is
     refused.  (``dem`` and ``simulate`` read their grain files with it: a DEM
@@ -210,7 +210,7 @@ def solid_grain(path: str | Path, *, mm: bool = False) -> tuple[np.ndarray, np.n
     ValueError
         One line naming the file, the problem and what to do.
     """
-    from ..solid import body_nesting
+    from ..geometry.solid import body_nesting
 
     path = Path(path)
     bodies = read_bodies(path, mm=mm)
@@ -267,12 +267,12 @@ def analyse_files(paths, *, workers: int = 1, executor=None, **options):
 
     Yields one list of rows per file as it is done (memory bounded: a few
     files are in flight).  The rows do not depend on ``workers``.  With
-    ``executor`` (a :class:`grainforge.cluster.DaskExecutor`) each file is
+    ``executor`` (a :class:`grainforge.runtime.cluster.DaskExecutor`) each file is
     measured there, sent as its bytes, ``workers`` files at a time (times
-    :func:`grainforge.workers.ordered_map`'s in-flight factor); the rows are
+    :func:`grainforge.runtime.workers.ordered_map`'s in-flight factor); the rows are
     the same.
     """
-    from ..workers import ordered_map
+    from ..runtime.workers import ordered_map
 
     if executor is not None:
         tasks = ((str(p), Path(p).read_bytes(), options) for p in paths)

@@ -29,7 +29,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..solid import volume_centroid
+from ..geometry.solid import volume_centroid
 from .fractal import radial_function
 
 __all__ = ["radii_along", "vertex_areas", "small_scale_relief", "interpolate_at", "mirror_correlation", "cap_band_rms", "ring", "separable_share"]

@@ -242,7 +242,7 @@ def _measure_task(task) -> dict:
         row["status"] = "thin"
         return row
     if mesh_h is not None:
-        from ..solid import solid_problems
+        from ..geometry.solid import solid_problems
 
         try:
             v, f, dropped = grain_mesh(mask, lo, mesh_h)
@@ -271,7 +271,7 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
     convention : {"atlas", "whole"}
         True sphericity's convention (:func:`~grainforge.analysis.atlas.voxel_descriptors`).
     workers : int
-        Processes measuring grains (:func:`grainforge.workers.ordered_map`); this process reads the image.
+        Processes measuring grains (:func:`grainforge.runtime.workers.ordered_map`); this process reads the image.
     mesh_voxel_size : float, optional
         Also make each measured grain's mesh (:func:`grainforge.analysis.scan.grain_mesh`) at this voxel
         size: ``row["mesh"]`` is ``(vertices, faces, bodies dropped, solid problems)``.
@@ -285,7 +285,7 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
         ``centroid_x``, ``centroid_y``, ``centroid_z`` (voxel centres at ``h·(index + ½)``) and
         :func:`measure_grain`'s values.
     """
-    from ..workers import ordered_map
+    from ..runtime.workers import ordered_map
 
     h = float(voxel_size)
     if not (math.isfinite(h) and h > 0):
@@ -507,7 +507,7 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
 
     Examples
     --------
-    >>> from grainforge.solid import solid_problems, signed_volume
+    >>> from grainforge.geometry.solid import solid_problems, signed_volume
     >>> g = np.indices((21, 21, 21)) - 10
     >>> v, f, dropped = grain_mesh((g ** 2).sum(0) <= 8 ** 2, voxel_size=0.01)
     >>> solid_problems(v, f, intersections=False), dropped
@@ -518,7 +518,7 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
     from scipy.ndimage import gaussian_filter
     from skimage.measure import marching_cubes
 
-    from ..solid import signed_volume, split_bodies
+    from ..geometry.solid import signed_volume, split_bodies
 
     pad = 2
     m = np.pad(np.asarray(mask, dtype=np.float32), pad)

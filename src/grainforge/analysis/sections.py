@@ -13,7 +13,7 @@ is the one implementation; its ``outline`` parameter says which outline:
     function.  Any plane, any orientation (:func:`random_normals`).
 ``"loop"``
     The largest closed loop of the section (trimesh ``section``), as a
-    polygon (:func:`grainforge.contours.polygon_contour`: shoelace centroid),
+    polygon (:func:`grainforge.outline.contours.polygon_contour`: shoelace centroid),
     the plane nudged off the mesh's vertices when they leave the loop in
     pieces.  What a thin section shows.
 
@@ -129,7 +129,7 @@ def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS, *, outline: s
 
 def _loop_contour(mesh, normal, origin, basis, n_rays):
     """The largest closed loop of the section as a Contour (``"loop"`` outlines)."""
-    from ..contours import polygon_contour
+    from ..outline.contours import polygon_contour
 
     size = float(np.ptp(np.asarray(mesh.vertices), axis=0).max())
     unit = normal / np.linalg.norm(normal)

@@ -73,8 +73,8 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
     """Before any image is made: every body's image means something and the largest fits in memory."""
     from ..analysis.atlas import check_atlas_request
     from ..analysis.measure import read_bodies
-    from ..estimate import TooLargeError
-    from ..solid import body_nesting, signed_volume
+    from ..geometry.solid import body_nesting, signed_volume
+    from ..runtime.estimate import TooLargeError
     from .progress import progress_bar
 
     bodies = []
@@ -154,7 +154,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers is for the local processes; the Dask cluster (--scheduler) has its own")
     if scheduler is not None:
-        from ..cluster import check_address
+        from ..runtime.cluster import check_address
 
         check_address(scheduler)
     if primary_volume is not None and not math.isfinite(primary_volume):
@@ -178,7 +178,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     with contextlib.ExitStack() as stack:
         executor = None
         if scheduler is not None:
-            from ..cluster import dask_executor
+            from ..runtime.cluster import dask_executor
 
             executor = stack.enter_context(dask_executor(scheduler))  # refused in one line before any work
             n = executor.workers
@@ -209,7 +209,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
 def _measure_files(files, workers: int, executor, options: dict) -> list:
     """Every file's rows, in the files' order, under a progress bar; a lost Dask scheduler is one line (exit 1)."""
     from ..analysis.measure import analyse_files
-    from ..cluster import SchedulerLost
+    from ..runtime.cluster import SchedulerLost
     from .progress import progress_bar
 
     rows = []

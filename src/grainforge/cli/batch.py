@@ -35,10 +35,10 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
         raise click.UsageError("--workers is for the local pool; the Dask cluster decides its own workers")
     output_dir(out)  # run_batch decides what may be replaced (--resume, --overwrite)
     r = load_recipe(recipe)
-    from ..cluster import SchedulerLost
+    from ..runtime.cluster import SchedulerLost
 
     if scheduler:
-        from ..cluster import check_address
+        from ..runtime.cluster import check_address
 
         check_address(scheduler)
     try:

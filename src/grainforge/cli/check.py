@@ -39,8 +39,8 @@ def check(files, printer_spec, as_csv):
 
     from ..fabrication.printability import check_mesh, equivalent_diameter
     from ..fabrication.printers import get_printer
+    from ..geometry.solid import mesh_size_problem
     from ..io import csv_text, read_parts
-    from ..solid import mesh_size_problem
     from .paths import mesh_inputs
     from .progress import progress_bar
 

@@ -145,7 +145,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
                                 size_range=size_range, **({} if clump_accuracy is None else
                                                           {"target_iou": clump_accuracy,
                                                            "min_spheres": 2 if engine in TWO_SPHERE_ENGINES else 1}))
-    from ..dem.decks import write_deck
+    from ..dem.engines import write_deck
 
     placed = [t.clump.count for t in templates if t.clump is not None]
     if clump_accuracy is None and placed and min(placed) < spheres:
@@ -270,7 +270,7 @@ def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float,
               accuracy: bool = False):
     """Refuse template work estimated beyond a day, naming what to change; return the call that announces
     work over a minute."""
-    from ..estimate import TooLargeError, check_job, dem_template_seconds
+    from ..runtime.estimate import TooLargeError, check_job, dem_template_seconds
     from .interrupts import say_estimate
 
     each = dem_template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing)

@@ -17,7 +17,7 @@ from .paths import OutPath, output_dir
 @overwrite_option("Replace the outputs of an earlier demo in --out (make demo does).")
 def demo(out, quick, overwrite):
     """Generate the paper-style galleries (grains, manifests, contact sheets) into OUT."""
-    from ..demo import run_demo
+    from ..viz.demo import run_demo
 
     output_dir(out)
     earlier = out.is_dir() and any(out.iterdir())

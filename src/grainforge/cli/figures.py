@@ -20,7 +20,7 @@ def figures(out, only, subdivisions, overwrite):
     Same panels and parameters as the paper's captions, fixed seeds.  7: FSO aspects; 8: paper vs
     seamless FSO (pole and equator views); 9: CRI before/after the shape-control changes.
     """
-    from ..figures import FIGURES, make_figures
+    from ..viz.figures import FIGURES, make_figures
 
     numbers = tuple(sorted(set(only))) or tuple(FIGURES)
     output_dir(out, overwrite=overwrite, files=[out / FIGURES[n][0] for n in numbers])

@@ -16,7 +16,7 @@ EXIT_NOT_PASSED = EXIT_CHECK_FAILED
 
 #: modules a fit loads before any work (see cli.interrupts)
 HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",
-                 "grainforge.analysis.atlas", "grainforge.methods", "grainforge.population", "grainforge.workers",
+                 "grainforge.analysis.atlas", "grainforge.methods", "grainforge.population", "grainforge.runtime.workers",
                  "grainforge.io", "matplotlib.pyplot")
 
 
@@ -101,7 +101,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers is for the local processes; the Dask cluster (--scheduler) has its own")
     if scheduler is not None:
-        from ..cluster import check_address
+        from ..runtime.cluster import check_address
 
         check_address(scheduler)
     output_dir(out, overwrite=overwrite, files=[out / n for n in OUTPUTS])  # before any work
@@ -110,14 +110,14 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     with contextlib.ExitStack() as stack:
         executor = None
         if scheduler is not None:
-            from ..cluster import dask_executor
+            from ..runtime.cluster import dask_executor
 
             executor = stack.enter_context(dask_executor(scheduler))  # refused in one line before any work
         result = _run_fit(s, out, executor, dict(
             method=method, count=count, refine=refine, reseed=reseed, population_grains=population_grains,
             population_slopes=population_slopes, seed=seed, workers=workers, sphericity=sphericity,
             max_across=max_across, design_grains=design_grains, cache=cache_dir), max_minutes)
-    from ..staging import commit_stage, staged
+    from ..runtime.staging import commit_stage, staged
 
     with staged(out) as stage:  # the four outputs appear together, or none of them (an interrupt while writing)
         write_outputs(s, result, stage)
@@ -148,9 +148,9 @@ def _run_fit(s, out, executor, kw: dict, max_minutes: float):
     """Check the fit's size, announce it and run it (on ``executor``, a Dask cluster, if given); its result."""
     import os
 
-    from ..cluster import SchedulerLost
-    from ..estimate import TooLargeError, duration
     from ..fit import METHOD_CAP, check_fit_size, fit_sand
+    from ..runtime.cluster import SchedulerLost
+    from ..runtime.estimate import TooLargeError, duration
     from .interrupts import ready_for_work
 
     cores = executor.workers if executor is not None else None

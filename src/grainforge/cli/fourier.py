@@ -18,7 +18,7 @@ def descriptor_rows(path: str, *, min_area: int, threshold, foreground: str, ray
     Positions and sizes are in pixels (``x_px``, ``area_px2``, ...) and, with
     ``pixel_size`` (µm per pixel), also in millimetres (``x_mm``, ``area_mm2``, ...).
     """
-    from ..contours import scan_image
+    from ..outline.contours import scan_image
 
     scan = scan_image(path, min_area=min_area, threshold=threshold, foreground=foreground, n_angles=rays)
     rows = []

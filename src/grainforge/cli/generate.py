@@ -48,8 +48,8 @@ def generate():
 
 def run_generate(method: str, params, *, out, count, seed, size, size_definition, fmt, overwrite, extra_columns=()):
     """Shared body of every ``generate METHOD`` command."""
-    from ..estimate import TooLargeError
-    from ..run import write_run
+    from ..population.generate import write_run
+    from ..runtime.estimate import TooLargeError
     from .paths import output_dir
 
     output_dir(out)  # write_run refuses existing outputs without --overwrite
@@ -80,7 +80,7 @@ GRAIN_COST_OPTIONS = {"fso": "--subdivisions, --ridges or --frequencies", "cri":
 
 def announce_estimate(method: str, params, count: int, workers: int = 1, count_option: str = "--count") -> float:
     """Refuse a job estimated beyond a day (naming the option that shortens it); announce one over a minute."""
-    from ..estimate import SECONDS_LIMIT, check_job, duration, grain_seconds
+    from ..runtime.estimate import SECONDS_LIMIT, check_job, duration, grain_seconds
 
     each = grain_seconds(method, params)
     option = count_option if each * 2 <= SECONDS_LIMIT else GRAIN_COST_OPTIONS.get(method, "--subdivisions")

@@ -1,5 +1,5 @@
 """Hook of ``grainforge generate dpa`` (see :mod:`grainforge.cli.generate`): ``--target-fractal-dimension``,
-which picks the exponent ε from the cached calibration curve (:mod:`grainforge.calibration`)."""
+which picks the exponent ε from the cached calibration curve (:mod:`grainforge.methods.dpa.calibration`)."""
 
 from __future__ import annotations
 
@@ -18,8 +18,8 @@ OPTIONS = [
 
 def prepare(values: dict) -> dict:
     """Replace ``target`` by the calibrated ``exponent`` (and record the target)."""
-    from ..calibration import exponent_for_dimension
     from ..methods.dpa import Params
+    from ..methods.dpa.calibration import exponent_for_dimension
     from .progress import progress_bar
 
     values = dict(values)

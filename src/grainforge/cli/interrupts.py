@@ -21,7 +21,7 @@ import signal
 import sys
 from collections.abc import Iterable
 
-from ..staging import _handled, signals_held
+from ..runtime.staging import _handled, signals_held
 
 __all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "STARTUP_MODULES"]
 
@@ -74,7 +74,7 @@ def say_estimate(seconds: float, *, bound: str = "about") -> None:
     """On stderr, the job's estimated time when it is over a minute (nothing below)."""
     import click
 
-    from ..estimate import duration
+    from ..runtime.estimate import duration
 
     if seconds > 60:
         click.echo(f"estimated time: {bound} {duration(seconds)} (a rough model; the progress bar shows the "

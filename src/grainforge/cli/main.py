@@ -417,24 +417,9 @@ def cli():
 
 
 def _register():
-    from . import (
-        analyse,
-        batch,
-        calibrate,
-        check,
-        dem,
-        demo,
-        figures,
-        fit,
-        fourier,
-        generate,
-        plot,
-        render,
-        scan,
-        simulate,
-        simulate_calibrate,
-        tray,
-    )
+    from . import analyse, batch, check, dem, demo, figures, fit, fourier, generate, plot, render, scan, simulate, tray
+    from . import calibrate_dpa as calibrate
+    from . import simulate_friction as simulate_calibrate
     from .options import apply_help_style
 
     simulate.simulate.add_command(simulate_calibrate.calibrate)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from ..plots import KINDS
+from ..viz.plots import KINDS
 from .options import overwrite_option
 from .paths import OutPath, output_file
 
@@ -27,7 +27,7 @@ def plot(kind, manifests, out, title, overwrite):
                           a CRI manifest's input spectrum is drawn dashed)
     size-distribution     % finer by volume against equivalent diameter
     """
-    from ..plots import plot as draw
+    from ..viz.plots import plot as draw
 
     out = output_file(out, overwrite=overwrite, option="-o", suffixes=(".png",))
     draw(kind, manifests, out, title=title)

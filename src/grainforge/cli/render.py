@@ -24,7 +24,7 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 def render(files, out, columns, title, overwrite):
     """Render mesh FILES (STL, OBJ, PLY, 3MF, or folders of them) as a labelled contact sheet."""
     from ..io import read_mesh
-    from ..render import contact_sheet
+    from ..viz.render import contact_sheet
 
     out = output_file(out, overwrite=overwrite, option="-o", suffixes=IMAGE_SUFFIXES)
     files = mesh_inputs(files)

@@ -63,7 +63,7 @@ class _Outputs:
         self.overwrite = False
 
     def temp(self, final: Path) -> Path:
-        from ..staging import signals_held
+        from ..runtime.staging import signals_held
 
         final.parent.mkdir(parents=True, exist_ok=True)
         with signals_held():  # the file is made and noted for the clean-up together: a signal waits for both
@@ -74,7 +74,7 @@ class _Outputs:
         return Path(tmp)
 
     def mesh_stage(self, folder: Path, overwrite: bool) -> Path:
-        from ..staging import open_stage
+        from ..runtime.staging import open_stage
 
         self.mesh_created = not folder.exists()
         self.mesh_dir, self.overwrite = folder, overwrite
@@ -83,7 +83,7 @@ class _Outputs:
 
     def commit(self) -> None:
         from ..io import file_mode
-        from ..staging import commit_stage
+        from ..runtime.staging import commit_stage
         from .interrupts import signals_held
 
         with signals_held():
@@ -102,7 +102,7 @@ class _Outputs:
                 self.stage = None
 
     def discard(self) -> None:
-        from ..staging import discard_stage
+        from ..runtime.staging import discard_stage
 
         for tmp in self.temps:
             try:
@@ -175,8 +175,8 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
     import numpy as np
 
     from ..analysis import scan as sc
-    from ..estimate import TooLargeError, check_memory
     from ..io.volume import LABEL_SUFFIXES, Volume, open_volume
+    from ..runtime.estimate import TooLargeError, check_memory
     from .interrupts import preload, say_estimate
     from .progress import progress_bar
 

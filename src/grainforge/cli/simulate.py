@@ -68,7 +68,7 @@ def check_installed(engine: str, mpi: int | None) -> None:
     Called after every check of the user's input, so that bad input is named first on any machine.
     """
     from ..simulate import yade_executable
-    from ..simulate.liggghts import liggghts_executable, mpirun_executable
+    from ..simulate.liggghts_scenes import liggghts_executable, mpirun_executable
 
     checks = {"yade": [yade_executable], "liggghts": [liggghts_executable]}[engine]
     if mpi is not None:
@@ -119,7 +119,7 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
         for its periodic cell.
     """
     from ..simulate import QUICK, QUICK_TRIAXIAL
-    from ..simulate.levelset import check_levelset_run, quick_levelset
+    from ..simulate.levelset_scenes import check_levelset_run, quick_levelset
     from ..simulate.settings import check_triaxial_run
 
     if clump_accuracy is not None and values.get("spheres") is None and not quick:
@@ -144,7 +144,7 @@ def choose_templates(inputs, settings, pool: int | None, workers: int):
     one line of the choice and its KS figures."""
     from tqdm import tqdm
 
-    from ..simulate.population import choose_grains
+    from ..simulate.specimen import choose_grains
 
     with tqdm(desc="choosing templates", unit="grain", disable=None, leave=False, dynamic_ncols=True) as bar:
         def step(done, total):
@@ -225,7 +225,7 @@ def check_cluster_options(scheduler: str | None, workers: int | None, resume: bo
     if resume and overwrite:
         raise click.UsageError("--resume and --overwrite exclude each other")
     if scheduler is not None:
-        from ..cluster import check_address
+        from ..runtime.cluster import check_address
 
         if workers is not None:
             raise click.UsageError("--workers is for the local pool; the Dask cluster (--scheduler) decides its "
@@ -257,8 +257,8 @@ def open_sweep(out: Path, fingerprint: dict, resume: bool, overwrite: bool):
 
 
 def cluster_executor(scheduler: str):
-    """A :class:`grainforge.cluster.DaskExecutor` open until the command ends (refused in one line: exit 2)."""
-    from ..cluster import dask_executor
+    """A :class:`grainforge.runtime.cluster.DaskExecutor` open until the command ends (refused in one line: exit 2)."""
+    from ..runtime.cluster import dask_executor
 
     try:
         return click.get_current_context().with_resource(dask_executor(scheduler))
@@ -343,22 +343,22 @@ def _settings_cls(test: str = "repose"):
 
 #: modules a run loads before any work (cli.interrupts.preload: a lazy import later could swallow a Ctrl-C)
 HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.spatial", "scipy.spatial.transform",
-                 "grainforge.io", "grainforge.solid", "grainforge.methods", "grainforge.population",
+                 "grainforge.io", "grainforge.geometry.solid", "grainforge.methods", "grainforge.population",
                  "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
                  "grainforge.dem.clump", "grainforge.dem.enclosure", "grainforge.dem.yade", "grainforge.dem.deck",
-                 "grainforge.dem.liggghts", "grainforge.simulate.liggghts", "grainforge.simulate.report",
+                 "grainforge.dem.liggghts", "grainforge.simulate.liggghts_scenes", "grainforge.simulate.results",
                  "matplotlib.pyplot", "matplotlib.collections", "scipy.stats", "grainforge.analysis",
-                 "grainforge.workers", "grainforge.dem.representative", "grainforge.dem.template_choice")
+                 "grainforge.runtime.workers", "grainforge.dem.representative", "grainforge.dem.template_choice")
 
 
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
          shape="clump", spacing=0.05, clump_accuracy=None, scheduler=None, resume=False):
     import os
 
-    from ..cluster import SchedulerLost
-    from ..estimate import TooLargeError
+    from ..runtime.cluster import SchedulerLost
+    from ..runtime.estimate import TooLargeError
     from ..simulate import check_inputs, check_size
-    from ..simulate.population import template_make_seconds
+    from ..simulate.specimen import template_make_seconds
     from .interrupts import ready_for_work, signals_held
 
     settings = run_settings(test, values, quick, shape, clump_accuracy)
@@ -391,7 +391,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         run_test,
         staged,
     )
-    from ..simulate.report import write_report
+    from ..simulate.results import write_report
     from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)

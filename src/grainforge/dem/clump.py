@@ -48,7 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..voxel import grid_for, inside_mask
+from ..geometry.voxel import grid_for, inside_mask
 
 __all__ = ["Clump", "ClumpAccuracy", "ACCURACY_MEASURE_SECONDS", "CLUMP_TABLE_COLUMNS", "DEFAULT_SPHERE_CAP",
            "accuracy_measures", "accuracy_record", "check_target", "clump", "clump_accuracy", "clump_quality",
@@ -136,7 +136,7 @@ class Clump:
 
 
 def _equivalent_diameter(vertices, faces) -> float:
-    from ..solid import signed_volume
+    from ..geometry.solid import signed_volume
 
     vol = signed_volume(vertices, faces)
     if not vol > 0:
@@ -457,7 +457,7 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
         Each cell's distance to the nearest outside cell centre.
     inside_idx : (M, 3) int64
         The cells' indices, in grid order (x index first).
-    grid : grainforge.voxel.Grid
+    grid : grainforge.geometry.voxel.Grid
     n : int
         The most spheres to place.
     h : float

@@ -139,14 +139,14 @@ def settle_report(quit_settled: str, quit_not_settled: str, energy_unit: str = "
 
 
 def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
-    """Right-handed rotation by ``theta`` radians about ``axis``: :func:`grainforge.rotations.axis_angle_matrix`.
+    """Right-handed rotation by ``theta`` radians about ``axis``: :func:`grainforge.geometry.rotations.axis_angle_matrix`.
 
     Examples
     --------
     >>> np.round(rotation_matrix(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
     [0.0, 1.0, 0.0]
     """
-    from ..rotations import axis_angle_matrix
+    from ..geometry.rotations import axis_angle_matrix
 
     return axis_angle_matrix(axis, theta)
 
@@ -158,7 +158,7 @@ ORIENTATION_STREAM = 0x6F7269
 
 def grain_orientations(count: int, seed: int) -> np.ndarray:
     """The orientations of the ``count`` grains a deck or scene of ``seed`` places: ``(count, 4)`` unit
-    quaternions ``(w, x, y, z)``, uniformly random (:func:`grainforge.rotations.random_quaternions`).
+    quaternions ``(w, x, y, z)``, uniformly random (:func:`grainforge.geometry.rotations.random_quaternions`).
 
     Every engine's deck gets its grains' orientations from here, written out as numbers (the engine
     scripts draw none); grain ``k`` of the deck's placement order takes row ``k``.
@@ -171,7 +171,7 @@ def grain_orientations(count: int, seed: int) -> np.ndarray:
     >>> bool(np.array_equal(q[:2], grain_orientations(2, seed=0)))
     True
     """
-    from ..rotations import random_quaternions
+    from ..geometry.rotations import random_quaternions
 
     return random_quaternions(count, np.random.default_rng([int(seed), ORIENTATION_STREAM]))
 
@@ -254,7 +254,7 @@ def lattice_slots(count: int, side: int, cell: float, seed: int):
     >>> [(s, p.tolist()) for s, p, *_ in lattice_slots(3, 2, 1.0, 0)]
     [(0, [0.5, 0.5, 1.0]), (1, [1.5, 0.5, 1.0]), (2, [0.5, 1.5, 1.0])]
     """
-    from ..rotations import quaternion_axis_angle, quaternion_matrix
+    from ..geometry.rotations import quaternion_axis_angle, quaternion_matrix
 
     for slot, q in enumerate(grain_orientations(count, seed)):
         i, j, layer = slot % side, (slot // side) % side, slot // (side * side)

@@ -11,7 +11,7 @@ __all__ = ["enclosure_problems"]
 def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     """What stops a mesh from enclosing one solid with a well-defined inside (empty if nothing).
 
-    Weaker than :func:`grainforge.solid.solid_problems` in one respect only:
+    Weaker than :func:`grainforge.geometry.solid.solid_problems` in one respect only:
     an edge may be shared by four faces (two touching cubes of a DPA
     aggregate, once coincident vertices are merged), as long as every directed
     edge is matched by as many reverse edges. The winding number — hence the
@@ -28,7 +28,7 @@ def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     >>> enclosure_problems(b.vertices, b.faces[:-1])
     ['open boundary or inconsistent orientation']
     """
-    from ..solid import _directed_edges, face_components, signed_volume
+    from ..geometry.solid import _directed_edges, face_components, signed_volume
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)

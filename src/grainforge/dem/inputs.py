@@ -134,8 +134,8 @@ def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.
         from ..analysis.measure import solid_grain
 
         return solid_grain(path)  # sizes: checked in metres by the caller (dem --unit)
+    from ..geometry.solid import unique_rows
     from ..io import read_mesh
-    from ..solid import unique_rows
 
     mesh = read_mesh(path)
     # merge by exact position (sorted by x, y, z, as np.unique(axis=0) would, several times faster)
@@ -188,7 +188,7 @@ def build_templates(paths: Sequence[Path], *, workers: int = 1,
     wrap = progress or (lambda it: it)
     if workers <= 1 or len(tasks) < 4:
         return list(wrap(map(_load_one, tasks)))
-    from ..workers import ordered_map
+    from ..runtime.workers import ordered_map
 
     # ordered_map stops its workers at once on an error or a signal (a pool's own shutdown
     # would first run every queued grain to its end)

@@ -209,7 +209,7 @@ def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = 
     """Write a LAMMPS deck for ``templates`` into ``out`` (see the module text).
 
     Templates of shape ``"polyhedron"`` take the rounded/polyhedron body deck of
-    :func:`grainforge.dem.lammps_body.write_deck` (:func:`grainforge.dem.decks.write_deck`
+    :func:`grainforge.dem.lammps_body.write_deck` (:func:`grainforge.dem.engines.write_deck`
     chooses it).
     """
     if any(t.shape == "polyhedron" for t in templates):

@@ -6,7 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..voxel import Grid, grid_for, inside_mask
+from ..geometry.voxel import Grid, grid_for, inside_mask
 
 __all__ = ["LevelSet", "level_set", "surface_nodes", "DISTANCE_BLOCK", "MAX_NODES"]
 
@@ -77,7 +77,7 @@ def level_set_grid(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 
     >>> level_set_grid(s.vertices, s.faces, spacing=0.2).shape
     (12, 12, 12)
     """
-    from ..solid import signed_volume
+    from ..geometry.solid import signed_volume
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
@@ -122,7 +122,7 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
     """Signed distance to the mesh surface at the nodes of a regular grid.
 
     Inside/outside is exact at the nodes (scanline winding number,
-    :func:`grainforge.voxel.inside_mask`); the distance is the exact
+    :func:`grainforge.geometry.voxel.inside_mask`); the distance is the exact
     Euclidean distance to the nearest triangle (trimesh), signed.
 
     Parameters

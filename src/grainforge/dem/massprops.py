@@ -83,7 +83,7 @@ def rotation_to_quaternion(R: np.ndarray) -> np.ndarray:
 def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
     """Exact volume, centroid and inertia tensor of a closed, outward-oriented mesh.
 
-    The integrals come from :func:`grainforge.solid.second_moments` (signed
+    The integrals come from :func:`grainforge.geometry.solid.second_moments` (signed
     tetrahedra from the vertex mean); with ``C`` the second central moment the
     inertia tensor is ``tr(C) 1 − C``.
 
@@ -115,7 +115,7 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
     >>> np.round(mp.principal, 12).tolist()
     [2.5, 5.0, 6.5]
     """
-    from ..solid import second_moments
+    from ..geometry.solid import second_moments
 
     volume, centroid, second_c = second_moments(vertices, faces)
     if not np.isfinite(volume) or volume <= 0:

@@ -225,7 +225,7 @@ def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: 
     candidates, known, resolved, todo = _candidates(inputs, paths, k, pool)
     measured = {}
     if todo:
-        from ..workers import ordered_map
+        from ..runtime.workers import ordered_map
 
         for n, (i, d) in enumerate(zip(todo, ordered_map(_measure_file, [paths[i] for i in todo],
                                                           pool_workers(workers, len(todo)),

@@ -3,7 +3,7 @@
 :func:`check_mesh` runs, for one part:
 
 - **solid**: watertight, manifold, consistently oriented, one body, positive
-  volume (:func:`grainforge.solid.solid_problems`);
+  volume (:func:`grainforge.geometry.solid.solid_problems`);
 - **self-intersection**: pairs of non-adjacent triangles that cross
   (:func:`self_intersections`);
 - **wall thickness / minimum feature**: rays cast inward along the normal of
@@ -37,7 +37,7 @@ from typing import Any
 
 import numpy as np
 
-from ..solid import moller_trumbore
+from ..geometry.solid import moller_trumbore
 
 __all__ = ["CheckResult", "check_mesh", "equivalent_diameter", "TriangleGrid", "triangle_grid", "local_thickness", "self_intersections", "THIN_AREA_LIMIT", "NECK_FACTOR"]
 
@@ -110,7 +110,7 @@ class CheckResult:
 def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     """Number of self-intersecting triangle pairs of the mesh as written (float32, vertices merged).
 
-    The same test as the solid contract (:func:`grainforge.solid.self_intersections`).
+    The same test as the solid contract (:func:`grainforge.geometry.solid.self_intersections`).
 
     Examples
     --------
@@ -123,8 +123,8 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     >>> self_intersections(both.vertices, both.faces) > 0
     True
     """
-    from ..solid import as_written
-    from ..solid import self_intersections as count
+    from ..geometry.solid import as_written
+    from ..geometry.solid import self_intersections as count
 
     return count(*as_written(vertices, faces))
 
@@ -364,7 +364,7 @@ def equivalent_diameter(vertices: np.ndarray, faces: np.ndarray) -> float:
     >>> round(equivalent_diameter(b.vertices, b.faces), 4)   # (6/π)^(1/3)
     1.2407
     """
-    from ..solid import signed_volume
+    from ..geometry.solid import signed_volume
 
     f = np.asarray(faces, dtype=np.int64)
     vol = signed_volume(np.asarray(vertices, dtype=np.float64), f) if len(f) else 0.0
@@ -387,7 +387,7 @@ def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "pa
     """
     import trimesh
 
-    from ..solid import solid_problems
+    from ..geometry.solid import solid_problems
     from .printers import get_printer
 
     printer = get_printer(printer)

@@ -28,7 +28,7 @@ from typing import Any
 
 import numpy as np
 
-from ..geodesic import MAX_SUBDIVISIONS, icosphere
+from ..geometry.geodesic import MAX_SUBDIVISIONS, icosphere
 
 __all__ = ["Resolution", "chordal_deviation", "match_subdivisions", "supports_matching"]
 

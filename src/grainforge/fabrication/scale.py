@@ -19,7 +19,7 @@ SIZE_DEFINITIONS = {
 
 def _current_size(grain, definition: str) -> float:
     from ..analysis.descriptors import principal_dimensions
-    from ..solid import signed_volume
+    from ..geometry.solid import signed_volume
 
     if definition == "equivalent":
         return float(np.cbrt(6.0 * signed_volume(grain.vertices, grain.faces) / np.pi))

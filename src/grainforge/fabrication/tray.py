@@ -101,7 +101,7 @@ def orient_stable(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """
     from scipy.spatial import ConvexHull
 
-    from ..solid import volume_centroid
+    from ..geometry.solid import volume_centroid
 
     c = volume_centroid(vertices, faces)
     eq = ConvexHull(vertices).equations  # n·x + d <= 0 inside, n outward unit
@@ -275,8 +275,8 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
         k = scale_factor(g, task["size"], task["size_definition"])
         name = f"{task['method']}-{task['index']:05d}"
         return name, f"seed {task['seed']}", g.vertices * k, g.faces, getattr(task["params"], "subdivisions", None)
+    from ..geometry.solid import solid_problems
     from ..io import read_parts
-    from ..solid import solid_problems
 
     path = Path(task["path"])
     parts = read_parts(path)
@@ -290,7 +290,7 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
     if task["size"] is not None:
         v = v * scale_factor(part, task["size"], task["size_definition"])
     else:  # printed as it is, in mm
-        from ..solid import mesh_size_problem
+        from ..geometry.solid import mesh_size_problem
 
         problem = mesh_size_problem(v)
         if problem is not None:
@@ -302,9 +302,9 @@ def prepare(task: dict) -> Prepared:
     """Make, scale and orient one grain, and encode it for the output format."""
     from scipy.spatial import ConvexHull
 
+    from ..geometry.solid import signed_volume
     from ..io.stl import stl_triangles
     from ..io.threemf import mesh_xml
-    from ..solid import signed_volume
 
     name, source, v, f, subdivisions = _grain_mesh(task)
     v = orient_principal(v) if task["stacking"] else orient_stable(v, f)
@@ -337,7 +337,7 @@ def _prepared_in_order(tasks: Iterable[dict], workers: int, chunk: int = 16) -> 
 
     ``tasks`` may be a generator: it is consumed as the work goes.
     """
-    from ..workers import ordered_map
+    from ..runtime.workers import ordered_map
 
     for done in ordered_map(_prepare_chunk, _chunks(tasks, chunk), workers,
                             preload=["grainforge.fabrication.tray", "trimesh", "scipy.special"]):
@@ -458,7 +458,7 @@ def remove_stale_temps(out: Path) -> list[Path]:
     """Remove temporary print files for ``out`` left by killed runs (their process is gone)."""
     import re
 
-    from ..workers import pid_alive
+    from ..runtime.workers import pid_alive
 
     removed = []
     if not out.parent.is_dir():
@@ -478,7 +478,7 @@ ROW_BYTES = 2048
 
 def _check_size_of_job(source, workers: int) -> None:
     """Refuse, before any work, a tray that would take more than a day or more memory than the machine has."""
-    from ..estimate import check_job, check_memory, grain_seconds
+    from ..runtime.estimate import check_job, check_memory, grain_seconds
 
     n = len(source)
     check_memory(n * ROW_BYTES, what=f"a tray of {n} grains", option="--count")
@@ -599,7 +599,7 @@ def build_tray(
         source, resolution = _matched_source(source, printer, max_subdivisions, max_triangles)
     _check_size_of_job(source, workers)
 
-    from ..staging import signals_held
+    from ..runtime.staging import signals_held
 
     made = [q for q in [out.parent, *out.parent.parents] if not q.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)

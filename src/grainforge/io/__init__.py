@@ -107,7 +107,7 @@ def atomic_file(path: str | os.PathLike):
     >>> target.read_text(), sorted(p.name for p in target.parent.iterdir())
     ('x', ['a.txt'])
     """
-    from ..staging import signals_held
+    from ..runtime.staging import signals_held
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -217,7 +217,7 @@ def read_mesh(path: str | os.PathLike):
     ValueError
         If the file is missing, unreadable, corrupt, holds no triangles,
         non-finite coordinates or coordinates so far from the origin that float32
-        loses the shape (:func:`grainforge.solid.precision_problem`); the message
+        loses the shape (:func:`grainforge.geometry.solid.precision_problem`); the message
         says what is wrong with the file.
     """
     import trimesh
@@ -263,8 +263,8 @@ def read_mesh(path: str | os.PathLike):
 
 
 def _check_precision(path: Path, vertices, what: str = "the mesh") -> None:
-    """Refuse coordinates so far from the origin that float32 loses the shape (:func:`grainforge.solid.precision_problem`)."""
-    from ..solid import precision_problem
+    """Refuse coordinates so far from the origin that float32 loses the shape (:func:`grainforge.geometry.solid.precision_problem`)."""
+    from ..geometry.solid import precision_problem
 
     problem = precision_problem(vertices, what)
     if problem is not None:
@@ -295,7 +295,7 @@ def read_parts(path: str | os.PathLike) -> list:
         return parts
     mesh = read_mesh(path)  # (checks the precision)
     # STL stores a triangle soup: merge exactly coincident vertices so topology can be checked
-    from ..solid import unique_rows
+    from ..geometry.solid import unique_rows
 
     v, inv = unique_rows(np.asarray(mesh.vertices, dtype=np.float64))
     f = inv[np.asarray(mesh.faces, dtype=np.int64)]

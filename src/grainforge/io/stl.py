@@ -200,7 +200,7 @@ def read_stl(path: str | os.PathLike):
 def read_stl_parts(path) -> list:
     """The connected bodies of an STL (vertices merged exactly), in file order, as
     :class:`grainforge.io.threemf.Part` named ``body-K``."""
-    from ..solid import split_bodies
+    from ..geometry.solid import split_bodies
     from .threemf import Part
 
     mesh = read_stl(path)

@@ -25,8 +25,8 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry.solid import require_solid, volume_centroid
 from ..grain import Grain
-from ..solid import require_solid, volume_centroid
 
 __all__ = ["METHODS", "get", "generate", "resolve_rng"]
 
@@ -77,7 +77,7 @@ def generate(name: str, params: Any, rng: Any = None) -> Grain:
     """Generate one grain of method ``name`` with ``params``.
 
     The mesh is checked by the solid contract as a reader will see it
-    (:func:`grainforge.solid.solid_problems`: float32, vertices merged by
+    (:func:`grainforge.geometry.solid.solid_problems`: float32, vertices merged by
     position, closed 2-manifold, no near-zero-area face, one body, positive
     volume, no self-intersection) and translated so that its volume centroid
     is at the origin.

@@ -102,8 +102,8 @@ def mirror(points: np.ndarray, centre: np.ndarray, normal: np.ndarray) -> np.nda
 
 
 def rotation_matrix(axis: np.ndarray, angle: float) -> np.ndarray:
-    """(3, 3) rotation by ``angle`` about ``axis``: :func:`grainforge.rotations.axis_angle_matrix`."""
-    from ..rotations import axis_angle_matrix
+    """(3, 3) rotation by ``angle`` about ``axis``: :func:`grainforge.geometry.rotations.axis_angle_matrix`."""
+    from ..geometry.rotations import axis_angle_matrix
 
     return axis_angle_matrix(axis, angle)
 

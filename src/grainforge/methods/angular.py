@@ -47,7 +47,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..geodesic import icosphere
+from ..geometry.geodesic import icosphere
 from ..params import ParameterError, param, validate
 
 __all__ = ["Params", "Core", "build", "core", "core_edges", "radius", "angular", "NAME"]
@@ -423,13 +423,13 @@ def _inertia_stretch(vertices: np.ndarray, faces: np.ndarray, aspect) -> np.ndar
     >>> unit, faces = icosphere(3)
     >>> v = unit * np.array([0.5, 2.0, 1.0])                      # an ellipsoid with its long axis on y
     >>> M = _inertia_stretch(v, np.array(faces), (3.0, 2.0, 1.0))
-    >>> from grainforge.solid import second_moments
+    >>> from grainforge.geometry.solid import second_moments
     >>> vol, _, C = second_moments(v @ M.T, np.array(faces))
     >>> sd = np.sqrt(np.diag(C))
     >>> np.round(sd / sd[2], 4).tolist(), bool(abs(np.linalg.det(M) - 1) < 1e-12)
     ([3.0, 2.0, 1.0], True)
     """
-    from ..solid import second_moments
+    from ..geometry.solid import second_moments
 
     vol, _, second = second_moments(vertices, faces)
     var, axes = np.linalg.eigh(second / vol)

@@ -31,15 +31,15 @@ from typing import Any
 
 import numpy as np
 
-from ..contours import (
+from ..geometry.geodesic import icosphere
+from ..outline.contours import (
     DEFAULT_DECAY,
     PRESETS,
     Contour,
     descriptors_of_radii,
 )
-from ..geodesic import icosphere
+from ..outline.spectra import extend_spectrum, read_spectra
 from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
-from ..spectra import extend_spectrum, read_spectra
 
 __all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
 
@@ -58,7 +58,7 @@ def validity_parameter(p: Params) -> str:
     return {"fractal": "fractal_amplitude", "image": "images", "given": "sections"}.get(p.contour, "descriptors")
 #: contour sources: Fourier descriptors, fractal profiles, image files, a
 #: measured spectrum table (``grainforge fourier`` CSV), or
-#: :class:`~grainforge.contours.Contour` objects given from Python.
+#: :class:`~grainforge.outline.contours.Contour` objects given from Python.
 SOURCES = ("fourier", "fractal", "image", "spectrum", "given")
 #: default (D2, D3, D8) when neither descriptors nor a preset is given.
 DEFAULT_PRESET = "rough-angular"
@@ -149,7 +149,7 @@ class Params:
         "spectrum (no ridges; the sections carry the descriptors on average, not exactly)", kind="str",
         choices=ROUGHNESS,
     )
-    #: three :class:`~grainforge.contours.Contour` (xy, xz, yz) given from Python
+    #: three :class:`~grainforge.outline.contours.Contour` (xy, xz, yz) given from Python
     sections: tuple[Contour, Contour, Contour] | None = field(default=None, compare=False, repr=False)
 
     def __post_init__(self):
@@ -560,7 +560,7 @@ def _own_centre(fine: np.ndarray, spec: np.ndarray) -> np.ndarray:
     that stops being star-shaped about its centroid (extreme descriptors) is
     left as synthesised.
     """
-    from ..contours import polygon_contour
+    from ..outline.contours import polygon_contour
 
     target = np.abs(spec)
     n = len(spec)

@@ -35,9 +35,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..geodesic import icosphere, spherical
+from ..geometry.geodesic import icosphere, spherical
+from ..geometry.rotations import random_rotation
 from ..params import ParameterError, param, validate
-from ..rotations import random_rotation
 
 __all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "draw_field", "Field",
            "SURFACES", "ellipsoid_radius", "spread_axes"]
@@ -362,7 +362,7 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> unit, _ = icosphere(2)
     >>> for surface in SURFACES:
     ...     f = draw_field(Params(surface=surface), np.random.default_rng(0))
@@ -478,7 +478,7 @@ def overlay(unit: np.ndarray, params: Params | None = None, rng=None) -> np.ndar
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> unit, _ = icosphere(3)
     >>> d = overlay(unit, Params(surface="seamless", amplitude=0.05), rng=7)
     >>> d.shape, round(float(np.sqrt(np.mean(d**2))), 6)
@@ -628,7 +628,7 @@ def aspect_correction(vertices: np.ndarray, faces: np.ndarray, aspect) -> tuple[
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> u, f = icosphere(3)
     >>> M, res = aspect_correction(u * [1.1, 0.9, 1.0], np.array(f), (3, 2, 1))
     >>> bool(res < 2e-3), round(float(np.linalg.det(M)), 9)

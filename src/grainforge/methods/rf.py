@@ -3,7 +3,7 @@
 Mollon & Zhao (2014) style; docs/design/algorithms.md §5 and ``docs/methods/rf.md``.  The
 radius on the unit sphere is r(u) = r0 (1 + f(u)), with f a zero-mean,
 isotropic Gaussian random field synthesised with real spherical harmonics
-(:mod:`grainforge.harmonics`) at the vertices of a geodesic sphere:
+(:mod:`grainforge.geometry.harmonics`) at the vertices of a geodesic sphere:
 
     f(u) = Σ_{l=2}^{L} Σ_{m=−l}^{l} a_lm Y_lm(u),   a_lm ~ N(0, C_l)
 
@@ -52,11 +52,11 @@ from typing import Any
 
 import numpy as np
 
-from ..contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
-from ..geodesic import icosphere
-from ..harmonics import degree_order, icosphere_synthesis, legendre_equator
+from ..geometry.geodesic import icosphere
+from ..geometry.harmonics import degree_order, icosphere_synthesis, legendre_equator
+from ..outline.contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
+from ..outline.spectra import extend_spectrum, read_spectra
 from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
-from ..spectra import extend_spectrum, read_spectra
 
 __all__ = ["Params", "build", "rf", "angular_spectrum", "section_spectrum", "target_spectrum", "coefficients", "field",
            "centred_section_spectrum", "centring_shift", "mean_modulus_factor", "AMPLITUDES"]

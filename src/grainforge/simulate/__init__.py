@@ -9,7 +9,7 @@ comparison in the DEM engine Yade before anything is printed:
 1. the population's grains (mesh files, a run folder, a manifest, or grains
    generated from a recipe) become clumps through :mod:`grainforge.dem`, each
    carrying the mesh's exact mass, centre and inertia;
-2. a Yade deck is written with a scene from :mod:`grainforge.simulate.scenes`
+2. a Yade deck is written with a scene from :mod:`grainforge.simulate.yade_scenes`
    (a lifted cylinder on a rough base for the angle of repose; a periodic layer
    on a rough plate tilted until it slides for the tilt table) and run headless
    (``yade -n -x run.py``) once per seed;
@@ -22,9 +22,9 @@ Nothing is tuned to the paper's numbers; the contact friction is an input.
 """
 
 from .engine import EngineFailed, measure_result, run_test, run_yade, summarise, write_test_deck, yade_executable
-from .population import build_population, check_inputs
+from .run_folders import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage, staged
 from .settings import QUICK, QUICK_TRIAXIAL, TESTS, Settings, TriaxialSettings, check_size, scene_settings
-from .staging import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage, staged
+from .specimen import build_population, check_inputs
 
 __all__ = ["TESTS", "Settings", "TriaxialSettings", "QUICK", "QUICK_TRIAXIAL", "yade_executable", "scene_settings", "check_inputs", "build_population",
            "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage", "staged",

@@ -32,17 +32,17 @@ def yade_executable() -> str:
 def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
                     *, overwrite: bool = False, engine: str = "yade") -> list[Path]:
     """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
-    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts.deck_files`).
+    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts_scenes.deck_files`).
 
-    In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset`) picks the scene;
+    In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset_scenes`) picks the scene;
     ``settings`` of a triaxial test are :class:`~grainforge.simulate.TriaxialSettings`.
     """
     if engine == "liggghts":
-        from .liggghts import write_test_deck as write_liggghts
+        from .liggghts_scenes import write_test_deck as write_liggghts
 
         return write_liggghts(templates, test, settings, seed, out, overwrite=overwrite)
     from ..dem.yade import write_deck
-    from .levelset import scene_extra, scene_text
+    from .levelset_scenes import scene_extra, scene_text
 
     shape = templates[0].shape if templates else "clump"
     if test == "triaxial":
@@ -124,7 +124,7 @@ def run_deck(deck: str | os.PathLike, *, engine: str = "yade", mpi: int | None =
     (:func:`grainforge.simulate.sweep.run_remote`).
     """
     if engine == "liggghts":
-        from .liggghts import run_liggghts
+        from .liggghts_scenes import run_liggghts
 
         return run_liggghts(deck, mpi=mpi, progress=progress)
     return run_yade(deck, progress=progress)
@@ -155,7 +155,7 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     engine : {"yade", "liggghts"}
     mpi : int, optional
         LIGGGHTS only: ranks of each run under ``mpirun``.
-    executor : grainforge.cluster.DaskExecutor, optional
+    executor : grainforge.runtime.cluster.DaskExecutor, optional
         Run each seed as a Dask task (:func:`grainforge.simulate.sweep.run_remote`: the deck's files go to the
         worker, the run's files come back into its folder); ``workers`` is then unused, and ``progress`` says
         when each run starts and ends.

@@ -220,7 +220,7 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
 
     Raises
     ------
-    grainforge.estimate.TooLargeError
+    grainforge.runtime.estimate.TooLargeError
         With the estimate and the options that reduce it.
 
     Examples
@@ -234,7 +234,7 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     >>> 100 < check_size("triaxial", TriaxialSettings(), available=3) < 3600  # 3 runs of 200 grains, 2 at once
     True
     """
-    from ..estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
+    from ..runtime.estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
 
     templates = min(settings.templates, available)
     spheres = 1 if as_spheres else settings.spheres

@@ -119,7 +119,7 @@ def run_on_cluster(executor, run, decks: Sequence[Path], which: Sequence[int], *
     ------
     EngineFailed
         A run failed on its worker: its folder has its deck and the engine's log (the other tasks are cancelled).
-    grainforge.cluster.SchedulerLost
+    grainforge.runtime.cluster.SchedulerLost
         The scheduler was lost (the runs finished are in their folders and the journal).
     """
     import concurrent.futures as cf

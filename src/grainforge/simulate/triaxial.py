@@ -3,7 +3,7 @@ table and figure (pure NumPy apart from the figure; no engine needed).
 
 The source paper's bulk test is a conventional drained triaxial compression at an effective confining stress of
 20 kPa, plotted as the stress ratio q/p′ and the volumetric strain against the axial strain.  The scene
-(:data:`grainforge.simulate.scenes.TRIAXIAL`) compacts the grains isotropically to the confining stress in a
+(:data:`grainforge.simulate.yade_scenes.TRIAXIAL`) compacts the grains isotropically to the confining stress in a
 periodic cell, then shortens the cell in z at a constant engineering strain rate while servo-controlling x and
 y at the confining stress, and records the curve.  This module turns that record into the test's figures.
 

@@ -118,11 +118,11 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     import sys
     from dataclasses import replace
 
-    from ..cluster import SchedulerLost
-    from ..estimate import TooLargeError
+    from ..runtime.cluster import SchedulerLost
+    from ..runtime.estimate import TooLargeError
     from ..simulate import check_inputs, check_size
-    from ..simulate.calibrate import check_target
-    from ..simulate.population import template_make_seconds
+    from ..simulate.friction_search import check_target
+    from ..simulate.specimen import template_make_seconds
     from .interrupts import ready_for_work, signals_held
 
     try:
@@ -156,7 +156,7 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
     pool = min(available, 4 * settings.templates) if quick else None
     make_seconds = template_make_seconds(settings.templates, available, make_seconds, pool)
     executor, workers = engine_runners(scheduler, workers, mpi)
-    from ..estimate import SECONDS_LIMIT, _limit, duration
+    from ..runtime.estimate import SECONDS_LIMIT, _limit, duration
 
     try:
         one = check_size(test, settings, available=available, make_seconds=make_seconds, as_spheres=as_spheres,
@@ -174,11 +174,11 @@ def calibrate(test, inputs, target_angle, out, friction_range, start, tolerance,
                                f"{_limit()}); lower --max-frictions, --grains or --seeds")
     if executor is None:  # on a cluster, the engine is the workers'
         check_installed(engine, mpi)
-    ready_for_work(HEAVY_MODULES + ("grainforge.simulate.calibrate",), seconds, bound="at most about")
+    ready_for_work(HEAVY_MODULES + ("grainforge.simulate.friction_search",), seconds, bound="at most about")
     from tqdm import tqdm
 
     from ..simulate import EngineFailed, commit_stage, staged
-    from ..simulate.calibrate import Unreachable, run_calibration, write_calibration
+    from ..simulate.friction_search import Unreachable, run_calibration, write_calibration
     from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)

@@ -6,7 +6,7 @@ import os
 import shutil
 from pathlib import Path
 
-from ..staging import commit_stage, discard_stage, open_stage, staged
+from ..runtime.staging import commit_stage, discard_stage, open_stage, staged
 
 __all__ = ["open_stage", "staged", "commit_stage", "discard_stage", "FAILED_PREFIX", "keep_failed"]
 

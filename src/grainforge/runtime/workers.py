@@ -240,7 +240,7 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
     yielded, so ``items`` may be a long generator.  ``workers <= 1`` runs in
     this process.  An exception in ``fn`` is raised here, for its item, and
     the pool is shut down (pending work cancelled).  With ``executor`` (a
-    :class:`grainforge.cluster.DaskExecutor`, say) the items run there
+    :class:`grainforge.runtime.cluster.DaskExecutor`, say) the items run there
     instead, ``workers`` of them at a time; the executor stays open (its
     owner closes it), and an error or interrupt cancels the items submitted.
 
@@ -292,7 +292,7 @@ def close_pool(pool, abort: bool = False) -> None:
     manager thread.
     """
     if not abort or not hasattr(pool, "worker_processes"):
-        # another executor (a :class:`grainforge.cluster.DaskExecutor`): its own shutdown cancels what is left
+        # another executor (a :class:`grainforge.runtime.cluster.DaskExecutor`): its own shutdown cancels what is left
         pool.shutdown(wait=True, cancel_futures=True)
         return
     processes = pool.worker_processes()

@@ -29,10 +29,11 @@ from pathlib import Path
 
 import numpy as np
 
-from .params import ParameterError
+from ...params import ParameterError
+from ...runtime.cache import cache_dir
 
 __all__ = [
-    "dpa", "Calibration", "calibrate", "parse_exponents", "cache_dir", "cached_calibration",
+    "Calibration", "calibrate", "parse_exponents", "cached_calibration",
     "exponent_for_dimension", "DEFAULT_EXPONENTS", "DEFAULT_REPEATS", "COLUMNS",
 ]
 
@@ -149,7 +150,7 @@ class Calibration:
 
     def write_csv(self, path: str | os.PathLike) -> Path:
         """Write ``calibration.csv``-style text atomically."""
-        from .io import write_csv
+        from ...io import write_csv
 
         return write_csv(path, self.rows(), COLUMNS, units=UNITS)
 
@@ -209,7 +210,7 @@ class Calibration:
 
     def plot(self, path: str | os.PathLike) -> Path:
         """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."""
-        from .io import save_figure
+        from ...io import save_figure
 
         return save_figure(self.figure(), path)
 
@@ -249,7 +250,7 @@ class Calibration:
 
 def _measure(task) -> tuple[float, float, float, float]:
     """Grow one aggregate and return (D_A, porosity, R_g, D_A_scaling).  Module level so that it pickles."""
-    from .methods.dpa import aggregate
+    from .aggregation import aggregate
 
     primitive, primaries, exponent, seed_seq = task
     m = aggregate(primitive, primaries, exponent, np.random.default_rng(seed_seq)).measures()
@@ -296,7 +297,7 @@ def calibrate(
     >>> c.exponent.tolist(), bool(c.D_A_mean[0] > c.D_A_mean[1])
     ([0.5, 20.0], True)
     """
-    from .methods.dpa import Params
+    from .aggregation import Params
 
     exps = np.asarray([float(e) for e in exponents], dtype=np.float64)
     if len(exps) == 0:
@@ -318,9 +319,9 @@ def calibrate(
         results: Iterable = map(_measure, tasks)
         pool = None
     else:
-        from .workers import close_pool, process_pool, single_threaded_children
+        from ...runtime.workers import close_pool, process_pool, single_threaded_children
 
-        pool = process_pool(workers, ["grainforge.calibration", "grainforge.methods.dpa", "trimesh"])
+        pool = process_pool(workers, ["grainforge.methods.dpa.calibration", "grainforge.methods.dpa", "trimesh"])
         with single_threaded_children():  # map submits every task, starting the workers
             results = pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
     ok = False
@@ -345,20 +346,6 @@ def calibrate(
         D_A_mean=dm, D_A_std=ds, porosity_mean=pm, porosity_std=ps, R_g_mean=rm, R_g_std=rs,
         D_A_scaling_mean=sm, D_A_scaling_std=ss,
     )
-
-
-def cache_dir() -> Path:
-    """Where calibration curves are cached.
-
-    ``$GRAINFORGE_CACHE`` if set, else ``$XDG_CACHE_HOME/grainforge``, else
-    ``~/.cache/grainforge``.
-    """
-    env = os.environ.get("GRAINFORGE_CACHE")
-    if env:
-        return Path(env)
-    xdg = os.environ.get("XDG_CACHE_HOME")
-    base = Path(xdg) if xdg else Path.home() / ".cache"
-    return base / "grainforge"
 
 
 def _cache_path(primitive: str, primaries: int, exponents, repeats: int, seed: int) -> Path:
@@ -412,82 +399,8 @@ def exponent_for_dimension(
     ParameterError
         If ``target`` is outside the calibrated range (the message gives it).
     """
-    from .methods.dpa import Params
+    from .aggregation import Params
 
     Params(primitive=primitive, exponent=1.0, primaries=primaries, target_fractal_dimension=target)
     cal = cached_calibration(primitive, primaries, progress=progress)
     return cal.exponent_for(target)
-
-
-def dpa(
-    *,
-    primitive: str = "cube",
-    exponent: float | None = None,
-    primaries: int = 200,
-    smooth: int = 0,
-    target_fractal_dimension: float | None = None,
-    rng=None,
-):
-    """Generate one aggregate grain by Directed Polyhedra Aggregation (paper §2.3).
-
-    Parameters
-    ----------
-    primitive : str
-        ``cube`` (lattice), ``octahedron`` (as in the paper), or ``tetrahedron``,
-        ``dodecahedron``, ``icosahedron``, ``truncated-octahedron``.
-    exponent : float, optional
-        ε of Eq. 4 in [0.01, 100] (default 1.0).  Exclusive with
-        ``target_fractal_dimension``.
-    primaries : int
-        Number of primaries N in [1, 100000] (default 200).
-    smooth : int
-        0 keeps sharp corners; K in 1..4 rounds them by K steps of Loop
-        subdivision (each step multiplies the triangles by four).
-    target_fractal_dimension : float, optional
-        Ask for an aggregate fractal dimension D_A instead of ε: ε is read
-        from the (cached, computed on first use) calibration curve of this
-        primitive and N, see :func:`exponent_for_dimension`.
-    rng : None, int or numpy.random.Generator
-        Seed or generator.
-
-    Returns
-    -------
-    Grain
-        Centred, scaled so that the primaries' total volume is a unit-radius
-        sphere's; ``info`` holds D_A, porosity, R_g, cavity_volume and
-        primary_size.
-
-    Raises
-    ------
-    ValueError
-        For an out-of-range parameter, an unknown primitive, or a target
-        D_A outside the calibrated range.
-
-    References
-    ----------
-    Hanaor et al., *3D printable geomaterials*, Géotechnique (2016), Eqs. 4–5.
-
-    Examples
-    --------
-    >>> from grainforge import dpa
-    >>> g = dpa(primitive="cube", exponent=0.5, primaries=27, rng=3)
-    >>> g.method, round(float(g.mesh.volume / g.info["primary_size"] ** 3), 2)  # edge contacts notched
-    ('dpa', 27.0)
-    >>> dpa(exponent=0)
-    Traceback (most recent call last):
-    ...
-    grainforge.params.ParameterError: exponent must be in [0.01, 100], got 0.0
-    """
-    from .methods import generate, get
-
-    P = get("dpa").Params  # the registered module's class (robust to the module being imported twice)
-
-    if target_fractal_dimension is not None and exponent is not None:
-        raise ParameterError("target_fractal_dimension", "cannot be combined with exponent: give one of them")
-    if target_fractal_dimension is not None:
-        P(primitive=primitive, exponent=1.0, primaries=primaries, smooth=smooth,
-          target_fractal_dimension=target_fractal_dimension)  # validate first
-        exponent = exponent_for_dimension(target_fractal_dimension, primitive=primitive, primaries=primaries)
-    p = P(primitive=primitive, exponent=exponent, primaries=primaries, smooth=smooth,
-          target_fractal_dimension=target_fractal_dimension)
-    return generate("dpa", p, rng)

@@ -1,7 +1,7 @@
 """Level-set grains in the virtual bulk tests: the Yade scenes on Yade's level-set contact.
 
 ``simulate repose|tilt --shape levelset`` runs the scenes of
-:mod:`grainforge.simulate.scenes` with every grain's contact geometry a level
+:mod:`grainforge.simulate.yade_scenes` with every grain's contact geometry a level
 set — the signed distance field on a grid that ``grainforge dem --shape
 levelset`` writes (:func:`grainforge.dem.levelset.level_set`), carried by a
 clump whose six mass spheres give the mesh's exact mass, centre and inertia,
@@ -143,7 +143,7 @@ def scene_text(test: str, shape: str = "clump") -> str:
 
     Examples
     --------
-    >>> from grainforge.simulate.scenes import TILT
+    >>> from grainforge.simulate.yade_scenes import TILT
     >>> scene_text("tilt") == TILT
     True
     >>> text = scene_text("tilt", "levelset")
@@ -152,7 +152,7 @@ def scene_text(test: str, shape: str = "clump") -> str:
     >>> "Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)" in text  # torques from the contact points
     True
     """
-    from .scenes import COMMON, REPOSE, TILT, TRIAXIAL
+    from .yade_scenes import COMMON, REPOSE, TILT, TRIAXIAL
 
     scene = {"repose": REPOSE, "tilt": TILT, "triaxial": TRIAXIAL}[test]
     if shape == "clump":

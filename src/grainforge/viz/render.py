@@ -355,7 +355,7 @@ def contact_sheet(
     radius: float | None = None,
 ) -> Path:
     """Write a PNG with one shaded, labelled panel per mesh (:func:`contact_sheet_figure`)."""
-    from .io import save_figure
+    from ..io import save_figure
 
     fig = contact_sheet_figure(meshes, labels, columns=columns, title=title, panel_size=panel_size, dpi=dpi,
                                elev=elev, azim=azim, color=color, unit=unit, common_scale=common_scale,

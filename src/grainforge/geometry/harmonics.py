@@ -191,7 +191,7 @@ def synthesis(unit: np.ndarray, degree: int, lmin: int = 0) -> Synthesis:
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> v, _ = icosphere(2)
     >>> rng = np.random.default_rng(0)
     >>> a = rng.standard_normal(9 * 9 - 4)

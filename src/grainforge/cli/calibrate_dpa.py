@@ -38,8 +38,8 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
     porosity_std, R_g_mean_primary_sizes, R_g_std_primary_sizes, D_A_scaling_mean, D_A_scaling_std, ...)
     and calibration.png (the curves with ±1 s.d. bands).
     """
-    from ..calibration import calibrate as run_calibration
-    from ..calibration import parse_exponents
+    from ..methods.dpa.calibration import calibrate as run_calibration
+    from ..methods.dpa.calibration import parse_exponents
 
     try:
         grid = parse_exponents(exponents)
@@ -55,7 +55,7 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
         )
     except ParameterError as exc:
         raise bad_parameter(exc) from None
-    from ..staging import commit_stage, staged
+    from ..runtime.staging import commit_stage, staged
     from .interrupts import signals_held
 
     with staged(out) as stage:  # the table and its figure appear together, or neither (an interrupt while drawing)
@@ -73,8 +73,8 @@ def _estimate(primitive: str, primaries: int, count: int, workers) -> None:
     """Refuse a calibration beyond a day before any work (option: --repeats, or --primaries)."""
     import os
 
-    from ..estimate import TooLargeError
     from ..methods.dpa import Params
+    from ..runtime.estimate import TooLargeError
     from .generate import announce_estimate
 
     try:

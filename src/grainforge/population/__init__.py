@@ -57,10 +57,10 @@ from typing import Any
 
 import numpy as np
 
+from ..fabrication.scale import SIZE_DEFINITIONS
+from ..io import FORMATS, atomic_write, write_csv
+from ..params import ParameterError, ParamSpec, specs
 from .distributions import Distribution, FixedSize, GradingCurve, LognormalSize
-from .fabrication.scale import SIZE_DEFINITIONS
-from .io import FORMATS, atomic_write, write_csv
-from .params import ParameterError, ParamSpec, specs
 
 __all__ = [
     "RecipeError",
@@ -191,7 +191,7 @@ class Recipe:
         return hashlib.sha256(self.text.encode("utf-8")).hexdigest()
 
     def file_name(self, index: int) -> str:
-        from .run import grain_file_name
+        from .generate import grain_file_name
 
         return grain_file_name(self.method, index, self.format)
 
@@ -225,7 +225,7 @@ def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
     ...
     grainforge.population.RecipeError: <recipe>:2: count: must be a whole number >= 1, got 0
     """
-    from .methods import METHODS, get
+    from ..methods import METHODS, get
 
     def fail(path: Sequence[str], reason: str):
         raise RecipeError(source, ".".join(path), reason, field_line(text, path))
@@ -294,7 +294,7 @@ def _grains(raw, pspecs, typical, params_type, count, method, fail) -> dict[str,
         return {}
     if not isinstance(raw, dict) or not raw:
         fail(["grains"], "must be a table of name = [one value per grain]")
-    from .fabrication.scale import MAX_SIZE_MM, MIN_SIZE_MM
+    from ..fabrication.scale import MAX_SIZE_MM, MIN_SIZE_MM
 
     out: dict[str, tuple] = {}
     for name, values in raw.items():
@@ -486,7 +486,7 @@ def _size(raw, fail):
     modes = [m for m in ("mm", "distribution", "sieves_mm") if m in raw]
     if len(modes) != 1:
         fail(["size"], "give exactly one of mm (fixed), distribution = \"lognormal\", or sieves_mm + percent_passing")
-    from .fabrication.scale import MAX_SIZE_MM, MIN_SIZE_MM
+    from ..fabrication.scale import MAX_SIZE_MM, MIN_SIZE_MM
 
     def in_size_range(key, value):
         if not MIN_SIZE_MM <= value <= MAX_SIZE_MM:
@@ -546,7 +546,7 @@ def grain_stream(root_seed: int, index: int) -> np.random.Generator:
 
 def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
     """Grain ``index``'s seed, Params and size (mm), from its own stream only."""
-    from .methods import get
+    from ..methods import get
 
     params_type = get(recipe.method).Params
     rng = grain_stream(recipe.seed, index)
@@ -615,7 +615,7 @@ def make_grain(recipe: Recipe, index: int) -> GrainResult:
 
     Runs in a worker process (local pool or Dask); the client writes the file.
     """
-    from .run import encode_grain
+    from .generate import encode_grain
 
     seed, params, size = draw_grain(recipe, index)
     name = recipe.file_name(index)
@@ -659,10 +659,10 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process
         for i in todo:
             yield make_grain(recipe, i)
         return
-    from .methods import METHODS
-    from .workers import close_pool, process_pool
+    from ..methods import METHODS
+    from ..runtime.workers import close_pool, process_pool
 
-    ex = process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.run",
+    ex = process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.population.generate",
                                 "trimesh", "scipy.special"])
     ok = False
     try:
@@ -673,7 +673,7 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process
 
 
 def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterable[GrainResult]:
-    from .cluster import dask_executor
+    from ..runtime.cluster import dask_executor
 
     with dask_executor(scheduler) as ex:
         yield from _executor_results(ex, recipe, todo, ex.workers)
@@ -684,7 +684,7 @@ def _executor_results(ex, recipe: Recipe, todo: Sequence[int], workers: int) -> 
     they finish, ``4 × workers`` in flight (memory does not grow with the count); the owner closes ``ex``."""
     from concurrent.futures import FIRST_COMPLETED, wait
 
-    from .workers import single_threaded_children
+    from ..runtime.workers import single_threaded_children
 
     it = iter(todo)
     ahead = 4 * workers
@@ -704,7 +704,7 @@ def _executor_results(ex, recipe: Recipe, todo: Sequence[int], workers: int) -> 
 
 def check_recipe_size(recipe: Recipe, workers: int = 1) -> float:
     """Refuse a recipe whose population would take more than a day (estimated from grain 0's parameters)."""
-    from .estimate import check_job, grain_seconds
+    from ..runtime.estimate import check_job, grain_seconds
 
     _, params, _ = draw_grain(recipe, 0)
     return check_job(recipe.count, grain_seconds(recipe.method, params),
@@ -731,7 +731,7 @@ def check_extremes(recipe: Recipe) -> None:
     """
     import dataclasses
 
-    from .methods import generate
+    from ..methods import generate
 
     varying = {k: v for k, v in recipe.params.items() if isinstance(v, Distribution)}
     if not varying:
@@ -782,7 +782,7 @@ def _extremes(dist: Distribution) -> list:
 
 def existing_grains(out: Path, recipe: Recipe) -> bool:
     """Whether ``out`` holds a grain file of this recipe's naming (listing the folder, not every name)."""
-    from .run import existing_outputs
+    from .generate import existing_outputs
 
     return any(p.name != "manifest.csv" for p in existing_outputs(out, recipe.method, recipe.count, recipe.format))
 
@@ -832,11 +832,11 @@ def run_batch(
     ValueError
         For a recipe that does not match the interrupted batch, an unreachable
         scheduler, or a grain that cannot be made (named by index and seed).
-    grainforge.cluster.SchedulerLost
+    grainforge.runtime.cluster.SchedulerLost
         The Dask scheduler lost mid-run: the grains recorded so far stay, with
         their journal, for ``resume``.
     """
-    from .run import MANIFEST
+    from .generate import MANIFEST
 
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
@@ -880,7 +880,7 @@ def run_batch(
 
 
 def _run_batch(recipe, out, names, *, workers, scheduler, resume, overwrite, progress, report, in_process):
-    from .run import MANIFEST, manifest_columns
+    from .generate import MANIFEST, manifest_columns
 
     journal = out / JOURNAL
     saved = journal / "recipe.toml"

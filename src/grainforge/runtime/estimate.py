@@ -18,7 +18,7 @@ True
 >>> check_job(10**9, t, what="1000000000 fso grains", option="--count")
 Traceback (most recent call last):
 ...
-grainforge.estimate.TooLargeError: 1000000000 fso grains would take about 5 years of computing (1.6e+02 ms each; limit 1 day); lower --count
+grainforge.runtime.estimate.TooLargeError: 1000000000 fso grains would take about 5 years of computing (1.6e+02 ms each; limit 1 day); lower --count
 """
 
 from __future__ import annotations

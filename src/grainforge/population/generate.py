@@ -13,12 +13,12 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
-from .analysis.descriptors import BASIC_COLUMNS, basic_descriptors
-from .fabrication.scale import check_size, to_size
-from .io import FORMATS, _cell, export_bytes, file_mode
-from .methods import generate, get
-from .params import as_dict, specs
-from .staging import signals_held, staged
+from ..analysis.descriptors import BASIC_COLUMNS, basic_descriptors
+from ..fabrication.scale import check_size, to_size
+from ..io import FORMATS, _cell, export_bytes, file_mode
+from ..methods import generate, get
+from ..params import as_dict, specs
+from ..runtime.staging import signals_held, staged
 
 __all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files",
            "existing_outputs", "earlier_run_files", "manifest_rows"]
@@ -174,7 +174,7 @@ def write_run(
     with staged(out) as stage:  # on success the stage is empty; on failure nothing new is left behind
         with open(stage / MANIFEST, "w", newline="", encoding="utf-8") as fh:
             writer = csv.writer(fh, lineterminator="\n")
-            from .units import UNITS, headers
+            from ..units import UNITS, headers
 
             writer.writerow(headers(columns, UNITS))  # every header states its unit, as write_csv(units=True)
             iterator = enumerate(seeds)

@@ -8,7 +8,7 @@ Hanaor et al., *3D printable geomaterials* (Géotechnique 2016):
    descriptors, (c) a grain image.  The paper's (c) is an optical micrograph
    of a sand grain, which grainforge does not ship; panel (c) here is traced
    from a synthetic image (a rendered FSO grain) through the same image →
-   contour path (:meth:`grainforge.contours.Contour.from_image`) a user's
+   contour path (:meth:`grainforge.outline.contours.Contour.from_image`) a user's
    micrograph would take.
 4. CRI grains from three FD-defined contours: (a) three different FD sets,
    (b) and (c) one FD set for all three contours.
@@ -58,7 +58,7 @@ SIZE_NOTE = f"; each grain scaled to d_eq = {PRINTED_SIZE:g} mm"
 
 def _printed(grain):
     """``grain`` scaled to the figures' printed size, d_eq = :data:`PRINTED_SIZE` mm."""
-    from .fabrication.scale import to_size
+    from ..fabrication.scale import to_size
 
     return to_size(grain, PRINTED_SIZE)
 
@@ -68,7 +68,7 @@ class Unavailable(Exception):
 
 
 def _method(name: str):
-    from .methods import METHODS
+    from ..methods import METHODS
 
     if name not in METHODS:
         raise Unavailable(f"the {name.upper()} generator is not available in this build")
@@ -76,7 +76,7 @@ def _method(name: str):
 
 def figure1(out: Path, subdivisions: int = 5) -> Path:
     """FSO, D = 2.4, L/R from 0.1 to 10 (paper Fig. 1)."""
-    from .methods.fso import fso
+    from ..methods.fso import fso
     from .render import contact_sheet
 
     grains = [_printed(fso(fractal_dimension=2.4, length_ratio=L, subdivisions=subdivisions, rng=SEED))
@@ -88,7 +88,7 @@ def figure1(out: Path, subdivisions: int = 5) -> Path:
 
 def figure2(out: Path, subdivisions: int = 5) -> Path:
     """FSO, L = 7 R, D from 2.0 to 2.8 (paper Fig. 2)."""
-    from .methods.fso import fso
+    from ..methods.fso import fso
     from .render import contact_sheet
 
     grains = [_printed(fso(fractal_dimension=D, length_ratio=7.0, subdivisions=subdivisions, rng=SEED))
@@ -100,7 +100,7 @@ def figure2(out: Path, subdivisions: int = 5) -> Path:
 
 def _synthetic_micrograph(size: int = 320, subdivisions: int = 5) -> np.ndarray:
     """A grey image of a rendered FSO grain on a dark background (stand-in for a micrograph)."""
-    from .methods.fso import fso
+    from ..methods.fso import fso
     from .render import render_image
 
     g = fso(fractal_dimension=2.3, length_ratio=4.0, amplitude=0.12, subdivisions=subdivisions, rng=SEED)
@@ -110,7 +110,7 @@ def _synthetic_micrograph(size: int = 320, subdivisions: int = 5) -> np.ndarray:
 
 def _traced_micrograph(subdivisions: int = 5):
     """The synthetic micrograph of Fig. 3(c) and the contour traced from it."""
-    from .contours import Contour
+    from ..outline.contours import Contour
 
     image = _synthetic_micrograph(subdivisions=subdivisions)
     # background 0.09, darkest shaded grain pixel ~0.17: Otsu would split the grain's own light and shadow
@@ -125,10 +125,10 @@ def figure3(out: Path, subdivisions: int = 5) -> Path:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import save_figure
+    from ..io import save_figure
 
     _method("cri")
-    from .contours import Contour
+    from ..outline.contours import Contour
 
     frac = Contour.from_fractal(fractal_dimension=2.4, length_ratio=2.0, amplitude=0.06, rng=SEED)
     four = Contour.from_descriptors(FIG4_SAME, rng=SEED)
@@ -160,7 +160,7 @@ def figure3(out: Path, subdivisions: int = 5) -> Path:
 def figure4(out: Path, subdivisions: int = 5) -> Path:
     """CRI grains from FD-defined contours (paper Fig. 4)."""
     _method("cri")
-    from .methods.cri import cri
+    from ..methods.cri import cri
     from .render import contact_sheet
 
     a = cri(descriptors=FIG4_SETS[0], descriptors_xz=FIG4_SETS[1], descriptors_yz=FIG4_SETS[2],
@@ -179,7 +179,7 @@ def figure4(out: Path, subdivisions: int = 5) -> Path:
 
 def _dpa_sheet(out: Path, primitive: str, rows: list[tuple[int, str]], title: str) -> Path:
     _method("dpa")
-    from .calibration import dpa
+    from ..methods.dpa import dpa
     from .render import contact_sheet
 
     grains, labels = [], []
@@ -223,7 +223,7 @@ def _posed(grain, elev: float, azim: float):
 
 def figure7(out: Path, subdivisions: int = 5) -> Path:
     """FSO on ellipsoidal precursors (``aspect``), seamless surface, D = 2.4, L = 7 R."""
-    from .methods.fso import fso
+    from ..methods.fso import fso
     from .render import contact_sheet
 
     grains, labels = [], []
@@ -238,7 +238,7 @@ def figure7(out: Path, subdivisions: int = 5) -> Path:
 
 def figure8(out: Path, subdivisions: int = 5) -> Path:
     """Paper vs seamless FSO, pole view and equator view (L = 2 R shows more small-scale relief)."""
-    from .methods.fso import fso
+    from ..methods.fso import fso
     from .render import contact_sheet
 
     grains, labels = [], []
@@ -256,7 +256,7 @@ def figure8(out: Path, subdivisions: int = 5) -> Path:
 def figure9(out: Path, subdivisions: int = 5) -> Path:
     """CRI before (2016 reconstruction) and after (spectral consistency + ridge twist)."""
     _method("cri")
-    from .methods.cri import cri
+    from ..methods.cri import cri
     from .render import contact_sheet
 
     grains, labels = [], []

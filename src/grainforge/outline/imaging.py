@@ -1,10 +1,10 @@
 """Grain images: reading, thresholding, the grain mask, and drawing contours back into an image.
 
-The pixel side of :mod:`grainforge.contours`: a grey or colour image is read
+The pixel side of :mod:`grainforge.outline.contours`: a grey or colour image is read
 (:func:`load_image`), thresholded (Otsu's threshold, :func:`otsu_threshold`)
 into a mask of grain pixels (:func:`grain_masks`); the contours module turns
-masks into :class:`~grainforge.contours.Contour` objects
-(:func:`~grainforge.contours.mask_contour`, :func:`~grainforge.contours.scan_image`).
+masks into :class:`~grainforge.outline.contours.Contour` objects
+(:func:`~grainforge.outline.contours.mask_contour`, :func:`~grainforge.outline.contours.scan_image`).
 :func:`draw_contours` is the inverse: it rasterises contours (anything with a
 ``points()`` method), for tests and figures. Nothing here knows a contour's
 polar form.
@@ -12,7 +12,7 @@ polar form.
 Examples
 --------
 >>> import numpy as np
->>> from grainforge.contours import Contour, scan_image
+>>> from grainforge.outline.contours import Contour, scan_image
 >>> img = draw_contours((128, 128), [(Contour(np.ones(64)), (64, 64), 40)])
 >>> scan = scan_image(img)
 >>> len(scan.contours), round(scan.contours[0].scale)
@@ -136,7 +136,7 @@ def draw_contours(shape: tuple[int, int], items, *, background: int = 0, fill: i
 
     Examples
     --------
-    >>> from grainforge.contours import Contour
+    >>> from grainforge.outline.contours import Contour
     >>> img = draw_contours((64, 64), [(Contour(np.ones(64)), (32, 32), 20)])
     >>> img.dtype.name, abs(float((img > 0).sum()) / (np.pi * 20**2) - 1) < 0.02
     ('uint8', True)

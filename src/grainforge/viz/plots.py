@@ -40,7 +40,7 @@ def read_manifest(path: str | Path) -> dict[str, list[str]]:
         raise ValueError(f"{path}: not a CSV manifest ({exc})") from None
     if not rows:
         raise ValueError(f"{path}: holds no rows")
-    from .units import plain
+    from ..units import plain
 
     # headers state their unit (volume_mm3); the plots use the plain names
     return {plain(k): [r.get(k) or "" for r in rows] for k in rows[0] if k is not None}
@@ -110,8 +110,8 @@ def fd_spectrum(ax, tables) -> None:
     three planes pooled); a CRI manifest's input spectrum (its
     ``descriptors``, ``decay`` and ``modes``) is drawn dashed where present.
     """
-    from .analysis.fourier import FD_ORDERS, PLANES
-    from .contours import DEFAULT_DECAY, DEFAULT_MODES, descriptor_spectrum
+    from ..analysis.fourier import FD_ORDERS, PLANES
+    from ..outline.contours import DEFAULT_DECAY, DEFAULT_MODES, descriptor_spectrum
 
     drew = False
     for (path, t), color in zip(tables, _colors()):
@@ -307,7 +307,7 @@ def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: 
     >>> plot("zingg", [d / "m.csv"], d / "z.png").name
     'z.png'
     """
-    from .io import save_figure
+    from ..io import save_figure
 
     return save_figure(figure(kind, manifests, title=title), out)
 
@@ -320,8 +320,8 @@ def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:
     files per folder are measured with :func:`~grainforge.analysis.measure.analyse_file`
     for the FD spectra.  Writes ``out/analysis/*.png``.
     """
-    from .analysis.measure import ANALYSE_COLUMNS, analyse_file
-    from .io import write_csv
+    from ..analysis.measure import ANALYSE_COLUMNS, analyse_file
+    from ..io import write_csv
 
     out = Path(out)
     dest = out / "analysis"

@@ -1,6 +1,6 @@
 """The virtual bulk tests in LIGGGHTS, serial or under ``mpirun``: deck writing and the engine run.
 
-The scenes are the Yade ones of :mod:`grainforge.simulate.scenes`, laid out
+The scenes are the Yade ones of :mod:`grainforge.simulate.yade_scenes`, laid out
 here in Python (grainforge draws the population, the lattice, the jitter and
 the rough base for the seed) and written as a LIGGGHTS input deck:
 

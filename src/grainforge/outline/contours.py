@@ -16,13 +16,13 @@ Three sources (paper §2.2, Fig. 3; docs/design/algorithms.md §2a–2c):
   circle, with integer harmonics so that the profile closes smoothly at 2π.
 - :meth:`Contour.from_image` — a grain image: threshold, largest component,
   holes filled, boundary, rays from the area centroid (the image side lives in
-  :mod:`grainforge.imaging`).
+  :mod:`grainforge.outline.imaging`).
 
 :meth:`Contour.descriptors` is the inverse: c = rfft(r)/N, D_n = 2|c_n|/c0.
 
 Examples
 --------
->>> from grainforge.contours import Contour
+>>> from grainforge.outline.contours import Contour
 >>> c = Contour.from_descriptors((0.15, 0.10, 0.03), rng=0)
 >>> [round(float(d), 3) for d in c.descriptors()[[2, 3, 8]]]
 [0.15, 0.1, 0.03]
@@ -36,8 +36,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..params import ParameterError
 from .imaging import grain_masks, load_image
-from .params import ParameterError
 
 __all__ = [
     "Contour",
@@ -342,7 +342,7 @@ class Contour:
 
         r(θ) = 1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n), δ_n ~ U(0, 2π) drawn as in
         :meth:`from_descriptors`; e.g. a measured spectrum continued by
-        :func:`grainforge.spectra.extend_spectrum`.
+        :func:`grainforge.outline.spectra.extend_spectrum`.
 
         Raises
         ------

@@ -25,7 +25,7 @@ def _sphere_mesh(d: float):
 
 def _template(args):
     from ..dem.template import prepare
-    from ..solid import signed_volume
+    from ..geometry.solid import signed_volume
 
     vertices, faces, name, settings, source, k, as_spheres, shape, spacing, clump_accuracy = args
     if as_spheres:
@@ -45,7 +45,7 @@ def _template(args):
 
 
 def _scaled_to(vertices, faces, size):
-    from ..solid import signed_volume
+    from ..geometry.solid import signed_volume
 
     d = (6.0 * signed_volume(vertices, faces) / math.pi) ** (1.0 / 3.0)
     return vertices * (size / d)
@@ -160,7 +160,7 @@ def choose_grains(inputs: Sequence[str | os.PathLike], settings: Settings, *, po
     paths = [Path(p) for p in inputs]
     if _is_recipe(paths):
         from ..population import load_recipe
-        from ..workers import ordered_map
+        from ..runtime.workers import ordered_map
 
         recipe = load_recipe(paths[0])
         n = recipe.count
@@ -209,8 +209,8 @@ def check_inputs(inputs: Sequence[str | os.PathLike]) -> tuple[int, float]:
     """
     paths = [Path(p) for p in inputs]
     if _is_recipe(paths):
-        from ..estimate import grain_seconds
         from ..population import check_recipe_size, draw_grain, load_recipe
+        from ..runtime.estimate import grain_seconds
 
         recipe = load_recipe(paths[0])
         check_recipe_size(recipe)

@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .params import ParameterError
+from ..params import ParameterError
 
 __all__ = ["MEASURED_ORDERS", "Spectra", "read_spectra", "extend_spectrum"]
 

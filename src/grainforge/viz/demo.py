@@ -16,8 +16,8 @@ __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "a
 
 def _sweep_panels(out: Path, method: str, make_params, values, label, seeds) -> tuple[list, list[str]]:
     """Write one run per value into ``out/<label>=<value>``; the meshes and labels of a sheet, row by seed."""
-    from .io import read_mesh
-    from .run import manifest_rows, write_run
+    from ..io import read_mesh
+    from ..population.generate import manifest_rows, write_run
 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
     for j, value in enumerate(values):
@@ -46,8 +46,8 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
 
 def fso_sweeps(out: Path, quick: bool = False) -> list[Path]:
     """The paper's Figures 1 and 2: FSO grains over L/R0 at D = 2.4 and over D at L = 7R0."""
+    from ..methods.fso import Params
     from .figures import FIG1_LENGTHS, FIG2_DIMENSIONS
-    from .methods.fso import Params
 
     seeds = [0, 1] if quick else [0, 1, 2]
     s = 4 if quick else 5
@@ -73,11 +73,11 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     """
     import numpy as np
 
-    from .contours import Contour
-    from .io import read_mesh, save_figure
-    from .methods.cri import Params
+    from ..io import read_mesh, save_figure
+    from ..methods.cri import Params
+    from ..outline.contours import Contour
+    from ..population.generate import manifest_rows, write_run
     from .render import contact_sheet
-    from .run import manifest_rows, write_run
 
     seeds = [0, 1] if quick else [0, 1, 2]
     s = 3 if quick else 5
@@ -130,7 +130,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
 
 def cri_sections_figure(path: Path, subdivisions: int = 5) -> Path:
     """Verification figure: a CRI grain's principal sections against its contours (:func:`cri_sections`)."""
-    from .io import save_figure
+    from ..io import save_figure
 
     return save_figure(cri_sections(subdivisions), path)
 
@@ -145,8 +145,8 @@ def cri_sections(subdivisions: int = 5):
     import numpy as np
     import trimesh
 
-    from .contours import Contour
-    from .methods.cri import GRID, PLANES, Params, build, construct
+    from ..methods.cri import GRID, PLANES, Params, build, construct
+    from ..outline.contours import Contour
 
     p = Params(preset="rough-angular", subdivisions=subdivisions)
     v, f, _ = build(p, np.random.default_rng(0))
@@ -199,7 +199,7 @@ def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
 
     All three sheets are drawn at one scale (one scale-bar length), that of the largest aggregate.
     """
-    from .methods.dpa import Params
+    from ..methods.dpa import Params
     from .render import view_radius
 
     seeds = [0, 1] if quick else [0, 1, 2]
@@ -233,10 +233,10 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
 
     A last row shows dented grains (lower convexity), also sharp to rounded.
     """
-    from .io import read_mesh
-    from .methods.angular import Params
+    from ..io import read_mesh
+    from ..methods.angular import Params
+    from ..population.generate import manifest_rows, write_run
     from .render import contact_sheet
-    from .run import manifest_rows, write_run
 
     s = 4 if quick else 5
     folder = out / "angular"
@@ -274,7 +274,7 @@ percent_passing = [0, 2, 25, 70, 98, 100]
 
 def population_demo(out: Path, quick: bool = False) -> list[Path]:
     """A small population (docs/populations.md): grains, manifest, summary JSON and report PNG."""
-    from .population import parse_recipe, run_batch
+    from ..population import parse_recipe, run_batch
 
     folder = out / "population-cri-sand"
     recipe = parse_recipe(POPULATION_RECIPE.format(count=16 if quick else 60), source="cri-sand-demo.toml")
@@ -300,9 +300,9 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     from PIL import Image
     from skimage.filters import gaussian
 
-    from .contours import Contour
-    from .imaging import draw_contours
-    from .io import atomic_write
+    from ..io import atomic_write
+    from ..outline.contours import Contour
+    from ..outline.imaging import draw_contours
 
     rng = np.random.default_rng(seed)
     items = []
@@ -333,9 +333,9 @@ def grain_image(path: Path, *, seed: int, size: int = 512) -> Path:
     from PIL import Image
     from skimage.filters import gaussian
 
-    from .contours import Contour
-    from .imaging import draw_contours
-    from .io import atomic_write
+    from ..io import atomic_write
+    from ..outline.contours import Contour
+    from ..outline.imaging import draw_contours
 
     c = Contour.from_descriptors("rough-angular", rng=100 + seed)
     img = draw_contours((size, size), [(c, (size // 2, size // 2), 170.0 * size / 512)], background=40,
@@ -371,8 +371,8 @@ def write_fourier_csv(images, path: Path) -> Path:
     Only the ``image``, ``grain`` and ``D2``..``D16`` columns, which is what
     the ``spectrum`` inputs of rf and CRI read.
     """
-    from .contours import scan_image
-    from .io import write_csv
+    from ..io import write_csv
+    from ..outline.contours import scan_image
 
     rows = []
     for image in images:
@@ -385,10 +385,10 @@ def write_fourier_csv(images, path: Path) -> Path:
 
 def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     """rf grains from a measured spectrum: a sample micrograph → its D2..D16 table → one rf grain per seed."""
-    from .io import read_mesh
-    from .methods.rf import Params
+    from ..io import read_mesh
+    from ..methods.rf import Params
+    from ..population.generate import manifest_rows, write_run
     from .render import contact_sheet
-    from .run import manifest_rows, write_run
 
     folder = out / "rf"
     folder.mkdir(parents=True, exist_ok=True)
@@ -408,11 +408,11 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
 
 def print_tray(out: Path, quick: bool = False) -> list[Path]:
     """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains."""
-    from .fabrication.printability import check_mesh
-    from .fabrication.tray import GeneratorSource, build_tray
-    from .io import write_csv
-    from .io.threemf import read_3mf
-    from .methods.cri import Params
+    from ..fabrication.printability import check_mesh
+    from ..fabrication.tray import GeneratorSource, build_tray
+    from ..io import write_csv
+    from ..io.threemf import read_3mf
+    from ..methods.cri import Params
 
     n = 40 if quick else 400
     res = build_tray(GeneratorSource("cri", Params(preset="rough-angular"), tuple(range(n)), 2.0),

@@ -19,7 +19,7 @@ How
    generated and measured once; cached on disk per method, convention and
    resolution range (:func:`design_path`), so a second fit of any sand
    measures none.
-2. **Inverse model** (:mod:`grainforge.twins`): a cubic least-squares model
+2. **Inverse model** (:mod:`grainforge.fit.twins`): a cubic least-squares model
    from settings and log(voxels across) to the four descriptors, solved,
    bounded, per sand grain for the settings it predicts to measure like it.
 3. **Twins**: grain ``i`` of the recipe (its own seed, as ``batch`` makes it)
@@ -69,7 +69,7 @@ from typing import Any
 
 import numpy as np
 
-from .analysis.atlas import OPENING_RADIUS
+from ..analysis.atlas import OPENING_RADIUS
 
 __all__ = [
     "DESCRIPTORS", "COLUMNS", "Sand", "read_sand", "Setting", "MethodFit", "FITS", "register", "fit_sand",
@@ -415,7 +415,7 @@ def write_sand(path: str | os.PathLike, equivalent_diameter: Sequence[float], va
     >>> s.count, s.voxel_size, float(s.opening[0])
     (1, 7.3, 0.99)
     """
-    from .io import atomic_write
+    from ..io import atomic_write
 
     d = np.asarray(equivalent_diameter, dtype=np.float64)
     cols = [np.arange(1, len(d) + 1), math.pi / 6 * d**3, d, *(np.asarray(values[k], np.float64) for k in DESCRIPTORS),
@@ -705,10 +705,10 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
 
     Raises
     ------
-    grainforge.estimate.TooLargeError
+    grainforge.runtime.estimate.TooLargeError
         One line with the estimate and what to change.
     """
-    from .estimate import TooLargeError, check_job, check_memory, duration
+    from ..runtime.estimate import TooLargeError, check_job, check_memory, duration
 
     methods = list(FITS) if method == "auto" else [method]
     # per method (each has its own resolution cap): the design's top resolution, the twins' resolutions, and
@@ -865,7 +865,7 @@ def twin_recipe_text(spec: MethodFit, grains: Sequence[Mapping[str, Any]], size_
 # --------------------------------------------------------------------------- measuring grains
 @lru_cache(maxsize=8)
 def _recipe(text: str):
-    from .population import parse_recipe
+    from ..population import parse_recipe
 
     return parse_recipe(text, source="<fit>")
 
@@ -883,7 +883,7 @@ def measure_grain(text: str, index: int, voxel_size_um: float, convention: str =
     import time
 
     cpu = time.process_time()
-    from .population import draw_grain
+    from ..population import draw_grain
 
     recipe = _recipe(text)
     seed, params, size_mm = draw_grain(recipe, index)
@@ -894,8 +894,8 @@ def measure_grain(text: str, index: int, voxel_size_um: float, convention: str =
 
 def _measure(method: str, params: Any, seed: int, across: float, convention: str,
              opening: bool = False) -> tuple[float, ...]:
-    from .analysis.atlas import opening_fraction, voxel_descriptors, voxel_image
-    from .methods import generate
+    from ..analysis.atlas import opening_fraction, voxel_descriptors, voxel_image
+    from ..methods import generate
 
     grain = generate(method, params, seed)
     mask, h, _ = voxel_image(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]))
@@ -913,8 +913,8 @@ def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, An
     """
     import time
 
-    from .methods import get
-    from .params import ParameterError
+    from ..methods import get
+    from ..params import ParameterError
 
     cpu = time.process_time()
     try:
@@ -926,7 +926,7 @@ def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, An
 
 def grain_seed(root: int, index: int) -> int:
     """The seed ``batch`` gives grain ``index`` of a recipe with root seed ``root``."""
-    from .population import grain_stream
+    from ..population import grain_stream
 
     return int(grain_stream(root, index).integers(0, 2**63))
 
@@ -946,7 +946,7 @@ def reseed_seed(root: int, index: int, attempt: int) -> int:
 
 class _Pool:
     """Runs :func:`measure_settings` jobs, in this process, on a worker pool or on the caller's ``executor`` (a
-    :class:`grainforge.cluster.DaskExecutor`): the same jobs and seeds, each result in its job's place."""
+    :class:`grainforge.runtime.cluster.DaskExecutor`): the same jobs and seeds, each result in its job's place."""
 
     def __init__(self, workers: int, convention: str = "atlas", executor=None):
         self.workers = workers
@@ -958,7 +958,7 @@ class _Pool:
 
     def __enter__(self):
         if self.own and self.workers > 1:
-            from .workers import process_pool
+            from ..runtime.workers import process_pool
 
             self.ex = process_pool(self.workers, ["grainforge.fit", "grainforge.analysis.atlas",
                                                   "grainforge.population", "trimesh", "scipy.ndimage",
@@ -967,7 +967,7 @@ class _Pool:
 
     def __exit__(self, exc_type, exc, tb):
         if self.ex is not None and self.own:
-            from .workers import close_pool
+            from ..runtime.workers import close_pool
 
             # an error, Ctrl-C or SIGTERM: stop the workers now (waiting for them from inside an
             # interrupted as_completed could hang; seen with SIGTERM during a fit)
@@ -985,7 +985,7 @@ class _Pool:
         else:
             from concurrent.futures import as_completed
 
-            from .workers import single_threaded_children
+            from ..runtime.workers import single_threaded_children
 
             with single_threaded_children():
                 futs = {self.ex.submit(measure_settings, *a): i for i, a in enumerate(args)}
@@ -1017,10 +1017,10 @@ def _design_high(sand: Sand, max_across: float | None) -> float:
 
 def design_path(method: str, convention: str, high: float, grains: int = DESIGN_GRAINS,
                 cache: str | os.PathLike | None = None) -> Path:
-    """Where a method's design is cached: under ``cache`` (default :func:`grainforge.calibration.cache_dir`),
+    """Where a method's design is cached: under ``cache`` (default :func:`grainforge.runtime.cache.cache_dir`),
     keyed by everything that changes its grains."""
-    from ._version import __version__
-    from .calibration import cache_dir
+    from .._version import __version__
+    from ..runtime.cache import cache_dir
 
     spec = FITS[method]
     key = repr((DESIGN_VERSION, __version__, DESIGN_SEED, method, spec.all_settings, sorted(spec.fixed.items()),
@@ -1048,7 +1048,7 @@ class Design:
 def design(method: str, pool: _Pool, *, high: float, grains: int = DESIGN_GRAINS,
            cache: str | os.PathLike | None = None, progress=None) -> Design:
     """The cached design of ``method`` (measured, and cached atomically, if it is not yet)."""
-    from .io import atomic_write
+    from ..io import atomic_write
     from .twins import design_points
 
     spec = FITS[method]
@@ -1078,7 +1078,7 @@ DETERMINED_MIN = 0.98
 
 def setting_identifiability(des: Design) -> dict[str, tuple[float, float]]:
     """Per setting of ``des``'s method: (R², rms error in the setting's units) of predicting it from a grain's
-    four descriptors (:func:`grainforge.twins.identifiability` on the design).
+    four descriptors (:func:`grainforge.fit.twins.identifiability` on the design).
 
     What the fitted settings of a twin can say about its sand grain: with R² ≥ :data:`IDENTIFIABLE_R2` the
     descriptors determine the setting (a sand's setting is *acquired* from its scan, within the error);
@@ -1409,7 +1409,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     grains'), remade with its own seed and measured, :data:`POPULATION_ROUNDS` times (a Newton iteration on
     measured means).  The estimate is the mean settings of the round whose means came closest to the sand's,
     plus a last linear step for the gap left; its standard error propagates the sand's and the made grains'
-    scatter of their means through the same step (:func:`grainforge.twins.population_error`).
+    scatter of their means through the same step (:func:`grainforge.fit.twins.population_error`).
 
     ``slopes="measured"`` measures the slopes on the grains (:func:`_measured_mean_jacobian`, 2 × settings ×
     up to :data:`SLOPE_GRAINS` grains more); ``"model"`` takes the design model's, which cost nothing but are
@@ -1423,7 +1423,7 @@ def population_settings(spec: MethodFit, model, sand: Sand, u0: np.ndarray, y0: 
     ``opening`` (the sand has the :data:`OPENING_COLUMN`; :func:`uses_opening`): the opening fraction is a fifth
     descriptor.  The starting grains are measured again with it (``grains`` more), the slopes are measured
     (the design model has none for it), the means' misfit is weighed by the sand's covariance (generalised
-    least squares, :func:`grainforge.twins.population_step`), and, since its response to edge rounding
+    least squares, :func:`grainforge.fit.twins.population_step`), and, since its response to edge rounding
     saturates, :data:`OPENING_ROUNDS` rounds are made, each step held to :data:`OPENING_TRUST` of the unit
     box and the slopes updated after each from how the means moved (Broyden's secant update).
 
@@ -1633,7 +1633,7 @@ def fit_sand(
     workers : int
         Processes measuring grains (1: this process).
     executor : concurrent.futures.Executor, optional
-        Measure the grains on it instead (a :class:`grainforge.cluster.DaskExecutor`:
+        Measure the grains on it instead (a :class:`grainforge.runtime.cluster.DaskExecutor`:
         a Dask cluster); the same jobs and seeds, so the same result.  The
         caller opens and closes it.
     sphericity : {"atlas", "whole"}
@@ -1842,7 +1842,7 @@ def fit_figure(sand: Sand, result: FitResult, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .io import save_figure
+    from ..io import save_figure
 
     gen, st = result.generated[:, 1:], result.targets
     fig, axes = plt.subplots(2, 4, figsize=(16, 7.6))
@@ -1896,7 +1896,7 @@ OUTPUTS = ("recipe.toml", "fit.csv", "fit-stats.csv", "fit.png")
 
 def write_outputs(sand: Sand, result: FitResult, out: str | os.PathLike) -> list[Path]:
     """Write :data:`OUTPUTS` into ``out`` (each atomically); return the paths."""
-    from .io import atomic_write, write_csv
+    from ..io import atomic_write, write_csv
 
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)

@@ -14,8 +14,8 @@ from functools import cache
 
 import numpy as np
 
-from ..params import ParameterError, param, validate
-from ._polyhedra import (
+from ...params import ParameterError, param, validate
+from .._polyhedra import (
     PRIMITIVES,
     Solid,
     edge_directions,
@@ -169,7 +169,7 @@ class Aggregate:
 
     def measures(self) -> dict[str, float]:
         """D_A (Eq. 5), D_A_scaling, porosity, R_g (units of a) and box mean edge of the aggregate."""
-        from ..analysis.aggregate import aggregate_measures
+        from ...analysis.aggregate import aggregate_measures
 
         pts = self.vertices.reshape(-1, 3)
         owner = np.repeat(np.arange(self.primaries), self.vertices.shape[1])
@@ -622,7 +622,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
     >>> len(v), len(f), round(vol, 12), cav
     (9, 14, 2.0, 0.0)
     """
-    from ..solid import _edge_components, signed_volume, unique_rows
+    from ...geometry.solid import _edge_components, signed_volume, unique_rows
 
     s = agg.solid
     V = agg.vertices

@@ -72,7 +72,7 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> v, f = icosphere(3)
     >>> round(signed_volume(v, f), 2)
     4.15
@@ -90,7 +90,7 @@ def volume_and_centroid(vertices: np.ndarray, faces: np.ndarray) -> tuple[float,
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> v, f = icosphere(3)
     >>> vol, c = volume_and_centroid(v + 1.0, f)
     >>> round(vol, 2), c.round(6).tolist()
@@ -288,7 +288,7 @@ def star_certificate(vertices: np.ndarray, faces: np.ndarray, centre=(0.0, 0.0, 
 
     Examples
     --------
-    >>> from grainforge.geodesic import icosphere
+    >>> from grainforge.geometry.geodesic import icosphere
     >>> v, f = icosphere(2)
     >>> star_certificate(v, f), star_certificate(v, f, centre=(0.0, 0.0, 1.5))
     (True, False)
@@ -593,7 +593,7 @@ def require_solid(vertices: np.ndarray, faces: np.ndarray, parameter: str, *, st
     if the mesh, as written, is not a valid solid (see :func:`solid_problems`)."""
     problems = solid_problems(vertices, faces, star_centre=star_centre)
     if problems:
-        from .params import ParameterError
+        from ..params import ParameterError
 
         raise ParameterError(parameter, f"gives a mesh that is not a valid solid when written ({'; '.join(problems)})")
 
@@ -748,7 +748,7 @@ def mesh_size_problem(vertices: np.ndarray, what: str = "the mesh") -> str | Non
     >>> print(mesh_size_problem(np.array([[0.0, 0, 0], [2e37, 1, 1]])))
     the mesh is 2e+37 mm across (its bounding box's largest side), outside the 0.0001–100000 mm a grain file is read at (files are in mm); rescale the mesh to millimetres
     """
-    from .units import MESH_SIZE_RANGE_MM
+    from ..units import MESH_SIZE_RANGE_MM
 
     v = np.asarray(vertices, dtype=np.float64)
     if len(v) == 0 or not np.isfinite(v).all():

@@ -20,8 +20,8 @@ from typing import Any
 
 import numpy as np
 
+from ..io import atomic_write, save_figure
 from .distributions import Distribution, GradingCurve
-from .io import atomic_write, save_figure
 
 __all__ = ["summary", "population_report", "population_figure", "achieved_sizes", "SUMMARY", "FIGURE"]
 
@@ -129,8 +129,8 @@ def population_figure(recipe, rows, info: Mapping[str, Any]):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .methods import get
-    from .params import specs
+    from ..methods import get
+    from ..params import specs
 
     units = {s.name: s.unit for s in specs(get(recipe.method).Params)}
     drawn = [n for n, v in recipe.params.items() if isinstance(v, Distribution)]

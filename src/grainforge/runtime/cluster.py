@@ -2,7 +2,7 @@
 
 The commands run their per-grain or per-file work through a
 :class:`concurrent.futures.Executor`: a local process pool
-(:func:`grainforge.workers.process_pool`) or, with ``--scheduler``, a
+(:func:`grainforge.runtime.workers.process_pool`) or, with ``--scheduler``, a
 :class:`DaskExecutor` on a cluster that is already running.  The code that
 submits the tasks and puts their results in order is the same for both, so
 the outputs are byte-identical; this process keeps the progress bar, the
@@ -25,7 +25,7 @@ from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from typing import Any
 
-from ._version import __version__
+from .._version import __version__
 
 __all__ = ["CONNECT_TIMEOUT", "INSTALL", "DaskExecutor", "SchedulerLost", "VersionMismatch", "check_address",
            "connect", "dask_executor"]

@@ -1,0 +1,1 @@
+"""Geometry kernels on triangle meshes: solids, spheres, rotations, voxels, harmonics."""

@@ -1,0 +1,1 @@
+"""Processes, staging, estimates and clusters: how grainforge runs work."""

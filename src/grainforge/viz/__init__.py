@@ -1,0 +1,1 @@
+"""Pictures: renders, plots, the paper's figures and the demo."""
