@@ -1,42 +1,22 @@
-"""The house rules, checked statically on the source (ast, no imports run).
+"""The house rules on the source, checked statically (no grainforge module is imported to check them).
 
-- Algorithm modules (``grainforge.methods``, ``.analysis``, ``.fabrication``)
-  never import click or ``grainforge.cli``, directly or through another module.
-- No import cycles among grainforge modules, counting imports made inside
-  functions too (a lazy import that closes a cycle is still a cycle), and
-  counting the parent packages an import runs: ``import a.b.c`` executes
-  ``a/b/__init__.py`` as well, so it is an import of ``a.b`` too.
-- No upward import: every top-level module or package of grainforge sits in a
-  layer (:data:`LAYERS`, as docs/design/architecture.md draws them) and
-  imports only from its own layer or those below.
+- The import contracts of ``pyproject.toml`` (``[tool.importlinter]``: the layers, and algorithms that
+  never reach ``click`` or ``grainforge.cli``), run by import-linter.
+- No import cycles among grainforge modules, counting imports made inside functions too (a lazy
+  import that closes a cycle is still a cycle), and counting the parent packages an import runs:
+  ``import a.b.c`` executes ``a/b/__init__.py`` as well, so it is an import of ``a.b`` too.
+- The layout table of docs/design/architecture.md is the package tree.
 - Method modules export parameters and pure functions only: no ``cli_command``.
 """
 
 from __future__ import annotations
 
 import ast
+import re
 from pathlib import Path
-
-import pytest
 
 SRC = Path(__file__).resolve().parents[1] / "src"
 PACKAGE = "grainforge"
-ALGORITHMS = ("grainforge.methods", "grainforge.analysis", "grainforge.fabrication")
-
-#: the layers, bottom first: a module imports from its own layer and those below, never above
-LAYERS = (
-    # the base: data, geometry kernels, outlines, files, processes
-    ("_version", "params", "units", "grain", "geometry", "outline", "io", "runtime"),
-    # algorithms on grains
-    ("methods", "analysis", "fabrication"),
-    # jobs built from them
-    ("population", "fit", "dem", "simulate"),
-    # pictures of their results, and the demo that runs them
-    ("viz",),
-    # the commands
-    ("cli",),
-)
-
 
 def _modules() -> dict[str, Path]:
     out = {}
@@ -101,14 +81,6 @@ def _graph() -> dict[str, set[str]]:
     return graph
 
 
-def _layer(name: str) -> int | None:
-    unit = name.split(".")[1] if "." in name else None
-    for level, names in enumerate(LAYERS):
-        if unit in names:
-            return level
-    return None
-
-
 def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
     """Strongly connected components with more than one module (Tarjan)."""
     index, low, stack, on, comps = {}, {}, [], set(), []
@@ -169,56 +141,6 @@ def test_no_import_cycles():
     assert cycles == [], "import cycles among grainforge modules: " + "; ".join(" <-> ".join(c) for c in cycles)
 
 
-def test_every_module_has_a_layer():
-    missing = sorted({name.split(".")[1] for name in MODULES if name != PACKAGE and _layer(name) is None})
-    assert missing == [], f"put these in a layer of LAYERS (and docs/design/architecture.md): {missing}"
-
-
-def test_no_upward_imports():
-    graph = _graph()
-    up = []
-    for name, targets in graph.items():
-        if name == PACKAGE:
-            continue  # the root package re-exports (lazily); every module's parent
-        for t in sorted(targets):
-            if t != PACKAGE and _layer(t) > _layer(name):
-                up.append(f"{MODULES[name].relative_to(SRC)} (layer {_layer(name)}) imports {t} (layer {_layer(t)})")
-    assert up == [], "upward imports:\n" + "\n".join(up)
-
-
-def test_upward_detector_sees_an_upward_import():
-    assert _layer("grainforge.io.stl") < _layer("grainforge.fabrication.tray") < _layer("grainforge.cli.main")
-
-
-@pytest.mark.parametrize("package", ALGORITHMS)
-def test_algorithms_do_not_import_the_cli(package):
-    bad = []
-    for name in MODULES:
-        if name != package and not name.startswith(package + "."):
-            continue
-        for target, line in _imports(name):
-            if target == "click" or target.startswith("click.") or target == "grainforge.cli" \
-                    or target.startswith("grainforge.cli."):
-                bad.append(f"{MODULES[name].relative_to(SRC)}:{line} imports {target}")
-    assert bad == []
-
-
-def test_algorithms_do_not_reach_the_cli_transitively():
-    graph = _graph()
-    for start in MODULES:
-        if not start.startswith(ALGORITHMS):
-            continue
-        seen, todo = set(), [start]
-        while todo:
-            v = todo.pop()
-            if v in seen:
-                continue
-            seen.add(v)
-            todo += graph[v]
-        reached = sorted(m for m in seen if m.startswith("grainforge.cli"))
-        assert reached == [], f"{start} reaches {reached}"
-
-
 def test_method_modules_define_no_commands():
     from grainforge.methods import METHODS
 
@@ -242,3 +164,57 @@ def test_generate_commands_come_from_params_and_hooks(runner):
     assert "--target-fractal-dimension" in runner.invoke(cli, ["generate", "dpa", "--help"]).output
     res = runner.invoke(cli, ["generate", "dpa", "--out", "unused", "--printer", "generic-fdm"])
     assert res.exit_code == 2 and "No such option '--printer'" in res.output
+
+
+def test_import_contracts_are_kept():
+    """pyproject.toml's import contracts (layers; algorithms without the CLI), by import-linter."""
+    from importlinter.cli import lint_imports
+
+    assert lint_imports(config_filename=str(SRC.parent / "pyproject.toml"), no_cache=True) == 0
+
+
+def _layout_table() -> dict[str, tuple[str, set[str]]]:
+    """docs/design/architecture.md's layout table: part -> (layer, modules named in its last column)."""
+    text = (SRC.parent / "docs" / "design" / "architecture.md").read_text(encoding="utf-8")
+    section = text.split("## Layout", 1)[1].split("\n## ", 1)[0]
+    rows = {}
+    for line in section.splitlines():
+        cells = [c.strip() for c in line.strip().strip("|").split("|")]
+        if len(cells) == 4 and cells[0].startswith("`"):
+            part = cells[0].strip("`")
+            named = set(re.findall(r"`([\w/]+)`", cells[3]))
+            rows[part] = (cells[1], named)
+    return rows
+
+
+def test_layout_table_is_the_package_tree():
+    root = SRC / PACKAGE
+    parts = {p.name + "/" for p in root.iterdir() if (p / "__init__.py").exists()}
+    parts |= {p.name for p in root.glob("*.py") if p.name not in {"__init__.py", "_version.py"}}
+    table = _layout_table()
+    assert set(table) == parts, "docs/design/architecture.md's layout table lists other parts than src/grainforge"
+    for part, (_, named) in table.items():
+        if not part.endswith("/") or part == "cli/":
+            continue  # a module; cli's row names commands by example
+        folder = root / part
+        actual = {p.stem for p in folder.glob("*.py") if p.name != "__init__.py"}
+        actual |= {p.name + "/" for p in folder.iterdir() if p.is_dir() and p.name != "__pycache__"}
+        missing = actual - named
+        unknown = {n for n in named - actual if not list(folder.rglob(n.rstrip("/") + ("" if n.endswith("/") else ".py")))}
+        assert not missing and not unknown, f"{part}: not in the table {sorted(missing)}, not in the tree {sorted(unknown)}"
+
+
+def test_layout_layers_are_the_contract_layers():
+    import tomllib
+
+    config = tomllib.loads((SRC.parent / "pyproject.toml").read_text(encoding="utf-8"))
+    (layers,) = [c["layers"] for c in config["tool"]["importlinter"]["contracts"] if c["type"] == "layers"]
+    names = {"cli": "commands", "viz": "pictures"}
+    for part in layers[2].split(" : "):
+        names[part] = "jobs"
+    for part in layers[3].split(" : "):
+        names[part] = "algorithms"
+    for part in layers[4].split(" : "):
+        names[part] = "base"
+    for part, (layer, _) in _layout_table().items():
+        assert names[part.removesuffix("/").removesuffix(".py")] == layer, part
