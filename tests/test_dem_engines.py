@@ -535,9 +535,10 @@ def engine_cases(*slow):
 def small_deck(grains, out, engine, shape, options, **settings):
     """A deck of the two grains, with scene settings changed by ``settings``."""
     from grainforge.dem import lammps, lammps_body, liggghts, yade
-    from grainforge.dem.inputs import build_templates, grain_paths
+    from grainforge.dem.inputs import build_templates
+    from grainforge.io.inputs import mesh_paths
 
-    templates = build_templates(grain_paths([grains]), workers=1, shape=shape, **options)
+    templates = build_templates(mesh_paths([grains]), workers=1, shape=shape, **options)
     module = {"yade": yade, "liggghts": liggghts,
               "lammps": lammps_body if shape == "polyhedron" else lammps}[engine]
     module.write_deck(templates, out, settings=module.pour_settings(**settings))

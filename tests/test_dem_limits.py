@@ -55,14 +55,14 @@ def test_a_level_set_spacing_too_fine_is_refused_in_one_line_before_the_estimate
 
 
 def test_a_manifest_of_random_bytes_is_named(tmp_path):
-    from grainforge.dem.inputs import grain_paths
+    from grainforge.io.inputs import mesh_paths
 
     bad = tmp_path / "manifest.csv"
     bad.write_bytes(np.random.default_rng(0).integers(0, 256, 4000, dtype=np.uint8).tobytes())
     with pytest.raises(ValueError, match=r"manifest\.csv: not a grainforge manifest"):
-        grain_paths([bad])
+        mesh_paths([bad])
     with pytest.raises(ValueError, match=r"manifest\.csv: not a grainforge manifest"):
-        grain_paths([tmp_path])
+        mesh_paths([tmp_path])
 
 
 def _cli() -> list[str]:

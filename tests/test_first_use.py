@@ -193,7 +193,7 @@ def test_resume_of_a_finished_batch_says_it_is_complete(runner, tmp_path):
 
 @pytest.mark.parametrize("command", ["check", "analyse"])
 def test_an_image_is_not_a_mesh_file(runner, tmp_path, command):
-    from grainforge.cli.paths import MESH_SUFFIXES
+    from grainforge.io.inputs import MESH_SUFFIXES
 
     png = tmp_path / "sheet.png"
     png.write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(64))

@@ -3,7 +3,7 @@
 import pytest
 
 from grainforge.io import write_csv
-from grainforge.viz.plots import KINDS, plot, read_manifest
+from grainforge.viz.plots import KINDS, manifest_columns, plot
 
 PNG = b"\x89PNG\r\n\x1a\n"
 
@@ -49,17 +49,17 @@ def test_fd_spectrum_with_cri_input(tmp_path):
     from grainforge.population.generate import write_run
 
     write_run("cri", Params(descriptors=(0.15, 0.1, 0.03), subdivisions=2), [0, 1], tmp_path / "cri")
-    table = read_manifest(tmp_path / "cri" / "manifest.csv")
+    table = manifest_columns(tmp_path / "cri" / "manifest.csv")
     assert table["descriptors"][0].split() == ["0.15", "0.1", "0.03"]
     assert plot("fd-spectrum", [tmp_path / "cri" / "manifest.csv"], tmp_path / "s.png").read_bytes()[:8] == PNG
 
 
 def test_bad_manifests(tmp_path):
     with pytest.raises(ValueError, match="no such file"):
-        read_manifest(tmp_path / "none.csv")
+        manifest_columns(tmp_path / "none.csv")
     (tmp_path / "empty.csv").write_text("")
     with pytest.raises(ValueError, match="no rows"):
-        read_manifest(tmp_path / "empty.csv")
+        manifest_columns(tmp_path / "empty.csv")
     (tmp_path / "nocols.csv").write_text("a,b\n1,2\n")
     with pytest.raises(ValueError, match="no column 'L'"):
         plot("zingg", [tmp_path / "nocols.csv"], tmp_path / "z.png")

@@ -144,12 +144,12 @@ def test_tray_from_folder_and_manifest(tmp_path):
     a = build_tray(FileSource(tuple(sorted(folder.glob("*.stl")))), "objet-eden-250",
                    tmp_path / "a.3mf", workers=1)
     assert [p.name for p in read_3mf(a.files[0])] == ["fso-0000", "fso-0001", "fso-0002"]
-    from grainforge.fabrication.tray import files_from
+    from grainforge.io.inputs import mesh_paths
 
-    assert files_from([folder]) == files_from([folder / "manifest.csv"])
-    b = build_tray(FileSource(files_from([folder / "manifest.csv"])), "objet-eden-250", tmp_path / "b.3mf", workers=1)
+    assert tuple(mesh_paths([folder])) == tuple(mesh_paths([folder / "manifest.csv"]))
+    b = build_tray(FileSource(tuple(mesh_paths([folder / "manifest.csv"]))), "objet-eden-250", tmp_path / "b.3mf", workers=1)
     assert a.files[0].read_bytes() == b.files[0].read_bytes()
-    c = build_tray(FileSource(files_from([folder]), size=4.0), "objet-eden-250", tmp_path / "c.3mf", workers=1)
+    c = build_tray(FileSource(tuple(mesh_paths([folder])), size=4.0), "objet-eden-250", tmp_path / "c.3mf", workers=1)
     assert [float(r["equivalent_diameter"]) for r in c.rows] == pytest.approx([4.0] * 3)
 
 

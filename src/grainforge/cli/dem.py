@@ -85,7 +85,8 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
     `lmp -in in.run` (docs/dem.md).
     """
     from ..dem import SUPPORTED
-    from ..dem.inputs import build_templates, grain_paths, pour_counts
+    from ..dem.inputs import build_templates, pour_counts
+    from ..io.inputs import mesh_paths
     from .progress import progress_bar
 
     ctx = click.get_current_context()
@@ -111,7 +112,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
     if seed is not None and grains is None:
         raise click.UsageError("--seed draws the --grains pour; give --grains")
     output_dir(out)  # writable, not a file: before any work (write_deck applies the overwrite rule)
-    paths = grain_paths(inputs)
+    paths = mesh_paths(inputs)
     chosen, n_templates = None, len(paths)
     if template_count is not None:  # K representative grains (those without a manifest's measures are measured)
         n_templates = _templates_plan(inputs, paths, template_count, out, overwrite)

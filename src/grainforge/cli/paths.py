@@ -6,7 +6,7 @@ the user nothing and no file is written:
 - :func:`output_file` / :func:`output_dir`: empty path, an existing output
   without ``--overwrite``, a file where a folder is needed (or the reverse),
   a folder that cannot be written into, an unsupported extension;
-- :func:`mesh_inputs`: mesh files and folders of them (their mesh files, sorted);
+- :func:`mesh_inputs`: mesh files, folders and manifests (:func:`grainforge.io.inputs.mesh_paths`);
 - :func:`remove_stale_temps`: temporary files of our own naming that a killed
   run left behind.
 
@@ -37,11 +37,10 @@ from pathlib import Path
 
 import click
 
-__all__ = ["MESH_SUFFIXES", "OutPath", "output_file", "output_dir", "check_writable", "mesh_inputs", "remove_stale_temps",
+__all__ = ["OutPath", "output_file", "output_dir", "check_writable", "mesh_inputs", "remove_stale_temps",
            "refuse_existing"]
 
 #: suffixes of the mesh files a folder argument expands to
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf")
 
 
 class OutPath(click.Path):
@@ -163,28 +162,13 @@ def output_dir(path, *, overwrite: bool | None = None, option: str | None = "--o
 
 
 def mesh_inputs(paths: Iterable[str | os.PathLike], what: str = "FILES") -> list[Path]:
-    """Mesh files named by ``paths``: files as given, folders expanded to their mesh files (sorted).
+    """Mesh files named by ``paths`` (:func:`grainforge.io.inputs.mesh_paths`), refused in one line as ``what``."""
+    from ..io.inputs import mesh_paths
 
-    Hidden files (ours are temporaries) are skipped.  A missing path, or a
-    folder without mesh files, is refused in one line.
-    """
-    out: list[Path] = []
-    for item in paths:
-        p = Path(item)
-        if str(item).strip() == "":
-            raise click.BadParameter("an empty path", param_hint=what)
-        if p.is_dir():
-            found = sorted(q for q in p.iterdir()
-                           if q.suffix.lower() in MESH_SUFFIXES and q.is_file() and not q.name.startswith("."))
-            if not found:
-                raise click.BadParameter(
-                    f"{p} is a folder without mesh files ({', '.join(MESH_SUFFIXES)})", param_hint=what)
-            out += found
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise click.BadParameter(f"{p}: no such file or folder", param_hint=what)
-    return out
+    try:
+        return mesh_paths(paths)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint=what) from None
 
 
 def remove_stale_temps(folder: str | os.PathLike, prefix: str, suffix: str = ".tmp",

@@ -98,7 +98,8 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
     others get one layer, each grain resting on a stable face.
     """
     from ..fabrication.printers import get_printer
-    from ..fabrication.tray import FileSource, GeneratorSource, build_tray, files_from
+    from ..fabrication.tray import FileSource, GeneratorSource, build_tray
+    from ..io.inputs import mesh_paths
 
     output_file(out, overwrite=True, option="--out", suffixes=(".3mf", ".stl"))  # existing outputs: build_tray
     printer = get_printer(printer_spec)
@@ -114,7 +115,7 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
             raise click.UsageError("give grain files, folders or manifests, or --method to generate grains")
         if params or preset:
             raise click.UsageError("--param and --preset need --method")
-        source = FileSource(files_from(inputs), size, size_definition)
+        source = FileSource(tuple(mesh_paths(inputs)), size, size_definition)
         match = False
     try:
         result = build_tray(

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import csv
 from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 
@@ -13,17 +12,14 @@ from .enclosure import enclosure_problems
 __all__ = [
     "GRAIN_SIZE_RANGE",
     "MIN_GRAIN_SIZE",
-    "grain_paths",
     "read_grain",
     "load_template",
     "build_templates",
     "enclosure_problems",
     "pour_counts",
-    "MESH_SUFFIXES",
     "MAX_POUR_GRAINS",
 ]
 
-MESH_SUFFIXES = (".stl", ".obj", ".ply", ".3mf", ".off")
 #: equivalent diameters (m) a deck accepts: 10 µm (fine silt; below, contact time steps and the engines'
 #: absolute tolerances leave SI units) to 10 m (boulders)
 GRAIN_SIZE_RANGE = (1e-5, 10.0)
@@ -65,53 +61,6 @@ def pour_counts(templates: int, grains: int, seed: int = 0) -> np.ndarray:
     extra = np.random.default_rng(seed).choice(templates, size=grains % templates, replace=False)
     counts[extra] += 1
     return counts
-
-
-def _manifest_files(manifest: Path) -> list[Path]:
-    try:
-        with open(manifest, newline="") as fh:
-            rows = list(csv.DictReader(fh))
-    except OSError as exc:
-        raise ValueError(f"{manifest}: cannot read ({exc.strerror})") from None
-    except (UnicodeDecodeError, csv.Error):
-        raise ValueError(f"{manifest}: not a grainforge manifest (not a UTF-8 CSV table)") from None
-    if not rows or "file" not in rows[0]:
-        raise ValueError(f"{manifest}: not a grainforge manifest (no 'file' column)")
-    return [manifest.parent / r["file"] for r in rows]
-
-
-def grain_paths(inputs: Iterable[str | Path]) -> list[Path]:
-    """Mesh files named by ``inputs``: files, run folders (their manifest) or manifests.
-
-    A folder with a ``manifest.csv`` gives the manifest's files in its order; a
-    folder without one gives its mesh files sorted by name.
-
-    Raises
-    ------
-    ValueError
-        For a missing path, or inputs that hold no mesh file.
-    """
-    out: list[Path] = []
-    for p in map(Path, inputs):
-        if p.is_dir():
-            if (p / "manifest.csv").is_file():
-                out += _manifest_files(p / "manifest.csv")
-            else:
-                out += sorted(q for q in p.iterdir() if q.suffix.lower() in MESH_SUFFIXES)
-        elif p.suffix.lower() == ".csv":
-            if not p.is_file():
-                raise ValueError(f"{p}: no such file")
-            out += _manifest_files(p)
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise ValueError(f"{p}: no such file or folder")
-    if not out:
-        raise ValueError("no grain files in the inputs")
-    for p in out:
-        if not p.is_file():
-            raise ValueError(f"{p}: no such file")
-    return out
 
 
 def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.ndarray]:

@@ -104,20 +104,21 @@ def _from_basic(d: Mapping[str, float]) -> dict[str, float]:
 
 
 def _manifest_rows(manifest: Path) -> dict[Path, dict[str, float]]:
+    from ..io.inputs import read_manifest
     from ..units import plain
 
-    out = {}
     try:
-        with open(manifest, newline="", encoding="utf-8") as fh:
-            for row in csv.DictReader(fh):
-                row = {plain(k): v for k, v in row.items() if k is not None}
-                try:
-                    out[(manifest.parent / row["file"]).resolve()] = _from_basic(
-                        {k: float(row[k]) for k in ("sphericity", "convexity", "L", "I", "S", "equivalent_diameter")})
-                except (KeyError, TypeError, ValueError):
-                    continue  # a row without the measures: its file is measured
-    except (OSError, UnicodeDecodeError, csv.Error):
+        rows = read_manifest(manifest, require=("file",))
+    except ValueError:
         return {}
+    out = {}
+    for row in rows:
+        row = {plain(k): v for k, v in row.items() if k is not None}
+        try:
+            out[(manifest.parent / row["file"]).resolve()] = _from_basic(
+                {k: float(row[k]) for k in ("sphericity", "convexity", "L", "I", "S", "equivalent_diameter")})
+        except (KeyError, TypeError, ValueError):
+            continue  # a row without the measures: its file is measured
     return out
 
 
@@ -205,7 +206,7 @@ def files_to_measure(inputs: Sequence[str | os.PathLike], paths: Sequence[Path],
 def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: int, *, workers: int = 1,
                  progress: Callable[[int, int], None] | None = None, pool: int | None = None,
                  size: float | None = None) -> ChosenFiles:
-    """Choose ``k`` of ``paths`` (resolved from ``inputs`` by :func:`~grainforge.dem.inputs.grain_paths`).
+    """Choose ``k`` of ``paths`` (resolved from ``inputs`` by :func:`~grainforge.io.inputs.mesh_paths`).
 
     Candidates are every file when a manifest among the inputs gives them all
     (up to :data:`MAX_CANDIDATES`), else ``pool`` (default :func:`pool_size`)

@@ -44,7 +44,7 @@ import numpy as np
 
 __all__ = [
     "ShelfPacker", "GeneratorSource", "FileSource", "Prepared", "TrayResult", "build_tray",
-    "orient_principal", "orient_stable", "files_from", "tray_outputs", "min_mesh_distance",
+    "orient_principal", "orient_stable", "tray_outputs", "min_mesh_distance",
 ]
 
 OUT_FORMATS = (".3mf", ".stl")
@@ -212,40 +212,6 @@ class FileSource:
 
     def __len__(self):
         return len(self.paths)
-
-
-def files_from(inputs: Iterable[str | Path]) -> tuple[Path, ...]:
-    """Mesh files named by ``inputs``: files, folders (every STL/OBJ/PLY/3MF in them, sorted) or manifest CSVs.
-
-    Raises
-    ------
-    ValueError
-        For a missing path, a manifest without a ``file`` column, or no files at all.
-    """
-    import csv
-
-    exts = {".stl", ".obj", ".ply", ".3mf"}
-    out: list[Path] = []
-    for item in inputs:
-        p = Path(item)
-        if p.is_dir():
-            out += sorted(q for q in p.iterdir() if q.suffix.lower() in exts and not q.name.startswith("."))
-        elif p.suffix.lower() == ".csv" and p.is_file():
-            with p.open(newline="", encoding="utf-8") as fh:
-                reader = csv.DictReader(fh)
-                if not reader.fieldnames or "file" not in reader.fieldnames:
-                    raise ValueError(f"{p}: a manifest needs a 'file' column")
-                out += [p.parent / row["file"] for row in reader]
-        elif p.is_file():
-            out.append(p)
-        else:
-            raise ValueError(f"{p}: no such file or folder")
-    if not out:
-        raise ValueError("no grain files found in the inputs")
-    missing = [q for q in out if not q.is_file()]
-    if missing:
-        raise ValueError(f"{missing[0]}: no such file")
-    return tuple(out)
 
 
 # --------------------------------------------------------------------------- per-grain work (workers)

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._version import __version__
+from .inputs import MESH_SUFFIXES
 from .sniff import what_is
 from .stl import check_stl, read_stl, stl_header
 
@@ -207,7 +208,7 @@ def write_csv(
 
 
 #: the mesh formats every command reads (named in the message for a file of another kind)
-READABLE_MESHES = "STL, OBJ, PLY, 3MF"
+READABLE_MESHES = ", ".join(s.lstrip(".").upper() for s in MESH_SUFFIXES)
 
 def read_mesh(path: str | os.PathLike):
     """Read a mesh file (STL, OBJ, PLY, 3MF, ...) as a single trimesh.

@@ -16,14 +16,14 @@ from typing import Any
 from ..analysis.descriptors import BASIC_COLUMNS, basic_descriptors
 from ..fabrication.scale import check_size, to_size
 from ..io import FORMATS, _cell, export_bytes, file_mode
+from ..io.inputs import MANIFEST, read_manifest
 from ..methods import generate, get
 from ..params import as_dict, specs
 from ..runtime.staging import signals_held, staged
 
 __all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files",
-           "existing_outputs", "earlier_run_files", "manifest_rows"]
+           "existing_outputs", "earlier_run_files"]
 
-MANIFEST = "manifest.csv"
 
 
 def grain_file_name(method: str, index: int, fmt: str) -> str:
@@ -98,9 +98,8 @@ def earlier_run_files(out: Path) -> list[Path]:
     if not manifest.is_file():
         return []
     try:
-        with manifest.open(newline="", encoding="utf-8") as fh:
-            names = [row.get("file") or "" for row in csv.DictReader(fh)]
-    except (OSError, UnicodeDecodeError, csv.Error):
+        names = [row.get("file") or "" for row in read_manifest(manifest)]
+    except ValueError:
         return []
     files = []
     for name in names:
@@ -109,12 +108,6 @@ def earlier_run_files(out: Path) -> list[Path]:
         if name and Path(name).name == name and not name.startswith(".") and p.is_file():
             files.append(p)
     return files
-
-
-def manifest_rows(out: str | Path) -> list[dict[str, str]]:
-    """The rows of ``out``/manifest.csv (values as text)."""
-    with (Path(out) / MANIFEST).open(newline="", encoding="utf-8") as fh:
-        return list(csv.DictReader(fh))
 
 
 def write_run(

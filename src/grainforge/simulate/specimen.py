@@ -179,9 +179,9 @@ def choose_grains(inputs: Sequence[str | os.PathLike], settings: Settings, *, po
         picks = [int(i) for i in candidates[choice.indices]]
         return ChosenGrains(paths[0], picks, [f"{recipe.method}-{i:04d}" for i in picks],
                             [f"{paths[0]} grain {i}" for i in picks], table[choice.indices], choice, n, len(tasks))
-    from ..dem.inputs import grain_paths
+    from ..io.inputs import mesh_paths
 
-    files = grain_paths(paths)
+    files = mesh_paths(paths)
     chosen = choose_files(paths, files, k, workers=workers, progress=progress, pool=pool,
                           size=settings.size)
     names = [f"g{j:04d}-{f.stem}"[:60] for j, f in enumerate(chosen.paths)]
@@ -215,9 +215,9 @@ def check_inputs(inputs: Sequence[str | os.PathLike]) -> tuple[int, float]:
         recipe = load_recipe(paths[0])
         check_recipe_size(recipe)
         return recipe.count, grain_seconds(recipe.method, draw_grain(recipe, 0)[1])
-    from ..dem.inputs import grain_paths
+    from ..io.inputs import mesh_paths
 
-    return len(grain_paths(paths)), 0.0
+    return len(mesh_paths(paths)), 0.0
 
 
 def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *, as_spheres: bool = False,

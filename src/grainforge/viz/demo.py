@@ -17,13 +17,14 @@ __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "a
 def _sweep_panels(out: Path, method: str, make_params, values, label, seeds) -> tuple[list, list[str]]:
     """Write one run per value into ``out/<label>=<value>``; the meshes and labels of a sheet, row by seed."""
     from ..io import read_mesh
-    from ..population.generate import manifest_rows, write_run
+    from ..io.inputs import MANIFEST, read_manifest
+    from ..population.generate import write_run
 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
     for j, value in enumerate(values):
         folder = out / f"{label}={value:g}"
         write_run(method, make_params(value), seeds, folder, overwrite=True)
-        rows = manifest_rows(folder)
+        rows = read_manifest(folder / MANIFEST)
         for i, r in enumerate(rows):
             panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
     order = sorted(panels)
@@ -74,9 +75,10 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     import numpy as np
 
     from ..io import read_mesh, save_figure
+    from ..io.inputs import MANIFEST, read_manifest
     from ..methods.cri import Params
     from ..outline.contours import Contour
-    from ..population.generate import manifest_rows, write_run
+    from ..population.generate import write_run
     from .render import contact_sheet
 
     seeds = [0, 1] if quick else [0, 1, 2]
@@ -118,7 +120,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     for name, params in runs:
         run_seeds = seeds[:1] if name == "micrographs" else seeds  # images: no randomness
         write_run("cri", params, run_seeds, folder / name, overwrite=True)
-        rows = manifest_rows(folder / name)
+        rows = read_manifest(folder / name / MANIFEST)
         for r in rows:
             meshes.append(read_mesh(folder / name / r["file"]))
             labels.append(f"{name}  seed {r['seed']}")
@@ -234,8 +236,9 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
     A last row shows dented grains (lower convexity), also sharp to rounded.
     """
     from ..io import read_mesh
+    from ..io.inputs import MANIFEST, read_manifest
     from ..methods.angular import Params
-    from ..population.generate import manifest_rows, write_run
+    from ..population.generate import write_run
     from .render import contact_sheet
 
     s = 4 if quick else 5
@@ -248,7 +251,7 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
             params = Params(facets=18, aspect=(1.6, 1.25, 1.0), rounding=rounding, subdivisions=s, **extra)
             sub = folder / f"{name.replace(' ', '-').replace(',', '')}-rounding={rounding:g}"
             write_run("angular", params, [3], sub, overwrite=True)
-            meshes.append(read_mesh(sub / manifest_rows(sub)[0]["file"]))
+            meshes.append(read_mesh(sub / read_manifest(sub / MANIFEST)[0]["file"]))
             labels.append(f"rounding {rounding:g}, {name}")
     sheet = contact_sheet(meshes, labels, out / "angular-gallery.png", columns=len(ANGULAR_ROUNDING),
                           title="Angular grains (18 facets, aspect 1.6:1.25:1, seed 3): sharp to rounded "
@@ -386,8 +389,9 @@ def write_fourier_csv(images, path: Path) -> Path:
 def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     """rf grains from a measured spectrum: a sample micrograph → its D2..D16 table → one rf grain per seed."""
     from ..io import read_mesh
+    from ..io.inputs import MANIFEST, read_manifest
     from ..methods.rf import Params
-    from ..population.generate import manifest_rows, write_run
+    from ..population.generate import write_run
     from .render import contact_sheet
 
     folder = out / "rf"
@@ -397,7 +401,7 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     seeds = list(range(6 if quick else 12))
     p = Params(spectrum=str(table), subdivisions=4 if quick else 5)
     write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
-    rows = manifest_rows(folder / "from-spectrum")
+    rows = read_manifest(folder / "from-spectrum" / MANIFEST)
     meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
     labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
     sheet = contact_sheet(meshes, labels, out / "rf-grains.png", columns=6, dpi=90, panel_size=2.2, unit="mm",

@@ -10,7 +10,6 @@ CRI manifest's ``descriptors``/``decay``/``modes``, drawn as the input spectrum)
 
 from __future__ import annotations
 
-import csv
 import textwrap
 from collections.abc import Sequence
 from pathlib import Path
@@ -18,11 +17,11 @@ from pathlib import Path
 import numpy as np
 
 __all__ = [
-    "KINDS", "read_manifest", "plot", "figure", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution", "demo_plots",
+    "KINDS", "manifest_columns", "plot", "figure", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution", "demo_plots",
 ]
 
 
-def read_manifest(path: str | Path) -> dict[str, list[str]]:
+def manifest_columns(path: str | Path) -> dict[str, list[str]]:
     """Columns of a CSV manifest as lists of strings.
 
     Raises
@@ -30,14 +29,10 @@ def read_manifest(path: str | Path) -> dict[str, list[str]]:
     ValueError
         If the file is missing, not CSV or empty.
     """
+    from ..io.inputs import read_manifest
+
     path = Path(path)
-    if not path.is_file():
-        raise ValueError(f"{path}: no such file")
-    try:
-        with open(path, newline="", encoding="utf-8") as fh:
-            rows = list(csv.DictReader(fh))
-    except (UnicodeDecodeError, csv.Error) as exc:
-        raise ValueError(f"{path}: not a CSV manifest ({exc})") from None
+    rows = read_manifest(path)
     if not rows:
         raise ValueError(f"{path}: holds no rows")
     from ..units import plain
@@ -273,7 +268,7 @@ def figure(kind: str, manifests: Sequence[str | Path], *, title: str | None = No
         raise ValueError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
     if not manifests:
         raise ValueError("at least one manifest is needed")
-    tables = [(Path(p), read_manifest(p)) for p in manifests]
+    tables = [(Path(p), manifest_columns(p)) for p in manifests]
     import matplotlib
 
     matplotlib.use("Agg")
@@ -339,7 +334,7 @@ def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:
         rows: list[dict] = []
         meshes: list[Path] = []
         for m in files:
-            t = read_manifest(m)
+            t = manifest_columns(m)
             n = len(next(iter(t.values())))
             rows += [{k: t[k][i] for k in t} for i in range(n)]
             meshes += [m.parent / f for f in t.get("file", []) if f and (m.parent / f).is_file()]
