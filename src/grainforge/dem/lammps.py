@@ -45,7 +45,8 @@ from .deck import (
     write_files,
     xyzr_text,
 )
-from .scripts import render
+from .scripts import render as render_script
+from .text import render
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
@@ -77,9 +78,8 @@ def mol_id(name: str) -> str:
     return "g_" + "".join(c if c.isalnum() else "_" for c in name)
 
 
-def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
-    """``{relative path: text}`` of a LAMMPS deck (nothing written)."""
-    s = settings or pour_settings()
+def _shape_files(templates: Sequence) -> dict:
+    """Per grain ``<grain>.xyzr``, ``<grain>.clump.vtk`` and the molecule file ``<grain>.mol``."""
     files: dict[str, str] = {}
     for t in templates:
         if t.shape != "clump" or t.clump is None:
@@ -89,7 +89,41 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=head)
         files[f"{t.name}.clump.vtk"] = clump_vtk_text(t.clump.centres, t.clump.radii, f"grainforge clump {t.name}")
         files[f"{t.name}.mol"] = molecule_text(t)
+    return files
 
+
+def _placement_files(templates: Sequence, population: list[int], side: int, cell: float, seed: int):
+    """``in.insert`` (one ``create_atoms`` per grain), ``rigid.infile`` (each body's mesh mass, centre and
+    inertia in the box frame) and the placements' records, for the grains ``population`` (template indices)."""
+    n = len(population)
+    ins = ["# grainforge: one rigid grain per line (molecule IDs 1..N in this order)"]
+    infile = ["# grainforge rigid/small infile: ID mass xcm ycm zcm ixx iyy izz ixy ixz iyz vxcm vycm vzcm lx ly lz"
+              " ixcm iycm izcm (SI, box frame)", str(n)]
+    placements = []
+    for (slot, pos, axis, theta, R), k in zip(lattice_slots(n, side, cell, seed), population):
+        t = templates[k]
+        # create_atoms puts the molecule's geometric centre (mean of the atom coordinates) at the
+        # point and rotates about it: aim it so that the centroid (file origin) lands on pos
+        point = pos + R @ t.clump.centres.mean(axis=0)
+        ins.append(f"create_atoms 0 single {fmt(point[0])} {fmt(point[1])} {fmt(point[2])} mol {mol_id(t.name)} "
+                   f"{1000003 + slot} rotate {fmt(theta)} {fmt(axis[0])} {fmt(axis[1])} {fmt(axis[2])} units box")
+        placements.append({"mol": slot + 1, "name": t.name, "xcm": pos.tolist(), "axis": axis.tolist(),
+                           "theta_deg": theta})
+        I = R @ t.inertia @ R.T
+        infile.append(" ".join([str(slot + 1), fmt(t.mass), *(fmt(x) for x in pos),
+                                *(fmt(x) for x in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])),
+                                *["0"] * 9]))
+    return {"in.insert": "\n".join(ins) + "\n", "rigid.infile": "\n".join(infile) + "\n"}, placements
+
+
+def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
+    """``{relative path: text}`` of a LAMMPS deck (nothing written).
+
+    ``in.run`` is the template ``grainforge/dem/texts/lammps-pour.in`` filled with the numbers computed
+    here (:mod:`grainforge.dem.text`).
+    """
+    s = settings or pour_settings()
+    files = _shape_files(templates)
     population = [k for k, t in enumerate(templates) for _ in range(t.count)]
     rng = np.random.default_rng(s["seed"])
     order = rng.permutation(len(population))
@@ -112,91 +146,24 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     gamman = 2 * zeta * omega
     ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
     sched = settle_schedule(dt, layers * cell, mean_d, s)
-
-    ins = ["# grainforge: one rigid grain per line (molecule IDs 1..N in this order)"]
-    infile = ["# grainforge rigid/small infile: ID mass xcm ycm zcm ixx iyy izz ixy ixz iyz vxcm vycm vzcm lx ly lz"
-              " ixcm iycm izcm (SI, box frame)", str(n)]
-    placements = []
-    for (slot, pos, axis, theta, R), k in zip(lattice_slots(len(population), side, cell, s["seed"]), population):
-        t = templates[k]
-        # create_atoms puts the molecule's geometric centre (mean of the atom coordinates) at the
-        # point and rotates about it: aim it so that the centroid (file origin) lands on pos
-        point = pos + R @ t.clump.centres.mean(axis=0)
-        ins.append(f"create_atoms 0 single {fmt(point[0])} {fmt(point[1])} {fmt(point[2])} mol {mol_id(t.name)} "
-                   f"{1000003 + slot} rotate {fmt(theta)} {fmt(axis[0])} {fmt(axis[1])} {fmt(axis[2])} units box")
-        placements.append({"mol": slot + 1, "name": t.name, "xcm": pos.tolist(), "axis": axis.tolist(),
-                           "theta_deg": theta})
-        I = R @ t.inertia @ R.T
-        infile.append(" ".join([str(slot + 1), fmt(t.mass), *(fmt(x) for x in pos),
-                                *(fmt(x) for x in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])),
-                                *["0"] * 9]))
-    files["in.insert"] = "\n".join(ins) + "\n"
-    files["rigid.infile"] = "\n".join(infile) + "\n"
-    mols = "\n".join(f"molecule {mol_id(t.name)} {t.name}.mol" for t in templates)
-    top = (layers + 2) * cell
+    placed, placements = _placement_files(templates, population, side, cell, s["seed"])
+    files.update(placed)
     # under MPI, rigid/small reaches a body's atoms on other ranks as ghosts: the ghost cutoff spans
     # a whole body plus the neighbour skin (the pair cutoff alone, ~ one sphere diameter, is shorter;
     # LAMMPS stops with "Rigid body extent > ghost cutoff" or "Rigid body atoms missing" then)
     ghost = 2 * max(t.bounding_radius for t in templates) + 0.2 * cell
-    walls = "hooke/history {kn} NULL {g} NULL {mu} 1".format(kn=fmt(kn), g=fmt(gamman), mu=fmt(s["friction"]))
-    run = f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
-# Units: SI (m, kg, s). Grains are rigid/small bodies with the mesh's exact mass, centre and inertia.
-units si
-atom_style sphere
-atom_modify map array
-dimension 3
-boundary f f f
-newton off
-# under MPI: columns (the pour's bed spreads over every rank), and ghosts far enough for a whole body
-processors * * 1
-comm_modify vel yes cutoff {fmt(ghost)}
-region domain block {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.05 * cell)} {fmt(width + 0.05 * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
-create_box 1 domain
-fix molprop all property/atom mol ghost yes
-{mols}
-include in.insert
-
-pair_style gran/hooke/history {fmt(kn)} NULL {fmt(gamman)} NULL {fmt(s["friction"])} 1
-pair_coeff * *
-neighbor {fmt(0.2 * cell)} bin
-neigh_modify delay 0 exclude molecule/intra all
-timestep {fmt(dt)}
-
-group nothing empty
-fix grav nothing gravity 9.81 vector 0 0 -1
-fix rb all rigid/small molecule infile rigid.infile gravity grav
-fix floor all wall/gran {walls} zplane 0.0 NULL
-fix wallx all wall/gran {walls} xplane 0.0 {fmt(width)}
-fix wally all wall/gran {walls} yplane 0.0 {fmt(width)}
-
-compute kr all ke/rigid rb
-compute er all erotate/rigid rb
-variable ke equal c_kr+c_er
-variable kethr equal {fmt(ke_threshold)}
-compute body all rigid/local rb mol mass x y z inertiax inertiay inertiaz vx vy vz
-thermo_style custom step atoms c_kr c_er
-thermo {sched["check_every"]}
-
-dump b0 all local 1 bodies-initial.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8]
-dump_modify b0 format float %.17g
-dump a0 all custom 1 atoms-initial.txt id mol x y z radius
-dump_modify a0 format float %.17g
-run 0
-undump b0
-undump a0
-
-shell mkdir post
-dump vtk all custom {s["dump_every"]} post/grains.*.dump id mol x y z vx vy vz radius
-{settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"], s["settle_checks"])}
-dump b1 all local 1 bodies-final.txt c_body[1] c_body[2] c_body[3] c_body[4] c_body[5] c_body[6] c_body[7] c_body[8] c_body[9] c_body[10] c_body[11]
-dump_modify b1 format float %.17g
-run 0
-shell python3 dump2vtk.py
-# the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... J) (1)
-{settle_report("quit 0", "quit 1")}
-"""
-    files["in.run"] = run
-    files["dump2vtk.py"] = render("lammps_dump2vtk.py")
+    lo, hi = fmt(-0.05 * cell), fmt(width + 0.05 * cell)
+    files["in.run"] = render("lammps-pour.in", {
+        "ghost": fmt(ghost), "x0": lo, "x1": hi, "y0": lo, "y1": hi, "z0": fmt(-0.5 * cell),
+        "z1": fmt((layers + 2) * cell),
+        "molecules": "\n".join(f"molecule {mol_id(t.name)} {t.name}.mol" for t in templates),
+        "kn": fmt(kn), "gamman": fmt(gamman), "friction": fmt(s["friction"]), "skin": fmt(0.2 * cell),
+        "dt": fmt(dt), "width": fmt(width), "ke_threshold": fmt(ke_threshold), "check_every": sched["check_every"],
+        "dump_every": s["dump_every"],
+        "settle_loop": settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"],
+                                   s["settle_checks"]),
+        "settle_report": settle_report("quit 0", "quit 1")})
+    files["dump2vtk.py"] = render_script("lammps_dump2vtk.py")
     deck = {"units": "SI (m, kg, s)", "grains": [template_record(t) for t in templates],
             "placements": placements, "box": [width, width],
             "ke_threshold": ke_threshold, "dt": dt, "kn": kn, "settle": sched, "scene": s}

@@ -52,7 +52,8 @@ from .deck import (
     updated_settings,
     write_files,
 )
-from .scripts import render
+from .scripts import render as render_script
+from .text import render
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "hull_topology", "body_lines", "MICRO",
            "MAX_VERTICES"]
@@ -273,73 +274,20 @@ def _data_file(templates: Sequence, topo: list, p: SimpleNamespace) -> tuple[str
 
 
 def _run_text(p: SimpleNamespace, s: dict, nmax: int) -> str:
-    """The ``in.run`` of the pour (units micro)."""
+    """The ``in.run`` of the pour (units micro): the template ``grainforge/dem/texts/lammps-body-pour.in``
+    filled with the plan's numbers, converted to micro units here."""
     L, T = MICRO["length"], MICRO["time"]
-    kn, c_n, c_t, cell, width, dt = p.kn, p.c_n, p.c_t, p.cell, p.width, p.dt
-    a_ua, cut_inner, gamma, ke_threshold, sched = p.a_ua, p.cut_inner, p.gamma, p.ke_threshold, p.sched
-    Kn, Cn, Ct = kn * MICRO["stiffness"], c_n * MICRO["damping"], c_t * MICRO["damping"]
-    g = 9.81 * MICRO["acceleration"]
-    wall = f"{fmt(Kn)} {fmt(Cn)} {fmt(Ct)}"
-    return f"""# LAMMPS deck written by grainforge. Run from inside this folder:  lmp -in in.run
-# Grains are convex rounded/polyhedron bodies (BODY package) with the mesh's exact mass, centre and
-# inertia. Units: micro (um, pg, us; force nN, energy 1e-15 J): the BODY contact code has absolute
-# length tolerances of 1e-3 input units, far too coarse in SI for millimetre grains (grains.json: SI).
-units micro
-dimension 3
-boundary f f f
-atom_style body rounded/polyhedron 1 {nmax}
-atom_modify map array
-newton on
-# under MPI: columns, so that the pour's bed spreads over every rank
-processors * * 1
-comm_modify vel yes
-read_data data.bodies
-
-# contact: linear spring k_n, viscous damping c_n (normal) and c_t (tangential), no cohesion, mu 0.
-# A_ua (the "unit contact area") is set above any contact patch of these grains (pi d_max^2): LAMMPS
-# multiplies contact forces by patch area / A_ua when that exceeds 1, which must not happen here.
-pair_style body/rounded/polyhedron {fmt(Cn)} {fmt(Ct)} 0.0 {fmt(a_ua * L * L)} {fmt(cut_inner * L)}
-pair_coeff * * {fmt(Kn)} 0.0
-neighbor {fmt(0.2 * cell * L)} bin
-neigh_modify every 1 delay 0 check yes
-timestep {fmt(dt * T)}
-
-fix integrate all nve/body
-fix grav all gravity {fmt(g)} vector 0 0 -1
-# background damping of the translational velocity: time constant sqrt(d/g) for the mean mass
-fix drag all viscous {fmt(gamma * MICRO["damping"])}
-fix floor all wall/body/polyhedron {wall} zplane 0.0 NULL
-fix wallx all wall/body/polyhedron {wall} xplane 0.0 {fmt(width * L)}
-fix wally all wall/body/polyhedron {wall} yplane 0.0 {fmt(width * L)}
-
-# kinetic energy: translational (compute ke) + rotational; LAMMPS 2021 has no erotate for bodies,
-# so the rotational part is 3/2 N k_B T of compute temp/body (dof rotate, no dof removed)
-compute kt all ke
-compute trot all temp/body dof rotate
-compute_modify trot extra/dof 0
-variable kr equal 1.5*atoms*{BOLTZ_MICRO}*c_trot
-variable ke equal c_kt+v_kr
-variable kethr equal {fmt(ke_threshold * MICRO["energy"])}
-compute vtx all body/local id 1 2 3
-thermo_style custom step atoms c_kt v_kr
-thermo {sched["check_every"]}
-
-run 0
-write_data data.initial nocoeff
-
-shell mkdir post
-dump vtk all local {s["dump_every"]} post/vertices.*.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[4]
-dump_modify vtk format float %.17g
-{settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"], s["settle_checks"])}
-undump vtk
-write_data data.final nocoeff
-dump last all local 1 post/vertices.final.dump c_vtx[1] c_vtx[2] c_vtx[3] c_vtx[4]
-dump_modify last format float %.17g
-run 0
-shell python3 dump2vtk.py
-# the last line: SETTLED in N steps (exit status 0) or NOT SETTLED after N steps (KE ... > ... in micro units) (1)
-{settle_report("quit 0", "quit 1", energy_unit="pg um^2/us^2, micro units = 1e-15 J")}
-"""
+    sched = p.sched
+    return render("lammps-body-pour.in", {
+        "nmax": nmax, "c_n": fmt(p.c_n * MICRO["damping"]), "c_t": fmt(p.c_t * MICRO["damping"]),
+        "a_ua": fmt(p.a_ua * L * L), "cut_inner": fmt(p.cut_inner * L), "kn": fmt(p.kn * MICRO["stiffness"]),
+        "skin": fmt(0.2 * p.cell * L), "dt": fmt(p.dt * T), "gravity": fmt(9.81 * MICRO["acceleration"]),
+        "drag": fmt(p.gamma * MICRO["damping"]), "width": fmt(p.width * L), "boltzmann": fmt(BOLTZ_MICRO),
+        "ke_threshold": fmt(p.ke_threshold * MICRO["energy"]), "check_every": sched["check_every"],
+        "dump_every": s["dump_every"],
+        "settle_loop": settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"],
+                                   s["settle_checks"]),
+        "settle_report": settle_report("quit 0", "quit 1", energy_unit="pg um^2/us^2, micro units = 1e-15 J")})
 
 
 def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
@@ -350,7 +298,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     p = _pour_plan(templates, s)
     files["data.bodies"], placements, nmax = _data_file(templates, topo, p)
     files["in.run"] = _run_text(p, s, nmax)
-    files["dump2vtk.py"] = render("lammps_body_dump2vtk.py")
+    files["dump2vtk.py"] = render_script("lammps_body_dump2vtk.py")
     r_round, width, ke_threshold, dt, sched = p.r_round, p.width, p.ke_threshold, p.dt, p.sched
     kn, c_n, c_t, gamma = p.kn, p.c_n, p.c_t, p.gamma
     grains = []

@@ -49,9 +49,10 @@ from .deck import (
     write_files,
     xyzr_text,
 )
+from .text import block, render
 
 __all__ = ["write_deck", "deck_files", "pour_settings", "template_fix", "node_insertion", "seed_table", "deck_seeds",
-           "SEED_MIN", "SEED_LIMIT"]
+           "SEED_MIN", "SEED_LIMIT", "MULTISPHERE_SETUP"]  # noqa: F822
 
 #: LIGGGHTS takes a random seed only if it is a prime > 10000 (it stops otherwise), and the seeds
 #: of an insertion fix, its particle distribution and that distribution's templates must differ
@@ -110,14 +111,12 @@ def node_insertion(slot: int, node, cell: float, seed: int, distribution: str, q
             "ntry_mc 1000"]
 
 
-#: input lines that insert the grains as multisphere bodies and define their kinetic energy ``ke`` (J)
-MULTISPHERE_SETUP = """include in.templates
-include in.insert
-fix ms all multisphere
-
-compute kems all ke/multisphere
-compute erms all erotate/multisphere
-variable ke equal c_kems+c_erms"""
+def __getattr__(name):
+    # MULTISPHERE_SETUP: input lines that insert the grains as multisphere bodies and define their kinetic energy
+    # ``ke`` (J), the template grainforge/dem/texts/liggghts-multisphere.in (package data)
+    if name == "MULTISPHERE_SETUP":
+        return block("liggghts-multisphere.in")
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def pour_settings(**kw) -> dict:
@@ -168,15 +167,11 @@ def deck_seeds(count: int) -> list[int]:
     return [int(x) for x in table[(np.arange(count, dtype=np.int64) * _SEED_STRIDE) % len(table)]]
 
 
-def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
-    """``{relative path: text}`` of a LIGGGHTS deck (nothing written)."""
-    s = settings or pour_settings()
+def _template_files(templates: Sequence, seeds: list[int]) -> dict:
+    """The grains' sphere files and ``in.templates``: one multisphere template per grain, and the
+    distribution ``pdd`` over them by mass fraction."""
     files: dict[str, str] = {}
     n_t = len(templates)
-    n = sum(t.count for t in templates)
-    # one distinct seed per random fix: templates, the mass-fraction distribution, one distribution
-    # per template, one insertion per grain (each copy its own orientation)
-    seeds = deck_seeds(2 * n_t + 1 + n)
     tpl = ["# grainforge: one multisphere template per grain (SI units), exact mesh mass and inertia",
            "# inertia_tensor Ixx Ixy Ixz Iyy Iyz Izz about the centroid, grain frame (kg m^2)"]
     names, masses = [], []
@@ -197,7 +192,41 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     tpl.append(f"fix pdd all particledistribution/discrete {seeds[n_t]} {n_t} "
                + " ".join(f"{n} {f}" for n, f in zip(names, frac_text)))
     files["in.templates"] = "\n".join(tpl) + "\n"
+    return files
 
+
+def _insert_text(templates: Sequence, seeds: list[int], side: int, cell: float, seed: int) -> str:
+    """``in.insert``: every grain ``count`` times, each copy at its own node of a lattice of ``side`` × ``side``
+    cells per layer above the box, in its own uniformly random orientation."""
+    n_t, n = len(templates), sum(t.count for t in templates)
+    head = f"each copy at its own lattice node (within {_NODE_BOX:g} cells)"
+    ins = [f"# grainforge: insert every grain `count` times, {head}, uniformly random orientation"]
+    quats = exact_unit_quaternions(grain_orientations(n, seed))
+    slot = 0
+    for k, t in enumerate(templates):
+        ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
+                   f"pts{k + 1} 1.0")
+        for _ in range(t.count):
+            i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
+            node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
+            ins += node_insertion(slot, node, cell, seeds[2 * n_t + 1 + slot], f"pdd{k + 1}", quats[slot])
+            slot += 1
+    return "\n".join(ins) + "\n"
+
+
+def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
+    """``{relative path: text}`` of a LIGGGHTS deck (nothing written).
+
+    ``in.run`` is the template ``grainforge/dem/texts/liggghts-pour.in`` filled with the numbers computed
+    here (:mod:`grainforge.dem.text`).
+    """
+    s = settings or pour_settings()
+    n_t = len(templates)
+    n = sum(t.count for t in templates)
+    # one distinct seed per random fix: templates, the mass-fraction distribution, one distribution
+    # per template, one insertion per grain (each copy its own orientation)
+    seeds = deck_seeds(2 * n_t + 1 + n)
+    files = _template_files(templates, seeds)
     # lattice of insertion cells above the box: one per population member
     cell = 2.2 * max(t.bounding_radius for t in templates)
     side = max(1, math.ceil(math.sqrt(n / 6.0)))
@@ -210,81 +239,17 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
     # the highest insertion node's top: where the last grain can start
     sched = settle_schedule(dt, (layers + 0.5) * cell, mean_d, s)
-    head = f"each copy at its own lattice node (within {_NODE_BOX:g} cells)"
-    ins = [f"# grainforge: insert every grain `count` times, {head}, uniformly random orientation"]
-    quats = exact_unit_quaternions(grain_orientations(n, s.get("seed", 0)))
-    slot = 0
-    for k, t in enumerate(templates):
-        ins.append(f"fix pdd{k + 1} all particledistribution/discrete {seeds[n_t + 1 + k]} 1 "
-                   f"pts{k + 1} 1.0")
-        for _ in range(t.count):
-            i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
-            node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
-            ins += node_insertion(slot, node, cell, seeds[2 * n_t + 1 + slot], f"pdd{k + 1}", quats[slot])
-            slot += 1
-    files["in.insert"] = "\n".join(ins) + "\n"
-
-    top = (layers + 2) * cell
-    run = f"""# LIGGGHTS deck written by grainforge. Run from inside this folder:  liggghts -in in.run
-# Units: SI (m, kg, s). Grains are multisphere bodies with the mesh's exact mass and inertia.
-atom_style sphere
-atom_modify map array sort 0 0
-boundary f f f
-newton off
-communicate single vel yes
-units si
-
-processors * * 1
-region domain block {fmt(-_MARGIN_LO * cell)} {fmt(width + _MARGIN_HI * cell)} {fmt(-_MARGIN_LO * cell)} {fmt(width + _MARGIN_HI * cell)} {fmt(-0.5 * cell)} {fmt(top)} units box
-create_box 1 domain
-neighbor {fmt(0.5 * rmin)} bin
-neigh_modify delay 0
-
-fix m1 all property/global youngsModulus peratomtype {fmt(s["young"])}
-fix m2 all property/global poissonsRatio peratomtype {fmt(s["poisson"])}
-fix m3 all property/global coefficientRestitution peratomtypepair 1 {fmt(s["restitution"])}
-fix m4 all property/global coefficientFriction peratomtypepair 1 {fmt(s["friction"])}
-pair_style gran model hertz tangential history
-pair_coeff * *
-timestep {fmt(dt)}
-fix gravi all gravity 9.81 vector 0.0 0.0 -1.0
-fix floor all wall/gran model hertz tangential history primitive type 1 zplane 0.0
-fix wx0 all wall/gran model hertz tangential history primitive type 1 xplane 0.0
-fix wx1 all wall/gran model hertz tangential history primitive type 1 xplane {fmt(width)}
-fix wy0 all wall/gran model hertz tangential history primitive type 1 yplane 0.0
-fix wy1 all wall/gran model hertz tangential history primitive type 1 yplane {fmt(width)}
-
-{MULTISPHERE_SETUP}
-variable kethr equal {fmt(ke_threshold)}
-compute bid all multisphere property id_multisphere
-compute btype all multisphere property clumptype
-compute bmass all multisphere property masstotal
-compute bx all multisphere property xcm
-compute binert all multisphere property inertia
-compute bv all multisphere property vcm
-thermo_style custom step atoms c_kems c_erms
-thermo {sched["check_every"]}
-thermo_modify lost ignore norm no
-
-run 1
-dump bodies0 all local 1 bodies-initial.txt c_bid c_btype c_bmass c_bx[1] c_bx[2] c_bx[3] c_binert[1] c_binert[2] c_binert[3]
-dump_modify bodies0 format "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g"
-dump atoms0 all custom 1 atoms-initial.txt id x y z radius
-dump_modify atoms0 format "%d %.17g %.17g %.17g %.17g"
-run 1
-undump bodies0
-undump atoms0
-
-dump vtk all custom/vtk {s["vtk_every"]} post/grains_*.vtk id type x y z vx vy vz radius
-{settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"], s["settle_checks"])}
-dump bodies1 all local 1 bodies-final.txt c_bid c_btype c_bmass c_bx[1] c_bx[2] c_bx[3] c_bv[1] c_bv[2] c_bv[3]
-dump_modify bodies1 format "%.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g %.17g"
-run 1
-# the last line: SETTLED in N steps, or NOT SETTLED after N steps (KE ... > ... J) and exit
-# status 1 (LIGGGHTS's quit takes no status and always exits 1)
-{settle_report("", "quit")}
-"""
-    files["in.run"] = run
+    files["in.insert"] = _insert_text(templates, seeds, side, cell, s.get("seed", 0))
+    lo, hi = fmt(-_MARGIN_LO * cell), fmt(width + _MARGIN_HI * cell)
+    files["in.run"] = render("liggghts-pour.in", {
+        "x0": lo, "x1": hi, "y0": lo, "y1": hi, "z0": fmt(-0.5 * cell), "z1": fmt((layers + 2) * cell),
+        "skin": fmt(0.5 * rmin), "young": fmt(s["young"]), "poisson": fmt(s["poisson"]),
+        "restitution": fmt(s["restitution"]), "friction": fmt(s["friction"]), "dt": fmt(dt), "width": fmt(width),
+        "multisphere": block("liggghts-multisphere.in"), "ke_threshold": fmt(ke_threshold),
+        "check_every": sched["check_every"], "vtk_every": s["vtk_every"],
+        "settle_loop": settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"],
+                                   s["settle_checks"]),
+        "settle_report": settle_report("", "quit")})
     deck = {"units": "SI (m, kg, s)", "grains": [template_record(t) for t in templates],
             "box": [width, width], "ke_threshold": ke_threshold, "dt": dt, "settle": sched, "scene": s}
     files["grains.json"] = json_text(deck)

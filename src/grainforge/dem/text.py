@@ -22,7 +22,7 @@ from collections.abc import Mapping
 from functools import cache
 from importlib import resources
 
-__all__ = ["EngineText", "fill", "render", "template_text"]
+__all__ = ["EngineText", "fill", "render", "block", "template_text"]
 
 
 class EngineText(string.Template):
@@ -83,3 +83,29 @@ def render(name: str, values: Mapping[str, object]) -> str:
         The engine text.
     """
     return fill(template_text(name), values)
+
+
+def block(name: str, values: Mapping[str, object] | None = None) -> str:
+    """Template ``name`` rendered as a block of lines for a placeholder line of another template.
+
+    A template file ends with a newline; the line it is placed on ends with its own, so the block
+    is the rendered text without its final newline.
+
+    Parameters
+    ----------
+    name : str
+        File name of the template in ``grainforge/dem/texts/``.
+    values : mapping, optional
+        Every placeholder's value (none for a template without placeholders).
+
+    Returns
+    -------
+    str
+        The engine text without its final newline.
+
+    Examples
+    --------
+    >>> block("liggghts-multisphere.in").splitlines()[0]
+    'include in.templates'
+    """
+    return render(name, values or {}).removesuffix("\n")

@@ -6,8 +6,9 @@ set — the signed distance field on a grid that ``grainforge dem --shape
 levelset`` writes (:func:`grainforge.dem.levelset.level_set`), carried by a
 clump whose six mass spheres give the mesh's exact mass, centre and inertia,
 as for the sphere clumps.  The scene text is the clump scene with a short part
-inserted after the shared helpers (:data:`LEVELSET_PART`) that redefines what
-a level set needs:
+after the shared helpers that redefines what a level set needs: the template
+``grainforge/dem/texts/yade-levelset.py.in`` (:data:`LEVELSET_PART`), which
+:func:`scene_text` puts into the test's ``@{helpers}`` after the shared ones:
 
 - the engines: Yade's level-set contact geometry (``Ig2_LevelSet_LevelSet_ScGeom``,
   ``Ig2_Wall_LevelSet_ScGeom``) under the same contact law as the clumps
@@ -46,120 +47,24 @@ damping, the material and the scenes are the same.
 
 from __future__ import annotations
 
-__all__ = ["LEVELSET_PART", "scene_text", "scene_extra", "LEVELSET_NODES", "BASE_NODES", "MIN_TILT_GRAINS",
-           "check_levelset_run", "quick_levelset"]
+from .yade_scenes import scene_text
+
+__all__ = ["LEVELSET_PART", "scene_text", "scene_extra", "LEVELSET_NODES", "BASE_NODES",  # noqa: F822
+           "MIN_TILT_GRAINS", "check_levelset_run", "quick_levelset"]
 
 #: surface nodes of each grain's level set (as ``grainforge dem`` decks)
 LEVELSET_NODES = 150
 #: surface nodes of each level-set sphere of the rough base
 BASE_NODES = 50
 
-LEVELSET_PART = r'''
 
-# ---- level-set grains: Yade's level-set contact geometry under the same contact law ------
-def engines(extra_geoms=(), extra_bounds=()):
-    """The clumps' contact law (linear spring + Coulomb friction, Cundall-Strack) on level-set contacts.
+def __getattr__(name):
+    # LEVELSET_PART: the text of grainforge/dem/texts/yade-levelset.py.in (package data), read when asked for
+    if name == "LEVELSET_PART":
+        from . import yade_scenes
 
-    Torques from the contact point (sphericalBodies=False): Yade's default takes the branch vector as a
-    radius along the normal, right for spheres only; on a level set the normal force would have no moment.
-    """
-    return [
-        ForceResetter(),
-        InsertionSortCollider([Bo1_LevelSet_Aabb(), Bo1_Wall_Aabb(), Bo1_Sphere_Aabb()]),
-        InteractionLoop(
-            [Ig2_LevelSet_LevelSet_ScGeom(), Ig2_Wall_LevelSet_ScGeom()],
-            [Ip2_FrictMat_FrictMat_FrictPhys()],
-            [Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)],
-        ),
-        NewtonIntegrator(gravity=(0, 0, -SETTINGS["gravity"]), damping=SETTINGS["damping"], label="newton"),
-    ]
-
-
-def stable_dt(grains):
-    """dt = safety * sqrt(m_min / k_max), k_max = E * (largest bounding radius): a level-set contact's radius."""
-    m_min = min(t["mass"] for t in grains)
-    r_max = max(t["bounding_radius"] for t in grains)
-    return SETTINGS["dt_safety"] * math.sqrt(m_min / (SETTINGS["young"] * r_max))
-
-
-_sphere_rough_base = rough_base
-
-
-def rough_base(x0, x1, y0, y1, r, rnd, periodic=False):
-    """The spheres' rough base (same places, same draws), each sphere a fixed level set."""
-    ids = []
-    for i in _sphere_rough_base(x0, x1, y0, y1, r, rnd, periodic):
-        c = Vector3(O.bodies[i].state.pos)
-        O.bodies.erase(i)
-        ids.append(O.bodies.append(utils.levelSetBody("sphere", center=c, radius=r, spacing=r / 5.0,
-                                                      nSurfNodes=SETTINGS["ls_base_nodes"], dynamic=False,
-                                                      material=contact_material())))
-    return ids
-
-
-class _LevelSetWalls:
-    """The repose cylinder as one fixed level-set tube (Yade has no facet/level-set contact)."""
-
-    def facetCylinder(self, center, radius, height, segmentsNumber=32, wallMask=4, material=-1):
-        import numpy
-        t = 0.25 * radius  # wall thickness: far more than any overlap
-        h = radius / 30.0  # grid spacing
-        pad = 3 * h
-        xs = numpy.arange(-(radius + t + pad), radius + t + pad + 0.5 * h, h)
-        zs = numpy.arange(-(0.5 * height + pad), 0.5 * height + pad + 0.5 * h, h)
-        X, Y, Z = numpy.meshgrid(xs, xs, zs, indexing="ij")
-        # exact signed distance of a hollow cylinder: inner radius `radius`, thickness t, height `height`
-        q1 = numpy.abs(numpy.hypot(X, Y) - (radius + 0.5 * t)) - 0.5 * t
-        q2 = numpy.abs(Z) - 0.5 * height
-        field = numpy.minimum(numpy.maximum(q1, q2), 0.0) + numpy.hypot(numpy.maximum(q1, 0.0),
-                                                                          numpy.maximum(q2, 0.0))
-        grid = RegularGrid(min=Vector3(xs[0], xs[0], zs[0]), spacing=h, nGP=Vector3i(len(xs), len(xs), len(zs)))
-        b = utils.levelSetBody(grid=grid, distField=field.tolist(), center=Vector3(*center), nSurfNodes=8,
-                               dynamic=False, material=material)
-        b.state.pos = Vector3(*center)  # the tube's axis, whatever centre Yade computed for the field
-        return [b]
-
-
-geom = _LevelSetWalls()
-
-
-def contact_spheres(ids):
-    """[x, y, z, r, clump id] of every surface node of the level-set grains ids (r: half a grid spacing)."""
-    out = []
-    for i, b in contact_members(ids):
-        r = 0.5 * b.shape.lsGrid.spacing
-        for x in b.shape.surfNodes:
-            p = b.state.pos + b.state.ori * x
-            out.append([p[0], p[1], p[2], r, i])
-    return out
-'''
-
-
-def scene_text(test: str, shape: str = "clump") -> str:
-    """The Yade scene text of ``test`` for grains of ``shape`` (``"clump"`` or ``"levelset"``).
-
-    The clump scene is returned unchanged; the level-set scene is the same text
-    with :data:`LEVELSET_PART` inserted after the shared helpers.
-
-    Examples
-    --------
-    >>> from grainforge.simulate.yade_scenes import TILT
-    >>> scene_text("tilt") == TILT
-    True
-    >>> text = scene_text("tilt", "levelset")
-    >>> text.index("Ig2_LevelSet_LevelSet_ScGeom") < text.index("def tilt():")
-    True
-    >>> "Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)" in text  # torques from the contact points
-    True
-    """
-    from .yade_scenes import COMMON, REPOSE, TILT, TRIAXIAL
-
-    scene = {"repose": REPOSE, "tilt": TILT, "triaxial": TRIAXIAL}[test]
-    if shape == "clump":
-        return scene
-    if shape != "levelset":
-        raise ValueError(f"shape must be clump or levelset, got {shape!r}")
-    return COMMON + LEVELSET_PART + scene[len(COMMON):]
+        return yade_scenes.LEVELSET_PART
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 def scene_extra(shape: str = "clump") -> dict:
