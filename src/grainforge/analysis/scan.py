@@ -49,13 +49,16 @@ import numpy as np
 
 from .atlas import OPENING_RADIUS, SIGMA, opening_fraction, voxel_descriptors
 
-__all__ = ["LabelBox", "label_boxes", "measure_labels", "measure_grain", "check_labels", "segment", "grain_mesh",
+__all__ = ["LabelBox", "measure_scan", "scan_seconds", "label_boxes", "measure_labels", "measure_grain", "check_labels", "segment", "grain_mesh",
            "compare_labels", "MIN_VOXELS", "MAX_LABEL", "SLAB_VOXELS", "SEGMENT_BYTES_PER_VOXEL",
            "MARKER_DISTANCE", "MARKER_DEPTH", "typical_diameter", "scan_memory", "MEASURE_BYTES_PER_CELL"]
 
 #: labels of fewer voxels are counted, not measured: a ball of 66 voxels is 5 voxels across, the least at
 #: which the Atlas descriptors measure shape (:data:`grainforge.analysis.atlas.MIN_VOXELS_ACROSS`)
 MIN_VOXELS = 66
+#: seconds per cell of a measured grain's box, and per grain (one core: 0.085 s for a grain 45 voxels across in
+#: a box of 57³; benchmarks/bench_scan.py)
+SECONDS_PER_CELL, SECONDS_PER_GRAIN = 4.5e-7, 0.01
 #: largest label value read (bounding boxes are indexed by label): relabel sequentially above it
 MAX_LABEL = 2**24
 #: voxels read per slab of the first pass (its label count takes 8 bytes a voxel)
@@ -534,3 +537,85 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
     if signed_volume(xyz, f) < 0:
         f = f[:, ::-1].copy()
     return xyz, f, len(bodies) - 1
+
+
+def scan_seconds(boxes: Iterable[LabelBox], workers: int = 1) -> float:
+    """Estimated seconds to measure ``boxes`` on ``workers`` processes (:data:`SECONDS_PER_CELL`, :data:`SECONDS_PER_GRAIN`).
+
+    Parameters
+    ----------
+    boxes : iterable of LabelBox
+        The grains to measure.
+    workers : int
+        Processes measuring them.
+
+    Returns
+    -------
+    float
+        Seconds of wall time.
+    """
+    boxes = list(boxes)
+    return (sum(b.cells for b in boxes) * SECONDS_PER_CELL + len(boxes) * SECONDS_PER_GRAIN) / max(1, workers)
+
+
+def measure_scan(volume, boxes: list[LabelBox], *, voxel_size_um: float, min_voxels: int = MIN_VOXELS,
+                 border: bool = False, convention: str = "atlas", workers: int = 1, mesh_folder=None,
+                 mesh_name: str = "grain-{:06d}.stl", progress=None) -> tuple[list[dict], list[str], int, list[int]]:
+    """Measure the grains of a scan (:func:`measure_labels`), writing each one's mesh into ``mesh_folder``.
+
+    Parameters
+    ----------
+    volume, boxes
+        The image and its labels' boxes (:func:`label_boxes`).
+    voxel_size_um : float
+        Voxel edge in µm.
+    min_voxels, border, convention, workers
+        As :func:`measure_labels`.
+    mesh_folder : path-like, optional
+        Where each measured grain's closed one-body STL (mm, at its place in the scan) is written as
+        ``mesh_name.format(label)``; a grain whose mesh is not a valid solid is not written and is named.
+    progress : callable, optional
+        Wraps the iterator of grains (a progress bar).
+
+    Returns
+    -------
+    rows : list of dict
+        The measured grains, sorted by label, each with a ``flags`` cell.
+    bad_meshes : list of str
+        Grains whose mesh was not written, and why.
+    pieces : int
+        Grains in several pieces (their largest piece written).
+    thin : list of int
+        Labels a voxel or so thin, without a surface at the Atlas's smoothing (left out).
+    """
+    from pathlib import Path
+
+    rows: list[dict] = []
+    bad_meshes: list[str] = []
+    thin: list[int] = []
+    pieces = 0
+    stage = None if mesh_folder is None else Path(mesh_folder)
+    found = measure_labels(volume, boxes, voxel_size=voxel_size_um, min_voxels=min_voxels, border=border,
+                           convention=convention, workers=workers,
+                           mesh_voxel_size=None if stage is None else voxel_size_um / 1000.0)
+    for row in (progress or (lambda it: it))(found):
+        if row["status"] == "thin":
+            thin.append(row["label"])
+        if row["status"] != "measured":
+            continue
+        mesh = row.pop("mesh", None)
+        if mesh is not None:
+            v, f, dropped, problems = mesh
+            pieces += bool(dropped)
+            if problems:
+                bad_meshes.append(f"label {row['label']}: {'; '.join(problems)}")
+            else:
+                import trimesh
+
+                from ..io import write_mesh
+
+                write_mesh(trimesh.Trimesh(v, f, process=False), stage / mesh_name.format(row["label"]))
+        row["flags"] = "border" if row["border"] else ""
+        rows.append(row)
+    rows.sort(key=lambda r: r["label"])
+    return rows, bad_meshes, pieces, thin

@@ -271,14 +271,11 @@ def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float,
               accuracy: bool = False):
     """Refuse template work estimated beyond a day, naming what to change; return the call that announces
     work over a minute."""
-    from ..runtime.estimate import TooLargeError, check_job, dem_template_seconds
+    from ..dem.inputs import template_seconds
+    from ..runtime.estimate import TooLargeError, check_job
     from .interrupts import say_estimate
 
-    each = dem_template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing)
-    if accuracy and shape == "clump":  # the bisection's measures of the greedy prefixes
-        from ..dem.clump import ACCURACY_MEASURE_SECONDS, accuracy_measures
-
-        each += ACCURACY_MEASURE_SECONDS * accuracy_measures(spheres)
+    each = template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing, accuracy=accuracy)
     refining = shape == "clump" and refine > 0  # the model counts every iteration: an upper bound
     if refining:
         advice = "lower --refine-iterations (or --spheres), or give fewer grain files"

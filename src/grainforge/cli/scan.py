@@ -6,8 +6,6 @@ import csv
 import io
 import math
 import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import click
@@ -27,9 +25,6 @@ TABLE = (
     ("elongation", "a_elong", "{:.3f}"), ("opening_fraction", "a_open", "{:.4f}"),
     ("centroid_x", "x_um", "{:.5g}"), ("centroid_y", "y_um", "{:.5g}"), ("centroid_z", "z_um", "{:.5g}"),
 )
-#: seconds per cell of a measured grain's box, and per grain (one core: 0.085 s for a grain 45 voxels across in
-#: a box of 57³; benchmarks/bench_scan.py)
-SECONDS_PER_CELL, SECONDS_PER_GRAIN = 4.5e-7, 0.01
 #: mesh file of a grain
 MESH_NAME = "grain-{:06d}.stl"
 
@@ -48,69 +43,6 @@ def scan_table_text(rows, voxel_size_um: float) -> str:
                  r["opening_fraction"], r["voxels"], r["centroid_x"], r["centroid_y"], r["centroid_z"]]
         w.writerow([int(r["label"]), *(f"{float(x):.6g}" for x in cells), int(bool(r["border"]))])
     return out.getvalue()
-
-
-class _Outputs:
-    """Every output is written under a temporary name and renamed into place at the end, together; on any failure
-    or interrupt the temporary files go and nothing is left."""
-
-    def __init__(self) -> None:
-        self.temps: list[Path] = []
-        self.moves: list[tuple[Path, Path]] = []
-        self.stage: Path | None = None
-        self.mesh_dir: Path | None = None
-        self.mesh_created = False
-        self.overwrite = False
-
-    def temp(self, final: Path) -> Path:
-        from ..runtime.staging import signals_held
-
-        final.parent.mkdir(parents=True, exist_ok=True)
-        with signals_held():  # the file is made and noted for the clean-up together: a signal waits for both
-            fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
-            os.close(fd)
-            self.temps.append(Path(tmp))
-            self.moves.append((Path(tmp), final))
-        return Path(tmp)
-
-    def mesh_stage(self, folder: Path, overwrite: bool) -> Path:
-        from ..runtime.staging import open_stage
-
-        self.mesh_created = not folder.exists()
-        self.mesh_dir, self.overwrite = folder, overwrite
-        self.stage = open_stage(folder)[0]
-        return self.stage
-
-    def commit(self) -> None:
-        from ..io import file_mode
-        from ..runtime.staging import commit_stage
-        from .interrupts import signals_held
-
-        with signals_held():
-            for tmp, final in self.moves:
-                os.chmod(tmp, file_mode())
-                os.replace(tmp, final)
-            self.temps = []
-            if self.stage is not None:
-                new = {p.name for p in self.stage.iterdir()}
-                if self.overwrite:  # an earlier run's grain meshes that this one does not replace
-                    for old in self.mesh_dir.glob("grain-*.stl"):
-                        if old.name not in new:
-                            old.unlink()
-                commit_stage(self.stage, self.mesh_dir, overwrite=self.overwrite)
-                shutil.rmtree(self.stage, ignore_errors=True)
-                self.stage = None
-
-    def discard(self) -> None:
-        from ..runtime.staging import discard_stage
-
-        for tmp in self.temps:
-            try:
-                tmp.unlink()
-            except FileNotFoundError:
-                pass
-        if self.mesh_dir is not None:
-            discard_stage(self.stage, self.mesh_dir, self.mesh_created)
 
 
 def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
@@ -175,10 +107,67 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
     import numpy as np
 
     from ..analysis import scan as sc
-    from ..io.volume import LABEL_SUFFIXES, Volume, open_volume
     from ..runtime.estimate import TooLargeError, check_memory
+    from ..runtime.staging import OutputSet
     from .interrupts import preload, say_estimate
     from .progress import progress_bar
+
+    marker_distance, marker_depth = _check_options(image, segment, marker_distance, marker_depth, labels_out,
+                                                   atlas_csv, meshes, voxel_size_um, overwrite)
+    volume, voxel_size_um = _open_image(image, raw_shape, raw_dtype, voxel_size_um)
+    total = int(np.prod(volume.shape, dtype=np.int64))
+    preload(["scipy.ndimage", "skimage.measure", "skimage.segmentation", "skimage.feature", "skimage.morphology",
+             "trimesh"])
+    if segment:
+        volume = _segment_image(volume, image, total, marker_distance, marker_depth)
+    Z = volume.shape[0]
+    slabs = progress_bar(total=-(-Z // sc._slab_size(volume)), desc="boxes", unit="slab")
+    boxes = sc.label_boxes(volume, progress=slabs)
+    _refuse_image(boxes, total, segment, image)
+    todo = [b for b in boxes if b.voxels >= min_voxels and (keep_border or not b.touches(volume.shape))]
+    n_small = sum(1 for b in boxes if b.voxels < min_voxels)
+    n_border = sum(1 for b in boxes if b.voxels >= min_voxels and b.touches(volume.shape))
+    n_workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
+    if not todo:
+        raise click.UsageError(f"{image}: no grain to measure among {len(boxes)} label(s): {n_border} touch the "
+                               f"image's faces (--keep-border measures them), {n_small} are under --min-voxels "
+                               f"{min_voxels}")
+    try:
+        check_memory(sc.scan_memory(boxes, volume.shape, volume.dtype.itemsize, min_voxels=min_voxels,
+                                    border=keep_border, workers=n_workers), what="measuring the largest grain",
+                     option="--workers, or the image (its largest label's box is too large)")
+    except TooLargeError as exc:
+        raise click.UsageError(str(exc)) from None
+    say_estimate(sc.scan_seconds(todo, n_workers))
+
+    h_um = float(voxel_size_um)
+    outputs = OutputSet()
+    try:
+        stage = outputs.mesh_stage(Path(meshes), overwrite) if meshes is not None else None
+        bar = progress_bar(total=len(boxes), desc="grains", unit="grain")
+        rows, bad_meshes, pieces, thin = sc.measure_scan(
+            volume, boxes, voxel_size_um=h_um, min_voxels=min_voxels, border=keep_border, convention=convention,
+            workers=n_workers, mesh_folder=stage, mesh_name=MESH_NAME, progress=bar)
+        if atlas_csv is not None:
+            outputs.temp(Path(atlas_csv)).write_text(scan_table_text(rows, h_um), encoding="utf-8", newline="")
+        if labels_out is not None:
+            from ..io.volume import write_labels
+
+            write_labels(outputs.temp(Path(labels_out)), volume.whole(), voxel_size_um=h_um,
+                         fmt=Path(labels_out).suffix)
+        outputs.commit()
+    finally:
+        outputs.discard()
+    click.echo(table_text(rows, TABLE))
+    _report(rows, boxes, n_border, n_small, thin, keep_border, min_voxels, atlas_csv, labels_out, meshes,
+            bad_meshes, pieces)
+
+
+def _check_options(image, segment, marker_distance, marker_depth, labels_out, atlas_csv, meshes, voxel_size_um,
+                   overwrite):
+    """Every option checked before the image is read; the marker settings with their defaults."""
+    from ..analysis import scan as sc
+    from ..io.volume import LABEL_SUFFIXES
 
     if not segment:
         for name, given in (("--marker-distance", marker_distance), ("--marker-depth", marker_depth),
@@ -206,6 +195,15 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
         output_dir(meshes, overwrite=None, option="--meshes")
         if not overwrite and Path(meshes).is_dir() and any(Path(meshes).glob("grain-*.stl")):
             raise click.UsageError(f"{meshes} holds grain meshes; use --overwrite")
+    return marker_distance, marker_depth
+
+
+def _open_image(image, raw_shape, raw_dtype, voxel_size_um):
+    """The image and its voxel size (given, or from the file's metadata)."""
+    from ..analysis import scan as sc
+    from ..io.volume import open_volume
+    from ..runtime.estimate import TooLargeError
+
     try:
         volume = open_volume(image, raw_shape=raw_shape, raw_dtype=raw_dtype)
         if voxel_size_um is None:
@@ -216,85 +214,39 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
         sc.check_labels(volume.dtype, str(image))
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    total = int(np.prod(volume.shape, dtype=np.int64))
-    preload(["scipy.ndimage", "skimage.measure", "skimage.segmentation", "skimage.feature", "skimage.morphology",
-             "trimesh"])
-    seg_info = None
-    if segment:
-        check_memory(total * (sc.SEGMENT_BYTES_PER_VOXEL + volume.dtype.itemsize),
-                     what=f"segmenting a {' x '.join(map(str, volume.shape))} image", option="the image's size "
-                     "(segment sub-volumes)")
-        binary = volume.whole() != 0
-        if not binary.any():
-            raise click.UsageError(f"{image}: no grain: every voxel is 0")
-        if binary.all():
-            raise click.UsageError(f"{image}: every voxel is grain: no void, so no grains to tell apart")
-        labels, seg_info = sc.segment(binary, marker_distance=marker_distance, marker_depth=marker_depth)
-        del binary
-        if labels.max() < 2**16:
-            labels = labels.astype(np.uint16)
-        volume = Volume.from_array(labels, str(image))
-        click.echo(f"segmented: {seg_info['grains']} grain(s) from {seg_info['markers']} marker(s) (typical "
-                   f"diameter {seg_info['typical_diameter']:.3g} voxels; markers at least {seg_info['min_distance']} "
-                   f"voxels apart and {seg_info['depth']:.2g} voxels deep)", err=True)
-    Z = volume.shape[0]
-    slabs = progress_bar(total=-(-Z // sc._slab_size(volume)), desc="boxes", unit="slab")
-    boxes = sc.label_boxes(volume, progress=slabs)
-    _refuse_image(boxes, total, segment, image)
-    todo = [b for b in boxes if b.voxels >= min_voxels and (keep_border or not b.touches(volume.shape))]
-    n_small = sum(1 for b in boxes if b.voxels < min_voxels)
-    n_border = sum(1 for b in boxes if b.voxels >= min_voxels and b.touches(volume.shape))
-    n_workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
-    if not todo:
-        raise click.UsageError(f"{image}: no grain to measure among {len(boxes)} label(s): {n_border} touch the "
-                               f"image's faces (--keep-border measures them), {n_small} are under --min-voxels "
-                               f"{min_voxels}")
-    try:
-        check_memory(sc.scan_memory(boxes, volume.shape, volume.dtype.itemsize, min_voxels=min_voxels,
-                                    border=keep_border, workers=n_workers), what="measuring the largest grain",
-                     option="--workers, or the image (its largest label's box is too large)")
-    except TooLargeError as exc:
-        raise click.UsageError(str(exc)) from None
-    say_estimate((sum(b.cells for b in todo) * SECONDS_PER_CELL + len(todo) * SECONDS_PER_GRAIN) / n_workers)
+    return volume, voxel_size_um
 
-    h_um = float(voxel_size_um)
-    outputs = _Outputs()
-    rows, bad_meshes, pieces, thin = [], [], 0, []
-    try:
-        stage = outputs.mesh_stage(Path(meshes), overwrite) if meshes is not None else None
-        bar = progress_bar(total=len(boxes), desc="grains", unit="grain")
-        for row in bar(sc.measure_labels(volume, boxes, voxel_size=h_um, min_voxels=min_voxels, border=keep_border,
-                                         convention=convention, workers=n_workers,
-                                         mesh_voxel_size=None if stage is None else h_um / 1000.0)):
-            if row["status"] == "thin":
-                thin.append(row["label"])
-            if row["status"] != "measured":
-                continue
-            mesh = row.pop("mesh", None)
-            if mesh is not None:
-                v, f, dropped, problems = mesh
-                pieces += bool(dropped)
-                if problems:
-                    bad_meshes.append(f"label {row['label']}: {'; '.join(problems)}")
-                else:
-                    import trimesh
 
-                    from ..io import write_mesh
+def _segment_image(volume, image, total, marker_distance, marker_depth):
+    """A binary image split into labelled grains (a distance-transform watershed)."""
+    import numpy as np
 
-                    write_mesh(trimesh.Trimesh(v, f, process=False), stage / MESH_NAME.format(row["label"]))
-            row["flags"] = "border" if row["border"] else ""
-            rows.append(row)
-        rows.sort(key=lambda r: r["label"])
-        if atlas_csv is not None:
-            outputs.temp(Path(atlas_csv)).write_text(scan_table_text(rows, h_um), encoding="utf-8", newline="")
-        if labels_out is not None:
-            from ..io.volume import write_labels
+    from ..analysis import scan as sc
+    from ..io.volume import Volume
+    from ..runtime.estimate import check_memory
 
-            write_labels(outputs.temp(Path(labels_out)), volume.whole(), voxel_size_um=h_um,
-                         fmt=Path(labels_out).suffix)
-        outputs.commit()
-    finally:
-        outputs.discard()
+    check_memory(total * (sc.SEGMENT_BYTES_PER_VOXEL + volume.dtype.itemsize),
+                 what=f"segmenting a {' x '.join(map(str, volume.shape))} image", option="the image's size "
+                 "(segment sub-volumes)")
+    binary = volume.whole() != 0
+    if not binary.any():
+        raise click.UsageError(f"{image}: no grain: every voxel is 0")
+    if binary.all():
+        raise click.UsageError(f"{image}: every voxel is grain: no void, so no grains to tell apart")
+    labels, seg_info = sc.segment(binary, marker_distance=marker_distance, marker_depth=marker_depth)
+    del binary
+    if labels.max() < 2**16:
+        labels = labels.astype(np.uint16)
+    volume = Volume.from_array(labels, str(image))
+    click.echo(f"segmented: {seg_info['grains']} grain(s) from {seg_info['markers']} marker(s) (typical "
+               f"diameter {seg_info['typical_diameter']:.3g} voxels; markers at least {seg_info['min_distance']} "
+               f"voxels apart and {seg_info['depth']:.2g} voxels deep)", err=True)
+    return volume
+
+
+def _report(rows, boxes, n_border, n_small, thin, keep_border, min_voxels, atlas_csv, labels_out, meshes,
+            bad_meshes, pieces) -> None:
+    """What was measured, left out and written, on stderr."""
     click.echo(table_text(rows, TABLE))
     parts = [f"{len(rows)} grain(s) measured of {len(boxes)} label(s)"]
     if n_border:

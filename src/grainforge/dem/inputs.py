@@ -10,6 +10,7 @@ import numpy as np
 from .enclosure import enclosure_problems
 
 __all__ = [
+    "template_seconds",
     "GRAIN_SIZE_RANGE",
     "MIN_GRAIN_SIZE",
     "read_grain",
@@ -31,6 +32,40 @@ MIN_GRAIN_SIZE = {("yade", "polyhedron"): 2e-5}
 #: the most grains an example pour holds (the LIGGGHTS deck inserts each grain by its own fix,
 #: and every deck places them on a lattice above the box: far beyond this is no example pour)
 MAX_POUR_GRAINS = 100_000
+
+
+def template_seconds(shape: str, *, spheres: int = 30, refine_iterations: int = 0, spacing: float = 0.05,
+                     accuracy: bool = False) -> float:
+    """Rough upper bound of the seconds one grain's DEM template takes on one core.
+
+    Parameters
+    ----------
+    shape : str
+        ``"clump"``, ``"polyhedron"`` or ``"levelset"``.
+    spheres, refine_iterations, spacing
+        As :func:`grainforge.runtime.estimate.dem_template_seconds`.
+    accuracy : bool
+        A clump built to an accuracy target: the bisection's measures of the greedy prefixes
+        (:func:`grainforge.dem.clump.accuracy_measures`) are added.
+
+    Returns
+    -------
+    float
+        Seconds.
+
+    Examples
+    --------
+    >>> template_seconds("clump", spheres=40, accuracy=True) > template_seconds("clump", spheres=40)
+    True
+    """
+    from ..runtime.estimate import dem_template_seconds
+
+    each = dem_template_seconds(shape, spheres=spheres, refine_iterations=refine_iterations, spacing=spacing)
+    if accuracy and shape == "clump":
+        from .clump import ACCURACY_MEASURE_SECONDS, accuracy_measures
+
+        each += ACCURACY_MEASURE_SECONDS * accuracy_measures(spheres)
+    return each
 
 
 def pour_counts(templates: int, grains: int, seed: int = 0) -> np.ndarray:
