@@ -37,6 +37,7 @@ import math
 import os
 from collections.abc import Callable, Sequence
 from pathlib import Path
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -49,6 +50,10 @@ __all__ = ["liggghts_executable", "mpirun_executable", "contact_table", "deck_fi
 GRAIN, BASE, WALL = 1, 2, 3
 #: insertion nodes stay clear of the column cuts of up to this many ranks along x and along y
 MAX_CUTS = 64
+#: the contact model of the grains, the base and the walls (``pair_style gran`` and every ``fix wall/gran``) and its
+#: options
+CONTACT_MODEL = "model hooke/stiffness tangential history"
+CONTACT_OPTIONS = "absolute_damping off tangential_damping on limitForce on"
 #: a prime larger than the seed table: seeds k * _STRIDE (mod its length) are distinct within a deck
 _STRIDE = 1_000_003
 
@@ -189,23 +194,13 @@ def _settle(name: str, threshold: float, min_checks: int, max_checks: int, every
             phase: str) -> str:
     """Input lines of a settle phase, as the Yade scenes' ``settle``: run ``every`` steps at a time until
     the kinetic energy ``ke`` is below ``threshold`` at three checks in a row past ``min_checks`` checks,
-    or ``max_checks`` checks have run; leaves ``<name>_ke`` and prints progress per check."""
-    return "\n".join([
-        f"variable {name}_below equal 0",
-        f"variable {name}_f equal {f0!r}+{f1 - f0!r}*v_{name}_i/{max_checks}",
-        f"variable {name}_i loop {max_checks}",
-        f"label {name}_loop",
-        f"run {every} pre no post no",
-        f"variable {name}_ke equal ${{ke}}",
-        f'if "${{{name}_ke}} < {threshold!r}" then "variable {name}_below equal ${{{name}_below}}+1" '
-        f'else "variable {name}_below equal 0"',
-        f'print "grainforge-progress ${{{name}_f}} {phase}"',
-        f'if "${{{name}_below}} >= 3 && ${{{name}_i}} >= {min_checks}" then "jump SELF {name}_done"',
-        f"next {name}_i",
-        f"jump SELF {name}_loop",
-        f"label {name}_done",
-        f"variable {name}_ke equal ${{{name}_ke}}",
-    ])
+    or ``max_checks`` checks have run; leaves ``<name>_ke`` and prints progress per check (the template
+    ``grainforge/dem/texts/liggghts-settle.in``)."""
+    from ..dem.text import block
+
+    return block("liggghts-settle.in", {"name": name, "f0": repr(f0), "df": repr(f1 - f0), "max_checks": max_checks,
+                                        "every": every, "threshold": repr(threshold), "phase": phase,
+                                        "min_checks": min_checks})
 
 
 def _layout(templates: Sequence, test: str, settings: Settings, seed: int) -> dict:
@@ -275,30 +270,15 @@ def _layer_depth(settings: Settings) -> float:
     return float(scene_settings(settings, "tilt", 0)["layer_depth"])
 
 
-def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) -> dict:
-    """``{relative path: text}`` of the LIGGGHTS deck of one run of ``test`` (nothing written).
-
-    Run from inside the folder with ``liggghts -in in.run`` or ``mpirun -np P liggghts -in in.run``.
-
-    Notes
-    -----
-    The repose cylinder is a primitive granular wall (``zcylinder``, the grains' contact law)
-    removed in one step after the fill, where the Yade scene lifts a facet cylinder at
-    0.5 √(g d): LIGGGHTS 3.8 as packaged stops at any ``fix move/mesh`` ("Illegal situation in
-    MultiNodeMesh::registerMove") and crashes when mesh walls are swapped during a run.  Every
-    other step of the scenes follows the Yade text, with the differences of :func:`contact_table`.
-    A fix added or removed between runs needs LIGGGHTS's set-up (``run N`` with ``pre yes``): a
-    ``pre no`` run after it keeps the old fix lists and integrates nothing.
-    """
-    from ..dem.deck import exact_unit_quaternions, fmt, json_text, template_record, xyzr_text
-    from ..dem.liggghts import MULTISPHERE_SETUP, node_insertion, template_fix
-
+def _plan(templates: Sequence, test: str, settings: Settings, seed: int) -> SimpleNamespace:
+    """The numbers of one run's deck: the scene settings, the layout (:func:`_layout`), the drawn templates,
+    the contacts (:func:`contact_table`), the time step, the kinetic-energy threshold and the checks."""
     for t in templates:
         if t.shape != "clump" or t.clump is None:
             raise ValueError(f"the LIGGGHTS scenes take multisphere clumps; {t.name} has shape {t.shape!r}")
     scene = scene_settings(settings, test, seed)
     geo = _layout(templates, test, settings, seed)
-    pick, d, cell, n = geo["pick"], geo["d"], geo["cell"], geo["n"]
+    pick, d = geo["pick"], geo["d"]
     used = sorted(set(pick.tolist()))
     # contact radius: the mean contact sphere of the drawn grains; mass: the mean grain
     r_grain = float(np.mean([templates[k].clump.radii.mean() for k in pick]))
@@ -308,12 +288,21 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     dt = scene["dt_safety"] * math.sqrt(m_min / table["k_max"])
     g = scene["gravity"]
     total_mass = float(sum(templates[k].mass for k in pick))
-    threshold = scene["ke_ratio"] * total_mass * g * d
     every = int(scene["check_every"])
-    max_checks = max(3, int(math.ceil(scene["max_time_factor"] * geo["fall"] / (every * dt))))
+    return SimpleNamespace(
+        scene=scene, geo=geo, pick=pick, d=d, cell=geo["cell"], n=geo["n"], used=used, r_grain=r_grain,
+        table=table, dt=dt, g=g, threshold=scene["ke_ratio"] * total_mass * g * d, every=every,
+        max_checks=max(3, int(math.ceil(scene["max_time_factor"] * geo["fall"] / (every * dt)))))
 
+
+def _grain_files(templates: Sequence, plan: SimpleNamespace, settings: Settings, seed: int) -> dict:
+    """The drawn templates' sphere files, ``in.templates``, ``in.insert``, ``in.unfix`` and ``in.base``."""
+    from ..dem.deck import exact_unit_quaternions, fmt, xyzr_text
+    from ..dem.liggghts import node_insertion, template_fix
+
+    used, geo = plan.used, plan.geo
     files: dict[str, str] = {}
-    seeds = _seeds(2 * len(used) + n, seed)
+    seeds = _seeds(2 * len(used) + plan.n, seed)
     tpl = ["# grainforge: one multisphere template per grain drawn (SI units), exact mesh mass and inertia"]
     for q, k in enumerate(used):
         t = _multisphere(templates[k])
@@ -325,158 +314,124 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     ins = ["# grainforge: every grain at its own node of the scene's lattice, uniformly random orientation"]
     clump_type = {k: q + 1 for q, k in enumerate(used)}
     # the scene's orientations (grains.json's, the same as the Yade scene's grain k), exactly unit for LIGGGHTS
-    quats = exact_unit_quaternions(scene["orientations"])
-    for slot, (k, node) in enumerate(zip(pick, geo["nodes"])):
-        ins += node_insertion(slot, node, cell, seeds[2 * len(used) + slot], f"pdd{clump_type[int(k)]}",
+    quats = exact_unit_quaternions(plan.scene["orientations"])
+    for slot, (k, node) in enumerate(zip(plan.pick, geo["nodes"])):
+        ins += node_insertion(slot, node, plan.cell, seeds[2 * len(used) + slot], f"pdd{clump_type[int(k)]}",
                               quats[slot])
     files["in.insert"] = "\n".join(ins) + "\n"
-    files["in.unfix"] = "\n".join(f"unfix i{slot}\nregion r{slot} delete" for slot in range(n)) + "\n"
-    base = geo["base"]
+    files["in.unfix"] = "\n".join(f"unfix i{slot}\nregion r{slot} delete" for slot in range(plan.n)) + "\n"
     files["in.base"] = "\n".join([f"create_atoms {BASE} single {fmt(x)} {fmt(y)} {fmt(z)} units box"
-                                  for x, y, z in base]
+                                  for x, y, z in geo["base"]]
                                  + [f"set type {BASE} diameter {fmt(2.0 * geo['r_base'])}",
                                     f"set type {BASE} density {fmt(settings.density)}"]) + "\n"
+    return files
 
-    def pairs(name, values):
-        return (f"fix {name} all property/global {name} peratomtypepair 3 "
-                + " ".join(fmt(values[a][b]) for a in range(3) for b in range(3)))
 
-    mu = settings.friction
-    x0, x1, y0, y1 = geo["box"]
-    periodic = test == "tilt"
-    model = "model hooke/stiffness tangential history"
-    options = "absolute_damping off tangential_damping on limitForce on"
-    head = f"""# LIGGGHTS deck of grainforge simulate {test}, seed {seed}. Run from inside this folder:
-#   liggghts -in in.run      or      mpirun -np P liggghts -in in.run
-# Units: SI (m, kg, s). Contacts: linear spring (hooke/stiffness) + Coulomb friction, tangential history.
-atom_style sphere
-atom_modify map array sort 0 0
-boundary {"p p f" if periodic else "f f f"}
-newton off
-communicate single vel yes
-units si
+def _per_type_pair(values) -> str:
+    """A 3 × 3 per-type-pair table as ``property/global ... peratomtypepair 3`` takes it (row by row)."""
+    from ..dem.deck import fmt
 
-processors * * 1
-region domain block {fmt(x0)} {fmt(x1)} {fmt(y0)} {fmt(y1)} {fmt(-cell)} {fmt(geo["top"])} units box
-create_box 3 domain
-neighbor {fmt(0.25 * d)} bin
-neigh_modify delay 0
+    return " ".join(fmt(values[a][b]) for a in range(3) for b in range(3))
 
-{pairs("kn", table["kn"])}
-{pairs("kt", table["kt"])}
-{pairs("gamman", table["gamman"])}
-{pairs("gammat", table["gamman"])}
-fix m4 all property/global coefficientFriction peratomtypepair 3 {" ".join([fmt(mu)] * 9)}
-pair_style gran {model} {options}
-pair_coeff * *
-timestep {fmt(dt)}
-fix gravi all gravity {fmt(g)} vector 0.0 0.0 -1.0
 
-include in.base
-group base type {BASE}
-fix frz base freeze
-{MULTISPHERE_SETUP}
-compute bx all multisphere property xcm
-compute bv all multisphere property vcm
-compute bvx all reduce ave c_bv[1]
-compute bzmax all reduce max c_bx[3]
-variable vxm equal c_bvx
-thermo_style custom step atoms c_kems c_erms c_bvx c_bzmax
-thermo {every}
-thermo_modify lost ignore norm no
-"""
-    insert = """
-print "grainforge-progress 0.0 insert"
-run 1
-include in.unfix
-compute bid all multisphere property id_multisphere
-dump bodies0 all local 1 bodies-initial.txt c_bid c_bx[1] c_bx[2] c_bx[3]
-dump_modify bodies0 format "%.17g %.17g %.17g %.17g"
-run 0
-undump bodies0
-"""
-    if test == "repose":
-        walls = f"""fix floor all wall/gran {model} primitive type {WALL} zplane 0.0 {options}
-fix sx0 all wall/gran {model} primitive type {WALL} xplane {fmt(x0)} {options}
-fix sx1 all wall/gran {model} primitive type {WALL} xplane {fmt(x1)} {options}
-fix sy0 all wall/gran {model} primitive type {WALL} yplane {fmt(y0)} {options}
-fix sy1 all wall/gran {model} primitive type {WALL} yplane {fmt(y1)} {options}
-fix cylw all wall/gran {model} primitive type {WALL} zcylinder {fmt(geo["R"])} 0.0 0.0 {options}
-"""
-        # the cylinder: LIGGGHTS 3.8 as packaged can neither move a mesh wall (any fix move/mesh stops with
-        # "Illegal situation in MultiNodeMesh::registerMove") nor swap mesh walls during a run (a crash),
-        # so the cylinder is a primitive granular wall, removed at once where the Yade scene lifts it
-        lift_text = "unfix cylw\nprint \"grainforge-progress 0.7 lift\""
-        fill_min = int(math.ceil(3.0 * geo["fall"] / (every * dt)))
-        collapse_min = int(math.ceil(0.5 * geo["fall"] / (every * dt)))
-        body = f"""{_settle("fill", 10.0 * threshold, fill_min, max_checks, every, 0.0, 0.3, "fill")}
-variable t_fill equal step*{fmt(dt)}
-variable t_fill equal ${{t_fill}}
-{lift_text}
-variable t_lift equal step*{fmt(dt)}
-variable t_lift equal ${{t_lift}}
-{_settle("collapse", threshold, collapse_min, max_checks, every, 0.7, 1.0, "collapse")}
-variable settled equal ${{collapse_ke}}<{threshold!r}
-variable nsteps equal step
-variable nsteps equal ${{nsteps}}
-print "steps ${{nsteps}} kinetic_energy ${{collapse_ke}} settled ${{settled}} t_fill ${{t_fill}} t_lift ${{t_lift}}" file record.txt
-"""
-    else:
-        hold = max(1, int(scene["tilt_hold"] * math.sqrt(d / g) / dt))
-        start, step = scene["tilt_start_deg"], scene["tilt_step_deg"]
-        n_tilt = max(1, int(math.ceil((89.0 - start) / step)))
-        walls = f"fix roof all wall/gran {model} primitive type {WALL} zplane {fmt(geo['top'] - 0.5 * cell)} {options}\n"
-        deposit_min = int(math.ceil(3.0 * geo["fall"] / (every * dt)))
-        body = f"""{_settle("deposit", 10.0 * threshold, deposit_min, max_checks, every, 0.0, 0.3, "deposit")}
-# the tilt holds end on multiples of {hold} steps: the mean velocity is averaged over each hold
-variable pad equal {hold}-step%{hold}
-run ${{pad}}
-fix vxav all ave/time 1 {hold} {hold} v_vxm
-variable dx equal 0.0
-variable failed equal -1
-variable tilt_i loop {n_tilt}
-label tilt_loop
-variable beta equal {start!r}+(v_tilt_i-1)*{step!r}
-variable beta equal ${{beta}}
-variable gx equal sin(${{beta}}*PI/180.0)
-variable gz equal -cos(${{beta}}*PI/180.0)
-unfix gravi
-fix gravi all gravity {fmt(g)} vector ${{gx}} 0.0 ${{gz}}
-# a changed fix needs LIGGGHTS's set-up (pre yes): a run without it keeps the old fix lists
-run {hold} post no
-variable dx equal ${{dx}}+f_vxav*{fmt(hold * dt)}
-variable dx equal ${{dx}}
-variable dxd equal ${{dx}}/{fmt(d)}
-variable vxn equal ${{vxm}}/{fmt(math.sqrt(g * d))}
-print "${{beta}} ${{dxd}} ${{vxn}}" append history.txt
-variable tilt_f equal 0.3+0.7*${{beta}}/60.0
-print "grainforge-progress ${{tilt_f}} tilt ${{beta}} deg"
-if "${{dxd}} > {scene['failure_displacement']!r}" then "variable failed equal ${{beta}}" "jump SELF tilt_done"
-next tilt_i
-jump SELF tilt_loop
-label tilt_done
-variable nsteps equal step
-variable nsteps equal ${{nsteps}}
-print "steps ${{nsteps}} failed ${{failed}}" file record.txt
-"""
-    tail = f"""dump fin all custom 1 spheres-final.txt x y z radius
-dump_modify fin format "%.17g %.17g %.17g %.17g" sort id thresh type == {GRAIN}
-dump bodies1 all local 1 bodies-final.txt c_bid c_bx[1] c_bx[2] c_bx[3]
-dump_modify bodies1 format "%.17g %.17g %.17g %.17g"
-run 0
-print "grainforge-progress 1.0 done"
-"""
-    files["in.run"] = head + walls + insert + body + tail
-    rec = {"test": test, "seed": int(seed), "grains": n, "d_mean": d, "base_top": 1.3 * geo["r_base"] + geo["r_base"],
-           "base_sphere_radius": geo["r_base"], "dt": dt, "ke_threshold": threshold, "contact": table,
-           "contact_radius": r_grain, "scene": scene}
+def _head_values(test: str, seed: int, plan: SimpleNamespace, settings: Settings) -> dict:
+    """The values of ``liggghts-scene-head.in``: box, contacts per type pair, time step, gravity."""
+    from ..dem.deck import fmt
+    from ..dem.text import block
+
+    x0, x1, y0, y1 = plan.geo["box"]
+    table = plan.table
+    return {"test": test, "seed": seed, "boundary": "p p f" if test == "tilt" else "f f f",
+            "x0": fmt(x0), "x1": fmt(x1), "y0": fmt(y0), "y1": fmt(y1), "z0": fmt(-plan.cell),
+            "z1": fmt(plan.geo["top"]), "skin": fmt(0.25 * plan.d), "kn": _per_type_pair(table["kn"]),
+            "kt": _per_type_pair(table["kt"]), "gamman": _per_type_pair(table["gamman"]),
+            "gammat": _per_type_pair(table["gamman"]), "friction": " ".join([fmt(settings.friction)] * 9),
+            "model": CONTACT_MODEL, "options": CONTACT_OPTIONS, "dt": fmt(plan.dt), "gravity": fmt(plan.g),
+            "base_type": BASE, "multisphere": block("liggghts-multisphere.in"), "every": plan.every}
+
+
+def _repose_values(plan: SimpleNamespace) -> dict:
+    """The values of ``liggghts-repose.in`` beyond the shared parts: the walls, the fill and the collapse.
+
+    The cylinder: LIGGGHTS 3.8 as packaged can neither move a mesh wall (any fix move/mesh stops with
+    "Illegal situation in MultiNodeMesh::registerMove") nor swap mesh walls during a run (a crash), so the
+    cylinder is a primitive granular wall, removed at once where the Yade scene lifts it."""
+    from ..dem.deck import fmt
+
+    x0, x1, y0, y1 = plan.geo["box"]
+    fall_checks = plan.geo["fall"] / (plan.every * plan.dt)
+    return {"x0": fmt(x0), "x1": fmt(x1), "y0": fmt(y0), "y1": fmt(y1), "radius": fmt(plan.geo["R"]),
+            "fill": _settle("fill", 10.0 * plan.threshold, int(math.ceil(3.0 * fall_checks)), plan.max_checks,
+                            plan.every, 0.0, 0.3, "fill"),
+            "dt": fmt(plan.dt),
+            "collapse": _settle("collapse", plan.threshold, int(math.ceil(0.5 * fall_checks)), plan.max_checks,
+                                plan.every, 0.7, 1.0, "collapse"),
+            "threshold": repr(plan.threshold)}
+
+
+def _tilt_values(plan: SimpleNamespace) -> dict:
+    """The values of ``liggghts-tilt.in`` beyond the shared parts: the roof, the deposit and the tilt steps."""
+    from ..dem.deck import fmt
+
+    scene, d, g, dt = plan.scene, plan.d, plan.g, plan.dt
+    hold = max(1, int(scene["tilt_hold"] * math.sqrt(d / g) / dt))
+    start, step = scene["tilt_start_deg"], scene["tilt_step_deg"]
+    deposit_min = int(math.ceil(3.0 * plan.geo["fall"] / (plan.every * dt)))
+    return {"roof": fmt(plan.geo["top"] - 0.5 * plan.cell),
+            "deposit": _settle("deposit", 10.0 * plan.threshold, deposit_min, plan.max_checks, plan.every, 0.0, 0.3,
+                               "deposit"),
+            "hold": hold, "tilts": max(1, int(math.ceil((89.0 - start) / step))), "start": repr(start),
+            "step": repr(step), "gravity": fmt(g), "hold_time": fmt(hold * dt), "d": fmt(d),
+            "v_scale": fmt(math.sqrt(g * d)), "failure": repr(scene["failure_displacement"])}
+
+
+def _run_text(test: str, seed: int, plan: SimpleNamespace, settings: Settings) -> str:
+    """``in.run``: the template ``liggghts-<test>.in`` with the shared head, insertion and final dumps."""
+    from ..dem.text import block, render
+
+    own = _repose_values(plan) if test == "repose" else _tilt_values(plan)
+    return render(f"liggghts-{test}.in", {
+        "head": block("liggghts-scene-head.in", _head_values(test, seed, plan, settings)),
+        "model": CONTACT_MODEL, "options": CONTACT_OPTIONS, "wall_type": WALL,
+        "insert": block("liggghts-scene-insert.in"), "tail": block("liggghts-scene-tail.in", {"grain_type": GRAIN}),
+        **own})
+
+
+def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) -> dict:
+    """``{relative path: text}`` of the LIGGGHTS deck of one run of ``test`` (nothing written).
+
+    Run from inside the folder with ``liggghts -in in.run`` or ``mpirun -np P liggghts -in in.run``.
+    ``in.run`` is the template ``grainforge/dem/texts/liggghts-<test>.in`` whose ``@{head}``,
+    ``@{insert}`` and ``@{tail}`` are the scenes' shared parts (``liggghts-scene-head.in``, ...) and whose
+    settle phases are ``liggghts-settle.in``, every number computed and formatted here.
+
+    Notes
+    -----
+    The repose cylinder is a primitive granular wall (``zcylinder``, the grains' contact law)
+    removed in one step after the fill, where the Yade scene lifts a facet cylinder at
+    0.5 √(g d): LIGGGHTS 3.8 as packaged stops at any ``fix move/mesh`` ("Illegal situation in
+    MultiNodeMesh::registerMove") and crashes when mesh walls are swapped during a run.  Every
+    other step of the scenes follows the Yade text, with the differences of :func:`contact_table`.
+    A fix added or removed between runs needs LIGGGHTS's set-up (``run N`` with ``pre yes``): a
+    ``pre no`` run after it keeps the old fix lists and integrates nothing.
+    """
+    from ..dem.deck import json_text, template_record
+
+    plan = _plan(templates, test, settings, seed)
+    geo = plan.geo
+    files = _grain_files(templates, plan, settings, seed)
+    files["in.run"] = _run_text(test, seed, plan, settings)
+    rec = {"test": test, "seed": int(seed), "grains": plan.n, "d_mean": plan.d,
+           "base_top": 1.3 * geo["r_base"] + geo["r_base"], "base_sphere_radius": geo["r_base"], "dt": plan.dt,
+           "ke_threshold": plan.threshold, "contact": plan.table, "contact_radius": plan.r_grain,
+           "scene": plan.scene}
     if test == "repose":
         rec.update(cylinder_radius=geo["R"], base_half_width=geo["half"])
     else:
         rec.update(width=geo["width"])
     files["grains.json"] = json_text({"units": "SI (m, kg, s)", "engine": "liggghts", "result": rec,
-                                      "grains": [template_record(templates[k]) for k in used],
-                                      "drawn": [templates[k].name for k in pick]})
+                                      "grains": [template_record(templates[k]) for k in plan.used],
+                                      "drawn": [templates[k].name for k in plan.pick]})
     return files
 
 
