@@ -235,6 +235,33 @@ CASES: list[Case] = [
          err=r"--atlas-csv: cannot write", readonly=True),
     Case("scan-labels", ["scan", "{in}/labels.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv"], code=0,
          lines=2, err=r"2 grain\(s\) measured of 2 label\(s\)\n.*wrote 2 grain\(s\) to s\.csv", creates=("s.csv",)),
+    # simulate calibrate triaxial: the target, the triaxial settings (simulate triaxial's checks), other tests'
+    # options; all before any engine starts
+    *[Case(f"calibrate-triaxial-{name}", ["simulate", "calibrate", "triaxial", "{in}/grains", "--out", "cal",
+                                          *args], err=err)
+      for name, args, err in (
+          ("target-0", ["--target-angle", "0"], r"--target-angle: target angle 0° is outside 5–80°"),
+          ("target-90", ["--target-angle", "90"], r"--target-angle: target angle 90° is outside 5–80°"),
+          ("target-nan", ["--target-angle", "nan"], r"--target-angle.*finite"),
+          ("confining-0", ["--target-angle", "30", "--confining-kpa", "0"], r"'--confining-kpa': must be in"),
+          ("axial-strain-1", ["--target-angle", "30", "--axial-strain", "1"], r"'--axial-strain': must be in"),
+          ("packing-medium", ["--target-angle", "30", "--packing", "medium"], r"'medium' is not one of"),
+          ("inertial-0.5", ["--target-angle", "30", "--inertial-number", "0.5"], r"'--inertial-number'"),
+          ("grains-30", ["--target-angle", "30", "--grains", "30", "--quick"], r"needs --grains ≥ 79"),
+          ("liggghts", ["--target-angle", "30", "--engine", "liggghts"], r"simulate triaxial has no liggghts scene"),
+          ("levelset", ["--target-angle", "30", "--shape", "levelset"],
+           r"--shape levelset: simulate triaxial's yade scene takes --shape clump only"),
+          ("angle-mid", ["--target-angle", "30", "--angle", "mid"], r"'mid' is not one of 'ultimate', 'peak'"),
+          ("tilt-step", ["--target-angle", "30", "--tilt-step", "1"],
+           r"--tilt-step and --tilt-start are the tilt test's: calibrate triaxial takes neither"),
+          ("huge", ["--target-angle", "30", "--grains", "2000", "--seeds", "20", "--max-frictions", "30"],
+           r"a calibration of up to 30 frictions .* would take about .*; lower --max-frictions"),
+      )],
+    Case("calibrate-tilt-packing", ["simulate", "calibrate", "tilt", "{in}/grains", "--out", "cal", "--target-angle",
+                                    "30", "--packing", "loose"], err=r"are the triaxial test's: calibrate tilt takes"),
+    Case("calibrate-repose-angle", ["simulate", "calibrate", "repose", "{in}/grains", "--out", "cal",
+                                    "--target-angle", "30", "--angle", "peak"],
+         err=r"--angle are the triaxial test's: calibrate repose takes none of them"),
 ]
 
 

@@ -211,3 +211,111 @@ def test_the_printed_command_keeps_the_engine_and_its_mpi_ranks():
     yade = shlex.split(use_command("tilt", ["g"], 0.2, {}, quick=False, as_spheres=False, shape="clump",
                                    spacing=None))
     assert "--engine" not in yade and "--mpi" not in yade
+
+
+# ---- the triaxial calibration, on a stand-in engine -------------------------------------------------
+
+#: a stand-in Yade for the triaxial scene: reads the deck's friction and writes the result.json of a drained test
+#: whose stress ratio peaks at M_ult + 0.3 early (a quarter of the axial strain) and ends at M_ult = 0.5 + μ
+STAND_IN_TRIAXIAL = '''
+import json, math, os
+scene = json.load(open("grains.json"))["scene"]
+mu = math.tan(math.radians(scene["friction_deg"]))
+goal, strain = 1e3 * scene["confining_kpa"], scene["axial_strain"]
+records = []
+for k in range(201):
+    e = strain * k / 200
+    m = 0.5 + mu + 0.3 * math.exp(-((e - 0.25 * strain) / (0.1 * strain)) ** 2)
+    p = goal / (1 - m / 3)
+    records += [e, goal, goal, goal + m * p, m * p, p, m, -0.1 * e, 0.6, 4.0, p, 0.001, 0.001]
+print("grainforge-progress 1.0 done", flush=True)
+json.dump({"test": "triaxial", "grains": scene["grains"], "inserted": scene["grains"], "lost": 0, "d_mean": 0.002,
+           "grain_density": 1180.0, "confining": goal, "packing": scene["packing"], "strain_rate": 1.0,
+           "inertial_number": scene["inertial_number"], "compacted": os.environ.get("STAND_IN_COMPACTED") != "0",
+           "void_ratio_compacted": 0.6, "void_ratio_initial": 0.6,
+           "columns": ["axial_strain", "sigma_x", "sigma_y", "sigma_z", "q", "p", "q_over_p", "volumetric_strain",
+                       "void_ratio", "coordination", "p_love_weber", "unbalanced", "overlap_over_d"],
+           "records": records, "steps": 1000, "time": 0.1, "dt": 1e-4}, open("result.json", "w"))
+'''
+
+
+def _friction_angle(m):
+    return math.degrees(math.asin(3 * m / (6 + m)))
+
+
+@pytest.fixture
+def stand_in_yade(tmp_path, monkeypatch):
+    import sys
+
+    fake = tmp_path / "stand-in-yade"
+    fake.write_text(f"#!{sys.executable}\n" + STAND_IN_TRIAXIAL)
+    fake.chmod(0o755)
+    monkeypatch.setenv("GRAINFORGE_YADE", str(fake))
+    return fake
+
+
+@pytest.mark.parametrize("angle, column, extra", [
+    ("ultimate", "ultimate_friction_deg", []),
+    ("ultimate", "ultimate_friction_deg", ["--angle", "ultimate"]),
+    ("peak", "peak_friction_deg", ["--angle", "peak"]),
+])
+def test_a_triaxial_calibration_reaches_the_ultimate_friction_angle(grains, tmp_path, stand_in_yade, angle, column,
+                                                                    extra):
+    """On a stand-in engine whose ultimate stress ratio is 0.5 + μ (peak 0.3 higher), a 30° target: μ = 0.7 on the
+    ultimate angle (the default), about 0.4 on the peak one; every run's angle in calibration.csv is that column
+    of its row, which is the angle of the curve its result.json holds."""
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "triaxial", str(grains), "--out", str(out), "--quick",
+                                 "--target-angle", "30", "--tolerance", "0.05", *extra])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader((out / "calibration.csv").read_text().splitlines()))
+    assert {"friction", "angle_deg", "peak_friction_deg", "ultimate_friction_deg", "problems"} <= set(rows[0])
+    for row in rows:
+        mu = float(row["friction"])
+        assert float(row["ultimate_friction_deg"]) == pytest.approx(_friction_angle(0.5 + mu), abs=1e-9)
+        assert float(row["angle_deg"]) == float(row[column])
+        curve = out / "runs" / f"e{row['evaluation']}-mu{mu:.4f}" / f"triaxial-seed{row['seed']}" / "triaxial.csv"
+        assert len(curve.read_text().splitlines()) == 202  # the header and the 201 records
+    rec = json.loads((out / "calibration.json").read_text())
+    assert rec["test"] == "triaxial" and rec["angle"] == f"{angle} friction angle" and rec["angle_column"] == column
+    assert rec["converged"] and rec["failed_runs"] == []
+    if angle == "ultimate":  # 30° is M = 1.2
+        assert rec["friction"] == pytest.approx(0.7, abs=0.005)
+    else:  # the peak is 0.3 higher, a little less after the moving mean
+        assert 0.38 < rec["friction"] < 0.43
+    assert rec["settings"]["packing"] == "dense" and rec["settings"]["young"] == 1e8
+    assert f"reaches 30° ({angle} friction angle) on the triaxial test" in r.stdout
+    assert rec["command"] in r.stdout and rec["command"].startswith("grainforge simulate triaxial ")
+    assert f"--friction {rec['friction']:.3g}" in rec["command"] and "--quick" in rec["command"]
+    assert (out / "calibration.png").stat().st_size > 10_000
+
+
+def test_a_triaxial_calibration_out_of_reach_ends_as_a_tilt_one_does(grains, tmp_path, stand_in_yade):
+    """Ultimate angles up to asin(6/8) = 48.6° at μ = 1.5: a 60° target is not reached; one line, exit 2, nothing
+    kept."""
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "triaxial", str(grains), "--out", str(out), "--quick",
+                                 "--target-angle", "60"])
+    assert r.exit_code == 2, r.output
+    lines = [ln for ln in r.stderr.splitlines() if ln.strip()]
+    assert lines[-1] == (f"Error: target angle 60° is not reached for friction in [0.05, 1.5]: the angles measured "
+                         f"span {_friction_angle(1.0):.1f}–{_friction_angle(2.0):.1f}° (the highest at friction 1.5); "
+                         "3 run(s) made, nothing kept")
+    assert not out.exists() or not list(out.iterdir())
+
+
+def test_triaxial_runs_that_fail_their_check_are_named_after_the_outputs(grains, tmp_path, stand_in_yade,
+                                                                         monkeypatch):
+    """A compaction that did not come to rest (the stand-in says so): the calibration's outputs are written, every
+    run is named on one line, exit 3."""
+    monkeypatch.setenv("STAND_IN_COMPACTED", "0")
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "triaxial", str(grains), "--out", str(out), "--quick",
+                                 "--target-angle", "30", "--max-frictions", "2"])
+    assert r.exit_code == 3, r.output
+    rec = json.loads((out / "calibration.json").read_text())
+    assert len(rec["failed_runs"]) == rec["runs"] == 2
+    assert r.stderr.strip().splitlines()[-1] == (
+        "check failed: friction 0.5, seed 0: the isotropic compaction did not reach the confining stress at rest; "
+        "friction 1, seed 0: the isotropic compaction did not reach the confining stress at rest (calibration.csv "
+        "has every run)")

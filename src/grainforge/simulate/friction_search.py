@@ -2,9 +2,10 @@
 
 A DEM modeller calibrates the contact parameters on one laboratory test and
 predicts the others with them.  :func:`search_friction` finds the contact
-friction μ at which a virtual test (tilt table or angle of repose) gives a
-target angle: a bounded search on the seed-averaged angle, which rises with μ
-(docs/simulate.md).  It is a pure function of a callable ``angle_of(μ)`` —
+friction μ at which a virtual test (tilt table, angle of repose, or the
+triaxial test's ultimate or peak friction angle: :func:`calibrated_angle`)
+gives a target angle: a bounded search on the seed-averaged angle, which
+rises with μ (docs/simulate.md).  It is a pure function of a callable ``angle_of(μ)`` —
 the engine runs live in the command (``grainforge simulate calibrate``), the
 search logic is tested with stand-in functions.
 
@@ -37,14 +38,18 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 __all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "friction_uncertainty", "pooled_sd",
-           "local_slope",
+           "local_slope", "calibrated_angle", "calibration_seconds", "failed_calibration_runs",
            "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
-           "TARGET_RANGE", "FRICTION_RANGE", "check_target"]
+           "TARGET_RANGE", "FRICTION_RANGE", "TRIAXIAL_ANGLES", "check_target"]
 
 #: target angles (degrees) a calibration accepts: bulk friction angles of granular materials
 TARGET_RANGE = (5.0, 80.0)
 #: the default bounds of the μ search
 FRICTION_RANGE = (0.05, 1.5)
+#: the friction angles of a triaxial run a calibration can reach (``--angle``): their columns of results.csv
+TRIAXIAL_ANGLES = {"ultimate": "ultimate_friction_deg", "peak": "peak_friction_deg"}
+#: the angle each gravity test measures (``angle_deg`` of its rows)
+TEST_ANGLES = {"tilt": "tilt failure angle", "repose": "angle of repose"}
 
 
 @dataclass(frozen=True)
@@ -105,6 +110,91 @@ def check_target(target: float) -> None:
     if not (math.isfinite(target) and lo <= target <= hi):
         raise ValueError(f"target angle {target:g}° is outside {lo:g}–{hi:g}°: bulk friction angles of granular "
                          "materials lie there")
+
+
+def calibrated_angle(test: str, angle: str | None = None) -> tuple[str, str]:
+    """The angle a calibration on ``test`` reaches: the column of the test's rows it is read from, and its name.
+
+    A tilt or repose run's ``angle_deg``; a triaxial run's ultimate friction angle (``angle`` None or
+    ``"ultimate"``: from the mean stress ratio over the last 5 % of the axial strain) or its peak one
+    (``"peak"``), as ``results.csv`` of ``grainforge simulate triaxial`` has them.
+
+    Raises
+    ------
+    ValueError
+        For an unknown test, or an ``angle`` of a test that measures only one.
+
+    Examples
+    --------
+    >>> calibrated_angle("tilt")
+    ('angle_deg', 'tilt failure angle')
+    >>> calibrated_angle("triaxial")
+    ('ultimate_friction_deg', 'ultimate friction angle')
+    >>> calibrated_angle("triaxial", "peak")
+    ('peak_friction_deg', 'peak friction angle')
+    """
+    if test == "triaxial":
+        angle = "ultimate" if angle is None else angle
+        if angle not in TRIAXIAL_ANGLES:
+            raise ValueError(f"angle must be one of {', '.join(TRIAXIAL_ANGLES)}, got {angle!r}")
+        return TRIAXIAL_ANGLES[angle], f"{angle} friction angle"
+    if test not in TEST_ANGLES:
+        raise ValueError(f"test must be one of {', '.join([*TEST_ANGLES, 'triaxial'])}, got {test!r}")
+    if angle is not None:
+        raise ValueError(f"the {test} test measures one angle: no angle={angle!r}")
+    return "angle_deg", TEST_ANGLES[test]
+
+
+def calibration_seconds(test: str, settings, *, max_evaluations: int, available: int, make_seconds: float = 0.0,
+                        pool: int | None = None, as_spheres: bool = False, workers: int = 1, shape: str = "clump",
+                        spacing: float = 0.05, engine: str = "yade") -> float:
+    """Estimated seconds of a calibration, at most: the templates once, then ``max_evaluations`` frictions of
+    every seed (:func:`grainforge.simulate.check_size` of one friction's runs); refuse one beyond the limit.
+
+    Parameters
+    ----------
+    available, make_seconds : int, float
+        From :func:`grainforge.simulate.check_inputs`: the grains the inputs hold and the seconds to make one.
+    pool : int, optional
+        Grains the templates are chosen from (:func:`grainforge.simulate.specimen.template_make_seconds`).
+    max_evaluations, as_spheres, workers, shape, spacing, engine
+        As the calibration's and :func:`grainforge.simulate.check_size`'s.
+
+    Returns
+    -------
+    float
+
+    Raises
+    ------
+    grainforge.runtime.estimate.TooLargeError
+        One friction's runs beyond the limits (:func:`grainforge.simulate.check_size`'s line), or the whole
+        calibration beyond the time limit (the line names ``--max-frictions``, ``--grains`` and ``--seeds``).
+
+    Examples
+    --------
+    >>> from .settings import Settings, check_size
+    >>> one = check_size("tilt", Settings(), available=3)
+    >>> one < calibration_seconds("tilt", Settings(), max_evaluations=8, available=3) < 8 * one
+    True
+    """
+    from dataclasses import replace
+
+    from ..runtime.estimate import SECONDS_LIMIT, TooLargeError, _limit, duration
+    from .settings import check_size
+    from .specimen import template_make_seconds
+
+    per_grain = template_make_seconds(settings.templates, available, make_seconds, pool)
+    size = dict(available=available, make_seconds=per_grain, as_spheres=as_spheres, workers=workers, shape=shape,
+                spacing=spacing, engine=engine)
+    one = check_size(test, settings, **size)
+    # the templates are made once (the cost of a run of two grains and one seed); every friction runs every seed
+    make = check_size(test, replace(settings, seeds=1, grains=2), **size)
+    seconds = make + (one - make) * max_evaluations
+    if seconds > SECONDS_LIMIT:
+        raise TooLargeError(f"a calibration of up to {max_evaluations} frictions × {settings.seeds} seed(s) of "
+                            f"{settings.grains} grains would take about {duration(seconds)} of computing (limit "
+                            f"{_limit()}); lower --max-frictions, --grains or --seeds")
+    return float(seconds)
 
 
 def search_friction(angle_of: Callable[[float], float], target: float, *, low: float = FRICTION_RANGE[0],
@@ -297,11 +387,14 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
                     max_evaluations: int = 8, workers: int = 1, label: str = "",
                     progress: Callable[[int, int, float, str], None] | None = None,
                     evaluated: Callable[[Evaluation, list], None] | None = None, engine: str = "yade",
-                    mpi: int | None = None, executor=None, journal=None) -> tuple[FrictionSearch, list]:
+                    mpi: int | None = None, executor=None, journal=None,
+                    angle: str | None = None) -> tuple[FrictionSearch, list]:
     """Calibrate μ on ``test`` with the engine: :func:`search_friction` over seed-averaged engine runs.
 
     Each evaluation runs ``settings.seeds`` seeds at friction μ into
-    ``out/runs/e<k>-mu<μ>/`` (:func:`grainforge.simulate.run_test`).
+    ``out/runs/e<k>-mu<μ>/`` (:func:`grainforge.simulate.run_test`; a triaxial run's folder also gets its
+    ``triaxial.csv``, as ``simulate triaxial`` writes it).  The angle averaged over the seeds is
+    :func:`calibrated_angle`'s, copied into each row's ``angle_deg``.
 
     Parameters
     ----------
@@ -314,6 +407,8 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
     executor, journal : optional
         A Dask executor for the runs and the journal of finished (friction, seed) runs
         (as :func:`grainforge.simulate.run_test`).
+    angle : {"ultimate", "peak"}, optional
+        A triaxial test's friction angle to reach (default ultimate; :func:`calibrated_angle`).
 
     Returns
     -------
@@ -330,15 +425,19 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
 
     from .engine import run_test, summarise
 
+    column, _ = calibrated_angle(test, angle)
     rows: list[dict] = []
 
     def angle_of(mu: float) -> float:
         k = len({r["evaluation"] for r in rows})
         report = None if progress is None else (lambda i, f, p: progress(k, i, f, p))
         s = replace(settings, friction=float(mu))
-        got = run_test(test, templates, s, Path(out) / "runs" / f"e{k}-mu{mu:.4f}", label=label, progress=report,
+        folder = Path(out) / "runs" / f"e{k}-mu{mu:.4f}"
+        got = run_test(test, templates, s, folder, label=label, progress=report,
                        workers=workers, engine=engine, mpi=mpi, executor=executor, journal=journal)
-        got = [{"evaluation": k, "friction": float(mu), **r} for r in got]
+        if test == "triaxial":  # each run's curve beside its result.json, as simulate triaxial writes it
+            _write_curves(folder, got)
+        got = [{"evaluation": k, "friction": float(mu), **r, "angle_deg": float(r[column])} for r in got]
         rows.extend(got)
         mean = summarise(got)["angle_mean_deg"]
         if evaluated is not None:
@@ -354,9 +453,45 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
     return search, rows
 
 
+def _write_curves(folder, rows: Sequence[dict]) -> None:
+    """Each triaxial run's ``triaxial.csv`` in its folder ``folder/triaxial-seed<k>/``."""
+    import json
+    from pathlib import Path
+
+    from .triaxial import write_triaxial_csv
+
+    for r in rows:
+        run = Path(folder) / f"triaxial-seed{r['seed']}"
+        write_triaxial_csv(json.loads((run / "result.json").read_text()), run / "triaxial.csv")
+
+
+#: the columns of calibration.csv: every test's, and a triaxial test's own
+CALIBRATION_COLUMNS = ("evaluation", "friction", "seed", "angle_deg", "label", "grains", "inserted", "lost", "steps",
+                       "dt_s", "simulated_time_s", "note")
+TRIAXIAL_CALIBRATION_COLUMNS = ("peak_friction_deg", "ultimate_friction_deg", "max_dilatancy_deg", "packing",
+                                "initial_void_ratio", "problems")
+
+
+def failed_calibration_runs(rows: Sequence[dict]) -> list[str]:
+    """The runs of a calibration that fail their own check (a triaxial run's ``problems``), one line each.
+
+    Examples
+    --------
+    >>> failed_calibration_runs([{"friction": 0.5, "seed": 0, "problems": ""},
+    ...                          {"friction": 0.25, "seed": 1, "problems": "no stress ratio recorded"}])
+    ['friction 0.25, seed 1: no stress ratio recorded']
+    >>> failed_calibration_runs([{"friction": 0.5, "seed": 0, "angle_deg": 30.0}])
+    []
+    """
+    return [f"friction {float(r['friction']):.4g}, seed {r['seed']}: {r['problems']}" for r in rows
+            if r.get("problems")]
+
+
 def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
-                       command: str, *, low: float, high: float) -> dict:
-    """The ``calibration.json`` record: μ, its uncertainty from the seed spread and the local slope, the runs."""
+                       command: str, *, low: float, high: float, angle: str | None = None) -> dict:
+    """The ``calibration.json`` record: μ, its uncertainty from the seed spread and the local slope, the runs
+    (``angle``: the angle reached, its name and column, :func:`calibrated_angle`; ``failed_runs``:
+    :func:`failed_calibration_runs`)."""
     from ..params import as_dict
 
     by_eval: dict[int, list[float]] = {}
@@ -366,8 +501,9 @@ def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: flo
     slope = local_slope(search.evaluations, search.friction)
     mu_sd = friction_uncertainty(slope, sd, settings.seeds) if math.isfinite(sd) else float("nan")
     lo, hi = search.bracket
+    column, name = calibrated_angle(test, angle)
     return {
-        "test": test, "target_angle_deg": target, "friction": search.friction,
+        "test": test, "angle": name, "angle_column": column, "target_angle_deg": target, "friction": search.friction,
         "friction_sd": mu_sd, "friction_angle_deg": math.degrees(math.atan(search.friction)),
         "slope_deg_per_unit_friction": slope, "bracket_slope_deg_per_unit_friction": search.slope,
         "angle_sd_deg": sd, "seeds": settings.seeds,
@@ -377,10 +513,12 @@ def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: flo
                        "angle (angle_sd pooled over the evaluations) over the local slope (a least-squares line "
                        "through the evaluations within 0.5 of the friction)",
         "settings": {k: v for k, v in as_dict(settings).items() if k != "friction"}, "command": command,
+        "failed_runs": failed_calibration_runs(rows),
     }
 
 
-def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, mu_sd: float):
+def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, mu_sd: float,
+                       angle: str | None = None):
     """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty."""
     import matplotlib
 
@@ -399,7 +537,7 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: flo
     if math.isfinite(mu_sd):
         ax.axvspan(search.friction - mu_sd, search.friction + mu_sd, color="C2", alpha=0.15)
     ax.set_xlabel("contact friction μ")
-    ax.set_ylabel(("tilt failure angle" if test == "tilt" else "angle of repose") + " (°)")
+    ax.set_ylabel(calibrated_angle(test, angle)[1] + " (°)")
     ax.set_title(f"calibration on the {test} test: {len(search.evaluations)} frictions, {len(rows)} runs")
     ax.legend(fontsize=8, loc="lower right")
     fig.tight_layout()
@@ -407,18 +545,20 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: flo
 
 
 def write_calibration(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
-                      command: str, out, *, low: float, high: float) -> dict:
-    """Write ``calibration.csv`` (every run), ``calibration.json`` and ``calibration.png`` into ``out``."""
+                      command: str, out, *, low: float, high: float, angle: str | None = None) -> dict:
+    """Write ``calibration.csv`` (every run; a triaxial run's angles too), ``calibration.json`` and
+    ``calibration.png`` into ``out``; the record (:func:`calibration_record`)."""
     import json
     from pathlib import Path
 
     from ..io import save_figure, write_csv
 
     out = Path(out)
-    record = calibration_record(search, rows, target, test, settings, command, low=low, high=high)
-    keep = ("evaluation", "friction", "seed", "angle_deg", "label", "grains", "inserted", "lost", "steps", "dt_s",
-            "simulated_time_s", "note")
+    record = calibration_record(search, rows, target, test, settings, command, low=low, high=high, angle=angle)
+    keep = CALIBRATION_COLUMNS[:4] + TRIAXIAL_CALIBRATION_COLUMNS + CALIBRATION_COLUMNS[4:-1] if test == "triaxial" \
+        else CALIBRATION_COLUMNS
     write_csv(out / "calibration.csv", [{k: r.get(k, "") for k in keep} for r in rows])
     (out / "calibration.json").write_text(json.dumps(record, indent=1) + "\n")
-    save_figure(calibration_figure(search, rows, target, test, record["friction_sd"]), out / "calibration.png")
+    save_figure(calibration_figure(search, rows, target, test, record["friction_sd"], angle),
+                out / "calibration.png")
     return record
