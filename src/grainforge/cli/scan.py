@@ -107,8 +107,8 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
     import numpy as np
 
     from ..analysis import scan as sc
+    from ..io.outputs import OutputSet
     from ..runtime.estimate import TooLargeError, check_memory
-    from ..runtime.staging import OutputSet
     from .interrupts import preload, say_estimate
     from .progress import progress_bar
 

@@ -20,7 +20,7 @@ from pathlib import Path
 
 from .workers import pid_alive
 
-__all__ = ["OutputSet", "signals_held", "STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
+__all__ = ["signals_held", "STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
 
 
 #: the signals a command stops on (Ctrl-C and a polite kill)
@@ -135,63 +135,3 @@ def discard_stage(stage: Path | None, out: str | os.PathLike, created: bool) -> 
     out = Path(out)
     if created and out.is_dir() and not any(out.iterdir()):
         out.rmdir()
-
-
-class OutputSet:
-    """A command's outputs written under temporary names and renamed into place together at the end.
-
-    :meth:`temp` gives a temporary file beside each final file; :meth:`mesh_stage` a staging folder for a
-    folder of files (``grain-*.stl``) that replaces an earlier run's with ``overwrite``; :meth:`commit`
-    moves everything into place with signals held; :meth:`discard` (call it in ``finally``) removes
-    whatever was not committed, so a failure or an interrupt leaves nothing.
-    """
-
-    def __init__(self) -> None:
-        self.temps: list[Path] = []
-        self.moves: list[tuple[Path, Path]] = []
-        self.stage: Path | None = None
-        self.mesh_dir: Path | None = None
-        self.mesh_created = False
-        self.overwrite = False
-
-    def temp(self, final: Path) -> Path:
-        final.parent.mkdir(parents=True, exist_ok=True)
-        with signals_held():  # the file is made and noted for the clean-up together: a signal waits for both
-            fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
-            os.close(fd)
-            self.temps.append(Path(tmp))
-            self.moves.append((Path(tmp), final))
-        return Path(tmp)
-
-    def mesh_stage(self, folder: Path, overwrite: bool) -> Path:
-        self.mesh_created = not folder.exists()
-        self.mesh_dir, self.overwrite = folder, overwrite
-        self.stage = open_stage(folder)[0]
-        return self.stage
-
-    def commit(self) -> None:
-        from ..io import file_mode
-
-        with signals_held():
-            for tmp, final in self.moves:
-                os.chmod(tmp, file_mode())
-                os.replace(tmp, final)
-            self.temps = []
-            if self.stage is not None:
-                new = {p.name for p in self.stage.iterdir()}
-                if self.overwrite:  # an earlier run's grain meshes that this one does not replace
-                    for old in self.mesh_dir.glob("grain-*.stl"):
-                        if old.name not in new:
-                            old.unlink()
-                commit_stage(self.stage, self.mesh_dir, overwrite=self.overwrite)
-                shutil.rmtree(self.stage, ignore_errors=True)
-                self.stage = None
-
-    def discard(self) -> None:
-        for tmp in self.temps:
-            try:
-                tmp.unlink()
-            except FileNotFoundError:
-                pass
-        if self.mesh_dir is not None:
-            discard_stage(self.stage, self.mesh_dir, self.mesh_created)
