@@ -11,7 +11,8 @@
 - ``rigid.infile``: the rigid/small ``infile`` — per body the mesh's mass,
   the centre of mass where it was placed, and the inertia tensor rotated into
   the box frame (LAMMPS otherwise sums the overlapping member spheres);
-- ``in.run``: the example pour — ``pair_style gran/hooke/history`` with the
+- ``in.run``: the example pour (the template ``grainforge/dem/texts/lammps-pour.in``, filled by
+  :func:`deck_files`) — ``pair_style gran/hooke/history`` with the
   rigid bodies' masses, walls, gravity applied through ``fix rigid/small ...
   gravity`` on the bodies' mesh masses (the ``fix gravity`` group is empty),
   a settle loop on the rigid kinetic energy, body read-back files

@@ -10,7 +10,8 @@
   lattice position (``Atoms``) and in ``Bodies`` the inertia tensor, hull
   vertices, edges and triangular faces, rotated into the box frame (seeded
   random orientation), plus the rounded diameter;
-- ``in.run``: the example pour — ``pair_style body/rounded/polyhedron``,
+- ``in.run``: the example pour (the template ``grainforge/dem/texts/lammps-body-pour.in``) —
+  ``pair_style body/rounded/polyhedron``,
   ``fix wall/body/polyhedron`` floor and side walls, ``fix gravity``,
   ``fix nve/body``, a settle loop on translational + rotational kinetic energy,
   the engine's own state written back (``data.initial``, ``data.final``,

@@ -15,7 +15,8 @@
   copy by its own ``insert/pack`` at its own node of a lattice above the box
   (random orientation); every random fix has its own prime seed
   (:func:`deck_seeds`);
-- ``in.run``: the example — a box under gravity, Hertz contacts, VTK output in
+- ``in.run``: the example (the template ``grainforge/dem/texts/liggghts-pour.in``, filled by
+  :func:`deck_files`) — a box under gravity, Hertz contacts, VTK output in
   ``post/``, run until the multisphere kinetic energy falls below
   ``ke_threshold`` (J) at three checks in a row (docs/dem.md), writing ``bodies-initial.txt`` /
   ``bodies-final.txt`` (id, clump type, mass, xcm, principal inertia per body) and ``settle.txt``;

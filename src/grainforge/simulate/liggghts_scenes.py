@@ -2,7 +2,9 @@
 
 The scenes are the Yade ones of :mod:`grainforge.simulate.yade_scenes`, laid out
 here in Python (grainforge draws the population, the lattice, the jitter and
-the rough base for the seed) and written as a LIGGGHTS input deck:
+the rough base for the seed) and written as a LIGGGHTS input deck (``in.run``:
+the template ``grainforge/dem/texts/liggghts-<test>.in`` with the numbers
+computed and formatted here, :func:`deck_files`):
 
 - every grain is a ``particletemplate/multisphere`` with the mesh's exact mass
   and inertia tensor (:func:`grainforge.dem.liggghts.template_fix`, as
