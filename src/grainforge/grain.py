@@ -85,7 +85,24 @@ class Grain:
         )
 
     def scaled(self, factor: float) -> Grain:
-        """A new Grain with every coordinate multiplied by ``factor`` (> 0)."""
+        """A new Grain with every coordinate multiplied by ``factor`` (> 0).
+
+        Parameters
+        ----------
+        factor : float
+            Scale factor (> 0, finite): model units -> millimetres when scaling a generated grain to size.
+
+        Returns
+        -------
+        Grain
+            A copy with ``vertices * factor`` and ``info["scale"]`` multiplied by ``factor``; the faces,
+            method, parameters and seed are kept.
+
+        Raises
+        ------
+        ValueError
+            If ``factor`` is not a positive finite number.
+        """
         factor = float(factor)
         if not np.isfinite(factor) or factor <= 0:
             raise ValueError(f"scale factor must be a positive number, got {factor!r}")

@@ -99,6 +99,10 @@ class ParamSpec:
         """The default as help text: ``2.4``, ``-5/3,-5/3``, ``cube``; ``shown_default`` when the field's
         default is None but a value applies (e.g. ``amplitude``: 0.1 unless ``k`` is given); ``""`` if none.
 
+        Returns
+        -------
+        str
+
         Examples
         --------
         >>> ParamSpec("decay", (-5 / 3, -5 / 3), "").default_text()
@@ -115,7 +119,19 @@ class ParamSpec:
         return format_number(self.default)
 
     def range_text(self) -> str:
-        """Human-readable valid range, e.g. ``[2, 3)``."""
+        """Human-readable valid range, e.g. ``[2, 3)``.
+
+        Returns
+        -------
+        str
+            ``[low, high]`` with ``(``/``)`` for open or missing bounds (``-inf``/``inf``), ``one of a, b``
+            for choices, ``""`` when the value is unbounded.
+
+        Examples
+        --------
+        >>> ParamSpec("d", 2.4, "", low=2, high=3, high_open=True).range_text()
+        '[2, 3)'
+        """
         if self.choices:
             return "one of " + ", ".join(self.choices)
         if self.low is None and self.high is None:
@@ -127,7 +143,30 @@ class ParamSpec:
         return f"{lb}{lo}, {hi}{rb}"
 
     def check(self, value: Any) -> Any:
-        """Return the normalised value or raise :class:`ParameterError`."""
+        """Return the normalised value or raise :class:`ParameterError`.
+
+        Parameters
+        ----------
+        value : object
+            The value given for the parameter: a number for ``kind="float"``/``"int"``, a string for
+            ``"str"``, an iterable of numbers for ``"floats"``, or None.
+
+        Returns
+        -------
+        float, int, str, tuple of float or None
+            The value converted to the spec's kind (``None`` only for an optional parameter).
+
+        Raises
+        ------
+        ParameterError
+            If the value is missing but required, of the wrong type, not finite, not a whole number
+            (``kind="int"``), outside the range, or not one of ``choices``.
+
+        Examples
+        --------
+        >>> ParamSpec("n", 40, "", kind="int", low=1).check(12.0)
+        12
+        """
         if value is None:
             if self.optional:
                 return None
@@ -174,6 +213,17 @@ def _fmt(x: float) -> str:
 
 def format_number(x: Any) -> str:
     """A value as a person would write it: ``2.4``, ``10``, ``-5/3`` (a simple fraction when that is exact).
+
+    Parameters
+    ----------
+    x : object
+        A number (anything else, booleans included, is returned as ``str(x)``).
+
+    Returns
+    -------
+    str
+        An integer without decimals, else the 6-significant-digit form when it is exact to 1e-12,
+        else a fraction of denominator at most 12 when that is exact, else the 6-digit form.
 
     Examples
     --------
@@ -236,6 +286,11 @@ def param(
     shown_default : str, optional
         The default to show in help when ``default`` is None but a value
         applies unless another parameter is given (``amplitude`` vs ``k``).
+
+    Returns
+    -------
+    dataclasses.Field
+        The field to assign in the dataclass body; :func:`specs` reads its metadata back.
     """
     spec = dict(
         default=default, help=help, unit=unit, kind=kind, low=low, high=high,
@@ -246,7 +301,18 @@ def param(
 
 
 def specs(cls_or_obj: Any) -> list[ParamSpec]:
-    """The :class:`ParamSpec` of every declared field, in declaration order."""
+    """The :class:`ParamSpec` of every declared field, in declaration order.
+
+    Parameters
+    ----------
+    cls_or_obj : dataclass type or instance
+        A method's ``Params`` class or one of its instances.
+
+    Returns
+    -------
+    list of ParamSpec
+        One per field made with :func:`param` (other fields are left out).
+    """
     out = []
     for f in dataclasses.fields(cls_or_obj):
         meta = f.metadata.get(_KEY)
@@ -257,6 +323,12 @@ def specs(cls_or_obj: Any) -> list[ParamSpec]:
 
 def validate(obj: Any) -> None:
     """Check and normalise every declared field of a frozen dataclass in place.
+
+    Parameters
+    ----------
+    obj : dataclass instance
+        A frozen dataclass whose fields were declared with :func:`param`; each such field is replaced by
+        :meth:`ParamSpec.check`'s normalised value (ints as int, floats as float, lists as tuples).
 
     Raises
     ------
@@ -316,5 +388,16 @@ def check_aspect(aspect, max_ratio: float) -> None:
 
 
 def as_dict(obj: Any) -> dict[str, Any]:
-    """The declared parameters of ``obj`` as a plain ``{name: value}`` dict."""
+    """The declared parameters of ``obj`` as a plain ``{name: value}`` dict.
+
+    Parameters
+    ----------
+    obj : dataclass instance
+        A method's parameters.
+
+    Returns
+    -------
+    dict of str to object
+        The fields made with :func:`param`, in declaration order.
+    """
     return {s.name: getattr(obj, s.name) for s in specs(obj)}

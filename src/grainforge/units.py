@@ -51,16 +51,58 @@ _SUFFIXED = {f"{c}_{u}": c for c, u in UNITS.items()}
 
 
 def with_unit(column: str, units: Mapping[str, str] = UNITS) -> str:
-    """``column`` with its unit suffix (unchanged if it has no unit)."""
+    """``column`` with its unit suffix (unchanged if it has no unit).
+
+    Parameters
+    ----------
+    column : str
+        A row key (``volume``, ``L``).
+    units : mapping of str to str, optional
+        Column -> unit suffix; default :data:`UNITS`.
+
+    Returns
+    -------
+    str
+        ``column_unit`` (``volume_mm3``), or ``column`` when ``units`` gives it no unit.
+    """
     unit = units.get(column)
     return f"{column}_{unit}" if unit else column
 
 
 def headers(columns: Sequence[str], units: Mapping[str, str] = UNITS) -> list[str]:
-    """:func:`with_unit` of every column."""
+    """:func:`with_unit` of every column.
+
+    Parameters
+    ----------
+    columns : sequence of str
+        Row keys, in the order of the CSV's columns.
+    units : mapping of str to str, optional
+        Column -> unit suffix; default :data:`UNITS`.
+
+    Returns
+    -------
+    list of str
+        The CSV header, one name per column.
+
+    Examples
+    --------
+    >>> headers(["size", "n_faces"])
+    ['size_mm', 'n_faces']
+    """
     return [with_unit(c, units) for c in columns]
 
 
 def plain(header: str) -> str:
-    """The row key of a CSV header: ``volume_mm3`` -> ``volume`` (unchanged if it has no unit suffix)."""
+    """The row key of a CSV header: ``volume_mm3`` -> ``volume`` (unchanged if it has no unit suffix).
+
+    Parameters
+    ----------
+    header : str
+        A CSV column name, with or without the unit suffix grainforge writes.
+
+    Returns
+    -------
+    str
+        The row key (a name that is not a suffixed column of :data:`UNITS` is returned unchanged).
+    """
     return _SUFFIXED.get(header, header)

@@ -27,8 +27,9 @@ import numpy as np
 
 from ..geometry.solid import require_solid, volume_centroid
 from ..grain import Grain
+from ..rng import RNGLike, resolve_rng
 
-__all__ = ["METHODS", "get", "generate", "resolve_rng"]
+__all__ = ["METHODS", "get", "generate"]
 
 #: method name -> module path.  Modules are imported lazily.
 METHODS: dict[str, str] = {
@@ -55,25 +56,7 @@ def get(name: str) -> ModuleType:
     return importlib.import_module(path)
 
 
-def resolve_rng(rng: Any) -> tuple[np.random.Generator, int | None]:
-    """Normalise ``rng`` to a Generator, returning the seed when there is one.
-
-    ``None`` draws fresh entropy but still records it, so every grain can be
-    regenerated from its recorded seed.
-    """
-    if isinstance(rng, np.random.Generator):
-        return rng, None
-    if rng is None:
-        rng = int(np.random.SeedSequence().entropy)
-    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
-        seed = int(rng)
-        if seed < 0:
-            raise ValueError(f"seed must be a non-negative integer, got {seed}")
-        return np.random.default_rng(seed), seed
-    raise ValueError(f"rng must be None, a non-negative int or a numpy Generator, got {rng!r}")
-
-
-def generate(name: str, params: Any, rng: Any = None) -> Grain:
+def generate(name: str, params: Any, rng: RNGLike = None) -> Grain:
     """Generate one grain of method ``name`` with ``params``.
 
     The mesh is checked by the solid contract as a reader will see it
