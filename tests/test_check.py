@@ -113,7 +113,7 @@ def test_candidate_slices_are_bounded_and_hold_every_hit():
     # brute force: every (ray, triangle) crossing within reach is among the candidates
     R, T = np.meshgrid(np.arange(len(idx)), np.arange(len(m.faces)), indexing="ij")
     R, T = R.ravel(), T.ravel()
-    ok, u, w, t = moller_trumbore(origins[R], -normals[R] * reach, m.triangles[T], 1e-30)
+    ok, u, w, t = moller_trumbore(origins[R], -normals[R] * reach, m.triangles[T], det_min=1e-30)
     hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t > 0) & (t <= 1)
     assert hit.sum() > len(idx)
     assert {(int(a), int(b)) for a, b in zip(R[hit], T[hit])} <= found

@@ -131,7 +131,7 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
 
 def _segment_hits_triangle(p0, p1, tri):
     """Whether segment p0→p1 crosses each triangle's interior (strictly, by a 1e-9 margin)."""
-    ok, u, w, t = moller_trumbore(p0, p1 - p0, tri, 1e-15)
+    ok, u, w, t = moller_trumbore(p0, p1 - p0, tri, det_min=1e-15)
     eps = 1e-9
     return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
 
@@ -348,7 +348,7 @@ def _short_rays(mesh, idx, origins, normals, length, eps, max_pairs: int = MAX_P
         for ray_k, cand in _candidate_slices(grid, ray + r0, slot, max_pairs):
             keep = cand != idx[ray_k]
             ray_k, cand = ray_k[keep], cand[keep]
-            ok, u, w, t = moller_trumbore(origins[ray_k], direction[ray_k], tri[cand], 1e-30)
+            ok, u, w, t = moller_trumbore(origins[ray_k], direction[ray_k], tri[cand], det_min=1e-30)
             hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t * length > eps) & (t <= 1)
             np.minimum.at(out, ray_k[hit], t[hit] * length + eps)
     return out

@@ -39,6 +39,11 @@ def icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     faces : (F, 3) int64
         Outward-oriented triangles (read-only, cached).
 
+    Raises
+    ------
+    ValueError
+        If ``subdivisions`` is outside [0, 8].
+
     Examples
     --------
     >>> v, f = icosphere(5)

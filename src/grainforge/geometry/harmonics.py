@@ -35,6 +35,18 @@ __all__ = ["real_harmonics", "legendre_equator", "degree_order", "Synthesis", "s
 def degree_order(degree: int, lmin: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """Degree l and order m of each column of :func:`real_harmonics`.
 
+    Parameters
+    ----------
+    degree : int
+        Highest degree L.
+    lmin : int, default 0
+        Lowest degree.
+
+    Returns
+    -------
+    l, m : ((L+1)² − lmin²,) int64
+        Degree and order of each column.
+
     Examples
     --------
     >>> l, m = degree_order(2, lmin=1)
@@ -91,6 +103,11 @@ def real_harmonics(unit: np.ndarray, degree: int, lmin: int = 0) -> np.ndarray:
     (V, (L+1)² − lmin²) float64
         Column ``l² + l + m − lmin²`` holds Y_lm.
 
+    Raises
+    ------
+    ValueError
+        Unless 0 ≤ lmin ≤ degree.
+
     Examples
     --------
     >>> Y = real_harmonics(np.array([[0.0, 0.0, 1.0], [1.0, 0.0, 0.0]]), 1)
@@ -121,6 +138,16 @@ def real_harmonics(unit: np.ndarray, degree: int, lmin: int = 0) -> np.ndarray:
 
 def legendre_equator(degree: int) -> np.ndarray:
     """P̄_lm(0) for l, m = 0…degree (zero when m > l or l + m is odd), shape (L+1, L+1).
+
+    Parameters
+    ----------
+    degree : int
+        Highest degree L ≥ 0.
+
+    Returns
+    -------
+    (L+1, L+1) float64
+        ``out[l, m]`` = P̄_lm(0), orthonormalised as in :func:`real_harmonics` (without the √2 of m > 0).
 
     Examples
     --------
@@ -189,6 +216,21 @@ CACHE_VALUES = 16_000_000
 def synthesis(unit: np.ndarray, degree: int, lmin: int = 0) -> Synthesis:
     """The :class:`Synthesis` of degrees lmin…degree at ``unit`` (not cached; see :func:`_cached`).
 
+    Parameters
+    ----------
+    unit : (V, 3) array_like of float
+        Unit vectors where the field is evaluated.
+    degree : int
+        Highest degree L ≥ lmin.
+    lmin : int, default 0
+        Lowest degree.
+
+    Returns
+    -------
+    Synthesis
+        Call it with ``(L+1)² − lmin²`` coefficients (column order of :func:`real_harmonics`) to get the
+        field at every vector, shape (V,).
+
     Examples
     --------
     >>> from grainforge.geometry.geodesic import icosphere
@@ -224,7 +266,28 @@ def _cached(subdivisions: int, degree: int, lmin: int) -> Synthesis:
 
 
 def icosphere_synthesis(subdivisions: int, degree: int, lmin: int = 0) -> Synthesis:
-    """:func:`synthesis` at the vertices of ``icosphere(subdivisions)``, cached when small enough."""
+    """:func:`synthesis` at the vertices of ``icosphere(subdivisions)``, cached when small enough.
+
+    Parameters
+    ----------
+    subdivisions : int
+        The geodesic sphere, :func:`grainforge.geometry.geodesic.icosphere` (0 to 8).
+    degree : int
+        Highest degree L ≥ lmin.
+    lmin : int, default 0
+        Lowest degree.
+
+    Returns
+    -------
+    Synthesis
+        As :func:`synthesis`; the same object for repeated calls while the basis holds at most
+        :data:`CACHE_VALUES` values (two kept).
+
+    Examples
+    --------
+    >>> icosphere_synthesis(2, 4) is icosphere_synthesis(2, 4)
+    True
+    """
     from .geodesic import icosphere
 
     unit, _ = icosphere(subdivisions)

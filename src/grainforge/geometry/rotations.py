@@ -34,9 +34,9 @@ independently, to orientations read back from written decks).
 
 from __future__ import annotations
 
-from typing import Any
-
 import numpy as np
+
+from ..rng import RNGLike, as_generator
 
 __all__ = ["random_rotation", "random_quaternions", "quaternion_matrix", "quaternion_axis_angle", "axis_angle_matrix",
            "rotation_angles", "haar_angle_test", "CONVENTIONS"]
@@ -47,6 +47,16 @@ CONVENTIONS = ("scalar-first", "scipy")
 
 def quaternion_matrix(q) -> np.ndarray:
     """The rotation matrix of quaternion ``q = (w, x, y, z)`` (normalised here).
+
+    Parameters
+    ----------
+    q : (4,) array_like of float
+        Quaternion, scalar first; any non-zero length.
+
+    Returns
+    -------
+    (3, 3) float64
+        The rotation matrix (acting on column vectors).
 
     Examples
     --------
@@ -71,6 +81,18 @@ def axis_angle_matrix(axis, angle: float) -> np.ndarray:
     box search's rotation vectors). ``axis`` need not be unit: it is normalised unless it already is, so
     a unit axis gives the same bits as the plain formula.
 
+    Parameters
+    ----------
+    axis : (3,) array_like of float
+        Rotation axis, any non-zero length.
+    angle : float
+        Angle in radians, counter-clockwise seen from the tip of ``axis``.
+
+    Returns
+    -------
+    (3, 3) float64
+        The rotation matrix (acting on column vectors).
+
     Examples
     --------
     >>> np.round(axis_angle_matrix([0.0, 0.0, 2.0], np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
@@ -85,14 +107,14 @@ def axis_angle_matrix(axis, angle: float) -> np.ndarray:
     return np.eye(3) + np.sin(angle) * K + (1.0 - np.cos(angle)) * (K @ K)
 
 
-def random_rotation(rng: Any, convention: str = "scipy") -> np.ndarray:
+def random_rotation(rng: RNGLike, convention: str = "scipy") -> np.ndarray:
     """A uniformly random 3×3 rotation matrix from four normal draws of ``rng``.
 
     Parameters
     ----------
-    rng : numpy.random.Generator, int, SeedSequence or None
-        Anything :func:`numpy.random.default_rng` accepts; a Generator is
-        used (and advanced by four draws) as it is.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is used (and advanced by four
+        draws) as it is.
     convention : {"scipy", "scalar-first"}
         How the draws become a rotation (module docstring): ``"scipy"`` is
         scipy's ``Rotation.random``; ``"scalar-first"`` is the FSO method's.
@@ -100,6 +122,11 @@ def random_rotation(rng: Any, convention: str = "scipy") -> np.ndarray:
     Returns
     -------
     (3, 3) float64 ndarray
+
+    Raises
+    ------
+    ValueError
+        If ``convention`` is not one of :data:`CONVENTIONS`, or ``rng`` is not an accepted value.
 
     Examples
     --------
@@ -115,7 +142,7 @@ def random_rotation(rng: Any, convention: str = "scipy") -> np.ndarray:
     """
     if convention not in CONVENTIONS:
         raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
-    q = np.random.default_rng(rng).standard_normal(4)
+    q = as_generator(rng).standard_normal(4)
     if convention == "scalar-first":
         return quaternion_matrix(q)
     from scipy.spatial.transform import Rotation
@@ -123,7 +150,7 @@ def random_rotation(rng: Any, convention: str = "scipy") -> np.ndarray:
     return Rotation.from_quat(q).as_matrix()
 
 
-def random_quaternions(count: int, rng: Any) -> np.ndarray:
+def random_quaternions(count: int, rng: RNGLike) -> np.ndarray:
     """``count`` uniformly random unit quaternions ``(w, x, y, z)``, ``w ≥ 0``, one row each.
 
     Row ``k`` is what :func:`random_rotation` with ``convention="scalar-first"``
@@ -136,12 +163,17 @@ def random_quaternions(count: int, rng: Any) -> np.ndarray:
     ----------
     count : int
         Number of quaternions (≥ 0).
-    rng : numpy.random.Generator, int, SeedSequence, sequence of int or None
-        Anything :func:`numpy.random.default_rng` accepts.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by ``4 · count`` draws.
 
     Returns
     -------
     (count, 4) float64 ndarray
+
+    Raises
+    ------
+    ValueError
+        If ``count`` is negative or ``rng`` is not an accepted value.
 
     Examples
     --------
@@ -155,7 +187,7 @@ def random_quaternions(count: int, rng: Any) -> np.ndarray:
     count = int(count)
     if count < 0:
         raise ValueError(f"count must be ≥ 0, got {count}")
-    q = np.random.default_rng(rng).standard_normal((count, 4))
+    q = as_generator(rng).standard_normal((count, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
     return q
@@ -165,6 +197,18 @@ def quaternion_axis_angle(q) -> tuple[np.ndarray, float]:
     """Unit axis and angle (radians, in [0, π] for ``w ≥ 0``) of the turn ``q = (w, x, y, z)``.
 
     A turn by 0 has no axis: ``(1, 0, 0)`` is returned with angle 0.
+
+    Parameters
+    ----------
+    q : (4,) array_like of float
+        Quaternion, scalar first; any non-zero length.
+
+    Returns
+    -------
+    axis : (3,) float64
+        Unit axis.
+    angle : float
+        Angle in radians (in [0, 2π); in [0, π] when ``w ≥ 0``).
 
     Examples
     --------
@@ -182,6 +226,16 @@ def quaternion_axis_angle(q) -> tuple[np.ndarray, float]:
 
 def rotation_angles(rotations) -> np.ndarray:
     """Rotation angle ω ∈ [0, π] of each 3×3 rotation matrix (from its trace, 1 + 2 cos ω).
+
+    Parameters
+    ----------
+    rotations : (n, 3, 3) or (3, 3) array_like of float
+        Rotation matrices.
+
+    Returns
+    -------
+    (n,) float64
+        Angles in radians.
 
     Examples
     --------
@@ -213,6 +267,11 @@ def haar_angle_test(rotations) -> dict:
     -------
     dict
         ``n``, ``ks`` (statistic), ``p`` (p-value), ``mean_trace``, ``trace_se``, ``within_90``.
+
+    Raises
+    ------
+    ValueError
+        With fewer than two rotations.
 
     Examples
     --------

@@ -43,6 +43,16 @@ def cross3(a: np.ndarray, b: np.ndarray) -> np.ndarray:
 
     (``np.cross`` handles any shapes and axes, with a temporary per component.)
 
+    Parameters
+    ----------
+    a, b : (N, 3) ndarray
+        Row vectors; their shapes must broadcast (same N, or one of them a single row).
+
+    Returns
+    -------
+    (N, 3) ndarray
+        ``a[i] × b[i]``, in the dtype of ``a`` and ``b`` combined.
+
     Examples
     --------
     >>> a, b = np.random.default_rng(0).random((2, 5, 3))
@@ -70,6 +80,19 @@ def _tetra_volumes(vertices: np.ndarray, faces: np.ndarray):
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Signed volume of a closed triangle mesh (positive when outward).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    float
+        Volume in the cube of the vertices' unit: the sum of the signed tetrahedra (origin, face); negative
+        for an inward-oriented surface, meaningless for an open one.
+
     Examples
     --------
     >>> from grainforge.geometry.geodesic import icosphere
@@ -81,12 +104,46 @@ def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 
 def volume_centroid(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """Centroid of the enclosed volume, shape (3,)."""
+    """Centroid of the enclosed volume, shape (3,).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    (3,) float64
+        The volume centroid, in the vertices' unit (the vertex mean when the volume is zero).
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> b = trimesh.creation.box()
+    >>> np.round(volume_centroid(b.vertices + 2.0, b.faces), 12).tolist()
+    [2.0, 2.0, 2.0]
+    """
     return volume_and_centroid(vertices, faces)[1]
 
 
 def volume_and_centroid(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.ndarray]:
     """:func:`signed_volume` and :func:`volume_centroid` from one pass over the faces.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    volume : float
+        Signed volume (positive when outward).
+    centroid : (3,) float64
+        Volume centroid (the vertex mean when the volume is zero).
 
     Examples
     --------
@@ -112,6 +169,13 @@ def second_moments(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.n
     Each face ``(a, b, c)`` and the vertex mean span a signed tetrahedron of volume
     ``det[a, b, c] / 6``; its second moment is ``det/120 · (a aᵀ + b bᵀ + c cᵀ + (a+b+c)(a+b+c)ᵀ)``.
     Summing and shifting to the centroid gives ``C = ∫ (x − x̄)(x − x̄)ᵀ dV``.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
 
     Returns
     -------
@@ -161,6 +225,18 @@ def face_components(faces: np.ndarray, n_vertices: int) -> np.ndarray:
     Faces touching at a single vertex get the same label; see
     :func:`solid_problems` for bodies connected through edges.
 
+    Parameters
+    ----------
+    faces : (F, 3) array_like of int
+        Triangles.
+    n_vertices : int
+        Number of vertices (at least ``faces.max() + 1``).
+
+    Returns
+    -------
+    (F,) int
+        Component label of each face, ``0 … n_components − 1``.
+
     Examples
     --------
     >>> face_components(np.array([[0, 1, 2], [0, 2, 3], [4, 5, 6]]), 7).tolist()
@@ -192,6 +268,18 @@ def _directed_edges(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.
 def is_closed(faces: np.ndarray, n_vertices: int) -> bool:
     """True if every directed edge appears once and its reverse once (closed, consistently oriented).
 
+    Parameters
+    ----------
+    faces : (F, 3) array_like of int
+        Triangles.
+    n_vertices : int
+        Number of vertices (at least ``faces.max() + 1``).
+
+    Returns
+    -------
+    bool
+        False for an empty face list, an open edge, or an edge used twice in one direction.
+
     Examples
     --------
     >>> import trimesh
@@ -212,6 +300,20 @@ def as_written(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.
 
     Every face is kept (faces whose corners merge become degenerate).  The
     vertices are returned as float64 holding float32 values.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    vertices : (V', 3) float64
+        The distinct float32 positions, sorted (x, then y, then z), as float64.
+    faces : (F, 3) int64
+        The same faces, re-indexed into the merged vertices.
 
     Examples
     --------
@@ -285,6 +387,20 @@ def star_certificate(vertices: np.ndarray, faces: np.ndarray, centre=(0.0, 0.0, 
     sphere (a local homeomorphism of degree one from a closed surface), so
     no two triangles share a point other than their common edges and
     vertices.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+    centre : (3,) array_like of float, optional
+        The point the mesh is star-shaped about (default: the origin).
+
+    Returns
+    -------
+    bool
+        True when the certificate holds; False says nothing (the full check decides).
 
     Examples
     --------
@@ -369,7 +485,7 @@ def _candidate_pairs(tri: np.ndarray, block: int = PAIR_BLOCK):
         a = b
 
 
-def moller_trumbore(p0, d, tri, det_min: float, relative: bool = False):
+def moller_trumbore(p0, d, tri, *, det_min: float, relative: bool = False):
     """Vectorised Möller–Trumbore: barycentrics (u, w) and parameter t of ``p0 + t·d`` on each triangle.
 
     The one ray/segment–triangle intersection of grainforge (the solid contract's
@@ -384,6 +500,8 @@ def moller_trumbore(p0, d, tri, det_min: float, relative: bool = False):
     det_min : float
         ``ok`` is false where the ray is parallel to the triangle: |det| ≤ det_min, or with
         ``relative`` |det| ≤ det_min · |d| |e1| |e2| (a threshold that scales with the mesh).
+    relative : bool, default False
+        Scale ``det_min`` by the lengths of ``d`` and of the triangle's edges.
 
     Returns
     -------
@@ -393,7 +511,7 @@ def moller_trumbore(p0, d, tri, det_min: float, relative: bool = False):
     Examples
     --------
     >>> tri = np.array([[[0.0, 0, 0], [1, 0, 0], [0, 1, 0]]])
-    >>> ok, u, w, t = moller_trumbore(np.array([[0.2, 0.3, -1.0]]), np.array([[0.0, 0, 2]]), tri, 1e-15)
+    >>> ok, u, w, t = moller_trumbore(np.array([[0.2, 0.3, -1.0]]), np.array([[0.0, 0, 2]]), tri, det_min=1e-15)
     >>> bool(ok[0]), round(float(u[0]), 12), round(float(w[0]), 12), float(t[0])
     (True, 0.2, 0.3, 0.5)
     """
@@ -415,7 +533,7 @@ def moller_trumbore(p0, d, tri, det_min: float, relative: bool = False):
 
 def _segments_cross(p0, p1, tri, eps: float = 1e-9) -> np.ndarray:
     """Whether each segment p0→p1 crosses the interior of the matching triangle (strictly, relative margin eps)."""
-    ok, u, w, t = moller_trumbore(p0, p1 - p0, tri, 1e-12, relative=True)
+    ok, u, w, t = moller_trumbore(p0, p1 - p0, tri, det_min=1e-12, relative=True)
     return ok & (u > eps) & (w > eps) & (u + w < 1 - eps) & (t > eps) & (t < 1 - eps)
 
 
@@ -428,6 +546,18 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     tested against the other triangle (vectorised Möller–Trumbore, strict
     interior by a relative margin of 1e-9).  Coplanar overlaps are not seen
     here (they show up as edges shared by more than two faces).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    int
+        The number of triangle pairs whose interiors cross (0 for a valid solid).
 
     Examples
     --------
@@ -485,6 +615,13 @@ def solid_problems(vertices: np.ndarray, faces: np.ndarray, *, intersections: bo
         distinct positions (as :func:`split_bodies` returns them).  If they
         also hold float32 values exactly, the float32 rounding and merge is
         skipped (same answer, faster); otherwise the flag is ignored.
+
+    Returns
+    -------
+    list of str
+        One phrase per problem found (``"12 open edges (not watertight)"``), empty for a valid solid.  The
+        checks stop at the first failing group, so a mesh with open edges is not also tested for
+        self-intersections.
 
     Examples
     --------
@@ -573,6 +710,18 @@ def index_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
 
     No generator relies on it any more (every grain passes :func:`solid_problems`);
     kept to show, in tests, what the index view misses.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    list of str
+        The first problem found (``"several bodies"``, ...), or an empty list.
     """
     if len(faces) == 0 or len(vertices) == 0:
         return ["empty mesh"]
@@ -590,7 +739,24 @@ def index_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
 
 def require_solid(vertices: np.ndarray, faces: np.ndarray, parameter: str, *, star_centre=None) -> None:
     """Raise ``ValueError`` (:class:`~grainforge.params.ParameterError`) naming ``parameter``
-    if the mesh, as written, is not a valid solid (see :func:`solid_problems`)."""
+    if the mesh, as written, is not a valid solid (see :func:`solid_problems`).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+    parameter : str
+        The parameter the error names (e.g. ``"amplitude"``; the CLI turns it into ``--amplitude``).
+    star_centre : (3,) array_like of float, optional
+        Passed to :func:`solid_problems`: try the star certificate about this point first.
+
+    Raises
+    ------
+    grainforge.params.ParameterError
+        (a ``ValueError``) naming ``parameter`` and listing the problems.
+    """
     problems = solid_problems(vertices, faces, star_centre=star_centre)
     if problems:
         from ..params import ParameterError
@@ -671,6 +837,21 @@ def split_bodies(
 
     Bodies are ordered by their first face in the input.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+    drop_degenerate : bool, default True
+        Drop the triangles that collapse when coincident vertices merge.
+
+    Returns
+    -------
+    list of (vertices, faces)
+        One ``((V_k, 3) float64, (F_k, 3) int64)`` pair per body, each indexing its own vertices; an
+        empty list when no face is left.
+
     Examples
     --------
     >>> import trimesh
@@ -713,6 +894,19 @@ def precision_problem(vertices: np.ndarray, what: str = "the mesh") -> str | Non
     """Why float32 cannot hold the detail of ``vertices`` (``None`` if it can): coordinates more than
     :data:`FLOAT32_OFFSET_LIMIT` times the mesh's size from the origin, or no extent left at all.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions, any unit.
+    what : str, default "the mesh"
+        How the message names the mesh (e.g. a file name).
+
+    Returns
+    -------
+    str or None
+        One sentence saying how much float32 rounds the coordinates and what to do, or ``None`` (also for
+        an empty or non-finite array, which the readers report themselves).
+
     Examples
     --------
     >>> import trimesh
@@ -743,6 +937,19 @@ def mesh_size_problem(vertices: np.ndarray, what: str = "the mesh") -> str | Non
     """Why ``vertices`` (in mm) are no grain's size (``None`` if they are): the largest side of their
     bounding box outside :data:`grainforge.units.MESH_SIZE_RANGE_MM` (0.1 µm to 100 m).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions in mm.
+    what : str, default "the mesh"
+        How the message names the mesh.
+
+    Returns
+    -------
+    str or None
+        One sentence giving the size and the accepted range, or ``None`` (also for an empty or
+        non-finite array).
+
     Examples
     --------
     >>> print(mesh_size_problem(np.array([[0.0, 0, 0], [2e37, 1, 1]])))
@@ -765,6 +972,20 @@ def winding_numbers(vertices: np.ndarray, faces: np.ndarray, points: np.ndarray)
     """Winding number of a closed, oriented mesh about each of ``points`` (1 inside an outward
     surface, −1 inside an inward one, 0 outside), from the faces' solid angles (Van Oosterom &
     Strackee, 1983).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles indexing ``vertices``, counter-clockwise seen from outside.
+    points : (n, 3) array_like of float
+        Query points.
+
+    Returns
+    -------
+    (n,) float64
+        The winding number about each point (an integer up to rounding for a closed mesh).
 
     Examples
     --------
@@ -798,6 +1019,11 @@ def body_nesting(bodies: list[tuple[np.ndarray, np.ndarray]]) -> tuple[list[int 
     **inner shell** of it: the wall of a cavity (facing inward: negative
     volume) or a shell nested in the grain; either way not a grain of its
     own.  Bodies that are partly inside another **overlap** it.
+
+    Parameters
+    ----------
+    bodies : list of (vertices, faces)
+        Bodies as :func:`split_bodies` returns them: ``(V_k, 3)`` float and ``(F_k, 3)`` int arrays.
 
     Returns
     -------

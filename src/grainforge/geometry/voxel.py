@@ -71,11 +71,28 @@ class Grid:
     shape: tuple[int, int, int]
 
     def axes(self) -> list[np.ndarray]:
-        """The cell-centre coordinates along x, y and z."""
+        """The cell-centre coordinates along x, y and z.
+
+        Returns
+        -------
+        list of three 1-D float64 arrays
+            Lengths ``shape[0]``, ``shape[1]``, ``shape[2]``.
+        """
         return [self.origin[k] + self.spacing * np.arange(self.shape[k]) for k in range(3)]
 
     def points(self, index: np.ndarray) -> np.ndarray:
-        """Centres ``(n, 3)`` of the cells with integer ``index (n, 3)``."""
+        """Centres ``(n, 3)`` of the cells with integer ``index (n, 3)``.
+
+        Parameters
+        ----------
+        index : (n, 3) array_like of int
+            Cell indices (i, j, k).
+
+        Returns
+        -------
+        (n, 3) float64
+            ``origin + index · spacing``.
+        """
         return self.origin + self.spacing * np.asarray(index, dtype=np.float64)
 
 
@@ -84,15 +101,26 @@ def grid_for(vertices: np.ndarray, spacing: float, pad: int = 1, anchor: str = "
 
     Parameters
     ----------
-    vertices : (V, 3) array_like
+    vertices : (V, 3) array_like of float
+        The mesh's vertices (only their bounding box is used).
     spacing : float
-    pad : int
+        Cell side, in the vertices' unit (> 0).
+    pad : int, default 1
         Cells added on each side.  With ``"lattice"``, ``pad`` empty cells
         lie beyond the outermost centre that can be inside.
-    anchor : {"centred", "lattice"}
+    anchor : {"centred", "lattice"}, default "centred"
         ``"centred"``: the grid is centred on the bounding box (shifted by a
         tiny irrational fraction of a cell); ``"lattice"``: cell centres on
         ``spacing·(k + 1/2)`` for integer ``k``.
+
+    Returns
+    -------
+    Grid
+
+    Raises
+    ------
+    ValueError
+        If ``spacing`` is not positive or ``anchor`` is unknown.
 
     Examples
     --------
@@ -143,7 +171,7 @@ def inside_mask(vertices: np.ndarray, faces: np.ndarray, grid: Grid, *, axis: in
     ------
     ValueError
         If a column's crossings stay unbalanced after the re-cast rays (the
-        mesh is not closed).
+        mesh is not closed), or ``axis`` or ``rule`` is unknown.
 
     Examples
     --------
