@@ -37,6 +37,7 @@ from functools import lru_cache
 import numpy as np
 
 from ..params import ParameterError
+from ..rng import RNGLike, as_generator
 from .imaging import grain_masks, load_image
 
 __all__ = [
@@ -89,6 +90,11 @@ def descriptor_spectrum(
     (N + 1,) float64
         D_0 = 1, D_1 = 0, then D_2..D_N.
 
+    Raises
+    ------
+    ParameterError
+        ``modes`` when it is below 8.
+
     Examples
     --------
     >>> D = descriptor_spectrum(0.15, 0.1, 0.03, decay=(-2, -2), modes=16)
@@ -111,6 +117,24 @@ def descriptors_of_radii(radii: np.ndarray, n_max: int | None = None) -> np.ndar
     """Fourier descriptors D_0..D_nmax of radii sampled on a regular angle grid.
 
     c = rfft(r)/N, D_n = 2|c_n|/c_0 (D_0 = 1).  Works on the last axis.
+
+    Parameters
+    ----------
+    radii : (..., N) array_like of float
+        Radii at θ_j = 2πj/N (last axis), any positive unit.
+    n_max : int, optional
+        Highest order returned (default: all, N//2).
+
+    Returns
+    -------
+    (..., n_max + 1) float64
+        D_0 = 1, D_1, …, D_nmax: amplitudes relative to the mean radius.
+
+    Examples
+    --------
+    >>> t = 2 * np.pi * np.arange(64) / 64
+    >>> np.round(descriptors_of_radii(1 + 0.2 * np.cos(2 * t), 3), 12).tolist()
+    [1.0, 0.0, 0.2, 0.0]
     """
     r = np.asarray(radii, dtype=np.float64)
     c = np.fft.rfft(r, axis=-1) / r.shape[-1]
@@ -190,13 +214,30 @@ class Contour:
         return TWO_PI * np.arange(self.n_angles) / self.n_angles
 
     def points(self, physical: bool = False) -> np.ndarray:
-        """(N, 2) boundary points; in source units about ``centroid`` if ``physical``."""
+        """(N, 2) boundary points; in source units about ``centroid`` if ``physical``.
+
+        Parameters
+        ----------
+        physical : bool, default False
+            Scale by ``scale`` and translate to ``centroid`` (source units, e.g. pixels with y up);
+            otherwise normalised radii about the origin.
+
+        Returns
+        -------
+        (N, 2) float64
+            (x, y) at the grid angles θ_j, counter-clockwise.
+        """
         r = self.radii * (self.scale if physical else 1.0)
         p = np.stack([r * np.cos(self.theta), r * np.sin(self.theta)], axis=1)
         return p + self.centroid if physical else p
 
     def descriptors(self, n_max: int = 16) -> np.ndarray:
         """Fourier descriptors D_0..D_nmax (docs/design/algorithms.md §2b).
+
+        Parameters
+        ----------
+        n_max : int, default 16
+            Highest order (capped at N // 2).
 
         Returns
         -------
@@ -207,7 +248,18 @@ class Contour:
         return descriptors_of_radii(self.radii, n_max)
 
     def resampled(self, n: int) -> np.ndarray:
-        """The radii on a regular grid of ``n`` angles by exact trigonometric interpolation."""
+        """The radii on a regular grid of ``n`` angles by exact trigonometric interpolation.
+
+        Parameters
+        ----------
+        n : int
+            Number of angles of the new grid θ_k = 2πk/n.
+
+        Returns
+        -------
+        (n,) float64
+            Normalised radii (mean 1); band-limited to the shorter of the two grids.
+        """
         return _resample(self.radii, int(n))
 
     def __call__(self, theta) -> np.ndarray:
@@ -227,6 +279,12 @@ class Contour:
         Generated contours are described about the origin they were built
         on, which is not exactly their centroid; an image contour is always
         described about its centroid, so compare the two after recentring.
+
+        Returns
+        -------
+        Contour
+            Same ``n_angles`` and ``source``; ``centroid`` moved by the shift (in source units); ``star_shaped``
+            false if a ray from the new origin crosses the curve more than once.
         """
         fine = _fine(self)
         t = TWO_PI * np.arange(len(fine)) / len(fine)
@@ -237,7 +295,18 @@ class Contour:
         return Contour(radii * self.scale, 1.0, centroid, star and self.star_shaped, self.source)
 
     def rotated(self, angle: float) -> Contour:
-        """The contour turned counter-clockwise by ``angle`` (exact, via a Fourier phase shift)."""
+        """The contour turned counter-clockwise by ``angle`` (exact, via a Fourier phase shift).
+
+        Parameters
+        ----------
+        angle : float
+            Radians, counter-clockwise.
+
+        Returns
+        -------
+        Contour
+            Same grid, scale, centroid and source.
+        """
         N = self.n_angles
         c = np.fft.rfft(self.radii)
         k = np.arange(len(c))
@@ -247,23 +316,47 @@ class Contour:
         return Contour(np.fft.irfft(c, N), self.scale, self.centroid, self.star_shaped, self.source)
 
     def mirrored(self) -> Contour:
-        """The contour reflected about the x axis (θ → −θ)."""
+        """The contour reflected about the x axis (θ → −θ)."
+
+        Returns
+        -------
+        Contour
+            Same grid, scale, centroid and source.
+        """
         r = np.roll(self.radii[::-1], 1)
         return Contour(r, self.scale, self.centroid, self.star_shaped, self.source)
 
     def longest_direction(self) -> float:
-        """Angle in [0, π) of the longest diameter r(θ) + r(θ + π)."""
+        """Angle in [0, π) of the longest diameter r(θ) + r(θ + π)."
+
+        Returns
+        -------
+        float
+            Radians, on the contour's 16× finer grid.
+        """
         fine = _fine(self)
         G = len(fine)
         diam = fine[: G // 2] + fine[G // 2 :]
         return float(np.argmax(diam)) * TWO_PI / G
 
     def aligned(self) -> Contour:
-        """The contour turned so that its longest diameter lies along +x."""
+        """The contour turned so that its longest diameter lies along +x.
+
+        Returns
+        -------
+        Contour
+            :meth:`rotated` by ``-longest_direction()``.
+        """
         return self.rotated(-self.longest_direction())
 
     def extents(self) -> tuple[float, float]:
-        """Width along x and height along y of the (normalised) contour."""
+        """Width along x and height along y of the (normalised) contour.
+
+        Returns
+        -------
+        width, height : float
+            In units of the mean radius (multiply by ``scale`` for source units).
+        """
         fine = _fine(self)
         t = TWO_PI * np.arange(len(fine)) / len(fine)
         x, y = fine * np.cos(t), fine * np.sin(t)
@@ -274,6 +367,16 @@ class Contour:
 
         A linear map keeps a star-shaped contour star-shaped about the origin,
         and maps angles monotonically, so the resampling is a 1D interpolation.
+
+        Parameters
+        ----------
+        ax, ay : float
+            Scale factors along x and y (> 0).
+
+        Returns
+        -------
+        Contour
+            On the same grid of angles (its mean radius normalised again to 1, ``scale`` keeping the old mean).
         """
         fine = _fine(self)
         G = len(fine)
@@ -297,7 +400,7 @@ class Contour:
         decay: Sequence[float] = DEFAULT_DECAY,
         modes: int = DEFAULT_MODES,
         n_angles: int = DEFAULT_ANGLES,
-        rng=None,
+        rng: RNGLike = None,
     ) -> Contour:
         """A random contour with given Fourier descriptors (docs/design/algorithms.md §2a).
 
@@ -315,13 +418,21 @@ class Contour:
             Highest mode N (default 64).
         n_angles : int
             Grid size (default 256; must exceed 2N).
-        rng : None, int or numpy.random.Generator
+        rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+            Normalised by :func:`grainforge.rng.as_generator`; the phases δ_2 … δ_N are its first ``modes − 1``
+            uniform draws.
+
+        Returns
+        -------
+        Contour
+            ``source="fourier"``, scale 1, centred on the origin it was built about.
 
         Raises
         ------
         ParameterError
             ``descriptors`` when some radius would fall to 5 % of the mean or
-            below (the contour is not wrapped with abs()).
+            below (the contour is not wrapped with abs()); ``preset`` for an unknown preset name;
+            ``n_angles`` unless it exceeds 2·modes; ``modes`` below 8.
 
         Examples
         --------
@@ -333,16 +444,31 @@ class Contour:
         if n_angles <= 2 * modes:
             raise ParameterError("n_angles", f"must exceed 2·modes = {2 * modes}, got {n_angles}")
         D = descriptor_spectrum(*d, decay=decay, modes=modes)
-        delta = np.random.default_rng(rng).uniform(0.0, TWO_PI, size=modes - 1)
+        delta = as_generator(rng).uniform(0.0, TWO_PI, size=modes - 1)
         return cls(_radii_from_spectrum(D, delta, n_angles), source="fourier")
 
     @classmethod
-    def from_spectrum(cls, D: Sequence[float], *, n_angles: int = DEFAULT_ANGLES, rng=None) -> Contour:
+    def from_spectrum(cls, D: Sequence[float], *, n_angles: int = DEFAULT_ANGLES, rng: RNGLike = None) -> Contour:
         """A random contour with a full amplitude spectrum D_0…D_N (D_0, D_1 ignored).
 
         r(θ) = 1 + Σ_{n=2}^{N} D_n cos(nθ − δ_n), δ_n ~ U(0, 2π) drawn as in
         :meth:`from_descriptors`; e.g. a measured spectrum continued by
         :func:`grainforge.outline.spectra.extend_spectrum`.
+
+        Parameters
+        ----------
+        D : (N + 1,) array_like of float
+            Amplitudes D_0 … D_N relative to the mean radius (D_0 and D_1 are not used).
+        n_angles : int, default 256
+            Grid size, > 2N.
+        rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+            Normalised by :func:`grainforge.rng.as_generator`; the phases δ_2 … δ_N are its first N − 1 uniform
+            draws.
+
+        Returns
+        -------
+        Contour
+            ``source="spectrum"``.
 
         Raises
         ------
@@ -360,7 +486,7 @@ class Contour:
         modes = len(D) - 1
         if modes < 2 or n_angles <= 2 * modes:
             raise ParameterError("spectrum", f"needs 2 <= N < n_angles/2 orders, got N = {modes}")
-        delta = np.random.default_rng(rng).uniform(0.0, TWO_PI, size=modes - 1)
+        delta = as_generator(rng).uniform(0.0, TWO_PI, size=modes - 1)
         try:
             radii = _radii_from_spectrum(D, delta, n_angles)
         except ParameterError as exc:
@@ -379,7 +505,7 @@ class Contour:
         gamma: float = 1.5,
         modes: int = DEFAULT_MODES,
         n_angles: int = DEFAULT_ANGLES,
-        rng=None,
+        rng: RNGLike = None,
     ) -> Contour:
         """A fractal profile around the circle: the 2D variant of the paper's Eq. 1.
 
@@ -411,8 +537,20 @@ class Contour:
             Highest harmonic kept (default 64).
         n_angles : int
             Grid size.
-        rng : None, int or numpy.random.Generator
-            ψ_mn ~ U(0, 2π), shape (M, n_max).
+        rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+            Normalised by :func:`grainforge.rng.as_generator`; ψ_mn ~ U(0, 2π), shape (M, n_max), drawn first.
+
+        Returns
+        -------
+        Contour
+            ``source="fractal"``.
+
+        Raises
+        ------
+        ParameterError
+            Naming ``fractal_dimension``, ``length_ratio`` or ``amplitude`` when out of range (or
+            ``length_ratio`` so small that the wavenumbers overflow), and ``amplitude`` when some radius would
+            fall to 5 % of the mean or below.
 
         Examples
         --------
@@ -426,7 +564,7 @@ class Contour:
             raise ParameterError("length_ratio", f"must be positive, got {length_ratio!r}")
         if not 0 <= amplitude <= 0.5:
             raise ParameterError("amplitude", f"must be in [0, 0.5], got {amplitude!r}")
-        rng = np.random.default_rng(rng)
+        rng = as_generator(rng)
         M, Nf = int(ridges), int(frequencies)
         psi = rng.uniform(0.0, TWO_PI, size=(M, Nf))
         n = np.arange(1, Nf + 1, dtype=np.float64)
@@ -484,6 +622,11 @@ class Contour:
             that covers fewer border pixels.
         n_angles : int
             Number of rays (default 256).
+
+        Returns
+        -------
+        Contour
+            ``source="image"``; ``scale`` in pixels and ``centroid`` in pixels as (column, −row).
 
         Raises
         ------
@@ -580,6 +723,12 @@ def polygon_contour(points, *, n_angles: int = DEFAULT_ANGLES, source: str = "po
     source : str
         Recorded in :attr:`Contour.source`.
 
+    Returns
+    -------
+    Contour
+        ``scale`` and ``centroid`` in the points' unit; ``star_shaped`` false when a ray crosses the
+        polygon more than once.
+
     Raises
     ------
     ValueError
@@ -608,6 +757,18 @@ def polygon_area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float, f
 
     The one implementation of a polygon's centroid; each caller decides what a polygon of (near) zero
     area means. With zero area the centroid is NaN.
+
+    Parameters
+    ----------
+    x, y : (P,) ndarray of float
+        Vertex coordinates in order; the closing edge is implied.
+
+    Returns
+    -------
+    area : float
+        Signed area (positive counter-clockwise), in the square of the coordinates' unit.
+    cx, cy : float
+        Area centroid (NaN when ``area`` is exactly 0).
 
     Examples
     --------
@@ -707,6 +868,34 @@ def mask_contour(
     (column, −row) so that angles run counter-clockwise as displayed;
     ``offset`` = (row0, col0) of the mask in a larger image; ``filled`` says
     that the holes are filled already.
+
+    Parameters
+    ----------
+    mask : (H, W) array_like of bool
+        One connected component (8-connected), True on the grain.
+    n_angles : int, default 256
+        Number of rays.
+    offset : (row0, col0), default (0, 0)
+        Where the mask's pixel (0, 0) lies in the image, in pixels.
+    filled : bool, default False
+        The holes are filled already (skip the filling).
+
+    Returns
+    -------
+    Contour
+        ``source="image"``, ``scale`` and ``centroid`` in pixels ((column, −row) of the image).
+
+    Raises
+    ------
+    ValueError
+        If the mask is empty or the boundary does not enclose its area centroid.
+
+    Examples
+    --------
+    >>> yy, xx = np.mgrid[:64, :64]
+    >>> c = mask_contour((xx - 30) ** 2 + (yy - 20) ** 2 < 15**2, n_angles=64)
+    >>> round(c.scale), np.round(c.centroid).tolist()
+    (15, [30.0, -20.0])
     """
     from scipy.ndimage import binary_fill_holes
     from skimage.measure import find_contours
@@ -766,6 +955,24 @@ def scan_image(
     the border and those smaller than ``min_area`` pixels are skipped and
     counted; each remaining one gets its holes filled and its contour traced
     as in :meth:`Contour.from_image`.
+
+    Parameters
+    ----------
+    image : path or (H, W) / (H, W, C) array_like
+        An image file (PNG, TIFF, JPEG ...) or its pixels.
+    min_area : int, default 50
+        Smallest grain measured, in pixels (holes filled).
+    threshold : float, optional
+        Grey level separating grain and background (default: Otsu's).
+    foreground : {"auto", "dark", "bright"}, default "auto"
+        Which side of the threshold is grain; ``"auto"`` takes the side that covers fewer border pixels.
+    n_angles : int, default 128
+        Rays per contour.
+
+    Returns
+    -------
+    GrainScan
+        The contours (pixels) and the counts of grains skipped and why.
 
     Raises
     ------

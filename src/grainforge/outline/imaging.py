@@ -31,10 +31,28 @@ __all__ = ["load_image", "otsu_threshold", "grain_masks", "draw_contours"]
 def load_image(image) -> np.ndarray:
     """A grey-level float image from a path or an array.
 
+    Parameters
+    ----------
+    image : str, Path or array_like
+        An image file readable by Pillow (PNG, TIFF, JPEG ...; palette, alpha and colour modes are
+        converted to grey), or a (H, W) grey / (H, W, C) colour array (the mean of its first three
+        channels is taken).
+
+    Returns
+    -------
+    (H, W) float64
+        Grey levels in the source's range (0–255 for 8-bit files).
+
     Raises
     ------
     ValueError
-        If the file is missing or unreadable, or the array is empty.
+        If the file is missing or unreadable, the array is empty, not 2-D once grey, smaller than
+        3 pixels on a side, or holds non-finite values.
+
+    Examples
+    --------
+    >>> load_image(np.dstack([np.full((4, 4), 30.0)] * 3)).shape
+    (4, 4)
     """
     if isinstance(image, (str, Path)):
         path = Path(image)
@@ -69,6 +87,18 @@ def otsu_threshold(image: np.ndarray, bins: int = 256) -> float:
     to ``skimage.filters.threshold_otsu``, without importing
     ``skimage.filters``, which costs about a second.)
 
+    Parameters
+    ----------
+    image : array_like of float
+        Grey levels, any shape.
+    bins : int, default 256
+        Histogram bins for images that are not integer-valued (or span 65536 levels or more).
+
+    Returns
+    -------
+    float
+        The threshold, a grey level (the bin centre); the single value of a uniform image.
+
     Examples
     --------
     >>> img = np.r_[np.full(50, 10.0), np.full(50, 200.0)]
@@ -97,10 +127,25 @@ def otsu_threshold(image: np.ndarray, bins: int = 256) -> float:
 def grain_masks(image: np.ndarray, *, threshold: float | None = None, foreground: str = "auto") -> np.ndarray:
     """Boolean mask of grain pixels (threshold, then the chosen side).
 
+    Parameters
+    ----------
+    image : (H, W) ndarray of float
+        Grey image (:func:`load_image`).
+    threshold : float, optional
+        Grey level separating grain and background (default: :func:`otsu_threshold`).
+    foreground : {"auto", "dark", "bright"}, default "auto"
+        Which side is grain; ``"auto"`` takes the side covering fewer of the border pixels (grains lie
+        on a background).
+
+    Returns
+    -------
+    (H, W) bool
+        True on grain pixels.
+
     Raises
     ------
     ValueError
-        If the image is uniform (no threshold separates anything).
+        If the image is uniform (no threshold separates anything), or ``foreground`` is unknown.
     """
     if foreground not in ("auto", "dark", "bright"):
         raise ValueError(f"foreground must be auto, dark or bright, got {foreground!r}")

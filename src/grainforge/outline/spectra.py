@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 
 from ..params import ParameterError
+from ..rng import RNGLike, as_generator
 
 __all__ = ["MEASURED_ORDERS", "Spectra", "read_spectra", "extend_spectrum"]
 
@@ -55,9 +56,20 @@ class Spectra:
     def __len__(self) -> int:
         return len(self.D)
 
-    def draw(self, rng: np.random.Generator) -> int:
-        """The row of one measured grain, uniformly (one ``rng.integers`` draw)."""
-        return int(rng.integers(len(self.D)))
+    def draw(self, rng: RNGLike) -> int:
+        """The row of one measured grain, uniformly (one ``rng.integers`` draw).
+
+        Parameters
+        ----------
+        rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+            Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by one draw.
+
+        Returns
+        -------
+        int
+            A row index into ``D`` and ``labels``.
+        """
+        return int(as_generator(rng).integers(len(self.D)))
 
 
 @lru_cache(maxsize=16)
@@ -93,6 +105,18 @@ def _read(path: str, mtime_ns: int, size: int, name: str) -> Spectra:
 def read_spectra(path: str | Path, name: str = "spectrum") -> Spectra:
     """Read (and cache, by path, size and modification time) a ``grainforge fourier`` CSV.
 
+    Parameters
+    ----------
+    path : str or Path
+        The CSV written by ``grainforge fourier --csv`` (columns D2 … D16, optional ``image`` and ``grain``).
+    name : str, default "spectrum"
+        The parameter the errors name (the CLI's ``--spectrum``).
+
+    Returns
+    -------
+    Spectra
+        Read-only; the same object again while the file is unchanged.
+
     Raises
     ------
     ParameterError
@@ -122,6 +146,11 @@ def extend_spectrum(measured: np.ndarray, decay: float, modes: int) -> np.ndarra
         β ≤ 0.
     modes : int
         Highest order N ≥ 2.
+
+    Returns
+    -------
+    (modes + 1,) float64
+        D_0 … D_modes, relative to the mean radius.
     """
     d = np.asarray(measured, dtype=np.float64)
     D = np.zeros(modes + 1)
