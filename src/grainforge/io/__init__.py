@@ -66,6 +66,24 @@ def export_bytes(obj, fmt: str = "stl", header: str | None = None) -> bytes:
 
     The output holds no timestamp: the same mesh always gives the same bytes.
 
+    Parameters
+    ----------
+    obj : Grain or trimesh.Trimesh
+        The mesh, in its own units (grainforge writes millimetres).
+    fmt : {"stl", "obj", "ply"}, default "stl"
+        The format (:data:`FORMATS`).
+    header : str, optional
+        The STL header / OBJ comment (default ``grainforge VERSION [METHOD seed=SEED]``; PLY has none).
+
+    Returns
+    -------
+    bytes
+
+    Raises
+    ------
+    ValueError
+        If ``fmt`` is not a key of :data:`FORMATS`.
+
     Examples
     --------
     >>> import grainforge
@@ -87,7 +105,13 @@ def export_bytes(obj, fmt: str = "stl", header: str | None = None) -> bytes:
 
 
 def file_mode() -> int:
-    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give."""
+    """0o666 less the process umask: the mode an ordinary ``open(path, "w")`` would give.
+
+    Returns
+    -------
+    int
+        Permission bits, e.g. ``0o644`` under the usual umask 022.
+    """
     mask = os.umask(0)
     os.umask(mask)
     return 0o666 & ~mask
@@ -98,6 +122,16 @@ def atomic_file(path: str | os.PathLike):
     """A temporary path beside ``path`` to write to; renamed onto ``path`` when the block ends without an
     exception, removed otherwise (an interrupt included). The file gets the permissions an ordinary
     write would give (umask honoured).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final file; its folder is created if missing.
+
+    Yields
+    ------
+    Path
+        The temporary file (``.NAME.XXXX.tmp`` in the same folder) to write.
 
     Examples
     --------
@@ -130,7 +164,20 @@ def atomic_file(path: str | os.PathLike):
 
 
 def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
-    """Write ``data`` to ``path`` through a temporary file and an atomic rename (:func:`atomic_file`)."""
+    """Write ``data`` to ``path`` through a temporary file and an atomic rename (:func:`atomic_file`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The final file; its folder is created if missing.
+    data : bytes or str
+        The content (a str is written as UTF-8).
+
+    Returns
+    -------
+    Path
+        ``path``.
+    """
     path = Path(path)
     if isinstance(data, str):
         data = data.encode("utf-8")
@@ -143,6 +190,20 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
     """Write a matplotlib figure (atomically) and close it: JPEG for ``.jpg``/``.jpeg``, PNG otherwise.
 
     No "Software" metadata is written, so the same figure gives the same bytes.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        Closed after writing.
+    path : str or os.PathLike
+        The image file (``.jpg``/``.jpeg`` for JPEG at quality 92, anything else PNG).
+    dpi : float, optional
+        Resolution in dots per inch (default: the figure's own).
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     import matplotlib.pyplot as plt
 
@@ -156,7 +217,27 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
 
 
 def write_mesh(obj, path: str | os.PathLike, fmt: str | None = None) -> Path:
-    """Export a Grain or trimesh to ``path`` atomically (format from the suffix if not given)."""
+    """Export a Grain or trimesh to ``path`` atomically (format from the suffix if not given).
+
+    Parameters
+    ----------
+    obj : Grain or trimesh.Trimesh
+        The mesh, in its own units (grainforge writes millimetres).
+    path : str or os.PathLike
+        The file to write.
+    fmt : {"stl", "obj", "ply"}, optional
+        Default: ``path``'s suffix.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If the format is not one of :data:`FORMATS`.
+    """
     path = Path(path)
     fmt = fmt or path.suffix.lstrip(".").lower()
     return atomic_write(path, export_bytes(obj, fmt))
@@ -203,7 +284,31 @@ def write_csv(
     path: str | os.PathLike, rows: Iterable[Mapping[str, Any]], columns: Sequence[str] | None = None,
     *, units: bool | Mapping[str, str] = False,
 ) -> Path:
-    """Write rows of dicts to a CSV file atomically (``units``: see :func:`csv_text`)."""
+    """Write rows of dicts to a CSV file atomically (``units``: see :func:`csv_text`).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    rows : iterable of mapping
+        One dict per row (missing keys and ``None`` are written empty; floats with full precision).
+    columns : sequence of str, optional
+        Column order (default: the keys in order of first appearance).
+    units : bool or mapping of str to str, default False
+        Suffix each header with its unit (:mod:`grainforge.units`).
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Examples
+    --------
+    >>> import tempfile
+    >>> p = write_csv(Path(tempfile.mkdtemp()) / "t.csv", [{"size": 2.0, "n": 3}], units=True)
+    >>> p.read_text().splitlines()
+    ['size_mm,n', '2.0,3']
+    """
     return atomic_write(path, csv_text(rows, columns, units=units))
 
 
@@ -212,6 +317,16 @@ READABLE_MESHES = ", ".join(s.lstrip(".").upper() for s in MESH_SUFFIXES)
 
 def read_mesh(path: str | os.PathLike):
     """Read a mesh file (STL, OBJ, PLY, 3MF, ...) as a single trimesh.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A mesh file (STL, OBJ, PLY, 3MF, ... :data:`READABLE_MESHES`), coordinates in mm.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Not processed (no vertex merged; an STL is its triangle soup); a 3MF's build items concatenated.
 
     Raises
     ------
@@ -274,6 +389,11 @@ def _check_precision(path: Path, vertices, what: str = "the mesh") -> None:
 
 def read_parts(path: str | os.PathLike) -> list:
     """The parts of a mesh file: every build item of a 3MF, the single mesh of an STL/OBJ/PLY.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A mesh file (:data:`READABLE_MESHES`).
 
     Returns
     -------

@@ -31,6 +31,17 @@ class OutputSet:
         self.overwrite = False
 
     def temp(self, final: Path) -> Path:
+        """
+        Parameters
+        ----------
+        final : Path
+            Where the file goes on :meth:`commit` (its folder is created).
+
+        Returns
+        -------
+        Path
+            A new empty temporary file beside ``final``, to write.
+        """
         final.parent.mkdir(parents=True, exist_ok=True)
         with signals_held():  # the file is made and noted for the clean-up together: a signal waits for both
             fd, tmp = tempfile.mkstemp(prefix=f".{final.name}.", suffix=".tmp", dir=final.parent)
@@ -40,6 +51,19 @@ class OutputSet:
         return Path(tmp)
 
     def mesh_stage(self, folder: Path, overwrite: bool) -> Path:
+        """
+        Parameters
+        ----------
+        folder : Path
+            The mesh folder the staged files go into on :meth:`commit`.
+        overwrite : bool
+            On commit, remove an earlier run's ``grain-*.stl`` files that this run does not replace.
+
+        Returns
+        -------
+        Path
+            The staging folder to write the files into.
+        """
         self.mesh_created = not folder.exists()
         self.mesh_dir, self.overwrite = folder, overwrite
         self.stage = open_stage(folder)[0]

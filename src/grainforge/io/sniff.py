@@ -18,6 +18,16 @@ _MAGIC = (
 def what_is(head: bytes) -> str | None:
     """The kind of file ``head`` (its first bytes) starts, e.g. ``"a PNG image"``; ``None`` if not known.
 
+    Parameters
+    ----------
+    head : bytes
+        The file's first bytes (16 suffice).
+
+    Returns
+    -------
+    str or None
+        A phrase for messages (``"a PNG image"``), or ``None`` if no known signature matches.
+
     Examples
     --------
     >>> what_is(b"%PDF-1.7")

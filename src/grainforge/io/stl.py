@@ -33,6 +33,16 @@ def stl_header(text: str) -> bytes:
     """The 80-byte header of a binary STL: ``text`` in ASCII, padded; never starting with ``solid``
     (readers would take the file for ASCII STL).
 
+    Parameters
+    ----------
+    text : str
+        Header text (non-ASCII characters become ``?``; cut at 80 bytes).
+
+    Returns
+    -------
+    bytes
+        Exactly 80 bytes, space-padded.
+
     Examples
     --------
     >>> stl_header("solid grain")[:12]
@@ -51,6 +61,13 @@ STL_DTYPE = np.dtype([("normal", "<f4", (3,)), ("vertices", "<f4", (3, 3)), ("at
 
 def stl_triangles(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """Binary-STL records (50 bytes each) of a mesh, with unit face normals.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions (written as float32).
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise from outside.
 
     Returns
     -------
@@ -77,7 +94,22 @@ class STLWriter:
         self.count = 0
 
     def add_object(self, name: str, records: np.ndarray, translation: Sequence[float] = (0.0, 0.0, 0.0)) -> int:
-        """Append a part (records from :func:`stl_triangles`, in part coordinates) moved by ``translation``."""
+        """Append a part (records from :func:`stl_triangles`, in part coordinates) moved by ``translation``.
+
+        Parameters
+        ----------
+        name : str
+            The part's name (binary STL has no place for it; kept for the writers' common interface).
+        records : (F,) ndarray of :data:`STL_DTYPE`
+            The part's triangles, from :func:`stl_triangles`.
+        translation : (3,) sequence of float, default (0, 0, 0)
+            Where the part goes, in the file's unit.
+
+        Returns
+        -------
+        int
+            The number of parts written so far.
+        """
         rec = records.copy()
         rec["vertices"] += np.asarray(translation, dtype=np.float64).astype(np.float32)
         self._fh.write(rec.tobytes())
@@ -115,6 +147,11 @@ def check_stl(path: str | os.PathLike) -> None:
     A binary STL is an 80-byte header, a facet count ``n`` and ``n`` records
     of 50 bytes: the file size must be ``84 + 50 n``.  An ASCII STL starts with
     ``solid`` and holds ``facet``/``vertex`` lines.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file (it must exist).
 
     Raises
     ------
@@ -171,6 +208,16 @@ def check_stl(path: str | os.PathLike) -> None:
 def read_stl(path: str | os.PathLike):
     """An STL file (binary or ASCII) as a triangle-soup ``trimesh.Trimesh``, checked.
 
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A binary or ASCII STL.
+
+    Returns
+    -------
+    trimesh.Trimesh
+        Three vertices per face, not merged, not processed.
+
     Raises
     ------
     ValueError
@@ -199,7 +246,23 @@ def read_stl(path: str | os.PathLike):
 
 def read_stl_parts(path) -> list:
     """The connected bodies of an STL (vertices merged exactly), in file order, as
-    :class:`grainforge.io.threemf.Part` named ``body-K``."""
+    :class:`grainforge.io.threemf.Part` named ``body-K``.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A binary or ASCII STL.
+
+    Returns
+    -------
+    list of grainforge.io.threemf.Part
+        One per edge-connected body, every face kept (degenerate ones too).
+
+    Raises
+    ------
+    ValueError
+        From :func:`check_stl`.
+    """
     from ..geometry.solid import split_bodies
     from .threemf import Part
 

@@ -68,6 +68,20 @@ def mesh_xml(vertices: np.ndarray, faces: np.ndarray, decimals: int = 5) -> byte
     Coordinates are written with ``decimals`` digits after the point
     (default 5: 10 nm in millimetres, far below any printer).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions in mm.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise from outside.
+    decimals : int, default 5
+        Digits after the point of each coordinate.
+
+    Returns
+    -------
+    bytes
+        ASCII XML ``<mesh>…</mesh>``.
+
     Examples
     --------
     >>> mesh_xml(np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0.5]]), np.array([[0, 1, 2]]))[:61]
@@ -116,7 +130,22 @@ class ThreeMFWriter:
         self.count = 0
 
     def add_object(self, name: str, mesh: bytes, translation: Sequence[float] = (0.0, 0.0, 0.0)) -> int:
-        """Append one named object (``mesh`` from :func:`mesh_xml`) placed at ``translation``; return its id."""
+        """Append one named object (``mesh`` from :func:`mesh_xml`) placed at ``translation``; return its id.
+
+        Parameters
+        ----------
+        name : str
+            The object's name (XML-escaped; slicers show it).
+        mesh : bytes
+            The ``<mesh>`` element (:func:`mesh_xml`), in part coordinates (mm).
+        translation : (3,) sequence of float, default (0, 0, 0)
+            The build item's translation, in mm.
+
+        Returns
+        -------
+        int
+            The object id, 1, 2, … in order.
+        """
         self.count += 1
         oid = self.count
         self._model.write(f'<object id="{oid}" name={quoteattr(str(name))} type="model">'.encode())
@@ -183,6 +212,16 @@ def read_3mf(file) -> list[Part]:
     Only what grainforge writes is supported in full: mesh objects (no
     components) placed by build items with an affine ``transform``.
 
+    Parameters
+    ----------
+    file : path or binary file object
+        A 3MF package (a zip holding ``3D/3dmodel.model``).
+
+    Returns
+    -------
+    list of Part
+        One per build item, in build order, vertices placed by the item's transform (the model's unit).
+
     Raises
     ------
     ValueError
@@ -232,6 +271,16 @@ def read_3mf_file(path) -> list[Part]:
     """The parts (build items) of the 3MF file ``path``, checked.
 
     :func:`grainforge.io.read_parts` reads any mesh file as parts; this is its 3MF branch.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        A 3MF file.
+
+    Returns
+    -------
+    list of Part
+        As :func:`read_3mf`, at least one.
 
     Raises
     ------

@@ -42,7 +42,18 @@ TIFFFILE_HINT = "reading TIFF images needs tifffile: pip install 'grainforge[sca
 
 
 def tifffile_module():
-    """tifffile, imported on first use; a missing one is one line saying how to install it."""
+    """tifffile, imported on first use; a missing one is one line saying how to install it.
+
+    Returns
+    -------
+    module
+        ``tifffile``.
+
+    Raises
+    ------
+    ValueError
+        If tifffile is not installed (:data:`TIFFFILE_HINT`).
+    """
     try:
         import tifffile
     except ImportError:
@@ -75,6 +86,17 @@ class Volume:
     def from_array(cls, array, name: str = "<array>") -> Volume:
         """A volume over an array already in memory (a segmentation's labels).
 
+        Parameters
+        ----------
+        array : array_like
+            A ``(Z, Y, X)`` image; kept by reference, not copied.
+        name : str, default "<array>"
+            Stands for the path in messages.
+
+        Returns
+        -------
+        Volume
+
         Examples
         --------
         >>> Volume.from_array(np.zeros((2, 2, 2), np.uint8)).read(0, 1).shape
@@ -89,11 +111,28 @@ class Volume:
         return int(self.shape[1]) * int(self.shape[2]) * self.dtype.itemsize
 
     def read(self, z0: int, z1: int) -> np.ndarray:
-        """Slices ``z0 … z1 − 1`` as a ``(z1 − z0, Y, X)`` array."""
+        """Slices ``z0 … z1 − 1`` as a ``(z1 − z0, Y, X)`` array."
+
+        Parameters
+        ----------
+        z0, z1 : int
+            First slice and one past the last (0 ≤ z0 ≤ z1 ≤ Z).
+
+        Returns
+        -------
+        (z1 − z0, Y, X) ndarray
+            In the file's dtype (native byte order), a copy (not a view of a memory map).
+        """
         return np.asarray(self._reader(int(z0), int(z1)))
 
     def whole(self) -> np.ndarray:
-        """The whole image in memory (for a segmentation, which needs it)."""
+        """The whole image in memory (for a segmentation, which needs it).
+
+        Returns
+        -------
+        (Z, Y, X) ndarray
+            The array itself for :meth:`from_array`, else a copy read from the file.
+        """
         if self._array is not None:
             return self._array
         return self.read(0, self.shape[0])
@@ -244,6 +283,11 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
     raw_dtype : str, optional
         NumPy dtype of a raw file, e.g. ``"uint16"`` (``"<u2"`` little-endian explicitly); default uint16.
 
+    Returns
+    -------
+    Volume
+        ``voxel_size_um`` set when a TIFF's metadata gives it.
+
     Raises
     ------
     ValueError
@@ -311,6 +355,28 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, f
     """Write a label image as ``.npy`` or ``.tif`` (ImageJ metadata with the voxel size in µm), atomically.
 
     ``fmt`` (``".npy"``, ``".tif"``, ``".tiff"``) is the format; by default the path's suffix.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The file to write.
+    labels : (Z, Y, X) ndarray of int
+        Label image (0 background).
+    voxel_size_um : float, optional
+        Voxel side in µm, written in a TIFF's metadata (ImageJ's for uint8/uint16, resolution tags
+        per centimetre otherwise); not stored in ``.npy``.
+    fmt : {".npy", ".tif", ".tiff"}, optional
+        Default: ``path``'s suffix.
+
+    Returns
+    -------
+    Path
+        ``path``.
+
+    Raises
+    ------
+    ValueError
+        If the format is not one of :data:`LABEL_SUFFIXES`, or a TIFF is asked for without tifffile.
 
     Examples
     --------
