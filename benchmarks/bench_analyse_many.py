@@ -62,7 +62,7 @@ def main():
     rows = 0
     worker_cpu = 0.0
     # the same pool and task as analyse_files (grainforge analyse), timed per file in the worker
-    for file_rows, cpu_file in ordered_map(timed_analyse, map(str, files), args.workers, preload=PRELOAD):
+    for file_rows, cpu_file in ordered_map(timed_analyse, map(str, files), workers=args.workers, preload=PRELOAD):
         rows += len(file_rows)
         worker_cpu += cpu_file
     main_cpu = cpu_seconds() - c

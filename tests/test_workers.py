@@ -12,7 +12,7 @@ def test_pool_workers_get_one_blas_thread():
     limits: before the fix it started outside them and every worker ran multithreaded BLAS
     (analyse used 2x the CPU per grain on 2 workers)."""
     expect = [os.environ.get(var, "1") for var in THREAD_VARS]
-    got = list(ordered_map(os.getenv, list(THREAD_VARS), 2, preload=["numpy"]))
+    got = list(ordered_map(os.getenv, list(THREAD_VARS), workers=2, preload=["numpy"]))
     assert got == expect
 
 

@@ -276,10 +276,10 @@ def analyse_files(paths, *, workers: int = 1, executor=None, **options):
 
     if executor is not None:
         tasks = ((str(p), Path(p).read_bytes(), options) for p in paths)
-        yield from ordered_map(_analyse_data, tasks, workers, executor=executor)
+        yield from ordered_map(_analyse_data, tasks, workers=workers, executor=executor)
         return
     tasks = ((str(p), options) for p in paths)
-    yield from ordered_map(_analyse_task, tasks, workers, preload=PRELOAD)
+    yield from ordered_map(_analyse_task, tasks, workers=workers, preload=PRELOAD)
 
 
 #: modules the analysis workers' fork server imports once

@@ -307,7 +307,7 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
             yield ({"label": box.label, "border": box.touches(shape)}, crop == box.label, box.lo, h, convention,
                    mesh_voxel_size)
 
-    yield from ordered_map(_measure_task, tasks(), min(int(workers), max(1, len(todo))),
+    yield from ordered_map(_measure_task, tasks(), workers=min(int(workers), max(1, len(todo))),
                            preload=["grainforge.analysis.scan"])
 
 

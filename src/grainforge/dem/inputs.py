@@ -176,5 +176,5 @@ def build_templates(paths: Sequence[Path], *, workers: int = 1,
 
     # ordered_map stops its workers at once on an error or a signal (a pool's own shutdown
     # would first run every queued grain to its end)
-    return list(wrap(ordered_map(_load_one, tasks, workers, preload=["grainforge.dem.template",
+    return list(wrap(ordered_map(_load_one, tasks, workers=workers, preload=["grainforge.dem.template",
                                                                       "grainforge.dem.clump"])))

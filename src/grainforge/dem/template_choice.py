@@ -229,7 +229,7 @@ def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: 
         from ..runtime.workers import ordered_map
 
         for n, (i, d) in enumerate(zip(todo, ordered_map(_measure_file, [paths[i] for i in todo],
-                                                          pool_workers(workers, len(todo)),
+                                                          workers=pool_workers(workers, len(todo)),
                                                           preload=["grainforge.analysis"])), start=1):
             measured[i] = d
             if progress is not None:

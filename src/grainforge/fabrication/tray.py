@@ -305,7 +305,7 @@ def _prepared_in_order(tasks: Iterable[dict], workers: int, chunk: int = 16) -> 
     """
     from ..runtime.workers import ordered_map
 
-    for done in ordered_map(_prepare_chunk, _chunks(tasks, chunk), workers,
+    for done in ordered_map(_prepare_chunk, _chunks(tasks, chunk), workers=workers,
                             preload=["grainforge.fabrication.tray", "trimesh", "scipy.special"]):
         yield from done
 

@@ -13,6 +13,11 @@ def cache_dir() -> Path:
 
     ``$GRAINFORGE_CACHE`` if set, else ``$XDG_CACHE_HOME/grainforge``, else
     ``~/.cache/grainforge``.
+
+    Returns
+    -------
+    Path
+        The folder (not created here).
     """
     env = os.environ.get("GRAINFORGE_CACHE")
     if env:

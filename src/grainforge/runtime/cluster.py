@@ -63,6 +63,16 @@ class VersionMismatch(ValueError):
 def check_address(address: str) -> str:
     """``address`` if it can name a Dask scheduler (``tcp://HOST:PORT``, ``HOST:PORT``, ``tls://…``), else refuse.
 
+    Parameters
+    ----------
+    address : str
+        What the user gave for ``--scheduler``.
+
+    Returns
+    -------
+    str
+        The address, stripped of surrounding blanks.
+
     Raises
     ------
     ValueError
@@ -156,6 +166,18 @@ def connect(address: str, *, timeout: str | None = None) -> Iterator[Any]:
 
     Dask's log lines are off while it is open; the client is closed on leaving.
 
+    Parameters
+    ----------
+    address : str
+        The scheduler's address (:func:`check_address`).
+    timeout : str, optional
+        Dask's timeout string (``"10s"``); default :data:`CONNECT_TIMEOUT`.
+
+    Yields
+    ------
+    distributed.Client
+        Open while the block runs.
+
     Raises
     ------
     ValueError
@@ -228,6 +250,27 @@ class DaskExecutor(cf.Executor):
         return max(1, sum(int(w.get("nthreads", 1)) for w in info.get("workers", {}).values()))
 
     def submit(self, fn, /, *args, **kwargs) -> cf.Future:
+        """Run ``fn(*args, **kwargs)`` on the cluster.
+
+        Parameters
+        ----------
+        fn : callable
+            Picklable by Dask (cloudpickle).
+        *args, **kwargs
+            Its arguments.
+
+        Returns
+        -------
+        concurrent.futures.Future
+            Cancelling it cancels the Dask task.
+
+        Raises
+        ------
+        RuntimeError
+            After :meth:`shutdown`.
+        SchedulerLost
+            If the scheduler refuses the task (the connection is gone).
+        """
         if self._closing:
             raise RuntimeError("cannot schedule new tasks after shutdown")
         out: cf.Future = cf.Future()
@@ -278,7 +321,15 @@ class DaskExecutor(cf.Executor):
             pass
 
     def shutdown(self, wait: bool = True, *, cancel_futures: bool = False) -> None:
-        """Stop: with ``cancel_futures`` (or without ``wait``) cancel the tasks not done, else wait for them."""
+        """Stop: with ``cancel_futures`` (or without ``wait``) cancel the tasks not done, else wait for them.
+
+        Parameters
+        ----------
+        wait : bool, default True
+            Wait for the tasks not done (unless ``cancel_futures``).
+        cancel_futures : bool, default False
+            Cancel the tasks not done.
+        """
         with self._lock:
             pending = list(self._pending)
         if cancel_futures or not wait:
@@ -295,7 +346,22 @@ class DaskExecutor(cf.Executor):
 
 @contextmanager
 def dask_executor(address: str) -> Iterator[DaskExecutor]:
-    """:func:`connect`, then a :class:`DaskExecutor` on that client; tasks not done on leaving are cancelled."""
+    """:func:`connect`, then a :class:`DaskExecutor` on that client; tasks not done on leaving are cancelled.
+
+    Parameters
+    ----------
+    address : str
+        The scheduler's address.
+
+    Yields
+    ------
+    DaskExecutor
+
+    Raises
+    ------
+    ValueError
+        As :func:`connect`: Dask missing, a bad or silent address, workers of another version.
+    """
     with connect(address) as client:
         ex = DaskExecutor(client, check_address(address))
         try:

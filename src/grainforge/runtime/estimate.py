@@ -64,12 +64,42 @@ class TooLargeError(ValueError):
 
 
 def icosphere_vertices(subdivisions: int) -> int:
-    """10·4^s + 2."""
+    """10·4^s + 2."
+
+    Parameters
+    ----------
+    subdivisions : int
+        Subdivisions s of the geodesic sphere.
+
+    Returns
+    -------
+    int
+        Its number of vertices, 10·4^s + 2.
+
+    Examples
+    --------
+    >>> icosphere_vertices(5)
+    10242
+    """
     return 10 * 4 ** int(subdivisions) + 2
 
 
 def grain_seconds(method: str, params: Any) -> float:
-    """Rough seconds to generate, measure and encode one grain of ``method`` on one core."""
+    """Rough seconds to generate, measure and encode one grain of ``method`` on one core.
+
+    Parameters
+    ----------
+    method : str
+        Method name (``"fso"``, ``"dpa"``, ...; others cost by vertices only).
+    params : object
+        The method's parameters; ``subdivisions``, and for FSO ``ridges``/``frequencies``, for DPA
+        ``primaries``/``smooth`` are read when present.
+
+    Returns
+    -------
+    float
+        Seconds.
+    """
     s = getattr(params, "subdivisions", None)
     v = icosphere_vertices(s) if isinstance(s, int) else 2562
     t = GRAIN_SECONDS + VERTEX_SECONDS * v
@@ -91,6 +121,22 @@ def dem_template_seconds(shape: str, *, spheres: int = 30, refine_iterations: in
     The clump refinement is counted at its full ``refine_iterations`` (L-BFGS-B
     often converges sooner: an upper bound); the level-set grid is that of a
     compact grain (about 1.4 d_eq across each way, plus the padding).
+
+    Parameters
+    ----------
+    shape : str
+        ``"clump"``, ``"levelset"`` or another template kind (the fixed cost only).
+    spheres : int, default 30
+        Clump spheres asked for (the refinement's cost stops growing at :data:`DEM_REFINE_SPHERES_CAP`).
+    refine_iterations : int, default 0
+        L-BFGS-B iterations of the clump refinement.
+    spacing : float, default 0.05
+        Level-set grid spacing, in equivalent diameters.
+
+    Returns
+    -------
+    float
+        Seconds.
 
     Examples
     --------
@@ -114,6 +160,16 @@ def dem_template_seconds(shape: str, *, spheres: int = 30, refine_iterations: in
 def duration(seconds: float) -> str:
     """``"3.2 h"``, ``"41 s"``, ``"1.9e+04 years"``.
 
+    Parameters
+    ----------
+    seconds : float
+        A duration (≥ 0).
+
+    Returns
+    -------
+    str
+        Two significant digits in the largest unit that fits (s, min, h, days, years).
+
     Examples
     --------
     >>> duration(41.0), duration(7200.0), duration(3e12)
@@ -131,6 +187,26 @@ def check_job(count: int, seconds_each: float, *, what: str, option: str, worker
     """Total seconds for ``count`` items of ``seconds_each`` on ``workers``; refuse beyond a day.
 
     The message ends "lower ``option``", or ``advice`` when given (e.g. "raise --spacing").
+
+    Parameters
+    ----------
+    count : int
+        Number of items.
+    seconds_each : float
+        Estimated seconds per item on one core.
+    what : str
+        How the message names the job (``"10 fso grains"``).
+    option : str
+        The option that reduces the job (``"--count"``).
+    workers : int, default 1
+        Processes sharing the work.
+    advice : str, optional
+        The message's last words instead of ``lower OPTION``.
+
+    Returns
+    -------
+    float
+        The estimate in seconds (of wall time on ``workers``).
 
     Raises
     ------
@@ -152,7 +228,13 @@ def _limit() -> str:
 
 
 def machine_memory() -> int:
-    """Physical memory of this machine in bytes (24 GiB if it cannot be read)."""
+    """Physical memory of this machine in bytes (24 GiB if it cannot be read).
+
+    Returns
+    -------
+    int
+        Bytes.
+    """
     try:
         return int(os.sysconf("SC_PAGE_SIZE") * os.sysconf("SC_PHYS_PAGES"))
     except (ValueError, OSError, AttributeError):
@@ -160,7 +242,29 @@ def machine_memory() -> int:
 
 
 def check_memory(nbytes: float, *, what: str, option: str, fraction: float = 0.5) -> float:
-    """Refuse when ``nbytes`` exceeds ``fraction`` of the machine's memory (the machine is shared)."""
+    """Refuse when ``nbytes`` exceeds ``fraction`` of the machine's memory (the machine is shared).
+
+    Parameters
+    ----------
+    nbytes : float
+        Estimated bytes the job needs.
+    what : str
+        How the message names the job.
+    option : str
+        The option that reduces the memory.
+    fraction : float, default 0.5
+        Share of :func:`machine_memory` allowed.
+
+    Returns
+    -------
+    float
+        ``nbytes``.
+
+    Raises
+    ------
+    TooLargeError
+        Naming the estimate, the limit in GiB and ``option``.
+    """
     limit = machine_memory() * fraction
     if nbytes > limit:
         raise TooLargeError(f"{what} would need about {nbytes / 1024**3:.3g} GiB of memory "

@@ -50,6 +50,11 @@ def signals_held() -> Iterator[list]:
     Yields the list of signals held so far.  Outside the main thread (where
     Python cannot set handlers) nothing is held.
 
+    Yields
+    ------
+    list of int
+        The signal numbers received so far during the block.
+
     Examples
     --------
     >>> with signals_held() as got:
@@ -64,7 +69,13 @@ def signals_held() -> Iterator[list]:
 
 
 def remove_stale_staging(out: Path) -> None:
-    """Remove staging folders of runs that were killed (their process is gone)."""
+    """Remove staging folders of runs that were killed (their process is gone).
+
+    Parameters
+    ----------
+    out : Path
+        An output folder (nothing happens when it does not exist).
+    """
     if not out.is_dir():
         return
     for stage in out.glob(STAGING_PREFIX + "*"):
@@ -82,6 +93,18 @@ def open_stage(out: str | os.PathLike) -> tuple[Path, bool]:
 
     Staging folders of killed runs (their process gone) are removed first,
     so a run killed by SIGKILL never blocks the next one.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder (created, with its parents, if missing).
+
+    Returns
+    -------
+    stage : Path
+        A new folder ``out/.grainforge-staging-PID-XXXX``.
+    created : bool
+        Whether ``out`` did not exist before.
     """
     out = Path(out)
     created = not out.exists()
@@ -94,6 +117,25 @@ def commit_stage(stage: Path, out: str | os.PathLike, *, overwrite: bool = False
     """Move everything in ``stage`` into ``out`` (folders first, then files): the outputs appear together.
 
     An existing output is replaced only with ``overwrite`` (else ``FileExistsError``, nothing moved).
+
+    Parameters
+    ----------
+    stage : Path
+        The staging folder (:func:`open_stage`).
+    out : str or os.PathLike
+        The output folder.
+    overwrite : bool, default False
+        Replace outputs that exist (a folder is removed first).
+
+    Returns
+    -------
+    list of Path
+        The outputs now in ``out``, folders first.
+
+    Raises
+    ------
+    FileExistsError
+        Without ``overwrite``, when an output exists; nothing is moved then.
     """
     out = Path(out)
     items = sorted(stage.iterdir(), key=lambda p: (not p.is_dir(), p.name))
@@ -117,7 +159,18 @@ def staged(out: str | os.PathLike) -> Iterator[Path]:
     """``with staged(out) as stage:`` a staging folder (:func:`open_stage`), removed on the way out with ``out``
     itself when this run created it and left it empty (:func:`discard_stage`) — also when a signal lands while
     the folders are being made: whether ``out`` existed is noted before anything is made, and the clean-up is
-    armed before :func:`open_stage` runs."""
+    armed before :func:`open_stage` runs.
+
+    Parameters
+    ----------
+    out : str or os.PathLike
+        The output folder.
+
+    Yields
+    ------
+    Path
+        The staging folder; commit it with :func:`commit_stage` before the block ends.
+    """
     out = Path(out)
     created, stage = not out.exists(), None
     try:
@@ -129,7 +182,17 @@ def staged(out: str | os.PathLike) -> Iterator[Path]:
 
 def discard_stage(stage: Path | None, out: str | os.PathLike, created: bool) -> None:
     """Remove ``stage`` (empty after :func:`commit_stage`; None: none was made) and ``out`` if this run created
-    it and it is empty."""
+    it and it is empty.
+
+    Parameters
+    ----------
+    stage : Path or None
+        The staging folder, or None.
+    out : str or os.PathLike
+        The output folder.
+    created : bool
+        Whether this run created ``out`` (then it is removed when empty).
+    """
     if stage is not None:
         shutil.rmtree(stage, ignore_errors=True)
     out = Path(out)

@@ -44,6 +44,10 @@ def single_threaded_children() -> Iterator[None]:
     Workers (and the fork server) start when the first tasks are submitted,
     so wrap those submissions.
 
+    Yields
+    ------
+    None
+
     Examples
     --------
     >>> import os
@@ -90,6 +94,15 @@ def sigint_blocked() -> Iterator[None]:
 def pid_alive(pid: int) -> bool:
     """Whether process ``pid`` runs (a zombie, dead but not yet reaped, counts as dead).
 
+    Parameters
+    ----------
+    pid : int
+        Process id.
+
+    Returns
+    -------
+    bool
+
     Examples
     --------
     >>> pid_alive(os.getpid())
@@ -132,6 +145,11 @@ def watch_parent(owner: int) -> None:
     On Linux the kernel also sends SIGKILL when the worker's parent dies
     (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
     server, not the owner, so a daemon thread polls the owner as well.
+
+    Parameters
+    ----------
+    owner : int
+        Process id of the pool's maker.
     """
     die_with_parent()
 
@@ -204,8 +222,14 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
     Parameters
     ----------
     workers : int
+        Number of worker processes.
     preload : sequence of str
         Modules the fork server imports once, before forking the workers.
+
+    Returns
+    -------
+    concurrent.futures.ProcessPoolExecutor
+        With ``workers``, ``start_method`` and ``worker_processes()`` for :func:`close_pool`.
     """
     import multiprocessing
 
@@ -232,7 +256,7 @@ def process_pool(workers: int, preload: Sequence[str] = ()):
     return _pool_class()(workers, ctx, os.getpid())
 
 
-def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, preload: Sequence[str] = (),
+def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], *, workers: int, preload: Sequence[str] = (),
                 inflight: int = 3, executor=None) -> Iterator[Any]:
     """``map(fn, items)`` on ``workers`` processes, results in input order, memory bounded.
 
@@ -243,6 +267,26 @@ def ordered_map(fn: Callable[[Any], Any], items: Iterable[Any], workers: int, pr
     :class:`grainforge.runtime.cluster.DaskExecutor`, say) the items run there
     instead, ``workers`` of them at a time; the executor stays open (its
     owner closes it), and an error or interrupt cancels the items submitted.
+
+    Parameters
+    ----------
+    fn : callable
+        A picklable function of one item (module level, for a process pool).
+    items : iterable
+        The items, consumed lazily.
+    workers : int
+        Processes (``<= 1``: in this process, no pool); with ``executor``, items in flight at once.
+    preload : sequence of str, default ()
+        Modules the fork server imports once (:func:`process_pool`).
+    inflight : int, default 3
+        Items submitted ahead per worker.
+    executor : concurrent.futures.Executor, optional
+        Run there instead of a new pool (left open).
+
+    Yields
+    ------
+    object
+        ``fn(item)`` for each item, in the order of ``items``.
 
     Examples
     --------
@@ -290,6 +334,13 @@ def close_pool(pool, abort: bool = False) -> None:
     the one use of a private attribute, for the reason given there); then
     ``pool.shutdown(wait=True, cancel_futures=True)`` drops the queued tasks and joins the pool's
     manager thread.
+
+    Parameters
+    ----------
+    pool : concurrent.futures.Executor
+        A pool of :func:`process_pool` (or another executor, which is just shut down).
+    abort : bool, default False
+        Stop the workers now (after an error or a signal) instead of letting them finish.
     """
     if not abort or not hasattr(pool, "worker_processes"):
         # another executor (a :class:`grainforge.runtime.cluster.DaskExecutor`): its own shutdown cancels what is left
@@ -396,6 +447,11 @@ def kill_process_tree(pid: int) -> None:
     a session of its own, its members are killed pass after pass until none is left. The caller still
     reaps ``pid`` if it is its child (``Popen.wait``). A process already gone is no error. Never signals
     this process's own group or session.
+
+    Parameters
+    ----------
+    pid : int
+        The root process (a child of this process, typically started with ``start_new_session=True``).
 
     Examples
     --------

@@ -167,7 +167,7 @@ def choose_grains(inputs: Sequence[str | os.PathLike], settings: Settings, *, po
         candidates = spread(n, pool_size(k, n) if pool is None else min(n, max(pool, k)))
         rows = []
         tasks = [(recipe, int(i)) for i in candidates]
-        for done, row in enumerate(ordered_map(_recipe_descriptors, tasks, pool_workers(workers, len(tasks)),
+        for done, row in enumerate(ordered_map(_recipe_descriptors, tasks, workers=pool_workers(workers, len(tasks)),
                                                preload=["grainforge.methods", "grainforge.analysis"]), start=1):
             rows.append(row)
             if progress is not None:
