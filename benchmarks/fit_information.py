@@ -55,7 +55,7 @@ def main() -> None:
     args = ap.parse_args()
     import numpy as np
 
-    from grainforge.fit import DESCRIPTORS, _Pool, grain_seed
+    from grainforge.fit import DESCRIPTORS, MeasurePool, grain_seed
 
     sand, spec, names, known, rows, across = known_angular_sand(args.grains)
     cov = np.cov(sand.table().T)
@@ -64,7 +64,7 @@ def main() -> None:
           f"slopes by ±{args.step:g} with the same seeds\n")
     for mode in ("inertia", "facets"):
         fixed = {**spec.fixed, "aspect_by": mode}
-        with _Pool(args.workers) as pool:
+        with MeasurePool(args.workers) as pool:
             def run(delta, root=99):
                 jobs = [(spec.params(dict(zip(names, known[j] + delta))), grain_seed(root, i), float(across[i]))
                         for i, j in enumerate(rows)]

@@ -88,16 +88,16 @@ def main() -> None:
     with open(known_path, encoding="utf-8", newline="") as fh:
         known = list(csv.DictReader(fh))
     if args.measured_slopes:
-        import grainforge.fit as fitmod
+        import grainforge.fit.population as estimate
 
         slopes = measured_slopes(args.method, sand, known, args.max_across, args.workers)
         print("measured slopes of the mean descriptors per unit-box setting (rows: descriptors):\n"
               + np.array2string(slopes, precision=4), flush=True)
-        fitmod._mean_jacobian = lambda model, u, across, h=1e-3: slopes
+        estimate._mean_jacobian = lambda model, u, across, h=1e-3: slopes  # looked up by population_settings
     if args.known_spread:
-        import grainforge.fit as fitmod
+        import grainforge.fit.run as run  # fit_sand looks population_settings up in its own module
 
-        fitmod.population_settings = known_spread(fitmod.population_settings, known)
+        run.population_settings = known_spread(run.population_settings, known)
     t, cpu = time.perf_counter(), time.process_time()
     result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
                       reseed=RESEED if args.reseed is None else args.reseed,
@@ -152,7 +152,7 @@ def known_spread(population_settings, known: list[dict]):
     starting mean, the sand's own spread."""
     import numpy as np
 
-    def wrapped(spec, model, sand, u0, y0, *args, grains, shrink=None, **kw):
+    def wrapped(spec, sand, *, u0, grains, shrink=None, **kw):
         names = [s.name for s in spec.all_settings]
         low = np.array([s.low for s in spec.all_settings])
         width = np.array([s.high - s.low for s in spec.all_settings])
@@ -164,7 +164,7 @@ def known_spread(population_settings, known: list[dict]):
             f"{k} {a:.3f} (shrunk twins {b:.3f})" for k, a, b in
             zip(names, truth.std(axis=0), (u - centre).std(axis=0) * np.asarray(shrink or np.ones(len(names))))),
             flush=True)
-        return population_settings(spec, model, sand, u0, y0, *args, shrink=shrink, grains=grains,
+        return population_settings(spec, sand, u0=u0, shrink=shrink, grains=grains,
                                    start=truth - truth.mean(axis=0) + centre, **kw)
 
     return wrapped
@@ -172,11 +172,12 @@ def known_spread(population_settings, known: list[dict]):
 
 def measured_slopes(method: str, sand, known: list[dict], max_across: float, workers: int, step: float = 0.04):
     """(4, p) slopes of the mean descriptors per unit-box setting, measured at the known settings of the sand's
-    first rows (:func:`grainforge.fit._measured_mean_jacobian`, the fit's own measurement, with a step of
+    first rows (:func:`grainforge.fit.population._measured_mean_jacobian`, the fit's own measurement, with a step of
     ``step`` in each setting's units and the seeds of ``fit_information.py``)."""
     import numpy as np
 
-    from grainforge.fit import FITS, SLOPE_GRAINS, _measured_mean_jacobian, _Pool, grain_seed
+    from grainforge.fit import FITS, SLOPE_GRAINS, MeasurePool, grain_seed
+    from grainforge.fit.population import _measured_mean_jacobian
 
     spec = FITS[method]
     names = [s.name for s in spec.all_settings]
@@ -185,7 +186,7 @@ def measured_slopes(method: str, sand, known: list[dict], max_across: float, wor
     rows = np.arange(min(SLOPE_GRAINS, len(known)))
     u = (np.array([[float(known[j][k]) for k in names] for j in rows]) - low) / width
     across = np.minimum(sand.equivalent_diameter[rows] / sand.voxel_size, max_across)
-    with _Pool(workers) as pool:
+    with MeasurePool(workers) as pool:
         return _measured_mean_jacobian(spec, pool, u, [grain_seed(99, i) for i in rows], across, step=step / width)
 
 

@@ -33,7 +33,8 @@ def main() -> None:
     args = ap.parse_args()
     import numpy as np
 
-    from grainforge.fit import DESCRIPTORS, FITS, _measure, grain_seed
+    from grainforge.fit import DESCRIPTORS, FITS, grain_seed
+    from grainforge.fit.measure import _measure
     from grainforge.fit.twins import design_points
     from grainforge.methods import get
 

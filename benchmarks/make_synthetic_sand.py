@@ -83,7 +83,7 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
     import numpy as np
     from scipy.stats import truncnorm
 
-    from grainforge.fit import DESCRIPTORS, FITS, _Pool, grain_seed, write_sand
+    from grainforge.fit import DESCRIPTORS, FITS, MeasurePool, grain_seed, write_sand
 
     rng = np.random.default_rng(SEED)
     spec = FITS[method]
@@ -101,7 +101,7 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
                 print(f"grain {n}/{total}", end="\r", flush=True)
             yield x
 
-    with _Pool(workers) as pool:  # each grain measured the Atlas way (spam's cube)
+    with MeasurePool(workers) as pool:  # each grain measured the Atlas way (spam's cube)
         table = pool.run(method, spec.fixed, jobs, progress, opening=opening is not None)
     print()
     if not np.all(np.isfinite(table)):

@@ -199,7 +199,8 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     assert result.grains_measured >= 40 and len(result.generated) == 40
     # two twins' first settings lie in a corner where the generator refuses their seed; refined, they are made
     assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
-    monkeypatch.setattr(fitmod, "fit_figure", lambda *a: None)  # fit.png: the slow plumbing test draws it
+    # fit.png: the slow plumbing test draws it (write_outputs looks the figure up in its own module)
+    monkeypatch.setattr("grainforge.fit.outputs.fit_figure", lambda *a: None)
     paths = write_outputs(sand, result, tmp_path / "out")
     rows = list(csv.DictReader(paths[1].read_text(encoding="utf-8").splitlines()))
     settings = [f"setting_{s.name}" for s in FITS["rf"].all_settings]
@@ -383,7 +384,8 @@ def test_angular_grains_take_their_aspect_from_their_settings_and_their_surface_
     another seed, its flatness and elongation stay (the fit's angular grains are stretched to their aspect's
     inertia ellipsoid) while its convexity moves by several hundredths: what the seed adds that no grain's
     settings can be told from (docs/fit.md, Angular sands)."""
-    from grainforge.fit import _measure, grain_seed
+    from grainforge.fit import grain_seed
+    from grainforge.fit.measure import _measure
     from grainforge.methods import get
 
     sand, spec = read_sand(ANGULAR_SAND), FITS["angular"]
@@ -508,7 +510,7 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
     def interrupted(*args):
         raise KeyboardInterrupt
 
-    monkeypatch.setattr(fitmod, "fit_figure", interrupted)
+    monkeypatch.setattr("grainforge.fit.outputs.fit_figure", interrupted)
     fresh = tmp_path / "fresh"
     r = runner.invoke(cli, ["fit", str(tmp_path / "s.csv"), "--voxel-size-um", "7", "--out", str(fresh)])
     assert r.exit_code != 0 and not fresh.exists(), (r.exit_code, r.stderr)

@@ -2,7 +2,7 @@
 
 :class:`Distribution` (a parameter drawn per grain), :class:`FixedSize`,
 :class:`LognormalSize` and :class:`GradingCurve` (the size of each grain).
-:mod:`grainforge.population` parses recipes into them and
+:mod:`grainforge.population.recipe` parses recipes into them and
 :mod:`grainforge.population.report` summarises populations with them; neither of those
 two modules is imported here (no import cycle).
 """

@@ -1,0 +1,117 @@
+"""A method's design: grains spread over its settings and resolutions, measured once and cached on disk.
+
+The design is the inverse model's data (:class:`Design`, whose
+:meth:`Design.model` is :class:`grainforge.fit.twins.ForwardModel`): a few
+hundred grains of the method, their per-grain settings and resolution spread
+over the method's whole range (a Sobol design), each generated and measured
+once; cached per method, convention and resolution range
+(:func:`design_path`), so a second fit of any sand measures none.
+:func:`setting_identifiability` tells from it how well a grain's four
+descriptors determine each setting.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import io
+import math
+import os
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from .measure import MeasurePool
+from .recipes import grain_seed
+from .sand import Sand
+from .settings import FITS
+
+#: grains of a method's design, and the smallest resolution it spans (voxels across)
+DESIGN_GRAINS = 400
+DESIGN_ACROSS_LOW = 10.0
+#: root seed of every design (designs do not depend on the sand or the fit's seed); bump DESIGN_VERSION
+#: when a generator or the measurement changes, so that cached designs are not reused
+DESIGN_SEED = 20261202
+DESIGN_VERSION = 1
+
+
+def _design_high(sand: Sand, max_across: float | None) -> float:
+    """Highest resolution a design spans: the cap, or (uncapped) the sand's largest grain's, on a 10 % grid."""
+    if max_across:
+        return float(max_across)
+    top = float((sand.equivalent_diameter / sand.voxel_size).max())
+    return float(f"{1.1 ** math.ceil(math.log(max(top, DESIGN_ACROSS_LOW * 1.1)) / math.log(1.1)):.4g}")
+
+
+def design_path(method: str, convention: str, high: float, grains: int = DESIGN_GRAINS,
+                cache: str | os.PathLike | None = None) -> Path:
+    """Where a method's design is cached: under ``cache`` (default :func:`grainforge.runtime.cache.cache_dir`),
+    keyed by everything that changes its grains."""
+    from .._version import __version__
+    from ..runtime.cache import cache_dir
+
+    spec = FITS[method]
+    key = repr((DESIGN_VERSION, __version__, DESIGN_SEED, method, spec.all_settings, sorted(spec.fixed.items()),
+                convention, float(high), int(grains)))
+    digest = hashlib.sha256(key.encode()).hexdigest()[:12]
+    return Path(cache or cache_dir()) / "fit-designs" / f"{method}-{convention}-{high:g}-{grains}-{digest}.npz"
+
+
+@dataclass(frozen=True)
+class Design:
+    """A method's design: unit-box settings ``u``, resolutions ``across`` and measured descriptors ``y``."""
+
+    method: str
+    u: np.ndarray
+    across: np.ndarray
+    y: np.ndarray  # NaN rows: the generator refused those settings
+
+    def model(self):
+        from .twins import ForwardModel
+
+        ok = np.all(np.isfinite(self.y), axis=1)
+        return ForwardModel.fit(self.u[ok], self.across[ok], self.y[ok])
+
+
+def design(method: str, pool: MeasurePool, *, high: float, grains: int = DESIGN_GRAINS,
+           cache: str | os.PathLike | None = None, progress=None) -> Design:
+    """The cached design of ``method`` (measured, and cached atomically, if it is not yet)."""
+    from ..io import atomic_write
+    from .twins import design_points
+
+    spec = FITS[method]
+    path = design_path(method, pool.convention, high, grains, cache)
+    if path.exists():
+        with np.load(path) as z:
+            return Design(method, z["u"], z["across"], z["y"])
+    pts = design_points(grains, len(spec.all_settings) + 1, DESIGN_SEED)
+    u, t = pts[:, :-1], pts[:, -1]
+    across = DESIGN_ACROSS_LOW * (high / DESIGN_ACROSS_LOW) ** t
+    jobs = [(spec.grain_params(u[i]), grain_seed(DESIGN_SEED, i), float(across[i])) for i in range(grains)]
+    y = pool.run(method, spec.fixed, jobs, progress)
+    buf = io.BytesIO()
+    np.savez(buf, u=u, across=across, y=y)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    atomic_write(path, buf.getvalue())
+    return Design(method, u, across, y)
+
+
+#: a setting predicted from a grain's descriptors with at least this cross-validated R² is called identifiable
+IDENTIFIABLE_R2 = 0.9
+
+
+def setting_identifiability(des: Design) -> dict[str, tuple[float, float]]:
+    """Per setting of ``des``'s method: (R², rms error in the setting's units) of predicting it from a grain's
+    four descriptors (:func:`grainforge.fit.twins.identifiability` on the design).
+
+    What the fitted settings of a twin can say about its sand grain: with R² ≥ :data:`IDENTIFIABLE_R2` the
+    descriptors determine the setting (a sand's setting is *acquired* from its scan, within the error);
+    near 0 the grain's seed or another setting shapes the same descriptors, and the fitted value is one
+    choice among many that measure alike.
+    """
+    from .twins import identifiability
+
+    ok = np.all(np.isfinite(des.y), axis=1)
+    r2, rmse = identifiability(des.u[ok], des.across[ok], des.y[ok])
+    return {st.name: (float(a), float(e * (st.high - st.low)))
+            for st, a, e in zip(FITS[des.method].all_settings, r2, rmse)}
