@@ -298,7 +298,8 @@ def _plan(templates: Sequence, test: str, settings: Settings, seed: int) -> Simp
 
 
 def _grain_files(templates: Sequence, plan: SimpleNamespace, settings: Settings, seed: int) -> dict:
-    """The drawn templates' sphere files, ``in.templates``, ``in.insert``, ``in.unfix`` and ``in.base``."""
+    """The drawn templates' sphere files, ``in.templates``, ``in.insert``, ``in.unfix`` and (if ``plan.geo`` has a
+    ``base``) ``in.base``."""
     from ..dem.deck import exact_unit_quaternions, fmt, xyzr_text
     from ..dem.liggghts import node_insertion, template_fix
 
@@ -322,6 +323,8 @@ def _grain_files(templates: Sequence, plan: SimpleNamespace, settings: Settings,
                               quats[slot])
     files["in.insert"] = "\n".join(ins) + "\n"
     files["in.unfix"] = "\n".join(f"unfix i{slot}\nregion r{slot} delete" for slot in range(plan.n)) + "\n"
+    if "base" not in geo:  # a scene without a rough base (the triaxial box)
+        return files
     files["in.base"] = "\n".join([f"create_atoms {BASE} single {fmt(x)} {fmt(y)} {fmt(z)} units box"
                                   for x, y, z in geo["base"]]
                                  + [f"set type {BASE} diameter {fmt(2.0 * geo['r_base'])}",
@@ -485,6 +488,10 @@ def collect_result(deck: str | os.PathLike) -> dict:
     """The Yade scene's ``result.json`` record, from a finished LIGGGHTS run's files (and written there)."""
     deck = Path(deck)
     rec = dict(json.loads((deck / "grains.json").read_text())["result"])
+    if rec["test"] == "triaxial":  # the walled box's records: grainforge.simulate.liggghts_triaxial
+        from .liggghts_triaxial import collect_triaxial
+
+        return collect_triaxial(deck)
     initial = _rows(deck / "bodies-initial.txt", 4)
     final = _rows(deck / "bodies-final.txt", 4)
     spheres = _rows(deck / "spheres-final.txt", 4)
