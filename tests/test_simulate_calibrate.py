@@ -6,11 +6,11 @@ from __future__ import annotations
 import csv
 import json
 import math
-import shutil
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from conftest import require_engine
 
 from grainforge.cli.main import cli
 from grainforge.simulate.friction_search import (
@@ -159,12 +159,7 @@ def test_the_printed_command_uses_the_calibrated_friction():
 @pytest.mark.slow
 def test_quick_calibration_in_yade(grains, tmp_path):
     """A --quick tilt calibration: a few frictions of one seed, all outputs, the command that uses μ."""
-    if shutil.which("yade") is None:
-        import os
-
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail("yade not installed but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip("yade not installed (apt-get install yade python3-yade)")
+    require_engine("yade")
     out = tmp_path / "cal"
     # a target inside what quick rough-angular layers reach over μ 0.05–1.5 (else: 'not reached', exit 2)
     r = CliRunner().invoke(cli, ["simulate", "calibrate", "tilt", str(grains), "--out", str(out), "--quick",
@@ -319,3 +314,37 @@ def test_triaxial_runs_that_fail_their_check_are_named_after_the_outputs(grains,
         "check failed: friction 0.5, seed 0: the isotropic compaction did not reach the confining stress at rest; "
         "friction 1, seed 0: the isotropic compaction did not reach the confining stress at rest (calibration.csv "
         "has every run)")
+
+
+@pytest.mark.slow
+def test_quick_triaxial_calibration_in_yade_reads_the_ultimate_angles_simulate_triaxial_writes(grains, tmp_path):
+    """Two --quick triaxial runs (μ 0.25 and 0.5) by `simulate triaxial`, then a calibration of two frictions
+    between them aiming at the mean of their ultimate angles: it runs the same decks (Yade repeats a run), so
+    each friction's angle is results.csv's ultimate_friction_deg, and μ is the interpolation between them."""
+    from conftest import require_engine
+
+    require_engine("yade")
+    ultimate = {}
+    for mu in (0.25, 0.5):
+        out = tmp_path / f"mu{mu}"
+        r = CliRunner().invoke(cli, ["simulate", "triaxial", str(grains), "--out", str(out), "--quick",
+                                     "--friction", str(mu)])
+        assert r.exit_code == 0, r.output
+        (row,) = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
+        ultimate[mu] = float(row["ultimate_friction_deg"])
+    assert ultimate[0.25] < ultimate[0.5], ultimate  # else the mean is not bracketed from 0.25 upwards
+    target = round(0.5 * (ultimate[0.25] + ultimate[0.5]), 2)
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "triaxial", str(grains), "--out", str(out), "--quick",
+                                 "--target-angle", str(target), "--friction-range", "0.25", "0.5", "--start", "0.25",
+                                 "--max-frictions", "2"])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader((out / "calibration.csv").read_text().splitlines()))
+    assert [float(row["friction"]) for row in rows] == [0.25, 0.5]
+    for row in rows:
+        assert float(row["angle_deg"]) == float(row["ultimate_friction_deg"]) == ultimate[float(row["friction"])]
+    rec = json.loads((out / "calibration.json").read_text())
+    lo, hi = ultimate[0.25], ultimate[0.5]
+    assert rec["friction"] == pytest.approx(0.25 + (target - lo) * 0.25 / (hi - lo), abs=1e-9)
+    assert rec["command"] in r.stdout and "grainforge simulate triaxial" in rec["command"]
+    assert not list(out.glob(".grainforge-*"))
