@@ -37,14 +37,14 @@ def main() -> None:
     from grainforge.methods.dpa.calibration import calibrate
 
     print(f"load average: {os.getloadavg()}")
-    D.aggregate("octahedron", 20, 1.0, np.random.default_rng(0))  # imports, caches
+    D.aggregate("octahedron", 20, exponent=1.0, rng=np.random.default_rng(0))  # imports, caches
     grainforge.dpa(primaries=20, rng=0)
 
     print("\n300 octahedra (face-cancellation union, contact rules; seeds 0, 1; wall s / CPU s, one run each)")
     for eps in (1.0, 3.0):
         for seed in (0, 1):
             t0, c0 = time.perf_counter(), time.process_time()
-            agg = D.aggregate("octahedron", 300, eps, np.random.default_rng(seed))
+            agg = D.aggregate("octahedron", 300, exponent=eps, rng=np.random.default_rng(seed))
             t1, c1 = time.perf_counter(), time.process_time()
             D.union_surface(agg)
             t2, c2 = time.perf_counter(), time.process_time()
@@ -58,8 +58,8 @@ def main() -> None:
     for name in ("cube", "octahedron", "tetrahedron", "dodecahedron", "icosahedron", "truncated-octahedron"):
         for eps in ((0.3, 1.0, 10.0) if name in ("cube", "octahedron") else (1.0,)):
             r = reps if name in ("cube", "octahedron") else 2
-            t_agg = best(lambda: D.aggregate(name, 1000, eps, np.random.default_rng(1)), r)
-            agg = D.aggregate(name, 1000, eps, np.random.default_rng(1))
+            t_agg = best(lambda: D.aggregate(name, 1000, exponent=eps, rng=np.random.default_rng(1)), r)
+            agg = D.aggregate(name, 1000, exponent=eps, rng=np.random.default_rng(1))
             if agg.cells is not None:
                 t_surf = best(lambda: D.lattice_surface(agg.cells), r)
             else:
@@ -71,7 +71,7 @@ def main() -> None:
 
     if not args.quick:
         t = time.perf_counter()
-        calibrate("cube", 200, np.linspace(0.5, 10.0, 20), 20, seed=0, workers=2)
+        calibrate("cube", 200, exponents=np.linspace(0.5, 10.0, 20), repeats=20, rng=0, workers=2)
         print(f"\ncalibration, cubes N = 200, 20 ε × 20 repeats, 2 workers: {time.perf_counter() - t:.1f} s")
     print(f"load average: {os.getloadavg()}")
 

@@ -31,7 +31,7 @@ def main() -> None:
             for seed in range(args.seeds):
                 for rules in (True, False):
                     kw = {} if rules else {"clearance": -1.0, "min_notch": -1.0}
-                    agg = D.aggregate(name, args.primaries, eps, np.random.default_rng(seed), **kw)
+                    agg = D.aggregate(name, args.primaries, exponent=eps, rng=np.random.default_rng(seed), **kw)
                     m = agg.measures()
                     rows[rules].append((m["D_A"], m["porosity"]))
                     if rules:

@@ -58,8 +58,8 @@ def test_csv_round_trip(tmp_path):
 
 
 def test_calibration_is_independent_of_worker_count():
-    one = C.calibrate("cube", 30, [0.5, 8.0], repeats=3, seed=5, workers=1)
-    two = C.calibrate("cube", 30, [0.5, 8.0], repeats=3, seed=5, workers=2)
+    one = C.calibrate("cube", 30, exponents=[0.5, 8.0], repeats=3, rng=5, workers=1)
+    two = C.calibrate("cube", 30, exponents=[0.5, 8.0], repeats=3, rng=5, workers=2)
     for name in ("D_A_mean", "D_A_std", "porosity_mean", "porosity_std", "R_g_mean"):
         assert np.array_equal(getattr(one, name), getattr(two, name))
     assert np.all(one.D_A_std > 0)  # the seeds differ
@@ -67,11 +67,11 @@ def test_calibration_is_independent_of_worker_count():
 
 def test_calibrate_validates():
     with pytest.raises(ParameterError, match="exponent"):
-        C.calibrate("cube", 20, [0.0, 1.0], repeats=2)
+        C.calibrate("cube", 20, exponents=[0.0, 1.0], repeats=2)
     with pytest.raises(ParameterError, match="primitive"):
-        C.calibrate("sphere", 20, [1.0], repeats=2)
+        C.calibrate("sphere", 20, exponents=[1.0], repeats=2)
     with pytest.raises(ParameterError, match="repeats"):
-        C.calibrate("cube", 20, [1.0], repeats=0)
+        C.calibrate("cube", 20, exponents=[1.0], repeats=0)
 
 
 def test_cache_location_and_reuse(tmp_path, monkeypatch):
@@ -151,7 +151,7 @@ def test_generate_with_target_fractal_dimension_records_both(runner, tmp_path, m
 def test_old_calibration_files_without_scaling_columns_still_read(tmp_path):
     from grainforge.methods.dpa.calibration import COLUMNS, Calibration, calibrate
 
-    c = calibrate("cube", 40, [0.5, 20.0], repeats=2, seed=3)
+    c = calibrate("cube", 40, exponents=[0.5, 20.0], repeats=2, rng=3)
     assert np.all(np.isfinite(c.D_A_scaling_mean)) and np.all(c.D_A_scaling_std >= 0)
     path = c.write_csv(tmp_path / "new.csv")
     again = Calibration.read_csv(path)

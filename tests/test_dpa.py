@@ -113,7 +113,7 @@ def test_parent_choice_redraws_when_full_including_the_direct_fallback():
 @pytest.mark.parametrize("eps", [0.3, 4.0])
 def test_union_volume_is_n_primaries_and_one_body(name, eps):
     n = 60
-    agg = D.aggregate(name, n, eps, np.random.default_rng(5))
+    agg = D.aggregate(name, n, exponent=eps, rng=np.random.default_rng(5))
     if agg.cells is not None:
         v, f, cavity = D.lattice_surface(agg.cells)
         assert signed_volume(v, f) - cavity == n  # exact on the lattice
@@ -136,7 +136,7 @@ def test_union_volume_is_n_primaries_and_one_body(name, eps):
 def test_no_intrusion_in_larger_aggregates(name):
     # the truncated octahedron's faces lie at two distances from its centre: the neighbour search
     # must reach the children of the farther (square) faces too
-    agg = D.aggregate(name, 250, 1.0, np.random.default_rng(1))
+    agg = D.aggregate(name, 250, exponent=1.0, rng=np.random.default_rng(1))
     s = agg.solid
     for i in range(1, agg.primaries):
         d2 = ((agg.centres[:i] - agg.centres[i]) ** 2).sum(axis=1)
@@ -224,7 +224,7 @@ def test_compact_block_of_cubes_has_d_a_three():
 
 def test_d_a_falls_as_exponent_rises_over_seeds():
     def stats(eps):
-        ms = [D.aggregate("cube", 150, eps, np.random.default_rng(s)).measures() for s in range(10)]
+        ms = [D.aggregate("cube", 150, exponent=eps, rng=np.random.default_rng(s)).measures() for s in range(10)]
         return np.array([m["D_A"] for m in ms]), np.array([m["porosity"] for m in ms])
 
     d_low, p_low = stats(0.3)
@@ -240,11 +240,11 @@ def test_compact_exponent_gives_d_a_near_three_for_cubes():
     # The scaling form of Eq. 5 (log V against log A over the aggregate's own growth) is the
     # mass-size dimension: ≈ 3 for compact cube aggregates (2.99 ± 0.05 s.e. measured here; at
     # larger N it overshoots slightly, ≈ 3.15, as early elongated clusters round off).
-    ms = [D.aggregate("cube", 200, 0.3, np.random.default_rng(s)).measures() for s in range(10)]
+    ms = [D.aggregate("cube", 200, exponent=0.3, rng=np.random.default_rng(s)).measures() for s in range(10)]
     scaling = np.array([m["D_A_scaling"] for m in ms])
     assert abs(scaling.mean() - 3.0) < 0.2
     # and it separates compact from branching growth, like Eq. 5
-    branching = [D.aggregate("cube", 200, 100.0, np.random.default_rng(s)).measures()["D_A_scaling"]
+    branching = [D.aggregate("cube", 200, exponent=100.0, rng=np.random.default_rng(s)).measures()["D_A_scaling"]
                  for s in range(10)]
     assert scaling.mean() - np.mean(branching) > 0.5
 
@@ -253,7 +253,7 @@ def test_eq5_d_a_rises_towards_three_as_compact_aggregates_grow():
     # Eq. 5 itself is the secant from one primary (V = A = 1): for a compact aggregate V ≈ c·A³
     # with c < 1, so D_A = 3 + log c / log A climbs towards 3 only as A grows.
     def mean_d_a(n):
-        return np.mean([D.aggregate("cube", n, 0.3, np.random.default_rng(s)).measures()["D_A"] for s in range(6)])
+        return np.mean([D.aggregate("cube", n, exponent=0.3, rng=np.random.default_rng(s)).measures()["D_A"] for s in range(6)])
 
     d100, d400, d1600 = mean_d_a(100), mean_d_a(400), mean_d_a(1600)
     assert d100 < d400 < d1600 < 3.0
@@ -271,8 +271,8 @@ def test_scaling_dimension_of_a_rod_is_near_one():
 
 
 def test_octahedra_are_more_porous_than_cubes_at_the_same_exponent():
-    cube = [D.aggregate("cube", 80, 0.5, np.random.default_rng(s)).measures()["porosity"] for s in range(4)]
-    octa = [D.aggregate("octahedron", 80, 0.5, np.random.default_rng(s)).measures()["porosity"] for s in range(4)]
+    cube = [D.aggregate("cube", 80, exponent=0.5, rng=np.random.default_rng(s)).measures()["porosity"] for s in range(4)]
+    octa = [D.aggregate("octahedron", 80, exponent=0.5, rng=np.random.default_rng(s)).measures()["porosity"] for s in range(4)]
     assert np.mean(octa) > np.mean(cube)
 
 
@@ -282,7 +282,7 @@ def test_mass_radius_fit_over_an_ensemble():
         for n in (50, 100, 200, 400):
             for s in range(2):
                 n_values.append(n)
-                rg.append(D.aggregate("cube", n, eps, np.random.default_rng(s)).measures()["R_g"])
+                rg.append(D.aggregate("cube", n, exponent=eps, rng=np.random.default_rng(s)).measures()["R_g"])
         return mass_radius_fit(n_values, rg)
 
     d_compact, k_compact = fit(0.3)

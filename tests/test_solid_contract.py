@@ -116,7 +116,7 @@ def test_dpa_cube_pinch_separation_volume_effect():
     from grainforge.methods.dpa import aggregation as D
 
     for seed in range(3):
-        agg = D.aggregate("cube", 300, 1.0, np.random.default_rng(seed))
+        agg = D.aggregate("cube", 300, exponent=1.0, rng=np.random.default_rng(seed))
         v, f, cav = D.lattice_surface(agg.cells)
         pinch_points = int((np.unique(v, axis=0, return_counts=True)[1] > 1).sum())
         w = D.separate_pinches(v, f)

@@ -50,7 +50,7 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
     _estimate(primitive, primaries, len(grid) * repeats, workers)
     try:
         cal = run_calibration(
-            primitive, primaries, grid, repeats, seed=seed, workers=workers,
+            primitive, primaries, exponents=grid, repeats=repeats, rng=seed, workers=workers,
             progress=progress_bar(total=len(grid) * repeats, desc=f"calibrating dpa {primitive} N={primaries}"),
         )
     except ParameterError as exc:

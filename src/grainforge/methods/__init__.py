@@ -44,6 +44,16 @@ METHODS: dict[str, str] = {
 def get(name: str) -> ModuleType:
     """The module implementing method ``name``.
 
+    Parameters
+    ----------
+    name : str
+        A key of :data:`METHODS` (``"fso"``, ``"cri"``, ``"dpa"``, ``"angular"``, ``"rf"``).
+
+    Returns
+    -------
+    module
+        The method's module (imported on first use): ``NAME``, ``Params``, ``build``.
+
     Raises
     ------
     ValueError
@@ -65,10 +75,35 @@ def generate(name: str, params: Any, rng: RNGLike = None) -> Grain:
     volume, no self-intersection) and translated so that its volume centroid
     is at the origin.
 
+    Parameters
+    ----------
+    name : str
+        A key of :data:`METHODS`.
+    params : object
+        An instance of the method's ``Params``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Normalised by :func:`grainforge.rng.resolve_rng`; the seed it returns (an int, the entropy drawn
+        for None) is recorded as ``Grain.seed``, None for a Generator.
+
+    Returns
+    -------
+    Grain
+        Dimensionless (the method's R0 or equivalent radius about 1), centred on its volume centroid.
+
     Raises
     ------
     ValueError
-        Naming the parameter when the result would not be a valid solid.
+        Naming the parameter when the result would not be a valid solid; an unknown ``name``;
+        an ``rng`` of another kind.
+    TypeError
+        If ``params`` is not the method's ``Params``.
+
+    Examples
+    --------
+    >>> from grainforge.methods import generate, get
+    >>> g = generate("fso", get("fso").Params(subdivisions=2), rng=3)
+    >>> g.method, g.seed, len(g.faces)
+    ('fso', 3, 320)
     """
     module = get(name)
     if not isinstance(params, module.Params):

@@ -49,6 +49,7 @@ import numpy as np
 
 from ..geometry.geodesic import icosphere
 from ..params import ParameterError, param, validate
+from ..rng import RNGLike, as_generator
 
 __all__ = ["Params", "Core", "build", "core", "core_edges", "radius", "angular", "NAME"]
 
@@ -179,11 +180,24 @@ def _draw_normals(k: int, rng: np.random.Generator) -> np.ndarray:
     raise ParameterError("facets", f"could not place {k} facet normals covering every direction")  # pragma: no cover
 
 
-def core(p: Params, rng: np.random.Generator) -> Core:
+def core(p: Params, rng: RNGLike) -> Core:
     """Draw the convex core (facet planes) and its rounding geometry.
 
     The draws (the normals) come first from ``rng``; :func:`build` then draws
     the dents and the roughness field from the same generator.
+
+    Parameters
+    ----------
+    p : Params
+        ``facets``, ``aspect`` and ``rounding`` are used.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  Three normal draws
+        per facet normal.
+
+    Returns
+    -------
+    Core
+        Facet planes tangent to the ``aspect`` ellipsoid, the rounding radius ρ and the shrunk polytope.
 
     Examples
     --------
@@ -191,7 +205,7 @@ def core(p: Params, rng: np.random.Generator) -> Core:
     >>> c.normals.shape, round(c.rho, 3) > 0
     ((12, 3), True)
     """
-    n = _draw_normals(p.facets, rng)
+    n = _draw_normals(p.facets, as_generator(rng))
     ax = _semi_axes(p.aspect)
     h = np.linalg.norm(n * ax, axis=1)
     rho = float(p.rounding * ax.min())
@@ -224,6 +238,11 @@ def _polytope(normals: np.ndarray, offsets: np.ndarray):
 
 def core_edges(c: Core) -> list[tuple[np.ndarray, np.ndarray, float, int, int]]:
     """The edges of the shrunk core (planes at h_i − ρ; the core itself when ρ = 0).
+
+    Parameters
+    ----------
+    c : Core
+        From :func:`core`.
 
     Returns
     -------
@@ -384,8 +403,32 @@ def _roughness_factor(unit: np.ndarray, p: Params, rng: np.random.Generator) -> 
     return 1.0 + fso.overlay(unit, fp, rng)
 
 
-def build(p: Params, rng: np.random.Generator):
-    """Vertices, faces and info of one angular grain (R0 = 1, not yet centred)."""
+def build(p: Params, rng: RNGLike):
+    """Vertices, faces and info of one angular grain (R0 = 1, not yet centred).
+
+    Parameters
+    ----------
+    p : Params
+        The grain's parameters (validated).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  The core's
+        normals, then the dents, then the roughness field.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        In model units, about the construction origin (not yet centred on the centroid).
+    faces : (F, 3) int64
+        Outward, counter-clockwise triangles.
+    info : dict
+        The generation's derived quantities, the keys of :data:`INFO_COLUMNS`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter to lower when the grain would not be a valid star-shaped solid.
+    """
+    rng = as_generator(rng)
     unit, faces = icosphere(p.subdivisions)
     inertia = p.aspect_by == "inertia"
     c = core(replace(p, aspect=(1.0, 1.0, 1.0)) if inertia else p, rng)
@@ -465,7 +508,7 @@ def angular(
     surface: str = "seamless",
     subdivisions: int = 5,
     aspect_by: str = "facets",
-    rng=None,
+    rng: RNGLike = None,
 ):
     """Generate one angular grain: a rounded random polyhedron with dents and roughness.
 
@@ -495,8 +538,9 @@ def angular(
         ``inertia``: the grain is built isotropic, then stretched so that its
         inertia ellipsoid has exactly the L:I:S ratios (measured flatness and
         elongation then follow ``aspect``).
-    rng : None, int or numpy.random.Generator
-        Seed or generator.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Seed or generator (:mod:`grainforge.rng`).  An int, a plain SeedSequence's entropy, or the seed
+        drawn for None is recorded as ``Grain.seed``; a Generator leaves it None.
 
     Returns
     -------

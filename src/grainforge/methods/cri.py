@@ -27,7 +27,6 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cache, lru_cache
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
@@ -40,6 +39,7 @@ from ..outline.contours import (
 )
 from ..outline.spectra import extend_spectrum, read_spectra
 from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
+from ..rng import RNGLike, as_generator
 
 __all__ = ["Params", "build", "cri", "construct", "load_image_contour", "Construction", "SOURCES", "PRESETS", "mesh_modes"]
 
@@ -287,18 +287,55 @@ class Construction:
     twist: np.ndarray | None = None
 
     def section(self, plane: str) -> Contour:
-        """The principal section ``"xy"``, ``"xz"`` or ``"yz"`` as a :class:`Contour` (scale kept)."""
+        """The principal section ``"xy"``, ``"xz"`` or ``"yz"`` as a :class:`Contour` (scale kept).
+
+        Parameters
+        ----------
+        plane : {"xy", "xz", "yz"}
+            Which principal section.
+
+        Returns
+        -------
+        Contour
+            The corrected section (before ``axis_scale``), ``scale`` its mean radius in grain units.
+        """
         return Contour(self.sections[PLANES.index(plane)])
 
     def points(self, unit: np.ndarray, geometry: _Geometry | None = None) -> np.ndarray:
-        """Surface points (V, 3) along unit vectors: r(θ, ψ)·unit, scaled by ``axis_scale``."""
+        """Surface points (V, 3) along unit vectors: r(θ, ψ)·unit, scaled by ``axis_scale``."
+
+        Parameters
+        ----------
+        unit : (V, 3) ndarray of float
+            Unit vectors.
+        geometry : optional
+            The precomputed angles of ``unit`` (internal; computed when omitted).
+
+        Returns
+        -------
+        (V, 3) float64
+            Points of the grain's surface, in grain units.
+        """
         pts = unit * self.radius(unit, geometry)[:, None]
         if self.axis_scale != (1.0, 1.0, 1.0):
             pts = pts * np.asarray(self.axis_scale)
         return pts
 
     def radius(self, unit: np.ndarray, geometry: _Geometry | None = None) -> np.ndarray:
-        """r(θ, ψ) along unit vectors ``unit`` (V, 3)."""
+        """r(θ, ψ) along unit vectors ``unit`` (V, 3)."
+
+        Parameters
+        ----------
+        unit : (V, 3) ndarray of float
+            Unit vectors.
+        geometry : optional
+            The precomputed angles of ``unit`` (internal; computed when omitted).
+
+        Returns
+        -------
+        (V,) float64
+            The radius of the surface along each vector, before ``axis_scale``.
+        """
         g = geometry if geometry is not None else _geometry(np.asarray(unit, dtype=np.float64))
         c1, c2, c3 = self.sections
         r1 = _lookup(c1, g.i1, g.w1)
@@ -364,6 +401,21 @@ def mesh_modes(subdivisions: int) -> int:
     interpolation between vertices (and aliasing) would misrepresent the
     contour.  Contours are band-limited to this, so a coarse grain is the
     low-pass version of the fine grain with the same seed.
+
+    Parameters
+    ----------
+    subdivisions : int
+        Icosphere level s.
+
+    Returns
+    -------
+    int
+        2^s.
+
+    Examples
+    --------
+    >>> mesh_modes(5)
+    32
     """
     return 2 ** int(subdivisions)
 
@@ -478,6 +530,16 @@ def _image_contour(path: str, mtime_ns: int, size: int) -> Contour:
 
 def load_image_contour(path: str) -> Contour:
     """The outline of the grain in image ``path`` (cached by path, modification time and size).
+
+    Parameters
+    ----------
+    path : str
+        A grain image (PNG, TIFF, JPEG ...).
+
+    Returns
+    -------
+    Contour
+        The largest grain's outline (:meth:`grainforge.outline.contours.Contour.from_image`), pixels.
 
     Raises
     ------
@@ -647,8 +709,20 @@ def _spectral_consistency(inputs, p: Params):
     return out, dims
 
 
-def construct(p: Params, rng: Any = None) -> Construction:
+def construct(p: Params, rng: RNGLike = None) -> Construction:
     """Contours, alignment, stretching and correction of one CRI grain.
+
+    Parameters
+    ----------
+    p : Params
+        The grain's parameters.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  The contours'
+        draws first (xy, xz, yz), then the ridge twist's.
+
+    Returns
+    -------
+    Construction
 
     Examples
     --------
@@ -656,7 +730,7 @@ def construct(p: Params, rng: Any = None) -> Construction:
     >>> [round(float(c.sections[i][0]), 9) == round(float(c.sections[j][0]), 9) for i, j in [(0, 1)]]
     [True]
     """
-    rng = np.random.default_rng(rng)
+    rng = as_generator(rng)
     inputs = input_contours(p, rng)
     if p.consistency == "spectral":
         prepared, dims = _spectral_consistency(inputs, p)
@@ -706,8 +780,32 @@ def _field_roughness(con: Construction, unit: np.ndarray, geom: _Geometry, subdi
     return form.radius(unit, geom) * (1.0 + f)
 
 
-def build(p: Params, rng: np.random.Generator):
-    """Vertices, faces and info of one CRI grain (not yet centred)."""
+def build(p: Params, rng: RNGLike):
+    """Vertices, faces and info of one CRI grain (not yet centred).
+
+    Parameters
+    ----------
+    p : Params
+        The grain's parameters (validated).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  As
+        :func:`construct`, then the roughness field's.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        In model units, about the construction origin (not yet centred on the centroid).
+    faces : (F, 3) int64
+        Outward, counter-clockwise triangles.
+    info : dict
+        The generation's derived quantities, the keys of :data:`INFO_COLUMNS`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter to lower when the grain would not be a valid star-shaped solid.
+    """
+    rng = as_generator(rng)
     con = construct(p, rng)
     unit, faces, geom = _sphere(p.subdivisions)
     if p.roughness == "field":
@@ -758,7 +856,7 @@ def cri(
     consistency: str = "spectral",
     subdivisions: int = 5,
     roughness: str = "swept",
-    rng=None,
+    rng: RNGLike = None,
 ):
     """Generate one grain by Contour Rotation Interpolation (paper §2.2).
 
@@ -801,14 +899,16 @@ def cri(
         each contour's mode 2 and mean radius and keeps every other mode;
         ``stretch`` stretches each contour linearly (the earlier
         reconstruction, which lowers D8 by about 15 %).
+    subdivisions : int
+        Icosphere level 0–8 (default 5: 10,242 vertices).
     roughness : {"swept", "field"}
         ``swept`` (default): the method's roughness, swept from the contours.
         ``field``: the contours' form (modes 0–2) with an isotropic
         random-field roughness of the contours' mean spectrum: no ridges; the
         principal sections carry the descriptors on average, not exactly.
-    subdivisions : int
-        Icosphere level 0–8 (default 5: 10,242 vertices).
-    rng : None, int or numpy.random.Generator
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Seed or generator (:mod:`grainforge.rng`).  An int, a plain SeedSequence's entropy, or the seed
+        drawn for None is recorded as ``Grain.seed``; a Generator leaves it None.
 
     Returns
     -------

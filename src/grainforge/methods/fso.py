@@ -38,6 +38,7 @@ import numpy as np
 from ..geometry.geodesic import icosphere, spherical
 from ..geometry.rotations import random_rotation
 from ..params import ParameterError, param, validate
+from ..rng import RNGLike, as_generator
 
 __all__ = ["Params", "build", "fso", "overlay", "wm_sum", "wm_sum_reference", "draw_field", "Field",
            "SURFACES", "ellipsoid_radius", "spread_axes"]
@@ -150,6 +151,16 @@ def spread_axes(m: int) -> np.ndarray:
     An axis and its opposite give the same ridge family (ψ is uniform), so a
     hemisphere of axes covers every orientation once.
 
+    Parameters
+    ----------
+    m : int
+        Number of axes (the ridge families M).
+
+    Returns
+    -------
+    (m, 3) float64
+        Unit vectors, z from 1/(2m) to 1 − 1/(2m).
+
     Examples
     --------
     >>> d = spread_axes(40)
@@ -163,7 +174,7 @@ def spread_axes(m: int) -> np.ndarray:
     return np.column_stack([r * np.cos(a), r * np.sin(a), z])
 
 
-def draw_field(p: Params, rng: np.random.Generator) -> Field:
+def draw_field(p: Params, rng: RNGLike) -> Field:
     """Draw the random field of one grain from ``rng``.
 
     Paper form: ψ and ζ ~ U(0, 2π) (in that order), α_m = π m / M.
@@ -173,7 +184,22 @@ def draw_field(p: Params, rng: np.random.Generator) -> Field:
     Seamless form: ψ ~ U(0, 2π), then one uniform random rotation applied to
     the evenly spread axes :func:`spread_axes` (M) — the 3D counterpart of
     α_m = πm/M, with no preferred orientation of the set.
+
+    Parameters
+    ----------
+    p : Params
+        D, L/R0, M, n_max, γ and the surface form are used.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  Paper form:
+        M·n_max uniform draws for ψ, then as many for ζ; seamless form: the ψ draws,
+        then four normal draws for the rotation.
+
+    Returns
+    -------
+    Field
+        ψ (and ζ, α_m or the ridge axes), the weights w_n and wavenumbers k_n.
     """
+    rng = as_generator(rng)
     M, N = p.ridges, p.frequencies
     n = np.arange(1, N + 1, dtype=np.float64)
     weights = (TWO_PI * p.gamma ** (n - 1) / p.length_ratio) ** (p.fractal_dimension - 3.0)
@@ -419,6 +445,18 @@ def wm_sum(unit: np.ndarray, f: Field, chunk: int | None = None) -> np.ndarray:
 def ellipsoid_radius(unit: np.ndarray, aspect) -> np.ndarray:
     """Radius in direction ``unit`` of the ellipsoid with semi-axes ∝ ``aspect`` (geometric mean 1).
 
+    Parameters
+    ----------
+    unit : (V, 3) array_like of float
+        Unit vectors.
+    aspect : (3,) sequence of float
+        Semi-axes along x, y, z, up to a common factor (> 0).
+
+    Returns
+    -------
+    (V,) float64
+        The radius, semi-axes scaled to a geometric mean of 1.
+
     Examples
     --------
     >>> u = np.eye(3)
@@ -447,7 +485,7 @@ def _scale(p: Params, f: Field, unit: np.ndarray, S: np.ndarray) -> float:
     return p.amplitude / rms if rms > 0 else 0.0
 
 
-def overlay(unit: np.ndarray, params: Params | None = None, rng=None) -> np.ndarray:
+def overlay(unit: np.ndarray, params: Params | None = None, rng: RNGLike = None) -> np.ndarray:
     """The FSO overlay K·S(u): the relative radius perturbation at unit vectors ``unit``.
 
     A pure function of its arguments: the field (ψ, ζ or the ridge axes) is
@@ -468,13 +506,20 @@ def overlay(unit: np.ndarray, params: Params | None = None, rng=None) -> np.ndar
         Unit vectors (any points on the unit sphere, in any order).
     params : Params, optional
         D, L/R0, amplitude or k, M, n_max, γ, surface (default ``Params()``).
-    rng : None, int or numpy.random.Generator
-        Normalised with ``np.random.default_rng``; a Generator is advanced.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced.
 
     Returns
     -------
     (N,) float64
         (R − R_precursor)/R_precursor at each unit vector.
+
+    Raises
+    ------
+    TypeError
+        If ``params`` is not :class:`Params`.
+    ValueError
+        If ``unit`` is not (N, 3).
 
     Examples
     --------
@@ -490,15 +535,38 @@ def overlay(unit: np.ndarray, params: Params | None = None, rng=None) -> np.ndar
     unit = np.asarray(unit, dtype=np.float64)
     if unit.ndim != 2 or unit.shape[1] != 3:
         raise ValueError(f"unit must have shape (N, 3), got {unit.shape}")
-    f = draw_field(p, np.random.default_rng(rng))
+    f = draw_field(p, rng)
     S = wm_sum(unit, f)
     return _scale(p, f, unit, S) * S
 
 
-def build(p: Params, rng: np.random.Generator):
-    """Vertices, faces and info of one FSO grain (R0 = 1, not yet centred)."""
+def build(p: Params, rng: RNGLike):
+    """Vertices, faces and info of one FSO grain (R0 = 1, not yet centred).
+
+    Parameters
+    ----------
+    p : Params
+        The grain's parameters (validated).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  The draws of
+        :func:`draw_field`, in that order.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        In model units, about the construction origin (not yet centred on the centroid).
+    faces : (F, 3) int64
+        Outward, counter-clockwise triangles.
+    info : dict
+        The generation's derived quantities, the keys of :data:`INFO_COLUMNS`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter to lower when the grain would not be a valid star-shaped solid.
+    """
     unit, faces = icosphere(p.subdivisions)
-    f = draw_field(p, rng)
+    f = draw_field(p, as_generator(rng))
     S = wm_sum(unit, f)
     K = _scale(p, f, unit, S)
     R = 1.0 + K * S
@@ -693,7 +761,7 @@ def fso(
     subdivisions: int = 5,
     surface: str = "paper",
     aspect=(1.0, 1.0, 1.0),
-    rng=None,
+    rng: RNGLike = None,
 ):
     """Generate one grain by Fractal Surface Overlay (paper §2.1, Eqs. 2–3).
 
@@ -727,9 +795,9 @@ def fso(
         ellipsoid both have I/L and S/I of A:B:C (:func:`aspect_correction`;
         the residual is ``info["aspect_residual"]``).  Longest/shortest at
         most 20.
-    rng : None, int or numpy.random.Generator
-        Seed or generator.  An int (or None, which draws one) is recorded
-        as ``Grain.seed``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Seed or generator (:mod:`grainforge.rng`).  An int, a plain SeedSequence's entropy, or the seed
+        drawn for None is recorded as ``Grain.seed``; a Generator leaves it None.
 
     Returns
     -------

@@ -48,7 +48,6 @@ from __future__ import annotations
 from collections.abc import Sequence
 from dataclasses import dataclass
 from functools import cache, lru_cache
-from typing import Any
 
 import numpy as np
 
@@ -57,6 +56,7 @@ from ..geometry.harmonics import degree_order, icosphere_synthesis, legendre_equ
 from ..outline.contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
 from ..outline.spectra import extend_spectrum, read_spectra
 from ..params import ParameterError, check_aspect, check_lengths, param, resolve_descriptors, validate
+from ..rng import RNGLike, as_generator
 
 __all__ = ["Params", "build", "rf", "angular_spectrum", "section_spectrum", "target_spectrum", "coefficients", "field",
            "centred_section_spectrum", "centring_shift", "mean_modulus_factor", "AMPLITUDES"]
@@ -169,6 +169,18 @@ def mean_modulus_factor(C: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
     [0, 30/σ] plus the tail σ/30 (relative error below 10⁻¹⁰ against 4,000
     nodes on [0, 200/σ]).  Orders without power get √π/2.
 
+    Parameters
+    ----------
+    C : (L + 1,) array_like of float
+        Angular power spectrum C_0 … C_L of the field.
+    amplitudes : {"fixed", "gaussian"}, default "fixed"
+        How the a_lm are drawn (:func:`coefficients`).
+
+    Returns
+    -------
+    (L + 1,) float64
+        κ_0 … κ_L.
+
     Examples
     --------
     >>> C = np.zeros(9); C[2] = 1.0  # one degree: c_2 is the 2D projection of a uniform 5-vector
@@ -206,6 +218,18 @@ def section_spectrum(C: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
 
     E[D_n] = 2κ_n (Σ_{l≥n} C_l P̄_ln(0)²)^½ (to first order in f: c_0 ≈ r0),
     κ_n from :func:`mean_modulus_factor` (√π/2 for Gaussian amplitudes).
+
+    Parameters
+    ----------
+    C : (L + 1,) array_like of float
+        Angular power spectrum C_0 … C_L.
+    amplitudes : {"fixed", "gaussian"}, default "fixed"
+        How the a_lm are drawn.
+
+    Returns
+    -------
+    (L + 1,) float64
+        E[D_0] … E[D_L] (relative to r0 = 1).
 
     Examples
     --------
@@ -263,6 +287,16 @@ def angular_spectrum(D: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:
         Target mean descriptors D_0…D_L (D_0, D_1 ignored).
     amplitudes : {"fixed", "gaussian"}
 
+    Returns
+    -------
+    (L + 1,) float64
+        C_0 … C_L (a copy of the cached solution).
+
+    Raises
+    ------
+    ValueError
+        If ``amplitudes`` is not one of :data:`AMPLITUDES`.
+
     Examples
     --------
     >>> C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=32))
@@ -291,6 +325,21 @@ def centring_shift(C: np.ndarray) -> float:
 
     To first order δ = 2·c_1 (the section's first circular harmonic), and
     E|c_1|² = Σ_l C_l P̄_l1(0)² as for every order (odd l ≥ 3: the field has no l = 1).
+
+    Parameters
+    ----------
+    C : (L + 1,) array_like of float
+        Angular power spectrum C_0 … C_L.
+
+    Returns
+    -------
+    float
+        E|δ|², in units of r0².
+
+    Examples
+    --------
+    >>> centring_shift(np.array([0.0, 0.0, 1e-3])) == 0.0  # even degrees move no centroid
+    True
     """
     C = np.asarray(C, dtype=np.float64)
     return float(4.0 * (_transfer(len(C) - 1)[1] @ C))
@@ -319,6 +368,18 @@ def centred_section_spectrum(C: np.ndarray, amplitudes: str = "fixed") -> np.nda
     pre-compensate the field was tried and rejected: the tridiagonal
     inverse oscillates from order to order (±15 % by n = 16).
 
+    Parameters
+    ----------
+    C : (L + 1,) array_like of float
+        Angular power spectrum C_0 … C_L.
+    amplitudes : {"fixed", "gaussian"}, default "fixed"
+        How the a_lm are drawn.
+
+    Returns
+    -------
+    (L + 1,) float64
+        E[D_n] about the centroid; orders 0 and 1 are 0.
+
     Examples
     --------
     >>> C = angular_spectrum(descriptor_spectrum(0.15, 0.1, 0.03, modes=32))
@@ -333,10 +394,25 @@ def centred_section_spectrum(C: np.ndarray, amplitudes: str = "fixed") -> np.nda
     return 2.0 * mean_modulus_factor(C, amplitudes) * np.sqrt(np.maximum(out, 0.0))
 
 
-def target_spectrum(p: Params, rng: np.random.Generator) -> tuple[np.ndarray, int | None]:
+def target_spectrum(p: Params, rng: RNGLike) -> tuple[np.ndarray, int | None]:
     """Target mean section descriptors D_0…D_L of one grain, and the measured row used (if any).
 
     With ``spectrum`` the row is drawn from ``rng`` first (one integer draw).
+
+    Parameters
+    ----------
+    p : Params
+        ``spectrum`` (a measured table) or ``descriptors``, with ``decay`` and ``degree``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  One integer draw
+        with ``spectrum``, none otherwise.
+
+    Returns
+    -------
+    D : (degree + 1,) float64
+        Target mean descriptors.
+    row : int or None
+        The measured table's row drawn, or None.
     """
     if p.spectrum is not None:
         table = read_spectra(p.spectrum)
@@ -348,13 +424,28 @@ def target_spectrum(p: Params, rng: np.random.Generator) -> tuple[np.ndarray, in
         raise ParameterError("descriptors", exc.reason) from None
 
 
-def coefficients(C: np.ndarray, rng: np.random.Generator, amplitudes: str = "fixed") -> np.ndarray:
+def coefficients(C: np.ndarray, rng: RNGLike, amplitudes: str = "fixed") -> np.ndarray:
     """The a_lm in the order (l, m), l = 2…L, m = −l…l, from one standard-normal draw per coefficient.
 
     Gaussian: a_lm = √C_l · g_lm.  Fixed: the draws g_l of each degree are
     scaled to a vector of length √((2l + 1) C_l), so Σ_m a_lm² = (2l + 1) C_l
     exactly and the direction is uniform (the same draws, the same order:
     the two differ only by one factor per degree).
+
+    Parameters
+    ----------
+    C : (L + 1,) array_like of float
+        Angular power spectrum C_0 … C_L.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  One
+        standard-normal draw per coefficient, in column order.
+    amplitudes : {"fixed", "gaussian"}, default "fixed"
+        Fixed length per degree, or Gaussian.
+
+    Returns
+    -------
+    ((L+1)² − 4,) float64
+        a_lm in the column order of :func:`grainforge.geometry.harmonics.real_harmonics` (lmin = 2).
 
     Examples
     --------
@@ -367,7 +458,7 @@ def coefficients(C: np.ndarray, rng: np.random.Generator, amplitudes: str = "fix
     _check_amplitudes(amplitudes)
     C = np.asarray(C, dtype=np.float64)
     l, _ = degree_order(len(C) - 1, 2)
-    g = rng.standard_normal(len(l))
+    g = as_generator(rng).standard_normal(len(l))
     if amplitudes == "gaussian":
         return g * np.sqrt(C[l])
     norm2 = np.bincount(l, weights=g * g, minlength=len(C))
@@ -376,7 +467,22 @@ def coefficients(C: np.ndarray, rng: np.random.Generator, amplitudes: str = "fix
 
 
 def field(a: np.ndarray, degree: int, subdivisions: int) -> np.ndarray:
-    """f = Σ a_lm Y_lm (l = 2…degree) at the vertices of ``icosphere(subdivisions)``."""
+    """f = Σ a_lm Y_lm (l = 2…degree) at the vertices of ``icosphere(subdivisions)``."
+
+    Parameters
+    ----------
+    a : ((degree+1)² − 4,) array_like of float
+        Coefficients a_lm, l = 2 … degree (:func:`coefficients`).
+    degree : int
+        Highest degree L.
+    subdivisions : int
+        Icosphere level.
+
+    Returns
+    -------
+    (V,) float64
+        f at the icosphere's vertices (relative radius perturbation).
+    """
     return icosphere_synthesis(subdivisions, degree, 2)(a)
 
 
@@ -394,8 +500,32 @@ def _solve(key: bytes, amplitudes: str) -> tuple[np.ndarray, float]:
     return C, _misfit(C, np.frombuffer(key, dtype=np.float64), amplitudes)
 
 
-def build(p: Params, rng: np.random.Generator):
-    """Vertices, faces and info of one rf grain (r0 = 1, not yet centred)."""
+def build(p: Params, rng: RNGLike):
+    """Vertices, faces and info of one rf grain (r0 = 1, not yet centred).
+
+    Parameters
+    ----------
+    p : Params
+        The grain's parameters (validated).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  The measured row
+        (with ``spectrum``), then one normal draw per coefficient.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        In model units, about the construction origin (not yet centred on the centroid).
+    faces : (F, 3) int64
+        Outward, counter-clockwise triangles.
+    info : dict
+        The generation's derived quantities, the keys of :data:`INFO_COLUMNS`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter to lower when the grain would not be a valid star-shaped solid.
+    """
+    rng = as_generator(rng)
     D, row = target_spectrum(p, rng)
     C, misfit = _solve(np.ascontiguousarray(D, dtype=np.float64).tobytes(), p.amplitudes)
     unit, faces = icosphere(p.subdivisions)
@@ -450,7 +580,7 @@ def rf(
     aspect: Sequence[float] | None = None,
     subdivisions: int = 5,
     amplitudes: str = "fixed",
-    rng: Any = None,
+    rng: RNGLike = None,
 ):
     """Generate one grain whose radius is an isotropic Gaussian random field (Mollon & Zhao 2014 style).
 
@@ -476,7 +606,9 @@ def rf(
         "fixed" (default): each degree of the grain carries exactly its
         expected power, in a random orientation; "gaussian": independent
         Gaussian coefficients (the grain's power per degree varies too).
-    rng : None, int or numpy.random.Generator
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Seed or generator (:mod:`grainforge.rng`).  An int, a plain SeedSequence's entropy, or the seed
+        drawn for None is recorded as ``Grain.seed``; a Generator leaves it None.
 
     Returns
     -------

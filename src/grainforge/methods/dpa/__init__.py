@@ -9,6 +9,7 @@
 from __future__ import annotations
 
 from ...params import ParameterError
+from ...rng import RNGLike
 from .aggregation import (
     INFO_COLUMNS,
     NAME,
@@ -35,7 +36,7 @@ def dpa(
     primaries: int = 200,
     smooth: int = 0,
     target_fractal_dimension: float | None = None,
-    rng=None,
+    rng: RNGLike = None,
 ):
     """Generate one aggregate grain by Directed Polyhedra Aggregation (paper §2.3).
 
@@ -56,8 +57,9 @@ def dpa(
         Ask for an aggregate fractal dimension D_A instead of ε: ε is read
         from the (cached, computed on first use) calibration curve of this
         primitive and N, see :func:`grainforge.methods.dpa.calibration.exponent_for_dimension`.
-    rng : None, int or numpy.random.Generator
-        Seed or generator.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Seed or generator (:mod:`grainforge.rng`).  An int, a plain SeedSequence's entropy, or the seed
+        drawn for None is recorded as ``Grain.seed``; a Generator leaves it None.
 
     Returns
     -------

@@ -15,6 +15,7 @@ from functools import cache
 import numpy as np
 
 from ...params import ParameterError, param, validate
+from ...rng import RNGLike, as_generator
 from .._polyhedra import (
     PRIMITIVES,
     Solid,
@@ -101,7 +102,7 @@ def parent_weights(existing: int, exponent: float) -> np.ndarray:
     return hi - lo
 
 
-def parent_index(existing: int, exponent: float, rng: np.random.Generator, open_: np.ndarray) -> int:
+def parent_index(existing: int, exponent: float, rng: RNGLike, open_: np.ndarray) -> int:
     """0-based index of the parent of the next primary (Eq. 4 with re-draws).
 
     i = ⌈(n−1)·u^(1/ε)⌉ with u ~ U(0, 1]; a parent with no free face is
@@ -116,15 +117,23 @@ def parent_index(existing: int, exponent: float, rng: np.random.Generator, open_
         n − 1, the number of primaries already placed.
     exponent : float
         ε > 0.
-    rng : numpy.random.Generator
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by
+        :data:`MAX_REDRAWS` uniform draws (and one more when none of them is acceptable).
     open_ : (≥ existing,) bool
         Whether each primary still has a free face.
+
+    Returns
+    -------
+    int
+        The parent's index, in ``0 … existing − 1``.
 
     Raises
     ------
     ValueError
         If no primary has a free face (cannot happen for a finite aggregate).
     """
+    rng = as_generator(rng)
     u = 1.0 - rng.random(MAX_REDRAWS)
     i = np.clip(np.ceil(existing * u ** (1.0 / exponent)).astype(np.int64), 1, existing) - 1
     ok = np.flatnonzero(open_[i])
@@ -168,7 +177,14 @@ class Aggregate:
         return len(self.centres)
 
     def measures(self) -> dict[str, float]:
-        """D_A (Eq. 5), D_A_scaling, porosity, R_g (units of a) and box mean edge of the aggregate."""
+        """D_A (Eq. 5), D_A_scaling, porosity, R_g (units of a) and box mean edge of the aggregate.
+
+        Returns
+        -------
+        dict of str to float
+            ``D_A``, ``D_A_scaling``, ``porosity``, ``R_g`` (primary sizes) and the others of
+            :func:`grainforge.analysis.aggregate.aggregate_measures`.
+        """
         from ...analysis.aggregate import aggregate_measures
 
         pts = self.vertices.reshape(-1, 3)
@@ -399,7 +415,7 @@ def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random
     return verts, shift, tried
 
 
-def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Generator,
+def aggregate(primitive: str, primaries: int, *, exponent: float, rng: RNGLike,
               tol: float = INTRUSION_TOLERANCE, clearance: float = CONTACT_CLEARANCE,
               min_notch: float = MIN_NOTCH) -> Aggregate:
     """Grow an aggregate of ``primaries`` unit-volume primaries (no mesh).
@@ -421,12 +437,41 @@ def aggregate(primitive: str, primaries: int, exponent: float, rng: np.random.Ge
     turns them off (the growth before these contact rules were added, for
     comparison).
 
+    Parameters
+    ----------
+    primitive : str
+        One of :data:`PRIMITIVES`.
+    primaries : int
+        N ≥ 1.
+    exponent : float
+        ε of Eq. 4 (> 0): small values grow compact aggregates, large ones branched.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  The parents, faces
+        and orientations are drawn in growth order.
+    tol : float, default INTRUSION_TOLERANCE
+        Largest overlap accepted by the separating-axis test, in primary sizes.
+    clearance : float, default CONTACT_CLEARANCE
+        Smallest gap to a non-parent primary, in primary sizes (−1: no check).
+    min_notch : float, default MIN_NOTCH
+        Smallest empty angle around a shared edge, radians (−1: no check).
+
+    Returns
+    -------
+    Aggregate
+        The primaries' vertices and centres, in primary sizes.
+
+    Raises
+    ------
+    ValueError
+        For an unknown primitive.
+
     Examples
     --------
-    >>> agg = aggregate("octahedron", 50, 2.0, np.random.default_rng(0))
+    >>> agg = aggregate("octahedron", 50, exponent=2.0, rng=0)
     >>> agg.vertices.shape
     (50, 6, 3)
     """
+    rng = as_generator(rng)
     s = solid(primitive)
     if primitive == "cube":
         cells = _aggregate_cubes(primaries, exponent, rng)
@@ -563,6 +608,15 @@ def separate_pinches(vertices: np.ndarray, faces: np.ndarray, gap: float = PINCH
     the faces around each moved vertex (≤ 2e-3 primary volumes per pinched
     edge at the default, measured in ``tests/test_dpa.py``).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        The lattice surface's vertices, in primary sizes.
+    faces : (F, 3) array_like of int
+        Its triangles.
+    gap : float, default PINCH_GAP
+        Distance each copy of a pinched vertex moves, in primary sizes.
+
     Returns
     -------
     (V, 3) float64
@@ -599,6 +653,11 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
     the cavities are dropped (filled).  No boolean, no tolerance: the union
     volume is N primary volumes up to rounding.
 
+    Parameters
+    ----------
+    agg : Aggregate
+        A non-cube aggregate (cubes use :func:`lattice_surface`).
+
     Returns
     -------
     vertices : (V, 3) float64
@@ -617,7 +676,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
 
     Examples
     --------
-    >>> agg = aggregate("octahedron", 2, 1.0, np.random.default_rng(1))
+    >>> agg = aggregate("octahedron", 2, exponent=1.0, rng=1)
     >>> v, f, vol, cav = union_surface(agg)
     >>> len(v), len(f), round(vol, 12), cav
     (9, 14, 2.0, 0.0)
@@ -692,6 +751,20 @@ def smooth_surface(vertices: np.ndarray, faces: np.ndarray, level: int) -> tuple
     Loop subdivision works on the connectivity only, so a closed, oriented
     2-manifold stays one; flat regions stay flat, edges and corners are
     rounded over about one primary size and convex parts shrink slightly.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        A closed, oriented 2-manifold.
+    faces : (F, 3) array_like of int
+        Its triangles.
+    level : int
+        Loop subdivision steps (0 returns the mesh as float64/int64).
+
+    Returns
+    -------
+    vertices : (V', 3) float64
+    faces : (4^level · F, 3) int64
     """
     from trimesh.remesh import subdivide_loop
 
@@ -711,6 +784,18 @@ def physical_info(info: dict, scale: float) -> dict:
     ``grainforge analyse`` (``radius_of_gyration_mm``).  R_g/a, the ratio of
     the paper's mass–radius relation, is ``R_g_mm / primary_size_mm``.
 
+    Parameters
+    ----------
+    info : dict
+        A DPA grain's ``info`` (:func:`build`).
+    scale : float
+        Millimetres per model unit.
+
+    Returns
+    -------
+    dict
+        A copy with ``R_g`` and ``primary_size`` in mm and ``cavity_volume`` in mm³.
+
     Examples
     --------
     >>> physical_info({"R_g": 3.0, "cavity_volume": 2.0, "primary_size": 0.5, "D_A": 2.1}, 4.0)
@@ -721,7 +806,7 @@ def physical_info(info: dict, scale: float) -> dict:
             "primary_size": a}
 
 
-def build(p: Params, rng: np.random.Generator):
+def build(p: Params, rng: RNGLike):
     """Vertices, faces and info of one DPA grain (scaled to equivalent radius 1, not centred).
 
     Info: ``D_A`` (Eq. 5), ``D_A_scaling`` (the slope of log V against log A
@@ -729,8 +814,30 @@ def build(p: Params, rng: np.random.Generator):
     of gyration in primary sizes) of the aggregate of primaries;
     ``cavity_volume`` (sealed cavities filled in the mesh, in primary
     volumes); ``primary_size`` (the primary's V_p^(1/3) in grain units).
+
+    Parameters
+    ----------
+    p : Params
+        The grain's parameters (validated).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Normalised by :func:`grainforge.rng.as_generator`; a Generator is advanced by the draws.  The aggregate's
+        growth, :func:`aggregate`.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        In model units, about the construction origin (not yet centred on the centroid).
+    faces : (F, 3) int64
+        Outward, counter-clockwise triangles.
+    info : dict
+        The generation's derived quantities, the keys of :data:`INFO_COLUMNS`.
+
+    Raises
+    ------
+    ParameterError
+        Naming the parameter to lower when the grain would not be a valid star-shaped solid.
     """
-    agg = aggregate(p.primitive, p.primaries, p.exponent, rng)
+    agg = aggregate(p.primitive, p.primaries, exponent=p.exponent, rng=rng)
     if agg.cells is not None:
         v, f, cavity = lattice_surface(agg.cells)
         if not p.smooth:  # smoothing separates the pinches by itself (each copy follows its own cube)

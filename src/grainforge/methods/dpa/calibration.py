@@ -8,8 +8,9 @@ D_A (paper §2.3: "by constructing a calibration curve, it is possible to
 control the value of the exponent ε to yield a desired D_A").
 
 Aggregate ``k`` of the grid (ε index i, repeat r, k = i·repeats + r) is grown
-from ``SeedSequence(seed).spawn(...)[k]``, so the numbers do not depend on
-the number of worker processes.  Curves used by ``dpa(target_fractal_dimension=...)``
+from ``SeedSequence(rng).spawn(...)[k]`` (``rng`` an int seed; see
+:func:`grainforge.rng.seed_sequence` for the other kinds), so the numbers do
+not depend on the number of worker processes.  Curves used by ``dpa(target_fractal_dimension=...)``
 are cached as CSV under :func:`cache_dir`.
 
 :func:`dpa` (exported as ``grainforge.dpa``) lives here rather than in
@@ -30,6 +31,7 @@ from pathlib import Path
 import numpy as np
 
 from ...params import ParameterError
+from ...rng import RNGLike, seed_sequence
 from ...runtime.cache import cache_dir
 
 __all__ = [
@@ -59,6 +61,21 @@ MAX_EXPONENTS = 1000
 
 def parse_exponents(text: str) -> np.ndarray:
     """``"A:B:STEP"`` → A, A + STEP, …, B (inclusive); ``"a,b,c"`` → that list.
+
+    Parameters
+    ----------
+    text : str
+        ``"A:B:STEP"`` or comma-separated values (each > 0).
+
+    Returns
+    -------
+    (E,) float64
+        The ε grid (at most :data:`MAX_EXPONENTS` values).
+
+    Raises
+    ------
+    ParameterError
+        Naming ``exponents`` for a malformed text or too many values.
 
     Examples
     --------
@@ -107,7 +124,9 @@ class Calibration:
     primitive : str
     primaries : int
     repeats : int
-    seed : int
+    seed : int or None
+        The root seed the curve was grown from (``None`` when ``rng`` was a Generator or a spawned
+        SeedSequence, which no int reproduces).
     exponent, D_A_mean, D_A_std, porosity_mean, porosity_std, R_g_mean, R_g_std : (E,) float64
     D_A_scaling_mean, D_A_scaling_std : (E,) float64
         The scaling dimension (:func:`grainforge.analysis.aggregate.scaling_dimension`);
@@ -117,7 +136,7 @@ class Calibration:
     primitive: str
     primaries: int
     repeats: int
-    seed: int
+    seed: int | None
     exponent: np.ndarray
     D_A_mean: np.ndarray
     D_A_std: np.ndarray
@@ -135,7 +154,12 @@ class Calibration:
                 object.__setattr__(self, name, nan)
 
     def rows(self) -> list[dict]:
-        """One dict per ε, keys :data:`COLUMNS`."""
+        """One dict per ε, keys :data:`COLUMNS`."
+
+        Returns
+        -------
+        list of dict
+        """
         out = []
         for i, e in enumerate(self.exponent):
             out.append({
@@ -149,14 +173,41 @@ class Calibration:
         return out
 
     def write_csv(self, path: str | os.PathLike) -> Path:
-        """Write ``calibration.csv``-style text atomically."""
+        """Write ``calibration.csv``-style text atomically.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The CSV file (R_g columns suffixed with their unit, primary sizes).
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         from ...io import write_csv
 
         return write_csv(path, self.rows(), COLUMNS, units=UNITS)
 
     @classmethod
     def read_csv(cls, path: str | os.PathLike) -> Calibration:
-        """Read a file written by :meth:`write_csv`."""
+        """Read a file written by :meth:`write_csv`.
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            A file written by :meth:`write_csv`.
+
+        Returns
+        -------
+        Calibration
+            The D_A scaling columns NaN-free only if the file has them.
+
+        Raises
+        ------
+        ValueError
+            If the file has no rows.
+        """
         with open(path, newline="") as fh:
             rows = list(csv.DictReader(fh))
         if not rows:
@@ -167,7 +218,8 @@ class Calibration:
         col = lambda k: np.array([float(r[k]) for r in rows]) if k in r0 else None  # noqa: E731
         return cls(
             primitive=r0["primitive"], primaries=int(r0["primaries"]), repeats=int(r0["repeats"]),
-            seed=int(r0["seed"]), exponent=col("exponent"), D_A_mean=col("D_A_mean"), D_A_std=col("D_A_std"),
+            seed=int(r0["seed"]) if r0.get("seed") else None, exponent=col("exponent"),
+            D_A_mean=col("D_A_mean"), D_A_std=col("D_A_std"),
             porosity_mean=col("porosity_mean"), porosity_std=col("porosity_std"),
             R_g_mean=col("R_g_mean"), R_g_std=col("R_g_std"),
             D_A_scaling_mean=col("D_A_scaling_mean"), D_A_scaling_std=col("D_A_scaling_std"),
@@ -176,7 +228,15 @@ class Calibration:
     def usable(self) -> tuple[np.ndarray, np.ndarray]:
         """The invertible part of the curve: ε and mean D_A from the ε of the largest D_A on,
         made non-increasing (running minimum).  D_A falls with ε except for a small dip at the
-        very lowest ε (breadth-first growth around the first primaries)."""
+        very lowest ε (breadth-first growth around the first primaries)."
+
+        Returns
+        -------
+        exponent : (E',) float64
+            ε, increasing.
+        D_A : (E',) float64
+            Mean D_A, non-increasing.
+        """
         m = np.asarray(self.D_A_mean, dtype=np.float64)
         good = np.isfinite(m)
         e, m = np.asarray(self.exponent)[good], m[good]
@@ -187,6 +247,16 @@ class Calibration:
 
     def exponent_for(self, target: float) -> float:
         """ε whose mean D_A is ``target`` (interpolated in log ε on :meth:`usable`).
+
+        Parameters
+        ----------
+        target : float
+            Mean aggregate fractal dimension D_A wanted.
+
+        Returns
+        -------
+        float
+            ε.
 
         Raises
         ------
@@ -209,13 +279,29 @@ class Calibration:
         return float(np.exp(x))
 
     def plot(self, path: str | os.PathLike) -> Path:
-        """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."""
+        """A PNG of mean D_A ± one standard deviation against ε (and porosity on a second axis)."
+
+        Parameters
+        ----------
+        path : str or os.PathLike
+            The PNG file.
+
+        Returns
+        -------
+        Path
+            ``path``.
+        """
         from ...io import save_figure
 
         return save_figure(self.figure(), path)
 
     def figure(self):
-        """The Figure of :meth:`plot`; the legend sits below the axes, clear of every curve."""
+        """The Figure of :meth:`plot`; the legend sits below the axes, clear of every curve.
+
+        Returns
+        -------
+        matplotlib.figure.Figure
+        """
         import matplotlib
 
         matplotlib.use("Agg")
@@ -253,17 +339,17 @@ def _measure(task) -> tuple[float, float, float, float]:
     from .aggregation import aggregate
 
     primitive, primaries, exponent, seed_seq = task
-    m = aggregate(primitive, primaries, exponent, np.random.default_rng(seed_seq)).measures()
+    m = aggregate(primitive, primaries, exponent=exponent, rng=seed_seq).measures()
     return m["D_A"], m["porosity"], m["R_g"], m["D_A_scaling"]
 
 
 def calibrate(
     primitive: str = "cube",
     primaries: int = 200,
+    *,
     exponents: Sequence[float] = DEFAULT_EXPONENTS,
     repeats: int = DEFAULT_REPEATS,
-    *,
-    seed: int = 0,
+    rng: RNGLike = 0,
     workers: int | None = 1,
     progress: Callable[[Iterable], Iterable] | None = None,
 ) -> Calibration:
@@ -279,8 +365,10 @@ def calibrate(
         The ε grid (each in [0.01, 100]).
     repeats : int
         Aggregates per ε (≥ 1).
-    seed : int
-        Root seed; aggregate k uses ``SeedSequence(seed).spawn(E·repeats)[k]``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, default 0
+        The root of the aggregates' streams, :func:`grainforge.rng.seed_sequence`: aggregate k
+        uses ``SeedSequence(rng).spawn(E·repeats)[k]`` for an int seed, child k of a given
+        SeedSequence, of fresh entropy for None, of one draw of a Generator.
     workers : int or None
         Processes (1: in this process; None: one per CPU).  The result does
         not depend on it.
@@ -291,9 +379,15 @@ def calibrate(
     -------
     Calibration
 
+    Raises
+    ------
+    ParameterError
+        Naming ``exponents``, ``primitive``, ``primaries``, ``repeats``, ``workers`` or ``rng`` for a value
+        out of range.
+
     Examples
     --------
-    >>> c = calibrate("cube", 30, [0.5, 20.0], repeats=3, seed=1)
+    >>> c = calibrate("cube", 30, exponents=[0.5, 20.0], repeats=3, rng=1)
     >>> c.exponent.tolist(), bool(c.D_A_mean[0] > c.D_A_mean[1])
     ([0.5, 20.0], True)
     """
@@ -306,10 +400,14 @@ def calibrate(
         Params(primitive=primitive, exponent=float(e), primaries=primaries)  # validates every value
     if int(repeats) != repeats or repeats < 1:
         raise ParameterError("repeats", f"must be a whole number >= 1, got {repeats!r}")
-    if int(seed) != seed or seed < 0:
-        raise ParameterError("seed", f"must be a non-negative integer, got {seed!r}")
+    try:
+        root = seed_sequence(rng)
+    except ValueError:
+        raise ParameterError("rng", f"must be None, a non-negative int seed, a numpy SeedSequence or a numpy "
+                                    f"Generator, got {rng!r}") from None
+    seed = int(root.entropy) if not root.spawn_key and isinstance(root.entropy, (int, np.integer)) else None
     repeats = int(repeats)
-    children = np.random.SeedSequence(int(seed)).spawn(len(exps) * repeats)
+    children = root.spawn(len(exps) * repeats)
     tasks = [(primitive, int(primaries), float(exps[k // repeats]), children[k]) for k in range(len(children))]
     if workers is None:
         workers = os.cpu_count() or 1
@@ -342,7 +440,7 @@ def calibrate(
         std = np.nanstd(values, axis=1)
     (dm, pm, rm, sm), (ds, ps, rs, ss) = mean.T, std.T
     return Calibration(
-        primitive=primitive, primaries=int(primaries), repeats=repeats, seed=int(seed), exponent=exps,
+        primitive=primitive, primaries=int(primaries), repeats=repeats, seed=seed, exponent=exps,
         D_A_mean=dm, D_A_std=ds, porosity_mean=pm, porosity_std=ps, R_g_mean=rm, R_g_std=rs,
         D_A_scaling_mean=sm, D_A_scaling_std=ss,
     )
@@ -360,7 +458,7 @@ def cached_calibration(
     *,
     exponents: Sequence[float] | None = None,
     repeats: int | None = None,
-    seed: int = 0,
+    rng: RNGLike = 0,
     workers: int | None = None,
     progress: Callable[[Iterable], Iterable] | None = None,
 ) -> Calibration:
@@ -369,17 +467,44 @@ def cached_calibration(
     ``exponents`` and ``repeats`` default to :data:`DEFAULT_EXPONENTS` and
     :data:`DEFAULT_REPEATS`.  The cache key is the primitive, N, the ε grid,
     the repeats, the root seed and :data:`ALGORITHM_VERSION`; a damaged cache
-    file is recomputed.
+    file is recomputed.  An ``rng`` that is no int seed (None, a Generator, a
+    SeedSequence) has no key: the curve is computed and not stored.
+
+    Parameters
+    ----------
+    primitive : str
+        One of :data:`grainforge.methods.dpa.PRIMITIVES`.
+    primaries : int
+        N.
+    exponents : sequence of float, optional
+        The ε grid (default :data:`DEFAULT_EXPONENTS`).
+    repeats : int, optional
+        Aggregates per ε (default :data:`DEFAULT_REPEATS`).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, default 0
+        As for :func:`calibrate`; only an int seed is cached.
+    workers : int or None, optional
+        Processes when computing (None: one per CPU).
+    progress : callable, optional
+        Wraps the iterator of finished aggregates.
+
+    Returns
+    -------
+    Calibration
     """
     exponents = DEFAULT_EXPONENTS if exponents is None else exponents
     repeats = DEFAULT_REPEATS if repeats is None else repeats
+    if isinstance(rng, bool) or not isinstance(rng, (int, np.integer)):
+        return calibrate(primitive, primaries, exponents=exponents, repeats=repeats, rng=rng, workers=workers,
+                         progress=progress)
+    seed = int(rng)
     path = _cache_path(primitive, primaries, exponents, repeats, seed)
     if path.exists():
         try:
             return Calibration.read_csv(path)
         except (ValueError, KeyError, OSError):
             pass
-    cal = calibrate(primitive, primaries, exponents, repeats, seed=seed, workers=workers, progress=progress)
+    cal = calibrate(primitive, primaries, exponents=exponents, repeats=repeats, rng=seed, workers=workers,
+                    progress=progress)
     path.parent.mkdir(parents=True, exist_ok=True)
     cal.write_csv(path)
     return cal
@@ -393,6 +518,22 @@ def exponent_for_dimension(
     progress: Callable[[Iterable], Iterable] | None = None,
 ) -> float:
     """ε expected to give mean D_A = ``target`` for this primitive and N (cached calibration).
+
+    Parameters
+    ----------
+    target : float
+        Mean aggregate fractal dimension D_A wanted.
+    primitive : str, default "cube"
+        One of :data:`grainforge.methods.dpa.PRIMITIVES`.
+    primaries : int, default 200
+        N.
+    progress : callable, optional
+        Wraps the iterator of finished aggregates when the curve is computed (first use).
+
+    Returns
+    -------
+    float
+        ε, interpolated on the cached curve (:func:`cached_calibration`, default grid and seed).
 
     Raises
     ------
