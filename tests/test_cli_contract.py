@@ -248,7 +248,7 @@ CASES: list[Case] = [
           ("packing-medium", ["--target-angle", "30", "--packing", "medium"], r"'medium' is not one of"),
           ("inertial-0.5", ["--target-angle", "30", "--inertial-number", "0.5"], r"'--inertial-number'"),
           ("grains-30", ["--target-angle", "30", "--grains", "30", "--quick"], r"needs --grains ≥ 79"),
-          ("liggghts", ["--target-angle", "30", "--engine", "liggghts"], r"simulate triaxial has no liggghts scene"),
+          ("mpi-with-yade", ["--target-angle", "30", "--mpi", "2"], r"--mpi: yade runs one process per seed"),
           ("levelset", ["--target-angle", "30", "--shape", "levelset"],
            r"--shape levelset: simulate triaxial's yade scene takes --shape clump only"),
           ("angle-mid", ["--target-angle", "30", "--angle", "mid"], r"'mid' is not one of 'ultimate', 'peak'"),
