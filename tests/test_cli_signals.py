@@ -343,15 +343,18 @@ def _mpi_session_folders(pid: int, *bases: Path) -> list[Path]:
 
 
 @pytest.mark.slow  # runs LIGGGHTS under mpirun
-@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
-def test_a_signal_while_mpi_ranks_run_leaves_no_rank_and_no_session_folder(tmp_path, inputs, sig):
-    """``simulate --engine liggghts --mpi 2`` stopped while its ranks run: mpirun and both ranks gone, Open MPI's
-    session folder of that run gone (it lies in a folder of the run's own, under $TMPDIR), nothing in --out."""
+@pytest.mark.parametrize("sig, test", [(signal.SIGINT, "repose"), (signal.SIGTERM, "repose"),
+                                       (signal.SIGINT, "triaxial")],
+                         ids=["SIGINT", "SIGTERM", "SIGINT-triaxial"])
+def test_a_signal_while_mpi_ranks_run_leaves_no_rank_and_no_session_folder(tmp_path, inputs, sig, test):
+    """``simulate repose|triaxial --engine liggghts --mpi 2`` stopped while its ranks run: mpirun and both ranks
+    gone, Open MPI's session folder of that run gone (it lies in a folder of the run's own, under $TMPDIR),
+    nothing in --out."""
     require("liggghts", "mpirun")
     work, tmp = tmp_path / "work", tmp_path / "tmp"
     work.mkdir()
     tmp.mkdir()
-    proc = _start(["simulate", "repose", "{in}/ang", "--quick", "--engine", "liggghts", "--mpi", "2", "--out", "o"],
+    proc = _start(["simulate", test, "{in}/ang", "--quick", "--engine", "liggghts", "--mpi", "2", "--out", "o"],
                   work, inputs, TMPDIR=str(tmp))
 
     def engines() -> dict[int, str]:

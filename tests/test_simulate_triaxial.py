@@ -135,15 +135,19 @@ REFUSED = [
     (["--grains", "30", "--quick"], "needs --grains ≥"),
     (["--packing", "medium"], "'medium' is not one of 'dense', 'loose'"),
     (["--inertial-number", "0.5"], "--inertial-number"),
-    (["--engine", "liggghts"], "simulate triaxial has no liggghts scene yet"),
     (["--shape", "levelset"], "--shape levelset: simulate triaxial's yade scene takes --shape clump only"),
+    (["--engine", "liggghts", "--shape", "levelset"],
+     "--shape levelset: simulate triaxial's liggghts scene takes --shape clump only"),
+    (["--engine", "liggghts", "--mpi", "64"], "--mpi 64: a triaxial specimen of 200 grains is about 5.5 grain "
+     "diameters wide; cut 4 ways"),
     (["--mpi", "2"], "--mpi"),
 ]
 
 
 @pytest.mark.parametrize("args, message", REFUSED, ids=[" ".join(a) for a, _ in REFUSED])
 def test_bad_triaxial_settings_are_refused_in_one_line(runner, spheres, tmp_path, monkeypatch, args, message):
-    monkeypatch.setenv("GRAINFORGE_YADE", str(tmp_path / "no-engine-is-started"))  # named only if reached
+    for engine in ("YADE", "LIGGGHTS", "MPIRUN"):  # named only if reached
+        monkeypatch.setenv(f"GRAINFORGE_{engine}", str(tmp_path / "no-engine-is-started"))
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "triaxial", str(spheres), "--out", str(out), *args])
     assert r.exit_code == 2, r.output

@@ -1,5 +1,5 @@
 """``grainforge simulate repose|tilt|triaxial INPUTS --out DIR``: virtual bulk tests in Yade or LIGGGHTS (under
-mpirun; the triaxial test in Yade only)."""
+mpirun; the triaxial test in a periodic cell in Yade, in a box of servo-controlled walls in LIGGGHTS)."""
 
 from __future__ import annotations
 
@@ -28,8 +28,8 @@ ENGINES = ("yade", "liggghts")
 SHAPES = ("clump", "levelset")
 #: what simulate's scenes can run, per engine
 RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
-#: what a test's scenes run where it differs from RUNS: the triaxial scene is Yade's, on clumps
-TEST_RUNS = {"triaxial": {"yade": ("clump",), "liggghts": ()}}
+#: what a test's scenes run where it differs from RUNS: the triaxial scenes take clumps only
+TEST_RUNS = {"triaxial": {"yade": ("clump",), "liggghts": ("clump",)}}
 #: engines simulate runs under mpirun (--mpi)
 MPI_ENGINES = ("liggghts",)
 #: the engines' names in progress bars
@@ -103,37 +103,47 @@ def check_representation(shape: str, spacing: float | None, as_spheres: bool, sp
                                "--shape levelset")
 
 
-def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accuracy: float | None = None):
+def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accuracy: float | None = None, *,
+                 engine: str = "yade", mpi: int | None = None):
     """The run's :class:`grainforge.simulate.Settings` from the options (``--quick`` filling what is not given).
 
     With ``clump_accuracy``, ``spheres`` is the cap of every clump: the one given, or ``--quick``'s, or
     :data:`grainforge.dem.clump.DEFAULT_SPHERE_CAP`.
 
     A triaxial test's settings are :class:`grainforge.simulate.TriaxialSettings` (``--quick``:
-    :data:`grainforge.simulate.QUICK_TRIAXIAL`).
+    :data:`grainforge.simulate.QUICK_TRIAXIAL`, in LIGGGHTS
+    :data:`grainforge.simulate.settings.QUICK_TRIAXIAL_LIGGGHTS`).
 
     Raises
     ------
     click.BadParameter, click.UsageError
         For a setting out of its range, a level-set run Yade cannot set up, or a triaxial specimen too small
-        for its periodic cell.
+        for its periodic cell, or (LIGGGHTS) for its walls cut among ``mpi`` ranks
+        (:func:`grainforge.simulate.liggghts_triaxial.check_ranks`).
     """
     from ..simulate import QUICK, QUICK_TRIAXIAL
     from ..simulate.levelset_scenes import check_levelset_run, quick_levelset
-    from ..simulate.settings import check_triaxial_run
+    from ..simulate.settings import QUICK_TRIAXIAL_LIGGGHTS, check_triaxial_run
 
     if clump_accuracy is not None and values.get("spheres") is None and not quick:
         from ..dem.clump import DEFAULT_SPHERE_CAP
 
         values = {**values, "spheres": DEFAULT_SPHERE_CAP}
     if quick:
-        quick_values = QUICK_TRIAXIAL if test == "triaxial" else {**QUICK, **quick_levelset(test, shape)}
+        if test == "triaxial":
+            quick_values = QUICK_TRIAXIAL_LIGGGHTS if engine == "liggghts" else QUICK_TRIAXIAL
+        else:
+            quick_values = {**QUICK, **quick_levelset(test, shape)}
         values = {**quick_values, **{k: v for k, v in values.items() if v is not None}}
     settings = build_params(_settings_cls(test), values)
     try:
         check_levelset_run(test, shape, settings)
         if test == "triaxial":
             check_triaxial_run(settings)
+        if test == "triaxial" and engine == "liggghts":
+            from ..simulate.liggghts_triaxial import check_ranks
+
+            check_ranks(settings, mpi)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     return settings
@@ -346,7 +356,8 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "grainforge.io", "grainforge.geometry.solid", "grainforge.methods", "grainforge.population",
                  "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
                  "grainforge.dem.clump", "grainforge.dem.enclosure", "grainforge.dem.yade", "grainforge.dem.deck",
-                 "grainforge.dem.liggghts", "grainforge.simulate.liggghts_scenes", "grainforge.simulate.results",
+                 "grainforge.dem.liggghts", "grainforge.simulate.liggghts_scenes", "grainforge.simulate.liggghts_triaxial",
+                 "grainforge.simulate.results",
                  "matplotlib.pyplot", "matplotlib.collections", "scipy.stats", "grainforge.analysis",
                  "grainforge.runtime.workers", "grainforge.dem.representative", "grainforge.dem.template_choice")
 
@@ -361,7 +372,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate.specimen import template_make_seconds
     from .interrupts import ready_for_work, signals_held
 
-    settings = run_settings(test, values, quick, shape, clump_accuracy)
+    settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi)
     outputs = [out / "results.csv", out / f"{test}.png", out / "templates.csv"] + [
         out / f"{test}-seed{settings.seed + k}" for k in range(settings.seeds)]
     outputs += [out / "clumps.csv"] if clump_accuracy is not None else []
@@ -508,10 +519,12 @@ tilt = _command("tilt", """Tilt table: a layer of grains on a rough plate is til
     INPUTS as for `simulate repose`.  The layer is periodic (an infinite slope); failure is the
     tilt at which the layer's mean downslope displacement exceeds half a grain diameter.
     """)
-triaxial = _command("triaxial", """Drained triaxial compression of a periodic cell of grains, in Yade.
+triaxial = _command("triaxial", """Drained triaxial compression: a periodic cell (Yade) or a walled box (LIGGGHTS).
+
+    In LIGGGHTS (--engine liggghts [--mpi N]) six servo-controlled walls close the box.
 
     INPUTS as for `simulate repose`.  The grains are compacted isotropically to --confining-kpa
-    (dense: without friction; loose: with it), then the cell is shortened in z at the strain rate
+    (dense: without friction; loose: with it), then the specimen is shortened in z at the strain rate
     of --inertial-number while x and y are held at the confining stress, to --axial-strain.
     Writes each seed's triaxial.csv (q/p', volumetric strain, void ratio, coordination against the
     axial strain), results.csv (peak and ultimate friction angles, largest dilatancy angle) and
@@ -521,8 +534,8 @@ triaxial = _command("triaxial", """Drained triaxial compression of a periodic ce
 
 @click.group()
 def simulate():
-    """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table; triaxial, Yade): shape's effect on
-    bulk friction."""
+    """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table, drained triaxial test): shape's effect
+    on bulk friction."""
 
 
 simulate.add_command(repose)

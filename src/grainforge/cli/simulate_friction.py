@@ -104,7 +104,7 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @workers_option("Engine runs (seeds) at once, each on one core or on --mpi ranks.",
                 default_text="CPU count divided by --mpi")
 @click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
-              help="DEM engine (as simulate tilt|repose; triaxial: Yade only).")
+              help="DEM engine (as simulate tilt|repose|triaxial).")
 @click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
               help="LIGGGHTS only: run each seed under `mpirun -np N`.")
 @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
@@ -140,7 +140,7 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     check_engine(engine, mpi, shape, test)
     check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
     given = dict(values)
-    settings = run_settings(test, values, quick, shape, clump_accuracy)
+    settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi)
     outputs = OUTPUTS + (("clumps.csv",) if clump_accuracy is not None else ())
     out = output_dir(out, overwrite=overwrite, files=[out / name for name in outputs])
     ls_spacing = 0.05 if spacing is None else spacing

@@ -32,11 +32,16 @@ def yade_executable() -> str:
 def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
                     *, overwrite: bool = False, engine: str = "yade") -> list[Path]:
     """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
-    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts_scenes.deck_files`).
+    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts_scenes.deck_files`, a triaxial test's
+    :func:`grainforge.simulate.liggghts_triaxial.deck_files`).
 
     In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset_scenes`) picks the scene;
     ``settings`` of a triaxial test are :class:`~grainforge.simulate.TriaxialSettings`.
     """
+    if engine == "liggghts" and test == "triaxial":  # a box of servo-controlled walls
+        from .liggghts_triaxial import write_deck as write_triaxial
+
+        return write_triaxial(templates, settings, seed, out, overwrite=overwrite)
     if engine == "liggghts":
         from .liggghts_scenes import write_test_deck as write_liggghts
 
@@ -126,7 +131,10 @@ def run_deck(deck: str | os.PathLike, *, engine: str = "yade", mpi: int | None =
     if engine == "liggghts":
         from .liggghts_scenes import run_liggghts
 
-        return run_liggghts(deck, mpi=mpi, progress=progress)
+        collect = None
+        if json.loads((Path(deck) / "grains.json").read_text())["result"]["test"] == "triaxial":
+            from .liggghts_triaxial import collect_triaxial as collect  # the walled box's records
+        return run_liggghts(deck, mpi=mpi, progress=progress, collect=collect)
     return run_yade(deck, progress=progress)
 
 

@@ -488,10 +488,6 @@ def collect_result(deck: str | os.PathLike) -> dict:
     """The Yade scene's ``result.json`` record, from a finished LIGGGHTS run's files (and written there)."""
     deck = Path(deck)
     rec = dict(json.loads((deck / "grains.json").read_text())["result"])
-    if rec["test"] == "triaxial":  # the walled box's records: grainforge.simulate.liggghts_triaxial
-        from .liggghts_triaxial import collect_triaxial
-
-        return collect_triaxial(deck)
     initial = _rows(deck / "bodies-initial.txt", 4)
     final = _rows(deck / "bodies-final.txt", 4)
     spheres = _rows(deck / "spheres-final.txt", 4)
@@ -515,8 +511,11 @@ def collect_result(deck: str | os.PathLike) -> dict:
 
 
 def run_liggghts(deck: str | os.PathLike, *, mpi: int | None = None,
-                 progress: Callable[[float, str], None] | None = None, timeout: float | None = None) -> dict:
-    """Run the deck in ``deck`` (``liggghts -in in.run``, under ``mpirun -np mpi`` if given); its result.
+                 progress: Callable[[float, str], None] | None = None, timeout: float | None = None,
+                 collect: Callable[[Path], dict] | None = None) -> dict:
+    """Run the deck in ``deck`` (``liggghts -in in.run``, under ``mpirun -np mpi`` if given); its result, made by
+    ``collect(deck)`` (default :func:`collect_result`; a triaxial deck's:
+    :func:`grainforge.simulate.liggghts_triaxial.collect_triaxial`).
 
     The deck's ``grainforge-progress`` lines go to ``progress(fraction, phase)``; LIGGGHTS's output to
     ``deck/liggghts.log``.  An interrupt kills mpirun with every rank, and removes its session folder
@@ -540,4 +539,4 @@ def run_liggghts(deck: str | os.PathLike, *, mpi: int | None = None,
     if rc != 0 or not all((deck / f).is_file() for f in needed):
         tail = [ln.strip() for ln in (deck / "liggghts.log").read_text(errors="replace").splitlines() if ln.strip()]
         raise EngineFailed(f"LIGGGHTS failed in {deck} (exit {rc}): {tail[-1] if tail else 'no output'}", deck)
-    return collect_result(deck)
+    return (collect or collect_result)(deck)

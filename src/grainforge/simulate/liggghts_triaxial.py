@@ -103,7 +103,7 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None) -> None:
     >>> check_ranks(TriaxialSettings(grains=100), 64)
     Traceback (most recent call last):
     ...
-    ValueError: --mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use --mpi 8 or fewer, or --grains 626 or more
+    ValueError: --mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use --mpi 8 (or another count cut at most 2 ways per side), or --grains 626 or more
     """
     if mpi is None or mpi <= 1:
         return
@@ -112,12 +112,14 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None) -> None:
     cuts = max(grid)
     if width / cuts >= MIN_RANK_DIAMETERS:
         return
-    fits = max(r for r in range(1, mpi + 1) if width / max(processor_grid(r)) >= MIN_RANK_DIAMETERS)
+    allowed = int(width // MIN_RANK_DIAMETERS)
+    fits = max(r for r in range(1, mpi + 1) if max(processor_grid(r)) <= allowed)
     grains = math.ceil((MIN_RANK_DIAMETERS * cuts) ** 3 * DENSEST_FRACTION / (math.pi / 6.0))
     raise ValueError(f"--mpi {mpi}: a triaxial specimen of {settings.grains} grains is about {width:.1f} grain "
                      f"diameters wide; cut {cuts} ways (the {' × '.join(map(str, grid))} ranks' grid) a rank's slab "
                      f"would be {width / cuts:.1f} diameters thick, under the {MIN_RANK_DIAMETERS:g} a rank needs: "
-                     f"use --mpi {fits} or fewer, or --grains {grains} or more")
+                     f"use --mpi {fits} (or another count cut at most {allowed} ways per side), or --grains {grains} "
+                     "or more")
 
 
 def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleNamespace:
@@ -269,7 +271,8 @@ def deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> di
            "packing": settings.packing, "strain_rate": plan.rate, "compaction_strain_rate": plan.rate_c,
            "inertial_number": plan.rate * plan.d * math.sqrt(plan.rho / plan.sigma), "contact": plan.table,
            "contact_radius": plan.r_grain,
-           "box_initial": plan.length.tolist(), "plate_half_width": plan.half_plate, "scene": plan.scene}
+           "box_initial": plan.length.tolist(), "plate_half_width": plan.half_plate, "nodes": plan.nodes.tolist(),
+           "scene": plan.scene}
     files["grains.json"] = json_text({"units": "SI (m, kg, s)", "engine": "liggghts", "result": rec,
                                       "grains": [template_record(templates[k]) for k in plan.used],
                                       "drawn": [templates[k].name for k in plan.pick]})
@@ -331,8 +334,8 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
     """The Yade scene's ``result.json`` record of a finished LIGGGHTS triaxial run (and written there).
 
     The stresses are the walls' forces over their areas (the mean of the two walls of an axis), the volume the
-    walls' box; the coordination and overlaps come from the contacts dump (``contacts.txt``, removed once read,
-    with ``atoms.txt``: every sphere's grain and radius).
+    walls' box; the coordination and overlaps come from the contacts dump (``contacts.txt``, removed once read)
+    and ``atoms.txt`` (every sphere's grain, radius and place as inserted).
     """
     from .liggghts_scenes import _record, _rows
 
@@ -343,9 +346,9 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
     final = _rows(deck / "bodies-final.txt", 4)
     spheres = _rows(deck / "spheres-final.txt", 4)
     shear = _rows(deck / "shear.txt", 7)
-    atoms = _rows(deck / "atoms.txt", 3)
-    grain_of = {int(i): int(m) for i, m, _ in atoms}
-    radius_of = {int(i): float(r) for i, _, r in atoms}
+    atoms = _rows(deck / "atoms.txt", 6)
+    grain_of = {int(i): int(m) for i, m in atoms[:, :2]}
+    radius_of = {int(i): float(r) for i, r in atoms[:, [0, 2]]}
     snapshots = _snapshots(deck / "contacts.txt")
     n, d, solid = rec["grains"], rec["d_mean"], rec["solid_volume"]
     lx, ly, lz, sx, sy, sz, ke = shear.T
@@ -372,6 +375,5 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
                steps=int(run["steps"]), time=run["steps"] * rec["dt"],
                spheres=np.column_stack([spheres, np.full(len(spheres), -1.0)]).tolist())
     (deck / "result.json").write_text(json.dumps(out))
-    for name in ("contacts.txt", "atoms.txt"):
-        (deck / name).unlink()
+    (deck / "contacts.txt").unlink()
     return out
