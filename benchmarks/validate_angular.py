@@ -83,7 +83,7 @@ def radius_table(n: int, subdivisions: int) -> None:
                     cut.append(edge_cut(mesh, mid * scale, d))
                     continue
                 reach = 1.5 * c.rho * scale
-                r = edge_radius(mesh, mid * scale, d, c.normals[i], c.normals[j], reach)
+                r = edge_radius(mesh, mid * scale, direction=d, n1=c.normals[i], n2=c.normals[j], reach=reach)
                 if r is None:
                     continue
                 req.append(rho)

@@ -89,8 +89,8 @@ def seam_metrics(surface: str, grains: int, subdivisions: int = 5, n: int = 720)
     for seed in range(grains):
         v, f, _ = fso.build(fso.Params(subdivisions=subdivisions, surface=surface), np.random.default_rng(seed))
         z = np.zeros(3)  # the construction centre (fso.build's vertices are not yet centred)
-        eq.append(mirror_correlation(v, f, np.pi / 2, SEAM_DELTAS, n=n, centre=z))
-        oth.append(np.mean([mirror_correlation(v, f, p, SEAM_DELTAS, n=n, centre=z) for p in OTHER_CIRCLES], axis=0))
+        eq.append(mirror_correlation(v, f, polar=np.pi / 2, deltas=SEAM_DELTAS, n=n, centre=z))
+        oth.append(np.mean([mirror_correlation(v, f, polar=p, deltas=SEAM_DELTAS, n=n, centre=z) for p in OTHER_CIRCLES], axis=0))
         caps.append(cap_band_rms(v, f, cap=0.2, band=0.1, centre=z))
     return np.array(eq), np.array(oth), np.array(caps)
 

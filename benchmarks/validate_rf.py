@@ -54,7 +54,7 @@ def sections(mesh, normals):
     from grainforge.analysis.sections import section_descriptors
 
     c = mesh.center_mass
-    return np.array([section_descriptors(mesh, n, c) for n in normals])
+    return np.array([section_descriptors(mesh, n, origin=c) for n in normals])
 
 
 def axis_great_circles(a_all, degree, offsets=(0.0,), n_pts=128):

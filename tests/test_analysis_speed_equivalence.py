@@ -80,7 +80,7 @@ def test_silhouette_radii_matches_reference(grain):
         for origin in (np.zeros(2), 0.05 * rng.normal(size=2)):
             for n_rays in (128, 37):
                 for rays in (None, rng.random(n_rays) < 0.3):
-                    r, star = fourier.silhouette_radii(q, f, origin, n_rays, rays=rays)
+                    r, star = fourier.silhouette_radii(q, f, origin=origin, n_rays=n_rays, rays=rays)
                     r_ref, star_ref = _silhouette_radii_ref(q, f, origin, n_rays, rays=rays)
                     assert star == star_ref
                     np.testing.assert_allclose(r, r_ref, rtol=1e-12, atol=0)
@@ -91,7 +91,7 @@ def test_silhouette_radii_not_star_shaped():
     c = np.array([[0, 0], [3, 0], [3, 1], [1, 1], [1, 2], [3, 2], [3, 3], [0, 3]], float)
     faces = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 7], [4, 5, 6], [4, 6, 7]])
     for origin, expected in (((0.5, 1.5), False), ((0.5, 0.5), False), ((0.5, 2.5), False)):
-        r, star = fourier.silhouette_radii(c, faces, origin, 64)
+        r, star = fourier.silhouette_radii(c, faces, origin=origin, n_rays=64)
         r_ref, star_ref = _silhouette_radii_ref(c, faces, origin, 64)
         assert star == star_ref == expected
         np.testing.assert_allclose(r, r_ref, rtol=1e-12)

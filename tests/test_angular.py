@@ -84,7 +84,7 @@ def test_measured_edge_radius_tracks_the_requested_one():
     radii = []
     for mid, d, _, i, j in core_edges(c):
         if c.normals[i] @ c.normals[j] < np.cos(np.deg2rad(25)):
-            r = edge_radius(mesh, mid, d, c.normals[i], c.normals[j], 1.5 * c.rho)
+            r = edge_radius(mesh, mid, direction=d, n1=c.normals[i], n2=c.normals[j], reach=1.5 * c.rho)
             if r is not None:
                 radii.append(r)
     assert len(radii) >= 5

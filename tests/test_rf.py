@@ -217,8 +217,8 @@ def test_sections_carry_the_requested_descriptors_in_every_direction():
     for s in range(50):
         m = _read_back(grainforge.rf(descriptors=d, rng=1000 + s))
         c = m.center_mass
-        rand += [section_descriptors(m, n, c) for n in random_normals(4, rng=s)]
-        axes.append([section_descriptors(m, e, c) for e in np.eye(3)])
+        rand += [section_descriptors(m, n, origin=c) for n in random_normals(4, rng=s)]
+        axes.append([section_descriptors(m, e, origin=c) for e in np.eye(3)])
     ratio = np.mean(rand, axis=0) / want
     assert np.all(np.abs(ratio - 1) < 0.10), np.round(ratio, 3)
     per_axis = (np.mean(axes, axis=0) / want).mean(axis=1)
@@ -350,7 +350,7 @@ def test_sections_carry_measured_spectra(spectrum_csv):
             continue
         m = _read_back(g)
         c = m.center_mass
-        got.append(np.mean([section_descriptors(m, n, c) for n in random_normals(4, rng=s)], axis=0)[:11])
+        got.append(np.mean([section_descriptors(m, n, origin=c) for n in random_normals(4, rng=s)], axis=0)[:11])
         want.append(table.D[g.info["spectrum_row"]][:11])
     assert len(got) >= 55
     ratio = np.mean(got, axis=0) / np.mean(want, axis=0)

@@ -94,8 +94,8 @@ def _seam(surface, seeds, deltas=(0.05, 0.1, 0.2)):
     for seed in seeds:
         v, f, _ = fso_mod.build(fso_mod.Params(subdivisions=4, surface=surface), np.random.default_rng(seed))
         z = np.zeros(3)
-        eq.append(mirror_correlation(v, f, np.pi / 2, deltas, n=360, centre=z))
-        oth.append(np.mean([mirror_correlation(v, f, p, deltas, n=360, centre=z) for p in others], axis=0))
+        eq.append(mirror_correlation(v, f, polar=np.pi / 2, deltas=deltas, n=360, centre=z))
+        oth.append(np.mean([mirror_correlation(v, f, polar=p, deltas=deltas, n=360, centre=z) for p in others], axis=0))
     return np.mean(eq, axis=0), np.mean(oth, axis=0)
 
 

@@ -120,6 +120,16 @@ def bounding_box_edges(points) -> np.ndarray:
     hull's face directions; the classical face-flush search for the 3D
     minimum-volume box, never smaller than it).
 
+    Parameters
+    ----------
+    points : (P, 3) array_like of float
+        The aggregate's vertices (only their convex hull matters).
+
+    Returns
+    -------
+    (3,) float64
+        L ≥ I ≥ S, in the points' unit.
+
     Examples
     --------
     >>> import numpy as np
@@ -135,6 +145,20 @@ def bounding_box_edges(points) -> np.ndarray:
 def porosity(volume: float, points, hull=None) -> float:
     """1 − V / V_hull with V_hull the convex hull volume of ``points`` (or of ``hull``, their
     scipy ``ConvexHull`` if already computed).
+
+    Parameters
+    ----------
+    volume : float
+        The aggregate's volume, in the cube of the points' unit.
+    points : (P, 3) array_like of float
+        Its vertices.
+    hull : scipy.spatial.ConvexHull, optional
+        Their hull, if already computed.
+
+    Returns
+    -------
+    float
+        In [0, 1) (clipped at 0 when the volume exceeds the hull's by rounding).
 
     Examples
     --------
@@ -161,6 +185,11 @@ def radius_of_gyration(centres, primary_gyration2: float = 0.0) -> float:
     centres : (N, 3) float64
     primary_gyration2 : float
         r_p² of one primary (1/4 for a unit cube).
+
+    Returns
+    -------
+    float
+        In the centres' unit.
 
     Examples
     --------
@@ -207,7 +236,7 @@ def mass_radius_fit(primaries, gyration_radii) -> tuple[float, float]:
     return float(slope), float(np.exp(intercept))
 
 
-def aggregate_measures(points, centres, volume: float, primary_gyration2: float, owner=None) -> dict[str, float]:
+def aggregate_measures(points, centres, *, volume: float, primary_gyration2: float, owner=None) -> dict[str, float]:
     """D_A, its scaling form, porosity, R_g and the box mean edge A of one aggregate.
 
     Parameters
@@ -223,6 +252,19 @@ def aggregate_measures(points, centres, volume: float, primary_gyration2: float,
     owner : (P,) int, optional
         Growth index of the primary of each point; with it ``D_A_scaling``
         (:func:`scaling_dimension`) is measured, else it is NaN.
+
+    Returns
+    -------
+    dict of str to float
+        ``D_A`` (Eq. 5, :func:`aggregate_dimension`), ``D_A_scaling``, ``porosity``, ``R_g`` (in the
+        points' unit) and ``box_mean_edge`` (the mean edge A of the minimum-volume box).
+
+    Examples
+    --------
+    >>> corners = np.array(np.meshgrid([0, 1], [0, 1], [0, 1])).T.reshape(-1, 3).astype(float)
+    >>> m = aggregate_measures(corners, [[0.5, 0.5, 0.5]], volume=1.0, primary_gyration2=0.25)
+    >>> m["porosity"], m["R_g"], m["box_mean_edge"]
+    (0.0, 0.5, 1.0)
     """
     from scipy.spatial import ConvexHull
 

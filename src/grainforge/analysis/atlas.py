@@ -69,6 +69,18 @@ def image_cells(extents, voxel_size: float) -> float:
     """Cells of the voxel image of a grain whose bounding box has ``extents``, at ``voxel_size``
     (:func:`voxelise`'s box: the voxels the box spans and a margin).
 
+    Parameters
+    ----------
+    extents : (3,) array_like of float
+        The bounding box's sides, in the mesh's unit.
+    voxel_size : float
+        Voxel edge, same unit.
+
+    Returns
+    -------
+    float
+        Number of voxels (as a float: it only sizes estimates).
+
     Examples
     --------
     >>> image_cells([1.0, 1.0, 1.0], 0.1)
@@ -579,6 +591,36 @@ def voxel_image(
     """The binary voxel image :func:`atlas_descriptors` measures: ``(mask, h, d_eq of the mesh)``.
 
     Arguments as :func:`atlas_descriptors`'s; ``h`` is the voxel edge in the mesh's units.
+
+    Parameters
+    ----------
+    mesh_or_vertices : Grain, trimesh.Trimesh or (V, 3) array_like
+        As :func:`atlas_descriptors`.
+    faces : (F, 3) array_like of int, optional
+        With vertices.
+    voxel_size : float, optional
+        Voxel edge in the mesh's units.
+    voxels_across : float, optional
+        Instead of ``voxel_size``: d_eq / h.
+    rotation : (3, 3) array_like, or None, int, SeedSequence or Generator, optional
+        A rotation matrix, or the randomness of a uniform one
+        (:func:`grainforge.geometry.rotations.random_rotation`,
+        scipy's convention, normalised by :mod:`grainforge.rng`).
+
+    Returns
+    -------
+    mask : (Z, Y, X) bool
+        The voxel image (cell centres inside the mesh).
+    h : float
+        The voxel edge, in the mesh's unit.
+    d_eq : float
+        The mesh's equivalent diameter.
+
+    Raises
+    ------
+    ValueError
+        If both or neither of ``voxel_size`` and ``voxels_across`` are given, either is not positive,
+        or the mesh is not closed.
 
     Examples
     --------

@@ -47,6 +47,16 @@ def principal_dimensions(obj) -> tuple[float, float, float]:
     face flush with the convex hull, exact over every hull-face direction
     (the classical search for the 3D minimum-volume box, an upper bound on it).
 
+    Parameters
+    ----------
+    obj : Grain, trimesh.Trimesh or anything with ``vertices`` and ``faces``
+        The mesh.
+
+    Returns
+    -------
+    L, I, S : float
+        In the mesh's unit, L ≥ I ≥ S.
+
     Examples
     --------
     >>> import trimesh

@@ -57,6 +57,17 @@ def facet_flatness(vertices, faces, normals, tolerance_deg: float = 2.0) -> floa
 def fit_circle(points: np.ndarray) -> tuple[np.ndarray, float]:
     """Least-squares circle through 2D points (Kåsa's algebraic fit): (centre, radius).
 
+    Parameters
+    ----------
+    points : (P, 2) array_like of float
+        At least three points, not collinear.
+
+    Returns
+    -------
+    centre : (2,) float64
+    radius : float
+        In the points' unit.
+
     Examples
     --------
     >>> t = np.linspace(0.0, 1.0, 9)
@@ -71,7 +82,7 @@ def fit_circle(points: np.ndarray) -> tuple[np.ndarray, float]:
     return np.array([cx, cy]), float(np.sqrt(k + cx * cx + cy * cy))
 
 
-def edge_radius(mesh, point, direction, n1, n2, reach: float, min_points: int = 5) -> float | None:
+def edge_radius(mesh, point, *, direction, n1, n2, reach: float, min_points: int = 5) -> float | None:
     """Radius of curvature of a rounded edge, from the mesh's cross-section.
 
     The mesh is cut by the plane through ``point`` normal to the edge

@@ -34,6 +34,11 @@ PLANES = {"LI": (0, 1), "LS": (0, 2), "IS": (1, 2)}
 def fd_columns() -> list[str]:
     """Names of the projection descriptor columns: ``fd_LI_2`` … ``fd_IS_16``.
 
+    Returns
+    -------
+    list of str
+        ``fd_{plane}_{n}`` for the planes LI, LS, IS and the orders :data:`FD_ORDERS`.
+
     Examples
     --------
     >>> fd_columns()[:2], len(fd_columns())
@@ -55,6 +60,22 @@ def _polygon_centroid(poly: np.ndarray) -> np.ndarray:
 
 def descriptors_from_radii(r: np.ndarray, orders=FD_ORDERS) -> np.ndarray:
     """Fourier descriptors D_n = 2|c_n|/c_0 of equally spaced radii (c = rfft(r)/N).
+
+    Parameters
+    ----------
+    r : (N,) array_like of float
+        Radii at θ_j = 2πj/N, positive mean.
+    orders : sequence of int, default FD_ORDERS
+        The orders n wanted (each < N/2 + 1).
+
+    Returns
+    -------
+    (len(orders),) float64
+
+    Raises
+    ------
+    ValueError
+        If the mean radius is not positive or an order is too high for N.
 
     Examples
     --------
@@ -82,6 +103,15 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
 
     ``mass`` may pass precomputed :func:`~grainforge.analysis.mass.mass_properties`.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    mass : dict, optional
+        :func:`~grainforge.analysis.mass.mass_properties` of the mesh, if computed already.
+
     Returns
     -------
     centre : (3,) float64
@@ -103,7 +133,7 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
 
 
 def silhouette_radii(
-    points: np.ndarray, faces: np.ndarray, origin, n_rays: int = N_RAYS, rays: np.ndarray | None = None,
+    points: np.ndarray, faces: np.ndarray, *, origin, n_rays: int = N_RAYS, rays: np.ndarray | None = None,
 ) -> tuple[np.ndarray, bool]:
     """Outermost crossing of the silhouette of projected triangles along rays from ``origin``.
 
@@ -116,9 +146,13 @@ def silhouette_radii(
     Parameters
     ----------
     points : (V, 2) float64
+        Projected vertices.
     faces : (F, 3) int64
+        Triangles (any orientation).
     origin : (2,) float64
-    n_rays : int
+        Where the rays start.
+    n_rays : int, default N_RAYS
+        Rays θ_j = 2πj/n_rays.
     rays : (n_rays,) bool, optional
         Only trace these rays (the others get NaN radii).
 
@@ -137,7 +171,7 @@ def silhouette_radii(
     Examples
     --------
     >>> sq = np.array([[-1.0, -1.0], [1.0, -1.0], [1.0, 1.0], [-1.0, 1.0]])
-    >>> r, star = silhouette_radii(sq, np.array([[0, 1, 2], [0, 2, 3]]), (0.0, 0.0), 8)
+    >>> r, star = silhouette_radii(sq, np.array([[0, 1, 2], [0, 2, 3]]), origin=(0.0, 0.0), n_rays=8)
     >>> np.round(r, 6).tolist()[:2], star
     ([1.0, 1.414214], True)
     """
@@ -359,13 +393,13 @@ def projection_descriptors(
                 # covered from the origin; only the others need the exact test
                 s = True
                 if not np.all(np.isfinite(r)):
-                    r, s = silhouette_radii(q, tris, origin, n_rays)
+                    r, s = silhouette_radii(q, tris, origin=origin, n_rays=n_rays)
                 elif inner.any():
-                    _, s = silhouette_radii(q, tris, origin, n_rays, rays=inner > 0)
+                    _, s = silhouette_radii(q, tris, origin=origin, n_rays=n_rays, rays=inner > 0)
         if r is None:  # open mesh, or no closed outline among the contour edges: the exact silhouette
-            r_fine, _ = silhouette_radii(q, tris, origin, 512)
+            r_fine, _ = silhouette_radii(q, tris, origin=origin, n_rays=512)
             origin = _polygon_area_centroid_of_radii(r_fine, origin)
-            r, s = silhouette_radii(q, tris, origin, n_rays)
+            r, s = silhouette_radii(q, tris, origin=origin, n_rays=n_rays)
         star &= s
         for n, d in zip(orders, descriptors_from_radii(r, orders)):
             out[f"fd_{name}_{n}"] = float(d)

@@ -43,7 +43,22 @@ _MONOMIALS = [(a, b, d - a - b) for d in (FIT_DEGREE, FIT_DEGREE - 1) for a in r
 
 
 def radial_function(vertices: np.ndarray, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Unit directions (V, 3) and radii (V,) of vertices seen from ``centre``."""
+    """Unit directions (V, 3) and radii (V,) of vertices seen from ``centre``.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Points.
+    centre : (3,) ndarray of float
+        The origin of the radii.
+
+    Returns
+    -------
+    u : (V, 3) float64
+        Unit directions (zero vectors give the vertex offset unchanged: 0).
+    r : (V,) float64
+        Distances, in the vertices' unit.
+    """
     d = np.asarray(vertices, dtype=np.float64) - centre
     r = np.linalg.norm(d, axis=1)
     return d / np.where(r > 0, r, 1.0)[:, None], r
@@ -84,6 +99,20 @@ def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
     Exact for spheres and centred ellipsoids of any orientation.
 
+    Parameters
+    ----------
+    u : (V, 3) array_like of float
+        Unit directions.
+    r : (V,) array_like of float
+        Radii along them (> 0).
+    weights : (V,) array_like of float
+        Area weights.
+
+    Returns
+    -------
+    (V,) float64
+        The smooth radii, in the unit of ``r``.
+
     Examples
     --------
     >>> import trimesh
@@ -107,7 +136,27 @@ def smooth_fit(u: np.ndarray, r: np.ndarray, weights: np.ndarray) -> np.ndarray:
 
 
 def roughness(residual: np.ndarray, weights: np.ndarray, mean_radius: float) -> float:
-    """Area-weighted RMS of the radial residual over the mean radius."""
+    """Area-weighted RMS of the radial residual over the mean radius.
+
+    Parameters
+    ----------
+    residual : (V,) ndarray of float
+        r − smooth r per vertex.
+    weights : (V,) ndarray of float
+        Area weights.
+    mean_radius : float
+        The normaliser, in the unit of ``residual``.
+
+    Returns
+    -------
+    float
+        Dimensionless.
+
+    Examples
+    --------
+    >>> roughness(np.array([0.1, -0.1]), np.ones(2), 2.0)
+    0.05
+    """
     return float(np.sqrt(np.sum(weights * residual**2) / np.sum(weights)) / mean_radius)
 
 
@@ -126,6 +175,17 @@ def variogram(u: np.ndarray, h: np.ndarray, bins: np.ndarray, *, subset: int = 1
     it (found with a k-d tree radius query); the other bins hold all pairs
     a < b of an evenly strided subset of ``subset`` vertices whose separation
     falls in them.  Each bin's pairs are taken in row-major (a, b) order.
+
+    Parameters
+    ----------
+    u : (V, 3) array_like of float
+        Unit directions of the vertices.
+    h : (V,) array_like of float
+        The field at each vertex (e.g. the radial residual).
+    bins : (B + 1,) array_like of float
+        Bin edges of the angular separation, radians, increasing.
+    subset : int, default 1000
+        Vertices used for the bins after the first.
 
     Returns
     -------

@@ -19,6 +19,13 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
     this adds the surface area and per-face areas, and does not reject a
     non-positive volume (``analyse`` reports open and inverted bodies).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+
     Returns
     -------
     dict
@@ -42,7 +49,24 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
 
 
 def principal_moments(v: np.ndarray, f: np.ndarray, mp: dict | None = None) -> tuple[np.ndarray, np.ndarray]:
-    """Centre and covariance for principal axes: the solid's if it has volume, else the surface's."""
+    """Centre and covariance for principal axes: the solid's if it has volume, else the surface's.
+
+    Parameters
+    ----------
+    v : (V, 3) ndarray of float
+        Vertices.
+    f : (F, 3) ndarray of int
+        Faces.
+    mp : dict, optional
+        :func:`mass_properties` of the mesh, if computed already.
+
+    Returns
+    -------
+    centre : (3,) float64
+        Volume or area centroid.
+    covariance : (3, 3) float64
+        Per unit volume (or area), in the square of the vertices' unit.
+    """
     if mp is None:
         mp = mass_properties(v, f)
     if mp["volume"] > 0 and np.all(np.linalg.eigvalsh(mp["covariance"]) > 0):

@@ -18,7 +18,20 @@ ID_COLUMNS = ("file", "body", "bodies", "faces", "flags")
 
 
 def ANALYSE_COLUMNS(fourier: bool = True, atlas: bool = False) -> list[str]:  # noqa: N802 (a column list builder)
-    """Every column ``analyse`` writes, in order (``atlas``: the ``atlas_*`` voxel columns too)."""
+    """Every column ``analyse`` writes, in order (``atlas``: the ``atlas_*`` voxel columns too).
+
+    Parameters
+    ----------
+    fourier : bool, default True
+        Include the projection Fourier descriptors (``fd_*``, ``fd_star_shaped``).
+    atlas : bool, default False
+        Include the Sand-Atlas voxel columns (``atlas_*``).
+
+    Returns
+    -------
+    list of str
+        Row keys (units are added by :mod:`grainforge.units` when written).
+    """
     from .atlas import ATLAS_COLUMNS
     from .descriptors import DESCRIPTOR_COLUMNS
     from .fourier import fd_columns
@@ -37,6 +50,19 @@ def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, 
     ``mm``: the file is in millimetres, and a body whose size is no grain's
     (:func:`grainforge.geometry.solid.mesh_size_problem`) is refused; ``False``
     for a caller with a unit of its own (``dem --unit``), which checks sizes itself.
+
+    Parameters
+    ----------
+    path : str or Path
+        A mesh file.
+    mm : bool, default True
+        The file is in millimetres: refuse bodies of no grain's size.
+
+    Returns
+    -------
+    list of (vertices, faces)
+        :func:`grainforge.geometry.solid.split_bodies`' bodies (vertices merged, degenerate faces dropped),
+        in file order.
 
     Raises
     ------
@@ -82,6 +108,15 @@ def body_flags(vertices, faces, *, merged: bool = False) -> tuple[list[str], np.
 
     The one check of a body as a solid: ``analyse`` flags with it and ``dem``
     (:func:`solid_grain`) refuses with it.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    merged : bool, default False
+        The vertices are distinct positions already (skips the solid check's merge).
 
     Returns
     -------
@@ -131,6 +166,20 @@ def analyse_mesh(vertices, faces, atlas: dict | None = None, merged: bool = Fals
     failing the solid contract of :func:`grainforge.geometry.solid.solid_problems`,
     the same definition ``grainforge check`` uses).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    atlas : dict, optional
+        ``{"voxel_size": h}`` or ``{"voxels_across": n}`` (and ``rotation``, ``convention``): add the
+        ``atlas_*`` columns.
+    merged : bool, default False
+        The vertices are distinct positions (a body of :func:`read_bodies`).
+    **options
+        Passed to :func:`~grainforge.analysis.descriptors.describe` (``fractal``, ``fourier``, ...).
+
     Returns
     -------
     dict
@@ -164,6 +213,23 @@ def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
     ``bodies`` counts the rows of the file.
 
     ``options`` go to :func:`~grainforge.analysis.descriptors.describe`.
+
+    Parameters
+    ----------
+    path : str or Path
+        A mesh file in mm.
+    **options
+        Passed to :func:`analyse_mesh`.
+
+    Returns
+    -------
+    list of dict
+        One row per grain (``file``, ``body``, ``bodies``, ``faces``, ``flags`` and the descriptors).
+
+    Raises
+    ------
+    ValueError
+        As :func:`read_bodies`.
 
     Examples
     --------
@@ -204,6 +270,19 @@ def solid_grain(path: str | Path, *, mm: bool = False) -> tuple[np.ndarray, np.n
     or overlapping bodies, or a body that is open, inverted or not a solid is
     refused.  (``dem`` and ``simulate`` read their grain files with it: a DEM
     grain is one solid, without a void.)
+
+    Parameters
+    ----------
+    path : str or Path
+        A mesh file.
+    mm : bool, default False
+        The file is in millimetres: refuse a body of no grain's size.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+        The one body, outward.
 
     Raises
     ------

@@ -36,7 +36,20 @@ __all__ = ["radii_along", "vertex_areas", "small_scale_relief", "interpolate_at"
 
 
 def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
-    """One third of the area of the faces around each vertex."""
+    """One third of the area of the faces around each vertex.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    (V,) float64
+        In the square of the vertices' unit; they sum to the surface area.
+    """
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces)
     t = v[f]
@@ -46,6 +59,22 @@ def vertex_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 def radii_along(vertices: np.ndarray, faces: np.ndarray, directions: np.ndarray, centre=None) -> np.ndarray:
     """Distance from ``centre`` (default: volume centroid) to the farthest crossing along each ray.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    directions : (N, 3) array_like of float
+        Ray directions (normalised here).
+    centre : (3,) array_like of float, optional
+        Where the radii and angles are measured from (default: the volume centroid).
+
+    Returns
+    -------
+    (N,) float64
+        In the vertices' unit; NaN where a ray meets nothing.
 
     Examples
     --------
@@ -76,6 +105,22 @@ def small_scale_relief(vertices, faces, sigma: float = 0.05, centre=None) -> np.
 
     G_σ∗r is the area-weighted Gaussian average of r over the vertices within
     3σ of angular distance, weight exp(−δ²/2σ²).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    sigma : float, default 0.05
+        Smoothing width, radians of angular distance.
+    centre : (3,) array_like of float, optional
+        Where the radii and angles are measured from (default: the volume centroid).
+
+    Returns
+    -------
+    (V,) float64
+        Dimensionless (relative to the area-weighted mean radius).
     """
     from scipy.spatial import cKDTree
 
@@ -94,18 +139,35 @@ def small_scale_relief(vertices, faces, sigma: float = 0.05, centre=None) -> np.
     return (r - smooth) / np.average(r, weights=w)
 
 
-def interpolate_at(vertices, faces, values, directions, centre=None) -> np.ndarray:
+def interpolate_at(vertices, faces, *, values, directions, centre=None) -> np.ndarray:
     """``values`` (per vertex) at ``directions``: barycentric on the face the ray from ``centre`` crosses.
 
     Candidate faces are the 16 whose centre directions are nearest; the first
     whose cone (spanned by its vertex directions) contains the ray is used.
     NaN where none does (a mesh not star-shaped about the centre).
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    values : (V,) array_like of float
+        One value per vertex.
+    directions : (N, 3) array_like of float
+        Ray directions (normalised here).
+    centre : (3,) array_like of float, optional
+        Where the radii and angles are measured from (default: the volume centroid).
+
+    Returns
+    -------
+    (N,) float64
+
     Examples
     --------
     >>> import trimesh
     >>> s = trimesh.creation.icosphere(3)
-    >>> x = interpolate_at(s.vertices, s.faces, s.vertices[:, 0], [[1.0, 0.2, 0.1]])
+    >>> x = interpolate_at(s.vertices, s.faces, values=s.vertices[:, 0], directions=[[1.0, 0.2, 0.1]])
     >>> bool(abs(x[0] - 1 / np.sqrt(1.05)) < 0.01)
     True
     """
@@ -140,13 +202,30 @@ def interpolate_at(vertices, faces, values, directions, centre=None) -> np.ndarr
 
 
 def ring(polar: float, n: int = 720) -> np.ndarray:
-    """``n`` unit vectors at polar angle ``polar`` (from +z), evenly spaced in azimuth."""
+    """``n`` unit vectors at polar angle ``polar`` (from +z), evenly spaced in azimuth.
+
+    Parameters
+    ----------
+    polar : float
+        Polar angle from +z, radians.
+    n : int, default 720
+        Number of vectors.
+
+    Returns
+    -------
+    (n, 3) float64
+
+    Examples
+    --------
+    >>> np.round(ring(np.pi / 2, 4), 12).tolist()[:2]
+    [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0]]
+    """
     t = 2.0 * np.pi * np.arange(n) / n
     s = np.sin(polar)
     return np.column_stack([s * np.cos(t), s * np.sin(t), np.full(n, np.cos(polar))])
 
 
-def mirror_correlation(vertices, faces, polar: float, deltas, n: int = 720, sigma: float = 0.05,
+def mirror_correlation(vertices, faces, *, polar: float, deltas, n: int = 720, sigma: float = 0.05,
                        centre=None) -> np.ndarray:
     """Correlation over azimuth of the small-scale relief at ``polar − δ`` and ``polar + δ``, for each δ.
 
@@ -155,13 +234,35 @@ def mirror_correlation(vertices, faces, polar: float, deltas, n: int = 720, sigm
     around; pass that point (for FSO, the origin of ``fso.build``'s vertices,
     before the grain is centred) to find it at small δ.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    polar : float
+        The circle of the suspected mirror plane, radians from +z (π/2: the equator).
+    deltas : float or sequence of float
+        Offsets δ from it, radians.
+    n : int, default 720
+        Azimuths sampled.
+    sigma : float, default 0.05
+        Width of the relief's smoothing (:func:`small_scale_relief`), radians.
+    centre : (3,) array_like of float, optional
+        Where the radii and angles are measured from (default: the volume centroid).
+
+    Returns
+    -------
+    (len(deltas),) float64
+        Pearson correlations, in [−1, 1].
+
     Examples
     --------
     >>> import trimesh
     >>> s = trimesh.creation.icosphere(5)
     >>> z = s.vertices[:, 2:]
     >>> v = s.vertices * (1 + 0.02 * np.cos(40 * z ** 2) * np.cos(20 * s.vertices[:, :1]))  # even in z
-    >>> float(mirror_correlation(v, s.faces, np.pi / 2, [0.1], n=360)[0]) > 0.95
+    >>> float(mirror_correlation(v, s.faces, polar=np.pi / 2, deltas=[0.1], n=360)[0]) > 0.95
     True
     """
     deltas = np.atleast_1d(np.asarray(deltas, dtype=np.float64))
@@ -169,14 +270,40 @@ def mirror_correlation(vertices, faces, polar: float, deltas, n: int = 720, sigm
     c = volume_centroid(v, np.asarray(faces)) if centre is None else np.asarray(centre, dtype=np.float64)
     h = small_scale_relief(v, faces, sigma, centre=c)
     dirs = np.vstack([ring(polar + s * d, n) for d in deltas for s in (-1.0, 1.0)])
-    x = interpolate_at(v, faces, h, dirs, centre=c).reshape(len(deltas), 2, n)
+    x = interpolate_at(v, faces, values=h, directions=dirs, centre=c).reshape(len(deltas), 2, n)
     return np.array([np.corrcoef(a, b)[0, 1] for a, b in x])
 
 
-def cap_band_rms(vertices, faces, cap: float = 0.3, band: float = 0.15, centre=None) -> tuple[float, float]:
+def cap_band_rms(vertices, faces, *, cap: float = 0.3, band: float = 0.15, centre=None) -> tuple[float, float]:
     """Area-weighted RMS of r/r̄ − 1 at vertices within ``cap`` rad of either pole, and within
     ``band`` rad of the equator (r̄: area-weighted mean radius; angles from ``centre``, default
-    the volume centroid)."""
+    the volume centroid).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    cap : float, default 0.3
+        Half-angle of the polar caps, radians.
+    band : float, default 0.15
+        Half-width of the equatorial band, radians.
+    centre : (3,) array_like of float, optional
+        Where the radii and angles are measured from (default: the volume centroid).
+
+    Returns
+    -------
+    caps, band : float
+        Dimensionless RMS values.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> s = trimesh.creation.icosphere(3)
+    >>> [round(x, 9) for x in cap_band_rms(s.vertices, s.faces)]
+    [0.0, 0.0]
+    """
     v = np.asarray(vertices, dtype=np.float64)
     c = volume_centroid(v, np.asarray(faces)) if centre is None else np.asarray(centre, dtype=np.float64)
     u, r = radial_function(v, c)
@@ -189,7 +316,8 @@ def cap_band_rms(vertices, faces, cap: float = 0.3, band: float = 0.15, centre=N
     return rms[0], rms[1]
 
 
-def separable_share(vertices, faces, sigma: float = 0.1, n_theta: int = 64, n_psi: int = 128, centre=None) -> float:
+def separable_share(vertices, faces, *, sigma: float = 0.1, n_theta: int = 64, n_psi: int = 128,
+                    centre=None) -> float:
     """Share of the variance of the small-scale relief explained by f(θ) + g(ψ).
 
     θ = angle from +x, ψ = azimuth about x, from ``centre`` (default the
@@ -199,6 +327,24 @@ def separable_share(vertices, faces, sigma: float = 0.1, n_theta: int = 64, n_ps
     surface gives a small share (the row and column means of a finite grid
     are never exactly zero); relief made of rings about x plus meridional
     ridges gives a large one.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    sigma : float, default 0.1
+        Width of the relief's smoothing, radians.
+    n_theta, n_psi : int, default 64, 128
+        Grid size in θ and ψ.
+    centre : (3,) array_like of float, optional
+        Where the radii and angles are measured from (default: the volume centroid).
+
+    Returns
+    -------
+    float
+        1 − var(residual)/var(relief), in [0, 1].
     """
     v = np.asarray(vertices, dtype=np.float64)
     c = volume_centroid(v, np.asarray(faces)) if centre is None else np.asarray(centre, dtype=np.float64)
@@ -207,7 +353,7 @@ def separable_share(vertices, faces, sigma: float = 0.1, n_theta: int = 64, n_ps
     p = 2 * np.pi * np.arange(n_psi) / n_psi
     T, P = np.meshgrid(t, p, indexing="ij")
     d = np.column_stack([np.cos(T).ravel(), (np.sin(T) * np.cos(P)).ravel(), (np.sin(T) * np.sin(P)).ravel()])
-    H = interpolate_at(v, faces, h, d, centre=c).reshape(n_theta, n_psi)
+    H = interpolate_at(v, faces, values=h, directions=d, centre=c).reshape(n_theta, n_psi)
     H = H - H.mean()
     fit = H.mean(axis=1, keepdims=True) + H.mean(axis=0, keepdims=True)
     return float(1.0 - np.var(H - fit) / np.var(H))

@@ -94,12 +94,34 @@ class LabelBox:
         return int(np.prod(np.subtract(self.hi, self.lo), dtype=np.int64))
 
     def touches(self, shape) -> bool:
-        """Whether the box reaches a face of an image of ``shape``."""
+        """Whether the box reaches a face of an image of ``shape``.
+
+        Parameters
+        ----------
+        shape : (3,) sequence of int
+            The image's (Z, Y, X).
+
+        Returns
+        -------
+        bool
+        """
         return min(self.lo) == 0 or any(h == s for h, s in zip(self.hi, shape))
 
 
 def check_labels(dtype, path: str = "the image") -> None:
     """Refuse an image whose values cannot be labels: floats (a greyscale or a probability map), complex.
+
+    Parameters
+    ----------
+    dtype : numpy dtype or dtype-like
+        The image's.
+    path : str, default "the image"
+        How the message names the image.
+
+    Raises
+    ------
+    ValueError
+        For a float, complex or non-numeric dtype.
 
     Examples
     --------
@@ -193,6 +215,21 @@ def measure_grain(mask: np.ndarray, voxel_size: float, *, convention: str = "atl
     :func:`~grainforge.analysis.atlas.voxel_descriptors` and the opening fraction at a ball of
     :data:`~grainforge.analysis.atlas.OPENING_RADIUS` times the grain's equivalent diameter (here the voxel
     image's own, a scan having no mesh).
+
+    Parameters
+    ----------
+    mask : (Z, Y, X) array_like of bool
+        The grain's voxels.
+    voxel_size : float
+        Voxel edge, in the unit wanted for lengths.
+    convention : {"atlas", "whole"}, default "atlas"
+        True sphericity's convention (:func:`~grainforge.analysis.atlas.voxel_descriptors`).
+
+    Returns
+    -------
+    dict of str to float
+        :func:`~grainforge.analysis.atlas.voxel_descriptors`' values, ``voxel_size``, ``voxels_across`` and
+        ``opening_fraction``.
 
     Examples
     --------
@@ -311,14 +348,34 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
                            preload=["grainforge.analysis.scan"])
 
 
-def scan_memory(boxes: Iterable[LabelBox], volume_shape, itemsize: int, *, min_voxels: int = MIN_VOXELS,
+def scan_memory(boxes: Iterable[LabelBox], volume_shape, *, itemsize: int, min_voxels: int = MIN_VOXELS,
                 border: bool = False, workers: int = 1) -> float:
     """Bytes :func:`measure_labels` needs at most: the largest measured box (in each worker, and a few queued),
     and the slices of the tallest.
 
+    Parameters
+    ----------
+    boxes : iterable of LabelBox
+        From :func:`label_boxes`.
+    volume_shape : (3,) sequence of int
+        The image's (Z, Y, X).
+    itemsize : int
+        Bytes per voxel of the image.
+    min_voxels : int, default MIN_VOXELS
+        As :func:`measure_labels`.
+    border : bool, default False
+        As :func:`measure_labels`.
+    workers : int, default 1
+        As :func:`measure_labels`.
+
+    Returns
+    -------
+    float
+        Bytes.
+
     Examples
     --------
-    >>> scan_memory([LabelBox(1, (2, 2, 2), (12, 12, 12), 700)], (100, 100, 100), 2)
+    >>> scan_memory([LabelBox(1, (2, 2, 2), (12, 12, 12), 700)], (100, 100, 100), itemsize=2)
     2090000.0
     """
     shape = tuple(volume_shape)
@@ -340,6 +397,18 @@ def typical_diameter(distance: np.ndarray, binary: np.ndarray) -> float:
 
     A ball of radius R has a mean distance to its surface of R/4 over its volume, so this is the diameter of
     balls whose voxels lie, on average, as deep as the image's.
+
+    Parameters
+    ----------
+    distance : (Z, Y, X) ndarray of float
+        Distance of each voxel to the void, in voxels (a Euclidean distance transform).
+    binary : (Z, Y, X) ndarray of bool
+        The grains' voxels.
+
+    Returns
+    -------
+    float
+        Voxels (0 for an image without grain voxels).
 
     Examples
     --------
@@ -442,6 +511,22 @@ def compare_labels(truth: np.ndarray, found: np.ndarray, *, share: float = 0.5, 
     voxels that hold no true grain's majority and are not mostly one true grain (smaller ones are the
     ``small`` labels :func:`measure_labels` counts apart).
 
+    Parameters
+    ----------
+    truth : array_like of int
+        Known labels (0 the void).
+    found : array_like of int
+        Segmented labels, same shape.
+    share : float, default 0.5
+        The majority that counts as holding a grain.
+    min_voxels : int, default 0
+        Smallest segmented label counted as ``spurious``.
+
+    Returns
+    -------
+    dict of str to int
+        ``truth``, ``segmented``, ``found``, ``merged``, ``split``, ``missed``, ``spurious``.
+
     Examples
     --------
     >>> t = np.array([[[1, 1, 2, 2, 3, 3]]])
@@ -500,6 +585,17 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
     middle and first axes, voxel centres at ``voxel_size·(index + ½)`` with ``lo`` the mask's first voxel in the
     image.  Where the surface has several bodies (a label in several pieces), the largest by volume is kept.
 
+    Parameters
+    ----------
+    mask : (Z, Y, X) array_like of bool
+        The grain's voxels (a crop of the image).
+    lo : (3,) sequence of int, default (0, 0, 0)
+        The crop's first voxel in the image, (z, y, x).
+    voxel_size : float, default 1.0
+        Voxel edge, in the unit wanted for the mesh.
+    sigma : float, default SIGMA
+        Gaussian smoothing, voxels (0: none).
+
     Returns
     -------
     vertices : (V, 3) float64
@@ -507,6 +603,11 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
         Outward-oriented.
     dropped : int
         Bodies left out (0 for a grain in one piece).
+
+    Raises
+    ------
+    ValueError
+        If the smoothed mask has no surface.
 
     Examples
     --------

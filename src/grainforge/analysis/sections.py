@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..rng import RNGLike, as_generator
 from .fourier import FD_ORDERS, N_RAYS, _outline_radii, _polygon_area_centroid_of_radii, descriptors_from_radii
 
 __all__ = ["plane_basis", "section_radii", "section_descriptors", "principal_section_descriptors",
@@ -40,6 +41,16 @@ CENTROID_RAYS = 1024
 
 def plane_basis(normal) -> np.ndarray:
     """Two orthonormal in-plane axes (rows) for a plane with ``normal`` (right-handed with it).
+
+    Parameters
+    ----------
+    normal : (3,) array_like of float
+        The plane's normal (any non-zero length).
+
+    Returns
+    -------
+    (2, 3) float64
+        e1, e2 with e1 × e2 along the normal.
 
     Examples
     --------
@@ -64,7 +75,7 @@ def _trimesh(mesh):
                            process=False)
 
 
-def section_radii(mesh, normal, origin=None, n_rays: int = N_RAYS, *, outline: str = "segments",
+def section_radii(mesh, normal, *, origin=None, n_rays: int = N_RAYS, outline: str = "segments",
                   basis=None) -> tuple[np.ndarray, np.ndarray]:
     """Radii of the section through ``origin`` with ``normal``, from the outline's area centroid.
 
@@ -146,11 +157,35 @@ def _loop_contour(mesh, normal, origin, basis, n_rays):
     raise ValueError("no closed outline around the centroid in the section")
 
 
-def section_descriptors(mesh, normal, origin=None, orders=FD_ORDERS, n_rays: int = N_RAYS, *,
+def section_descriptors(mesh, normal, *, origin=None, orders=FD_ORDERS, n_rays: int = N_RAYS,
                         outline: str = "segments") -> np.ndarray:
     """D_n (for ``orders``) of the section through ``origin`` (default the volume centroid) with ``normal``.
 
     ``mesh``, ``outline`` as in :func:`section_radii`.
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh, Grain or anything with ``vertices`` and ``faces``
+        A closed mesh.
+    normal : (3,) array_like of float
+        The plane's normal.
+    origin : (3,) array_like of float, optional
+        A point of the plane (default: the volume centroid).
+    orders : sequence of int, default FD_ORDERS
+        The orders n.
+    n_rays : int, default N_RAYS
+        Rays from the outline's area centroid.
+    outline : {"segments", "loop"}, default "segments"
+        As :func:`section_radii`.
+
+    Returns
+    -------
+    (len(orders),) float64
+
+    Raises
+    ------
+    ValueError
+        As :func:`section_radii`.
 
     Examples
     --------
@@ -161,7 +196,7 @@ def section_descriptors(mesh, normal, origin=None, orders=FD_ORDERS, n_rays: int
     >>> np.round(d, 3).tolist()  # a 2:1 ellipse: D2 = 0.338, D3 = 0
     [0.338, 0.0]
     """
-    r, _ = section_radii(mesh, normal, origin, n_rays, outline=outline)
+    r, _ = section_radii(mesh, normal, origin=origin, n_rays=n_rays, outline=outline)
     return descriptors_from_radii(r, orders)
 
 
@@ -171,6 +206,19 @@ def principal_section_descriptors(mesh, orders=(2, 3, 8), n_rays: int = 256) -> 
     Rows: ⊥ the longest, the intermediate, the shortest axis; ``"loop"``
     outlines (what a thin section or a cut would show, measured with no
     knowledge of how the grain was made).
+
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh, Grain or anything with ``vertices`` and ``faces``
+        A closed mesh.
+    orders : sequence of int, default (2, 3, 8)
+        The orders n.
+    n_rays : int, default 256
+        Rays per section.
+
+    Returns
+    -------
+    (3, len(orders)) float64
 
     Examples
     --------
@@ -186,14 +234,25 @@ def principal_section_descriptors(mesh, orders=(2, 3, 8), n_rays: int = 256) -> 
     axes = vec.T  # smallest moment first: the longest axis
     rows = []
     for k in range(3):
-        r, _ = section_radii(mesh, axes[k], centre, n_rays, outline="loop",
+        r, _ = section_radii(mesh, axes[k], origin=centre, n_rays=n_rays, outline="loop",
                              basis=np.stack([axes[(k + 1) % 3], axes[(k + 2) % 3]]))
         rows.append(descriptors_from_radii(r, orders))
     return np.array(rows)
 
 
-def random_normals(count: int, rng=None) -> np.ndarray:
+def random_normals(count: int, rng: RNGLike = None) -> np.ndarray:
     """``count`` unit vectors uniform on the sphere (normalised Gaussian triples).
+
+    Parameters
+    ----------
+    count : int
+        Number of vectors.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        Normalised by :func:`grainforge.rng.as_generator`; 3·count normal draws.
+
+    Returns
+    -------
+    (count, 3) float64
 
     Examples
     --------
@@ -201,5 +260,5 @@ def random_normals(count: int, rng=None) -> np.ndarray:
     >>> n.shape, np.allclose(np.linalg.norm(n, axis=1), 1.0)
     ((4, 3), True)
     """
-    g = np.random.default_rng(rng).standard_normal((int(count), 3))
+    g = as_generator(rng).standard_normal((int(count), 3))
     return g / np.linalg.norm(g, axis=1, keepdims=True)

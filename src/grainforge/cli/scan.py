@@ -133,7 +133,7 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
                                f"image's faces (--keep-border measures them), {n_small} are under --min-voxels "
                                f"{min_voxels}")
     try:
-        check_memory(sc.scan_memory(boxes, volume.shape, volume.dtype.itemsize, min_voxels=min_voxels,
+        check_memory(sc.scan_memory(boxes, volume.shape, itemsize=volume.dtype.itemsize, min_voxels=min_voxels,
                                     border=keep_border, workers=n_workers), what="measuring the largest grain",
                      option="--workers, or the image (its largest label's box is too large)")
     except TooLargeError as exc:

@@ -193,7 +193,8 @@ class Aggregate:
             _, first = np.unique(pts, axis=0, return_index=True)
             first = np.sort(first)
             pts, owner = pts[first], owner[first]
-        return aggregate_measures(pts, self.centres, float(self.primaries), self.solid.gyration2, owner)
+        return aggregate_measures(pts, self.centres, volume=float(self.primaries),
+                                  primary_gyration2=self.solid.gyration2, owner=owner)
 
 
 def _aggregate_cubes(n_total: int, exponent: float, rng: np.random.Generator) -> np.ndarray:
