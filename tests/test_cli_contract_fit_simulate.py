@@ -38,6 +38,7 @@ from pathlib import Path
 import click
 import pytest
 from _processes import kill_sessions, session_processes
+from conftest import require_engine
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
@@ -453,16 +454,6 @@ def test_signal_before_yade_starts_is_honoured(sim_dir, inputs, sig, delay):
     assert list(work.iterdir()) == []
 
 
-def require_yade() -> None:
-    import shutil
-
-    if shutil.which("yade") is None:
-        reason = "yade not installed (apt-get install yade python3-yade)"
-        if os.environ.get("GRAINFORGE_REQUIRE_ENGINES") == "1":
-            pytest.fail(reason + " but GRAINFORGE_REQUIRE_ENGINES=1")
-        pytest.skip(reason)
-
-
 def _wait_for_yade(work: Path, proc: subprocess.Popen) -> None:
     deadline = time.monotonic() + 120
     while not _processes_in(work):
@@ -479,7 +470,7 @@ def _wait_for_yade(work: Path, proc: subprocess.Popen) -> None:
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
 @pytest.mark.slow  # runs Yade
 def test_signal_while_yade_runs_kills_it_and_leaves_nothing(tmp_path, inputs, sig, command):
-    require_yade()
+    require_engine("yade")
     work = tmp_path / "work"
     work.mkdir()
     proc = _start(["simulate", *command[:2 if command[0] == "calibrate" else 1], str(inputs / "ang"),
@@ -493,7 +484,7 @@ def test_signal_while_yade_runs_kills_it_and_leaves_nothing(tmp_path, inputs, si
 
 @pytest.mark.slow  # runs Yade
 def test_sigkill_while_yade_runs_leaves_nothing_that_blocks_the_rerun(tmp_path, inputs):
-    require_yade()
+    require_engine("yade")
     work = tmp_path / "work"
     work.mkdir()
     args = ["simulate", "repose", str(inputs / "ang"), "--quick", "--out", "o"]

@@ -13,6 +13,7 @@ import shutil
 
 import numpy as np
 import pytest
+from conftest import require_engine
 
 from grainforge.cli.main import cli
 from grainforge.params import ParameterError
@@ -122,8 +123,7 @@ def test_a_folder_without_grains_is_refused(runner, tmp_path):
 
 
 def test_a_mesh_yade_cannot_load_is_refused(runner, tmp_path):
-    if shutil.which("yade") is None:
-        pytest.skip("the refusal comes after the Yade check; Yade not installed")
+    require_engine("yade")
     bad = tmp_path / "open.stl"
     import trimesh
 
@@ -135,16 +135,10 @@ def test_a_mesh_yade_cannot_load_is_refused(runner, tmp_path):
     assert not (tmp_path / "sim").exists()
 
 
-def require_yade():
-    from conftest import require_engine
-
-    require_engine("yade", "yade python3-yade")
-
-
 @pytest.mark.slow
 @pytest.mark.parametrize("test", ["repose", "tilt"])
 def test_quick_run_in_yade(runner, grains, tmp_path, test):
-    require_yade()
+    require_engine("yade")
     out = tmp_path / test
     r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick"])
     rows = list(csv.DictReader((out / "results.csv").read_text().splitlines()))
@@ -229,7 +223,7 @@ def test_a_level_set_tilt_too_narrow_for_yades_periodic_cell_is_refused(runner, 
 @pytest.mark.slow
 def test_quick_level_set_tilt_in_yade(runner, grains, tmp_path):
     """A level-set tilt completes: the fewest grains --quick allows, a coarse grid, few tilt steps (minutes)."""
-    require_yade()
+    require_engine("yade")
     out = tmp_path / "ls"
     r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--quick", "--shape", "levelset",
                             "--spacing", "0.15", "--templates", "2", "--tilt-start", "30", "--tilt-step", "5",

@@ -31,10 +31,6 @@ ARGS = ["--quick", "--seeds", "2"]
 ENGINE_LOG = "yade.log"
 
 
-def require_yade():
-    require_engine("yade", "yade python3-yade")
-
-
 def tree(folder: Path) -> dict[str, bytes]:
     """Every file under ``folder`` (hidden ones too) by relative path; an engine log by presence only."""
     return {str(p.relative_to(folder)): b"" if p.name == ENGINE_LOG else p.read_bytes()
@@ -57,7 +53,7 @@ def local(grains, tmp_path_factory) -> Path:
     """The uninterrupted local sweep: the reference of every other run here."""
     from click.testing import CliRunner
 
-    require_yade()
+    require_engine("yade")
     out = tmp_path_factory.mktemp("local") / "sim"
     r = CliRunner().invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS, "--workers", "1"])
     assert r.exit_code in (0, 3), r.output  # 3: a quick heap may be too flat to measure (the files are written)
@@ -165,7 +161,7 @@ class _LosingExecutor:
 
 
 def test_a_scheduler_lost_mid_run_is_one_line_and_keeps_the_finished_runs(grains, runner, tmp_path, monkeypatch):
-    require_yade()
+    require_engine("yade")
     import grainforge.cli.simulate as simulate_cli
 
     monkeypatch.setattr(simulate_cli, "cluster_executor", lambda address: _LosingExecutor())
@@ -184,7 +180,7 @@ def test_an_interrupted_calibration_resumes_from_its_finished_friction_seed_runs
     """Each friction tried is a set of runs: the (friction, seed) runs finished before the interrupt are reused."""
     from _processes import kill_sessions
 
-    require_yade()
+    require_engine("yade")
     args = ["simulate", "calibrate", "tilt", str(grains), "--target-angle", "30", "--quick", "--max-frictions", "2",
             "--workers", "1"]
     ref = runner.invoke(cli, [*args, "--out", str(tmp_path / "ref")])

@@ -237,13 +237,9 @@ def test_simulate_chooses_from_a_recipe_pool_and_from_files(population):
     assert b.measured == 0 and len(b.picks) == 5 and all(Path(p).parent == population / "grains" for p in b.picks)
 
 
-def require_yade():
-    require_engine("yade")
-
-
 @pytest.mark.slow  # a quick Yade run
 def test_simulate_prints_the_ks_line_and_writes_templates_csv(runner, population, tmp_path):
-    require_yade()
+    require_engine("yade")
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "repose", str(population / "grains"), "--out", str(out), "--quick",
                             "--templates", "8"])

@@ -99,7 +99,8 @@ def _folder_meshes(folder: Path) -> list[Path]:
     found = sorted(q for q in folder.iterdir()
                    if q.suffix.lower() in MESH_SUFFIXES and not q.name.startswith(".") and q.is_file())
     if not found:
-        raise ValueError(f"{folder} is a folder without mesh files ({', '.join(MESH_SUFFIXES)}) or {MANIFEST}")
+        raise ValueError(f"{folder}: no grain files (no mesh file {', '.join(MESH_SUFFIXES)} and no {MANIFEST} in "
+                         "the folder)")
     return found
 
 
