@@ -446,6 +446,22 @@ def _lens_loss(r1, r, d):
 _CHUNK = 256
 
 
+def _exact_gain(c, r, ci, h, axes, shape, u_in, u_out, spill_weight):
+    """A candidate sphere's exact gain on the grid: uncovered inside cells it covers less ``spill_weight`` times
+    the uncovered outside ones; with its block of cells (its cell ± ceil(r/h) + 1, one more above, clipped to
+    the grid) as a mask and the block's bounds ``lo``, ``hi``."""
+    reach_cells = int(np.ceil(r / h))
+    lo = [max(ci[k] - reach_cells - 1, 0) for k in range(3)]
+    hi = [min(ci[k] + reach_cells + 2, shape[k]) for k in range(3)]
+    dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
+    dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
+    dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
+    blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
+    box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
+    gain = np.count_nonzero(blk & u_in[box]) - spill_weight * np.count_nonzero(blk & u_out[box])
+    return gain, blk, lo, hi
+
+
 def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weight, growth=0.0):
     """Greedy spheres on the working grid.
 
@@ -544,19 +560,8 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
             if t in known:
                 gain, blk, lo, hi = known[t]
             else:
-                c, r = cp[t // twins], cr[t]
-                # the candidate's block: its cell ± ceil(r/h) + 1 (one more above), clipped to the grid
-                reach_cells = int(np.ceil(r / h))
-                ci = cidx[t // twins].tolist()
-                lo = [max(ci[k] - reach_cells - 1, 0) for k in range(3)]
-                hi = [min(ci[k] + reach_cells + 2, shape[k]) for k in range(3)]
-                dx = (axes[0][lo[0]:hi[0]] - c[0]) ** 2
-                dy = (axes[1][lo[1]:hi[1]] - c[1]) ** 2
-                dz = (axes[2][lo[2]:hi[2]] - c[2]) ** 2
-                blk = dx[:, None, None] + dy[None, :, None] + dz[None, None, :] <= r * r
-                box = (slice(lo[0], hi[0]), slice(lo[1], hi[1]), slice(lo[2], hi[2]))
-                gain = np.count_nonzero(blk & u_in[box]) - spill_weight * np.count_nonzero(blk & u_out[box])
-                known[t] = (gain, blk, lo, hi)
+                known[t] = gain, blk, lo, hi = _exact_gain(cp[t // twins], cr[t], cidx[t // twins].tolist(), h, axes,
+                                                           shape, u_in, u_out, spill_weight)
             if gain > best_gain:
                 best, best_gain, best_blk, best_lo, best_hi = t, gain, blk, lo, hi
         if best_gain <= 0:
