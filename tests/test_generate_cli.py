@@ -170,7 +170,8 @@ def test_printer_matches_resolution_and_records_it(runner, tmp_path):
     assert res.exit_code == 0, res.output
     assert "resolution matching (generic-fdm" in res.output
     row = read_manifest(tmp_path)[0]
-    expected = match_subdivisions("fso", Params(), 10.0, "equivalent", "generic-fdm", [0, 1])
+    expected = match_subdivisions("fso", Params(), size=10.0, size_definition="equivalent", printer="generic-fdm",
+                                  seeds=[0, 1])
     assert int(row["subdivisions"]) == expected.subdivisions
     assert row["printer"] == "generic-fdm"
     assert float(row["chordal_deviation_mm"]) == pytest.approx(expected.deviation)

@@ -85,7 +85,7 @@ def test_matching_a_sphere_follows_the_sagitta_rule():
     # a sphere of radius R: the level whose largest sagitta is <= res/2
     p = FsoParams(amplitude=0.0)
     for size, printer in [(2.0, "objet-eden-250"), (20.0, "objet-eden-250"), (2.0, "generic-fdm")]:
-        r = match_subdivisions("fso", p, size, "equivalent", printer, [0])
+        r = match_subdivisions("fso", p, size=size, size_definition="equivalent", printer=printer, seeds=[0])
         tol = get_printer(printer).resolution / 2
         assert r.converged and r.deviation <= tol and r.limited_by == "tolerance"
         if r.subdivisions > 0:  # the next coarser level would not do
@@ -96,12 +96,14 @@ def test_matching_a_sphere_follows_the_sagitta_rule():
 
 def test_finer_printer_or_bigger_grain_needs_finer_mesh():
     p = FsoParams(amplitude=0.05, length_ratio=7, frequencies=8)
-    levels = [match_subdivisions("fso", p, s, "equivalent", "objet-eden-250", [0, 1]).subdivisions for s in (1, 4, 16)]
+    levels = [match_subdivisions("fso", p, size=s, size_definition="equivalent", printer="objet-eden-250",
+                                 seeds=[0, 1]).subdivisions for s in (1, 4, 16)]
     assert levels == sorted(levels) and levels[0] < levels[-1]
 
 
 def test_triangle_budget_caps_the_level():
-    r = match_subdivisions("fso", FsoParams(amplitude=0.0), 20.0, "equivalent", "objet-eden-250", [0], max_faces=400)
+    r = match_subdivisions("fso", FsoParams(amplitude=0.0), size=20.0, size_definition="equivalent",
+                           printer="objet-eden-250", seeds=[0], max_faces=400)
     assert r.subdivisions == 2 and not r.converged and r.limited_by == "budget"
     assert r.deviation > r.tolerance
     assert "budget" in r.describe()
@@ -109,4 +111,5 @@ def test_triangle_budget_caps_the_level():
 
 def test_matching_needs_pilot_seeds():
     with pytest.raises(ValueError, match="at least one pilot seed"):
-        match_subdivisions("fso", FsoParams(), 2.0, "equivalent", "objet-eden-250", [])
+        match_subdivisions("fso", FsoParams(), size=2.0, size_definition="equivalent", printer="objet-eden-250",
+                           seeds=[])

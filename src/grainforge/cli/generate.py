@@ -97,7 +97,8 @@ def _match_resolution(method, params, seeds, size, size_definition, printer):
 
     from ..fabrication.resolution import match_subdivisions
 
-    res = match_subdivisions(method, params, size, size_definition, printer, seeds[:3])
+    res = match_subdivisions(method, params, size=size, size_definition=size_definition, printer=printer,
+                             seeds=seeds[:3])
     click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): {res.describe()}", err=True)
     warning = res.shape_warning(size)
     if warning is not None:

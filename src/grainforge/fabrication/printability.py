@@ -38,6 +38,7 @@ from typing import Any
 import numpy as np
 
 from ..geometry.solid import moller_trumbore
+from ..rng import as_generator
 
 __all__ = ["CheckResult", "check_mesh", "equivalent_diameter", "TriangleGrid", "triangle_grid", "local_thickness", "self_intersections", "THIN_AREA_LIMIT", "NECK_FACTOR"]
 
@@ -85,6 +86,14 @@ class CheckResult:
         return "FAIL" if self.failures else ("WARN" if self.warnings else "OK")
 
     def row(self) -> dict[str, Any]:
+        """The part's row of ``grainforge check``'s table.
+
+        Returns
+        -------
+        dict
+            ``part``, ``status``, ``faces``, ``d_eq_mm``, ``solid``, ``self_intersections``, the wall and neck
+            columns (mm), ``thin_area_%`` and ``problems``.
+        """
         return {
             "part": self.name, "status": self.status, "faces": self.faces,
             "d_eq_mm": round(self.equivalent_diameter, 4),
@@ -111,6 +120,17 @@ def self_intersections(vertices: np.ndarray, faces: np.ndarray) -> int:
     """Number of self-intersecting triangle pairs of the mesh as written (float32, vertices merged).
 
     The same test as the solid contract (:func:`grainforge.geometry.solid.self_intersections`).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions, mm.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    int
 
     Examples
     --------
@@ -170,7 +190,7 @@ def local_thickness(mesh, max_rays: int = MAX_RAYS, max_distance: float | None =
     if len(usable) <= max_rays:
         idx = usable
     else:
-        rng = np.random.default_rng(0)
+        rng = as_generator(0)  # a fixed sample: the same faces every run
         idx = np.sort(rng.choice(usable, size=max_rays, replace=False, p=area[usable] / area[usable].sum()))
     normals = np.asarray(mesh.face_normals)[idx]
     scale = float(np.ptp(mesh.vertices, axis=0).max())
@@ -221,7 +241,17 @@ class TriangleGrid:
         return len(self.owner)
 
     def cell_of(self, points: np.ndarray) -> np.ndarray:
-        """Integer cell coordinates of ``points`` (not clipped to the grid)."""
+        """Integer cell coordinates of ``points`` (not clipped to the grid).
+
+        Parameters
+        ----------
+        points : (n, 3) ndarray of float
+            Points, in the triangles' unit.
+
+        Returns
+        -------
+        (n, 3) int64
+        """
         return np.floor((points - self.origin) / self.cell).astype(np.int64)
 
 
@@ -233,6 +263,17 @@ def triangle_grid(tri: np.ndarray, max_entries: int | None = None) -> TriangleGr
     entries fit ``max_entries`` (default :data:`GRID_ENTRIES_PER_FACE` per
     triangle plus 1000; never less than one per triangle): a few big triangles
     cannot make the grid large.
+
+    Parameters
+    ----------
+    tri : (F, 3, 3) array_like of float
+        The triangles' corners.
+    max_entries : int, optional
+        Most (triangle, cell) entries stored (default :data:`GRID_ENTRIES_PER_FACE` · F + 1000).
+
+    Returns
+    -------
+    TriangleGrid
 
     Examples
     --------
@@ -357,6 +398,18 @@ def _short_rays(mesh, idx, origins, normals, length, eps, max_pairs: int = MAX_P
 def equivalent_diameter(vertices: np.ndarray, faces: np.ndarray) -> float:
     """Diameter of the sphere of the mesh's volume, (6|V|/π)^(1/3) (0 for no faces); cheap, so it comes first.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions, mm.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    float
+        mm.
+
     Examples
     --------
     >>> import trimesh
@@ -373,6 +426,28 @@ def equivalent_diameter(vertices: np.ndarray, faces: np.ndarray) -> float:
 
 def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "part") -> CheckResult:
     """Check one part against ``printer`` (a :class:`~grainforge.fabrication.printers.Printer` or name).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions, mm.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+    printer : Printer or str
+        A profile or its name (:func:`~grainforge.fabrication.printers.get_printer`).
+    name : str, default "part"
+        The part's name in the result.
+
+    Returns
+    -------
+    CheckResult
+        ``failures`` (too small, not a valid solid, self-intersections, larger than the build volume, thin
+        walls or necks) and ``warnings``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown printer.
 
     Examples
     --------

@@ -113,6 +113,15 @@ class Printer:
     def size_problem(self, equivalent_diameter: float) -> str | None:
         """Why a grain of this equivalent diameter (mm) will not print reliably, or None if it is large enough.
 
+        Parameters
+        ----------
+        equivalent_diameter : float
+            mm.
+
+        Returns
+        -------
+        str or None
+
         Examples
         --------
         >>> p = get_printer("generic-fdm")
@@ -127,6 +136,15 @@ class Printer:
 
     def size_warning(self, equivalent_diameters) -> str | None:
         """A warning when some grains (equivalent diameters, mm) are below :attr:`min_size`, else None.
+
+        Parameters
+        ----------
+        equivalent_diameters : array_like of float
+            One per grain, mm.
+
+        Returns
+        -------
+        str or None
 
         Examples
         --------
@@ -185,6 +203,16 @@ _KEYS = {f.name for f in fields(Printer)} - {"name", "source"}
 def load_printers(path: str | Path) -> dict[str, Printer]:
     """Read every ``[printer.NAME]`` table of a TOML file.
 
+    Parameters
+    ----------
+    path : str or Path
+        A TOML file of ``[printer.NAME]`` tables (keys: the fields of :class:`Printer`).
+
+    Returns
+    -------
+    dict of str to Printer
+        In file order.
+
     Raises
     ------
     ValueError
@@ -219,10 +247,25 @@ def load_printers(path: str | Path) -> dict[str, Printer]:
 def get_printer(spec: str | Printer) -> Printer:
     """A built-in profile by name, or a user profile as ``file.toml`` / ``file.toml#name``.
 
+    Parameters
+    ----------
+    spec : str or Printer
+        A name of :data:`PRINTERS`, ``file.toml`` (one printer) or ``file.toml#NAME``; a Printer is
+        returned as it is.
+
+    Returns
+    -------
+    Printer
+
     Raises
     ------
     ValueError
         For an unknown name or a bad profile file.
+
+    Examples
+    --------
+    >>> get_printer("generic-fdm").resolution
+    0.4
     """
     if isinstance(spec, Printer):
         return spec

@@ -73,7 +73,13 @@ class Resolution:
     limited_by: str = "tolerance"
 
     def retained_wavelength(self) -> float:
-        """The shortest surface wavelength the chosen mesh can carry, mm: two mean edges (Nyquist)."""
+        """The shortest surface wavelength the chosen mesh can carry, mm: two mean edges (Nyquist).
+
+        Returns
+        -------
+        float
+            mm.
+        """
         return 2.0 * self.edge
 
     def shape_warning(self, size: float) -> str | None:
@@ -82,6 +88,15 @@ class Resolution:
         That is when the mean edge exceeds :data:`COARSE_EDGE_FRACTION` of the
         printed ``size`` (levels 0–2 of a geodesic sphere: 12 to 162 surface
         points); the message states the detail that is kept.
+
+        Parameters
+        ----------
+        size : float
+            The printed size, mm.
+
+        Returns
+        -------
+        str or None
 
         Examples
         --------
@@ -106,6 +121,17 @@ class Resolution:
                 f"because {why}.")
 
     def describe(self) -> str:
+        """One line for the user: level, faces, mean edge and deviation against the tolerance.
+
+        Returns
+        -------
+        str
+
+        Examples
+        --------
+        >>> Resolution(4, 0.01, 0.016, 0.1, 5120, True).describe()
+        'subdivisions 4: 5120 faces, mean edge 100 µm, chordal deviation 10.0 µm ≤ 16.0 µm'
+        """
         cmp = "≤" if self.converged else f"> (level capped by the {self.limited_by})"
         return (f"subdivisions {self.subdivisions}: {self.faces} faces, mean edge {self.edge * 1000:.0f} µm, "
                 f"chordal deviation {self.deviation * 1000:.1f} µm {cmp} {self.tolerance * 1000:.1f} µm")
@@ -129,7 +155,22 @@ def _midpoint_index(level: int) -> tuple[np.ndarray, np.ndarray]:
 
 
 def supports_matching(method: str) -> bool:
-    """Whether ``method``'s Params has an icosphere ``subdivisions`` field."""
+    """Whether ``method``'s Params has an icosphere ``subdivisions`` field.
+
+    Parameters
+    ----------
+    method : str
+        A method name.
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> supports_matching("fso"), supports_matching("dpa")
+    (True, False)
+    """
     from ..methods import get
 
     return any(f.name == "subdivisions" for f in dataclasses.fields(get(method).Params))
@@ -170,11 +211,11 @@ def chordal_deviation(grain, level: int) -> float:
 def match_subdivisions(
     method: str,
     params: Any,
+    *,
     size: float,
     size_definition: str,
     printer,
     seeds: Sequence[int],
-    *,
     max_level: int = MAX_MATCHED,
     max_faces: int | None = None,
 ) -> Resolution:
@@ -193,19 +234,31 @@ def match_subdivisions(
     size : float
         Printed size in mm under ``size_definition``.
     size_definition : str
+        One of :data:`grainforge.fabrication.scale.SIZE_DEFINITIONS`.
     printer : Printer or str
+        The printer (its resolution sets the tolerance).
     seeds : sequence of int
         Pilot seeds (usually the first grains of the job).
-    max_level : int
+    max_level : int, default MAX_MATCHED
         Finest level considered.
     max_faces : int, optional
         Triangle budget per grain: levels with more faces are not considered
         (``build_tray`` passes its per-job budget divided by the grain count).
 
+    Returns
+    -------
+    Resolution
+
+    Raises
+    ------
+    ValueError
+        For a method without ``subdivisions``, no pilot seed, or an unknown printer.
+
     Examples
     --------
     >>> from grainforge.methods.fso import Params
-    >>> r = match_subdivisions("fso", Params(amplitude=0.0), 2.0, "equivalent", "objet-eden-250", [0])
+    >>> r = match_subdivisions("fso", Params(amplitude=0.0), size=2.0, size_definition="equivalent",
+    ...                        printer="objet-eden-250", seeds=[0])
     >>> r.subdivisions, r.converged      # a 2 mm sphere at 32 µm
     (2, True)
     """

@@ -35,10 +35,23 @@ MIN_SIZE_MM, MAX_SIZE_MM = SIZE_RANGE_MM
 def check_size(size: float, definition: str = "equivalent") -> float:
     """Validate a size in mm and its definition; return the size as a float.
 
+    Parameters
+    ----------
+    size : float
+        mm.
+    definition : str, default "equivalent"
+        One of :data:`SIZE_DEFINITIONS`.
+
+    Returns
+    -------
+    float
+
     Raises
     ------
     ValueError
         For a non-positive or non-finite size or an unknown definition.
+    ParameterError
+        Naming ``size`` when it is outside :data:`grainforge.units.SIZE_RANGE_MM`.
     """
     if definition not in SIZE_DEFINITIONS:
         raise ValueError(f"size_definition must be one of {', '.join(SIZE_DEFINITIONS)}, got {definition!r}")
@@ -56,6 +69,20 @@ def check_size(size: float, definition: str = "equivalent") -> float:
 def scale_factor(grain, size: float, definition: str = "equivalent") -> float:
     """The factor that brings ``grain`` to ``size`` under ``definition``.
 
+    Parameters
+    ----------
+    grain : Grain or trimesh.Trimesh
+        The mesh, in its own units.
+    size : float
+        mm.
+    definition : str, default "equivalent"
+        One of :data:`SIZE_DEFINITIONS`.
+
+    Returns
+    -------
+    float
+        mm per model unit.
+
     Raises
     ------
     ValueError
@@ -66,6 +93,25 @@ def scale_factor(grain, size: float, definition: str = "equivalent") -> float:
 
 def to_size(grain, size: float, definition: str = "equivalent"):
     """A scaled copy of ``grain`` whose size under ``definition`` is ``size``.
+
+    Parameters
+    ----------
+    grain : Grain
+        The grain, in model units.
+    size : float
+        mm.
+    definition : str, default "equivalent"
+        One of :data:`SIZE_DEFINITIONS`.
+
+    Returns
+    -------
+    Grain
+        Coordinates in mm.
+
+    Raises
+    ------
+    ValueError
+        As :func:`check_size`.
 
     Examples
     --------

@@ -42,6 +42,8 @@ from typing import Any
 
 import numpy as np
 
+from ..rng import RNGLike, as_generator
+
 __all__ = [
     "ShelfPacker", "GeneratorSource", "FileSource", "Prepared", "TrayResult", "build_tray",
     "orient_principal", "orient_stable", "tray_outputs", "min_mesh_distance",
@@ -57,7 +59,24 @@ DEFAULT_TRIANGLE_BUDGET = 20_000_000
 # --------------------------------------------------------------------------- orientation
 
 def orient_principal(vertices: np.ndarray) -> np.ndarray:
-    """Rotate vertices so their principal axes are x (largest spread), y, z (a proper rotation)."""
+    """Rotate vertices so their principal axes are x (largest spread), y, z (a proper rotation).
+
+    Parameters
+    ----------
+    vertices : (V, 3) ndarray of float
+        Any unit.
+
+    Returns
+    -------
+    (V, 3) float64
+        Centred on the vertex mean.
+
+    Examples
+    --------
+    >>> v = orient_principal(np.array([[0.0, 0, 0], [0, 3, 0], [0, 0, 1], [0, 3, 1]]))
+    >>> np.round(np.ptp(v, axis=0), 6).tolist()
+    [3.0, 1.0, 0.0]
+    """
     c = vertices.mean(axis=0)
     d = vertices - c
     _, vecs = np.linalg.eigh(d.T @ d)
@@ -90,6 +109,18 @@ def orient_stable(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     centroid's projection onto it lies inside it, so the grain is in stable
     equilibrium resting on that face.  The footprint is then turned about z
     so its principal axis is x.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex positions, mm.
+    faces : (F, 3) array_like of int
+        Triangles, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    (V, 3) float64
+        The rotated vertices (about the volume centroid, which ends at the origin).
 
     Examples
     --------
@@ -146,13 +177,33 @@ class ShelfPacker:
         self.layers = 1
 
     def compact(self, count: int, extents: Sequence[float]) -> None:
-        """Limit rows to about a square patch for ``count`` boxes like ``extents`` (a compact, not a strip, layout)."""
+        """Limit rows to about a square patch for ``count`` boxes like ``extents`` (a compact, not a strip, layout).
+
+        Parameters
+        ----------
+        count : int
+            Boxes to be placed.
+        extents : (3,) sequence of float
+            A typical box, mm.
+        """
         a, b, _ = (float(e) + self.gap for e in extents)
         side = float(np.sqrt(count * a * b * 1.1))
         self.row_width = min(self.W, max(side, a))
 
     def place(self, extents: Sequence[float]) -> tuple[int, float, float, float]:
         """Position (plate, x, y, z) of the min corner of the next box.
+
+        Parameters
+        ----------
+        extents : (3,) sequence of float
+            The box's x, y, z, mm.
+
+        Returns
+        -------
+        plate : int
+            Counted from 0.
+        x, y, z : float
+            mm.
 
         Raises
         ------
@@ -331,6 +382,19 @@ def tray_outputs(out: Path, plates: int) -> tuple[list[Path], list[Path], Path]:
 
     One plate: ``out`` itself; several: ``STEM-plateK.EXT``.  Previews are
     always ``STEM-plateK.png`` and the CSV ``STEM.csv``.
+
+    Parameters
+    ----------
+    out : Path
+        The requested print file.
+    plates : int
+        Plates used.
+
+    Returns
+    -------
+    files : list of Path
+    previews : list of Path
+    table : Path
     """
     stem, ext = out.stem, out.suffix
     files = [out] if plates == 1 else [out.with_name(f"{stem}-plate{k}{ext}") for k in range(1, plates + 1)]
@@ -479,7 +543,8 @@ def _matched_source(source, printer, max_subdivisions: int | None, max_triangles
     if not (isinstance(source, GeneratorSource) and supports_matching(source.method)):
         return source, None
     resolution = match_subdivisions(
-        source.method, source.params, source.size, source.size_definition, printer, source.seeds[:3],
+        source.method, source.params, size=source.size, size_definition=source.size_definition, printer=printer,
+        seeds=source.seeds[:3],
         max_level=MAX_MATCHED if max_subdivisions is None else max_subdivisions,
         max_faces=None if max_triangles is None else max(20, int(max_triangles) // len(source)),
     )
@@ -638,7 +703,7 @@ def build_tray(
     return TrayResult(files, previews, csv_path, rows, len(files), resolution, gap, layer_count)
 
 
-def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, seed: int = 0) -> float:
+def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, rng: RNGLike = 0) -> float:
     """Smallest distance between the surfaces of any two parts whose boxes are closer than ``within``.
 
     For every such pair, the vertices and ``samples`` random surface points of
@@ -651,9 +716,13 @@ def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, seed:
     Parameters
     ----------
     parts : sequence of objects with ``vertices`` and ``faces`` (e.g. :class:`~grainforge.io.threemf.Part`)
+        Placed parts, coordinates in mm.
     within : float
-    samples : int
-    seed : int
+        Largest box distance of a measured pair, mm.
+    samples : int, default 2000
+        Random surface points per part and pair.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, default 0
+        Where the surface points are drawn, normalised by :func:`grainforge.rng.as_generator`.
 
     Returns
     -------
@@ -670,7 +739,7 @@ def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, seed:
     reach = 2 * float(np.linalg.norm(half, axis=1).max()) + within
     best = np.inf
     meshes: dict[int, Any] = {}
-    rng = np.random.default_rng(seed)
+    rng = as_generator(rng)
 
     def mesh(i):
         if i not in meshes:
