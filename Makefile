@@ -27,7 +27,7 @@ PYTEST_PROCS ?= 2
 PYTEST_DIST  ?= --dist load --maxschedchunk 1
 
 test: $(STAMP)
-	$(BIN)/python -m pytest -n $(PYTEST_PROCS) $(PYTEST_DIST)
+	$(BIN)/python -m pytest -n $(PYTEST_PROCS) $(PYTEST_DIST) --durations=25
 
 # the fast lane for everyday work: lint, then every test not marked slow
 check: $(STAMP)
