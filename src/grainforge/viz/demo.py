@@ -9,6 +9,10 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from pathlib import Path
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from ..rng import RNGLike
 
 __all__ = ["SECTIONS", "run_demo", "fso_sweeps", "dpa_sweeps", "cri_gallery", "angular_gallery", "print_tray", "rf_gallery",
            "sample_micrograph", "write_fourier_csv", "grain_image", "example_images", "EXAMPLE_IMAGES"]
@@ -46,7 +50,20 @@ def _sweep(out: Path, method: str, make_params, values, label, seeds, title) -> 
 
 
 def fso_sweeps(out: Path, quick: bool = False) -> list[Path]:
-    """The paper's Figures 1 and 2: FSO grains over L/R0 at D = 2.4 and over D at L = 7R0."""
+    """The paper's Figures 1 and 2: FSO grains over L/R0 at D = 2.4 and over D at L = 7R0.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    quick : bool, default False
+        Fewer seeds and coarser meshes (the quick demo).
+
+    Returns
+    -------
+    list of Path
+        The run folders and their contact sheets.
+    """
     from ..methods.fso import Params
     from .figures import FIG1_LENGTHS, FIG2_DIMENSIONS
 
@@ -71,6 +88,18 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     There are no real micrographs in this repository: the "micrograph" is a
     synthetic grain image (a Fourier contour drawn, blurred and speckled with
     scikit-image) that is written to PNG and read back like a real one.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    quick : bool, default False
+        Fewer seeds and coarser meshes (the quick demo).
+
+    Returns
+    -------
+    list of Path
+        The folder of runs and images, the contour figure and the contact sheets.
     """
     import numpy as np
 
@@ -86,7 +115,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     folder = out / "cri"
     folder.mkdir(parents=True, exist_ok=True)
     # synthetic micrographs: three drawn grains, blurred, with sensor noise
-    images = [str(grain_image(folder / f"synthetic-micrograph-{i}.png", seed=i)) for i in range(3)]
+    images = [str(grain_image(folder / f"synthetic-micrograph-{i}.png", rng=i)) for i in range(3)]
     # Figure 3: one contour from each source
     import matplotlib
 
@@ -151,7 +180,7 @@ def cri_sections(subdivisions: int = 5):
     from ..outline.contours import Contour
 
     p = Params(preset="rough-angular", subdivisions=subdivisions)
-    v, f, _ = build(p, np.random.default_rng(0))
+    v, f, _ = build(p, 0)
     con = construct(p, 0)
     mesh = trimesh.Trimesh(v, f, process=False)
     normals = {"xy": (0, 0, 1), "xz": (0, 1, 0), "yz": (1, 0, 0)}
@@ -200,6 +229,18 @@ def dpa_sweeps(out: Path, quick: bool = False) -> list[Path]:
     """The paper's Figures 5 and 6: DPA aggregates of cubes (sharp and smoothed) and octahedra over ε.
 
     All three sheets are drawn at one scale (one scale-bar length), that of the largest aggregate.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    quick : bool, default False
+        Fewer seeds and coarser meshes (the quick demo).
+
+    Returns
+    -------
+    list of Path
+        The run folders and their contact sheets.
     """
     from ..methods.dpa import Params
     from .render import view_radius
@@ -234,6 +275,18 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
     """Angular (crushed-rock) grains: sharp to rounded (columns) and smooth to rough (rows), one seed.
 
     A last row shows dented grains (lower convexity), also sharp to rounded.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    quick : bool, default False
+        Fewer seeds and coarser meshes (the quick demo).
+
+    Returns
+    -------
+    list of Path
+        The folder of runs and the contact sheet.
     """
     from ..io import read_mesh
     from ..io.inputs import MANIFEST, read_manifest
@@ -287,7 +340,7 @@ def population_demo(out: Path, quick: bool = False) -> list[Path]:
 
 
 
-def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int = 1) -> Path:
+def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, rng: RNGLike = 1) -> Path:
     """A synthetic micrograph of a sand sample: ``rows × columns`` separate grains, blurred and speckled.
 
     There are no real micrographs in this repository; the grains are Fourier
@@ -296,6 +349,20 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     exponents ~ U(−2.2, −1.2)), drawn at radius 55 px on a 160 px grid,
     blurred (σ = 1.5 px) and given sensor noise (σ = 10 grey levels), so that
     ``grainforge fourier`` reads them as it would a real image.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG file to write.
+    rows, columns : int, default 5, 6
+        Grains down and across.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, default 1
+        Normalised by :func:`grainforge.rng.as_generator`: the descriptors, contours and noise are drawn from it.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     import io as _io
 
@@ -306,8 +373,9 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     from ..io import atomic_write
     from ..outline.contours import Contour
     from ..outline.imaging import draw_contours
+    from ..rng import as_generator
 
-    rng = np.random.default_rng(seed)
+    rng = as_generator(rng)
     items = []
     for i in range(rows * columns):
         d = (rng.uniform(0.04, 0.25), rng.uniform(0.02, 0.10), rng.uniform(0.008, 0.03))
@@ -322,13 +390,29 @@ def sample_micrograph(path: Path, *, rows: int = 5, columns: int = 6, seed: int 
     return atomic_write(path, buf.getvalue())
 
 
-def grain_image(path: Path, *, seed: int, size: int = 512) -> Path:
+def grain_image(path: Path, *, rng: RNGLike, size: int = 512) -> Path:
     """A synthetic micrograph of one grain: a rough-angular Fourier contour drawn, blurred and speckled.
 
-    The contour (``Contour.from_descriptors("rough-angular", rng=100 + seed)``)
+    The contour (``Contour.from_descriptors("rough-angular", rng=...)``)
     is drawn with radius 170/512 of the ``size`` × ``size`` picture, blurred
-    (σ = 2/512 of it) and given sensor noise (σ = 12 grey levels, ``rng=200 + seed``):
+    (σ = 2/512 of it) and given sensor noise (σ = 12 grey levels):
     what ``generate cri --images`` and ``Contour.from_image`` read as a real grain image.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG file to write.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        An int ``s`` draws the contour from ``100 + s`` and the noise from ``200 + s`` (the streams of
+        ``examples/images/``); any other value is normalised by :func:`grainforge.rng.as_generator` and the
+        contour then the noise are drawn from it.
+    size : int, default 512
+        Picture width and height, pixels.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     import io as _io
 
@@ -339,12 +423,18 @@ def grain_image(path: Path, *, seed: int, size: int = 512) -> Path:
     from ..io import atomic_write
     from ..outline.contours import Contour
     from ..outline.imaging import draw_contours
+    from ..rng import as_generator
 
-    c = Contour.from_descriptors("rough-angular", rng=100 + seed)
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, bool):
+        as_generator(rng)  # refuses a negative seed
+        contour_rng, noise_rng = 100 + int(rng), 200 + int(rng)  # the streams of examples/images/
+    else:
+        contour_rng = noise_rng = as_generator(rng)
+    c = Contour.from_descriptors("rough-angular", rng=contour_rng)
     img = draw_contours((size, size), [(c, (size // 2, size // 2), 170.0 * size / 512)], background=40,
                         fill=200).astype(float)
     img = gaussian(img, sigma=2.0 * size / 512, preserve_range=True)
-    img += np.random.default_rng(200 + seed).normal(0.0, 12.0, img.shape)
+    img += as_generator(noise_rng).normal(0.0, 12.0, img.shape)
     buf = _io.BytesIO()
     Image.fromarray(np.clip(img, 0, 255).astype(np.uint8)).save(buf, format="png")
     return atomic_write(path, buf.getvalue())
@@ -360,11 +450,21 @@ def example_images(folder: Path) -> list[Path]:
     ``micrograph.png``: a sample of 2 × 3 grains (:func:`sample_micrograph`) for
     ``grainforge fourier``; ``grain-a/b/c.png``: three single-grain images
     (:func:`grain_image`, 256 px) for ``generate cri --images``.
+
+    Parameters
+    ----------
+    folder : Path
+        Created if missing.
+
+    Returns
+    -------
+    list of Path
+        The four images.
     """
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     written = [sample_micrograph(folder / EXAMPLE_IMAGES[0], rows=2, columns=3)]
-    written += [grain_image(folder / name, seed=i, size=256) for i, name in enumerate(EXAMPLE_IMAGES[1:])]
+    written += [grain_image(folder / name, rng=i, size=256) for i, name in enumerate(EXAMPLE_IMAGES[1:])]
     return written
 
 
@@ -373,6 +473,18 @@ def write_fourier_csv(images, path: Path) -> Path:
 
     Only the ``image``, ``grain`` and ``D2``..``D16`` columns, which is what
     the ``spectrum`` inputs of rf and CRI read.
+
+    Parameters
+    ----------
+    images : iterable of path
+        Grain images.
+    path : Path
+        The CSV file.
+
+    Returns
+    -------
+    Path
+        ``path``.
     """
     from ..io import write_csv
     from ..outline.contours import scan_image
@@ -387,7 +499,20 @@ def write_fourier_csv(images, path: Path) -> Path:
 
 
 def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
-    """rf grains from a measured spectrum: a sample micrograph → its D2..D16 table → one rf grain per seed."""
+    """rf grains from a measured spectrum: a sample micrograph → its D2..D16 table → one rf grain per seed."
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    quick : bool, default False
+        Fewer seeds and coarser meshes (the quick demo).
+
+    Returns
+    -------
+    list of Path
+        The folder (micrograph, table, runs) and the contact sheet.
+    """
     from ..io import read_mesh
     from ..io.inputs import MANIFEST, read_manifest
     from ..methods.rf import Params
@@ -411,7 +536,20 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
 
 
 def print_tray(out: Path, quick: bool = False) -> list[Path]:
-    """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains."""
+    """A PolyJet tray of 2 mm CRI grains (resolution matched), and the check of its first grains.
+
+    Parameters
+    ----------
+    out : Path
+        The demo's output folder.
+    quick : bool, default False
+        Fewer seeds and coarser meshes (the quick demo).
+
+    Returns
+    -------
+    list of Path
+        The print files, previews, the tray's CSV and the check's CSV.
+    """
     from ..fabrication.printability import check_mesh
     from ..fabrication.tray import GeneratorSource, build_tray
     from ..io import write_csv
@@ -440,7 +578,21 @@ SECTIONS: list[tuple[str, Callable[[Path, bool], list[Path]]]] = [
 
 
 def run_demo(out: str | Path, quick: bool = False, echo: Callable[[str], None] = print) -> list[Path]:
-    """Run every demo section into ``out``; return the paths written."""
+    """Run every demo section into ``out``; return the paths written.
+
+    Parameters
+    ----------
+    out : str or Path
+        Output folder (created).
+    quick : bool, default False
+        The quick demo.
+    echo : callable, default print
+        Receives one progress line per section.
+
+    Returns
+    -------
+    list of Path
+    """
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     written: list[Path] = []

@@ -75,7 +75,20 @@ def _method(name: str):
 
 
 def figure1(out: Path, subdivisions: int = 5) -> Path:
-    """FSO, D = 2.4, L/R from 0.1 to 10 (paper Fig. 1)."""
+    """FSO, D = 2.4, L/R from 0.1 to 10 (paper Fig. 1).
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     from ..methods.fso import fso
     from .render import contact_sheet
 
@@ -87,7 +100,20 @@ def figure1(out: Path, subdivisions: int = 5) -> Path:
 
 
 def figure2(out: Path, subdivisions: int = 5) -> Path:
-    """FSO, L = 7 R, D from 2.0 to 2.8 (paper Fig. 2)."""
+    """FSO, L = 7 R, D from 2.0 to 2.8 (paper Fig. 2).
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     from ..methods.fso import fso
     from .render import contact_sheet
 
@@ -119,7 +145,20 @@ def _traced_micrograph(subdivisions: int = 5):
 
 
 def figure3(out: Path, subdivisions: int = 5) -> Path:
-    """Contours from a fractal profile, Fourier descriptors and an image (paper Fig. 3)."""
+    """Contours from a fractal profile, Fourier descriptors and an image (paper Fig. 3).
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -158,7 +197,20 @@ def figure3(out: Path, subdivisions: int = 5) -> Path:
 
 
 def figure4(out: Path, subdivisions: int = 5) -> Path:
-    """CRI grains from FD-defined contours (paper Fig. 4)."""
+    """CRI grains from FD-defined contours (paper Fig. 4).
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     _method("cri")
     from ..methods.cri import cri
     from .render import contact_sheet
@@ -196,13 +248,39 @@ def _dpa_sheet(out: Path, primitive: str, rows: list[tuple[int, str]], title: st
 
 
 def figure5(out: Path, subdivisions: int = 5) -> Path:
-    """DPA of cubes over ε, sharp and smoothed (paper Fig. 5)."""
+    """DPA of cubes over ε, sharp and smoothed (paper Fig. 5)."
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     return _dpa_sheet(out, "cube", [(0, ""), (1, ", smoothed")],
                       f"Fig. 5  DPA aggregates of {DPA_PRIMARIES} cubes: exponent ε (top sharp, bottom smoothed)")
 
 
 def figure6(out: Path, subdivisions: int = 5) -> Path:
-    """DPA of octahedra over ε (paper Fig. 6)."""
+    """DPA of octahedra over ε (paper Fig. 6)."
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     return _dpa_sheet(out, "octahedron", [(0, "")],
                       f"Fig. 6  DPA aggregates of {DPA_PRIMARIES} octahedra: exponent ε")
 
@@ -222,7 +300,20 @@ def _posed(grain, elev: float, azim: float):
 
 
 def figure7(out: Path, subdivisions: int = 5) -> Path:
-    """FSO on ellipsoidal precursors (``aspect``), seamless surface, D = 2.4, L = 7 R."""
+    """FSO on ellipsoidal precursors (``aspect``), seamless surface, D = 2.4, L = 7 R.
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     from ..methods.fso import fso
     from .render import contact_sheet
 
@@ -237,7 +328,20 @@ def figure7(out: Path, subdivisions: int = 5) -> Path:
 
 
 def figure8(out: Path, subdivisions: int = 5) -> Path:
-    """Paper vs seamless FSO, pole view and equator view (L = 2 R shows more small-scale relief)."""
+    """Paper vs seamless FSO, pole view and equator view (L = 2 R shows more small-scale relief).
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     from ..methods.fso import fso
     from .render import contact_sheet
 
@@ -254,7 +358,20 @@ def figure8(out: Path, subdivisions: int = 5) -> Path:
 
 
 def figure9(out: Path, subdivisions: int = 5) -> Path:
-    """CRI before (2016 reconstruction) and after (spectral consistency + ridge twist)."""
+    """CRI before (2016 reconstruction) and after (spectral consistency + ridge twist).
+
+    Parameters
+    ----------
+    out : Path
+        The PNG file.
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     _method("cri")
     from ..methods.cri import cri
     from .render import contact_sheet
@@ -290,11 +407,27 @@ def make_figures(out: str | Path, numbers=tuple(FIGURES), *, subdivisions: int =
                  echo: Callable[[str], None] | None = None) -> tuple[list[Path], list[tuple[int, str]]]:
     """Write the requested figures into ``out``.
 
+    Parameters
+    ----------
+    out : str or Path
+        Output folder.
+    numbers : iterable of int, default all
+        Figure numbers (keys of :data:`FIGURES`).
+    subdivisions : int, default 5
+        Icosphere level of the grains drawn.
+    echo : callable, optional
+        Receives one line per figure written.
+
     Returns
     -------
     written : list of Path
     skipped : list of (number, reason)
         Figures whose generator is not available.
+
+    Raises
+    ------
+    ValueError
+        For a number that is not a figure.
     """
     out = Path(out)
     written, skipped = [], []

@@ -24,6 +24,16 @@ __all__ = [
 def manifest_columns(path: str | Path) -> dict[str, list[str]]:
     """Columns of a CSV manifest as lists of strings.
 
+    Parameters
+    ----------
+    path : str or Path
+        A manifest (or any CSV grainforge writes).
+
+    Returns
+    -------
+    dict of str to list of str
+        Plain column name (unit suffix removed, :func:`grainforge.units.plain`) -> its cells.
+
     Raises
     ------
     ValueError
@@ -62,7 +72,15 @@ def _label(path: Path) -> str:
 
 
 def zingg(ax, tables) -> None:
-    """Zingg diagram: flatness S/I against elongation I/L, with the 2/3 class boundaries."""
+    """Zingg diagram: flatness S/I against elongation I/L, with the 2/3 class boundaries.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axis to draw on.
+    tables : iterable of (Path, dict)
+        ``(manifest path, manifest_columns(path))`` per population.
+    """
     for (path, t), marker in zip(tables, _markers()):
         L, I, S = (_numeric(t, c, path) for c in ("L", "I", "S"))
         ax.scatter(I / L, S / I, s=14, alpha=0.75, marker=marker, label=f"{_label(path)} (n={len(L)})")
@@ -82,7 +100,15 @@ def zingg(ax, tables) -> None:
 
 
 def sphericity_convexity(ax, tables) -> None:
-    """Wadell sphericity against convexity V/V_hull."""
+    """Wadell sphericity against convexity V/V_hull.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axis to draw on.
+    tables : iterable of (Path, dict)
+        ``(manifest path, manifest_columns(path))`` per population.
+    """
     for (path, t), marker in zip(tables, _markers()):
         x, y = _numeric(t, "convexity", path), _numeric(t, "sphericity", path)
         ax.scatter(x, y, s=14, alpha=0.75, marker=marker, label=f"{_label(path)} (n={len(x)})")
@@ -104,6 +130,13 @@ def fd_spectrum(ax, tables) -> None:
     Uses the principal-projection descriptors of ``grainforge analyse`` (all
     three planes pooled); a CRI manifest's input spectrum (its
     ``descriptors``, ``decay`` and ``modes``) is drawn dashed where present.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axis to draw on.
+    tables : iterable of (Path, dict)
+        ``(manifest path, manifest_columns(path))`` per population.
     """
     from ..analysis.fourier import FD_ORDERS, PLANES
     from ..outline.contours import DEFAULT_DECAY, DEFAULT_MODES, descriptor_spectrum
@@ -151,6 +184,13 @@ def size_distribution(ax, tables) -> None:
     10 mm) give the same curve: it is drawn once, with every population named
     in its legend entry, rather than as lines hiding each other.  A single-size
     population is a vertical step, marked at its size.
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        The axis to draw on.
+    tables : iterable of (Path, dict)
+        ``(manifest path, manifest_columns(path))`` per population.
     """
     curves: list[tuple[np.ndarray, np.ndarray, list[str]]] = []
     for path, t in tables:
@@ -263,7 +303,26 @@ KINDS = {
 
 
 def figure(kind: str, manifests: Sequence[str | Path], *, title: str | None = None):
-    """The matplotlib Figure of plot ``kind`` for one or more manifests (see :func:`plot`)."""
+    """The matplotlib Figure of plot ``kind`` for one or more manifests (see :func:`plot`).
+
+    Parameters
+    ----------
+    kind : str
+        A key of :data:`KINDS`: ``"zingg"``, ``"sphericity-convexity"``, ``"fd-spectrum"`` or ``"size-distribution"``.
+    manifests : sequence of str or Path
+        One population per manifest.
+    title : str, optional
+        The axis title.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        For an unknown kind, no manifest, or a manifest without the columns the plot needs.
+    """
     if kind not in KINDS:
         raise ValueError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
     if not manifests:
@@ -294,6 +353,22 @@ def figure(kind: str, manifests: Sequence[str | Path], *, title: str | None = No
 def plot(kind: str, manifests: Sequence[str | Path], out: str | Path, *, title: str | None = None) -> Path:
     """Draw plot ``kind`` for one or more manifests into a PNG (atomically).
 
+    Parameters
+    ----------
+    kind : str
+        A key of :data:`KINDS`.
+    manifests : sequence of str or Path
+        One population per manifest.
+    out : str or Path
+        The PNG file.
+    title : str, optional
+        The axis title.
+
+    Returns
+    -------
+    Path
+        ``out``.
+
     Examples
     --------
     >>> import tempfile, pathlib
@@ -314,6 +389,18 @@ def demo_plots(out: str | Path, quick: bool = False) -> list[Path]:
     each) into ``out/analysis/<folder>.csv``; up to 4 (quick: 2) grain
     files per folder are measured with :func:`~grainforge.analysis.measure.analyse_file`
     for the FD spectra.  Writes ``out/analysis/*.png``.
+
+    Parameters
+    ----------
+    out : str or Path
+        The demo's output folder.
+    quick : bool, default False
+        Measure fewer grain files.
+
+    Returns
+    -------
+    list of Path
+        The pooled CSVs and the PNGs (empty when ``out`` holds no manifest).
     """
     from ..analysis.measure import ANALYSE_COLUMNS, analyse_file
     from ..io import write_csv

@@ -144,6 +144,21 @@ def silhouette(points2d: np.ndarray, faces: np.ndarray, size: int = 256, margin:
 
     Both axes share one scale, so shapes are not distorted.
 
+    Parameters
+    ----------
+    points2d : (V, 2) array_like of float
+        Projected vertices.
+    faces : (F, 3) array_like of int
+        Triangles.
+    size : int, default 256
+        Image width and height, pixels.
+    margin : int, default 4
+        Empty pixels around the silhouette.
+
+    Returns
+    -------
+    (size, size) bool
+
     Examples
     --------
     >>> import trimesh
@@ -164,6 +179,16 @@ def view_rotation(elev: float = 20.0, azim: float = -60.0) -> np.ndarray:
     """Rotation taking world coordinates to camera coordinates (x right, y up, z towards viewer).
 
     ``elev``/``azim`` follow matplotlib's convention (degrees), with +z up.
+
+    Parameters
+    ----------
+    elev, azim : float, default 20, -60
+        Degrees.
+
+    Returns
+    -------
+    (3, 3) float64
+        Rows: right, up, towards the viewer.
     """
     e, a = np.radians(elev), np.radians(azim)
     view = np.array([np.cos(e) * np.cos(a), np.cos(e) * np.sin(a), np.sin(e)])  # towards the viewer
@@ -297,6 +322,16 @@ def render_image(
 def view_radius(mesh) -> float:
     """The half-width (mesh units) of the picture :func:`render_image` makes of ``mesh`` by default.
 
+    Parameters
+    ----------
+    mesh : trimesh.Trimesh or Grain
+        The mesh.
+
+    Returns
+    -------
+    float
+        Mesh units.
+
     Examples
     --------
     >>> import trimesh
@@ -314,6 +349,23 @@ def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size
     With ``unit`` (the unit of the mesh coordinates, e.g. ``"mm"``) a scale bar
     is drawn in the lower left corner (:func:`scale_bar_length`).  ``radius``:
     as for :func:`render_image` (one scale for several pictures).
+
+    Parameters
+    ----------
+    ax : matplotlib.axes.Axes
+        A 2D axis.
+    mesh : trimesh.Trimesh or Grain
+        The mesh.
+    color : RGB tuple in [0, 1], default SAND
+        Surface colour.
+    elev, azim : float, default 20, -60
+        Viewing direction, degrees (matplotlib convention, +z up).
+    size : int, default 400
+        Picture width and height, pixels.
+    unit : str, optional
+        Unit of the mesh coordinates: draw a scale bar.
+    radius : float, optional
+        Half the picture's width in mesh units (one scale for several pictures).
     """
     ax.imshow(render_image(mesh, size=size, color=color, elev=elev, azim=azim, radius=radius),
               interpolation="antialiased")
@@ -335,6 +387,16 @@ def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size
 def scale_bar_length(width: float) -> float:
     """A round scale-bar length (1, 2 or 5 × 10^k) of at most 30 % of a picture ``width`` wide.
 
+    Parameters
+    ----------
+    width : float
+        The picture's width, in the mesh's unit.
+
+    Returns
+    -------
+    float
+        In the same unit.
+
     Examples
     --------
     >>> scale_bar_length(10.0), scale_bar_length(2.4), scale_bar_length(0.7)
@@ -354,7 +416,24 @@ def contact_sheet(
     elev: float = 20.0, azim: float = -60.0, color=SAND, unit: str | None = None, common_scale: bool = False,
     radius: float | None = None,
 ) -> Path:
-    """Write a PNG with one shaded, labelled panel per mesh (:func:`contact_sheet_figure`)."""
+    """Write a PNG with one shaded, labelled panel per mesh (:func:`contact_sheet_figure`).
+
+    Parameters
+    ----------
+    meshes : sequence of trimesh.Trimesh or Grain
+        One panel each.
+    labels : sequence of str
+        One label per panel.
+    out : str or Path
+        PNG file to write (atomically).
+    columns, title, panel_size, dpi, elev, azim, color, unit, common_scale, radius
+        As :func:`contact_sheet_figure`.
+
+    Returns
+    -------
+    Path
+        ``out``.
+    """
     from ..io import save_figure
 
     fig = contact_sheet_figure(meshes, labels, columns=columns, title=title, panel_size=panel_size, dpi=dpi,
@@ -376,8 +455,6 @@ def contact_sheet_figure(
     meshes : sequence of trimesh.Trimesh or Grain
     labels : sequence of str
         One label per panel.
-    out : path
-        PNG file to write (atomically).
     columns : int, optional
         Panels per row (default: about square).
     title : str, optional
@@ -386,6 +463,10 @@ def contact_sheet_figure(
         Panel edge in inches.
     dpi : int
         Output resolution.
+    elev, azim : float, default 20, -60
+        Viewing direction, degrees.
+    color : RGB tuple in [0, 1], default SAND
+        Surface colour.
     unit : str, optional
         Unit of the mesh coordinates (``"mm"`` for files): each panel gets a
         scale bar.  Without it (grains in model units) there is none.
@@ -396,6 +477,15 @@ def contact_sheet_figure(
     radius : float, optional
         The one scale to draw every panel at, as a half-width in mesh units
         (for several sheets at one scale: the largest :func:`view_radius` of all).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+
+    Raises
+    ------
+    ValueError
+        If there are no meshes, or not one label per mesh.
     """
     import matplotlib
 
