@@ -276,7 +276,9 @@ def param(
     kind : {"float", "int", "str", "floats"}
         Value type.
     low, high : float, optional
-        Range bounds; ``low_open``/``high_open`` make them exclusive.
+        Range bounds (``None``: unbounded on that side).
+    low_open, high_open : bool, default False
+        Make ``low`` / ``high`` exclusive.
     choices : tuple of str, optional
         Allowed values for ``kind="str"``.
     optional : bool

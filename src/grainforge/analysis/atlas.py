@@ -550,10 +550,11 @@ def atlas_descriptors(
     voxels_across : float, optional
         Instead of ``voxel_size``: ``d_eq / h`` with ``d_eq`` the mesh's
         equivalent diameter (exactly one of the two must be given).
-    rotation : (3, 3) array_like or seed, optional
+    rotation : (3, 3) array_like, or int, SeedSequence or Generator, optional
         Turn the grain before voxelising (a scan sees grains in any
-        orientation): a rotation matrix, or a seed/Generator for
-        :func:`grainforge.geometry.rotations.random_rotation` (scipy's convention).  Default: as given.
+        orientation): a rotation matrix, or the randomness of a uniform one
+        (:func:`grainforge.geometry.rotations.random_rotation`, scipy's convention, normalised by
+        :mod:`grainforge.rng`).  Default: as given.
     convention : {"atlas", "whole"}
         How true sphericity cuts the grain out (:func:`voxel_descriptors`).
 

@@ -675,6 +675,8 @@ def measure_scan(volume, boxes: list[LabelBox], *, voxel_size_um: float, min_vox
     mesh_folder : path-like, optional
         Where each measured grain's closed one-body STL (mm, at its place in the scan) is written as
         ``mesh_name.format(label)``; a grain whose mesh is not a valid solid is not written and is named.
+    mesh_name : str, default "grain-{:06d}.stl"
+        The meshes' file names, formatted with the label.
     progress : callable, optional
         Wraps the iterator of grains (a progress bar).
 
