@@ -288,132 +288,185 @@ def _edge_key(p: np.ndarray, q: np.ndarray) -> tuple:
     return (a, b) if a < b else (b, a)
 
 
-def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random.Generator, tol: float,
-                         clearance: float, min_notch: float = MIN_NOTCH):
-    tpl = _templates(s.name)
-    F, K = len(s.faces), s.max_orientations
-    base = np.zeros((F, K), dtype=bool)
-    slot_A = np.zeros((F, K, 3, 3))
-    slot_b = np.zeros((F, K, 3))
-    for f, per_face in enumerate(tpl):
-        for q, (_, A, b, _) in enumerate(per_face):
-            base[f, q] = True  # slot q holds the q-th distinct orientation of face f
-            slot_A[f, q], slot_b[f, q] = A, b
-    v0 = s.vertices
-    n0 = face_normals(s, v0)
-    first = np.array([fc[0] for fc in s.faces])
-    n0 = n0 * np.sign((n0 * v0[first]).sum(axis=1))[:, None]  # outward (the solid is centred on the origin)
-    h0 = (n0 * v0[first]).sum(axis=1)  # face-plane distances from the centre
-    e0 = edge_directions(s, v0)
-    verts = np.empty((n_total, len(v0), 3))
-    normals = np.empty((n_total, F, 3))
-    edges = np.empty((n_total, len(e0), 3))
-    rot = np.empty((n_total, 3, 3))
-    shift = np.zeros((n_total, 3))
-    verts[0], normals[0], edges[0], rot[0] = v0, n0, e0, np.eye(3)
-    avail = np.zeros((n_total, F, K), dtype=bool)
-    avail[0] = base
-    open_ = np.zeros(n_total, dtype=bool)
-    open_[0] = True
-    R, r_in = s.circumradius, s.inradius
-    r_face = float(h0.max())
-    margin = max(clearance, 0.0)
-    h = 2.0 * R + margin
-    reach2 = (2.0 * R + 2.0 * r_face + margin) ** 2  # a child's centre lies twice its face distance away
-    grid: dict[tuple[int, int, int], list[int]] = {(0, 0, 0): [0]}
-    cell = float(np.sqrt(reach2))  # hash-grid cell: every primary within reach is in the 27 cells around
-    offsets = [(a, b, c) for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)]
-    face_idx = s.faces
-    on_face = np.zeros((F, len(v0)), dtype=bool)
-    for f, fc in enumerate(face_idx):
-        on_face[f, fc] = True
-    dihedral = _dihedrals(s)
-    around: dict[tuple, float] = {}  # exact edge -> angle taken by the primaries that share it
+def _add_edges_around(around: dict, kid: np.ndarray, face_idx, dihedral) -> None:
+    """Count a placed primary's dihedral angles into ``around`` (exact edge -> angle taken around it); each
+    edge is seen from its two faces, so each counts half its angle."""
     for fc, ang in zip(face_idx, dihedral):
         for i in range(len(fc)):
-            key = _edge_key(v0[fc[i]], v0[fc[(i + 1) % len(fc)]])
-            around[key] = around.get(key, 0.0) + 0.5 * ang[i]  # each edge is seen from its two faces
+            key = _edge_key(kid[fc[i]], kid[fc[(i + 1) % len(fc)]])
+            around[key] = around.get(key, 0.0) + 0.5 * ang[i]
+
+
+@dataclass
+class _Growth:
+    """The state of a polyhedral aggregate as it grows (:func:`_aggregate_polyhedra`), and the primary's
+    constants the slot tests use."""
+
+    s: Solid
+    tol: float
+    clearance: float
+    min_notch: float
+    tpl: list
+    slot_A: np.ndarray
+    slot_b: np.ndarray
+    base: np.ndarray
+    v0: np.ndarray
+    n0: np.ndarray
+    h0: np.ndarray
+    e0: np.ndarray
+    on_face: np.ndarray
+    dihedral: list
+    verts: np.ndarray
+    normals: np.ndarray
+    edges: np.ndarray
+    rot: np.ndarray
+    shift: np.ndarray
+    avail: np.ndarray
+    open_: np.ndarray
+    h: float
+    reach2: float
+    cell: float
+    grid: dict
+    around: dict
+
+    @classmethod
+    def start(cls, s: Solid, n_total: int, tol: float, clearance: float, min_notch: float) -> _Growth:
+        tpl = _templates(s.name)
+        F, K = len(s.faces), s.max_orientations
+        base = np.zeros((F, K), dtype=bool)
+        slot_A, slot_b = np.zeros((F, K, 3, 3)), np.zeros((F, K, 3))
+        for f, per_face in enumerate(tpl):
+            for q, (_, A, b, _) in enumerate(per_face):
+                base[f, q] = True  # slot q holds the q-th distinct orientation of face f
+                slot_A[f, q], slot_b[f, q] = A, b
+        v0 = s.vertices
+        n0 = face_normals(s, v0)
+        first = np.array([fc[0] for fc in s.faces])
+        n0 = n0 * np.sign((n0 * v0[first]).sum(axis=1))[:, None]  # outward (the solid is centred on the origin)
+        h0 = (n0 * v0[first]).sum(axis=1)  # face-plane distances from the centre
+        e0 = edge_directions(s, v0)
+        on_face = np.zeros((F, len(v0)), dtype=bool)
+        for f, fc in enumerate(s.faces):
+            on_face[f, fc] = True
+        g = cls(s=s, tol=tol, clearance=clearance, min_notch=min_notch, tpl=tpl, slot_A=slot_A, slot_b=slot_b,
+                base=base, v0=v0, n0=n0, h0=h0, e0=e0, on_face=on_face, dihedral=_dihedrals(s),
+                verts=np.empty((n_total, len(v0), 3)), normals=np.empty((n_total, F, 3)),
+                edges=np.empty((n_total, len(e0), 3)), rot=np.empty((n_total, 3, 3)), shift=np.zeros((n_total, 3)),
+                avail=np.zeros((n_total, F, K), dtype=bool), open_=np.zeros(n_total, dtype=bool),
+                h=2.0 * s.circumradius + max(clearance, 0.0),
+                # a child's centre lies twice its face distance away
+                reach2=(2.0 * s.circumradius + 2.0 * float(h0.max()) + max(clearance, 0.0)) ** 2,
+                cell=0.0, grid={(0, 0, 0): [0]}, around={})
+        g.cell = float(np.sqrt(g.reach2))  # hash-grid cell: every primary within reach is in the 27 cells around
+        g.verts[0], g.normals[0], g.edges[0], g.rot[0] = v0, n0, e0, np.eye(3)
+        g.avail[0], g.open_[0] = base, True
+        _add_edges_around(g.around, v0, s.faces, g.dihedral)
+        return g
+
+    def near(self, p: int) -> np.ndarray:
+        """The primaries within reach of a child of primary ``p`` (the hash grid's 27 cells around it)."""
+        key = np.floor(self.shift[p] / self.cell).astype(np.int64)
+        near = np.array([i for a in (-1, 0, 1) for b in (-1, 0, 1) for c in (-1, 0, 1)
+                         for i in self.grid.get((key[0] + a, key[1] + b, key[2] + c), ())], dtype=np.int64)
+        return near[((self.shift[near] - self.shift[p]) ** 2).sum(axis=1) < self.reach2]
+
+    def test_slots(self, p: int):
+        """Every open slot of parent ``p`` tested at once against the primaries nearby: the slots ``(ff, qq)``,
+        the children there (vertices, rotations, shifts) and which intrude (``bad``) or come too close or
+        leave too narrow a notch (``close``)."""
+        face_idx, tol, clearance = self.s.faces, self.tol, self.clearance
+        ff, qq = np.nonzero(self.avail[p])
+        Rp = self.rot[p]
+        Rc = Rp @ self.slot_A[ff, qq]                       # (C, 3, 3)
+        tc = self.slot_b[ff, qq] @ Rp.T + self.shift[p]     # (C, 3)
+        kids = self.v0 @ Rc.transpose(0, 2, 1) + tc[:, None, :]
+        for c in range(len(ff)):  # contact face: the parent's exact coordinates
+            kids[c, face_idx[ff[c]]] = self.verts[p][self.tpl[ff[c]][qq[c]][3]]
+        near = self.near(p)
+        d2 = ((tc[:, None, :] - self.shift[near][None, :, :]) ** 2).sum(-1)  # (C, M)
+        ci, mj = np.nonzero(d2 < self.h * self.h)
+        deep = d2[ci, mj] < (2.0 * self.s.inradius) ** 2 - tol  # inspheres overlap: intrusion for sure
+        bad = np.zeros(len(ff), dtype=bool)
+        bad[ci[deep]] = True
+        ci, mj = ci[~deep], mj[~deep]
+        test = ~bad[ci]
+        ci, mj = ci[test], near[mj[test]]
+        close = np.zeros(len(ff), dtype=bool)
+        if len(ci):
+            kn = self.n0 @ Rc[ci].transpose(0, 2, 1)
+            gap = sat_gap(kids[ci], kn, self.e0 @ Rc[ci].transpose(0, 2, 1), self.verts[mj], self.normals[mj],
+                          self.edges[mj], clearance)
+            hit = gap < -tol
+            bad[ci[hit]] = True
+            # contact with a primary other than the parent: allowed only at exactly shared vertices
+            sel = np.flatnonzero(~hit & (gap < clearance) & (mj != p))
+            if len(sel):
+                cs, ms = ci[sel], mj[sel]
+                exact = _exact_contacts(
+                    kids[cs], kn[sel], self.h0 + np.einsum("pfk,pk->pf", kn[sel], tc[cs]),
+                    self.verts[ms], self.normals[ms], self.h0 + np.einsum("pfk,pk->pf", self.normals[ms], self.shift[ms]),
+                    self.on_face[ff[cs]], clearance)
+                close[cs[~exact]] = True
+        for c in np.flatnonzero(~(bad | close)):  # the notch left around each edge of the contact face
+            fc, kid = face_idx[ff[c]], kids[c]
+            for i in range(len(fc)):
+                taken = self.around.get(_edge_key(kid[fc[i]], kid[fc[(i + 1) % len(fc)]]), 0.0)
+                if 2.0 * np.pi - taken - self.dihedral[ff[c]][i] < self.min_notch:
+                    close[c] = True
+                    break
+        return ff, qq, kids, Rc, tc, bad, close
+
+    def place(self, n: int, kid: np.ndarray, Rn: np.ndarray, tn: np.ndarray, f: int) -> None:
+        """Primary ``n`` placed: its geometry, its open faces (all but ``f``, its contact face), its edges."""
+        _add_edges_around(self.around, kid, self.s.faces, self.dihedral)
+        self.verts[n], self.rot[n], self.shift[n] = kid, Rn, tn
+        self.normals[n], self.edges[n] = self.n0 @ Rn.T, self.e0 @ Rn.T
+        self.avail[n] = self.base
+        self.avail[n, f] = False
+        self.open_[n] = self.avail[n].any()
+        self.grid.setdefault(tuple(int(x) for x in np.floor(tn / self.cell)), []).append(n)
+
+
+def _choose_slot(g: _Growth, p: int, rng: np.random.Generator, tried: np.ndarray):
+    """The paper's choice on parent ``p``: an open face uniformly, then an orientation; rejected ones are
+    dropped (``tried`` counts accepted, intruding, too close).  The child placed, or None when ``p`` has no
+    acceptable slot left (``p`` is then closed)."""
+    ff, qq, kids, Rc, tc, bad, close = g.test_slots(p)
+    F, K = g.base.shape
+    ok = np.zeros((F, K), dtype=bool)
+    ok[ff, qq] = ~(bad | close)
+    why = np.zeros((F, K), dtype=np.int64)
+    why[ff, qq] = np.where(bad, 1, np.where(close, 2, 0))
+    slot_of = np.full((F, K), -1, dtype=np.int64)
+    slot_of[ff, qq] = np.arange(len(ff))
+    placed = None
+    while g.avail[p].any():
+        faces_open = np.flatnonzero(g.avail[p].any(axis=1))
+        f = int(faces_open[rng.integers(len(faces_open))])
+        slots = np.flatnonzero(g.avail[p, f])
+        q = int(slots[rng.integers(len(slots))])
+        tried[why[f, q]] += 1
+        if ok[f, q]:
+            g.avail[p, f] = False
+            c = slot_of[f, q]
+            placed = (kids[c], Rc[c], tc[c], f)
+            break
+        g.avail[p, f, q] = False
+    if not g.avail[p].any():
+        g.open_[p] = False
+    return placed
+
+
+def _aggregate_polyhedra(s: Solid, n_total: int, exponent: float, rng: np.random.Generator, tol: float,
+                         clearance: float, min_notch: float = MIN_NOTCH):
+    g = _Growth.start(s, n_total, tol, clearance, min_notch)
     tried = np.zeros(3, dtype=np.int64)  # chosen slots: accepted, intruding, too close / too narrow a notch
     for n in range(1, n_total):
         placed = None
         while placed is None:
-            p = parent_index(n, exponent, rng, open_)
-            # test every open slot of the parent at once against the primaries nearby
-            ff, qq = np.nonzero(avail[p])
-            Rp = rot[p]
-            Rc = Rp @ slot_A[ff, qq]                       # (C, 3, 3)
-            tc = slot_b[ff, qq] @ Rp.T + shift[p]          # (C, 3)
-            kids = v0 @ Rc.transpose(0, 2, 1) + tc[:, None, :]
-            for c in range(len(ff)):  # contact face: the parent's exact coordinates
-                kids[c, face_idx[ff[c]]] = verts[p][tpl[ff[c]][qq[c]][3]]
-            key = np.floor(shift[p] / cell).astype(np.int64)
-            near = np.array([i for o in offsets
-                             for i in grid.get((key[0] + o[0], key[1] + o[1], key[2] + o[2]), ())], dtype=np.int64)
-            near = near[((shift[near] - shift[p]) ** 2).sum(axis=1) < reach2]
-            d2 = ((tc[:, None, :] - shift[near][None, :, :]) ** 2).sum(-1)  # (C, M)
-            ci, mj = np.nonzero(d2 < h * h)
-            deep = d2[ci, mj] < (2.0 * r_in) ** 2 - tol  # inspheres overlap: intrusion for sure
-            bad = np.zeros(len(ff), dtype=bool)
-            bad[ci[deep]] = True
-            ci, mj = ci[~deep], mj[~deep]
-            test = ~bad[ci]
-            ci, mj = ci[test], near[mj[test]]
-            close = np.zeros(len(ff), dtype=bool)
-            if len(ci):
-                kn = n0 @ Rc[ci].transpose(0, 2, 1)
-                gap = sat_gap(kids[ci], kn, e0 @ Rc[ci].transpose(0, 2, 1), verts[mj], normals[mj], edges[mj],
-                              clearance)
-                hit = gap < -tol
-                bad[ci[hit]] = True
-                # contact with a primary other than the parent: allowed only at exactly shared vertices
-                sel = np.flatnonzero(~hit & (gap < clearance) & (mj != p))
-                if len(sel):
-                    cs, ms = ci[sel], mj[sel]
-                    exact = _exact_contacts(
-                        kids[cs], kn[sel], h0 + np.einsum("pfk,pk->pf", kn[sel], tc[cs]),
-                        verts[ms], normals[ms], h0 + np.einsum("pfk,pk->pf", normals[ms], shift[ms]),
-                        on_face[ff[cs]], clearance)
-                    close[cs[~exact]] = True
-            for c in np.flatnonzero(~(bad | close)):  # the notch left around each edge of the contact face
-                fc, kid = face_idx[ff[c]], kids[c]
-                for i in range(len(fc)):
-                    taken = around.get(_edge_key(kid[fc[i]], kid[fc[(i + 1) % len(fc)]]), 0.0)
-                    if 2.0 * np.pi - taken - dihedral[ff[c]][i] < min_notch:
-                        close[c] = True
-                        break
-            ok = np.zeros((F, K), dtype=bool)
-            ok[ff, qq] = ~(bad | close)
-            why = np.zeros((F, K), dtype=np.int64)
-            why[ff, qq] = np.where(bad, 1, np.where(close, 2, 0))
-            slot_of = np.full((F, K), -1, dtype=np.int64)
-            slot_of[ff, qq] = np.arange(len(ff))
-            # the paper's choice: an open face uniformly, then an orientation; rejected ones are dropped
-            while avail[p].any():
-                faces_open = np.flatnonzero(avail[p].any(axis=1))
-                f = int(faces_open[rng.integers(len(faces_open))])
-                slots = np.flatnonzero(avail[p, f])
-                q = int(slots[rng.integers(len(slots))])
-                tried[why[f, q]] += 1
-                if ok[f, q]:
-                    avail[p, f] = False
-                    c = slot_of[f, q]
-                    placed = (kids[c], Rc[c], tc[c], f)
-                    break
-                avail[p, f, q] = False
-            if not avail[p].any():
-                open_[p] = False
-        kid, Rn, tn, f = placed
-        for fc, ang in zip(face_idx, dihedral):
-            for i in range(len(fc)):
-                key = _edge_key(kid[fc[i]], kid[fc[(i + 1) % len(fc)]])
-                around[key] = around.get(key, 0.0) + 0.5 * ang[i]
-        verts[n], rot[n], shift[n] = kid, Rn, tn
-        normals[n], edges[n] = n0 @ Rn.T, e0 @ Rn.T
-        avail[n] = base
-        avail[n, f] = False
-        open_[n] = avail[n].any()
-        grid.setdefault(tuple(int(x) for x in np.floor(tn / cell)), []).append(n)
-    return verts, shift, tried
+            placed = _choose_slot(g, parent_index(n, exponent, rng, g.open_), rng, tried)
+        g.place(n, *placed)
+    return g.verts, g.shift, tried
 
 
 def aggregate(primitive: str, primaries: int, *, exponent: float, rng: RNGLike,
