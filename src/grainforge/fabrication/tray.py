@@ -567,6 +567,41 @@ def _csv_row(p: Prepared, plate: int, position: tuple[float, float, float], reso
     }
 
 
+def _open_plate(out: Path, fmt: str, temps: list[Path]):
+    """A new plate's print file: a temporary file beside ``out`` (noted in ``temps`` for the clean-up, with
+    signals held so that a signal waits for both) and its writer."""
+    from ..io import file_mode
+    from ..io.stl import STLWriter
+    from ..io.threemf import ThreeMFWriter
+    from ..runtime.staging import signals_held
+
+    with signals_held():
+        fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(out, os.getpid()), suffix=".tmp", dir=out.parent)
+        temps.append(Path(tmp))
+    os.chmod(tmp, file_mode())
+    fh = os.fdopen(fd, "w+b")
+    return fh, (ThreeMFWriter(fh) if fmt == ".3mf" else STLWriter(fh))
+
+
+def _write_previews_and_table(out: Path, plates: int, footprints, layers_of, rows, printer, gap: float,
+                              written: list[Path]):
+    """Each plate's preview and the tray's table (noted in ``written``); the print files' final names, the
+    previews', the table's and each plate's layer count."""
+    from ..io import write_csv
+
+    layer_count = [layers[-1] + 1 for layers in layers_of]  # layers only grow within a plate
+    files, previews, csv_path = tray_outputs(out, plates)
+    for k, path in enumerate(previews):
+        n = len(footprints[k])
+        _preview(path, footprints[k], layers_of[k], printer.build_volume,
+                 f"{out.name} plate {k + 1}/{len(previews)}: {n} grains, {layer_count[k]} layer(s), "
+                 f"{printer.name}, gap {gap * 1000:.0f} µm")
+        written.append(path)
+    write_csv(csv_path, rows, units=True)
+    written.append(csv_path)
+    return files, previews, csv_path, layer_count
+
+
 def build_tray(
     source: GeneratorSource | FileSource,
     printer,
@@ -618,9 +653,6 @@ def build_tray(
     FileExistsError
         If an output exists and ``overwrite`` is false.
     """
-    from ..io import file_mode, write_csv
-    from ..io.stl import STLWriter
-    from ..io.threemf import ThreeMFWriter
     from .printers import get_printer
 
     printer = get_printer(printer)
@@ -655,12 +687,7 @@ def build_tray(
                 if writer is not None:
                     writer.close()
                     fh.close()
-                with signals_held():  # made and noted for the clean-up together: a signal waits for both
-                    fd, tmp = tempfile.mkstemp(prefix=_temp_prefix(out, os.getpid()), suffix=".tmp", dir=out.parent)
-                    temps.append(Path(tmp))
-                os.chmod(tmp, file_mode())
-                fh = os.fdopen(fd, "w+b")
-                writer = ThreeMFWriter(fh) if fmt == ".3mf" else STLWriter(fh)
+                fh, writer = _open_plate(out, fmt, temps)
                 footprints.append([])
                 layers_of.append([])
                 plate = pl
@@ -670,16 +697,8 @@ def build_tray(
             rows.append(_csv_row(p, pl, (x, y, z), resolution))
         writer.close()
         fh.close()
-        layer_count = [layers[-1] + 1 for layers in layers_of]  # layers only grow within a plate
-        files, previews, csv_path = tray_outputs(out, len(temps))
-        for k, path in enumerate(previews):
-            n = len(footprints[k])
-            _preview(path, footprints[k], layers_of[k], printer.build_volume,
-                     f"{out.name} plate {k + 1}/{len(previews)}: {n} grains, {layer_count[k]} layer(s), "
-                     f"{printer.name}, gap {gap * 1000:.0f} µm")
-            written.append(path)
-        write_csv(csv_path, rows, units=True)
-        written.append(csv_path)
+        files, previews, csv_path, layer_count = _write_previews_and_table(out, len(temps), footprints, layers_of,
+                                                                          rows, printer, gap, written)
         with signals_held():  # the print files last, together: all outputs or none
             for tmp, final in zip(temps, files):
                 os.replace(tmp, final)
