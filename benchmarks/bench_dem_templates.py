@@ -49,7 +49,7 @@ def main() -> None:
         for name, (v, f) in grains.items():
             for spheres, refine in CLUMP_SETTINGS:
                 t0 = time.process_time()
-                t = prepare(v, f, name, spheres=spheres, refine_iterations=refine)
+                t = prepare(v, f, name=name, spheres=spheres, refine_iterations=refine)
                 cpu = time.process_time() - t0
                 model = dem_template_seconds("clump", spheres=spheres, refine_iterations=refine)
                 print(f"{name:8} {len(f):6d} {'clump':8} {spheres:7d} {refine:6d} {'':>7} {t.clump.count:6d} "
@@ -57,7 +57,7 @@ def main() -> None:
             if args.levelset:
                 for spacing in SPACINGS:
                     t0 = time.process_time()
-                    t = prepare(v, f, name, shape="levelset", levelset_spacing=spacing)
+                    t = prepare(v, f, name=name, shape="levelset", levelset_spacing=spacing)
                     cpu = time.process_time() - t0
                     model = dem_template_seconds("levelset", spacing=spacing)
                     print(f"{name:8} {len(f):6d} {'levelset':8} {'':>7} {'':>6} {spacing:7.3f} "

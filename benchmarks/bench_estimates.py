@@ -66,7 +66,7 @@ def main() -> None:
     print("\nsimulate: one clump template of an angular grain (subdivisions 3), CPU s")
     print(f"{'spheres':>14} {'best':>8} {'median':>8} {'model':>8}")
     for spheres in (1, 10, 50, 200):
-        best, med = cpu_seconds(lambda k, s=spheres: prepare(v, f, "g", unit=1e-3, density=1180.0, spheres=s,
+        best, med = cpu_seconds(lambda k, s=spheres: prepare(v, f, name="g", unit=1e-3, density=1180.0, spheres=s,
                                                              source="bench", rng=k), args.repeat)
         model = settings.TEMPLATE_SECONDS + settings.TEMPLATE_SPHERE_SECONDS * spheres
         print(f"{spheres:>14} {best:8.3f} {med:8.3f} {model:8.3f}")

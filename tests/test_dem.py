@@ -105,16 +105,16 @@ def test_clump_is_deterministic():
 def test_prepare_rejects_bad_input():
     box = trimesh.creation.box()
     with pytest.raises(ValueError, match="density"):
-        prepare(box.vertices, box.faces, "b", density=0.0)
+        prepare(box.vertices, box.faces, name="b", density=0.0)
     with pytest.raises(ValueError, match="not a closed solid"):
-        prepare(box.vertices, box.faces[:-1], "b")
+        prepare(box.vertices, box.faces[:-1], name="b")
     with pytest.raises(ValueError, match="shape"):
-        prepare(box.vertices, box.faces, "b", shape="cube")
+        prepare(box.vertices, box.faces, name="b", shape="cube")
 
 
 def test_prepare_units_and_centroid():
     g = grainforge.fso(rng=4).scaled(5.0)  # mm
-    t = prepare(g.vertices, g.faces, "g", unit=1e-3, density=2000.0, spheres=10)
+    t = prepare(g.vertices, g.faces, name="g", unit=1e-3, density=2000.0, spheres=10)
     m = g.mesh
     assert t.mass == pytest.approx(2000.0 * m.volume * 1e-9, rel=1e-12)
     assert np.allclose(mass_properties(t.vertices, t.faces).centroid, 0, atol=1e-15)
@@ -347,7 +347,7 @@ def test_liggghts_deck_seeds_distinct_primes_for_1_to_200_templates():
     from grainforge.dem.liggghts import SEED_MIN, deck_files
 
     t0 = prepare(trimesh.creation.box((2.0, 1.5, 1.0)).vertices, trimesh.creation.box((2.0, 1.5, 1.0)).faces,
-                 "g", spheres=3)
+                 name="g", spheres=3)
     seen = set()
     for n in range(1, 201):
         templates = [dataclasses.replace(t0, name=f"g{i}", count=1 + (i * 7 + n) % 3) for i in range(n)]
@@ -392,7 +392,7 @@ def test_liggghts_insertion_regions_stay_inside_one_mpi_rank():
             assert np.abs(cuts - nodes[None, :side]).min() >= 200 * lg._NODE_BOX, (px, side)
     # the deck follows the constants: 7 grains on a 2 x 2 lattice
     t0 = prepare(trimesh.creation.box((2.0, 1.5, 1.0)).vertices, trimesh.creation.box((2.0, 1.5, 1.0)).faces,
-                 "g", spheres=3, count=7)
+                 name="g", spheres=3, count=7)
     files = lg.deck_files([t0])
     cell = 2.2 * t0.bounding_radius
     dom = [float(x) for x in re.search(r"region domain block (\S+) (\S+) (\S+) (\S+)", files["in.run"]).groups()]
@@ -430,7 +430,7 @@ def test_dem_cli_grains_total_pour(tmp_path):
     counts = {r["name"]: r["count"] for r in g["grains"]}
     assert sum(counts.values()) == 7 and sorted(counts.values()) == [2, 2, 3]
     assert len(re.findall(r"^fix i\d+ all insert/pack", (out / "in.insert").read_text(), re.MULTILINE)) == 7
-    assert list(counts.values()) == pour_counts(3, 7, seed=1).tolist()
+    assert list(counts.values()) == pour_counts(3, 7, rng=1).tolist()
     again, _ = deck("l7b", "liggghts", "--grains", "7", "--seed", "1")
     assert {p.name: p.read_bytes() for p in out.iterdir()} == {p.name: p.read_bytes() for p in again.iterdir()}
     # LAMMPS: one rigid body per grain
@@ -440,7 +440,7 @@ def test_dem_cli_grains_total_pour(tmp_path):
     _, g = deck("l2", "liggghts", "--grains", "2", "--seed", "3")
     assert [r["count"] for r in g["grains"]] == [1, 1] and len({r["name"] for r in g["grains"]}) == 2
     # proportion: every count within one of grains / inputs
-    c = pour_counts(7, 1000, seed=5)
+    c = pour_counts(7, 1000, rng=5)
     assert c.sum() == 1000 and c.max() - c.min() <= 1
     assert dem_cli.MAX_POUR_GRAINS == MAX_POUR_GRAINS
     for bad in (["--grains", "0"], ["--grains", str(MAX_POUR_GRAINS + 1)], ["--grains", "4", "--count", "2"],

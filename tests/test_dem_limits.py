@@ -222,8 +222,8 @@ def test_grain_size_is_refused_before_the_representation_is_built(monkeypatch):
     monkeypatch.setattr(clump_module, "clump", no_clump)
     box = trimesh.creation.box((2.0, 2.0, 2.0))
     with pytest.raises(ValueError, match=r"box.stl: equivalent diameter 2.48e-06 m is outside 1e-05–10 m"):
-        prepare(box.vertices, box.faces, "box", unit=1e-6, source="box.stl", size_range=(1e-5, 10.0))
-    t = prepare(box.vertices, box.faces, "box", spheres=4, shape="polyhedron", size_range=(1e-5, 10.0))
+        prepare(box.vertices, box.faces, name="box", unit=1e-6, source="box.stl", size_range=(1e-5, 10.0))
+    t = prepare(box.vertices, box.faces, name="box", spheres=4, shape="polyhedron", size_range=(1e-5, 10.0))
     assert abs(t.d_eq - 2.48e-3) < 1e-5
 
 

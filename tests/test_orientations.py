@@ -72,7 +72,7 @@ def templates():
     out = []
     for k, extents in enumerate(((1.0, 2.0, 3.0), (2.0, 3.0, 5.0))):
         m = trimesh.creation.box(extents)
-        out.append(prepare(m.vertices, m.faces, f"box{k}", spheres=6, count=N // 2))
+        out.append(prepare(m.vertices, m.faces, name=f"box{k}", spheres=6, count=N // 2))
     return out
 
 
@@ -81,7 +81,7 @@ def polyhedra():
     out = []
     for k, extents in enumerate(((1.0, 2.0, 3.0), (2.0, 3.0, 5.0))):
         m = trimesh.creation.box(extents)
-        out.append(prepare(m.vertices, m.faces, f"poly{k}", shape="polyhedron", count=N // 2))
+        out.append(prepare(m.vertices, m.faces, name=f"poly{k}", shape="polyhedron", count=N // 2))
     return out
 
 

@@ -89,11 +89,11 @@ def test_the_first_k_of_a_sorted_table_are_far_off_and_the_choice_is_not(column)
 
 def test_the_choice_is_deterministic_for_a_seed():
     table = sand_like(300, seed=3)
-    a, b = choose_representative(table, 40, seed=7), choose_representative(table, 40, seed=7)
+    a, b = choose_representative(table, 40, rng=7), choose_representative(table, 40, rng=7)
     assert np.array_equal(a.indices, b.indices) and a.ks == b.ks
     # the row order of the input does not decide which grains look alike: any seed reaches the target
     for seed in (0, 1, 2):
-        assert choose_representative(table, 40, seed=seed).largest_ks <= 0.1
+        assert choose_representative(table, 40, rng=seed).largest_ks <= 0.1
 
 
 def test_k_at_least_n_takes_every_row_without_selection():

@@ -123,7 +123,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
                                      f"holds at most {MAX_POUR_GRAINS}", param_hint="--count")
         counts = [count] * n_templates
     else:
-        counts = pour_counts(n_templates, grains, 0 if seed is None else seed).tolist()
+        counts = pour_counts(n_templates, grains, rng=0 if seed is None else seed).tolist()
     workers = workers or os.cpu_count() or 1
     files = sum(c > 0 for c in counts)
     announce = _estimate(files, shape, spheres, refine, spacing, min(workers, files), clump_accuracy is not None)
@@ -239,7 +239,7 @@ def _choose_templates(inputs, paths, k: int, workers: int):
             bar.total = total
             bar.update(1)
 
-        chosen = choose_files(inputs, paths, k, workers=workers, progress=step)
+        chosen = choose_files(inputs, paths, k=k, workers=workers, progress=step)
     click.echo(chosen.summary(k) + "; templates.csv", err=True)
     return chosen
 
@@ -251,8 +251,8 @@ def _write_templates_csv(out: Path, chosen, unit: float) -> Path:
 
     table = chosen.table.copy()
     table[:, -1] *= unit * 1e3
-    return write_templates_csv(out / TEMPLATES_CSV, _unique_names(chosen.paths), [str(p) for p in chosen.paths],
-                               table, chosen.choice)
+    return write_templates_csv(out / TEMPLATES_CSV, names=_unique_names(chosen.paths),
+                               sources=[str(p) for p in chosen.paths], table=table, choice=chosen.choice)
 
 
 def _check_level_set_budget(paths, unit: float, spacing: float) -> None:

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry.voxel import grid_for, inside_mask
+from ..rng import as_generator
 
 __all__ = ["Clump", "ClumpAccuracy", "ACCURACY_MEASURE_SECONDS", "CLUMP_TABLE_COLUMNS", "DEFAULT_SPHERE_CAP",
            "accuracy_measures", "accuracy_record", "check_target", "clump", "clump_accuracy", "clump_quality",
@@ -70,6 +71,16 @@ def accuracy_measures(cap: int) -> int:
 
     The prefixes of 8, 16, 32, … spheres up to ``cap`` until one reaches the target, then a
     bisection between it and the one before: the most is when only the whole cap reaches it.
+
+    Parameters
+    ----------
+    cap : int
+        The most spheres the clump may take (values below 1 count as 1).
+
+    Returns
+    -------
+    int
+        Measures at most (≥ 1).
 
     Examples
     --------
@@ -127,11 +138,33 @@ class Clump:
         return bool(self.accuracy.iou >= self.target)
 
     def translated(self, offset) -> Clump:
-        """The same clump with every centre moved by ``offset`` (its measures unchanged)."""
+        """The same clump with every centre moved by ``offset`` (its measures unchanged).
+
+        Parameters
+        ----------
+        offset : (3,) array_like of float
+            The move, in the clump's length unit.
+
+        Returns
+        -------
+        Clump
+            A new clump; this one is unchanged.
+        """
         return dataclasses.replace(self, centres=self.centres + np.asarray(offset, dtype=np.float64))
 
     def scaled(self, factor: float) -> Clump:
-        """The clump scaled by ``factor`` about the origin (its measures, all relative, unchanged)."""
+        """The clump scaled by ``factor`` about the origin (its measures, all relative, unchanged).
+
+        Parameters
+        ----------
+        factor : float
+            Scale factor (> 0; e.g. 1e-3 from millimetres to metres).
+
+        Returns
+        -------
+        Clump
+            A new clump; this one is unchanged.
+        """
         return dataclasses.replace(self, centres=self.centres * factor, radii=self.radii * factor)
 
 
@@ -148,6 +181,30 @@ def union_mask(centres: np.ndarray, radii: np.ndarray, grid) -> np.ndarray:
     """Boolean array ``grid.shape``: which cell centres lie in at least one sphere.
 
     Each sphere is rasterised in its own bounding block (vectorised per sphere).
+
+    Parameters
+    ----------
+    centres : (N, 3) array_like of float
+        Sphere centres, in the grid's frame and length unit.
+    radii : (N,) array_like of float
+        Sphere radii, same unit; a cell centre at distance exactly ``r`` is inside.
+    grid : grainforge.geometry.voxel.Grid
+        The cells (their centres ``origin + (i, j, k) · spacing``).
+
+    Returns
+    -------
+    ndarray of bool, shape ``grid.shape``
+        True where a cell centre lies in at least one sphere.
+
+    Examples
+    --------
+    A 4 × 4 × 4 grid of cells 0.5 wide over a cube of side 2: a sphere of radius 0.6 at the
+    centre holds the 8 inner cell centres (at distance 0.43), not the next ones (0.83):
+
+    >>> from grainforge.geometry.voxel import grid_for
+    >>> g = grid_for(np.array([[-1.0, -1.0, -1.0], [1.0, 1.0, 1.0]]), 0.5, pad=0)
+    >>> g.shape, int(union_mask(np.zeros((1, 3)), np.array([0.6]), g).sum())
+    ((4, 4, 4), 8)
     """
     out = np.zeros(grid.shape, dtype=bool)
     h = grid.spacing
@@ -176,6 +233,29 @@ def clump_quality(vertices: np.ndarray, faces: np.ndarray, centres: np.ndarray, 
     grain and the spheres: coverage = #(grain ∩ union) / #grain, spill =
     #(union \\ grain) / #union. The grid error is of order one cell over
     the surface (≈ 1/resolution relative).
+
+    Parameters
+    ----------
+    vertices : (V, 3) float64
+    faces : (F, 3) int64
+        A closed, outward-oriented mesh (any length unit).
+    centres : (N, 3) float64
+    radii : (N,) float64
+        The spheres, in the mesh's frame and unit.
+    resolution : int
+        Cells per equivalent diameter of the grain of the measuring grid.
+
+    Returns
+    -------
+    coverage : float
+        The share of the grain's cells inside the spheres, in [0, 1].
+    spill : float
+        The share of the spheres' cells outside the grain, in [0, 1].
+
+    Raises
+    ------
+    ValueError
+        If the mesh's volume is not positive.
 
     Examples
     --------
@@ -236,7 +316,14 @@ class ClumpAccuracy:
     resolution: int
 
     def as_dict(self) -> dict:
-        """The figures as a plain dict (JSON- and CSV-ready)."""
+        """The figures as a plain dict (JSON- and CSV-ready).
+
+        Returns
+        -------
+        dict
+            ``iou``, ``coverage``, ``spill``, ``volume_error``, ``inertia_error`` (floats) and
+            ``resolution`` (int), as the attributes.
+        """
         return {"iou": self.iou, "coverage": self.coverage, "spill": self.spill,
                 "volume_error": self.volume_error, "inertia_error": self.inertia_error,
                 "resolution": self.resolution}
@@ -253,6 +340,17 @@ def accuracy_record(c: Clump) -> dict:
     ``iou``, ``volume_error``, ``inertia_error`` and the grid (``accuracy_resolution``) of its
     :class:`ClumpAccuracy`, the ``target`` and ``meets_target`` (coverage, spill and the sphere
     count are in every clump's record already).
+
+    Parameters
+    ----------
+    c : Clump
+        A clump, built to a target or not.
+
+    Returns
+    -------
+    dict
+        ``iou``, ``volume_error``, ``inertia_error``, ``accuracy_resolution`` (cells per d_eq),
+        ``target`` and ``meets_target``; ``{}`` for a clump of a fixed sphere count.
 
     Examples
     --------
@@ -276,6 +374,17 @@ def clump_table(records) -> str | None:
     Columns :data:`CLUMP_TABLE_COLUMNS`; numbers at full precision (they read back
     to the same floats), ``meets_target`` as ``true`` or ``false``. ``None`` when no
     record has a target (a deck of fixed-count clumps has no table).
+
+    Parameters
+    ----------
+    records : iterable of dict
+        The grain records of a deck's ``grains.json`` (:func:`grainforge.dem.deck.template_record`);
+        those without a ``target`` are left out.
+
+    Returns
+    -------
+    str or None
+        The CSV text (a header, one row per record with a target, newline-ended), or ``None``.
 
     Examples
     --------
@@ -340,6 +449,11 @@ def clump_accuracy(vertices: np.ndarray, faces: np.ndarray, centres: np.ndarray,
     -------
     ClumpAccuracy
 
+    Raises
+    ------
+    ValueError
+        If ``resolution`` is below 10 or the mesh's volume is not positive.
+
     Examples
     --------
     >>> import trimesh
@@ -399,6 +513,21 @@ class _Measure:
 
 def check_target(target) -> float:
     """``target`` as a float, or ``ValueError`` unless it is a finite number strictly between 0 and 1.
+
+    Parameters
+    ----------
+    target : object
+        The accuracy target (an intersection over union) as given: a number or a numeric string.
+
+    Returns
+    -------
+    float
+        ``float(target)``.
+
+    Raises
+    ------
+    ValueError
+        If ``target`` is not a number, not finite, or not in (0, 1).
 
     Examples
     --------
@@ -718,8 +847,9 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
         candidate per centre). The greedy takes the grown sphere where the
         grain it adds outweighs ``spill_weight`` × its spill: large spheres
         that reach past gently curved surface into the grain around them.
-    rng : int or numpy.random.Generator, optional
-        Seeds the refinement's sample (the result is deterministic for a seed).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator, optional
+        The refinement's sample of cell centres, normalised by :func:`grainforge.rng.as_generator`
+        (an int gives the same clump every time; unused without ``iterations``).
     target_iou : float, optional
         An accuracy target in (0, 1): the clump takes the fewest leading
         spheres of the greedy order (at most ``spheres``) whose intersection
@@ -739,6 +869,13 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     Clump
         With a target, ``accuracy`` holds every figure of :func:`clump_accuracy`
         and ``meets_target`` says whether the target is reached.
+
+    Raises
+    ------
+    ValueError
+        For ``spheres < 1``, ``spill_weight ≤ 0``, a negative or non-finite ``growth``, a ``target_iou``
+        outside (0, 1), ``measure_resolution < 10`` with a target, a mesh of non-positive volume, or an
+        ``rng`` :func:`grainforge.rng.as_generator` refuses.
 
     Examples
     --------
@@ -782,7 +919,7 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
         target_iou = check_target(target_iou)
         if int(measure_resolution) < 10:
             raise ValueError(f"measure_resolution must be ≥ 10 cells per diameter, got {measure_resolution!r}")
-    rng = np.random.default_rng(rng)
+    rng = as_generator(rng)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     d = _equivalent_diameter(v, f)

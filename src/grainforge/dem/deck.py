@@ -9,6 +9,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rng import RNGLike
+
 __all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop",
            "settle_report", "settle_schedule", "settle_settings", "GRAVITY",
            "rotation_matrix", "lattice_slots", "grain_orientations", "orientation_rows", "exact_unit_quaternions",
@@ -17,6 +19,25 @@ __all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt
 
 def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> dict:
     """``defaults`` updated with ``kw``; an unknown key raises ``ValueError`` naming it.
+
+    Parameters
+    ----------
+    defaults : dict
+        Every setting the caller knows, with its default value.
+    kw : dict
+        The settings given (a subset of ``defaults``' keys).
+    what : str
+        What the settings are, for the error message (``"scene settings"``, ``"pour settings"``).
+
+    Returns
+    -------
+    dict
+        A new dict: ``defaults`` with the values of ``kw`` (``defaults`` is not changed).
+
+    Raises
+    ------
+    ValueError
+        If ``kw`` has a key ``defaults`` lacks (all such keys named, sorted).
 
     Examples
     --------
@@ -36,6 +57,14 @@ GRAVITY = 9.81
 def settle_settings() -> dict:
     """Default settle criterion and budget shared by the example pours (see :func:`settle_schedule`).
 
+    Returns
+    -------
+    dict
+        ``ke_ratio`` (the kinetic-energy threshold as a share of the pour's ``m g d``: total mass, gravity,
+        mean equivalent diameter), ``check_time`` (time between checks, in grain times ``t_g``),
+        ``settle_checks`` (checks in a row below the threshold) and ``settle_time`` (the most settling
+        time after the fall, in ``t_g``).
+
     Examples
     --------
     >>> sorted(settle_settings())
@@ -44,7 +73,7 @@ def settle_settings() -> dict:
     return {"ke_ratio": 1e-4, "check_time": 0.2, "settle_checks": 3, "settle_time": 60.0}
 
 
-def settle_schedule(dt: float, top: float, mean_d: float, settings: dict, *, g_fall: float = GRAVITY) -> dict:
+def settle_schedule(dt: float, *, top: float, mean_d: float, settings: dict, g_fall: float = GRAVITY) -> dict:
     """Step counts of a pour's settle check, from times in the grains' own time scale.
 
     The natural time of a grain of diameter ``d`` under gravity is ``t_g = sqrt(d/g)``. The pour
@@ -63,9 +92,9 @@ def settle_schedule(dt: float, top: float, mean_d: float, settings: dict, *, g_f
     mean_d : float
         Mean equivalent diameter of the population, m.
     settings : dict
-        ``check_time``, ``settle_time`` (in ``t_g``) and ``settle_checks``.
+        ``check_time``, ``settle_time`` (in ``t_g``) and ``settle_checks`` (as :func:`settle_settings`).
     g_fall : float
-        Acceleration of the fall (less than g under Yade's local damping).
+        Acceleration of the fall, m/s² (less than g under Yade's local damping; default :data:`GRAVITY`).
 
     Returns
     -------
@@ -74,7 +103,7 @@ def settle_schedule(dt: float, top: float, mean_d: float, settings: dict, *, g_f
 
     Examples
     --------
-    >>> s = settle_schedule(1e-5, 0.02, 0.002, settle_settings())
+    >>> s = settle_schedule(1e-5, top=0.02, mean_d=0.002, settings=settle_settings())
     >>> s["fall_steps"], s["check_every"], s["max_checks"]
     (6386, 286, 300)
     """
@@ -94,6 +123,28 @@ def settle_loop(fall_steps: int, check_every: int, max_checks: int, window: int 
     times) until the largest ``ke`` of the last ``window`` checks is below ``kethr``. Leaves
     ``settled`` (1 or 0), ``kewin`` (that largest ke) and ``nsteps`` (the step count) defined and
     writes them with ``kethr`` to ``settle.txt``. The report line comes from :func:`settle_report`.
+
+    Parameters
+    ----------
+    fall_steps : int
+        Time steps run before the first check (0: none), from :func:`settle_schedule`.
+    check_every : int
+        Time steps between two checks (≥ 1).
+    max_checks : int
+        The most checks (≥ ``window``): the settle budget.
+    window : int
+        Checks in a row whose largest ``ke`` must be below ``kethr`` (≥ 1).
+
+    Returns
+    -------
+    str
+        Input lines joined by newlines, without a final newline (the deck defines ``ke`` and ``kethr``,
+        in its own energy unit).
+
+    Raises
+    ------
+    ValueError
+        If ``window < 1`` or ``max_checks < window``.
 
     Examples
     --------
@@ -125,6 +176,20 @@ def settle_report(quit_settled: str, quit_not_settled: str, energy_unit: str = "
     line, then the given quit commands (``""`` for none) — see :func:`settle_loop`. ``energy_unit`` names the
     unit of the deck's kinetic energies (``"J"`` in SI decks; LAMMPS's micro units are pg µm²/µs² = 1e-15 J).
 
+    Parameters
+    ----------
+    quit_settled : str
+        The input line that ends a settled run (``"quit 0"``; ``""``: none, the input goes on).
+    quit_not_settled : str
+        The command run after the ``NOT SETTLED`` line (``"quit 1"``; ``""``: none).
+    energy_unit : str
+        The unit printed after the kinetic energies.
+
+    Returns
+    -------
+    str
+        Input lines joined by newlines, without a final newline.
+
     Examples
     --------
     >>> print(settle_report("quit 0", "quit 1").splitlines()[-1])
@@ -141,6 +206,18 @@ def settle_report(quit_settled: str, quit_not_settled: str, energy_unit: str = "
 def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
     """Right-handed rotation by ``theta`` radians about ``axis``: :func:`grainforge.geometry.rotations.axis_angle_matrix`.
 
+    Parameters
+    ----------
+    axis : (3,) array_like of float
+        Rotation axis, any non-zero length.
+    theta : float
+        Angle, radians, counter-clockwise seen from the tip of ``axis``.
+
+    Returns
+    -------
+    (3, 3) float64
+        The rotation matrix (acting on column vectors).
+
     Examples
     --------
     >>> np.round(rotation_matrix(np.array([0.0, 0.0, 1.0]), np.pi / 2) @ [1.0, 0.0, 0.0], 12).tolist()
@@ -151,33 +228,65 @@ def rotation_matrix(axis: np.ndarray, theta: float) -> np.ndarray:
     return axis_angle_matrix(axis, theta)
 
 
-#: the second word of the seed of every deck's orientation stream, ``default_rng([seed, ORIENTATION_STREAM])``:
+#: the second word of the seed of every deck's orientation stream, ``SeedSequence([seed, ORIENTATION_STREAM])``:
 #: its own stream, so that the orientations do not move when another draw of the deck changes
 ORIENTATION_STREAM = 0x6F7269
 
 
-def grain_orientations(count: int, seed: int) -> np.ndarray:
-    """The orientations of the ``count`` grains a deck or scene of ``seed`` places: ``(count, 4)`` unit
+def grain_orientations(count: int, rng: RNGLike) -> np.ndarray:
+    """The orientations of the ``count`` grains a deck or scene of seed ``rng`` places: ``(count, 4)`` unit
     quaternions ``(w, x, y, z)``, uniformly random (:func:`grainforge.geometry.rotations.random_quaternions`).
 
     Every engine's deck gets its grains' orientations from here, written out as numbers (the engine
     scripts draw none); grain ``k`` of the deck's placement order takes row ``k``.
 
+    Parameters
+    ----------
+    count : int
+        Grains to orient (≥ 0).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The deck's seed. An int ``s`` draws from the deck's own orientation stream,
+        ``SeedSequence([s, ORIENTATION_STREAM])``: other draws of the deck seeded by ``s`` do not move
+        the orientations, and row ``k`` is the same for every ``count``. Any other value is normalised
+        by :func:`grainforge.rng.as_generator` (a Generator is advanced by ``4 · count`` draws).
+
+    Returns
+    -------
+    (count, 4) float64
+        Unit quaternions, scalar first, ``w ≥ 0``.
+
+    Raises
+    ------
+    ValueError
+        If ``count`` is negative or ``rng`` is not an accepted value (a negative int, ...).
+
     Examples
     --------
-    >>> q = grain_orientations(4, seed=0)
-    >>> q.shape, bool(np.array_equal(q, grain_orientations(4, seed=0)))
+    >>> q = grain_orientations(4, rng=0)
+    >>> q.shape, bool(np.array_equal(q, grain_orientations(4, rng=0)))
     ((4, 4), True)
-    >>> bool(np.array_equal(q[:2], grain_orientations(2, seed=0)))
+    >>> bool(np.array_equal(q[:2], grain_orientations(2, rng=0)))
     True
     """
     from ..geometry.rotations import random_quaternions
 
-    return random_quaternions(count, np.random.default_rng([int(seed), ORIENTATION_STREAM]))
+    if isinstance(rng, (int, np.integer)) and not isinstance(rng, (bool, np.bool_)):
+        rng = np.random.SeedSequence([int(rng), ORIENTATION_STREAM])
+    return random_quaternions(count, rng)
 
 
 def orientation_rows(q: np.ndarray) -> list[list[float]]:
     """Quaternions as JSON rows (each component exactly as float64 holds it).
+
+    Parameters
+    ----------
+    q : (N, 4) or (4,) array_like of float
+        Quaternions ``(w, x, y, z)``.
+
+    Returns
+    -------
+    list of list of float
+        ``N`` rows of four Python floats (what ``grains.json`` holds).
 
     Examples
     --------
@@ -193,6 +302,21 @@ def exact_unit_quaternions(q) -> np.ndarray:
     insertion's ``orientation constant`` (it stops with "quaternion not valid" otherwise).
 
     The turn moves by about 1e-15 rad at most.
+
+    Parameters
+    ----------
+    q : (N, 4) or (4,) array_like of float
+        Quaternions ``(w, x, y, z)``, any non-zero lengths.
+
+    Returns
+    -------
+    (N, 4) float64
+        The unit quaternions, each with ``w*w + x*x + y*y + z*z == 1.0`` exactly in float64.
+
+    Raises
+    ------
+    ValueError
+        If no exactly unit quaternion is found near a row (not met in practice).
 
     Examples
     --------
@@ -243,11 +367,36 @@ def _unit_candidates(q: np.ndarray) -> np.ndarray:
     return out
 
 
-def lattice_slots(count: int, side: int, cell: float, seed: int):
+def lattice_slots(count: int, side: int, cell: float, rng: RNGLike):
     """Pour positions on a ``side`` × ``side`` lattice of ``cell``, layer after layer, each with the
-    uniformly random orientation :func:`grain_orientations` gives slot ``k`` for ``seed``: yields
+    uniformly random orientation :func:`grain_orientations` gives slot ``k`` for ``rng``: yields
     ``(slot, pos, axis, theta_deg, R)`` for slots 0..count-1 (the turn by ``theta_deg`` about the unit
     ``axis``, and its matrix).
+
+    Parameters
+    ----------
+    count : int
+        Slots (grains) to place (≥ 0).
+    side : int
+        Lattice nodes per side of a layer (≥ 1).
+    cell : float
+        Lattice spacing, m (the deck's length unit): node ``(i, j)`` of layer ``l`` is at
+        ``((i + 1/2) cell, (j + 1/2) cell, (l + 1) cell)``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The deck's seed, as for :func:`grain_orientations` (an int: the deck's orientation stream).
+
+    Yields
+    ------
+    slot : int
+        0, 1, ..., ``count - 1``.
+    pos : (3,) float64
+        The node's position.
+    axis : (3,) float64
+        Unit axis of the slot's turn.
+    theta_deg : float
+        Angle of the turn, degrees, in [0, 180].
+    R : (3, 3) float64
+        The turn's matrix.
 
     Examples
     --------
@@ -256,7 +405,7 @@ def lattice_slots(count: int, side: int, cell: float, seed: int):
     """
     from ..geometry.rotations import quaternion_axis_angle, quaternion_matrix
 
-    for slot, q in enumerate(grain_orientations(count, seed)):
+    for slot, q in enumerate(grain_orientations(count, rng)):
         i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
         pos = np.array([(i + 0.5) * cell, (j + 0.5) * cell, (layer + 1.0) * cell])
         axis, theta = quaternion_axis_angle(q)
@@ -264,12 +413,42 @@ def lattice_slots(count: int, side: int, cell: float, seed: int):
 
 
 def fmt(x: float) -> str:
-    """A float with 17 significant digits (round-trips exactly)."""
+    """A float with 17 significant digits (round-trips exactly).
+
+    Parameters
+    ----------
+    x : float
+        Any number ``float()`` takes.
+
+    Returns
+    -------
+    str
+        ``repr(float(x))``: the shortest text that reads back to the same float64.
+
+    Examples
+    --------
+    >>> fmt(0.1), fmt(2), fmt(1e-7)
+    ('0.1', '2.0', '1e-07')
+    """
     return repr(float(x))
 
 
 def xyzr_text(centres: np.ndarray, radii: np.ndarray, *, header: str = "") -> str:
     """``x y z r`` per line (full precision), after ``#`` comment lines from ``header``.
+
+    Parameters
+    ----------
+    centres : (N, 3) float64
+        Sphere centres, m (the grain's frame, centroid at the origin in the decks).
+    radii : (N,) float64
+        Sphere radii, m.
+    header : str
+        Comment text; each of its lines becomes a ``# `` line (``""``: none).
+
+    Returns
+    -------
+    str
+        The file's text, ending with a newline.
 
     Examples
     --------
@@ -286,6 +465,25 @@ def clump_vtk_text(centres: np.ndarray, radii: np.ndarray, title: str = "grainfo
     """A legacy-VTK POLYDATA file: one vertex per sphere with a ``radius`` scalar.
 
     In ParaView apply *Glyph* (sphere, scale by ``radius``, factor 2 for diameter).
+
+    Parameters
+    ----------
+    centres : (N, 3) float64
+        Sphere centres, m.
+    radii : (N,) float64
+        Sphere radii, m.
+    title : str
+        The file's title line (cut to 250 characters, as the format allows 256).
+
+    Returns
+    -------
+    str
+        The file's text (ASCII), ending with a newline.
+
+    Examples
+    --------
+    >>> print(clump_vtk_text(np.zeros((1, 3)), np.array([0.5])).splitlines()[-1])
+    0.5
     """
     n = len(radii)
     lines = ["# vtk DataFile Version 3.0", title[:250], "ASCII", "DATASET POLYDATA", f"POINTS {n} double"]
@@ -297,7 +495,22 @@ def clump_vtk_text(centres: np.ndarray, radii: np.ndarray, title: str = "grainfo
 
 
 def template_record(t) -> dict:
-    """JSON-able summary of a GrainTemplate (SI units)."""
+    """JSON-able summary of a GrainTemplate (SI units): one record of a deck's ``grains.json``.
+
+    Parameters
+    ----------
+    t : grainforge.dem.template.GrainTemplate
+        The template.
+
+    Returns
+    -------
+    dict
+        ``name``, ``source``, ``count``, ``shape``, ``density`` (kg/m³), ``volume`` (m³), ``mass`` (kg),
+        ``d_eq`` (m), ``centroid`` (always the origin), ``inertia_tensor`` (kg m², the grain's frame),
+        ``principal_inertia`` (kg m², ascending), ``principal_axes`` (columns), ``bounding_radius`` (m);
+        for a clump also its sphere file ``xyzr``, ``spheres``, ``coverage``, ``spill``, ``r_min`` (m) and, when
+        it was built to an accuracy target, :func:`grainforge.dem.clump.accuracy_record`.
+    """
     rec = {
         "name": t.name, "source": t.source, "count": t.count, "shape": t.shape,
         "density": t.density, "volume": t.props.volume, "mass": t.mass, "d_eq": t.d_eq,
@@ -324,8 +537,24 @@ def write_files(files: Mapping[str, str | bytes], out: str | Path, *, overwrite:
     A deck whose ``grains.json`` records clumps built to an accuracy target
     gets ``clumps.csv`` beside it (:func:`grainforge.dem.clump.clump_table`).
 
+    Parameters
+    ----------
+    files : mapping of str to str or bytes
+        Relative path (``/``-separated, may name sub-folders) -> the file's text or bytes.
+    out : str or path
+        The deck's folder (created if missing).
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    list of Path
+        The files written, in the order of ``files`` (then ``clumps.csv`` when added).
+
     Raises
     ------
+    ValueError
+        If ``out`` exists and is not a folder.
     FileExistsError
         If any of the files exists and ``overwrite`` is false (checked before
         anything is written).

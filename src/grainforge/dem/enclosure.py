@@ -19,6 +19,18 @@ def enclosure_problems(vertices: np.ndarray, faces: np.ndarray) -> list[str]:
     well defined. Open boundaries, inconsistent orientation, degenerate
     faces, several bodies and non-positive volume are refused.
 
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Vertex coordinates (any length unit), coincident vertices merged.
+    faces : (F, 3) array_like of int
+        Triangles as vertex indices, counter-clockwise seen from outside.
+
+    Returns
+    -------
+    list of str
+        The first problem found, as one short phrase (empty list: the mesh encloses one solid).
+
     Examples
     --------
     >>> import trimesh

@@ -9,7 +9,35 @@ __all__ = ["write_deck"]
 
 
 def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: bool = False) -> list[Path]:
-    """Write the ``engine`` deck (``"yade"``, ``"liggghts"``, ``"lammps"``) of ``templates`` into ``out``."""
+    """Write the ``engine`` deck (``"yade"``, ``"liggghts"``, ``"lammps"``) of ``templates`` into ``out``.
+
+    LAMMPS: templates that are all ``"polyhedron"`` take the body deck (:mod:`grainforge.dem.lammps_body`),
+    clumps the rigid-body deck (:mod:`grainforge.dem.lammps`).
+
+    Parameters
+    ----------
+    engine : {"yade", "liggghts", "lammps"}
+        The engine the deck is for.
+    templates : sequence of GrainTemplate
+        The grains (SI units), each placed ``count`` times by the example pour; shapes the engine
+        supports (:data:`grainforge.dem.SUPPORTED`).
+    out : str or path
+        The deck's folder (created if missing).
+    overwrite : bool
+        Replace existing files (otherwise an existing file is refused before anything is written).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    ValueError
+        For an unknown engine or a template shape the engine does not support.
+    FileExistsError
+        If a file of the deck exists and ``overwrite`` is false.
+    """
     from . import SUPPORTED
 
     if engine not in SUPPORTED:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rng import RNGLike, as_generator
 from .enclosure import enclosure_problems
 
 __all__ = [
@@ -68,22 +69,37 @@ def template_seconds(shape: str, *, spheres: int = 30, refine_iterations: int = 
     return each
 
 
-def pour_counts(templates: int, grains: int, seed: int = 0) -> np.ndarray:
+def pour_counts(templates: int, grains: int, rng: RNGLike = 0) -> np.ndarray:
     """Copies of each of ``templates`` input grains in a pour of ``grains`` grains, in proportion.
 
     Every template is taken ``grains // templates`` times; the remaining
     ``grains % templates`` copies go to as many different templates drawn
-    without replacement by ``np.random.default_rng(seed)``. The counts sum to
-    ``grains``, differ by at most one, and are the same for the same arguments.
+    without replacement from ``rng``. The counts sum to ``grains``, differ by
+    at most one, and are the same for the same arguments (an int ``rng``).
+
+    Parameters
+    ----------
+    templates : int
+        Input grains (templates) the pour draws from (≥ 1).
+    grains : int
+        Grains in the pour, 1 to :data:`MAX_POUR_GRAINS`.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The draw of the remaining copies, normalised by :func:`grainforge.rng.as_generator`
+        (``grainforge dem --seed``; default 0).
+
+    Returns
+    -------
+    (templates,) int64
+        Copies of each template, in input order.
 
     Raises
     ------
     ValueError
-        If ``templates < 1`` or ``grains`` is not in ``[1, MAX_POUR_GRAINS]``.
+        If ``templates < 1``, ``grains`` is not in ``[1, MAX_POUR_GRAINS]``, or ``rng`` is not an accepted value.
 
     Examples
     --------
-    >>> pour_counts(3, 7, seed=1).tolist()
+    >>> pour_counts(3, 7, rng=1).tolist()
     [2, 3, 2]
     >>> int(pour_counts(5, 2).sum()), int(pour_counts(5, 2).max())
     (2, 1)
@@ -93,7 +109,7 @@ def pour_counts(templates: int, grains: int, seed: int = 0) -> np.ndarray:
     if not 1 <= grains <= MAX_POUR_GRAINS:
         raise ValueError(f"a pour holds 1 to {MAX_POUR_GRAINS} grains, got {grains}")
     counts = np.full(templates, grains // templates, dtype=np.int64)
-    extra = np.random.default_rng(seed).choice(templates, size=grains % templates, replace=False)
+    extra = as_generator(rng).choice(templates, size=grains % templates, replace=False)
     counts[extra] += 1
     return counts
 
@@ -107,6 +123,19 @@ def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.
     is refused.  ``check=False`` only reads it (for a caller that checks the mesh itself);
     coordinates too far from the origin for float32 are refused either way
     (:func:`grainforge.io.read_mesh`).
+
+    Parameters
+    ----------
+    path : str or path
+        A mesh file (STL, OBJ, PLY, 3MF, ... as :func:`grainforge.io.read_mesh` reads), in its own unit.
+    check : bool
+        Refuse a mesh that is not one valid solid.
+
+    Returns
+    -------
+    vertices : (V, 3) float64
+        In the file's unit, merged by position.
+    faces : (F, 3) int64
 
     Raises
     ------
@@ -130,11 +159,31 @@ def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.
 
 def load_template(path: str | Path, name: str, kwargs: dict):
     """Read and check ``path`` (:func:`read_grain`) and :func:`~grainforge.dem.template.prepare` it as
-    ``name`` (mesh dropped)."""
+    ``name`` (mesh dropped).
+
+    Parameters
+    ----------
+    path : str or path
+        The grain's mesh file.
+    name : str
+        The template's name (its deck files' stem).
+    kwargs : dict
+        The options of :func:`~grainforge.dem.template.prepare` (``unit``, ``density``, ``shape``, ...).
+
+    Returns
+    -------
+    GrainTemplate
+        Without its mesh (:meth:`~grainforge.dem.template.GrainTemplate.without_mesh`); its ``source`` is ``path``.
+
+    Raises
+    ------
+    ValueError
+        If the file is unreadable or not one valid solid, or ``prepare`` refuses it.
+    """
     from .template import prepare
 
     v, f = read_grain(path)
-    return prepare(v, f, name, source=str(path), **kwargs).without_mesh()
+    return prepare(v, f, name=name, source=str(path), **kwargs).without_mesh()
 
 
 def _unique_names(paths: Sequence[Path]) -> list[str]:
@@ -161,6 +210,30 @@ def build_templates(paths: Sequence[Path], *, workers: int = 1,
     template's ``count`` and leaves out the paths counted 0; names are those
     of the full list either way. Runs on ``workers`` processes; the result does
     not depend on the count.
+
+    Parameters
+    ----------
+    paths : sequence of Path
+        The grains' mesh files; each template is named after its file's stem (made safe for file
+        names, ``_1``, ``_2``, ... appended to repeated stems).
+    workers : int
+        Processes (1: this process; fewer than 4 grains are always made here).
+    progress : callable, optional
+        Wraps the iterable of finished templates (a progress bar), e.g. ``tqdm``.
+    counts : sequence of int, optional
+        Copies of each path's grain in the pour (0: left out); default: ``kwargs``' ``count``, or 1.
+    **kwargs
+        Options of :func:`~grainforge.dem.template.prepare` (``unit``, ``density``, ``shape``, ``spheres``, ...).
+
+    Returns
+    -------
+    list of GrainTemplate
+        In the order of ``paths`` (those counted 0 left out), without their meshes.
+
+    Raises
+    ------
+    ValueError
+        If ``counts`` and ``paths`` differ in length, or a grain file is refused (:func:`load_template`).
     """
     names = _unique_names(paths)
     if counts is None:

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..rng import as_generator
 from .deck import (
     GRAVITY,
     clump_vtk_text,
@@ -52,7 +53,33 @@ from .text import render
 __all__ = ["write_deck", "deck_files", "pour_settings", "rotation_matrix"]
 
 def pour_settings(**kw) -> dict:
-    """Default settings of the example pour (SI), updated with ``kw``."""
+    """Default settings of the example pour (SI), updated with ``kw``.
+
+    Parameters
+    ----------
+    **kw
+        Settings to change: ``seed`` (int: the pour's order of grains and their orientations, drawn in
+        Python; default 0), ``kn_weight_overlap`` (the Hooke stiffness lets the heaviest grain's weight
+        compress a contact by this share of the mean equivalent diameter), ``restitution`` (normal
+        coefficient, in (0, 1)), ``friction`` (contact friction coefficient), ``dt_fraction`` (time step as a
+        share of the contact's period), ``dump_every`` (steps between dumps) and those of
+        :func:`grainforge.dem.deck.settle_settings`.
+
+    Returns
+    -------
+    dict
+        Every setting, the defaults updated with ``kw``.
+
+    Raises
+    ------
+    ValueError
+        If ``kw`` names an unknown setting.
+
+    Examples
+    --------
+    >>> pour_settings(friction=0.3)["friction"], pour_settings()["seed"]
+    (0.3, 0)
+    """
     s = {"seed": 0, "kn_weight_overlap": 0.005, "restitution": 0.3, "friction": 0.5, "dt_fraction": 0.02,
          **settle_settings(), "dump_every": 5000}
     return updated_settings(s, kw, "pour settings")
@@ -122,11 +149,29 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
 
     ``in.run`` is the template ``grainforge/dem/texts/lammps-pour.in`` filled with the numbers computed
     here (:mod:`grainforge.dem.text`).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Clump templates (SI units), each placed ``count`` times; the pour's order of the copies and
+        their orientations are drawn from ``settings["seed"]``.
+    settings : dict, optional
+        The pour's settings (default :func:`pour_settings`).
+
+    Returns
+    -------
+    dict of str to str
+        Relative path -> text: the files listed in the module text.
+
+    Raises
+    ------
+    ValueError
+        If a template is not a clump.
     """
     s = settings or pour_settings()
     files = _shape_files(templates)
     population = [k for k, t in enumerate(templates) for _ in range(t.count)]
-    rng = np.random.default_rng(s["seed"])
+    rng = as_generator(s["seed"])
     order = rng.permutation(len(population))
     population = [population[i] for i in order]
     n = len(population)
@@ -146,7 +191,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     zeta = -lne / math.sqrt(math.pi**2 + lne**2)
     gamman = 2 * zeta * omega
     ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
-    sched = settle_schedule(dt, layers * cell, mean_d, s)
+    sched = settle_schedule(dt, top=layers * cell, mean_d=mean_d, settings=s)
     placed, placements = _placement_files(templates, population, side, cell, s["seed"])
     files.update(placed)
     # under MPI, rigid/small reaches a body's atoms on other ranks as ghosts: the ghost cutoff spans
@@ -179,6 +224,29 @@ def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = 
     Templates of shape ``"polyhedron"`` take the rounded/polyhedron body deck of
     :func:`grainforge.dem.lammps_body.write_deck` (:func:`grainforge.dem.engines.write_deck`
     chooses it).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Clump templates (SI units).
+    out : str or path
+        The deck's folder (created if missing).
+    settings : dict, optional
+        The pour's settings (default :func:`pour_settings`).
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    ValueError
+        If a template is a polyhedron or not a clump.
+    FileExistsError
+        If a file of the deck exists and ``overwrite`` is false (nothing is written).
     """
     if any(t.shape == "polyhedron" for t in templates):
         raise ValueError("polyhedron templates take grainforge.dem.lammps_body.write_deck")

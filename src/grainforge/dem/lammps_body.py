@@ -40,6 +40,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..rng import as_generator
 from .deck import (
     GRAVITY,
     fmt,
@@ -74,7 +75,35 @@ _MAX_BODY_LINES = 31
 _MAX_LINE = 250
 
 def pour_settings(**kw) -> dict:
-    """Default settings of the example pour (SI), updated with ``kw``."""
+    """Default settings of the example pour (SI), updated with ``kw``.
+
+    Parameters
+    ----------
+    **kw
+        Settings to change: ``seed`` (int: the pour's order of grains and their orientations, drawn in
+        Python; default 0), ``rounded_fraction`` (the rounded radius as a share of a grain's equivalent
+        radius), ``impact_overlap`` (the stiffness lets the heaviest grain's impact compress a contact by this
+        share of the smallest rounded radius), ``restitution`` (normal coefficient, in (0, 1)),
+        ``tangential_damping`` (tangential damping as a share of the normal one), ``viscous_time`` (the
+        background drag's time constant, in grain times ``t_g = sqrt(d/g)``), ``dt_fraction`` (time step as a
+        share of the contact's period), ``dump_every`` (steps between dumps) and those of
+        :func:`grainforge.dem.deck.settle_settings`.
+
+    Returns
+    -------
+    dict
+        Every setting, the defaults updated with ``kw``.
+
+    Raises
+    ------
+    ValueError
+        If ``kw`` names an unknown setting.
+
+    Examples
+    --------
+    >>> pour_settings(seed=4)["seed"], pour_settings()["rounded_fraction"]
+    (4, 0.05)
+    """
     s = {"seed": 0, "rounded_fraction": 0.05, "impact_overlap": 0.5, "restitution": 0.3,
          "tangential_damping": 1.0, "viscous_time": 1.0, "dt_fraction": 0.04,
          **settle_settings(), "dump_every": 10000}
@@ -141,18 +170,47 @@ def _pack(tokens: Sequence[str]) -> list[str]:
     return lines
 
 
-def body_lines(body_id: int, vertices: np.ndarray, faces: np.ndarray, edges: np.ndarray,
+def body_lines(body_id: int, vertices: np.ndarray, *, faces: np.ndarray, edges: np.ndarray,
                inertia: np.ndarray, rounded_diameter: float) -> list[str]:
     """The ``Bodies`` lines of one rounded/polyhedron body (values in the deck's units).
 
     ``vertices`` are displacements from the centre of mass in the box frame and
     ``inertia`` the tensor about the centre of mass in the box frame.
 
+    Parameters
+    ----------
+    body_id : int
+        The body's atom ID (1, 2, ...).
+    vertices : (K, 3) float64
+        Hull vertices, displacements from the centre of mass, box frame (the deck's units: µm).
+    faces : (F, 3) int64
+        Hull triangles as vertex indices, counter-clockwise seen from outside (:func:`hull_topology`).
+    edges : (E, 2) int64
+        Hull edges as vertex indices.
+    inertia : (3, 3) float64
+        Inertia tensor about the centre of mass, box frame (the deck's units: pg µm²).
+    rounded_diameter : float
+        Diameter of the rounding sphere swept over the hull (the deck's units: µm).
+
+    Returns
+    -------
+    list of str
+        The body's header line ``ID 3 Ndoubles``, then its integer line and the packed double lines.
+
     Raises
     ------
     ValueError
         If the body needs more than the 31 lines (≤ 250 characters each) that
         ``read_data`` reads per body.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> v = trimesh.creation.box().vertices
+    >>> f, e = hull_topology(v)
+    >>> lines = body_lines(1, v, faces=f, edges=e, inertia=np.eye(3), rounded_diameter=0.1)
+    >>> lines[:2]
+    ['1 3 115', '8 18 12']
     """
     I = inertia
     doubles = [fmt(x) for x in (I[0, 0], I[1, 1], I[2, 2], I[0, 1], I[0, 2], I[1, 2])]
@@ -198,7 +256,7 @@ def _shape_files(templates: Sequence) -> tuple[dict, list]:
 def _pour_plan(templates: Sequence, s: dict) -> SimpleNamespace:
     """The pour's population, box, contact stiffness and damping, time step and settle schedule (SI)."""
     population = [k for k, t in enumerate(templates) for _ in range(t.count)]
-    rng = np.random.default_rng(s["seed"])
+    rng = as_generator(s["seed"])
     order = rng.permutation(len(population))
     population = [population[i] for i in order]
     n = len(population)
@@ -235,7 +293,7 @@ def _pour_plan(templates: Sequence, s: dict) -> SimpleNamespace:
     c_n = 2 * zeta * math.sqrt(kn * m_eff)  # viscous normal damping, kg/s
     c_t = s["tangential_damping"] * c_n
     ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
-    sched = settle_schedule(dt, layers * cell, mean_d, s)
+    sched = settle_schedule(dt, top=layers * cell, mean_d=mean_d, settings=s)
     cut_inner = 2 * max(r_round.values())
     gamma = total_mass / n / tau  # kg/s
     a_ua = math.pi * (2 * max(float(np.linalg.norm(t.polyhedron, axis=1).max()) for t in templates)) ** 2
@@ -257,8 +315,8 @@ def _data_file(templates: Sequence, topo: list, p: SimpleNamespace) -> tuple[str
         t = templates[k]
         f, e = topo[k]
         atoms.append(f"{slot + 1} 1 1 {fmt(t.mass * M)} " + " ".join(fmt(x * L) for x in pos))
-        bodies += body_lines(slot + 1, (t.polyhedron @ R.T) * L, f, e, (R @ t.inertia @ R.T) * M * L * L,
-                             2 * r_round[k] * L)
+        bodies += body_lines(slot + 1, (t.polyhedron @ R.T) * L, faces=f, edges=e,
+                             inertia=(R @ t.inertia @ R.T) * M * L * L, rounded_diameter=2 * r_round[k] * L)
         nv = len(t.polyhedron)
         nmax = max(nmax, nv, math.ceil((3 * nv + 2 * len(e) + 4 * len(f)) / 9))
         placements.append({"id": slot + 1, "grain": k, "name": t.name, "xcm": pos.tolist(), "axis": axis.tolist(),
@@ -292,8 +350,27 @@ def _run_text(p: SimpleNamespace, s: dict, nmax: int) -> str:
 
 
 def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
-    """``{relative path: text}`` of a LAMMPS body deck (nothing written)."""
+    """``{relative path: text}`` of a LAMMPS body deck (nothing written).
 
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Convex-polyhedron templates (SI units), each placed ``count`` times; the pour's order of the copies
+        and their orientations are drawn from ``settings["seed"]``.
+    settings : dict, optional
+        The pour's settings (default :func:`pour_settings`).
+
+    Returns
+    -------
+    dict of str to str
+        Relative path -> text: the files listed in the module text (``grains.json`` in SI, the LAMMPS
+        files in units micro).
+
+    Raises
+    ------
+    ValueError
+        If a template is not a polyhedron, or a hull does not fit ``read_data``'s per-body limits.
+    """
     s = settings or pour_settings()
     files, topo = _shape_files(templates)
     p = _pour_plan(templates, s)
@@ -318,5 +395,29 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
 
 def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = None,
                overwrite: bool = False) -> list[Path]:
-    """Write a LAMMPS body deck for ``templates`` into ``out`` (see the module text)."""
+    """Write a LAMMPS body deck for ``templates`` into ``out`` (see the module text).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Convex-polyhedron templates (SI units).
+    out : str or path
+        The deck's folder (created if missing).
+    settings : dict, optional
+        The pour's settings (default :func:`pour_settings`).
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    ValueError
+        As :func:`deck_files`.
+    FileExistsError
+        If a file of the deck exists and ``overwrite`` is false (nothing is written).
+    """
     return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)

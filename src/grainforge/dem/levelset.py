@@ -46,7 +46,29 @@ class LevelSet:
 def surface_nodes(vertices: np.ndarray, faces: np.ndarray, count: int) -> np.ndarray:
     """``count`` points on the surface: the mesh vertices nearest to an even spread.
 
-    Farthest-point selection over the vertices (deterministic).
+    Farthest-point selection over the vertices (deterministic): it starts from the highest vertex
+    (largest z) and adds, one at a time, the vertex farthest from those chosen.
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Mesh vertices (any length unit).
+    faces : (F, 3) array_like of int
+        Mesh triangles (unused: the nodes are vertices; kept so that every mesh function takes a mesh).
+    count : int
+        Nodes wanted (at most ``V`` are returned).
+
+    Returns
+    -------
+    (min(count, V), 3) float64
+        The chosen vertices, in the order of ``vertices``.
+
+    Examples
+    --------
+    >>> import trimesh
+    >>> box = trimesh.creation.box()
+    >>> surface_nodes(box.vertices, box.faces, 2).tolist()  # a highest corner and the one opposite
+    [[-0.5, -0.5, 0.5], [0.5, 0.5, -0.5]]
     """
     v = np.asarray(vertices, dtype=np.float64)
     count = min(int(count), len(v))
@@ -129,12 +151,25 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
     ----------
     vertices : (V, 3) float64
     faces : (F, 3) int64
+        A closed, outward-oriented mesh (any length unit; the decks give metres).
     spacing : float
         Node spacing as a fraction of the equivalent diameter (0 < spacing ≤ 0.5).
     pad : int
         Nodes beyond the bounding box on each side (≥ 1).
     nodes : int
-        Surface nodes to pick.
+        Surface nodes to pick (:func:`surface_nodes`).
+
+    Returns
+    -------
+    LevelSet
+        The grid (spacing ``spacing · d_eq``, ``pad`` nodes beyond the mesh's bounding box), the signed
+        distances on it (the mesh's length unit, negative inside) and the surface nodes.
+
+    Raises
+    ------
+    ValueError
+        If ``spacing`` is not in (0, 0.5], ``pad < 1``, or the grid would have more than :data:`MAX_NODES`
+        nodes (naming the finest spacing that fits).
 
     Examples
     --------

@@ -83,7 +83,25 @@ _MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2
 
 def template_fix(t, k: int, seed: int, atom_type: int = 1) -> str:
     """The ``fix pts<k+1> ... particletemplate/multisphere`` line of template ``t`` (clump type ``k + 1``):
-    the spheres of ``<name>.xyzr``, the mesh's exact mass and inertia tensor (grain frame)."""
+    the spheres of ``<name>.xyzr``, the mesh's exact mass and inertia tensor (grain frame).
+
+    Parameters
+    ----------
+    t : GrainTemplate
+        A clump template (SI units: mass kg, inertia kg m², density kg/m³, volume m³).
+    k : int
+        The template's index (0, 1, ...): the fix is ``pts<k+1>``, its clump type ``k + 1``.
+    seed : int
+        LIGGGHTS's own random seed of the fix, written into the line (a prime > :data:`SEED_MIN` from
+        :func:`deck_seeds`, distinct from the deck's other seeds); no random number is drawn here.
+    atom_type : int
+        The atom type of the template's spheres (1: the grains' material).
+
+    Returns
+    -------
+    str
+        One input line, without a newline.
+    """
     I = t.inertia
     tensor = " ".join(fmt(x) for x in (I[0, 0], I[0, 1], I[0, 2], I[1, 1], I[1, 2], I[2, 2]))
     # LIGGGHTS refuses a template below volume_limit (default 1e-12 m³, a 12 µm sphere) as a
@@ -95,14 +113,36 @@ def template_fix(t, k: int, seed: int, atom_type: int = 1) -> str:
             f"mass {fmt(t.mass)} inertia_tensor {tensor} use_density")
 
 
-def node_insertion(slot: int, node, cell: float, seed: int, distribution: str, quat) -> list[str]:
+def node_insertion(slot: int, node, *, cell: float, seed: int, distribution: str, quat) -> list[str]:
     """The region and ``insert/pack`` lines that insert one grain of ``distribution`` at ``node``
     in the orientation ``quat`` (``w x y z``, a row of :func:`grainforge.dem.deck.grain_orientations` made
     exactly unit by :func:`grainforge.dem.deck.exact_unit_quaternions`), within a box of ``_NODE_BOX`` cells
     around it (see the notes above ``_NODE_BOX``).
 
     LIGGGHTS's own ``orientation random`` turns the template by three angles each uniform in [0, 2π): not
-    uniformly random, so the deck gives every grain its orientation instead."""
+    uniformly random, so the deck gives every grain its orientation instead.
+
+    Parameters
+    ----------
+    slot : int
+        The grain's index in the deck's insertion order: names the region ``r<slot>`` and the fix ``i<slot>``.
+    node : (3,) array_like of float
+        The lattice node the grain's centre of mass is inserted at, m.
+    cell : float
+        The lattice spacing, m (the region is ``_NODE_BOX · cell`` wide).
+    seed : int
+        LIGGGHTS's own random seed of the ``insert/pack`` fix, written into the deck (a prime from
+        :func:`deck_seeds`); no random number is drawn here.
+    distribution : str
+        The ID of the ``particledistribution/discrete`` fix the grain is taken from (one template).
+    quat : (4,) array_like of float
+        The grain's orientation ``w x y z``, of exactly unit norm.
+
+    Returns
+    -------
+    list of str
+        The ``region`` line and the ``fix ... insert/pack`` line.
+    """
     lo, hi = np.asarray(node) - 0.5 * _NODE_BOX * cell, np.asarray(node) + 0.5 * _NODE_BOX * cell
     return [f"region r{slot} block {fmt(lo[0])} {fmt(hi[0])} {fmt(lo[1])} {fmt(hi[1])} "
             f"{fmt(lo[2])} {fmt(hi[2])} units box volume_limit {fmt(0.5 * (_NODE_BOX * cell) ** 3)}",
@@ -121,7 +161,33 @@ def __getattr__(name):
 
 
 def pour_settings(**kw) -> dict:
-    """Default settings of the example pour (SI), updated with ``kw``."""
+    """Default settings of the example pour (SI), updated with ``kw``.
+
+    Parameters
+    ----------
+    **kw
+        Settings to change: ``seed`` (int: the grains' orientations, drawn in Python; default 0; LIGGGHTS's
+        own seeds come from :func:`deck_seeds`), ``young`` (Young's modulus, Pa), ``poisson`` (Poisson's
+        ratio), ``restitution`` (coefficient, in (0, 1)), ``friction`` (contact friction coefficient),
+        ``dt_safety`` (time step as a share of the smallest sphere's Rayleigh-like time
+        ``r_min sqrt(ρ / E)``), ``vtk_every`` (steps between VTK dumps) and those of
+        :func:`grainforge.dem.deck.settle_settings`.
+
+    Returns
+    -------
+    dict
+        Every setting, the defaults updated with ``kw``.
+
+    Raises
+    ------
+    ValueError
+        If ``kw`` names an unknown setting.
+
+    Examples
+    --------
+    >>> pour_settings(young=1e7)["young"], pour_settings()["seed"]
+    (10000000.0, 0)
+    """
     s = {"seed": 0, "young": 5e6, "poisson": 0.3, "restitution": 0.3, "friction": 0.5, "dt_safety": 0.3,
          **settle_settings(), "vtk_every": 5000}
     return updated_settings(s, kw, "pour settings")
@@ -130,6 +196,11 @@ def pour_settings(**kw) -> dict:
 @functools.lru_cache(maxsize=1)
 def seed_table() -> np.ndarray:
     """The primes ``SEED_MIN < p < SEED_LIMIT`` in ascending order (sieve of Eratosthenes), read-only.
+
+    Returns
+    -------
+    (347284,) int64
+        The primes, a read-only array computed once per process.
 
     Examples
     --------
@@ -151,6 +222,17 @@ def deck_seeds(count: int) -> list[int]:
 
     Distinct by construction (different entries of :func:`seed_table`) and the
     same for the same ``count``.
+
+    Parameters
+    ----------
+    count : int
+        Seeds wanted (≥ 0): one per random fix of the deck.
+
+    Returns
+    -------
+    list of int
+        Seed ``j`` is entry ``(j · 1000003) mod len(table)`` of :func:`seed_table`: the first seeds of a
+        larger count are those of a smaller one.
 
     Raises
     ------
@@ -210,7 +292,8 @@ def _insert_text(templates: Sequence, seeds: list[int], side: int, cell: float, 
         for _ in range(t.count):
             i, j, layer = slot % side, (slot // side) % side, slot // (side * side)
             node = np.array([i + 0.5, j + 0.5, layer + 1.0]) * cell
-            ins += node_insertion(slot, node, cell, seeds[2 * n_t + 1 + slot], f"pdd{k + 1}", quats[slot])
+            ins += node_insertion(slot, node, cell=cell, seed=seeds[2 * n_t + 1 + slot], distribution=f"pdd{k + 1}",
+                                  quat=quats[slot])
             slot += 1
     return "\n".join(ins) + "\n"
 
@@ -220,6 +303,24 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
 
     ``in.run`` is the template ``grainforge/dem/texts/liggghts-pour.in`` filled with the numbers computed
     here (:mod:`grainforge.dem.text`).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Clump templates (SI units), each inserted ``count`` times; the orientations are drawn from
+        ``settings["seed"]`` (:func:`grainforge.dem.deck.grain_orientations`).
+    settings : dict, optional
+        The pour's settings (default :func:`pour_settings`).
+
+    Returns
+    -------
+    dict of str to str
+        Relative path -> text: the files listed in the module text.
+
+    Raises
+    ------
+    ValueError
+        If a template is not a clump, or the deck needs more seeds than :func:`seed_table` holds.
     """
     s = settings or pour_settings()
     n_t = len(templates)
@@ -239,7 +340,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
     mean_d = sum(t.d_eq * t.count for t in templates) / n
     ke_threshold = s["ke_ratio"] * total_mass * GRAVITY * mean_d
     # the highest insertion node's top: where the last grain can start
-    sched = settle_schedule(dt, (layers + 0.5) * cell, mean_d, s)
+    sched = settle_schedule(dt, top=(layers + 0.5) * cell, mean_d=mean_d, settings=s)
     files["in.insert"] = _insert_text(templates, seeds, side, cell, s.get("seed", 0))
     lo, hi = fmt(-_MARGIN_LO * cell), fmt(width + _MARGIN_HI * cell)
     files["in.run"] = render("liggghts-pour.in", {
@@ -259,5 +360,29 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
 
 def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = None,
                overwrite: bool = False) -> list[Path]:
-    """Write a LIGGGHTS deck for ``templates`` into ``out`` (see the module text)."""
+    """Write a LIGGGHTS deck for ``templates`` into ``out`` (see the module text).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Clump templates (SI units).
+    out : str or path
+        The deck's folder (created if missing).
+    settings : dict, optional
+        The pour's settings (default :func:`pour_settings`).
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    ValueError
+        As :func:`deck_files`.
+    FileExistsError
+        If a file of the deck exists and ``overwrite`` is false (nothing is written).
+    """
     return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)

@@ -42,7 +42,25 @@ class MassProperties:
     axes: np.ndarray
 
     def scaled(self, factor: float) -> MassProperties:
-        """The properties of the solid scaled by ``factor`` about the origin."""
+        """The properties of the solid scaled by ``factor`` about the origin.
+
+        Parameters
+        ----------
+        factor : float
+            Length scale factor (> 0; 1e-3 from millimetres to metres).
+
+        Returns
+        -------
+        MassProperties
+            Volume × factor³, centroid × factor, inertia and principal moments × factor⁵, the same axes.
+
+        Examples
+        --------
+        >>> import trimesh
+        >>> box = trimesh.creation.box((1.0, 2.0, 3.0))
+        >>> round(mass_properties(box.vertices, box.faces).scaled(2.0).volume, 12)
+        48.0
+        """
         f = float(factor)
         return MassProperties(self.volume * f**3, self.centroid * f, self.inertia * f**5,
                               self.principal * f**5, self.axes)
@@ -53,7 +71,20 @@ class MassProperties:
         return float((6.0 * self.volume / np.pi) ** (1.0 / 3.0))
 
     def quaternion(self) -> np.ndarray:
-        """The rotation ``axes`` as a unit quaternion ``(w, x, y, z)`` with w ≥ 0."""
+        """The rotation ``axes`` as a unit quaternion ``(w, x, y, z)`` with w ≥ 0.
+
+        Returns
+        -------
+        (4,) float64
+            The turn from the mesh's frame to its principal frame, scalar first.
+
+        Examples
+        --------
+        >>> import trimesh
+        >>> box = trimesh.creation.box((3.0, 2.0, 1.0))
+        >>> mass_properties(box.vertices, box.faces).quaternion().round(12).tolist()
+        [1.0, 0.0, 0.0, 0.0]
+        """
         return rotation_to_quaternion(self.axes)
 
 

@@ -27,13 +27,19 @@ def convex_polyhedron(vertices: np.ndarray, *, max_vertices: int | None = None) 
     Parameters
     ----------
     vertices : (V, 3) float64
+        Points of the grain (its mesh's vertices; any length unit).
     max_vertices : int, optional
-        ≥ 4.
+        The most hull vertices kept (≥ 4); ``None``: every hull vertex.
 
     Returns
     -------
     (K, 3) float64
         Hull vertices (K ≤ max_vertices), in a deterministic order.
+
+    Raises
+    ------
+    ValueError
+        If ``max_vertices`` is below 4 (and the hull has more vertices).
 
     Examples
     --------

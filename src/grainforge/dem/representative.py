@@ -20,7 +20,7 @@ those quantiles (a Wasserstein-2 distance in rank space, which bounds the KS
 statistic): every chosen grain in turn is swapped for the grain outside the
 set that lowers it most, until a sweep swaps nothing. It starts from K
 strata of the first principal component of the standardised descriptors
-(size in log) and from ``restarts - 1`` random sets drawn with ``seed``;
+(size in log) and from ``restarts - 1`` random sets drawn from ``rng``;
 the result with the smallest largest KS statistic is kept. Values are compared
 to 6 significant digits (grains scaled to one size tie in size). Everything
 is deterministic for a seed. Pure numpy/scipy.
@@ -32,6 +32,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 
 import numpy as np
+
+from ..rng import RNGLike, as_generator
 
 __all__ = ["DESCRIPTORS", "TemplateChoice", "descriptor_matrix", "significant", "standardise", "ks_statistics",
            "choose_representative"]
@@ -72,6 +74,12 @@ class TemplateChoice:
     def summary(self) -> str:
         """One line: the KS statistic of every descriptor, or that all grains were taken.
 
+        Returns
+        -------
+        str
+            ``K of N grains; KS against all: sphericity 0.040, ... (largest 0.050)``, or the line saying
+            every grain was taken.
+
         Examples
         --------
         >>> TemplateChoice(np.arange(3), dict.fromkeys(DESCRIPTORS, 0.0), 3, False).summary()
@@ -86,6 +94,17 @@ class TemplateChoice:
 
 def descriptor_matrix(rows: Sequence[Mapping[str, float]]) -> np.ndarray:
     """(N, 5) float64 table of :data:`DESCRIPTORS` from one mapping per grain.
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        One mapping per grain holding at least the five :data:`DESCRIPTORS` (other keys ignored);
+        ``size`` (the equivalent diameter) in any length unit, the same for every row.
+
+    Returns
+    -------
+    (N, 5) float64
+        The descriptors, columns in the order of :data:`DESCRIPTORS`.
 
     Raises
     ------
@@ -122,6 +141,18 @@ def _check(table: np.ndarray) -> None:
 def significant(table: np.ndarray, digits: int = 6) -> np.ndarray:
     """The values rounded to ``digits`` significant digits: measures equal to that precision tie.
 
+    Parameters
+    ----------
+    table : array_like of float
+        Any shape; zeros stay zero.
+    digits : int
+        Significant digits kept (≥ 1).
+
+    Returns
+    -------
+    float64 ndarray
+        The rounded values, the shape of ``table``.
+
     Examples
     --------
     >>> significant(np.array([[0.99999999, 1.0000001, 123456.78, 0.0]])).tolist()
@@ -137,6 +168,17 @@ def significant(table: np.ndarray, digits: int = 6) -> np.ndarray:
 def standardise(table: np.ndarray) -> np.ndarray:
     """The descriptors as z-scores, the size by its logarithm (a constant column gives zeros).
 
+    Parameters
+    ----------
+    table : (N, 5) array_like of float
+        Rows of :data:`DESCRIPTORS`, the size (last column) > 0.
+
+    Returns
+    -------
+    (N, 5) float64
+        Each column less its mean, over its standard deviation (population, ``ddof=0``); the last column
+        is ``log(size)``'s.
+
     Examples
     --------
     >>> z = standardise(np.array([[0.8, 0.9, 0.6, 0.7, 1.0], [0.9, 0.95, 0.8, 0.9, 100.0]]))
@@ -151,6 +193,18 @@ def standardise(table: np.ndarray) -> np.ndarray:
 
 def ks_statistics(table: np.ndarray, indices: Sequence[int]) -> dict[str, float]:
     """Descriptor -> two-sample KS statistic (:func:`scipy.stats.ks_2samp`) of rows ``indices`` against all rows.
+
+    Parameters
+    ----------
+    table : (N, 5) array_like of float
+        Rows of :data:`DESCRIPTORS`.
+    indices : sequence of int
+        The rows compared with the whole table.
+
+    Returns
+    -------
+    dict of str to float
+        One statistic in [0, 1] per descriptor, in the order of :data:`DESCRIPTORS`.
 
     Examples
     --------
@@ -210,7 +264,7 @@ def _swap_search(u: np.ndarray, chosen: np.ndarray, target: np.ndarray, order: n
     return chosen
 
 
-def choose_representative(descriptors, k: int, *, seed: int = 0, restarts: int = 4) -> TemplateChoice:
+def choose_representative(descriptors, k: int, *, rng: RNGLike = 0, restarts: int = 4) -> TemplateChoice:
     """K rows whose descriptor distribution matches the whole table's.
 
     Parameters
@@ -220,8 +274,9 @@ def choose_representative(descriptors, k: int, *, seed: int = 0, restarts: int =
         flatness, elongation, equivalent diameter > 0 in any unit).
     k : int
         Templates wanted (≥ 1). With ``k >= N`` every row is taken.
-    seed : int
-        Seed of the random starting sets; the same seed gives the same choice.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The random starting sets and the search's order, normalised by :func:`grainforge.rng.as_generator`
+        (default 0); the same int gives the same choice.
     restarts : int
         Starting sets of the search (≥ 1): the principal-component strata,
         then ``restarts - 1`` random sets.
@@ -235,7 +290,7 @@ def choose_representative(descriptors, k: int, *, seed: int = 0, restarts: int =
     ------
     ValueError
         For ``k < 1``, ``restarts < 1``, an empty table, a table not of five
-        columns, or a row with a non-finite descriptor or a size ≤ 0.
+        columns, a row with a non-finite descriptor or a size ≤ 0, or an ``rng`` that is not an accepted value.
 
     Examples
     --------
@@ -248,10 +303,10 @@ def choose_representative(descriptors, k: int, *, seed: int = 0, restarts: int =
     >>> table = table[np.argsort(table[:, 4])]
     >>> round(ks_statistics(table, range(40))["size"], 2)
     0.87
-    >>> choice = choose_representative(table, 40, seed=0)
+    >>> choice = choose_representative(table, 40, rng=0)
     >>> len(choice.indices), choice.largest_ks <= 0.1
     (40, True)
-    >>> bool(np.array_equal(choice.indices, choose_representative(table, 40, seed=0).indices))
+    >>> bool(np.array_equal(choice.indices, choose_representative(table, 40, rng=0).indices))
     True
     """
     table = np.asarray(descriptors, dtype=np.float64)
@@ -261,12 +316,12 @@ def choose_representative(descriptors, k: int, *, seed: int = 0, restarts: int =
         raise ValueError(f"k must be a whole number ≥ 1, got {k!r}")
     if restarts < 1:
         raise ValueError(f"restarts must be ≥ 1, got {restarts!r}")
+    rng = as_generator(rng)  # refused alike whether or not a choice is made
     n, k = len(table), int(k)
     if k >= n:
         return TemplateChoice(np.arange(n, dtype=np.int64), dict.fromkeys(DESCRIPTORS, 0.0), n, False)
     u = _ranks(table)
     target = (np.arange(k) + 0.5) / k
-    rng = np.random.default_rng(seed)
     # the first start: K strata of the first principal component, the middle row of each
     z = standardise(table)
     _, _, vt = np.linalg.svd(z - z.mean(axis=0), full_matrices=False)

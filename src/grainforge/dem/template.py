@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..rng import RNGLike
 from .massprops import MassProperties, mass_properties
 
 __all__ = ["GrainTemplate", "prepare", "SHAPES"]
@@ -97,14 +98,20 @@ class GrainTemplate:
         return self.info["bounding_radius"]
 
     def without_mesh(self) -> GrainTemplate:
-        """The same template without its mesh (what the decks need; small to keep by the thousand)."""
+        """The same template without its mesh (what the decks need; small to keep by the thousand).
+
+        Returns
+        -------
+        GrainTemplate
+            A copy whose ``vertices`` and ``faces`` are ``None``; this one is unchanged.
+        """
         return dataclasses.replace(self, vertices=None, faces=None)
 
 
-def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float = 1e-3,
+def prepare(vertices: np.ndarray, faces: np.ndarray, *, name: str, unit: float = 1e-3,
             density: float = 2650.0, shape: str = "clump", spheres: int = 30, refine_iterations: int = 0,
             polyhedron_vertices: int | None = None, levelset_spacing: float = 0.05,
-            source: str = "", count: int = 1, rng=0,
+            source: str = "", count: int = 1, rng: RNGLike = 0,
             size_range: tuple[float, float] | None = None, target_iou: float | None = None,
             min_spheres: int = 1) -> GrainTemplate:
     """Make a :class:`GrainTemplate` from a closed mesh.
@@ -114,12 +121,16 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     vertices : (V, 3) float64
         In file units; ``unit`` converts them to metres (1e-3 for millimetres).
     faces : (F, 3) int64
+        Triangles as vertex indices, counter-clockwise seen from outside; the mesh must enclose one
+        solid (:func:`grainforge.dem.enclosure.enclosure_problems`).
     name : str
+        The template's name: the stem of its deck files (safe for file names).
     unit : float
         Metres per file unit (> 0).
     density : float
         kg/m³ (> 0).
     shape : {"clump", "polyhedron", "levelset"}
+        The representation built.
     spheres : int
         Sphere count of a clump (see :func:`grainforge.dem.clump.clump`); with
         ``target_iou``, the most spheres a clump may take.
@@ -132,10 +143,12 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
     levelset_spacing : float
         Level-set grid spacing as a fraction of d_eq.
     source : str
+        Where the grain came from (its file), for the records and messages.
     count : int
         Copies of this grain in the population (≥ 1).
-    rng : int or Generator
-        Seeds the clump refinement sample.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The clump refinement's sample (:func:`grainforge.dem.clump.clump`; unused without
+        ``refine_iterations``), normalised by :func:`grainforge.rng.as_generator`.
     size_range : (float, float), optional
         Equivalent diameters (m) the caller accepts; a grain outside is refused
         before its representation is built (the costly part).
@@ -149,20 +162,26 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, name: str, *, unit: float =
         With ``target_iou``: the fewest spheres a clump takes (2 for LIGGGHTS
         and LAMMPS, which refuse a body of one sphere).
 
+    Returns
+    -------
+    GrainTemplate
+        In metres, centroid at the origin, the grain's orientation kept, with its mesh.
+
     Raises
     ------
     ValueError
-        For a mesh that is not a valid solid, a density ≤ 0, an unknown shape,
-        a grain outside ``size_range``.
+        For a mesh that is not a valid solid, a density ≤ 0, a unit ≤ 0, an unknown shape,
+        ``refine_iterations < 0``, ``count < 1``, a ``target_iou`` outside (0, 1) or with a shape other
+        than ``"clump"``, a grain outside ``size_range``.
 
     Examples
     --------
     >>> import trimesh
     >>> box = trimesh.creation.box((2.0, 2.0, 2.0))
-    >>> t = prepare(box.vertices, box.faces, "box", density=1000.0, spheres=8)
+    >>> t = prepare(box.vertices, box.faces, name="box", density=1000.0, spheres=8)
     >>> round(t.mass, 12), t.clump.count      # a 2 mm cube (file units mm) of water: 8 mg
     (8e-06, 8)
-    >>> a = prepare(box.vertices, box.faces, "box", spheres=30, target_iou=0.8)
+    >>> a = prepare(box.vertices, box.faces, name="box", spheres=30, target_iou=0.8)
     >>> a.clump.count < 30, a.clump.meets_target
     (True, True)
     """

@@ -45,6 +45,19 @@ CHOICE_SEED = 0
 def pool_size(k: int, available: int) -> int:
     """Candidates to measure for ``k`` templates out of ``available`` grains.
 
+    Parameters
+    ----------
+    k : int
+        Templates wanted.
+    available : int
+        Grains the inputs hold.
+
+    Returns
+    -------
+    int
+        :data:`POOL_FACTOR` × ``k``, at least :data:`POOL_MIN`, at most :data:`POOL_MAX` (or ``k`` when
+        larger), and never more than ``available``.
+
     Examples
     --------
     >>> pool_size(40, 500), pool_size(6, 500), pool_size(600, 10_000), pool_size(3000, 10_000), pool_size(40, 90)
@@ -57,6 +70,18 @@ def pool_workers(workers: int, grains: int) -> int:
     """Processes to measure ``grains`` on: one (this process) below :data:`MIN_PER_WORKER` grains a worker,
     where starting the processes costs more than it saves.
 
+    Parameters
+    ----------
+    workers : int
+        Processes the caller allows.
+    grains : int
+        Grains to measure.
+
+    Returns
+    -------
+    int
+        Between 1 and ``workers``.
+
     Examples
     --------
     >>> pool_workers(8, 10), pool_workers(8, 200), pool_workers(2, 200)
@@ -67,6 +92,18 @@ def pool_workers(workers: int, grains: int) -> int:
 
 def spread(n: int, m: int) -> np.ndarray:
     """``m`` indices evenly spread over ``range(n)`` (all of them when ``m >= n``), ascending.
+
+    Parameters
+    ----------
+    n : int
+        Items to pick from.
+    m : int
+        Items wanted: the middle index of each of ``m`` equal parts of ``range(n)``.
+
+    Returns
+    -------
+    (min(m, n),) int64
+        Distinct indices, ascending.
 
     Examples
     --------
@@ -80,6 +117,19 @@ def spread(n: int, m: int) -> np.ndarray:
 
 def mesh_descriptors(vertices, faces) -> dict[str, float]:
     """The five descriptors of one closed mesh (size: its equivalent diameter, in the mesh's unit).
+
+    Parameters
+    ----------
+    vertices : (V, 3) array_like of float
+        Mesh vertices (any length unit).
+    faces : (F, 3) array_like of int
+        A closed, outward-oriented triangle mesh.
+
+    Returns
+    -------
+    dict of str to float
+        ``sphericity`` (Wadell), ``convexity`` (V / V_hull), ``flatness`` (S/I), ``elongation`` (I/L) of the
+        minimum-volume box's sides L ≥ I ≥ S, and ``size`` (the equivalent diameter).
 
     Examples
     --------
@@ -126,6 +176,18 @@ def manifest_descriptors(inputs: Iterable[str | os.PathLike]) -> dict[Path, dict
     """Resolved file path -> descriptors, from every manifest among ``inputs`` (folders' or named ``.csv``).
 
     Rows without the measured columns are left out (those files are measured).
+
+    Parameters
+    ----------
+    inputs : iterable of str or path
+        The command's inputs: a folder's ``manifest.csv`` is read, a ``.csv`` is read as a manifest,
+        anything else is skipped (as is a manifest that cannot be read).
+
+    Returns
+    -------
+    dict of Path to dict
+        Each listed file (resolved, relative to its manifest's folder) -> its five descriptors
+        (as :func:`mesh_descriptors`; the size in the grain files' length unit, as the manifest gives it).
     """
     out: dict[Path, dict[str, float]] = {}
     for p in map(Path, inputs):
@@ -155,7 +217,19 @@ class ChosenFiles:
     measured: int
 
     def summary(self, k: int) -> str:
-        """The one line the commands print: what was chosen from what, and the KS figures."""
+        """The one line the commands print: what was chosen from what, and the KS figures.
+
+        Parameters
+        ----------
+        k : int
+            The templates asked for (``--templates``).
+
+        Returns
+        -------
+        str
+            ``templates: 40 of 500 grains, 200 measured; KS against them: sphericity 0.040, ...
+            (largest 0.050)``, or the line saying every candidate was taken.
+        """
         return _summary(self.choice, k, self.available, self.measured)
 
 
@@ -190,6 +264,22 @@ def files_to_measure(inputs: Sequence[str | os.PathLike], paths: Sequence[Path],
                      pool: int | None = None) -> int:
     """How many files :func:`choose_files` will read and measure (for the commands' estimates).
 
+    Parameters
+    ----------
+    inputs : sequence of str or path
+        The command's inputs (their manifests give descriptors).
+    paths : sequence of Path
+        The grain files resolved from ``inputs``.
+    k : int
+        Templates wanted.
+    pool : int, optional
+        Candidates to draw from (default :func:`pool_size`).
+
+    Returns
+    -------
+    int
+        Candidate files without a manifest's descriptors.
+
     Examples
     --------
     >>> import tempfile, trimesh
@@ -203,7 +293,7 @@ def files_to_measure(inputs: Sequence[str | os.PathLike], paths: Sequence[Path],
     return len(_candidates(inputs, list(paths), k, pool)[3])
 
 
-def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: int, *, workers: int = 1,
+def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], *, k: int, workers: int = 1,
                  progress: Callable[[int, int], None] | None = None, pool: int | None = None,
                  size: float | None = None) -> ChosenFiles:
     """Choose ``k`` of ``paths`` (resolved from ``inputs`` by :func:`~grainforge.io.inputs.mesh_paths`).
@@ -214,6 +304,32 @@ def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: 
     and measured on ``workers`` processes, ``progress(done, total)`` after each.
     With ``size``, every grain is to be scaled to it: sizes are not matched
     (the table's sizes are ``size``).
+
+    The choice is :func:`grainforge.dem.representative.choose_representative` with ``rng=CHOICE_SEED``:
+    the same inputs and ``k`` give the same templates in every run.
+
+    Parameters
+    ----------
+    inputs : sequence of str or path
+        The command's inputs (their manifests give descriptors).
+    paths : sequence of Path
+        The grain files resolved from ``inputs``, in input order.
+    k : int
+        Templates wanted (≥ 1).
+    workers : int
+        Processes measuring the files.
+    progress : callable, optional
+        Called as ``progress(done, total)`` after each file measured.
+    pool : int, optional
+        Candidates when some must be measured (default :func:`pool_size`; at least ``k``).
+    size : float, optional
+        The one size every grain is scaled to (the table's size column), in the grain files' length unit.
+
+    Returns
+    -------
+    ChosenFiles
+        The chosen files in input order, their descriptors, the choice and the counts of files
+        available and measured.
 
     Raises
     ------
@@ -238,15 +354,33 @@ def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], k: 
     table = descriptor_matrix(rows)
     if size is not None:
         table[:, -1] = size
-    choice = choose_representative(table, k, seed=CHOICE_SEED)
+    choice = choose_representative(table, k, rng=CHOICE_SEED)
     picked = candidates[choice.indices]
     return ChosenFiles([paths[int(i)] for i in picked], table[choice.indices], choice, len(paths), len(todo))
 
 
-def write_templates_csv(path: str | os.PathLike, names: Sequence[str], sources: Sequence[str], table: np.ndarray,
-                        choice: TemplateChoice) -> Path:
+def write_templates_csv(path: str | os.PathLike, *, names: Sequence[str], sources: Sequence[str],
+                        table: np.ndarray, choice: TemplateChoice) -> Path:
     """``templates.csv``: one row per chosen grain (name, source, the five descriptors, size in mm), then a row
     ``KS`` holding each descriptor's two-sample KS statistic of the chosen grains against all candidates.
+
+    Parameters
+    ----------
+    path : str or path
+        The file written (replaced if it exists).
+    names : sequence of str
+        The chosen grains' template names, one per row of ``table``.
+    sources : sequence of str
+        Their files.
+    table : (K, 5) float64
+        Their descriptors (:data:`~grainforge.dem.representative.DESCRIPTORS`), the size in mm.
+    choice : TemplateChoice
+        The choice (its KS figures and candidate count make the last row).
+
+    Returns
+    -------
+    Path
+        ``path``.
 
     Examples
     --------
@@ -254,7 +388,8 @@ def write_templates_csv(path: str | os.PathLike, names: Sequence[str], sources: 
     >>> t = np.array([[0.9, 0.95, 0.7, 0.6, 0.5], [0.8, 0.9, 0.6, 0.5, 0.6]])
     >>> c = choose_representative(t, 1)
     >>> with tempfile.TemporaryDirectory() as d:
-    ...     lines = write_templates_csv(Path(d) / "t.csv", ["a"], ["a.stl"], t[c.indices], c).read_text().splitlines()
+    ...     out = write_templates_csv(Path(d) / "t.csv", names=["a"], sources=["a.stl"], table=t[c.indices], choice=c)
+    ...     lines = out.read_text().splitlines()
     >>> lines[0]
     'template,source,sphericity,convexity,flatness,elongation,size_mm'
     >>> lines[-1].split(",")[:2]

@@ -63,7 +63,28 @@ def fill(text: str, values: Mapping[str, object]) -> str:
 
 @cache
 def template_text(name: str) -> str:
-    """The text of template ``name`` in ``grainforge/dem/texts/`` (package data)."""
+    """The text of template ``name`` in ``grainforge/dem/texts/`` (package data).
+
+    Parameters
+    ----------
+    name : str
+        File name of the template, e.g. ``"liggghts-tilt.in"``.
+
+    Returns
+    -------
+    str
+        The file's text, placeholders unfilled (read once per process).
+
+    Raises
+    ------
+    FileNotFoundError
+        If there is no such template.
+
+    Examples
+    --------
+    >>> template_text("liggghts-multisphere.in").splitlines()[0]
+    'include in.templates'
+    """
     return resources.files("grainforge.dem").joinpath("texts", name).read_text(encoding="utf-8")
 
 

@@ -70,6 +70,28 @@ _SCRIPTS = {"LIBRARY": "yade_library.py", "POUR_SCENE": "yade_pour.py"}
 def pour_settings(**kw) -> dict:
     """Default settings of the pour scene (SI), updated with ``kw``.
 
+    Parameters
+    ----------
+    **kw
+        Settings to change: ``seed`` (int: the grains' orientations, drawn in Python by
+        :func:`grainforge.dem.deck.grain_orientations`, and the seed of the pour scene's own shuffle of
+        the grains in Yade's Python; default 0), ``young`` (Young's modulus of spheres and level sets, Pa),
+        ``poisson`` (Poisson's ratio), ``friction_deg`` (contact friction angle, degrees), ``damping``
+        (Yade's local damping, in [0, 1)), ``dt_safety`` (the time step as a share of the smallest grain's
+        ``r_min sqrt(ρ / E)``), ``vtk_every`` (steps between VTK files), ``poly_young`` (the polyhedra's
+        contact modulus, Pa), ``ls_nodes`` (surface nodes of a level set) and those of
+        :func:`grainforge.dem.deck.settle_settings`.
+
+    Returns
+    -------
+    dict
+        Every setting, the defaults updated with ``kw`` (stored in ``grains.json["scene"]``).
+
+    Raises
+    ------
+    ValueError
+        If ``kw`` names an unknown setting.
+
     Examples
     --------
     >>> pour_settings(seed=3)["seed"]
@@ -128,7 +150,18 @@ def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict 
         (default: the pour, ``render("yade_pour.py")``).
     settings : dict, optional
         Scene settings stored in ``grains.json["scene"]`` (default
-        :func:`pour_settings`).
+        :func:`pour_settings`). Without ``orientations``, the scene gets those of
+        :func:`grainforge.dem.deck.grain_orientations` for its ``seed`` (0 if none), one per grain placed.
+
+    Returns
+    -------
+    dict of str to str
+        Relative path -> text: the grains' shape files, ``grains.json`` and ``run.py``.
+
+    Raises
+    ------
+    ValueError
+        If the templates are of more than one shape, or a template lacks its representation.
     """
     files: dict[str, str] = {}
     records = []
@@ -161,5 +194,30 @@ def write_deck(templates: Sequence, out: str | Path, *, scene: str | None = None
 
     Returns the written paths. Raises ``FileExistsError`` before writing
     anything if a file exists and ``overwrite`` is false.
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Templates of one shape (SI units).
+    out : str or path
+        The deck's folder (created if missing).
+    scene : str, optional
+        The scene's Python text (default: the pour), as for :func:`deck_files`.
+    settings : dict, optional
+        The scene's settings (default :func:`pour_settings`).
+    overwrite : bool
+        Replace existing files.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    ValueError
+        As :func:`deck_files`.
+    FileExistsError
+        If a file of the deck exists and ``overwrite`` is false.
     """
     return write_files(deck_files(templates, scene=scene, settings=settings), out, overwrite=overwrite)

@@ -319,8 +319,8 @@ def _grain_files(templates: Sequence, plan: SimpleNamespace, settings: Settings,
     # the scene's orientations (grains.json's, the same as the Yade scene's grain k), exactly unit for LIGGGHTS
     quats = exact_unit_quaternions(plan.scene["orientations"])
     for slot, (k, node) in enumerate(zip(plan.pick, geo["nodes"])):
-        ins += node_insertion(slot, node, plan.cell, seeds[2 * len(used) + slot], f"pdd{clump_type[int(k)]}",
-                              quats[slot])
+        ins += node_insertion(slot, node, cell=plan.cell, seed=seeds[2 * len(used) + slot],
+                              distribution=f"pdd{clump_type[int(k)]}", quat=quats[slot])
     files["in.insert"] = "\n".join(ins) + "\n"
     files["in.unfix"] = "\n".join(f"unfix i{slot}\nregion r{slot} delete" for slot in range(plan.n)) + "\n"
     if "base" not in geo:  # a scene without a rough base (the triaxial box)

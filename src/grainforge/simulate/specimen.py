@@ -31,7 +31,8 @@ def _template(args):
     if as_spheres:
         d = (6.0 * signed_volume(vertices, faces) / math.pi) ** (1.0 / 3.0)
         vertices, faces = _sphere_mesh(d)
-        t = prepare(vertices, faces, name, unit=1e-3, density=settings.density, spheres=1, source=source, rng=k)
+        t = prepare(vertices, faces, name=name, unit=1e-3, density=settings.density, spheres=1, source=source,
+                    rng=k)
         # a sphere's clump is the sphere itself
         from ..dem.clump import Clump
 
@@ -40,7 +41,7 @@ def _template(args):
         # prepare() made and this replaces, which may reach past the mesh (the scene spaces grains by it)
         radius = max(t.d_eq / 2.0, float(np.linalg.norm(t.vertices, axis=1).max()))
         return replace(t, clump=sphere, info={**t.info, "bounding_radius": radius})
-    return prepare(vertices, faces, name, unit=1e-3, density=settings.density, spheres=settings.spheres,
+    return prepare(vertices, faces, name=name, unit=1e-3, density=settings.density, spheres=settings.spheres,
                    source=source, rng=k, shape=shape, levelset_spacing=spacing, target_iou=clump_accuracy)
 
 
@@ -114,7 +115,8 @@ class ChosenGrains:
         """``templates.csv`` (:func:`grainforge.dem.template_choice.write_templates_csv`)."""
         from ..dem.template_choice import write_templates_csv
 
-        return write_templates_csv(path, self.names, self.sources, self.table, self.choice)
+        return write_templates_csv(path, names=self.names, sources=self.sources, table=self.table,
+                                   choice=self.choice)
 
 
 def _recipe_mesh(recipe, i: int):
@@ -175,14 +177,14 @@ def choose_grains(inputs: Sequence[str | os.PathLike], settings: Settings, *, po
         table = descriptor_matrix(rows)
         if settings.size is not None:
             table[:, -1] = settings.size
-        choice = choose_representative(table, k, seed=CHOICE_SEED)
+        choice = choose_representative(table, k, rng=CHOICE_SEED)
         picks = [int(i) for i in candidates[choice.indices]]
         return ChosenGrains(paths[0], picks, [f"{recipe.method}-{i:04d}" for i in picks],
                             [f"{paths[0]} grain {i}" for i in picks], table[choice.indices], choice, n, len(tasks))
     from ..io.inputs import mesh_paths
 
     files = mesh_paths(paths)
-    chosen = choose_files(paths, files, k, workers=workers, progress=progress, pool=pool,
+    chosen = choose_files(paths, files, k=k, workers=workers, progress=progress, pool=pool,
                           size=settings.size)
     names = [f"g{j:04d}-{f.stem}"[:60] for j, f in enumerate(chosen.paths)]
     return ChosenGrains(None, chosen.paths, names, [str(f) for f in chosen.paths], chosen.table, chosen.choice,

@@ -49,6 +49,11 @@ _PARAM = re.compile(r"^(?P<name>[A-Za-z_]\w*) = .*  # @param$", re.MULTILINE)
 def script_names() -> list[str]:
     """File names of the scripts shipped in this folder (``*.py`` but this module), sorted.
 
+    Returns
+    -------
+    list of str
+        File names, e.g. ``"yade_library.py"``.
+
     Examples
     --------
     >>> "yade_pour.py" in script_names()
@@ -60,6 +65,19 @@ def script_names() -> list[str]:
 
 def inject(text: str, params: dict | None = None) -> str:
     """``text`` with its ``NAME = …  # @param`` lines set to ``params`` (see the module text).
+
+    Parameters
+    ----------
+    text : str
+        A script's text.
+    params : dict, optional
+        Parameter name -> value, each a Python literal (numbers, strings, booleans, ``None``, and
+        lists, tuples and dicts of them); unmentioned parameters keep their defaults.
+
+    Returns
+    -------
+    str
+        ``text`` with each named parameter line replaced by ``NAME = <repr(value)>``.
 
     Raises
     ------
@@ -92,6 +110,16 @@ def render(name: str, params: dict | None = None) -> str:
         File name in this folder, e.g. ``"yade_pour.py"`` (:func:`script_names`).
     params : dict, optional
         Values of the script's ``# @param`` lines (:func:`inject`).
+
+    Returns
+    -------
+    str
+        The script's text as a deck carries it.
+
+    Raises
+    ------
+    ValueError
+        If there is no such script, or :func:`inject` refuses ``params``.
     """
     if name not in script_names():
         raise ValueError(f"no engine script {name!r}; shipped: {', '.join(script_names())}")
