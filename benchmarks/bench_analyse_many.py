@@ -27,7 +27,7 @@ def make_grains(folder: Path, count: int) -> list[Path]:
     names = [folder / grain_file_name("fso", i, "stl") for i in range(count)]
     if not all(p.is_file() for p in names):
         t = time.perf_counter()
-        write_run("fso", get("fso").Params(subdivisions=5), range(count), folder, overwrite=True)
+        write_run("fso", get("fso").Params(subdivisions=5), seeds=range(count), out=folder, overwrite=True)
         print(f"made {count} grain files in {time.perf_counter() - t:.1f} s")
     return names
 

@@ -29,7 +29,7 @@ def make_grains(folder: Path, count: int) -> list[Path]:
 
     names = [folder / grain_file_name("fso", i, "stl") for i in range(count)]
     if not all(p.is_file() for p in names):
-        write_run("fso", get("fso").Params(subdivisions=4), range(count), folder, overwrite=True)
+        write_run("fso", get("fso").Params(subdivisions=4), seeds=range(count), out=folder, overwrite=True)
     return names
 
 
@@ -106,7 +106,8 @@ def main() -> None:
         from grainforge.methods import get
         from grainforge.population.generate import write_run
 
-        write_run("angular", get("angular").Params(subdivisions=3), range(3), angular, size=2.0, overwrite=True)
+        write_run("angular", get("angular").Params(subdivisions=3), seeds=range(3), out=angular, size=2.0,
+                  overwrite=True)
     warm()
     load0 = os.getloadavg()
     rows = []

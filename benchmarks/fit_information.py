@@ -68,7 +68,7 @@ def main() -> None:
             def run(delta, root=99):
                 jobs = [(spec.params(dict(zip(names, known[j] + delta))), grain_seed(root, i), float(across[i]))
                         for i, j in enumerate(rows)]
-                return pool.run("angular", fixed, jobs, None)
+                return pool.run("angular", fixed, jobs)
 
             base, other = run(np.zeros(len(names))), run(np.zeros(len(names)), root=7)
             slopes = []

@@ -99,7 +99,8 @@ def main() -> None:
 
         run.population_settings = known_spread(run.population_settings, known)
     t, cpu = time.perf_counter(), time.process_time()
-    result = fit_sand(sand, args.method, count=None, refine=args.refine, seed=args.seed, design_grains=args.design_grains,
+    result = fit_sand(sand, args.method, count=None, refine=args.refine, rng=args.seed,
+                      design_grains=args.design_grains,
                       reseed=RESEED if args.reseed is None else args.reseed,
                       population_grains=args.population_grains or POPULATION_GRAINS,
                       # the diagnostic's slopes replace the model's: the estimate must step through the "model"

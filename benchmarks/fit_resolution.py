@@ -46,7 +46,7 @@ def main() -> None:
         cap = args.cap or spec.max_across or args.probe
         label = f"{cap:g}" if args.cap or spec.max_across else f"none (tried {cap:g})"
         # settings from the middle 60 % of the design box (the box's corners include grains no sand has)
-        u = 0.2 + 0.6 * design_points(args.grains, len(spec.all_settings), seed=5)
+        u = 0.2 + 0.6 * design_points(args.grains, len(spec.all_settings), rng=5)
         worst = np.zeros(4)
         t_full = []
         for i in range(args.grains):

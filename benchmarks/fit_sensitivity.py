@@ -34,7 +34,7 @@ def main(n: int = 30, eps: float = 1e-5) -> None:
                   "subdivisions": 5,
                   "aspect": {"distribution": "zingg", "elongation": tn(0.803 + de, 0.1, 0.403 + de, 1.0),
                              "flatness": tn(0.804, 0.106, 0.404, 1.0)}}
-        return recipe_text("cri", params, sand, count=500, seed=2024)
+        return recipe_text("cri", params, sand=sand, count=500, seed=2024)
 
     import grainforge.methods.cri as cri
 
@@ -57,8 +57,8 @@ def main(n: int = 30, eps: float = 1e-5) -> None:
     print(f"grain | {' | '.join(DESCRIPTORS)} (recipe, then elongation mean + {eps:g})")
     for i in range(n):
         choices.clear()
-        a = np.array(measure_grain(t0, i, 7.3)[1:5])
-        b = np.array(measure_grain(t1, i, 7.3)[1:5])
+        a = np.array(measure_grain(t0, i, voxel_size_um=7.3)[1:5])
+        b = np.array(measure_grain(t1, i, voxel_size_um=7.3)[1:5])
         (ca, lo_a, second_a), (cb, _, _) = choices[0], choices[-1]
         flipped += ca != cb
         if np.abs(a - b).max() > 1e-3 or ca != cb:

@@ -102,7 +102,7 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
             yield x
 
     with MeasurePool(workers) as pool:  # each grain measured the Atlas way (spam's cube)
-        table = pool.run(method, spec.fixed, jobs, progress, opening=opening is not None)
+        table = pool.run(method, spec.fixed, jobs, progress=progress, opening=opening is not None)
     print()
     if not np.all(np.isfinite(table)):
         raise SystemExit(f"the generator refused {int(np.sum(~np.all(np.isfinite(table), axis=1)))} grains")
@@ -110,9 +110,9 @@ def make(method: str, name: str, known: dict, grains: int, voxel_um: float, d_um
     d_eq = [d for _, d in drawn]
     values = {k: table[:, j] for j, k in enumerate(DESCRIPTORS)}
     out.mkdir(parents=True, exist_ok=True)
-    write_sand(out / name, d_eq, values, voxel_um)
+    write_sand(out / name, d_eq, values, voxel_size=voxel_um)
     if opening:
-        write_sand(out / opening, d_eq, values, voxel_um, opening=table[:, 4])
+        write_sand(out / opening, d_eq, values, voxel_size=voxel_um, opening=table[:, 4])
     if settings:
         with open(out / settings, "w", newline="", encoding="utf-8") as fh:
             w = csv.writer(fh)

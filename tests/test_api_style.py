@@ -26,13 +26,13 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "grainforge"
 
-#: top-level modules and packages of grainforge held to the style (the jobs' packages fit/, population/,
-#: simulate/ and cli/ are to join)
+#: top-level modules and packages of grainforge held to the style (the jobs' packages simulate/ and cli/ are to
+#: join)
 SCOPE = (
     "grain.py", "params.py", "units.py", "rng.py",
     "geometry", "outline", "io", "runtime",
     "methods", "analysis", "fabrication",
-    "viz", "dem",
+    "viz", "dem", "fit", "population",
 )
 
 #: folders in SCOPE whose modules (all but ``__init__.py``) are not grainforge's Python API: the engine scripts
@@ -78,6 +78,32 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("seed", "grainforge.dem.liggghts:node_insertion"): (
         "seed is the number written into the deck's fix insert/pack, LIGGGHTS's own random seed (a prime from "
         "deck_seeds); the grain's orientation, drawn in Python, comes in as quat from grain_orientations"
+    ),
+    ("positional", "grainforge.fit.sand:write_sand"): (
+        "write_sand(path, equivalent_diameter, values, *, voxel_size, opening): the file and the table's two "
+        "columns of data (each grain's size and its descriptors' values, matched grain by grain); the voxel size "
+        "and the opening fraction are keyword-only"
+    ),
+    ("positional", "grainforge.fit.measure:MeasurePool.run"): (
+        "run(method, fixed, jobs, *, progress, opening): the grains measured are the method, the parameters they "
+        "share and each job's own (parameters, seed, resolution), as measure_settings takes them; the bar and "
+        "the opening fraction are keyword-only"
+    ),
+    ("positional", "grainforge.fit.twins:invert"): (
+        "invert(model, targets, across, *, offsets, start, scale): the model and the grains it is solved for "
+        "(their target descriptors and resolutions, matched row by row); the solver's options are keyword-only"
+    ),
+    ("positional", "grainforge.fit.twins:identifiability"): (
+        "identifiability(u, across, y, *, folds, rng): a design is three arrays matched row by row (settings, "
+        "resolutions, measured descriptors), in ForwardModel.fit's order; the folds and their rng are keyword-only"
+    ),
+    ("seed", "grainforge.fit.recipes:recipe_text"): (
+        "seed is the root seed written into the recipe text (its seed = ..., from which batch draws each grain's "
+        "own stream); recipe_text draws no random number"
+    ),
+    ("seed", "grainforge.fit.recipes:twin_recipe_text"): (
+        "seed is the root seed written into the twins' recipe (and seeds the grains' own, written where one "
+        "differs from batch's); twin_recipe_text draws no random number"
     ),
 }
 

@@ -84,6 +84,6 @@ def test_analyse_and_fit_name_the_convention(tmp_path):
         sph[convention] = json.loads(res.stdout)[0]["atlas_sphericity"]
     assert sph["atlas"] - sph["whole"] > 0.003, sph  # this grain is one spam clips
     text = 'method = "cri"\ncount = 1\nseed = 3\n[size]\nmm = 0.35\n'
-    a = measure_grain(text, 0, 7.3)
-    w = measure_grain(text, 0, 7.3, "whole")
+    a = measure_grain(text, 0, voxel_size_um=7.3)
+    w = measure_grain(text, 0, voxel_size_um=7.3, convention="whole")
     assert a[2:5] == w[2:5]  # convexity, flatness, elongation do not depend on it

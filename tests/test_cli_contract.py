@@ -293,7 +293,7 @@ def inputs(tmp_path_factory) -> Path:
     d = tmp_path_factory.mktemp("inputs")
     g = grainforge.fso(subdivisions=2, rng=0)
     write_mesh(g, d / "grain.stl")
-    write_run("fso", grainforge.methods.get("fso").Params(subdivisions=2), [0, 1], d / "grains", size=5.0)
+    write_run("fso", grainforge.methods.get("fso").Params(subdivisions=2), seeds=[0, 1], out=d / "grains", size=5.0)
     data = (d / "grain.stl").read_bytes()
     (d / "trunc.stl").write_bytes(data[: len(data) // 2])
     (d / "rand.stl").write_bytes(np.random.default_rng(0).bytes(3000))

@@ -89,7 +89,7 @@ def inputs(tmp_path_factory) -> Path:
         same_shape.append(",".join(cells))
     (d / "same-sphericity.csv").write_text("\n".join([header] + same_shape) + "\n", encoding="utf-8")
     (d / "empty.csv").write_text("", encoding="utf-8")
-    write_run("angular", get("angular").Params(subdivisions=3), [0, 1, 2], d / "ang", size=2.0)
+    write_run("angular", get("angular").Params(subdivisions=3), seeds=[0, 1, 2], out=d / "ang", size=2.0)
     (d / "nogrinit").mkdir()
     recipe = 'method = "fso"\ncount = {count}\nseed = 1\n[params]\nsubdivisions = 2\n[size]\nmm = 1.0\n'
     (d / "huge.toml").write_text(recipe.format(count=2**63 - 1), encoding="utf-8")
@@ -337,7 +337,7 @@ def test_fuzz_simulate_options_are_refused_up_front_without_a_budget(data, tmp_p
         from grainforge.methods import get
         from grainforge.population.generate import write_run
 
-        write_run("angular", get("angular").Params(subdivisions=2), [0, 1], inputs, size=2.0)
+        write_run("angular", get("angular").Params(subdivisions=2), seeds=[0, 1], out=inputs, size=2.0)
     cwd = tmp_path_factory.mktemp("fuzz-sim")
     test = data.draw(st.sampled_from(["repose", "tilt"]), label="test")
     args = ["simulate", test, str(inputs), "--out", "o"]
@@ -576,7 +576,7 @@ def test_a_signal_while_the_staging_folders_are_made_leaves_no_folder(tmp_path, 
 
     monkeypatch.setattr(where, interrupted)
     with pytest.raises(KeyboardInterrupt):
-        write_run("fso", grainforge.methods.get("fso").Params(subdivisions=2), [0], fresh, size=5.0)
+        write_run("fso", grainforge.methods.get("fso").Params(subdivisions=2), seeds=[0], out=fresh, size=5.0)
     assert not fresh.exists()
 
 

@@ -91,8 +91,8 @@ def inputs(tmp_path_factory) -> Path:
     from grainforge.population.generate import write_run
 
     d = tmp_path_factory.mktemp("inputs")
-    write_run("fso", get("fso").Params(subdivisions=2), [0, 1, 2], d / "grains", size=5.0)
-    write_run("angular", get("angular").Params(subdivisions=3), [0, 1, 2], d / "ang", size=2.0)
+    write_run("fso", get("fso").Params(subdivisions=2), seeds=[0, 1, 2], out=d / "grains", size=5.0)
+    write_run("angular", get("angular").Params(subdivisions=3), seeds=[0, 1, 2], out=d / "ang", size=2.0)
     (d / "r.toml").write_text('method = "fso"\ncount = 2\nseed = 1\n[params]\nsubdivisions = 2\n[size]\nmm = 1.0\n')
     import numpy as np
 
@@ -281,7 +281,7 @@ def test_a_signal_while_outputs_move_into_place_waits_for_the_last(tmp_path, mon
     out = tmp_path / "out"
     with pytest.raises(KeyboardInterrupt):
         if writer == "generate":
-            write_run("fso", get("fso").Params(subdivisions=2), range(3), out, size=5.0)
+            write_run("fso", get("fso").Params(subdivisions=2), seeds=range(3), out=out, size=5.0)
         else:
             with staged(out) as stage:
                 for name in ("a.csv", "b.png", "c.json"):

@@ -84,7 +84,7 @@ def test_recipe_text_is_a_valid_batch_recipe_with_the_sand_grading(tmp_path):
     params = {"descriptors": [0.0, 0.1, 0.006], "subdivisions": 5,
               "aspect": {"distribution": "zingg", "elongation": 0.8,
                          "flatness": {"distribution": "uniform", "low": 0.6, "high": 0.9}}}
-    r = parse_recipe(recipe_text("cri", params, s, count=500, seed=1, header="a\nb"))
+    r = parse_recipe(recipe_text("cri", params, sand=s, count=500, seed=1, header="a\nb"))
     assert r.count == 500 and r.size_definition == "equivalent" and r.size.basis == "count"
     assert r.size.sieves_mm[0] == pytest.approx(s.equivalent_diameter.min() / 1000, rel=1e-5)
     assert r.size.sieves_mm[-1] == pytest.approx(s.equivalent_diameter.max() / 1000, rel=1e-5)
@@ -99,7 +99,7 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
     spec = FITS["rf"]
     us = [np.array([0.1, 0.2, 0.5, 0.8, 0.7]), np.array([0.3, 0.1, 0.9, 0.6, 0.9])]
     own = [{**spec.grain_params(u)} for u in us]
-    text = twin_recipe_text(spec, own, [0.41, 0.52], seed=3, header="test")
+    text = twin_recipe_text(spec, own, size_mm=[0.41, 0.52], seed=3, header="test")
     recipe = parse_recipe(text)
     for i in range(len(us)):
         _, params, size = draw_grain(recipe, i)
@@ -115,9 +115,10 @@ def test_twin_recipe_gives_each_grain_its_own_settings_and_size(runner, tmp_path
     # batch then gives that grain that seed and draws nothing else differently
     from grainforge.fit import grain_seed
 
-    assert "\nseed = [" not in twin_recipe_text(spec, own, [0.41, 0.52], seed=3, seeds=[grain_seed(3, 0),
-                                                                                       grain_seed(3, 1)])
-    reseeded = parse_recipe(twin_recipe_text(spec, own, [0.41, 0.52], seed=3, seeds=[grain_seed(3, 0), 77]))
+    assert "\nseed = [" not in twin_recipe_text(spec, own, size_mm=[0.41, 0.52], seed=3,
+                                                seeds=[grain_seed(3, 0), grain_seed(3, 1)])
+    reseeded = parse_recipe(twin_recipe_text(spec, own, size_mm=[0.41, 0.52], seed=3,
+                                             seeds=[grain_seed(3, 0), 77]))
     assert [draw_grain(reseeded, i)[0] for i in range(2)] == [grain_seed(3, 0), 77]
     assert draw_grain(reseeded, 1)[1:] == draw_grain(recipe, 1)[1:]
 
@@ -247,7 +248,7 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
     for r in pop_rows:
         k = r["quantity"].split()[0]
         assert float(r["generated"]) == pytest.approx(pop.mean[k]) and float(r["difference"]) == pytest.approx(pop.se[k])
-    assert fitmod.design_path("rf", "atlas", 20.0, 80, design_cache).exists()
+    assert fitmod.design_path("rf", "atlas", high=20.0, grains=80, cache=design_cache).exists()
 
 
 def test_a_twin_the_generator_refuses_is_moved_until_it_is_made(design_cache):
@@ -277,7 +278,7 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     result = fit_sand(sand, "rf", count=50, **kw)
     assert len(result.generated) == 50
     for i in (0, 7):
-        again = measure_grain(result.recipe, i, sand.voxel_size, max_across=TEST_ACROSS)
+        again = measure_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
         assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     assert np.allclose(result.targets, sand.table()[result.sand_rows])
     paths = write_outputs(sand, result, tmp_path / "out")
@@ -286,7 +287,7 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     reseeded = [i for i, s in enumerate(result.seeds) if s != fitmod.grain_seed(2024, i)]
     assert reseeded and "\nseed = [" in result.recipe
     i = reseeded[0]
-    again = measure_grain(result.recipe, i, sand.voxel_size, max_across=TEST_ACROSS)
+    again = measure_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0, "reseed": 0})
     # the design came from the cache; rf's surface settings are not determined by the means (five settings, four
@@ -486,7 +487,7 @@ def test_fit_warns_and_exits_1_when_batch_would_refuse_its_recipe(runner, tmp_pa
 
     s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
     params = {"descriptors": [0.0, 0.05, {"distribution": "uniform", "low": 0.0, "high": 0.3}], "subdivisions": 3}
-    text = recipe_text("rf", params, s, count=500, seed=1, header="test")
+    text = recipe_text("rf", params, sand=s, count=500, seed=1, header="test")
     gen = np.full((50, 5), 0.8)
     gen[:, 0], gen[:, 1:] = s.equivalent_diameter, s.table()
     stats = compare(s.table(), gen[:, 1:], twin_within=1.0)
@@ -529,7 +530,7 @@ def test_a_fit_that_does_not_pass_keeps_its_outputs_names_the_failed_criteria_an
 
     s = read_sand(_write_sand(tmp_path / "s.csv", _fake_rows(50)), 7.0)
     params = {"descriptors": [0.0, 0.05, 0.1], "subdivisions": 3}
-    text = recipe_text("rf", params, s, count=500, seed=1, header="test")
+    text = recipe_text("rf", params, sand=s, count=500, seed=1, header="test")
     gen = np.full((50, 5), 0.8)
     gen[:, 0], gen[:, 1:] = s.equivalent_diameter, s.table()
     gen[:, 3] += 0.2  # every twin's flatness off by 0.2: the mean and the KS criteria fail for it
@@ -658,7 +659,8 @@ def test_a_voxel_size_that_contradicts_the_tables_column_is_refused(tmp_path):
 
     rows = _fake_rows(60)
     p = write_sand(tmp_path / "v.csv", [r["equivalent_diameter"] for r in rows],
-                   {k: [r[k] for r in rows] for k in ("sphericity", "convexity", "flatness", "elongation")}, 7.3)
+                   {k: [r[k] for r in rows] for k in ("sphericity", "convexity", "flatness", "elongation")},
+                   voxel_size=7.3)
     assert read_sand(p).voxel_size == pytest.approx(7.3) and read_sand(p, 7.3).voxel_size == pytest.approx(7.3)
     with pytest.raises(ValueError, match=r"the voxel size given \(7 µm\) differs from the file's 'Voxel Size"):
         read_sand(p, 7.0)

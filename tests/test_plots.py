@@ -22,7 +22,7 @@ def manifests(tmp_path_factory):
         rows = [dict(describe(fso(fractal_dimension=D, subdivisions=3, rng=s), fractal=False), file=f"{s}")
                 for s in range(4)]
         out[name] = write_csv(d / f"{name}.csv", rows)
-    write_run("fso", Params(subdivisions=2), [0, 1, 2], d / "run")
+    write_run("fso", Params(subdivisions=2), seeds=[0, 1, 2], out=d / "run")
     out["run"] = d / "run" / "manifest.csv"
     return out
 
@@ -48,7 +48,7 @@ def test_fd_spectrum_with_cri_input(tmp_path):
     from grainforge.methods.cri import Params
     from grainforge.population.generate import write_run
 
-    write_run("cri", Params(descriptors=(0.15, 0.1, 0.03), subdivisions=2), [0, 1], tmp_path / "cri")
+    write_run("cri", Params(descriptors=(0.15, 0.1, 0.03), subdivisions=2), seeds=[0, 1], out=tmp_path / "cri")
     table = manifest_columns(tmp_path / "cri" / "manifest.csv")
     assert table["descriptors"][0].split() == ["0.15", "0.1", "0.03"]
     assert plot("fd-spectrum", [tmp_path / "cri" / "manifest.csv"], tmp_path / "s.png").read_bytes()[:8] == PNG
@@ -133,8 +133,8 @@ def test_demo_plots(tmp_path):
     from grainforge.viz.plots import demo_plots
 
     assert demo_plots(tmp_path) == []
-    write_run("fso", Params(subdivisions=2), [0, 1, 2], tmp_path / "fso" / "L=7")
-    write_run("fso", Params(subdivisions=2, length_ratio=2.0), [0, 1], tmp_path / "fso" / "L=2")
+    write_run("fso", Params(subdivisions=2), seeds=[0, 1, 2], out=tmp_path / "fso" / "L=7")
+    write_run("fso", Params(subdivisions=2, length_ratio=2.0), seeds=[0, 1], out=tmp_path / "fso" / "L=2")
     written = demo_plots(tmp_path, quick=True)
     names = sorted(p.name for p in written)
     assert names == ["fd-spectrum.png", "fso-measured.csv", "fso.csv", "size-distribution.png",

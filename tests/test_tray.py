@@ -140,7 +140,7 @@ def test_output_identical_whatever_the_workers(tmp_path):
 
 def test_tray_from_folder_and_manifest(tmp_path):
     folder = tmp_path / "grains"
-    write_run("fso", SMALL, [0, 1, 2], folder, size=2.0)
+    write_run("fso", SMALL, seeds=[0, 1, 2], out=folder, size=2.0)
     a = build_tray(FileSource(tuple(sorted(folder.glob("*.stl")))), "objet-eden-250",
                    tmp_path / "a.3mf", workers=1)
     assert [p.name for p in read_3mf(a.files[0])] == ["fso-0000", "fso-0001", "fso-0002"]
@@ -166,8 +166,8 @@ def test_tray_failures_leave_no_files(tmp_path, small_polyjet):
 
 def test_tray_failure_after_a_plate_was_started_leaves_no_files(tmp_path, small_polyjet):
     """The second grain does not fit: the first one's plate file was already being written."""
-    write_run("fso", SMALL, [0], tmp_path / "small", size=2.0)
-    write_run("fso", SMALL, [1], tmp_path / "big", size=20.0)
+    write_run("fso", SMALL, seeds=[0], out=tmp_path / "small", size=2.0)
+    write_run("fso", SMALL, seeds=[1], out=tmp_path / "big", size=20.0)
     files = (tmp_path / "small" / "fso-0000.stl", tmp_path / "big" / "fso-0000.stl")
     out = tmp_path / "out" / "t.3mf"
     with pytest.raises(ValueError, match="does not fit"):

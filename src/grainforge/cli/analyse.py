@@ -56,7 +56,7 @@ def _write_atlas_table(path: Path, rows) -> None:
         raise ValueError("--atlas-csv: no closed body to measure; nothing written")
     write_sand(path, [1000.0 * r["atlas_equivalent_diameter"] for r in grains],
                {k: [r["atlas_" + k] for r in grains] for k in DESCRIPTORS},
-               [1000.0 * r["atlas_voxel_size"] for r in grains],
+               voxel_size=[1000.0 * r["atlas_voxel_size"] for r in grains],
                opening=[r["atlas_opening_fraction"] for r in grains])
     left = len(rows) - len(grains)
     click.echo(f"wrote {len(grains)} grain(s) to {path} as a Sand Atlas table (µm; opening fraction at a ball of "

@@ -115,7 +115,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
             executor = stack.enter_context(dask_executor(scheduler))  # refused in one line before any work
         result = _run_fit(s, out, executor, dict(
             method=method, count=count, refine=refine, reseed=reseed, population_grains=population_grains,
-            population_slopes=population_slopes, seed=seed, workers=workers, sphericity=sphericity,
+            population_slopes=population_slopes, rng=seed, workers=workers, sphericity=sphericity,
             max_across=max_across, design_grains=design_grains, cache=cache_dir), max_minutes)
     from ..runtime.staging import commit_stage, staged
 

@@ -62,7 +62,7 @@ def run_generate(method: str, params, *, out, count, seed, size, size_definition
             extra_columns = tuple(extra_columns) + tuple(row_extra)
         announce_estimate(method, params, count)
         write_run(
-            method, params, seeds, out, fmt=fmt, size=size, size_definition=size_definition,
+            method, params, seeds=seeds, out=out, fmt=fmt, size=size, size_definition=size_definition,
             overwrite=overwrite, progress=progress_bar(total=count, desc=f"{method} grains"),
             extra_columns=extra_columns, row_extra=row_extra,
         )

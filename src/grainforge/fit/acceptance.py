@@ -31,7 +31,24 @@ PAIRS = tuple((DESCRIPTORS[i], DESCRIPTORS[j]) for i in range(4) for j in range(
 
 
 def spearman(table: np.ndarray) -> np.ndarray:
-    """(k, k) Spearman rank correlations of the columns of ``table``."""
+    """(k, k) Spearman rank correlations of the columns of ``table``.
+
+    Parameters
+    ----------
+    table : (n, k) array_like
+        One row per grain, one column per quantity (ties get their mean rank).
+
+    Returns
+    -------
+    (k, k) numpy.ndarray
+        The Pearson correlations of the columns' ranks; ones on the diagonal.
+
+    Examples
+    --------
+    >>> x = np.arange(10.0)
+    >>> spearman(np.column_stack([x, x**3, -x])).round(6).tolist()
+    [[1.0, 1.0, -1.0], [1.0, 1.0, -1.0], [-1.0, -1.0, 1.0]]
+    """
     from scipy.stats import rankdata
 
     r = np.apply_along_axis(rankdata, 0, np.asarray(table, np.float64))
@@ -45,6 +62,22 @@ def compare(sand: np.ndarray, gen: np.ndarray, *, twin_within: float | None = No
     and |Δρ|/:data:`CORR_TOL` (and, with ``twin_within``, the share of
     reachable twins within :data:`TWIN_TOL`, as :data:`TWIN_SHARE`/share):
     the fit passes when it is ≤ 1.
+
+    Parameters
+    ----------
+    sand : (n, 4) numpy.ndarray
+        The sand's descriptors (columns :data:`grainforge.fit.sand.DESCRIPTORS`).
+    gen : (m, 4) numpy.ndarray
+        The generated grains' descriptors, same columns.
+    twin_within : float, optional
+        The share (0 to 1) of reachable twins within :data:`TWIN_TOL` of their sand grain; None: not judged.
+
+    Returns
+    -------
+    dict
+        ``"per"``: per descriptor ``sand_mean``, ``gen_mean``, ``sand_sd``, ``gen_sd`` (ddof 1), ``ks``,
+        ``mean_diff`` (generated − sand) and ``pass``; ``"corr"``: per pair ``"a-b"`` of :data:`PAIRS` the
+        (sand, generated) Spearman correlations; ``"twin_within"``; ``"score"``; ``"pass"``.
 
     Examples
     --------

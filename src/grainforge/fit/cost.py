@@ -67,6 +67,35 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most: the twins still off after the refinement;
     a third of them on a sand the method reaches only with other seeds). ``"auto"`` measures every method's design.
 
+    Parameters
+    ----------
+    method : str
+        A method of :data:`grainforge.fit.settings.FITS`, or ``"auto"`` (every method's design, the dearest
+        method's population estimate).
+    count : int
+        Twins of the fit (grains of its recipe).
+    design_grains : int
+        Grains of each method's design.
+    refine : int
+        Rounds of refinement (``fit --refine``).
+    reseed : int
+        Other seeds tried per twin still off after the refinement (``fit --reseed``).
+    population_grains : int
+        Twins remade in each round of the mean-settings estimate (at most ``count``).
+    population_slopes : {"auto", "measured", "model"}
+        The estimate's slopes (:func:`grainforge.fit.population.slopes_for`).
+    cached : callable
+        ``cached(method)``: whether that method's design is already cached (then none of its grains is counted).
+    opening : bool
+        The sand's opening fraction is used (:func:`grainforge.fit.sand.uses_opening`).
+
+    Returns
+    -------
+    expected : int
+        Grains the fit is expected to measure.
+    most : int
+        Grains it measures at most (every twin refined ``refine`` times, :data:`RESEED_MOST` reseeded).
+
     Examples
     --------
     >>> fit_grains("rf", count=500, design_grains=400, refine=3)
@@ -106,6 +135,43 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     (a Dask cluster's worker threads, each with its own memory) divides the
     time instead, and the memory is then checked for one worker.
 
+    Parameters
+    ----------
+    sand : grainforge.fit.sand.Sand
+        The sand to fit (its grains' voxels across set each grain's cost).
+    method : str
+        A method of :data:`grainforge.fit.settings.FITS`, or ``"auto"`` (costed at its dearest method).
+    count : int
+        Twins of the fit.
+    design_grains : int
+        Grains of each method's design (counted only when it is not cached under ``cache``).
+    refine : int
+        Rounds of refinement.
+    reseed : int
+        Other seeds tried per twin still off after the refinement.
+    population_grains : int
+        Twins remade in each round of the mean-settings estimate.
+    population_slopes : {"auto", "measured", "model"}
+        The estimate's slopes.
+    max_across : float, str or None
+        The resolution cap (voxels across), :data:`grainforge.fit.settings.METHOD_CAP` for the method's own,
+        None for none (:func:`grainforge.fit.settings.resolve_cap`).
+    workers : int
+        Local worker processes (their memory adds up on this machine).
+    max_minutes : float
+        The longest fit accepted, in minutes of wall clock.
+    convention : {"atlas", "whole"}
+        How true sphericity is measured (part of the design's cache key).
+    cache : str or os.PathLike, optional
+        Where designs are cached (default :func:`grainforge.runtime.cache.cache_dir`).
+    cores : int, optional
+        A Dask cluster's worker threads: the time is divided by them and ``workers`` is not used.
+
+    Returns
+    -------
+    float
+        The expected wall-clock seconds of the fit.
+
     Raises
     ------
     grainforge.runtime.estimate.TooLargeError
@@ -122,7 +188,8 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     costs = {m: grain_seconds(m, acrosses[m]) for m in methods}
     dear = max(methods, key=lambda m: costs[m])
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
-    fresh = [m for m in methods if not design_path(m, convention, highs[m], design_grains, cache).exists()]
+    fresh = [m for m in methods
+             if not design_path(m, convention, high=highs[m], grains=design_grains, cache=cache).exists()]
     expected, most = fit_grains(method, count=count, design_grains=design_grains, refine=refine, reseed=reseed,
                                 population_grains=population_grains, population_slopes=population_slopes,
                                 cached=lambda m: m not in fresh,
@@ -157,6 +224,18 @@ def grain_seconds(method: str, across) -> float:
     """The estimate's CPU seconds for one grain of ``method`` measured at ``across`` voxels across (the mean over
     an array): :data:`FIT_GRAIN_SECONDS` + the method's :data:`FIT_MAKE_SECONDS` + :data:`FIT_VOXEL_SECONDS` ×
     (across / :data:`FIT_ACROSS_REF`)³. A method without a measured making time is costed at the dearest's.
+
+    Parameters
+    ----------
+    method : str
+        The generator's name.
+    across : float or array_like
+        Voxels across the grain is measured at (an array: the grains of a fit, averaged).
+
+    Returns
+    -------
+    float
+        CPU seconds on one core.
 
     Examples
     --------

@@ -43,10 +43,37 @@ def _design_high(sand: Sand, max_across: float | None) -> float:
     return float(f"{1.1 ** math.ceil(math.log(max(top, DESIGN_ACROSS_LOW * 1.1)) / math.log(1.1)):.4g}")
 
 
-def design_path(method: str, convention: str, high: float, grains: int = DESIGN_GRAINS,
+def design_path(method: str, convention: str, *, high: float, grains: int = DESIGN_GRAINS,
                 cache: str | os.PathLike | None = None) -> Path:
     """Where a method's design is cached: under ``cache`` (default :func:`grainforge.runtime.cache.cache_dir`),
-    keyed by everything that changes its grains."""
+    keyed by everything that changes its grains.
+
+    Parameters
+    ----------
+    method : str
+        A method of :data:`grainforge.fit.settings.FITS`.
+    convention : {"atlas", "whole"}
+        How the design's true sphericity is measured.
+    high : float
+        The highest resolution the design spans, voxels across (keyword-only).
+    grains : int
+        Grains of the design.
+    cache : str or os.PathLike, optional
+        The cache folder; default :func:`grainforge.runtime.cache.cache_dir`.
+
+    Returns
+    -------
+    pathlib.Path
+        ``CACHE/fit-designs/METHOD-CONVENTION-HIGH-GRAINS-DIGEST.npz``, the digest of the design's version,
+        grainforge's, :data:`DESIGN_SEED`, the method's settings and fixed parameters and the arguments (the
+        file need not exist).
+
+    Examples
+    --------
+    >>> p = design_path("rf", "atlas", high=40.0, grains=80, cache="/tmp/c")
+    >>> p.parent.as_posix(), p.name.startswith("rf-atlas-40-80-"), p.suffix
+    ('/tmp/c/fit-designs', True, '.npz')
+    """
     from .._version import __version__
     from ..runtime.cache import cache_dir
 
@@ -59,7 +86,21 @@ def design_path(method: str, convention: str, high: float, grains: int = DESIGN_
 
 @dataclass(frozen=True)
 class Design:
-    """A method's design: unit-box settings ``u``, resolutions ``across`` and measured descriptors ``y``."""
+    """A method's design: unit-box settings ``u``, resolutions ``across`` and measured descriptors ``y``.
+
+    Attributes
+    ----------
+    method : str
+        The method's name.
+    u : (n, p) numpy.ndarray
+        Each design grain's settings in the unit box (one column per setting of its
+        :attr:`grainforge.fit.settings.MethodFit.all_settings`).
+    across : (n,) numpy.ndarray
+        Voxels across each was measured at.
+    y : (n, 4) numpy.ndarray
+        Its measured descriptors (:data:`grainforge.fit.sand.DESCRIPTORS`); NaN rows where the generator
+        refused the settings.
+    """
 
     method: str
     u: np.ndarray
@@ -67,6 +108,13 @@ class Design:
     y: np.ndarray  # NaN rows: the generator refused those settings
 
     def model(self):
+        """The forward model fitted to the design's grains that were made.
+
+        Returns
+        -------
+        grainforge.fit.twins.ForwardModel
+            Settings and voxels across -> the four descriptors, fitted to the rows of ``y`` without NaN.
+        """
         from .twins import ForwardModel
 
         ok = np.all(np.isfinite(self.y), axis=1)
@@ -75,20 +123,46 @@ class Design:
 
 def design(method: str, pool: MeasurePool, *, high: float, grains: int = DESIGN_GRAINS,
            cache: str | os.PathLike | None = None, progress=None) -> Design:
-    """The cached design of ``method`` (measured, and cached atomically, if it is not yet)."""
+    """The cached design of ``method`` (measured, and cached atomically, if it is not yet).
+
+    Its grains' settings and resolutions are a scrambled Sobol design (:func:`grainforge.fit.twins.design_points`,
+    ``rng`` :data:`DESIGN_SEED`), their resolutions log-uniform from :data:`DESIGN_ACROSS_LOW` to ``high``,
+    grain ``i`` made with the seed ``batch`` gives grain ``i`` of a recipe of root seed :data:`DESIGN_SEED`: a
+    design does not depend on the sand or on the fit's seed.
+
+    Parameters
+    ----------
+    method : str
+        A method of :data:`grainforge.fit.settings.FITS`.
+    pool : MeasurePool
+        Where the grains are made and measured (its ``convention`` is part of the cache key).
+    high : float
+        The highest resolution the design spans, voxels across.
+    grains : int
+        Grains of the design.
+    cache : str or os.PathLike, optional
+        The cache folder (:func:`design_path`).
+    progress : callable, optional
+        ``progress(iterable, total)`` wraps the grains as they are measured (a bar).
+
+    Returns
+    -------
+    Design
+        Loaded from the cache when it is there, else measured and written to it.
+    """
     from ..io import atomic_write
     from .twins import design_points
 
     spec = FITS[method]
-    path = design_path(method, pool.convention, high, grains, cache)
+    path = design_path(method, pool.convention, high=high, grains=grains, cache=cache)
     if path.exists():
         with np.load(path) as z:
             return Design(method, z["u"], z["across"], z["y"])
-    pts = design_points(grains, len(spec.all_settings) + 1, DESIGN_SEED)
+    pts = design_points(grains, len(spec.all_settings) + 1, rng=DESIGN_SEED)
     u, t = pts[:, :-1], pts[:, -1]
     across = DESIGN_ACROSS_LOW * (high / DESIGN_ACROSS_LOW) ** t
     jobs = [(spec.grain_params(u[i]), grain_seed(DESIGN_SEED, i), float(across[i])) for i in range(grains)]
-    y = pool.run(method, spec.fixed, jobs, progress)
+    y = pool.run(method, spec.fixed, jobs, progress=progress)
     buf = io.BytesIO()
     np.savez(buf, u=u, across=across, y=y)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -108,6 +182,17 @@ def setting_identifiability(des: Design) -> dict[str, tuple[float, float]]:
     descriptors determine the setting (a sand's setting is *acquired* from its scan, within the error);
     near 0 the grain's seed or another setting shapes the same descriptors, and the fitted value is one
     choice among many that measure alike.
+
+    Parameters
+    ----------
+    des : Design
+        A method's design (its rows with NaN left out).
+
+    Returns
+    -------
+    dict of str to (float, float)
+        Setting name (in the order of :attr:`grainforge.fit.settings.MethodFit.all_settings`) -> (cross-validated
+        R², rms error in the setting's own units).
     """
     from .twins import identifiability
 

@@ -2,20 +2,21 @@
 
 :func:`measure_grain` measures grain ``index`` of a recipe exactly as
 ``batch`` makes it; :func:`measure_settings` one grain of given parameters
-and seed; :class:`MeasurePool` runs many such jobs, each result in its job's
-place, and counts the grains and CPU seconds they took.
+and ``rng`` (the grain's seed); :class:`MeasurePool` runs many such jobs, each
+result in its job's place, and counts the grains and CPU seconds they took.
 """
 
 from __future__ import annotations
 
 import math
-from collections.abc import Iterable, Mapping, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import lru_cache
 from typing import Any
 
 import numpy as np
 
 from ..analysis.atlas import OPENING_RADIUS
+from ..rng import RNGLike, as_generator, resolve_rng
 from .sand import DESCRIPTORS
 
 
@@ -26,15 +27,46 @@ def _recipe(text: str):
     return parse_recipe(text, source="<fit>")
 
 
-def measure_grain(text: str, index: int, voxel_size_um: float, convention: str = "atlas",
+def measure_grain(text: str, index: int, *, voxel_size_um: float, convention: str = "atlas",
                   max_across: float | None = None) -> tuple[float, ...]:
     """Grain ``index`` of recipe ``text`` as ``batch`` makes it, measured the Atlas way.
 
     It is voxelised at ``voxel_size_um`` relative to its drawn equivalent
     diameter (at most ``max_across`` voxels across), in a random orientation
     drawn from its own seed; ``convention`` is true sphericity's
-    (:func:`grainforge.analysis.atlas.voxel_descriptors`).  Returns (d_eq µm,
-    sphericity, convexity, flatness, elongation, CPU seconds spent).
+    (:func:`grainforge.analysis.atlas.voxel_descriptors`).
+
+    Parameters
+    ----------
+    text : str
+        A ``grainforge batch`` recipe's TOML text (parsed once and cached).
+    index : int
+        The grain's index in the recipe, from 0.
+    voxel_size_um : float
+        The sand's voxel size, µm: the grain is measured ``d_eq / voxel_size_um`` voxels across (keyword-only).
+    convention : {"atlas", "whole"}
+        How true sphericity is measured.
+    max_across : float, optional
+        Measured at most this many voxels across; None: uncapped.
+
+    Returns
+    -------
+    tuple of float
+        (d_eq µm, sphericity, convexity, flatness, elongation, CPU seconds spent).
+
+    Raises
+    ------
+    grainforge.population.recipe.RecipeError
+        If ``text`` is not a valid recipe.
+    ValueError
+        If the grain's drawn parameters cannot be made.
+
+    Examples
+    --------
+    >>> text = 'method = "rf"\\ncount = 2\\nseed = 1\\n[params]\\nsubdivisions = 3\\n[size]\\nmm = 0.12\\n'
+    >>> d = measure_grain(text, 1, voxel_size_um=10.0)
+    >>> round(d[0], 6), len(d), bool(0.5 < d[1] < 1.1)
+    (120.0, 6, True)
     """
     import time
 
@@ -48,25 +80,68 @@ def measure_grain(text: str, index: int, voxel_size_um: float, convention: str =
     return (size_mm * 1000.0, *d, time.process_time() - cpu)
 
 
-def _measure(method: str, params: Any, seed: int, across: float, convention: str,
+def _salted(rng: RNGLike, *salt: int) -> tuple[np.random.Generator, np.random.Generator]:
+    """(the stream of ``rng``, a second stream): for an int seed ``s`` (or a plain SeedSequence of it, or None's
+    entropy) ``default_rng(s)`` and ``default_rng([s, *salt])``, the streams a seed has always given; for a
+    Generator (or a spawned SeedSequence) the one Generator twice, its draws continuing."""
+    generator, seed = resolve_rng(rng)
+    return generator, (generator if seed is None else as_generator(np.random.SeedSequence([seed, *salt])))
+
+
+def _measure(method: str, params: Any, rng: RNGLike, across: float, convention: str,
              opening: bool = False) -> tuple[float, ...]:
     from ..analysis.atlas import opening_fraction, voxel_descriptors, voxel_image
     from ..methods import generate
 
-    grain = generate(method, params, seed)
-    mask, h, _ = voxel_image(grain, voxels_across=across, rotation=np.random.default_rng([seed, 1]))
+    shape, turn = _salted(rng, 1)
+    grain = generate(method, params, shape)
+    mask, h, _ = voxel_image(grain, voxels_across=across, rotation=turn)
     d = voxel_descriptors(mask, h, convention=convention)
     return tuple(float(d[k]) for k in DESCRIPTORS) + ((opening_fraction(mask, OPENING_RADIUS * across),)
                                                       if opening else ())
 
 
-def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, Any], seed: int, across: float,
-                     convention: str = "atlas", opening: bool = False) -> tuple[float, ...]:
-    """One grain made with ``fixed`` and its ``own`` parameters and ``seed``, measured ``across`` voxels across.
+def measure_settings(method: str, fixed: Mapping[str, Any], *, own: Mapping[str, Any], rng: RNGLike,
+                     across: float, convention: str = "atlas", opening: bool = False) -> tuple[float, ...]:
+    """One grain made with ``fixed`` and its ``own`` parameters and ``rng``, measured ``across`` voxels across.
 
-    Returns the four descriptors (and, with ``opening``, the opening fraction of
-    :data:`grainforge.fit.sand.OPENING_COLUMN`) and the CPU seconds; NaNs if the generator refuses these
-    settings (a design corner, say).
+    Parameters
+    ----------
+    method : str
+        The generator's name.
+    fixed : mapping
+        Parameters every grain shares (a recipe's ``[params]``).
+    own : mapping
+        The grain's own parameters (a recipe's ``[grains]`` row); they override ``fixed``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The grain's randomness, normalised by :func:`grainforge.rng.resolve_rng`.  An int seed ``s`` is the
+        grain's seed as ``batch`` gives it (``generate(method, params, s)``), its orientation drawn from
+        ``SeedSequence([s, 1])``: the same grain and numbers as ever; a Generator makes the grain and then
+        draws the orientation, advanced by both.
+    across : float
+        Voxels across the grain is measured at (its equivalent diameter over the voxel size).
+    convention : {"atlas", "whole"}
+        How true sphericity is measured (:func:`grainforge.analysis.atlas.voxel_descriptors`).
+    opening : bool
+        Measure the opening fraction too (:data:`grainforge.fit.sand.OPENING_COLUMN`).
+
+    Returns
+    -------
+    tuple of float
+        The four descriptors of :data:`grainforge.fit.sand.DESCRIPTORS` (and, with ``opening``, the opening
+        fraction), then the CPU seconds spent; NaNs for the measurements if the generator refuses these
+        settings (a design corner, say).
+
+    Examples
+    --------
+    >>> from grainforge.fit import FITS
+    >>> spec = FITS["rf"]
+    >>> own = spec.grain_params(np.full(5, 0.5))
+    >>> d = measure_settings("rf", spec.fixed, own=own, rng=7, across=12.0)
+    >>> len(d), bool(all(0 < x < 1.2 for x in d[:4]))
+    (5, True)
+    >>> d[:4] == measure_settings("rf", spec.fixed, own=own, rng=np.random.SeedSequence(7), across=12.0)[:4]
+    True
     """
     import time
 
@@ -75,7 +150,7 @@ def measure_settings(method: str, fixed: Mapping[str, Any], own: Mapping[str, An
 
     cpu = time.process_time()
     try:
-        d = _measure(method, get(method).Params(**{**fixed, **own}), seed, across, convention, opening)
+        d = _measure(method, get(method).Params(**{**fixed, **own}), rng, across, convention, opening)
     except (ParameterError, ValueError):
         d = (math.nan,) * (len(DESCRIPTORS) + bool(opening))
     return (*d, time.process_time() - cpu)
@@ -110,7 +185,7 @@ class MeasurePool:
     >>> from grainforge.fit import FITS
     >>> spec = FITS["rf"]
     >>> with MeasurePool(1) as pool:
-    ...     y = pool.run("rf", spec.fixed, [(spec.grain_params(np.full(5, 0.5)), 7, 12.0)], None)
+    ...     y = pool.run("rf", spec.fixed, [(spec.grain_params(np.full(5, 0.5)), 7, 12.0)])
     >>> y.shape, pool.grains, bool(np.all((y > 0) & (y < 1.2)))
     ((1, 4), 1, True)
     """
@@ -140,8 +215,8 @@ class MeasurePool:
             # interrupted as_completed could hang; seen with SIGTERM during a fit)
             close_pool(self.ex, abort=exc_type is not None)
 
-    def run(self, method: str, fixed: Mapping[str, Any], jobs: Sequence[tuple[dict, int, float]],
-            progress, opening: bool = False) -> np.ndarray:
+    def run(self, method: str, fixed: Mapping[str, Any], jobs: Sequence[tuple[dict, int, float]], *,
+            progress: Callable[[Iterable, int], Iterable] | None = None, opening: bool = False) -> np.ndarray:
         """Measure each job: a grain of ``method`` made with ``fixed`` and the job's own parameters and seed.
 
         Parameters
@@ -151,9 +226,10 @@ class MeasurePool:
         fixed : mapping
             Parameters every grain shares.
         jobs : sequence of (dict, int, float)
-            Per grain: its own parameters, its seed and the voxels across it is measured at.
-        progress : callable or None
-            ``progress(iterable, total)`` wraps the results as they arrive (a bar).
+            Per grain: its own parameters, its seed (the ``rng`` of :func:`measure_settings`) and the voxels
+            across it is measured at.
+        progress : callable, optional
+            ``progress(iterable, total)`` wraps the results as they arrive (a bar); keyword-only.
         opening : bool
             Measure the opening fraction too (:data:`grainforge.fit.sand.OPENING_COLUMN`).
 
@@ -165,16 +241,17 @@ class MeasurePool:
         """
         width = len(DESCRIPTORS) + bool(opening)
         out = np.empty((len(jobs), width))
-        args = [(method, fixed, own, seed, across, self.convention, bool(opening)) for own, seed, across in jobs]
+        args = [dict(own=own, rng=seed, across=across, convention=self.convention, opening=bool(opening))
+                for own, seed, across in jobs]
         if self.ex is None:
-            it: Iterable = ((i, measure_settings(*a)) for i, a in enumerate(args))
+            it: Iterable = ((i, measure_settings(method, fixed, **a)) for i, a in enumerate(args))
         else:
             from concurrent.futures import as_completed
 
             from ..runtime.workers import single_threaded_children
 
             with single_threaded_children():
-                futs = {self.ex.submit(measure_settings, *a): i for i, a in enumerate(args)}
+                futs = {self.ex.submit(measure_settings, method, fixed, **a): i for i, a in enumerate(args)}
             it = ((futs[f], f.result()) for f in as_completed(futs))
         if progress is not None and jobs:
             it = progress(it, len(jobs))

@@ -26,7 +26,19 @@ TWIN_COLUMNS = ("grain", "seed", "sand_row", "sand_d_eq_um", "d_eq_um",
 
 def twin_rows(result: FitResult) -> list[dict[str, Any]]:
     """The rows of ``fit.csv``: each generated grain beside the sand row it is the twin of (row numbers from 1,
-    as in the sand's file)."""
+    as in the sand's file).
+
+    Parameters
+    ----------
+    result : FitResult
+        A fit's result.
+
+    Returns
+    -------
+    list of dict
+        One per twin, in grain order: the columns :data:`TWIN_COLUMNS` (sizes in µm), then ``setting_NAME`` for
+        each of the method's settings.
+    """
     err = result.twin_error
     rows = []
     for i, j in enumerate(result.sand_rows):
@@ -47,7 +59,21 @@ STAT_COLUMNS = ("statistic", "quantity", "sand", "generated", "difference", "cri
 
 
 def stat_rows(result: FitResult) -> list[dict[str, Any]]:
-    """The rows of ``fit-stats.csv``: means, sds, KS; Spearman correlations; the twins' share, sand vs generated."""
+    """The rows of ``fit-stats.csv``: means, sds, KS; Spearman correlations; the twins' share, sand vs generated.
+
+    Parameters
+    ----------
+    result : FitResult
+        A fit's result.
+
+    Returns
+    -------
+    list of dict
+        The columns :data:`STAT_COLUMNS`: per descriptor its mean, sd and KS rows, the six Spearman rows, the
+        twins' share within tolerance and unreachable, each setting's identifiability, and the sand's mean
+        settings (and their spread sensitivity) where estimated; ``pass`` is a bool for a criterion, ``""``
+        for a value only reported.
+    """
     rows = []
     for k in DESCRIPTORS:
         p = result.stats["per"][k]
@@ -89,7 +115,17 @@ def stat_rows(result: FitResult) -> list[dict[str, Any]]:
 
 def fit_figure(sand: Sand, result: FitResult, path: Path) -> None:
     """``fit.png``: histograms of the four descriptors and the size, twin errors, and the Spearman correlation
-    matrices of sand and generated grains."""
+    matrices of sand and generated grains.
+
+    Parameters
+    ----------
+    sand : Sand
+        The sand fitted (its sizes, µm, for the size panel).
+    result : FitResult
+        The fit's result.
+    path : pathlib.Path
+        The PNG written (atomically).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -148,7 +184,22 @@ OUTPUTS = ("recipe.toml", "fit.csv", "fit-stats.csv", "fit.png")
 
 
 def write_outputs(sand: Sand, result: FitResult, out: str | os.PathLike) -> list[Path]:
-    """Write :data:`OUTPUTS` into ``out`` (each atomically); return the paths."""
+    """Write :data:`OUTPUTS` into ``out`` (each atomically); return the paths.
+
+    Parameters
+    ----------
+    sand : Sand
+        The sand fitted.
+    result : FitResult
+        The fit's result.
+    out : str or os.PathLike
+        The output folder (made if missing); files of the same names in it are replaced.
+
+    Returns
+    -------
+    list of pathlib.Path
+        ``recipe.toml``, ``fit.csv``, ``fit-stats.csv`` and ``fit.png`` in ``out``, in that order.
+    """
     from ..io import atomic_write, write_csv
 
     out = Path(out)

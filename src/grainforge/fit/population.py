@@ -54,6 +54,23 @@ def slopes_for(slopes: str, grains: int) -> str:
     """The slopes a population estimate of ``grains`` grains a round steps through: ``slopes`` itself, or for
     ``"auto"`` measured from :data:`SLOPES_MEASURED_FROM` grains, the design model's below.
 
+    Parameters
+    ----------
+    slopes : {"auto", "measured", "model"}
+        The choice asked for (``fit --population-slopes``).
+    grains : int
+        Grains remade per round of the estimate.
+
+    Returns
+    -------
+    {"measured", "model"}
+        The slopes stepped through.
+
+    Raises
+    ------
+    ValueError
+        If ``slopes`` is not one of :data:`SLOPE_CHOICES`.
+
     Examples
     --------
     >>> slopes_for("auto", 300), slopes_for("auto", 2000), slopes_for("measured", 300)
@@ -91,7 +108,19 @@ class Population:
 
     def text(self) -> str:
         """One line: each setting's mean ± standard error (and ± its sensitivity to the settings' spread), the
-        undetermined ones named."""
+        undetermined ones named.
+
+        Returns
+        -------
+        str
+            ``"NAME MEAN ± SE[ (± SPREAD spread)], ...[; not determined by the means: NAME, ...]"``, in the
+            settings' own units.
+
+        Examples
+        --------
+        >>> Population({"a": 0.5, "b": 2.0}, {"a": 0.01, "b": 0.3}, {"a": 1.0, "b": 0.2}, grains=300).text()
+        'a 0.5 ± 0.01; not determined by the means: b'
+        """
         sure = [f"{k} {self.mean[k]:.4g} ± {self.se[k]:.2g}"
                 + (f" (± {self.spread[k]:.2g} spread)" if self.spread.get(k, 0.0) > 0 else "") for k in self.mean
                 if self.determined[k] >= DETERMINED_MIN]
@@ -123,7 +152,7 @@ def _measured_mean_jacobian(spec: MethodFit, pool: MeasurePool, u: np.ndarray, s
         up[:, k] = np.clip(up[:, k] + steps[k], 0.0, 1.0)
         down[:, k] = np.clip(down[:, k] - steps[k], 0.0, 1.0)
         jobs = [(spec.grain_params(v[i]), seeds[i], float(across[i])) for v in (up, down) for i in range(n)]
-        y = pool.run(spec.method, spec.fixed, jobs, progress, opening=opening)
+        y = pool.run(spec.method, spec.fixed, jobs, progress=progress, opening=opening)
         ok = np.all(np.isfinite(y[:n]), axis=1) & np.all(np.isfinite(y[n:]), axis=1)
         dy, du = (y[:n] - y[n:])[ok], (up[:, k] - down[:, k])[ok]
         cols.append(dy.sum(axis=0) / max(float(du.sum()), 1e-12))
@@ -218,7 +247,7 @@ def population_settings(spec: MethodFit, sand: Sand, *, model: ForwardModel, poo
 
     def remake(v: np.ndarray) -> np.ndarray:  # the m grains at settings v, each under its own seed
         return pool.run(spec.method, spec.fixed, [(spec.grain_params(v[i]), seeds[i], float(across[i]))
-                                                  for i in range(m)], progress, opening=opening)
+                                                  for i in range(m)], progress=progress, opening=opening)
 
     table, weight, short = _matched_table(sand, opening)
     if opening:
@@ -343,7 +372,7 @@ def _spread_sensitivity(spec: MethodFit, pool: MeasurePool, u: np.ndarray, y: np
         centre = wide[:, k].mean()
         wide[:, k] = np.clip(centre + (wide[:, k] - centre) * (1.0 + SPREAD_DOUBT), 0.0, 1.0)
         yw = pool.run(spec.method, spec.fixed, [(spec.grain_params(wide[j]), seeds[i], float(across[i]))
-                                                for j, i in enumerate(idx)], progress, opening=opening)
+                                                for j, i in enumerate(idx)], progress=progress, opening=opening)
         both = np.all(np.isfinite(yw), axis=1)
         if not both.any():
             continue

@@ -98,7 +98,7 @@ def _start_twins(spec: MethodFit, model, sand: Sand, rows: np.ndarray, across_ca
 
 def _measure_twins(tw: _Twins, pool: MeasurePool, idx: np.ndarray, progress) -> np.ndarray:
     jobs = [(tw.spec.grain_params(tw.u[i]), tw.seeds[i], float(tw.across[i])) for i in idx]
-    y = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress)
+    y = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress=progress)
     tw.keep_best(idx, y)
     return y
 
@@ -133,14 +133,14 @@ def _reseed(tw: _Twins, model, pool: MeasurePool, root: int, tries: int, progres
         u0 = tw.best_u[idx].copy()
         name(f"reseed {k + 1}/{tries}")
         jobs = [(tw.spec.grain_params(u0[j]), seeds[j], float(tw.across[i])) for j, i in enumerate(idx)]
-        y0 = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress)
+        y0 = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress=progress)
         pred = model.predict(u0, tw.across[idx])
         made = np.all(np.isfinite(y0), axis=1)
         u1, reach = invert(model, tw.targets[idx], tw.across[idx], offsets=np.where(made[:, None], y0 - pred, 0.0),
                            start=u0, scale=tw.tol)
         u1[~made] = u0[~made]
         jobs = [(tw.spec.grain_params(u1[j]), seeds[j], float(tw.across[i])) for j, i in enumerate(idx)]
-        y1 = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress)
+        y1 = pool.run(tw.spec.method, tw.spec.fixed, jobs, progress=progress)
         first = tw.relative(y0, idx) <= tw.relative(y1, idx)
         u = np.where(first[:, None], u0, u1)
         y = np.where(first[:, None], y0, y1)

@@ -37,9 +37,10 @@ from typing import Any
 
 import numpy as np
 
+from ..rng import RNGLike, resolve_rng
 from .acceptance import CORR_TOL, KS_MAX, MEAN_TOL, TWIN_SHARE, TWIN_TOL, compare
 from .designs import DESIGN_GRAINS, IDENTIFIABLE_R2, _design_high, design, setting_identifiability
-from .measure import MeasurePool
+from .measure import MeasurePool, _salted
 from .population import POPULATION_GRAINS, POPULATION_SLOPES, SPREAD_DOUBT, Population, population_settings, slopes_for
 from .recipes import twin_recipe_text
 from .refine import RESEED, _make_refused, _measure_twins, _refine, _reseed, _start_twins, _twin_summary, _Twins
@@ -79,16 +80,33 @@ class FitResult:
     seeds: list[int] = field(default_factory=list)
 
 
-def choose_rows(n: int, count: int | None, seed: int) -> np.ndarray:
+def choose_rows(n: int, count: int | None, rng: RNGLike) -> np.ndarray:
     """Sand rows the twins copy: all (``count`` None), a random ``count`` of them without replacement, or with
     replacement beyond all ``n`` (all rows, then random repeats).
+
+    Parameters
+    ----------
+    n : int
+        Rows of the sand's table.
+    count : int or None
+        Twins wanted; None: every row once.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        Which rows, normalised by :func:`grainforge.rng.resolve_rng`: an int seed ``s`` (a fit's root seed)
+        draws from ``SeedSequence([s, 7])``, the rows it has always chosen; a Generator is drawn from (advanced).
+
+    Returns
+    -------
+    (count,) numpy.ndarray of int
+        Row indices from 0: increasing without replacement; with replacement every row once, then the repeats.
 
     Examples
     --------
     >>> choose_rows(5, None, 1).tolist(), len(set(choose_rows(100, 60, 1).tolist())), len(choose_rows(5, 8, 1))
     ([0, 1, 2, 3, 4], 60, 8)
+    >>> bool(np.array_equal(choose_rows(100, 60, 3), choose_rows(100, 60, np.random.SeedSequence(3))))
+    True
     """
-    rng = np.random.default_rng([seed, 7])
+    rng = _salted(rng, 7)[1]
     if count is None or count == n:
         return np.arange(n)
     if count < n:
@@ -98,7 +116,35 @@ def choose_rows(n: int, count: int | None, seed: int) -> np.ndarray:
 
 def choose_method(sand: Sand, pool: MeasurePool, *, max_across: float | str | None, grains: int, cache, progress, say,
                   name) -> str:
-    """``auto``: the method whose inverse model reaches the most of the sand (ties: the smaller median miss)."""
+    """``auto``: the method whose inverse model reaches the most of the sand (ties: the smaller median miss).
+
+    Each method's design is loaded (or measured) and its model inverted for up to 300 of the sand's rows
+    (the same rows whatever the fit's seed).
+
+    Parameters
+    ----------
+    sand : Sand
+        The sand to fit.
+    pool : MeasurePool
+        Where designs not cached are measured.
+    max_across : float, str or None
+        The resolution cap (:func:`grainforge.fit.settings.resolve_cap`).
+    grains : int
+        Grains of each design.
+    cache : str or os.PathLike or None
+        Where designs are cached.
+    progress : callable or None
+        ``progress(iterable, total)`` wraps a design's grains (a bar).
+    say : callable
+        ``say(line)`` gets one line per method.
+    name : callable
+        ``name(text)`` names the design measured next.
+
+    Returns
+    -------
+    str
+        The chosen method's name.
+    """
     from .twins import invert
 
     table = sand.table()
@@ -124,7 +170,7 @@ def fit_sand(
     reseed: int = RESEED,
     population_grains: int = POPULATION_GRAINS,
     population_slopes: str = POPULATION_SLOPES,
-    seed: int = 2024,
+    rng: RNGLike = 2024,
     workers: int = 1,
     sphericity: str = "atlas",
     max_across: float | str | None = METHOD_CAP,
@@ -139,6 +185,11 @@ def fit_sand(
 
     Parameters
     ----------
+    sand : Sand
+        The sand to fit (at least :data:`grainforge.fit.sand.MIN_GRAINS` grains with a spread of sizes and
+        shapes: :func:`grainforge.fit.sand.check_sand`).
+    method : str
+        A method of :data:`grainforge.fit.settings.FITS`, or ``"auto"`` (:func:`choose_method`).
     count : int or None
         Grains of the recipe, each the twin of one sand row (:func:`choose_rows`;
         None: every row once).
@@ -159,6 +210,13 @@ def fit_sand(
         design model's, or (``"auto"``) measured from
         :data:`grainforge.fit.population.SLOPES_MEASURED_FROM` grains remade per round
         (:func:`grainforge.fit.population.population_settings`).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The fit's randomness, resolved to the recipe's root seed ``S``: an int is ``S`` itself (the default
+        2024; the same int, the same files); None, a Generator or a spawned SeedSequence gives ``S`` as one
+        draw in [0, 2⁶³) (:func:`grainforge.rng.resolve_rng`).  Everything random follows from ``S``, which the
+        recipe records as its ``seed``: the sand rows copied (:func:`choose_rows`), each twin's seed (the one
+        ``batch`` gives its grain, :func:`grainforge.fit.recipes.grain_seed`) and the reseed tries
+        (:func:`grainforge.fit.recipes.reseed_seed`).
     workers : int
         Processes measuring grains (1: this process).
     executor : concurrent.futures.Executor, optional
@@ -175,11 +233,24 @@ def fit_sand(
         method's own cap, :attr:`grainforge.fit.settings.MethodFit.max_across`).
     design_grains : int
         Grains of the method's design (cached under ``cache``).
+    cache : str or os.PathLike, optional
+        Where designs are cached (default :func:`grainforge.runtime.cache.cache_dir`).
     progress : callable, optional
         ``progress(iterable, total)`` wraps each phase's grains (a bar).
     log, desc : callable, optional
         ``log(line)`` gets one line per phase; ``desc(text)`` names the
         phase measured next.
+
+    Returns
+    -------
+    FitResult
+        The twins, their measurements beside their sand rows, the recipe's text and the statistics.
+
+    Raises
+    ------
+    ValueError
+        An unknown ``method`` or ``population_slopes``, a sand :func:`grainforge.fit.sand.check_sand` refuses,
+        an ``rng`` of another kind, or twins the generator refuses at every settings tried.
     """
     import time
 
@@ -187,6 +258,7 @@ def fit_sand(
         raise ValueError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
     slopes_for(population_slopes, 0)  # refuses an unknown choice before any work
     check_sand(sand)
+    seed = _root_seed(rng)
     say, name = log or (lambda s: None), desc or (lambda s: None)
     t0 = time.perf_counter()
     history: list[str] = []
@@ -241,6 +313,23 @@ def fit_sand(
     return _result(sand, spec, tw, rows, seed, history, time.perf_counter() - t0, pool, known, population)
 
 
+def _root_seed(rng: RNGLike) -> int:
+    """The fit's root seed (the recipe's ``seed``): an int ``rng`` itself, else one draw in [0, 2⁶³).
+
+    Examples
+    --------
+    >>> _root_seed(7), _root_seed(np.random.SeedSequence(7))
+    (7, 7)
+    >>> _root_seed(np.random.default_rng(1)) == _root_seed(np.random.default_rng(1))
+    True
+    """
+    generator, seed = resolve_rng(rng)
+    # a Generator or a spawned SeedSequence has no seed, None's entropy is 128 bits: one draw is the root seed
+    if seed is None or (seed >= 2**63 and not isinstance(rng, (int, np.integer))):
+        seed = int(generator.integers(0, 2**63))
+    return seed
+
+
 def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int, history: list[str],
             seconds: float, pool: MeasurePool, known: dict[str, tuple[float, float]],
             population: Population | None = None) -> FitResult:
@@ -257,7 +346,7 @@ def _result(sand: Sand, spec: MethodFit, tw: _Twins, rows: np.ndarray, seed: int
     gen = np.column_stack([np.asarray(size_mm) * 1000.0, tw.best_y])
     header = _recipe_header(sand, spec.method, st, len(rows), known, population)
     own = [spec.grain_params(u) for u in tw.best_u]
-    text = twin_recipe_text(spec, own, size_mm, seed=seed, header=header, seeds=tw.seeds)
+    text = twin_recipe_text(spec, own, size_mm=size_mm, seed=seed, header=header, seeds=tw.seeds)
     return FitResult(method=spec.method, recipe=text, stats=st, generated=gen, sand_rows=rows,
                      settings=[spec.values(u) for u in tw.best_u], reachable=reachable, history=history,
                      seconds=seconds, cpu_seconds=pool.cpu, grains_measured=pool.grains, targets=tw.targets,

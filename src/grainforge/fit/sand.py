@@ -65,7 +65,14 @@ class Sand:
         return len(self.equivalent_diameter)
 
     def table(self) -> np.ndarray:
-        """(n, 4) array of :data:`DESCRIPTORS`."""
+        """The four matched descriptors of every grain, one row per grain.
+
+        Returns
+        -------
+        (n, 4) numpy.ndarray of float64
+            Columns in the order of :data:`DESCRIPTORS` (sphericity, convexity, flatness, elongation),
+            rows in the table's order.
+        """
         return np.column_stack([self.values[k] for k in DESCRIPTORS])
 
 
@@ -159,10 +166,17 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
 
     Parameters
     ----------
-    path : path
+    path : str or os.PathLike
+        The CSV file (UTF-8, comma-separated, a header row naming the columns with their units).
     voxel_size : float, optional
         Voxel size of the scan (µm); required unless the file has a
         ``Voxel Size (µm)`` column (then its median is used).
+
+    Returns
+    -------
+    Sand
+        Named after the file; lengths in µm (equivalent diameters and the voxel size), each of
+        :data:`DESCRIPTORS` as an (n,) array, and the :data:`OPENING_COLUMN` where the file has it.
 
     Raises
     ------
@@ -251,7 +265,7 @@ SAND_HEADER = ("Particle ID", "Volume (µm³)", COLUMNS["equivalent_diameter"], 
 
 
 def write_sand(path: str | os.PathLike, equivalent_diameter: Sequence[float], values: Mapping[str, Sequence[float]],
-               voxel_size: float | Sequence[float], opening: Sequence[float] | None = None) -> Path:
+               *, voxel_size: float | Sequence[float], opening: Sequence[float] | None = None) -> Path:
     """Write grains' measurements as a Sand Atlas CSV that :func:`read_sand` reads (atomically).
 
     Columns :data:`SAND_HEADER` (particle IDs from 1, the volume of a ball of each d_eq, lengths in µm,
@@ -259,21 +273,33 @@ def write_sand(path: str | os.PathLike, equivalent_diameter: Sequence[float], va
 
     Parameters
     ----------
-    path : path
+    path : str or os.PathLike
+        The CSV file written (replaced if it exists).
     equivalent_diameter : (n,) array_like
-        µm.
+        Each grain's equivalent diameter, µm.
     values : mapping
-        Each of :data:`DESCRIPTORS` to its (n,) values.
+        Each of :data:`DESCRIPTORS` to its (n,) values (dimensionless).
     voxel_size : float or (n,) array_like
-        µm, per grain or for all.
+        µm, per grain or for all (keyword-only).
     opening : (n,) array_like, optional
-        Each grain's opening fraction (:func:`grainforge.analysis.atlas.opening_fraction`).
+        Each grain's opening fraction (:func:`grainforge.analysis.atlas.opening_fraction`), written as the
+        :data:`OPENING_COLUMN`; keyword-only.
+
+    Returns
+    -------
+    pathlib.Path
+        The file written.
+
+    Raises
+    ------
+    ValueError
+        If a column does not have one value per grain.
 
     Examples
     --------
     >>> import tempfile, pathlib
     >>> p = pathlib.Path(tempfile.mkdtemp()) / "s.csv"
-    >>> _ = write_sand(p, [500.0], {k: [0.8] for k in DESCRIPTORS}, 7.3, opening=[0.99])
+    >>> _ = write_sand(p, [500.0], {k: [0.8] for k in DESCRIPTORS}, voxel_size=7.3, opening=[0.99])
     >>> s = read_sand(p)
     >>> s.count, s.voxel_size, float(s.opening[0])
     (1, 7.3, 0.99)
@@ -302,6 +328,12 @@ def check_sand(sand: Sand) -> None:
     A fit matches distributions; identical grains (every value of a column
     the same) have none to match, and their single size makes no grading.
 
+    Parameters
+    ----------
+    sand : Sand
+        The table to check (its equivalent diameters, the four descriptors and, where it has one, the
+        opening fraction).
+
     Raises
     ------
     ValueError
@@ -328,7 +360,27 @@ def check_sand(sand: Sand) -> None:
 
 
 def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
-    """Voxels across each sand grain's twin is measured at: the sand's, capped at ``max_across``."""
+    """Voxels across each sand grain's twin is measured at: the sand's, capped at ``max_across``.
+
+    Parameters
+    ----------
+    sand : Sand
+        The sand (equivalent diameters and voxel size in µm).
+    max_across : float or None
+        The resolution cap in voxels across (:func:`grainforge.fit.settings.resolve_cap`); None or 0:
+        uncapped.
+
+    Returns
+    -------
+    (n,) numpy.ndarray of float64
+        Per sand grain, min(d_eq / voxel size, ``max_across``).
+
+    Examples
+    --------
+    >>> s = Sand("s.csv", 10.0, np.array([300.0, 2000.0]), {k: np.ones(2) for k in DESCRIPTORS})
+    >>> measured_across(s, 150.0).tolist(), measured_across(s, None).tolist()
+    ([30.0, 150.0], [30.0, 200.0])
+    """
     across = sand.equivalent_diameter / sand.voxel_size
     return np.minimum(across, max_across) if max_across else across
 
@@ -336,6 +388,19 @@ def measured_across(sand: Sand, max_across: float | None) -> np.ndarray:
 def uses_opening(sand: Sand, max_across: float | None) -> bool:
     """Whether a fit's mean-settings estimate uses the table's :data:`OPENING_COLUMN`: where it has one and no
     grain's twin is measured coarser than the sand grain (``max_across``), since the opening fraction, like
-    true sphericity, depends on the voxels across and is compared at the sand's own resolution only."""
+    true sphericity, depends on the voxels across and is compared at the sand's own resolution only.
+
+    Parameters
+    ----------
+    sand : Sand
+        The sand (its ``opening`` is None where the table has no such column).
+    max_across : float or None
+        The fit's resolution cap in voxels across; None or 0: uncapped.
+
+    Returns
+    -------
+    bool
+        True where the table has the column and no sand grain is more than ``max_across`` voxels across.
+    """
     return sand.opening is not None and not (max_across and bool(np.any(
         sand.equivalent_diameter / sand.voxel_size > max_across)))

@@ -87,11 +87,45 @@ class MethodFit:
         return len(self.all_settings) <= len(DESCRIPTORS)
 
     def values(self, u: np.ndarray) -> dict[str, float]:
-        """Unit-box coordinates ``u`` (one per :attr:`all_settings`) -> setting values."""
+        """Unit-box coordinates ``u`` (one per :attr:`all_settings`) -> setting values.
+
+        Parameters
+        ----------
+        u : (p,) array_like
+            One coordinate in [0, 1] per setting of :attr:`all_settings`, in that order (0: the setting's
+            ``low``, 1: its ``high``).
+
+        Returns
+        -------
+        dict of str to float
+            Setting name -> value in the setting's own units (``low + u × (high − low)``).
+
+        Examples
+        --------
+        >>> FITS["angular"].values([0.5, 0.0, 1.0, 0.0])
+        {'rounding': 0.45, 'dent_depth': 0.0, 'elongation': 1.0, 'flatness': 0.25}
+        """
         return {s.name: float(s.low + float(x) * (s.high - s.low)) for s, x in zip(self.all_settings, u)}
 
     def grain_params(self, u: np.ndarray) -> dict:
-        """The grain's own parameters for unit-box coordinates ``u``, rounded as the recipe writes them."""
+        """The grain's own parameters for unit-box coordinates ``u``, rounded as the recipe writes them.
+
+        Parameters
+        ----------
+        u : (p,) array_like
+            One coordinate in [0, 1] per setting of :attr:`all_settings`.
+
+        Returns
+        -------
+        dict
+            The generator's per-grain parameters (the recipe's ``[grains]`` columns, ``aspect`` L:I:S
+            included), floats to 6 significant digits: what ``batch`` reads back from the recipe.
+
+        Examples
+        --------
+        >>> FITS["angular"].grain_params([0.5, 0.0, 1.0, 0.0])
+        {'rounding': 0.45, 'dent_depth': 0.0, 'aspect': [1.0, 1.0, 0.25]}
+        """
         return _written(self.params(self.values(u)))
 
 
@@ -100,7 +134,18 @@ FITS: dict[str, MethodFit] = {}
 
 
 def register(spec: MethodFit) -> MethodFit:
-    """Make ``spec`` available to :func:`grainforge.fit.run.fit_sand` (replaces an earlier one of the same method)."""
+    """Make ``spec`` available to :func:`grainforge.fit.run.fit_sand` (replaces an earlier one of the same method).
+
+    Parameters
+    ----------
+    spec : MethodFit
+        How to fit its method; stored in :data:`FITS` under ``spec.method``.
+
+    Returns
+    -------
+    MethodFit
+        ``spec`` itself (so that a registration can be written as an assignment).
+    """
     FITS[spec.method] = spec
     return spec
 
@@ -173,6 +218,23 @@ def _written(v: Any) -> Any:
 def resolve_cap(method: str, max_across: float | str | None) -> float | None:
     """The resolution cap a fit of ``method`` measures at: ``max_across`` itself, or with :data:`METHOD_CAP`
     the method's own (:attr:`MethodFit.max_across`); None: uncapped.
+
+    Parameters
+    ----------
+    method : str
+        A method of :data:`FITS`.
+    max_across : float, str or None
+        A cap in voxels across, :data:`METHOD_CAP` (``"method"``), or None or 0 for none.
+
+    Returns
+    -------
+    float or None
+        The cap in voxels across; None: grains are measured at the sand's resolution.
+
+    Raises
+    ------
+    KeyError
+        If ``max_across`` is :data:`METHOD_CAP` and ``method`` is not in :data:`FITS`.
 
     Examples
     --------

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..rng import RNGLike, as_generator
+
 __all__ = ["design_points", "ForwardModel", "invert", "identifiability", "population_step", "population_error"]
 
 #: polynomial degree of the forward model
@@ -39,19 +41,36 @@ DEGREE = 3
 RIDGE = 1e-6
 
 
-def design_points(n: int, dims: int, seed: int) -> np.ndarray:
+def design_points(n: int, dims: int, rng: RNGLike) -> np.ndarray:
     """``n`` scrambled Sobol points in [0, 1]^dims (a design that fills the box evenly).
+
+    Parameters
+    ----------
+    n : int
+        Points wanted (the first ``n`` of a Sobol sequence of the next power of two).
+    dims : int
+        Dimensions of the box.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The scrambling's randomness, normalised by :func:`grainforge.rng.as_generator` (an int gives the
+        points it has always given; a Generator is advanced).
+
+    Returns
+    -------
+    (n, dims) numpy.ndarray of float64
+        In [0, 1).
 
     Examples
     --------
-    >>> p = design_points(64, 3, seed=1)
+    >>> p = design_points(64, 3, rng=1)
     >>> p.shape, bool(p.min() >= 0 and p.max() < 1)
     ((64, 3), True)
+    >>> bool(np.array_equal(p, design_points(64, 3, rng=1)))
+    True
     """
     from scipy.stats import qmc
 
     m = int(np.ceil(np.log2(max(n, 2))))
-    return qmc.Sobol(dims, scramble=True, seed=np.random.default_rng(seed)).random_base2(m)[:n]
+    return qmc.Sobol(dims, scramble=True, seed=as_generator(rng)).random_base2(m)[:n]
 
 
 def _features(u: np.ndarray, across: np.ndarray, degree: int = DEGREE) -> np.ndarray:
@@ -70,6 +89,15 @@ class ForwardModel:
 
     ``rms`` is the root-mean-square residual per descriptor on the design:
     what one grain's own seed and orientation scatter about the model.
+
+    Attributes
+    ----------
+    coef : (features, 4) numpy.ndarray
+        The polynomial's coefficients, one column per descriptor.
+    rms : (4,) numpy.ndarray
+        Root-mean-square residual per descriptor on the design.
+    dims : int
+        Settings of the model (p).
     """
 
     coef: np.ndarray  # (features, 4)
@@ -78,6 +106,21 @@ class ForwardModel:
 
     @classmethod
     def fit(cls, u: np.ndarray, across: np.ndarray, y: np.ndarray) -> ForwardModel:
+        """The model fitted to a design by ridge-damped least squares.
+
+        Parameters
+        ----------
+        u : (n, p) numpy.ndarray
+            The design's settings in [0, 1].
+        across : (n,) numpy.ndarray
+            Voxels across each was measured at.
+        y : (n, 4) numpy.ndarray
+            Their measured descriptors (no NaN).
+
+        Returns
+        -------
+        ForwardModel
+        """
         X = _features(u, across)
         y = np.asarray(y, np.float64)
         A = np.vstack([X, np.sqrt(RIDGE * len(X)) * np.eye(X.shape[1])])
@@ -87,12 +130,26 @@ class ForwardModel:
         return cls(coef=coef, rms=rms, dims=u.shape[1])
 
     def predict(self, u: np.ndarray, across: np.ndarray) -> np.ndarray:
+        """The descriptors the model predicts for settings ``u`` measured ``across`` voxels across.
+
+        Parameters
+        ----------
+        u : (p,) or (n, p) array_like
+            Settings in the unit box (a polynomial: defined, and smooth, just outside it too).
+        across : float or (n,) array_like
+            Voxels across, one for all or one per row.
+
+        Returns
+        -------
+        (n, 4) numpy.ndarray
+            One row per row of ``u`` (one row for a single setting vector).
+        """
         u = np.atleast_2d(u)
         return _features(u, np.broadcast_to(across, (len(u),))) @ self.coef
 
 
 def identifiability(u: np.ndarray, across: np.ndarray, y: np.ndarray, *, folds: int = 5,
-                    seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                    rng: RNGLike = 0) -> tuple[np.ndarray, np.ndarray]:
     """How well each setting is known from a grain's four measured descriptors, learnt from a design.
 
     Each setting (unit-box coordinate) is predicted from the descriptors and
@@ -112,8 +169,14 @@ def identifiability(u: np.ndarray, across: np.ndarray, y: np.ndarray, *, folds: 
     u : (n, p) array
         The design's settings in [0, 1].
     across : (n,) array
+        Voxels across each design grain was measured at.
     y : (n, 4) array
         Their measured descriptors.
+    folds : int
+        Folds of the cross-validation (each grain is scored by the model fitted to the other folds).
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The random split into folds, normalised by :func:`grainforge.rng.as_generator`; the default 0 makes the
+        scores a function of the design alone (an int gives the split it has always given).
 
     Returns
     -------
@@ -135,7 +198,7 @@ def identifiability(u: np.ndarray, across: np.ndarray, y: np.ndarray, *, folds: 
     (True, True)
     """
     u, y = np.asarray(u, np.float64), np.asarray(y, np.float64)
-    fold = np.random.default_rng(seed).permutation(len(u)) % folds
+    fold = as_generator(rng).permutation(len(u)) % folds
     mse = np.var(u, axis=0)  # predicting the mean
     for degree in range(1, DEGREE + 1):
         X = _features(y, across, degree)
@@ -155,7 +218,10 @@ def invert(model: ForwardModel, targets: np.ndarray, across: np.ndarray, *, offs
 
     Parameters
     ----------
+    model : ForwardModel
+        The design's model.
     targets : (n, 4) array
+        The descriptors to reach, one row per grain.
     across : (n,) array
         Voxels across each grain is measured at.
     offsets : (n, 4) array, optional
@@ -169,6 +235,7 @@ def invert(model: ForwardModel, targets: np.ndarray, across: np.ndarray, *, offs
     Returns
     -------
     u : (n, p) array
+        The settings found, in the unit box.
     miss : (n,) array
         Largest |predicted − target| over the descriptors at ``u``: what the
         model says the method cannot reach (the solve stops at a bound).
@@ -179,7 +246,7 @@ def invert(model: ForwardModel, targets: np.ndarray, across: np.ndarray, *, offs
     offsets = np.zeros_like(targets) if offsets is None else np.asarray(offsets, np.float64)
     scale = np.broadcast_to(np.asarray(scale, np.float64), (targets.shape[1],))
     if start is None:
-        grid = design_points(512, model.dims, seed=0)
+        grid = design_points(512, model.dims, rng=0)
         start = np.empty((n, model.dims))
         for i in range(n):
             pred = model.predict(grid, across[i]) + offsets[i]

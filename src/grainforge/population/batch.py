@@ -58,16 +58,12 @@ def _local_results(recipe: Recipe, todo: Sequence[int], workers: int, in_process
             yield make_grain(recipe, i)
         return
     from ..methods import METHODS
-    from ..runtime.workers import close_pool, process_pool
+    from ..runtime.workers import process_pool
 
-    ex = process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.population.generate",
-                                "trimesh", "scipy.special"])
-    ok = False
-    try:
+    # an error, Ctrl-C, SIGTERM or the generator closed early: the pool's exit stops the workers at once
+    with process_pool(workers, ["grainforge.population", METHODS[recipe.method], "grainforge.population.generate",
+                                "trimesh", "scipy.special"]) as ex:
         yield from _executor_results(ex, recipe, todo, workers)
-        ok = True
-    finally:
-        close_pool(ex, abort=not ok)
 
 
 def _dask_results(recipe: Recipe, todo: Sequence[int], scheduler: str) -> Iterable[GrainResult]:
@@ -82,14 +78,11 @@ def _executor_results(ex, recipe: Recipe, todo: Sequence[int], workers: int) -> 
     they finish, ``4 × workers`` in flight (memory does not grow with the count); the owner closes ``ex``."""
     from concurrent.futures import FIRST_COMPLETED, wait
 
-    from ..runtime.workers import single_threaded_children
-
     it = iter(todo)
     ahead = 4 * workers
     pending: set = set()
     try:
-        with single_threaded_children():  # local workers (and the fork server) start during submit
-            pending = {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, ahead)}
+        pending = {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, ahead)}
         while pending:
             done, pending = wait(pending, return_when=FIRST_COMPLETED)
             pending |= {ex.submit(make_grain, recipe, i) for i in itertools.islice(it, len(done))}
@@ -101,7 +94,25 @@ def _executor_results(ex, recipe: Recipe, todo: Sequence[int], workers: int) -> 
 
 
 def check_recipe_size(recipe: Recipe, workers: int = 1) -> float:
-    """Refuse a recipe whose population would take more than a day (estimated from grain 0's parameters)."""
+    """Refuse a recipe whose population would take more than a day (estimated from grain 0's parameters).
+
+    Parameters
+    ----------
+    recipe : Recipe
+        A parsed recipe.
+    workers : int
+        Processes sharing the work.
+
+    Returns
+    -------
+    float
+        The estimated wall-clock seconds.
+
+    Raises
+    ------
+    grainforge.runtime.estimate.TooLargeError
+        One line with the estimate and what to change (``count``).
+    """
     from ..runtime.estimate import check_job, grain_seconds
 
     _, params, _ = draw_grain(recipe, 0)
@@ -121,6 +132,11 @@ def check_extremes(recipe: Recipe) -> None:
     limits depend on the grain itself (e.g. an FSO amplitude too large for
     the grain to stay star-shaped).  This catches a distribution reaching such
     values before any work, instead of failing at grain 517.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        A parsed recipe; nothing is done when no parameter is drawn.
 
     Raises
     ------
@@ -179,7 +195,19 @@ def _extremes(dist: Distribution) -> list:
 
 
 def existing_grains(out: Path, recipe: Recipe) -> bool:
-    """Whether ``out`` holds a grain file of this recipe's naming (listing the folder, not every name)."""
+    """Whether ``out`` holds a grain file of this recipe's naming (listing the folder, not every name).
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        The output folder (need not exist).
+    recipe : Recipe
+        The recipe (its method, count and format name the files).
+
+    Returns
+    -------
+    bool
+    """
     from .generate import existing_outputs
 
     return any(p.name != "manifest.csv" for p in existing_outputs(out, recipe.method, recipe.count, recipe.format))
@@ -208,11 +236,23 @@ def run_batch(
 
     Parameters
     ----------
+    recipe : Recipe
+        A parsed recipe (:func:`grainforge.population.recipe.load_recipe`); its text is saved in the journal.
+    out : str or os.PathLike
+        The output folder (made if missing).
+    workers : int, optional
+        Local worker processes; default the CPU count (at most the grains to make).
+    scheduler : str, optional
+        A Dask scheduler's address: the grains are made on that cluster instead.
     resume : bool
         Keep every grain whose file matches its sidecar; generate the rest.
         The recipe must be the one the interrupted batch used.
     overwrite : bool
         Replace existing outputs (regenerates everything).
+    progress : callable, optional
+        ``progress(iterable)`` wraps the grains as they arrive (a bar).
+    report : bool
+        Write ``manifest.json`` and ``population.png`` too (:func:`grainforge.population.report.population_report`).
     in_process : bool, optional
         Generate in this process instead of a pool (default: only when
         ``workers`` is 1).  The bytes are the same either way; a pool worker

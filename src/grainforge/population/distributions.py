@@ -16,6 +16,8 @@ from typing import Any
 
 import numpy as np
 
+from ..rng import RNGLike, as_generator
+
 __all__ = ["Distribution", "FixedSize", "LognormalSize", "GradingCurve"]
 
 
@@ -55,6 +57,23 @@ class Distribution:
     integer: bool = False
 
     def support(self) -> tuple[float, float]:
+        """The interval the distribution draws from.
+
+        Returns
+        -------
+        low, high : float
+            Its ends (infinite for an unbounded side).
+
+        Raises
+        ------
+        ValueError
+            For a kind without an interval (``choice``, ``zingg``, ``each``).
+
+        Examples
+        --------
+        >>> Distribution("lognormal", {"median": 1.0, "sigma": 0.5}).support()
+        (0.0, inf)
+        """
         a = self.args
         if self.kind in ("uniform", "truncnormal"):
             return float(a["low"]), float(a["high"])
@@ -65,7 +84,19 @@ class Distribution:
         raise ValueError(f"{self.kind} has no interval support")
 
     def typical(self) -> Any:
-        """A representative value (used to check cross-parameter rules up front)."""
+        """A representative value (used to check cross-parameter rules up front).
+
+        Returns
+        -------
+        object
+            The middle of a uniform (rounded for an integer one), a normal's mean (clipped to a truncated one's
+            bounds), a lognormal's median, a choice's first value; a tuple for ``zingg`` (L:I:S) and ``each``.
+
+        Examples
+        --------
+        >>> Distribution("uniform", {"low": 2, "high": 5}, integer=True).typical()
+        4
+        """
         a = self.args
         if self.kind == "uniform":
             mid = 0.5 * (a["low"] + a["high"])
@@ -82,10 +113,23 @@ class Distribution:
             return tuple(x.typical() if isinstance(x, Distribution) else x for x in a["items"])
         return self.args["values"][0]
 
-    def draw(self, rng: np.random.Generator) -> Any:
-        """One value from ``rng``."""
+    def draw(self, rng: RNGLike) -> Any:
+        """One value from ``rng``.
+
+        Parameters
+        ----------
+        rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+            Normalised by :func:`grainforge.rng.as_generator`; a Generator (a grain's own stream) is advanced by
+            exactly the draws described above, so the next draw from it is the next parameter's.
+
+        Returns
+        -------
+        object
+            A float (an int for an integer uniform), a choice's value, or a tuple for ``zingg`` and ``each``.
+        """
         from scipy.special import ndtr, ndtri
 
+        rng = as_generator(rng)
         a = self.args
         if self.kind == "zingg":
             e, f = (x.draw(rng) if isinstance(x, Distribution) else x for x in (a["elongation"], a["flatness"]))
@@ -118,6 +162,18 @@ class FixedSize:
     mm: float
 
     def sample(self, u: float) -> float:
+        """The size at quantile ``u``: always ``mm``.
+
+        Parameters
+        ----------
+        u : float
+            A quantile in [0, 1] (not used).
+
+        Returns
+        -------
+        float
+            The size, mm.
+        """
         return self.mm
 
 
@@ -129,6 +185,23 @@ class LognormalSize:
     sigma: float
 
     def sample(self, u: float) -> float:
+        """The size (mm) at quantile ``u`` (inverse CDF).
+
+        Parameters
+        ----------
+        u : float
+            A quantile in [0, 1] (kept just inside it, so that the size is finite).
+
+        Returns
+        -------
+        float
+            The size, mm.
+
+        Examples
+        --------
+        >>> LognormalSize(2.0, 0.3).sample(0.5)
+        2.0
+        """
         from scipy.special import ndtri
 
         return float(self.median_mm * math.exp(self.sigma * ndtri(min(max(u, 2.0**-60), 1 - 2.0**-53))))
@@ -169,14 +242,49 @@ class GradingCurve:
         return u, np.concatenate([[0.0], np.cumsum(w) / w.sum()])
 
     def number_percent_passing(self) -> np.ndarray:
-        """Percent passing *by count* at each sieve implied by the curve (equal to it for ``basis="count"``)."""
+        """Percent passing *by count* at each sieve implied by the curve (equal to it for ``basis="count"``).
+
+        Returns
+        -------
+        numpy.ndarray
+            One value per sieve, from 0 to 100.
+        """
         return 100.0 * self._number_cdf()[1]
 
     def sample(self, q: float) -> float:
-        """The size (mm) at number quantile ``q`` in [0, 1] (inverse CDF)."""
+        """The size (mm) at number quantile ``q`` in [0, 1] (inverse CDF).
+
+        Parameters
+        ----------
+        q : float
+            The number quantile, clipped to [0, 1].
+
+        Returns
+        -------
+        float
+            The size, mm.
+        """
         return float(self.sample_many(np.array([q]))[0])
 
     def sample_many(self, q: np.ndarray) -> np.ndarray:
+        """The sizes (mm) at number quantiles ``q`` (vectorised :meth:`sample`).
+
+        Parameters
+        ----------
+        q : array_like
+            Number quantiles, clipped to [0, 1].
+
+        Returns
+        -------
+        numpy.ndarray
+            Sizes in mm, the shape of ``q``.
+
+        Examples
+        --------
+        >>> g = GradingCurve((0.1, 1.0, 10.0), (0.0, 50.0, 100.0), basis="count")
+        >>> g.sample_many(np.array([0.25, 0.5, 0.75])).round(6).tolist()
+        [0.316228, 1.0, 3.162278]
+        """
         u, F = self._number_cdf()
         q = np.clip(np.asarray(q, dtype=np.float64), 0.0, 1.0)
         i = np.clip(np.searchsorted(F, q, side="right") - 1, 0, len(u) - 2)
@@ -191,7 +299,25 @@ class GradingCurve:
         return np.exp(-np.log(a - t * (a - b)) / 3.0)
 
     def passing(self, sizes: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
-        """Achieved percent passing at each sieve for ``sizes`` (weighted, e.g. by volume)."""
+        """Achieved percent passing at each sieve for ``sizes`` (weighted, e.g. by volume).
+
+        Parameters
+        ----------
+        sizes : (n,) array_like
+            Grains' sizes, mm.
+        weights : (n,) array_like, optional
+            Each grain's weight (its volume for a mass grading); default 1 each (by count).
+
+        Returns
+        -------
+        numpy.ndarray
+            Percent (of the total weight) of grains no larger than each sieve, one value per sieve.
+
+        Examples
+        --------
+        >>> GradingCurve((0.1, 1.0), (0.0, 100.0)).passing([0.05, 0.5, 0.5, 2.0]).tolist()
+        [25.0, 75.0]
+        """
         sizes = np.asarray(sizes, dtype=np.float64)
         w = np.ones_like(sizes) if weights is None else np.asarray(weights, dtype=np.float64)
         total = w.sum()

@@ -19,6 +19,7 @@ from ..io import FORMATS, _cell, export_bytes, file_mode
 from ..io.inputs import MANIFEST, read_manifest
 from ..methods import generate, get
 from ..params import as_dict, specs
+from ..rng import RNGLike
 from ..runtime.staging import signals_held, staged
 
 __all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain", "write_run", "planned_files",
@@ -27,12 +28,52 @@ __all__ = ["grain_file_name", "manifest_row", "manifest_columns", "encode_grain"
 
 
 def grain_file_name(method: str, index: int, fmt: str) -> str:
-    """``fso-0000.stl`` style names (at least four digits)."""
+    """``fso-0000.stl`` style names (at least four digits).
+
+    Parameters
+    ----------
+    method : str
+        The generator's name.
+    index : int
+        The grain's index, from 0.
+    fmt : str
+        The file format's extension (``stl``, ``obj``, ``ply``).
+
+    Returns
+    -------
+    str
+
+    Examples
+    --------
+    >>> grain_file_name("fso", 7, "stl"), grain_file_name("rf", 12345, "ply")
+    ('fso-0007.stl', 'rf-12345.ply')
+    """
     return f"{method}-{index:04d}.{fmt}"
 
 
 def manifest_columns(method: str, extra: Sequence[str] = ()) -> list[str]:
-    """Manifest columns for ``method``: identity, every parameter, scale, measures."""
+    """Manifest columns for ``method``: identity, every parameter, scale, measures.
+
+    Parameters
+    ----------
+    method : str
+        The generator's name.
+    extra : sequence of str
+        Columns added after the method's info columns (e.g. a printer's, ``sha256``).
+
+    Returns
+    -------
+    list of str
+        ``file, method, seed``, the method's parameters, ``size, size_definition, scale``, its info columns,
+        ``extra``, the basic descriptors and ``version`` (without units: :func:`grainforge.units.headers`
+        adds them).
+
+    Examples
+    --------
+    >>> cols = manifest_columns("fso", ("sha256",))
+    >>> cols[:3], cols[-1], "sha256" in cols
+    (['file', 'method', 'seed'], 'version', True)
+    """
     module = get(method)
     cols = ["file", "method", "seed"]
     cols += [s.name for s in specs(module.Params)]
@@ -50,6 +91,23 @@ def manifest_row(grain, file: str, size: float, size_definition: str) -> dict[st
     Lengths, areas and volumes are in mm, mm², mm³ (the CSV headers say so:
     :mod:`grainforge.units`); a method's ``physical_info(info, scale)``, if it
     has one, converts its info values from model units.
+
+    Parameters
+    ----------
+    grain : grainforge.grain.Grain
+        The grain, scaled to mm (:func:`grainforge.fabrication.scale.to_size`).
+    file : str
+        Its file's name.
+    size : float
+        The size asked for, mm.
+    size_definition : str
+        What ``size`` measures (``equivalent``, ``sieve`` or ``longest``).
+
+    Returns
+    -------
+    dict
+        The manifest's columns (:func:`manifest_columns`) with the grain's values; ``seed`` is the grain's
+        recorded seed (None where it was made from a Generator).
     """
     row: dict[str, Any] = {"file": file, "method": grain.method, "seed": grain.seed}
     row.update(as_dict(grain.params))
@@ -65,21 +123,94 @@ def manifest_row(grain, file: str, size: float, size_definition: str) -> dict[st
 
 
 def encode_grain(
-    method: str, params: Any, seed: int, name: str, *, fmt: str, size: float, size_definition: str,
+    method: str, params: Any, *, rng: RNGLike, name: str, fmt: str, size: float, size_definition: str,
 ) -> tuple[bytes, dict[str, Any]]:
-    """Generate one grain, scale it to ``size`` and encode it: (file bytes, manifest row). Writes nothing."""
-    grain = to_size(generate(method, params, int(seed)), size, size_definition)
+    """Generate one grain, scale it to ``size`` and encode it: (file bytes, manifest row). Writes nothing.
+
+    Parameters
+    ----------
+    method : str
+        The generator's name.
+    params : object
+        An instance of the method's ``Params``.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The grain's randomness (:func:`grainforge.methods.generate`): an int is the grain's seed, recorded in
+        the manifest row's ``seed`` (the same int, the same bytes as ever); None draws a seed and records it;
+        a Generator records none.
+    name : str
+        The file's name, recorded in the row's ``file``.
+    fmt : str
+        Mesh format (``stl``, ``obj``, ``ply``).
+    size : float
+        The grain's size, mm.
+    size_definition : str
+        What ``size`` measures (``equivalent``, ``sieve`` or ``longest``).
+
+    Returns
+    -------
+    data : bytes
+        The mesh file's bytes.
+    row : dict
+        Its manifest row (:func:`manifest_row`).
+
+    Raises
+    ------
+    grainforge.params.ParameterError
+        If the grain cannot be made with ``params`` (naming the parameter).
+
+    Examples
+    --------
+    >>> data, row = encode_grain("fso", get("fso").Params(subdivisions=2), rng=3, name="fso-0000.stl", fmt="stl",
+    ...                          size=2.0, size_definition="equivalent")
+    >>> row["file"], row["seed"], len(data) == 84 + 50 * 320, round(row["equivalent_diameter"], 6)
+    ('fso-0000.stl', 3, True, 2.0)
+    """
+    grain = to_size(generate(method, params, rng), size, size_definition)
     return export_bytes(grain, fmt), manifest_row(grain, name, size, size_definition)
 
 
 def planned_files(out: Path, method: str, count: int, fmt: str) -> list[Path]:
-    """Every path a run would write (grain files, then the manifest)."""
+    """Every path a run would write (grain files, then the manifest).
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        The output folder.
+    method : str
+        The generator's name.
+    count : int
+        Grains of the run.
+    fmt : str
+        Mesh format.
+
+    Returns
+    -------
+    list of pathlib.Path
+        ``count`` grain files (:func:`grain_file_name`), then ``manifest.csv``.
+    """
     return [out / grain_file_name(method, i, fmt) for i in range(count)] + [out / MANIFEST]
 
 
 def existing_outputs(out: Path, method: str, count: int, fmt: str) -> list[Path]:
     """The files a run of ``count`` grains would replace in ``out``: found by listing ``out``, not by
-    building every planned name (memory does not grow with ``count``)."""
+    building every planned name (memory does not grow with ``count``).
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        The output folder (need not exist).
+    method : str
+        The generator's name.
+    count : int
+        Grains of the run.
+    fmt : str
+        Mesh format.
+
+    Returns
+    -------
+    list of pathlib.Path
+        The grain files of indices below ``count`` and the manifest that exist in ``out``, sorted.
+    """
     if not out.is_dir():
         return []
     pattern = re.compile(rf"{re.escape(method)}-(\d{{4,}})\.{re.escape(fmt)}")
@@ -93,7 +224,19 @@ def existing_outputs(out: Path, method: str, count: int, fmt: str) -> list[Path]
 
 
 def earlier_run_files(out: Path) -> list[Path]:
-    """Files the manifest already in ``out`` lists (an earlier run's grains), existing ones only."""
+    """Files the manifest already in ``out`` lists (an earlier run's grains), existing ones only.
+
+    Parameters
+    ----------
+    out : pathlib.Path
+        The output folder.
+
+    Returns
+    -------
+    list of pathlib.Path
+        Plain file names inside ``out`` only (a manifest cannot point elsewhere); empty without a readable
+        manifest.
+    """
     manifest = out / MANIFEST
     if not manifest.is_file():
         return []
@@ -113,9 +256,9 @@ def earlier_run_files(out: Path) -> list[Path]:
 def write_run(
     method: str,
     params: Any,
+    *,
     seeds: Sequence[int],
     out: str | Path,
-    *,
     fmt: str = "stl",
     size: float = 10.0,
     size_definition: str = "equivalent",
@@ -138,6 +281,32 @@ def write_run(
 
     ``row_extra`` (e.g. the printer and the chosen resolution) is added to
     every manifest row; list its keys in ``extra_columns``.
+
+    Parameters
+    ----------
+    method : str
+        The generator's name.
+    params : object
+        An instance of the method's ``Params``, shared by every grain.
+    seeds : sequence of int
+        Grain ``i`` is made with ``rng=seeds[i]`` (:func:`encode_grain`) and that seed recorded in the manifest:
+        data for regenerating it, one per grain (keyword-only).
+    out : str or pathlib.Path
+        The output folder (made if missing; keyword-only).
+    fmt : str
+        Mesh format (``stl``, ``obj``, ``ply``).
+    size : float
+        Each grain's size, mm.
+    size_definition : str
+        What ``size`` measures (``equivalent``, ``sieve`` or ``longest``).
+    overwrite : bool
+        Replace existing outputs (and remove the earlier manifest's grains this run does not replace).
+    progress : callable, optional
+        ``progress(iterable)`` wraps the grains as they are made (a bar).
+    extra_columns : sequence of str
+        Manifest columns for ``row_extra``'s keys.
+    row_extra : dict, optional
+        Added to every manifest row.
 
     Returns
     -------
@@ -175,7 +344,7 @@ def write_run(
                 iterator = progress(iterator)
             for i, seed in iterator:
                 name = grain_file_name(method, i, fmt)
-                data, row = encode_grain(method, params, seed, name, fmt=fmt, size=size,
+                data, row = encode_grain(method, params, rng=seed, name=name, fmt=fmt, size=size,
                                          size_definition=size_definition)
                 (stage / name).write_bytes(data)
                 row = {**row, **(row_extra or {})}

@@ -23,12 +23,28 @@ from typing import Any
 import numpy as np
 
 from ..params import ParameterError, specs
+from ..rng import as_generator
 from .distributions import Distribution
 from .recipe import Recipe
 
 
 def grain_stream(root_seed: int, index: int) -> np.random.Generator:
     """Grain ``index``'s own random stream: child ``index`` of ``SeedSequence(root_seed)``.
+
+    ``root_seed`` is a recipe's recorded root seed (its ``seed = ...``), data from which the stream is
+    derived, not an ``rng``: the stream must be the same in every worker and on every resume.
+
+    Parameters
+    ----------
+    root_seed : int
+        The recipe's root seed (non-negative).
+    index : int
+        The grain's index in the recipe, from 0.
+
+    Returns
+    -------
+    numpy.random.Generator
+        A new Generator on ``SeedSequence(root_seed, spawn_key=(index,))``.
 
     Examples
     --------
@@ -37,11 +53,42 @@ def grain_stream(root_seed: int, index: int) -> np.random.Generator:
     >>> a == b
     True
     """
-    return np.random.default_rng(np.random.SeedSequence(root_seed, spawn_key=(index,)))
+    return as_generator(np.random.SeedSequence(root_seed, spawn_key=(index,)))
 
 
 def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
-    """Grain ``index``'s seed, Params and size (mm), from its own stream only."""
+    """Grain ``index``'s seed, Params and size (mm), from its own stream only.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        A parsed recipe.
+    index : int
+        The grain's index, from 0 (below ``recipe.count``).
+
+    Returns
+    -------
+    seed : int
+        The grain's own seed (its stream's first draw, or the recipe's ``[grains] seed`` for it): the ``rng``
+        it is generated with.
+    params : object
+        The method's ``Params``: the recipe's fixed values, the grain's ``[grains]`` values and its draws.
+    size : float
+        The grain's size, mm (under the recipe's size definition).
+
+    Raises
+    ------
+    ValueError
+        If the drawn parameters are refused by the method (naming the grain and the parameter).
+
+    Examples
+    --------
+    >>> from grainforge.population import parse_recipe
+    >>> r = parse_recipe('method = "fso"\\ncount = 2\\nseed = 3\\n[params]\\nsubdivisions = 2\\n[size]\\nmm = 1.5\\n')
+    >>> seed, params, size = draw_grain(r, 1)
+    >>> seed == int(grain_stream(3, 1).integers(0, 2**63)), params.subdivisions, size
+    (True, 2, 1.5)
+    """
     from ..methods import get
 
     params_type = get(recipe.method).Params
@@ -83,6 +130,20 @@ def size_quantile(recipe: Recipe, index: int, u: float) -> float:
     still depends only on the root seed, ``index``, ``count`` and grain
     ``index``'s own stream.
 
+    Parameters
+    ----------
+    recipe : Recipe
+        The recipe (its ``sampling``, ``count`` and root ``seed``).
+    index : int
+        The grain's index, from 0.
+    u : float
+        The grain's own uniform draw in [0, 1).
+
+    Returns
+    -------
+    float
+        The size quantile in [0, 1), for ``recipe.size.sample``.
+
     Examples
     --------
     >>> from grainforge.population import parse_recipe
@@ -111,13 +172,31 @@ def make_grain(recipe: Recipe, index: int) -> GrainResult:
     """Generate, scale, measure and encode grain ``index`` (pure: writes nothing).
 
     Runs in a worker process (local pool or Dask); the client writes the file.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        A parsed recipe.
+    index : int
+        The grain's index, from 0.
+
+    Returns
+    -------
+    GrainResult
+        The file's name and bytes and its manifest row (with the file's ``sha256``), the row as JSON reads it
+        back.
+
+    Raises
+    ------
+    ValueError
+        If the grain cannot be made (naming its index, its seed and the parameter).
     """
     from .generate import encode_grain
 
     seed, params, size = draw_grain(recipe, index)
     name = recipe.file_name(index)
     try:
-        data, row = encode_grain(recipe.method, params, seed, name, fmt=recipe.format, size=size,
+        data, row = encode_grain(recipe.method, params, rng=seed, name=name, fmt=recipe.format, size=size,
                                  size_definition=recipe.size_definition)
     except ParameterError as exc:
         raise ValueError(f"grain {index} (seed {seed}): params.{exc.name} {exc.reason}") from None

@@ -108,6 +108,18 @@ def field_line(text: str, path: Sequence[str]) -> int | None:
     full key is the longest prefix of ``path`` wins (a field inside an inline
     table is reported at its key's line).
 
+    Parameters
+    ----------
+    text : str
+        The recipe's TOML text.
+    path : sequence of str
+        The field's dotted path, one key per element (``["params", "D", "low"]``).
+
+    Returns
+    -------
+    int or None
+        The line, from 1; None where no key of the path is in the text.
+
     Examples
     --------
     >>> src = 'method = "fso"\\n[params]\\nD = { distribution = "uniform", low = 2 }\\n'
@@ -156,6 +168,18 @@ class Recipe:
         return hashlib.sha256(self.text.encode("utf-8")).hexdigest()
 
     def file_name(self, index: int) -> str:
+        """The file grain ``index`` is written to.
+
+        Parameters
+        ----------
+        index : int
+            The grain's index, from 0.
+
+        Returns
+        -------
+        str
+            ``METHOD-NNNN.FORMAT`` (:func:`grainforge.population.generate.grain_file_name`).
+        """
         from .generate import grain_file_name
 
         return grain_file_name(self.method, index, self.format)
@@ -163,6 +187,16 @@ class Recipe:
 
 def load_recipe(path: str | os.PathLike) -> Recipe:
     """Read and validate a TOML recipe file.
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The recipe file (UTF-8 TOML).
+
+    Returns
+    -------
+    Recipe
+        Its ``source`` the path, its ``text`` the file's text.
 
     Raises
     ------
@@ -179,6 +213,22 @@ def load_recipe(path: str | os.PathLike) -> Recipe:
 
 def parse_recipe(text: str, source: str = "<recipe>") -> Recipe:
     """Validate recipe ``text``; see :func:`load_recipe`.
+
+    Parameters
+    ----------
+    text : str
+        The recipe's TOML text (the format: the module's docstring).
+    source : str
+        What errors name as the recipe (a file's path).
+
+    Returns
+    -------
+    Recipe
+
+    Raises
+    ------
+    RecipeError
+        Naming the field (dotted TOML path) and its line.
 
     Examples
     --------

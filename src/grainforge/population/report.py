@@ -39,12 +39,45 @@ def _stats(x: np.ndarray) -> dict[str, float]:
 
 
 def achieved_sizes(rows: Sequence[Mapping[str, Any]], definition: str) -> np.ndarray:
-    """Each grain's measured size (mm) under ``definition`` (equivalent, sieve or longest)."""
+    """Each grain's measured size (mm) under ``definition`` (equivalent, sieve or longest).
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        Manifest rows (their ``equivalent_diameter``, ``I`` or ``L`` column, mm).
+    definition : {"equivalent", "sieve", "longest"}
+        The size definition.
+
+    Returns
+    -------
+    (n,) numpy.ndarray
+        Sizes in mm.
+
+    Examples
+    --------
+    >>> achieved_sizes([{"equivalent_diameter": 1.5, "I": 1.2, "L": 2.0}], "sieve").tolist()
+    [1.2]
+    """
     return np.array([float(r[_MEASURED[definition]]) for r in rows])
 
 
 def summary(recipe, rows: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
-    """Summary statistics of a population (the content of ``manifest.json``)."""
+    """Summary statistics of a population (the content of ``manifest.json``).
+
+    Parameters
+    ----------
+    recipe : Recipe
+        The population's recipe.
+    rows : sequence of mapping
+        Its manifest rows, in grain order.
+
+    Returns
+    -------
+    dict
+        The recipe's identity (name, SHA-256, method, count, root seed, format, size definition), per
+        parameter its distribution and achieved statistics, the target and measured sizes (mm), the
+        descriptors' statistics and, for a grading curve, the achieved percent passing at each sieve.
+    """
     out: dict[str, Any] = {
         "recipe": Path(recipe.source).name,
         "recipe_sha256": recipe.digest,
@@ -123,7 +156,21 @@ def _hist(ax, vals, colour) -> None:
 def population_figure(recipe, rows, info: Mapping[str, Any]):
     """The population figure (a matplotlib Figure): grading curve or size histogram, then one panel per
     drawn parameter and sphericity and convexity.  Every panel has both axes labelled (units where
-    there are any); the last row is centred, so there are no empty panels."""
+    there are any); the last row is centred, so there are no empty panels.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        The population's recipe.
+    rows : sequence of mapping
+        Its manifest rows.
+    info : mapping
+        Its summary (:func:`summary`).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -201,7 +248,22 @@ def _figure(recipe, rows, info: Mapping[str, Any], path: Path) -> None:
 
 
 def population_report(recipe, rows: Sequence[Mapping[str, Any]], out: str | Path) -> dict[str, Any]:
-    """Write ``manifest.json`` (summary) and ``population.png`` into ``out``; return the summary."""
+    """Write ``manifest.json`` (summary) and ``population.png`` into ``out``; return the summary.
+
+    Parameters
+    ----------
+    recipe : Recipe
+        The population's recipe.
+    rows : sequence of mapping
+        Its manifest rows, in grain order.
+    out : str or pathlib.Path
+        The output folder (existing); both files are written atomically.
+
+    Returns
+    -------
+    dict
+        The summary (:func:`summary`).
+    """
     out = Path(out)
     info = summary(recipe, rows)
     atomic_write(out / SUMMARY, json.dumps(info, indent=2, sort_keys=True) + "\n")

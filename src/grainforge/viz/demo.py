@@ -27,7 +27,7 @@ def _sweep_panels(out: Path, method: str, make_params, values, label, seeds) -> 
     panels = {}  # (seed index, value index) -> (mesh, label): one row per seed, one column per value
     for j, value in enumerate(values):
         folder = out / f"{label}={value:g}"
-        write_run(method, make_params(value), seeds, folder, overwrite=True)
+        write_run(method, make_params(value), seeds=seeds, out=folder, overwrite=True)
         rows = read_manifest(folder / MANIFEST)
         for i, r in enumerate(rows):
             panels[i, j] = (read_mesh(folder / r["file"]), f"{label}={value:g}  seed {r['seed']}")
@@ -148,7 +148,7 @@ def cri_gallery(out: Path, quick: bool = False) -> list[Path]:
     meshes, labels = [], []
     for name, params in runs:
         run_seeds = seeds[:1] if name == "micrographs" else seeds  # images: no randomness
-        write_run("cri", params, run_seeds, folder / name, overwrite=True)
+        write_run("cri", params, seeds=run_seeds, out=folder / name, overwrite=True)
         rows = read_manifest(folder / name / MANIFEST)
         for r in rows:
             meshes.append(read_mesh(folder / name / r["file"]))
@@ -303,7 +303,7 @@ def angular_gallery(out: Path, quick: bool = False) -> list[Path]:
         for rounding in ANGULAR_ROUNDING:
             params = Params(facets=18, aspect=(1.6, 1.25, 1.0), rounding=rounding, subdivisions=s, **extra)
             sub = folder / f"{name.replace(' ', '-').replace(',', '')}-rounding={rounding:g}"
-            write_run("angular", params, [3], sub, overwrite=True)
+            write_run("angular", params, seeds=[3], out=sub, overwrite=True)
             meshes.append(read_mesh(sub / read_manifest(sub / MANIFEST)[0]["file"]))
             labels.append(f"rounding {rounding:g}, {name}")
     sheet = contact_sheet(meshes, labels, out / "angular-gallery.png", columns=len(ANGULAR_ROUNDING),
@@ -525,7 +525,7 @@ def rf_gallery(out: Path, quick: bool = False) -> list[Path]:
     table = write_fourier_csv([image], folder / "fd.csv")
     seeds = list(range(6 if quick else 12))
     p = Params(spectrum=str(table), subdivisions=4 if quick else 5)
-    write_run("rf", p, seeds, folder / "from-spectrum", overwrite=True)
+    write_run("rf", p, seeds=seeds, out=folder / "from-spectrum", overwrite=True)
     rows = read_manifest(folder / "from-spectrum" / MANIFEST)
     meshes = [read_mesh(folder / "from-spectrum" / r["file"]) for r in rows]
     labels = [f"seed {r['seed']}: grain #{r['spectrum_row']}" for r in rows]
