@@ -88,7 +88,7 @@ def main() -> None:
     with open(known_path, encoding="utf-8", newline="") as fh:
         known = list(csv.DictReader(fh))
     if args.measured_slopes:
-        import grainforge.fit.population as estimate
+        import grainforge.fit.mean_settings as estimate
 
         slopes = measured_slopes(args.method, sand, known, args.max_across, args.workers)
         print("measured slopes of the mean descriptors per unit-box setting (rows: descriptors):\n"
@@ -173,12 +173,12 @@ def known_spread(population_settings, known: list[dict]):
 
 def measured_slopes(method: str, sand, known: list[dict], max_across: float, workers: int, step: float = 0.04):
     """(4, p) slopes of the mean descriptors per unit-box setting, measured at the known settings of the sand's
-    first rows (:func:`grainforge.fit.population._measured_mean_jacobian`, the fit's own measurement, with a step of
+    first rows (:func:`grainforge.fit.mean_settings._measured_mean_jacobian`, the fit's own measurement, with a step of
     ``step`` in each setting's units and the seeds of ``fit_information.py``)."""
     import numpy as np
 
     from grainforge.fit import FITS, SLOPE_GRAINS, MeasurePool, grain_seed
-    from grainforge.fit.population import _measured_mean_jacobian
+    from grainforge.fit.mean_settings import _measured_mean_jacobian
 
     spec = FITS[method]
     names = [s.name for s in spec.all_settings]

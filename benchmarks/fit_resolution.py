@@ -34,7 +34,7 @@ def main() -> None:
     import numpy as np
 
     from grainforge.fit import DESCRIPTORS, FITS, grain_seed
-    from grainforge.fit.measure import _measure
+    from grainforge.fit.made_grains import _measure
     from grainforge.fit.twins import design_points
     from grainforge.methods import get
 

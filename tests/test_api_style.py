@@ -84,7 +84,7 @@ ALLOWED: dict[tuple[str, str], str] = {
         "columns of data (each grain's size and its descriptors' values, matched grain by grain); the voxel size "
         "and the opening fraction are keyword-only"
     ),
-    ("positional", "grainforge.fit.measure:MeasurePool.run"): (
+    ("positional", "grainforge.fit.made_grains:MeasurePool.run"): (
         "run(method, fixed, jobs, *, progress, opening): the grains measured are the method, the parameters they "
         "share and each job's own (parameters, seed, resolution), as measure_settings takes them; the bar and "
         "the opening fraction are keyword-only"

@@ -386,7 +386,7 @@ def test_angular_grains_take_their_aspect_from_their_settings_and_their_surface_
     inertia ellipsoid) while its convexity moves by several hundredths: what the seed adds that no grain's
     settings can be told from (docs/fit.md, Angular sands)."""
     from grainforge.fit import grain_seed
-    from grainforge.fit.measure import _measure
+    from grainforge.fit.made_grains import _measure
     from grainforge.methods import get
 
     sand, spec = read_sand(ANGULAR_SAND), FITS["angular"]

@@ -18,7 +18,7 @@ from conftest import require_engine
 from grainforge.cli.main import cli
 from grainforge.params import ParameterError
 from grainforge.simulate import QUICK, Settings, scene_settings, summarise
-from grainforge.simulate.measure import heap_angle, tilt_failure_angle
+from grainforge.simulate.angles import heap_angle, tilt_failure_angle
 
 
 def cone(angle_deg, n=30000, foot=20.0, r=0.1, seed=0):

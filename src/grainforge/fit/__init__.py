@@ -8,10 +8,10 @@ The modules, by job:
 - :mod:`grainforge.fit.settings`: per-method settings (:class:`MethodFit`, :data:`FITS`) and resolution caps.
 - :mod:`grainforge.fit.cost`: the grains, time and memory a fit takes, refused up front when too large.
 - :mod:`grainforge.fit.recipes`: the recipes a fit writes, and the seeds ``batch`` gives their grains.
-- :mod:`grainforge.fit.measure`: grains made and measured, one by one or on a pool (:class:`MeasurePool`).
+- :mod:`grainforge.fit.made_grains`: grains made and measured, one by one or on a pool (:class:`MeasurePool`).
 - :mod:`grainforge.fit.designs`: a method's design of measured grains, cached on disk.
 - :mod:`grainforge.fit.twins`: the inverse model from descriptors to settings.
-- :mod:`grainforge.fit.population`: the sand's mean settings from its descriptors' means.
+- :mod:`grainforge.fit.mean_settings`: the sand's mean settings from its descriptors' means.
 - :mod:`grainforge.fit.refine`: the twins' settings refined, reseeded and made.
 - :mod:`grainforge.fit.acceptance`: when a fit passes (KS, means, Spearman, twins within tolerance).
 - :mod:`grainforge.fit.run`: :func:`fit_sand`, the fit's phases in order, and its :class:`FitResult`.
@@ -48,9 +48,8 @@ from .designs import (
     design_path,
     setting_identifiability,
 )
-from .measure import MeasurePool, measure_grain, measure_settings
-from .outputs import OUTPUTS, STAT_COLUMNS, TWIN_COLUMNS, fit_figure, stat_rows, twin_rows, write_outputs
-from .population import (
+from .made_grains import MeasurePool, measure_grain, measure_settings
+from .mean_settings import (
     DETERMINED_MIN,
     OPENING_ROUNDS,
     OPENING_SECANT_MIN,
@@ -67,6 +66,7 @@ from .population import (
     population_settings,
     slopes_for,
 )
+from .outputs import OUTPUTS, STAT_COLUMNS, TWIN_COLUMNS, fit_figure, stat_rows, twin_rows, write_outputs
 from .recipes import GRADING_PERCENTS, grading, grain_seed, recipe_text, reseed_seed, twin_recipe_text
 from .refine import REFINE_SD, REFINE_TOL, REFUSED_TRIES, RESEED
 from .run import FitResult, choose_method, choose_rows, fit_sand

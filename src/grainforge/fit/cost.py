@@ -15,7 +15,7 @@ from collections.abc import Callable
 import numpy as np
 
 from .designs import DESIGN_ACROSS_LOW, DESIGN_GRAINS, _design_high, design_path
-from .population import (
+from .mean_settings import (
     OPENING_ROUNDS,
     POPULATION_GRAINS,
     POPULATION_ROUNDS,
@@ -56,13 +56,13 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     """Grains a fit of ``method`` measures: (expected, at most).
 
     The design's grains (none when it is cached), the population estimate's
-    (:data:`grainforge.fit.population.POPULATION_ROUNDS` × up to ``population_grains``, plus with measured slopes 2 ×
-    settings × up to :data:`grainforge.fit.population.SLOPE_GRAINS`: :func:`grainforge.fit.population.slopes_for`; plus,
-    for its sensitivity to the spread, up to :data:`grainforge.fit.population.SLOPE_GRAINS` per setting besides the
+    (:data:`grainforge.fit.mean_settings.POPULATION_ROUNDS` × up to ``population_grains``, plus with measured slopes 2 ×
+    settings × up to :data:`grainforge.fit.mean_settings.SLOPE_GRAINS`: :func:`grainforge.fit.mean_settings.slopes_for`; plus,
+    for its sensitivity to the spread, up to :data:`grainforge.fit.mean_settings.SLOPE_GRAINS` per setting besides the
     aspect where the four means can determine every setting, counted here for each although only those a grain's
     descriptors do not determine are remade; with ``opening``, the sand's opening fraction used
     (:func:`grainforge.fit.sand.uses_opening`), the starting grains measured again, the slopes always measured and
-    :data:`grainforge.fit.population.OPENING_ROUNDS` rounds), then each twin once, plus refinements:
+    :data:`grainforge.fit.mean_settings.OPENING_ROUNDS` rounds), then each twin once, plus refinements:
     :data:`EXPECTED_MEASUREMENTS` per twin expected, ``1 + refine`` at most, plus two per reseeded twin and try
     (:data:`RESEED_SHARE` of the twins expected, :data:`RESEED_MOST` at most: the twins still off after the refinement;
     a third of them on a sand the method reaches only with other seeds). ``"auto"`` measures every method's design.
@@ -83,7 +83,7 @@ def fit_grains(method: str, *, count: int, design_grains: int, refine: int, rese
     population_grains : int
         Twins remade in each round of the mean-settings estimate (at most ``count``).
     population_slopes : {"auto", "measured", "model"}
-        The estimate's slopes (:func:`grainforge.fit.population.slopes_for`).
+        The estimate's slopes (:func:`grainforge.fit.mean_settings.slopes_for`).
     cached : callable
         ``cached(method)``: whether that method's design is already cached (then none of its grains is counted).
     opening : bool

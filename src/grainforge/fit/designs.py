@@ -21,7 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .measure import MeasurePool
+from .made_grains import MeasurePool
 from .recipes import grain_seed
 from .sand import Sand
 from .settings import FITS

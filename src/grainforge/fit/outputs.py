@@ -15,7 +15,7 @@ import numpy as np
 
 from .acceptance import CORR_TOL, KS_MAX, MEAN_TOL, TWIN_SHARE, TWIN_TOL, spearman
 from .designs import IDENTIFIABLE_R2
-from .population import DETERMINED_MIN, SPREAD_DOUBT
+from .mean_settings import DETERMINED_MIN, SPREAD_DOUBT
 from .run import FitResult
 from .sand import DESCRIPTORS, Sand
 

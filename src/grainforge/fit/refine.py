@@ -19,7 +19,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .acceptance import TWIN_TOL
-from .measure import MeasurePool
+from .made_grains import MeasurePool
 from .recipes import grain_seed, reseed_seed
 from .sand import Sand, measured_across
 from .settings import MethodFit

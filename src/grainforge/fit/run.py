@@ -18,7 +18,7 @@ How
 3. **Twins**: grain ``i`` of the recipe (its own seed, as ``batch`` makes it)
    gets its sand grain's size and the model's settings, and is measured.
 4. **The sand's mean settings**
-   (:func:`grainforge.fit.population.population_settings`): from the means of
+   (:func:`grainforge.fit.mean_settings.population_settings`): from the means of
    its descriptors, with standard errors.
 5. **Refinement** and 6. **reseeding** (:mod:`grainforge.fit.refine`): twins
    that miss get new settings, then other seeds.
@@ -40,8 +40,15 @@ import numpy as np
 from ..rng import RNGLike, resolve_rng
 from .acceptance import CORR_TOL, KS_MAX, MEAN_TOL, TWIN_SHARE, TWIN_TOL, compare
 from .designs import DESIGN_GRAINS, IDENTIFIABLE_R2, _design_high, design, setting_identifiability
-from .measure import MeasurePool, _salted
-from .population import POPULATION_GRAINS, POPULATION_SLOPES, SPREAD_DOUBT, Population, population_settings, slopes_for
+from .made_grains import MeasurePool, _salted
+from .mean_settings import (
+    POPULATION_GRAINS,
+    POPULATION_SLOPES,
+    SPREAD_DOUBT,
+    Population,
+    population_settings,
+    slopes_for,
+)
 from .recipes import twin_recipe_text
 from .refine import RESEED, _make_refused, _measure_twins, _refine, _reseed, _start_twins, _twin_summary, _Twins
 from .sand import DESCRIPTORS, Sand, check_sand, measured_across, uses_opening
@@ -74,7 +81,7 @@ class FitResult:
     #: descriptors on the method's design (:func:`grainforge.fit.designs.setting_identifiability`)
     identifiable: dict[str, tuple[float, float]] = field(default_factory=dict)
     #: the sand's mean settings estimated from its descriptors' means
-    #: (:func:`grainforge.fit.population.population_settings`)
+    #: (:func:`grainforge.fit.mean_settings.population_settings`)
     population: Population | None = None
     #: each grain's seed (as the recipe makes it)
     seeds: list[int] = field(default_factory=list)
@@ -202,14 +209,14 @@ def fit_sand(
         the recipe's ``[grains] seed``).
     population_grains : int
         Twins remade in each round of the estimate of the sand's mean
-        settings (:func:`grainforge.fit.population.population_settings`; at most ``count``): its
+        settings (:func:`grainforge.fit.mean_settings.population_settings`; at most ``count``): its
         standard errors shrink as one over the square root of the grains,
         down to what the sand's own grain count allows.
     population_slopes : {"auto", "measured", "model"}
         The slopes the estimate steps through: measured on the grains, the
         design model's, or (``"auto"``) measured from
-        :data:`grainforge.fit.population.SLOPES_MEASURED_FROM` grains remade per round
-        (:func:`grainforge.fit.population.population_settings`).
+        :data:`grainforge.fit.mean_settings.SLOPES_MEASURED_FROM` grains remade per round
+        (:func:`grainforge.fit.mean_settings.population_settings`).
     rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
         The fit's randomness, resolved to the recipe's root seed ``S``: an int is ``S`` itself (the default
         2024; the same int, the same files); None, a Generator or a spawned SeedSequence gives ``S`` as one

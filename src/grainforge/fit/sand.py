@@ -37,7 +37,7 @@ VOXEL_COLUMN = "Voxel Size (µm)"
 #: optional column, not the Sand Atlas's: each grain's opening fraction at a ball of OPENING_RADIUS times its d_eq
 #: (:func:`grainforge.analysis.atlas.opening_fraction`, on the grain's voxel image; ``grainforge analyse --voxel-size-mm
 #: H --atlas-csv FILE`` writes it for mesh files).  Where a table has it, the estimate of the sand's mean settings uses
-#: it as a fifth descriptor (:func:`grainforge.fit.population.population_settings`): it responds to edge rounding far
+#: it as a fifth descriptor (:func:`grainforge.fit.mean_settings.population_settings`): it responds to edge rounding far
 #: more than to a grain's seed (docs/fit.md, "What a scan's images add")
 OPENING_COLUMN = "Opening Fraction (-)"
 #: largest true sphericity accepted: measured on voxels it can exceed 1 a little (Ottawa's largest is 1.02)

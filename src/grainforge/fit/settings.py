@@ -83,7 +83,7 @@ class MethodFit:
         """Whether a population estimate measures its sensitivity to the settings' spread: only where the four
         descriptor means can determine every setting (rf's five they cannot: its surface settings' means are the
         starting population's along what the means do not see, spread and all), so that its cost is known up
-        front (:func:`grainforge.fit.cost.fit_grains`, :func:`grainforge.fit.population.population_settings`)."""
+        front (:func:`grainforge.fit.cost.fit_grains`, :func:`grainforge.fit.mean_settings.population_settings`)."""
         return len(self.all_settings) <= len(DESCRIPTORS)
 
     def values(self, u: np.ndarray) -> dict[str, float]:

@@ -14,7 +14,7 @@ comparison in the DEM engine Yade before anything is printed:
    on a rough plate tilted until it slides for the tilt table) and run headless
    (``yade -n -x run.py``) once per seed;
 3. the angle is measured from the final grain positions by
-   :mod:`grainforge.simulate.measure`, and reported with its spread over seeds.
+   :mod:`grainforge.simulate.angles`, and reported with its spread over seeds.
 
 Every shape gets the same contact model (linear spring, Coulomb friction:
 Yade's Cundall–Strack law), the same material and the same time-step rule.

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .measure import heap_angle, tilt_failure_angle
+from .angles import heap_angle, tilt_failure_angle
 from .process import EngineFailed, find_executable, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from ..io import save_figure, write_csv
 from ..params import as_dict
-from .measure import heap_angle
+from .angles import heap_angle
 
 __all__ = ["write_report", "figure"]
 

@@ -16,7 +16,7 @@ with the mesh's exact mass, centre and inertia.  Settings come from
 spheres of every grain at the end (x, y, z, r in metres, clump id), the
 phases' step counts and times, and the test's own record.  The angle itself
 is measured afterwards, in grainforge, from that file
-(:mod:`grainforge.simulate.measure`).
+(:mod:`grainforge.simulate.angles`).
 
 These texts run inside Yade (its Python, its numpy); they never import
 grainforge.  They draw no orientation: grain ``k`` is placed in row ``k`` of

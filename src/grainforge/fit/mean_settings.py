@@ -17,7 +17,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .designs import IDENTIFIABLE_R2
-from .measure import MeasurePool
+from .made_grains import MeasurePool
 from .sand import DESCRIPTORS, Sand
 from .settings import MethodFit
 from .twins import ForwardModel, population_error, population_step
