@@ -8,6 +8,7 @@ result in its job's place, and counts the grains and CPU seconds they took.
 
 from __future__ import annotations
 
+import contextlib
 import math
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from functools import lru_cache
@@ -197,23 +198,21 @@ class MeasurePool:
         self.own = executor is None  # a pool of our own is closed on leaving; the caller's executor is not
         self.cpu = 0.0  # CPU seconds the workers spent generating and measuring
         self.grains = 0
+        self.pool_block = contextlib.ExitStack()  # the pool of our own, left with this block
 
     def __enter__(self):
         if self.own and self.workers > 1:
             from ..runtime.workers import process_pool
 
-            self.ex = process_pool(self.workers, ["grainforge.fit", "grainforge.analysis.atlas",
-                                                  "grainforge.population", "trimesh", "scipy.ndimage",
-                                                  "skimage.measure"])
+            self.ex = self.pool_block.enter_context(process_pool(
+                self.workers, ["grainforge.fit", "grainforge.analysis.atlas", "grainforge.population", "trimesh",
+                               "scipy.ndimage", "skimage.measure"]))
         return self
 
     def __exit__(self, exc_type, exc, tb):
-        if self.ex is not None and self.own:
-            from ..runtime.workers import close_pool
-
-            # an error, Ctrl-C or SIGTERM: stop the workers now (waiting for them from inside an
-            # interrupted as_completed could hang; seen with SIGTERM during a fit)
-            close_pool(self.ex, abort=exc_type is not None)
+        # the pool's own exit: an error, Ctrl-C or SIGTERM stops the workers now (waiting for them from inside
+        # an interrupted as_completed could hang; seen with SIGTERM during a fit)
+        return self.pool_block.__exit__(exc_type, exc, tb)
 
     def run(self, method: str, fixed: Mapping[str, Any], jobs: Sequence[tuple[dict, int, float]], *,
             progress: Callable[[Iterable, int], Iterable] | None = None, opening: bool = False) -> np.ndarray:
@@ -248,10 +247,7 @@ class MeasurePool:
         else:
             from concurrent.futures import as_completed
 
-            from ..runtime.workers import single_threaded_children
-
-            with single_threaded_children():
-                futs = {self.ex.submit(measure_settings, method, fixed, **a): i for i, a in enumerate(args)}
+            futs = {self.ex.submit(measure_settings, method, fixed, **a): i for i, a in enumerate(args)}
             it = ((futs[f], f.result()) for f in as_completed(futs))
         if progress is not None and jobs:
             it = progress(it, len(jobs))

@@ -21,6 +21,7 @@ method module stays free of this dependency (no import cycle).
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import os
@@ -414,23 +415,18 @@ def calibrate(
     if workers < 1:
         raise ParameterError("workers", f"must be >= 1, got {workers!r}")
     if workers == 1 or len(tasks) == 1:
-        results: Iterable = map(_measure, tasks)
-        pool = None
+        pool_or_none = contextlib.nullcontext()
     else:
-        from ...runtime.workers import close_pool, process_pool, single_threaded_children
+        from ...runtime.workers import process_pool
 
-        pool = process_pool(workers, ["grainforge.methods.dpa.calibration", "grainforge.methods.dpa", "trimesh"])
-        with single_threaded_children():  # map submits every task, starting the workers
-            results = pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers)))
-    ok = False
-    try:
+        pool_or_none = process_pool(workers, ["grainforge.methods.dpa.calibration", "grainforge.methods.dpa",
+                                              "trimesh"])
+    with pool_or_none as pool:  # an error, Ctrl-C or SIGTERM: the pool's exit stops the workers now
+        results: Iterable = (map(_measure, tasks) if pool is None
+                             else pool.map(_measure, tasks, chunksize=max(1, len(tasks) // (8 * workers))))
         if progress is not None:
             results = progress(results)
         values = np.array(list(results), dtype=np.float64).reshape(len(exps), repeats, 4)
-        ok = True
-    finally:
-        if pool is not None:
-            close_pool(pool, abort=not ok)  # an error, Ctrl-C or SIGTERM: stop the workers now
 
     import warnings
 
