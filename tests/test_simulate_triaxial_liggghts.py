@@ -7,6 +7,7 @@ engine is a failure (``require_engine``).  (The interrupt of a run under mpirun:
 """
 
 import csv
+import io
 import json
 import math
 import re
@@ -115,8 +116,11 @@ def test_the_deck_uses_the_contact_settings(templates, packing):
     grains_mu = [m[0] for m in mu]
     assert grains_mu == ([0.0, 0.7] if packing == "dense" else [0.7])
     assert all(m[2] == m[6] == 0.0 for m in mu)
-    m_min = min(g["mass"] for g in json.loads(files["grains.json"])["grains"])
-    assert rec["dt"] == pytest.approx(0.3 * math.sqrt(m_min / max(kn)), rel=1e-12)
+    # the Yade scene's time step, 0.3 √(m_min / (E r_max)), r_max the largest contact sphere of the grains drawn
+    grains = json.loads(files["grains.json"])["grains"]
+    m_min = min(g["mass"] for g in grains)
+    r_max = max(np.loadtxt(io.StringIO(files[g["xyzr"]]), comments="#").reshape(-1, 4)[:, 3].max() for g in grains)
+    assert rec["dt"] == pytest.approx(0.3 * math.sqrt(m_min / (2e8 * r_max)), rel=1e-12)
     # the axial strain rate of the inertial number, from the grains' own density and mean diameter
     assert rec["strain_rate"] == pytest.approx(s.inertial_number * math.sqrt(2e4 / rec["grain_density"])
                                                / rec["d_mean"], rel=1e-12)

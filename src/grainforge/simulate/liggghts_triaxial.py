@@ -159,8 +159,12 @@ def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleN
     r_grain = float(np.mean([templates[k].clump.radii.mean() for k in pick]))
     mass = np.array([templates[k].mass for k in pick])
     table = contact_table(settings, r_grain, r_grain, float(mass.mean()))
+    # the Yade scene's time step, 0.3 √(m_min / (E r_max)) with r_max the largest contact sphere: the type pairs'
+    # k_n (at the mean sphere radius) would allow a longer one, at which frictional clumps of large and small
+    # spheres chatter (their contacts' forces flip from step to step: the grains never come to rest)
     m_min = min(templates[k].mass for k in used)
-    dt = scene["dt_safety"] * math.sqrt(m_min / table["k_max"])
+    r_max = max(float(templates[k].clump.radii.max()) for k in used)
+    dt = scene["dt_safety"] * math.sqrt(m_min / (settings.young * r_max))
     solid = float(sum(templates[k].props.volume for k in pick))
     rho = float(mass.sum()) / solid
     sigma = 1e3 * settings.confining_kpa
