@@ -115,6 +115,12 @@ TRIAXIAL_COMPACTION_FACTOR = 1.4
 #: 500-grain run of 10-sphere clumps (1.9e-5 s a grain-step on a loaded machine), above the 100-grain runs of
 #: 6 spheres (7.9e-6 measured, 1.2e-5 modelled)
 TRIAXIAL_GRAIN_STEP_SECONDS, TRIAXIAL_SPHERE_STEP_SECONDS = 2e-6, 1.7e-6
+#: LIGGGHTS seconds per grain and step of the walled-box triaxial deck (one core's work, ranks not counted as a
+#: speed-up): measured 0.70 µs for 250 spheres and 1.72 µs for 250 clumps of 10 spheres (serial, the shared
+#: machine at load average 2-3; 1.23 µs for 100 clumps of 6 spheres), a fit of 0.59 + 0.11 per sphere set here
+#: a fifth higher (a run under mpirun costs a quarter more CPU); with triaxial_steps' count, about 30 % above the
+#: steps these runs took, the estimate is about 1.8 times their CPU time
+TRIAXIAL_LIGGGHTS_GRAIN_STEP_SECONDS, TRIAXIAL_LIGGGHTS_SPHERE_STEP_SECONDS = 0.7e-6, 0.14e-6
 
 
 def triaxial_steps(settings: TriaxialSettings) -> float:
@@ -203,7 +209,8 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
 
     A triaxial test (``settings`` a :class:`TriaxialSettings`) is costed per time step
-    (:func:`triaxial_steps`, :data:`TRIAXIAL_GRAIN_STEP_SECONDS`).
+    (:func:`triaxial_steps`, :data:`TRIAXIAL_GRAIN_STEP_SECONDS`; in LIGGGHTS
+    :data:`TRIAXIAL_LIGGGHTS_GRAIN_STEP_SECONDS`).
 
     Parameters
     ----------
@@ -236,13 +243,18 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     True
     >>> 100 < check_size("triaxial", TriaxialSettings(), available=3) < 3600  # 3 runs of 200 grains, 2 at once
     True
+    >>> 10 < check_size("triaxial", TriaxialSettings(), available=3, engine="liggghts") < 300
+    True
     """
     from ..runtime.estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
 
     templates = min(settings.templates, available)
     spheres = 1 if as_spheres else settings.spheres
     make = templates * (make_seconds + TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS * spheres)
-    if test == "triaxial":  # its own model: steps from the strain rate and the time step (triaxial_steps)
+    if test == "triaxial" and engine == "liggghts":  # the walled box's own cost per step (no ENGINE_FACTOR)
+        per_run = triaxial_steps(settings) * settings.grains * (
+            TRIAXIAL_LIGGGHTS_GRAIN_STEP_SECONDS + TRIAXIAL_LIGGGHTS_SPHERE_STEP_SECONDS * spheres)
+    elif test == "triaxial":  # its own model: steps from the strain rate and the time step (triaxial_steps)
         per_run = triaxial_steps(settings) * settings.grains * (TRIAXIAL_GRAIN_STEP_SECONDS
                                                                 + TRIAXIAL_SPHERE_STEP_SECONDS * spheres)
     else:
@@ -250,7 +262,8 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     if shape == "levelset":
         make = templates * (make_seconds + dem_template_seconds("levelset", spacing=spacing))
         per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
-    per_run *= ENGINE_FACTOR[engine]
+    if test != "triaxial":
+        per_run *= ENGINE_FACTOR[engine]
     at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
     total = make + per_run * settings.seeds / at_once
     grain = f"{spheres} sphere(s)" if shape == "clump" else f"level sets of spacing {spacing:g}"
