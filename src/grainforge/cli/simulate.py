@@ -319,7 +319,8 @@ def _command(test: str, doc: str):
                   help="DEM engine of the runs: Yade, or LIGGGHTS (the same scenes as multisphere clumps; "
                        "docs/simulate.md says where the engines differ).")
     @click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
-                  help="LIGGGHTS only: run each seed under `mpirun -np N` (the box cut into N columns). "
+                  help="LIGGGHTS only: run each seed under `mpirun -np N` (the box cut into N columns; the triaxial box "
+                       "into N parts). "
                        "Yade runs one process per seed: use --workers.")
     @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
                   help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "

@@ -6,24 +6,25 @@
 - the grains are the same multisphere templates as the tilt and repose scenes (the mesh's exact mass and
   inertia; :func:`grainforge.simulate.liggghts_scenes.contact_table`'s contacts), grain ``k`` in row ``k`` of the
   scene's uniformly random orientations (:func:`grainforge.simulate.triaxial.triaxial_scene_settings`), inserted at
-  the nodes of a loose cubic lattice with a jitter of 0.1 d, as the Yade scene lays them out (LIGGGHTS draws its
-  own templates for the seed, so not the Yade run's grains);
+  the nodes of a loose cubic lattice with a jitter of 0.1 d, as the Yade scene lays them out but 0.2 d wider (no
+  grain starts in contact) and spread evenly over a cube; grainforge draws the grains and the jitter from its own
+  stream, so not the Yade run's grains;
 - six square plates (``wall-*.stl``), each a ``fix mesh/surface/stress/servo`` wall moving along its inward
   normal, frictionless (the periodic cell's boundary carries no shear either), close the box; each plate
   reaches past the box, so the plates cross at its edges and leave no gap;
 - **isotropic compaction** (``--packing dense``: at μ = 0, then the contact friction switched on and the grains at
   rest again; ``loose``: at μ): every wall servo-controls its force to σ′₃ times its area (from the other walls'
-  positions, every step) until the three normal stresses are within 1 % of σ′₃ and the kinetic energy is below
-  :data:`KE_INERTIAL_NUMBER`'s at three checks in a row;
+  positions, every step) until the three normal stresses are within 1 % of σ′₃ and the net force on every grain
+  is below :data:`UNBALANCED` σ′₃ d² along every axis, at three checks in a row;
 - **drained shearing**: the z walls approach each other at the constant speed of the axial strain rate of
   ``--inertial-number`` (a constant engineering strain rate), the x and y walls servo-held at σ′₃
   (proportional-integral), the records every 1/200 of the axial strain: the walls' forces over their areas (the
   stresses), their positions (the volume), the grains' contacts (the coordination and overlaps).
 
-LIGGGHTS's servo walls move at ``vel_max · kp · e`` (plus the integral term), e the relative force error; the
-gains here are those of the Yade scene's servo (the strain rate that would close the error in a time T at the
-packing's affine modulus, plus an integral term), with T chosen for walls (:data:`SERVO_STEPS`) and the affine
-modulus estimated (:data:`AFFINE_MODULUS_FACTOR`).
+LIGGGHTS's servo walls move at ``vel_max · (kp e + ki ∫e dt)``, e the relative force error. A wall meets the
+stiffness of its own contacts before the packing's, so its gain is set by them: G = vel_max · kp closes an error
+against about (L/d)² grain contacts of stiffness k_n in :data:`SERVO_STEPS` ``["wall"]`` steps; the lateral walls
+add an integral term while shearing.  The time step is the Yade scene's, 0.3 √(m_min/(E r_max)).
 
 :func:`collect_triaxial` turns the run's files into the ``result.json`` the Yade scene writes (the same fields but
 its ``placed`` record and its Love–Weber check), so that :func:`grainforge.simulate.triaxial.measure_triaxial`,
