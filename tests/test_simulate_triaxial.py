@@ -138,6 +138,7 @@ REFUSED = [
     (["--shape", "levelset"], "--shape levelset: simulate triaxial's yade scene takes --shape clump only"),
     (["--engine", "liggghts", "--shape", "levelset"],
      "--shape levelset: simulate triaxial's liggghts scene takes --shape clump only"),
+    (["--engine", "liggghts", "--grains", "60"], "--grains 60: a triaxial box of walls needs --grains ≥ 79"),
     (["--engine", "liggghts", "--mpi", "64"], "--mpi 64: a triaxial specimen of 200 grains is about 5.5 grain "
      "diameters wide; cut 4 ways"),
     (["--mpi", "2"], "--mpi"),

@@ -139,7 +139,7 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
     try:
         check_levelset_run(test, shape, settings)
         if test == "triaxial":
-            check_triaxial_run(settings)
+            check_triaxial_run(settings, engine)
         if test == "triaxial" and engine == "liggghts":
             from ..simulate.liggghts_triaxial import check_ranks
 

@@ -140,8 +140,10 @@ def triaxial_steps(settings: TriaxialSettings) -> float:
     return float(shear + compaction)
 
 
-def check_triaxial_run(settings: TriaxialSettings) -> None:
-    """Refuse (``ValueError``, one line) a triaxial specimen too small for a periodic cell.
+def check_triaxial_run(settings: TriaxialSettings, engine: str = "yade") -> None:
+    """Refuse (``ValueError``, one line) a triaxial specimen too small for a periodic cell (Yade) or for a box of
+    walls (LIGGGHTS: the same bound, a box at least 4 diameters wide, so that each wall's servo meets a dozen
+    grains and more).
 
     Examples
     --------
@@ -150,11 +152,17 @@ def check_triaxial_run(settings: TriaxialSettings) -> None:
     Traceback (most recent call last):
     ...
     ValueError: --grains 30: a periodic triaxial cell needs --grains ≥ 79 (a cell at least 4 grain diameters wide at a solid fraction of 0.64)
+    >>> check_triaxial_run(TriaxialSettings(grains=30), "liggghts")
+    Traceback (most recent call last):
+    ...
+    ValueError: --grains 30: a triaxial box of walls needs --grains ≥ 79 (a box at least 4 grain diameters wide at a solid fraction of 0.64)
     """
+    what, where = ("a triaxial box of walls", "a box") if engine == "liggghts" else ("a periodic triaxial cell",
+                                                                                   "a cell")
     if settings.grains < MIN_TRIAXIAL_GRAINS:
-        raise ValueError(f"--grains {settings.grains}: a periodic triaxial cell needs --grains ≥ "
-                         f"{MIN_TRIAXIAL_GRAINS} (a cell at least {MIN_CELL_DIAMETERS:g} grain diameters wide at "
-                         f"a solid fraction of {DENSEST_FRACTION:g})")
+        raise ValueError(f"--grains {settings.grains}: {what} needs --grains ≥ {MIN_TRIAXIAL_GRAINS} ({where} at "
+                         f"least {MIN_CELL_DIAMETERS:g} grain diameters wide at a solid fraction of "
+                         f"{DENSEST_FRACTION:g})")
 
 
 def scene_settings(settings: Settings, test: str, seed: int) -> dict:
