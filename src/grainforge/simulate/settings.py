@@ -99,7 +99,8 @@ class TriaxialSettings(GrainSettings):
 QUICK_TRIAXIAL = dict(grains=MIN_TRIAXIAL_GRAINS + 21, templates=6, spheres=6, seeds=1, axial_strain=0.06,
                       inertial_number=1e-2)
 #: ``simulate triaxial --quick --engine liggghts``: the same at a fifth of the strain rate (I = 2e-3): the walls' servo
-#: follows the specimen through its contacts with the walls, and at I = 1e-2 the lateral stress strays 15 % (median)
+#: follows the specimen through its contacts with the walls; at I = 1e-2 the lateral stress strays 7-9 % (median),
+#: at 2e-3 about 1 %
 QUICK_TRIAXIAL_LIGGGHTS = {**QUICK_TRIAXIAL, "inertial_number": 2e-3}
 
 
