@@ -73,6 +73,16 @@ def processor_grid(ranks: int) -> tuple[int, int, int]:
     """The ``processors * * *`` grid LIGGGHTS picks for ``ranks`` on a cubic box: the factorisation P_x P_y P_z
     with the least sub-domain surface (the first found, P_x largest, on a tie).
 
+    Parameters
+    ----------
+    ranks : int
+        MPI ranks of the run.
+
+    Returns
+    -------
+    tuple of int
+        (P_x, P_y, P_z), their product ``ranks`` (the order LIGGGHTS gives the axes may differ).
+
     Examples
     --------
     >>> processor_grid(1), processor_grid(2), processor_grid(8), processor_grid(12)
@@ -97,6 +107,18 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None) -> None:
     """Refuse (``ValueError``, one line) a LIGGGHTS triaxial specimen too small for ``mpi`` ranks: the compacted
     cube (``settings.grains`` spheres at the densest solid fraction) cut by :func:`processor_grid` would leave a
     rank a slab under :data:`MIN_RANK_DIAMETERS` grain diameters thick.
+
+    Parameters
+    ----------
+    settings : TriaxialSettings
+        The run's settings (``grains``).
+    mpi : int or None
+        Ranks of each run (``--mpi``); ``None`` or 1: nothing to check.
+
+    Raises
+    ------
+    ValueError
+        Naming the slab's thickness, a rank count that fits and the grains that would take ``mpi`` ranks.
 
     Examples
     --------
@@ -260,6 +282,20 @@ def deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> di
     files of :func:`grainforge.simulate.liggghts_scenes._grain_files`, the six plates ``wall-*.stl``, ``in.run``
     (:func:`_run_text`) and ``grains.json`` (the scene's settings, with the orientations, and the numbers
     :func:`collect_triaxial` needs).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Multisphere clumps (:func:`grainforge.simulate.build_population`).
+    settings : TriaxialSettings
+        The test's settings.
+    seed : int
+        The run's seed: the grains drawn, their lattice's jitter, their orientations, LIGGGHTS's random seeds.
+
+    Returns
+    -------
+    dict of str to str
+        Relative path → text; the same for the same templates, settings and seed.
     """
     from ..dem.deck import json_text, template_record
     from .liggghts_scenes import _grain_files
@@ -286,7 +322,22 @@ def deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> di
 
 def write_deck(templates: Sequence, settings: TriaxialSettings, seed: int, out: str | os.PathLike, *,
                overwrite: bool = False) -> list[Path]:
-    """Write the LIGGGHTS deck of one triaxial run into ``out`` (see :func:`deck_files`)."""
+    """Write the LIGGGHTS deck of one triaxial run into ``out`` (see :func:`deck_files`).
+
+    Parameters
+    ----------
+    templates, settings, seed
+        As :func:`deck_files`.
+    out : path
+        The run's folder.
+    overwrite : bool
+        Replace an existing deck (refused otherwise).
+
+    Returns
+    -------
+    list of Path
+        The files written.
+    """
     from ..dem.deck import write_files
 
     return write_files(deck_files(templates, settings, seed), out, overwrite=overwrite)
@@ -313,6 +364,20 @@ def _snapshots(path: Path) -> dict[int, np.ndarray]:
 def contact_state(contacts: np.ndarray, grain_of: dict, radius_of: dict, grains: int) -> tuple[float, float]:
     """Coordination (2 × pairs of grains in contact / grains) and mean overlap of one snapshot of the contacts
     dump (rows: atom id 1, atom id 2, x₁ y₁ z₁, x₂ y₂ z₂); a pair listed twice (two ranks) counts once.
+
+    Parameters
+    ----------
+    contacts : (K, 8) ndarray
+        The snapshot's rows.
+    grain_of, radius_of : dict of int
+        Each atom id's grain (its multisphere body) and radius (m).
+    grains : int
+        Grains in the specimen.
+
+    Returns
+    -------
+    (float, float)
+        The coordination and the mean overlap (m) of the contacts between two grains.
 
     Examples
     --------
@@ -341,6 +406,22 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
     The stresses are the walls' forces over their areas (the mean of the two walls of an axis), the volume the
     walls' box; the coordination and overlaps come from the contacts dump (``contacts.txt``, removed once read)
     and ``atoms.txt`` (every sphere's grain, radius and place as inserted).
+
+    Parameters
+    ----------
+    deck : path
+        The finished run's folder.
+
+    Returns
+    -------
+    dict
+        The record (:func:`grainforge.simulate.triaxial.measure_triaxial` reads it), also written to
+        ``deck/result.json``.
+
+    Raises
+    ------
+    ValueError
+        If the records and the contact snapshots do not match one to one.
     """
     from .liggghts_scenes import _record, _rows
 
