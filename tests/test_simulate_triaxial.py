@@ -74,7 +74,8 @@ def test_triaxial_angles_of_a_synthetic_dense_curve():
     assert a.peak_friction_deg == pytest.approx(42.0, abs=0.05)
     assert a.peak_strain == pytest.approx(0.04, abs=0.002)
     assert a.ultimate_friction_deg == pytest.approx(31.0, abs=1e-6)
-    assert a.max_dilatancy_deg == pytest.approx(math.degrees(math.asin(1.0 / 3.0)), abs=0.1)
+    # the slope over 1 % of strain averages the curve's sharp minimum of dε_v/dε₁ a little: 0.1° low here
+    assert a.max_dilatancy_deg == pytest.approx(math.degrees(math.asin(1.0 / 3.0)), abs=0.15)
     assert a.max_dilatancy_strain == pytest.approx(0.05, abs=0.002)
 
 
@@ -222,3 +223,15 @@ def test_quick_dense_and_loose_triaxial_in_yade(runner, spheres, tmp_path):
     # compacted with friction, the loose specimen is looser, and contracts more than the dense one
     assert found["loose"][0] > found["dense"][0] + 0.02
     assert found["loose"][1][-1] > found["dense"][1][-1]
+
+
+def test_a_noisy_volume_curve_makes_no_extreme_dilatancy_angle():
+    """Frictionless spheres hardly change volume; records 0.05 % of strain apart with noise of 1e-4 in ε_v gave
+    slopes of −5 and more over 5 records (ψ near 90°). Over 1 % of strain the slope is the curve's."""
+    rng = np.random.default_rng(0)
+    e = np.linspace(0.0, 0.1, 201)
+    ev = -0.02 * e + rng.normal(0.0, 1e-4, e.size)  # a slight dilation, d = −0.02: ψ ≈ 0.6°
+    a = triaxial_angles(e, np.full_like(e, 0.5), ev)
+    assert 0.0 < a.max_dilatancy_deg < 5.0, a
+    narrow = triaxial_angles(e, np.full_like(e, 0.5), ev, slope_strain=0.0)  # the old 5-record slope
+    assert narrow.max_dilatancy_deg > 3 * a.max_dilatancy_deg

@@ -135,7 +135,7 @@ class TriaxialAngles(dict):
 
 
 def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 5,
-                    last: float = 0.05) -> TriaxialAngles:
+                    last: float = 0.05, slope_strain: float = 0.01) -> TriaxialAngles:
     """Peak and ultimate friction angles and the largest dilatancy angle of a triaxial curve.
 
     Parameters
@@ -144,10 +144,14 @@ def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 
         The curve, strains compression positive (ε_v falls when the specimen dilates), in increasing strain.
     window : int
         Points of the centred moving window: the stress ratio is averaged over it before its peak is taken (a
-        single noisy record does not make the peak), and dε_v/dε₁ is the least-squares slope over it.
+        single noisy record does not make the peak).
     last : float
         The ultimate state is the mean stress ratio over the last ``last`` fraction of the axial strain range
         (ε₁ ≥ (1 − last)·ε₁,end).
+    slope_strain : float
+        dε_v/dε₁ is the least-squares slope over a centred window of this much axial strain (and at least
+        ``window`` records): over a few closely spaced records the noise of ε_v makes any slope, and a slope
+        of −∞ is a dilatancy angle of 90°.
 
     Returns
     -------
@@ -180,7 +184,9 @@ def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 
     k = int(np.argmax(smooth))
     tail = e >= e[-1] - last * (e[-1] - e[0])
     ultimate = float(m[tail].mean())
-    psi = dilatancy_angle(local_slope(e, v, w))
+    spacing = float(np.median(np.diff(e)))
+    w_slope = max(w, min(len(e), int(round(slope_strain / spacing)) + 1 if spacing > 0 else w))
+    psi = dilatancy_angle(local_slope(e, v, w_slope))
     j = int(np.nanargmax(psi)) if np.isfinite(psi).any() else 0
     return TriaxialAngles(peak_friction_deg=float(friction_angle(smooth[k])), peak_q_over_p=float(smooth[k]),
                           peak_strain=float(e[k]), ultimate_friction_deg=float(friction_angle(ultimate)),
