@@ -363,6 +363,35 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "grainforge.runtime.workers", "grainforge.dem.representative", "grainforge.dem.template_choice")
 
 
+def _seed_progress(test: str, engine: str, mpi, settings):
+    """The progress bar of a test's seeds (per mille of the runs) and the callback the runs report to."""
+    from tqdm import tqdm
+
+    name = ENGINE_NAMES[engine] + (f", {mpi} MPI ranks" if mpi else "")
+    runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
+                dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
+    done = [0.0] * settings.seeds
+
+    def progress(k, fraction, phase):
+        done[k] = fraction
+        runs.n = int(1000 * sum(done))
+        runs.set_postfix_str(f"seed {settings.seed + k}: {phase}", refresh=False)
+        runs.refresh()
+
+    return runs, progress
+
+
+def _annotated(rows, *, shape, spacing, engine, mpi, clump_accuracy):
+    """results.csv's rows with the settings that differ from the defaults (the default runs' rows unchanged)."""
+    if shape != "clump":  # the representation
+        rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
+    if engine != "yade":  # the engine and its MPI ranks
+        rows = [{**r, "engine": engine, "mpi_ranks": mpi or 1} for r in rows]
+    if clump_accuracy is not None:  # the clumps' accuracy target
+        rows = [{**r, "clump_accuracy": clump_accuracy} for r in rows]
+    return rows
+
+
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
          shape="clump", spacing=0.05, clump_accuracy=None, scheduler=None, resume=False):
     import os
@@ -395,8 +424,6 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     if executor is None:  # on a cluster, the engine is the workers'
         check_installed(engine, mpi)
     ready_for_work(HEAVY_MODULES, seconds, bound="about")
-    from tqdm import tqdm
-
     from ..simulate import (
         EngineFailed,
         commit_stage,
@@ -410,18 +437,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     chosen = choose_templates(inputs, settings, pool, workers if executor is None else (os.cpu_count() or 1))
     templates = make_templates(inputs, settings, as_spheres, shape, spacing, chosen=chosen,
                                clump_accuracy=clump_accuracy)
-    name = ENGINE_NAMES[engine] + (f", {mpi} MPI ranks" if mpi else "")
-    runs = tqdm(total=settings.seeds * 1000, desc=f"{test} ({name})", unit="‰", disable=None, leave=False,
-                dynamic_ncols=True, bar_format="{desc}: {percentage:3.0f}%|{bar}| {elapsed}<{remaining} {postfix}")
-
-    done = [0.0] * settings.seeds
-
-    def progress(k, fraction, phase):
-        done[k] = fraction
-        runs.n = int(1000 * sum(done))
-        runs.set_postfix_str(f"seed {settings.seed + k}: {phase}", refresh=False)
-        runs.refresh()
-
+    runs, progress = _seed_progress(test, engine, mpi, settings)
     # every output is made in a hidden staging folder and moved into --out when all are complete: an
     # interrupt or a failed run leaves nothing (a SIGKILL leaves the staging folder, which the next run removes)
     with staged(out) as stage:
@@ -436,12 +452,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             raise click.UsageError(str(exc)) from None
         finally:
             runs.close()
-        if shape != "clump":  # the representation, in the rows of a non-default one (clump outputs unchanged)
-            rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
-        if engine != "yade":  # likewise the engine and its MPI ranks (Yade's outputs unchanged)
-            rows = [{**r, "engine": engine, "mpi_ranks": mpi or 1} for r in rows]
-        if clump_accuracy is not None:  # likewise the clumps' accuracy target
-            rows = [{**r, "clump_accuracy": clump_accuracy} for r in rows]
+        rows = _annotated(rows, shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         write_report(rows, stage, test, settings)
         chosen.write_csv(stage / "templates.csv")
