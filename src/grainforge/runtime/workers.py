@@ -386,9 +386,10 @@ def _pool_class():
             cancelled, running ones fail (``BrokenProcessPool``), the manager thread ends.
 
             When start-up was cut short, a worker may be on its way from the fork server (asked for, its pid
-            not known here yet; it would start after this process is gone and print a traceback): the fork
-            server and every process it forked are killed (:func:`stop_forkserver`), which also ends the
-            manager thread's wait for the fork server's answer.
+            not known here yet), typically while the fork server still imports its preload: left alone, it
+            would finish those imports and fork the worker after this process is gone. The fork server and
+            every process it forked are killed (:func:`stop_forkserver`), which also ends the manager
+            thread's wait for the fork server's answer.
             """
             with self.lock:
                 self.closing = self.stopped = True
