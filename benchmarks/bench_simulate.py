@@ -77,7 +77,7 @@ def main(argv=None) -> int:
                                                      .read_text()))} for k in range(settings.seeds)]
             else:
                 templates = build_population([recipe], settings, as_spheres=as_spheres)
-                rows = run_test(args.test, templates, settings, out, label=label, overwrite=True,
+                rows = run_test(args.test, templates, settings=settings, out=out, label=label, overwrite=True,
                                 workers=args.workers)
             c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
             write_report(rows, out, args.test, settings)

@@ -52,7 +52,7 @@ def run_set(test, population, settings, out, engine, mpi=None, workers=1):
     templates = build_population([recipe], settings, as_spheres=as_spheres)
     out.mkdir(parents=True, exist_ok=True)
     c0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.time()
-    rows = run_test(test, templates, settings, out, label=label, overwrite=True, workers=workers, engine=engine,
+    rows = run_test(test, templates, settings=settings, out=out, label=label, overwrite=True, workers=workers, engine=engine,
                     mpi=mpi)
     c1, t1 = resource.getrusage(resource.RUSAGE_CHILDREN), time.time()
     write_report(rows, out, test, settings)

@@ -112,7 +112,7 @@ def run_all(args, spheres, path):
                                                   spacing=args.spacing)
                 out = args.out / "runs" / f"{preset.replace(' ', '-')}-{name.replace(' ', '')}"
                 t0, c0 = time.time(), resource.getrusage(resource.RUSAGE_CHILDREN)
-                (row,) = run_test("tilt", cache[key], settings, out, label=preset, overwrite=True)
+                (row,) = run_test("tilt", cache[key], settings=settings, out=out, label=preset, overwrite=True)
                 c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
                 cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
                 rec = {"preset": preset, "representation": name, "spheres": n, "seed": seed,

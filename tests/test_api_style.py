@@ -26,13 +26,14 @@ import pytest
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "grainforge"
 
-#: top-level modules and packages of grainforge held to the style (the jobs' packages simulate/ and cli/ are to
-#: join)
+#: top-level modules and packages of grainforge held to the style. cli/ stays out: its functions are click
+#: commands, whose docstrings are their --help text (numpydoc sections would be printed to the user) and whose
+#: parameters are the command's options, declared and documented by click's decorators
 SCOPE = (
     "grain.py", "params.py", "units.py", "rng.py",
     "geometry", "outline", "io", "runtime",
     "methods", "analysis", "fabrication",
-    "viz", "dem", "fit", "population",
+    "viz", "dem", "fit", "population", "simulate",
 )
 
 #: folders in SCOPE whose modules (all but ``__init__.py``) are not grainforge's Python API: the engine scripts
@@ -104,6 +105,40 @@ ALLOWED: dict[tuple[str, str], str] = {
     ("seed", "grainforge.fit.recipes:twin_recipe_text"): (
         "seed is the root seed written into the twins' recipe (and seeds the grains' own, written where one "
         "differs from batch's); twin_recipe_text draws no random number"
+    ),
+    ("positional", "grainforge.simulate.triaxial:triaxial_angles"): (
+        "triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window, last, slope_strain): a triaxial "
+        "curve is three columns of triaxial.csv matched record by record; the windows are keyword-only"
+    ),
+    ("seed", "grainforge.simulate.settings:scene_settings"): (
+        "seed is the run's seed number (the k of --seeds), written into grains.json and result.json so that a run "
+        "is remade from its record; the orientations are drawn from it by grain_orientations (through "
+        "grainforge.rng), and a Generator could not be written down"
+    ),
+    ("seed", "grainforge.simulate.triaxial:triaxial_scene_settings"): (
+        "seed is the triaxial run's seed number (the k of --seeds), written into grains.json and result.json; the "
+        "orientations are drawn from it by grain_orientations, as scene_settings"
+    ),
+    ("seed", "grainforge.simulate.engine:write_test_deck"): (
+        "seed is the run's seed number (the k of --seeds) written into its deck (grains.json's scene, with which the "
+        "Yade scene seeds its own random.Random; LIGGGHTS's primes) and naming its folder; every stream of the run "
+        "is derived from it by the deck writers, so a deck is remade from the number its results record"
+    ),
+    ("seed", "grainforge.simulate.liggghts_scenes:deck_files"): (
+        "seed is the run's seed number written into the LIGGGHTS deck: its fix insert/particletemplate seeds "
+        "(primes of the seed table) and the layout's stream (SeedSequence([seed, 28]) through grainforge.rng) are "
+        "derived from it, so a deck is remade from the number its results record"
+    ),
+    ("seed", "grainforge.simulate.liggghts_scenes:write_test_deck"): (
+        "seed is the run's seed number written into the LIGGGHTS deck, as liggghts_scenes.deck_files"
+    ),
+    ("seed", "grainforge.simulate.liggghts_triaxial:deck_files"): (
+        "seed is the triaxial run's seed number written into the LIGGGHTS deck: LIGGGHTS's own seeds (primes of the "
+        "seed table) and the lattice's stream (SeedSequence([seed, 28]) through grainforge.rng) are derived from "
+        "it, so a deck is remade from the number its results record"
+    ),
+    ("seed", "grainforge.simulate.liggghts_triaxial:write_deck"): (
+        "seed is the triaxial run's seed number written into the LIGGGHTS deck, as liggghts_triaxial.deck_files"
     ),
 }
 

@@ -192,7 +192,7 @@ def test_simulate_population_and_its_decks_carry_the_figures(grain_files, tmp_pa
     assert all(t.clump.target == 0.7 and t.clump.count <= 12 for t in templates)
     for t in templates:
         assert t.clump.meets_target == (t.clump.accuracy.iou >= 0.7)
-    write_test_deck(templates, "tilt", settings, 0, tmp_path / "deck")
+    write_test_deck(templates, "tilt", settings=settings, seed=0, out=tmp_path / "deck")
     with open(tmp_path / "deck" / "clumps.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
     assert [r["name"] for r in rows] == [t.name for t in templates]

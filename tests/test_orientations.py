@@ -159,7 +159,7 @@ def test_virtual_test_scenes(templates, tmp_path, test, engine):
     from grainforge.simulate.engine import write_test_deck
     from grainforge.simulate.settings import Settings
 
-    write_test_deck(templates, test, Settings(grains=N), 3, tmp_path, engine=engine)
+    write_test_deck(templates, test, settings=Settings(grains=N), seed=3, out=tmp_path, engine=engine)
     deck = json.loads((tmp_path / "grains.json").read_text())
     scene = deck["result"]["scene"] if engine == "liggghts" else deck["scene"]
     if engine == "liggghts":

@@ -309,7 +309,7 @@ def test_an_engine_process_starts_with_ctrl_c_ignored_and_sigterm_default_and_ne
     from grainforge.simulate.process import run_engine_process
 
     rc = run_engine_process(["sh", "-c", "grep -E '^Sig(Blk|Ign)' /proc/self/status"], tmp_path,
-                            tmp_path / "log.txt", {}, None)
+                            log_path=tmp_path / "log.txt", env={}, progress=None)
     assert rc == 0
     masks = dict(line.split(":") for line in (tmp_path / "log.txt").read_text().splitlines())
     blocked, ignored = int(masks["SigBlk"], 16), int(masks["SigIgn"], 16)

@@ -442,7 +442,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     # interrupt or a failed run leaves nothing (a SIGKILL leaves the staging folder, which the next run removes)
     with staged(out) as stage:
         try:
-            rows = run_test(test, templates, settings, stage, label=label, progress=progress,
+            rows = run_test(test, templates, settings=settings, out=stage, label=label, progress=progress,
                             workers=workers, engine=engine, mpi=mpi, executor=executor, journal=journal.bind(stage))
         except EngineFailed as exc:
             raise engine_failed(exc, stage, out, journal) from None

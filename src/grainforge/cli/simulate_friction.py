@@ -175,7 +175,7 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     runs, progress, evaluated = _progress(test, engine, settings, max_evaluations)
     with staged(out) as stage:
         try:
-            search, rows = run_calibration(test, templates, settings, target_angle, stage, low=low, high=high,
+            search, rows = run_calibration(test, templates, settings=settings, target=target_angle, out=stage, low=low, high=high,
                                            start=start, tolerance=tolerance, max_evaluations=max_evaluations,
                                            workers=workers, label=label, progress=progress, evaluated=evaluated,
                                            engine=engine, mpi=mpi, executor=executor, journal=journal.bind(stage),
@@ -197,8 +197,8 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
         command = use_command(test, inputs, search.friction, given, quick=quick, as_spheres=as_spheres,
                               shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
-        record = write_calibration(search, rows, target_angle, test, settings, command, stage, low=low, high=high,
-                                   angle=angle)
+        record = write_calibration(search, rows, target=target_angle, test=test, settings=settings, command=command,
+                                   out=stage, low=low, high=high, angle=angle)
         chosen.write_csv(stage / "templates.csv")
         with signals_held():  # the outputs appear together; the finished runs' journal is then no longer needed
             commit_stage(stage, out, overwrite=overwrite)

@@ -20,6 +20,11 @@ __all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process
 def yade_executable() -> str:
     """Path of the ``yade`` command.
 
+    Returns
+    -------
+    str
+        The absolute path of ``yade``, or of the command ``GRAINFORGE_YADE`` names.
+
     Raises
     ------
     FileNotFoundError
@@ -29,23 +34,53 @@ def yade_executable() -> str:
                            "Yade is not installed (on Debian: apt-get install --no-install-recommends yade)")
 
 
-def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
-                    *, overwrite: bool = False, engine: str = "yade") -> list[Path]:
+def write_test_deck(templates: Sequence, test: str, *, settings: Settings, seed: int, out: str | os.PathLike,
+                    overwrite: bool = False, engine: str = "yade") -> list[Path]:
     """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
     ``engine="liggghts"``: :func:`grainforge.simulate.liggghts_scenes.deck_files`, a triaxial test's
     :func:`grainforge.simulate.liggghts_triaxial.deck_files`).
 
     In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset_scenes`) picks the scene;
     ``settings`` of a triaxial test are :class:`~grainforge.simulate.TriaxialSettings`.
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        The specimen's grains (:func:`grainforge.simulate.build_population`): clumps, or level sets in Yade.
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    settings : Settings or TriaxialSettings
+        The run's settings (SI units in the deck: m, kg, Pa, s; the triaxial scene's stresses in kPa).
+    seed : int
+        The run's seed number (``settings.seed + k``), written into the deck: the scene's orientations and
+        layout, and the engine's own random seeds, are derived from it.
+    out : path
+        The deck's folder (created).
+    overwrite : bool
+        Replace a deck already in ``out``; otherwise one is refused.
+    engine : {"yade", "liggghts"}
+        The engine the deck is written for.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    FileExistsError
+        If ``out`` already holds a deck and ``overwrite`` is False.
+    ValueError
+        If the templates do not fit the engine (LIGGGHTS takes multisphere clumps) or ``test`` is unknown.
     """
     if engine == "liggghts" and test == "triaxial":  # a box of servo-controlled walls
         from .liggghts_triaxial import write_deck as write_triaxial
 
-        return write_triaxial(templates, settings, seed, out, overwrite=overwrite)
+        return write_triaxial(templates, settings, seed=seed, out=out, overwrite=overwrite)
     if engine == "liggghts":
         from .liggghts_scenes import write_test_deck as write_liggghts
 
-        return write_liggghts(templates, test, settings, seed, out, overwrite=overwrite)
+        return write_liggghts(templates, test, settings=settings, seed=seed, out=out, overwrite=overwrite)
     from ..dem.yade import write_deck
     from .levelset_scenes import scene_extra, scene_text
 
@@ -68,6 +103,20 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
     phase)``; Yade's own output goes to ``deck/yade.log``.  The Yade process is
     killed if this call is interrupted (no orphan engine left running).
 
+    Parameters
+    ----------
+    deck : path
+        The deck's folder (:func:`write_test_deck`).
+    progress : callable, optional
+        ``progress(fraction, phase)`` for each progress line of the scene.
+    timeout : float, optional
+        Seconds to wait for Yade after its output has ended; None waits for ever.
+
+    Returns
+    -------
+    dict
+        The run's ``result.json`` (lengths in m, times in s).
+
     Raises
     ------
     EngineFailed
@@ -76,8 +125,8 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
     """
     deck = Path(deck)
     log_path = deck / "yade.log"
-    rc = run_engine_process([yade_executable(), "-n", "-x", "run.py"], deck, log_path, {}, progress,
-                            timeout=timeout)
+    rc = run_engine_process([yade_executable(), "-n", "-x", "run.py"], deck, log_path=log_path, env={},
+                            progress=progress, timeout=timeout)
     if rc != 0 or not (deck / "result.json").is_file():
         tail = [ln.strip() for ln in log_path.read_text(errors="replace").splitlines() if ln.strip()]
         raise EngineFailed(f"Yade failed in {deck} (exit {rc}): {tail[-1] if tail else 'no output'}", deck)
@@ -92,6 +141,18 @@ def measure_result(result: dict) -> dict:
     sectors, repose only), the number of grains inserted and lost, the
     engine's step count and time step, and a ``note`` saying why the angle is
     NaN when it could not be measured (a heap of a few grains).
+
+    Parameters
+    ----------
+    result : dict
+        The ``result.json`` of one finished run (:func:`run_yade`, :func:`run_deck`).
+
+    Returns
+    -------
+    dict
+        ``angle_deg`` (degrees), ``sector_sd_deg``, ``grains``, ``inserted``, ``lost``, ``steps``, ``dt_s``,
+        ``simulated_time_s``, ``settled`` and ``note``; a repose run's ``heap_height_mm`` and
+        ``heap_foot_radius_mm`` too.
     """
     if result["test"] == "triaxial":
         from .triaxial import measure_triaxial
@@ -127,6 +188,27 @@ def run_deck(deck: str | os.PathLike, *, engine: str = "yade", mpi: int | None =
 
     The one engine run of :func:`run_test`, in the local pool and in a Dask task
     (:func:`grainforge.simulate.sweep.run_remote`).
+
+    Parameters
+    ----------
+    deck : path
+        The deck's folder (:func:`write_test_deck`).
+    engine : {"yade", "liggghts"}
+        The engine the deck was written for.
+    mpi : int, optional
+        LIGGGHTS only: ranks of the run under ``mpirun``.
+    progress : callable, optional
+        ``progress(fraction, phase)`` while the run goes on.
+
+    Returns
+    -------
+    dict
+        The run's ``result.json``.
+
+    Raises
+    ------
+    EngineFailed
+        If the engine exits with an error (its folder is kept with its log).
     """
     if engine == "liggghts":
         from .liggghts_scenes import run_liggghts
@@ -138,7 +220,7 @@ def run_deck(deck: str | os.PathLike, *, engine: str = "yade", mpi: int | None =
     return run_yade(deck, progress=progress)
 
 
-def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.PathLike, *,
+def run_test(test: str, templates: Sequence, *, settings: Settings, out: str | os.PathLike,
              label: str = "", progress: Callable[[int, float, str], None] | None = None,
              overwrite: bool = False, workers: int = 1, engine: str = "yade",
              mpi: int | None = None, executor=None, journal=None) -> list[dict]:
@@ -147,9 +229,11 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     Parameters
     ----------
     test : {"repose", "tilt", "triaxial"}
+        The virtual test.
     templates : sequence of GrainTemplate
         From :func:`build_population`.
-    settings : Settings
+    settings : Settings or TriaxialSettings
+        The runs' settings; seeds ``settings.seed`` to ``settings.seed + settings.seeds - 1`` are run.
     out : path
         Folder for the decks (written before Yade starts; an existing deck is
         refused unless ``overwrite``).
@@ -157,6 +241,8 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
         Name of the population in the rows.
     progress : callable, optional
         ``progress(run index, fraction, phase)`` while each run goes on.
+    overwrite : bool
+        Replace decks already in ``out``.
     workers : int
         Engine runs at once (each single-threaded, or ``mpi`` ranks); the seeds' runs are
         independent, so the rows do not depend on it.
@@ -179,8 +265,8 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     out = Path(out)
     seeds = [settings.seed + k for k in range(settings.seeds)]
     decks = [out / f"{test}-seed{seed}" for seed in seeds]
-    written = [write_test_deck(templates, test, settings, seed, deck, overwrite=overwrite, engine=engine)
-               for seed, deck in zip(seeds, decks)]
+    written = [write_test_deck(templates, test, settings=settings, seed=seed, out=deck, overwrite=overwrite,
+                               engine=engine) for seed, deck in zip(seeds, decks)]
 
     def row(k, result):
         return {"label": label, "seed": seeds[k], **measure_result(result)}
@@ -196,7 +282,7 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
     if executor is not None:
         from .sweep import run_on_cluster
 
-        results = run_on_cluster(executor, run_deck, decks, [k for k in range(len(seeds)) if k not in kept],
+        results = run_on_cluster(executor, run_deck, decks=decks, which=[k for k in range(len(seeds)) if k not in kept],
                                  engine=engine, mpi=mpi, progress=progress, journal=journal)
         return [row(k, kept[k] if k in kept else results[k]) for k in range(len(seeds))]
 
@@ -225,6 +311,17 @@ def run_test(test: str, templates: Sequence, settings: Settings, out: str | os.P
 
 def summarise(rows: Sequence[dict]) -> dict:
     """Mean and standard deviation of the angle over seeds (NaN runs excluded).
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        Rows of :func:`run_test` (each with ``angle_deg``, degrees).
+
+    Returns
+    -------
+    dict
+        ``runs`` (the runs with an angle), ``angle_mean_deg`` and ``angle_sd_deg`` (degrees; NaN without
+        enough runs).
 
     Examples
     --------

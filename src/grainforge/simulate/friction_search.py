@@ -98,6 +98,16 @@ class Unreachable(ValueError):
 def check_target(target: float) -> None:
     """Refuse a target angle outside :data:`TARGET_RANGE` (``ValueError``, one line).
 
+    Parameters
+    ----------
+    target : float
+        The target angle, degrees.
+
+    Raises
+    ------
+    ValueError
+        If ``target`` is outside :data:`TARGET_RANGE`.
+
     Examples
     --------
     >>> check_target(38.0)
@@ -118,6 +128,20 @@ def calibrated_angle(test: str, angle: str | None = None) -> tuple[str, str]:
     A tilt or repose run's ``angle_deg``; a triaxial run's ultimate friction angle (``angle`` None or
     ``"ultimate"``: from the mean stress ratio over the last 5 % of the axial strain) or its peak one
     (``"peak"``), as ``results.csv`` of ``grainforge simulate triaxial`` has them.
+
+    Parameters
+    ----------
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    angle : {"ultimate", "peak"}, optional
+        A triaxial test's friction angle; None for the test's one angle (a triaxial test's ultimate).
+
+    Returns
+    -------
+    column : str
+        The column of the rows holding the angle (degrees).
+    name : str
+        The angle's name, as figures and ``calibration.json`` give it.
 
     Raises
     ------
@@ -153,6 +177,10 @@ def calibration_seconds(test: str, settings, *, max_evaluations: int, available:
 
     Parameters
     ----------
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    settings : Settings or TriaxialSettings
+        The runs' settings (one friction's runs: ``settings.seeds`` of them).
     available, make_seconds : int, float
         From :func:`grainforge.simulate.check_inputs`: the grains the inputs hold and the seconds to make one.
     pool : int, optional
@@ -163,6 +191,7 @@ def calibration_seconds(test: str, settings, *, max_evaluations: int, available:
     Returns
     -------
     float
+        The estimated seconds.
 
     Raises
     ------
@@ -325,6 +354,11 @@ def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
     seeds : int
         Seeds averaged at each μ.
 
+    Returns
+    -------
+    float
+        The standard uncertainty of μ (inf for a zero slope).
+
     Examples
     --------
     >>> round(friction_uncertainty(20.0, 1.5, 3), 3)
@@ -344,6 +378,20 @@ def local_slope(evaluations: Sequence[Evaluation], friction: float, *, window: f
     The seed-averaged angles are noisy: the secant of the final bracket —
     two close frictions — can be dominated by their noise, a line through
     the nearby evaluations much less.
+
+    Parameters
+    ----------
+    evaluations : sequence of Evaluation
+        The search's evaluations (μ and seed-averaged angle in degrees).
+    friction : float
+        The μ the slope is taken at.
+    window : float
+        Half-width of the window in μ.
+
+    Returns
+    -------
+    float
+        The slope, degrees per unit μ (NaN with fewer than two distinct μ).
 
     Examples
     --------
@@ -366,6 +414,16 @@ def local_slope(evaluations: Sequence[Evaluation], friction: float, *, window: f
 def pooled_sd(groups: Sequence[Sequence[float]]) -> float:
     """Pooled standard deviation of several groups of angles (NaN if no group has two values).
 
+    Parameters
+    ----------
+    groups : sequence of sequence of float
+        The angles (degrees) of each evaluation's seeds.
+
+    Returns
+    -------
+    float
+        The pooled standard deviation, degrees.
+
     Examples
     --------
     >>> round(pooled_sd([[30.0, 32.0], [40.0, 41.0, 42.0]]), 3)
@@ -382,7 +440,7 @@ def pooled_sd(groups: Sequence[Sequence[float]]) -> float:
     return math.sqrt(num / den) if den else float("nan")
 
 
-def run_calibration(test: str, templates: Sequence, settings, target: float, out, *, low: float = FRICTION_RANGE[0],
+def run_calibration(test: str, templates: Sequence, *, settings, target: float, out, low: float = FRICTION_RANGE[0],
                     high: float = FRICTION_RANGE[1], start: float = 0.5, tolerance: float = 0.5,
                     max_evaluations: int = 8, workers: int = 1, label: str = "",
                     progress: Callable[[int, int, float, str], None] | None = None,
@@ -398,6 +456,22 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
 
     Parameters
     ----------
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    templates : sequence of GrainTemplate
+        The specimen's grains (:func:`grainforge.simulate.build_population`).
+    settings : Settings or TriaxialSettings
+        The runs' settings; its ``friction`` is replaced by each μ tried.
+    target : float
+        The angle to reach, degrees (:func:`check_target`).
+    out : path
+        The folder of the runs (``out/runs/``).
+    low, high, start, tolerance, max_evaluations
+        As :func:`search_friction` (μ's bounds and first value; the tolerance in degrees).
+    workers : int
+        Engine runs at once (as :func:`grainforge.simulate.run_test`).
+    label : str
+        Name of the population in the rows.
     progress : callable, optional
         ``progress(evaluation index, run index, fraction, phase)`` while a run goes on.
     evaluated : callable, optional
@@ -433,7 +507,7 @@ def run_calibration(test: str, templates: Sequence, settings, target: float, out
         report = None if progress is None else (lambda i, f, p: progress(k, i, f, p))
         s = replace(settings, friction=float(mu))
         folder = Path(out) / "runs" / f"e{k}-mu{mu:.4f}"
-        got = run_test(test, templates, s, folder, label=label, progress=report,
+        got = run_test(test, templates, settings=s, out=folder, label=label, progress=report,
                        workers=workers, engine=engine, mpi=mpi, executor=executor, journal=journal)
         if test == "triaxial":  # each run's curve beside its result.json, as simulate triaxial writes it
             _write_curves(folder, got)
@@ -475,6 +549,16 @@ TRIAXIAL_CALIBRATION_COLUMNS = ("peak_friction_deg", "ultimate_friction_deg", "m
 def failed_calibration_runs(rows: Sequence[dict]) -> list[str]:
     """The runs of a calibration that fail their own check (a triaxial run's ``problems``), one line each.
 
+    Parameters
+    ----------
+    rows : sequence of dict
+        The calibration's rows (with ``friction``, ``seed`` and, for a triaxial run, ``problems``).
+
+    Returns
+    -------
+    list of str
+        ``friction <μ>, seed <k>: <problems>`` for each failing run.
+
     Examples
     --------
     >>> failed_calibration_runs([{"friction": 0.5, "seed": 0, "problems": ""},
@@ -487,11 +571,37 @@ def failed_calibration_runs(rows: Sequence[dict]) -> list[str]:
             if r.get("problems")]
 
 
-def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
-                       command: str, *, low: float, high: float, angle: str | None = None) -> dict:
+def calibration_record(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, settings,
+                       command: str, low: float, high: float, angle: str | None = None) -> dict:
     """The ``calibration.json`` record: μ, its uncertainty from the seed spread and the local slope, the runs
     (``angle``: the angle reached, its name and column, :func:`calibrated_angle`; ``failed_runs``:
-    :func:`failed_calibration_runs`)."""
+    :func:`failed_calibration_runs`).
+
+    Parameters
+    ----------
+    search : FrictionSearch
+        The finished search (:func:`run_calibration`).
+    rows : sequence of dict
+        Every run's row, with ``friction``, ``evaluation`` and ``angle_deg`` (degrees).
+    target : float
+        The target angle, degrees.
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    settings : Settings or TriaxialSettings
+        The runs' settings (SI units; a triaxial test's stresses in kPa), recorded without ``friction``.
+    command : str
+        The command line that reproduces the calibrated runs.
+    low, high : float
+        The bounds of μ searched.
+    angle : {"ultimate", "peak"}, optional
+        A triaxial test's friction angle (:func:`calibrated_angle`).
+
+    Returns
+    -------
+    dict
+        ``friction`` and ``friction_sd``, ``friction_angle_deg`` (atan μ, degrees), the slopes (degrees per unit
+        μ), ``angle_sd_deg``, the bracket, the runs' counts, ``settings``, ``command`` and ``failed_runs``.
+    """
     from ..params import as_dict
 
     by_eval: dict[int, list[float]] = {}
@@ -517,9 +627,30 @@ def calibration_record(search: FrictionSearch, rows: Sequence[dict], target: flo
     }
 
 
-def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, mu_sd: float,
+def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, mu_sd: float,
                        angle: str | None = None):
-    """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty."""
+    """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty.
+
+    Parameters
+    ----------
+    search : FrictionSearch
+        The finished search.
+    rows : sequence of dict
+        Every run's row (``friction``, ``angle_deg`` in degrees).
+    target : float
+        The target angle, degrees.
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    mu_sd : float
+        The uncertainty of μ (:func:`friction_uncertainty`; a band when finite).
+    angle : {"ultimate", "peak"}, optional
+        A triaxial test's friction angle (:func:`calibrated_angle`), named on the y axis.
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -544,21 +675,49 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], target: flo
     return fig
 
 
-def write_calibration(search: FrictionSearch, rows: Sequence[dict], target: float, test: str, settings,
-                      command: str, out, *, low: float, high: float, angle: str | None = None) -> dict:
+def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, settings,
+                      command: str, out, low: float, high: float, angle: str | None = None) -> dict:
     """Write ``calibration.csv`` (every run; a triaxial run's angles too), ``calibration.json`` and
-    ``calibration.png`` into ``out``; the record (:func:`calibration_record`)."""
+    ``calibration.png`` into ``out``; the record (:func:`calibration_record`).
+
+    Parameters
+    ----------
+    search : FrictionSearch
+        The finished search.
+    rows : sequence of dict
+        Every run's row.
+    target : float
+        The target angle, degrees.
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    settings : Settings or TriaxialSettings
+        The runs' settings.
+    command : str
+        The command line that reproduces the calibrated runs.
+    out : path
+        The folder the three files are written into.
+    low, high : float
+        The bounds of μ searched.
+    angle : {"ultimate", "peak"}, optional
+        A triaxial test's friction angle (:func:`calibrated_angle`).
+
+    Returns
+    -------
+    dict
+        The record written to ``calibration.json`` (:func:`calibration_record`).
+    """
     import json
     from pathlib import Path
 
     from ..io import save_figure, write_csv
 
     out = Path(out)
-    record = calibration_record(search, rows, target, test, settings, command, low=low, high=high, angle=angle)
+    record = calibration_record(search, rows, target=target, test=test, settings=settings, command=command, low=low,
+                                high=high, angle=angle)
     keep = CALIBRATION_COLUMNS[:4] + TRIAXIAL_CALIBRATION_COLUMNS + CALIBRATION_COLUMNS[4:-1] if test == "triaxial" \
         else CALIBRATION_COLUMNS
     write_csv(out / "calibration.csv", [{k: r.get(k, "") for k in keep} for r in rows])
     (out / "calibration.json").write_text(json.dumps(record, indent=1) + "\n")
-    save_figure(calibration_figure(search, rows, target, test, record["friction_sd"], angle),
+    save_figure(calibration_figure(search, rows, target=target, test=test, mu_sd=record["friction_sd"], angle=angle),
                 out / "calibration.png")
     return record

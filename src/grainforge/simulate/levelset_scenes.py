@@ -70,6 +70,17 @@ def __getattr__(name):
 def scene_extra(shape: str = "clump") -> dict:
     """Settings a level-set scene reads beyond :func:`grainforge.simulate.scene_settings` (none for clumps).
 
+    Parameters
+    ----------
+    shape : {"clump", "levelset"}
+        The grains' representation in Yade.
+
+    Returns
+    -------
+    dict
+        ``ls_nodes`` and ``ls_base_nodes`` (surface nodes of a grain and of the base's grains) for level sets;
+        empty for clumps.
+
     Examples
     --------
     >>> scene_extra("levelset")
@@ -89,6 +100,20 @@ MIN_TILT_GRAINS = 49
 def check_levelset_run(test: str, shape: str, settings) -> None:
     """Refuse (``ValueError``, one line) a level-set run Yade cannot set up.
 
+    Parameters
+    ----------
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    shape : {"clump", "levelset"}
+        The grains' representation; only level sets are checked.
+    settings : Settings
+        The runs' settings (their ``grains``).
+
+    Raises
+    ------
+    ValueError
+        If a level-set tilt has fewer than :data:`MIN_TILT_GRAINS` grains.
+
     Examples
     --------
     >>> from grainforge.simulate import Settings
@@ -105,6 +130,19 @@ def check_levelset_run(test: str, shape: str, settings) -> None:
 
 def quick_levelset(test: str, shape: str) -> dict:
     """What ``--quick`` changes for level sets beyond :data:`grainforge.simulate.QUICK` (tilt: the fewest grains).
+
+    Parameters
+    ----------
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    shape : {"clump", "levelset"}
+        The grains' representation.
+
+    Returns
+    -------
+    dict
+        The settings ``--quick`` sets beyond :data:`grainforge.simulate.QUICK` (``grains`` for a level-set tilt),
+        else empty.
 
     Examples
     --------

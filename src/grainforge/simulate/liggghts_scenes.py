@@ -43,6 +43,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..rng import as_generator
 from .settings import Settings, scene_settings
 
 __all__ = ["liggghts_executable", "mpirun_executable", "contact_table", "deck_files", "write_test_deck",
@@ -63,6 +64,11 @@ _STRIDE = 1_000_003
 def liggghts_executable() -> str:
     """Path of the ``liggghts`` command (``GRAINFORGE_LIGGGHTS`` overrides it).
 
+    Returns
+    -------
+    str
+        The command's absolute path.
+
     Raises
     ------
     FileNotFoundError
@@ -76,6 +82,11 @@ def liggghts_executable() -> str:
 
 def mpirun_executable() -> str:
     """Path of the ``mpirun`` command (``GRAINFORGE_MPIRUN`` overrides it).
+
+    Returns
+    -------
+    str
+        The command's absolute path.
 
     Raises
     ------
@@ -207,7 +218,7 @@ def _settle(name: str, threshold: float, min_checks: int, max_checks: int, every
 
 def _layout(templates: Sequence, test: str, settings: Settings, seed: int) -> dict:
     """The scene of one seed, as the Yade scene lays it out: the drawn templates, their nodes, the base."""
-    rng = np.random.default_rng([int(seed), 28])
+    rng = as_generator(np.random.SeedSequence([int(seed), 28]))  # the run's seed, stream 28: the layout
     counts = np.array([t.count for t in templates], dtype=np.float64)
     n = settings.grains
     pick = rng.choice(len(templates), size=n, p=counts / counts.sum())
@@ -410,6 +421,29 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     ``@{insert}`` and ``@{tail}`` are the scenes' shared parts (``liggghts-scene-head.in``, ...) and whose
     settle phases are ``liggghts-settle.in``, every number computed and formatted here.
 
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Multisphere clumps (:func:`grainforge.simulate.build_population`).
+    test : {"repose", "tilt"}
+        The virtual test under gravity.
+    settings : Settings
+        The run's settings (SI units in the deck: m, kg, Pa, s; angles in degrees).
+    seed : int
+        The run's seed number (``settings.seed + k``), written into ``grains.json``: the grains drawn, their
+        layout and orientations, and LIGGGHTS's random seeds (primes of the seed table) are derived from it.
+
+    Returns
+    -------
+    dict of str to str
+        Relative path → text (``in.run``, the grains' files, ``grains.json``); the same for the same templates,
+        settings and seed.
+
+    Raises
+    ------
+    ValueError
+        If a template is not a multisphere clump.
+
     Notes
     -----
     The repose cylinder is a primitive granular wall (``zcylinder``, the grains' contact law)
@@ -440,9 +474,35 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
     return files
 
 
-def write_test_deck(templates: Sequence, test: str, settings: Settings, seed: int, out: str | os.PathLike,
-                    *, overwrite: bool = False) -> list[Path]:
-    """Write the LIGGGHTS deck of one run of ``test`` into ``out`` (see :func:`deck_files`)."""
+def write_test_deck(templates: Sequence, test: str, *, settings: Settings, seed: int, out: str | os.PathLike,
+                    overwrite: bool = False) -> list[Path]:
+    """Write the LIGGGHTS deck of one run of ``test`` into ``out`` (see :func:`deck_files`).
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        Multisphere clumps.
+    test : {"repose", "tilt"}
+        The virtual test under gravity.
+    settings : Settings
+        The run's settings.
+    seed : int
+        The run's seed number (:func:`deck_files`).
+    out : path
+        The deck's folder (created).
+    overwrite : bool
+        Replace a deck already in ``out``; otherwise one is refused.
+
+    Returns
+    -------
+    list of Path
+        The files written.
+
+    Raises
+    ------
+    FileExistsError
+        If ``out`` already holds a deck and ``overwrite`` is False.
+    """
     from ..dem.deck import write_files
 
     return write_files(deck_files(templates, test, settings, seed), out, overwrite=overwrite)
@@ -453,6 +513,23 @@ def engine_command(mpi: int | None = None) -> tuple[list[str], dict]:
 
     Open MPI refuses to run as root and to start more ranks than cores unless told: both are
     allowed through its environment variables, and a waiting rank yields its core.
+
+    Parameters
+    ----------
+    mpi : int, optional
+        MPI ranks; None runs LIGGGHTS alone.
+
+    Returns
+    -------
+    cmd : list of str
+        The command line, run from inside the deck's folder.
+    env : dict
+        Environment variables to add (Open MPI's, empty without ``mpirun``).
+
+    Raises
+    ------
+    FileNotFoundError
+        If LIGGGHTS (or, with ``mpi``, ``mpirun``) is not installed.
     """
     exe = liggghts_executable()
     if mpi is None:
@@ -521,6 +598,24 @@ def run_liggghts(deck: str | os.PathLike, *, mpi: int | None = None,
     ``deck/liggghts.log``.  An interrupt kills mpirun with every rank, and removes its session folder
     (:func:`grainforge.simulate.process.mpi_session_folder`).
 
+    Parameters
+    ----------
+    deck : path
+        The deck's folder (:func:`write_test_deck`).
+    mpi : int, optional
+        MPI ranks under ``mpirun``; None runs LIGGGHTS alone.
+    progress : callable, optional
+        ``progress(fraction, phase)`` for each progress line of the deck.
+    timeout : float, optional
+        Seconds to wait for the engine after its output has ended; None waits for ever.
+    collect : callable, optional
+        ``collect(deck)`` → the run's result.
+
+    Returns
+    -------
+    dict
+        The run's result (lengths in m, times in s), as ``collect`` makes it.
+
     Raises
     ------
     EngineFailed
@@ -534,7 +629,8 @@ def run_liggghts(deck: str | os.PathLike, *, mpi: int | None = None,
     cmd, env = engine_command(mpi)
     # mpirun's session folder in one of this run's own, removed after the run (a killed mpirun leaves its own)
     with mpi_session_folder() if mpi is not None else nullcontext({}) as session:
-        rc = run_engine_process(cmd, deck, deck / "liggghts.log", {**env, **session}, progress, timeout=timeout)
+        rc = run_engine_process(cmd, deck, log_path=deck / "liggghts.log", env={**env, **session}, progress=progress,
+                                timeout=timeout)
     needed = ("record.txt", "bodies-initial.txt", "bodies-final.txt", "spheres-final.txt")
     if rc != 0 or not all((deck / f).is_file() for f in needed):
         tail = [ln.strip() for ln in (deck / "liggghts.log").read_text(errors="replace").splitlines() if ln.strip()]

@@ -42,6 +42,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..rng import as_generator
 from .settings import DENSEST_FRACTION, TriaxialSettings
 
 __all__ = ["WALLS", "deck_files", "write_deck", "collect_triaxial", "processor_grid", "check_ranks",
@@ -155,7 +156,7 @@ def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleN
             raise ValueError(f"the LIGGGHTS scenes take multisphere clumps; {t.name} has shape {t.shape!r}")
     scene = triaxial_scene_settings(settings, seed)
     n = settings.grains
-    rng = np.random.default_rng([int(seed), 28])
+    rng = as_generator(np.random.SeedSequence([int(seed), 28]))  # the run's seed, stream 28: the layout
     counts = np.array([t.count for t in templates], dtype=np.float64)
     pick = rng.choice(len(templates), size=n, p=counts / counts.sum())
     used = sorted(set(pick.tolist()))
@@ -320,7 +321,7 @@ def deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> di
     return files
 
 
-def write_deck(templates: Sequence, settings: TriaxialSettings, seed: int, out: str | os.PathLike, *,
+def write_deck(templates: Sequence, settings: TriaxialSettings, *, seed: int, out: str | os.PathLike,
                overwrite: bool = False) -> list[Path]:
     """Write the LIGGGHTS deck of one triaxial run into ``out`` (see :func:`deck_files`).
 

@@ -19,6 +19,20 @@ __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executabl
 def find_executable(variable: str, name: str, missing: str) -> str:
     """Path of command ``name``, or of the command the environment variable ``variable`` names.
 
+    Parameters
+    ----------
+    variable : str
+        Environment variable that may name the command (a name on ``PATH`` or a path), e.g. ``GRAINFORGE_YADE``.
+    name : str
+        The command looked up on ``PATH`` when ``variable`` is not set.
+    missing : str
+        The message of the error raised when the command is not found.
+
+    Returns
+    -------
+    str
+        The command's absolute path.
+
     Raises
     ------
     FileNotFoundError
@@ -32,12 +46,32 @@ def find_executable(variable: str, name: str, missing: str) -> str:
     return exe
 
 
-def run_engine_process(cmd: Sequence[str], cwd: Path, log_path: Path, env: dict,
-                       progress: Callable[[float, str], None] | None, *, timeout: float | None = None) -> int:
+def run_engine_process(cmd: Sequence[str], cwd: Path, *, log_path: Path, env: dict,
+                       progress: Callable[[float, str], None] | None, timeout: float | None = None) -> int:
     """Run an engine command in ``cwd`` (its own session), its output to ``log_path``; its exit status.
 
     ``grainforge-progress <fraction> <phase>`` lines go to ``progress``.  On any exception
     (an interrupt) the process and everything below it (an mpirun's ranks) are killed.
+
+    Parameters
+    ----------
+    cmd : sequence of str
+        The command and its arguments.
+    cwd : path
+        The folder it runs in (the deck's).
+    log_path : path
+        File that receives the engine's standard output and error (overwritten).
+    env : dict
+        Environment variables added to this process's (``OMP_NUM_THREADS`` is set to 1 first).
+    progress : callable or None
+        ``progress(fraction, phase)`` for each ``grainforge-progress`` line; None ignores them.
+    timeout : float, optional
+        Seconds to wait for the process after its output has ended; None waits for ever.
+
+    Returns
+    -------
+    int
+        The process's exit status.
     """
     env = dict(os.environ, OMP_NUM_THREADS="1", **env)
     with open(log_path, "w", buffering=1) as log:
@@ -127,6 +161,11 @@ def mpi_session_folder() -> Iterator[dict]:
     interrupted run); here the folder lies in one of this run's own, removed after the kill.  The folders of a
     run whose owner was killed (SIGKILL: nothing could clean up) are removed by the next run.
 
+    Yields
+    ------
+    dict
+        ``TMPDIR`` and Open MPI's MCA variables naming the temporary folder, to add to ``mpirun``'s environment.
+
     Examples
     --------
     >>> with mpi_session_folder() as env:
@@ -188,6 +227,18 @@ def mpi_slots(environ: dict | None = None) -> tuple[int, str]:
     (:data:`ALLOCATION_VARIABLES`) or a hostfile (:data:`HOSTFILE_VARIABLES`: a line per host, ``slots=N``
     counted, else one slot a line) provides them.
 
+    Parameters
+    ----------
+    environ : dict, optional
+        The environment read for allocations and hostfiles; None reads ``os.environ``.
+
+    Returns
+    -------
+    slots : int
+        The ranks available (at least 1).
+    source : str
+        Where that number comes from, as said in the error of :func:`check_mpi_ranks`.
+
     Examples
     --------
     >>> mpi_slots({"SLURM_NTASKS": "4096"})
@@ -225,6 +276,15 @@ def mpi_slots(environ: dict | None = None) -> tuple[int, str]:
 
 def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict | None = None) -> None:
     """Refuse ``mpi`` ranks per run (× ``workers`` runs at once) beyond :func:`mpi_slots`.
+
+    Parameters
+    ----------
+    mpi : int or None
+        MPI ranks of each run (``--mpi``); None (no ``mpirun``) is accepted as it is.
+    workers : int, optional
+        Runs at once (``--workers``); None counts one.
+    environ : dict, optional
+        As :func:`mpi_slots`.
 
     Raises
     ------

@@ -18,7 +18,25 @@ __all__ = ["write_report", "figure"]
 
 def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> list[Path]:
     """Write ``out/results.csv`` (one row per seed, the settings in every row) and ``out/<test>.png``; for a
-    triaxial test also each seed's ``triaxial-seed<k>/triaxial.csv``."""
+    triaxial test also each seed's ``triaxial-seed<k>/triaxial.csv``.
+
+    Parameters
+    ----------
+    rows : sequence of dict
+        One row per seed (:func:`grainforge.simulate.run_test`; angles in degrees).
+    out : path
+        The output folder, holding each run's ``<test>-seed<k>/result.json``.
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    settings : Settings or TriaxialSettings
+        The runs' settings, written into every row as ``setting_<name>`` (SI units; a triaxial test's stresses in
+        kPa).
+
+    Returns
+    -------
+    list of Path
+        The files written: ``results.csv``, each ``triaxial.csv`` (stresses in kPa) of a triaxial test, the figure.
+    """
     out = Path(out)
     extra = {f"setting_{k}": v for k, v in as_dict(settings).items()}
     table = [{**r, **extra} for r in rows]
@@ -52,6 +70,20 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
     right, each seed's surface profile with its angle.  Tilt: the layer's mean
     downslope displacement against the tilt angle, per seed, with the failure
     threshold and the failure angles.
+
+    Parameters
+    ----------
+    test : {"repose", "tilt"}
+        The virtual test.
+    results : sequence of dict
+        Each seed's ``result.json`` (lengths in m).
+    rows : sequence of dict
+        Each seed's row (:func:`grainforge.simulate.measure_result`; angles in degrees).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure (two panels).
     """
     import matplotlib
 

@@ -21,6 +21,18 @@ def keep_failed(deck: str | os.PathLike, out: str | os.PathLike) -> Path:
     An earlier ``failed-<name>`` folder is replaced: it is a diagnostic of the
     last failure, not a result.  The successful outputs stay staged (nothing
     else of the failed command appears in ``out``).
+
+    Parameters
+    ----------
+    deck : path
+        The failed run's folder (in the staging folder).
+    out : path
+        The command's output folder.
+
+    Returns
+    -------
+    Path
+        ``out/failed-<name>``, where the folder now is.
     """
     deck, out = Path(deck), Path(out)
     target = out / f"{FAILED_PREFIX}{deck.name}"

@@ -130,6 +130,16 @@ def triaxial_steps(settings: TriaxialSettings) -> float:
     The shearing takes ε_a / (ε̇ dt) steps, with ε̇ = I √(σ′₃/ρ)/d and dt ≈ 0.3 d √(ρ/E): that is
     ε_a √(E/σ′₃) / (0.3 I), whatever the grains' size and density.
 
+    Parameters
+    ----------
+    settings : TriaxialSettings
+        The run's settings (Young's modulus in Pa, confining stress in kPa, axial strain and inertial number).
+
+    Returns
+    -------
+    float
+        The time steps of the compaction and the shearing together.
+
     Examples
     --------
     >>> round(triaxial_steps(TriaxialSettings()))  # 58,926 shearing + 32,998 compaction
@@ -145,6 +155,18 @@ def check_triaxial_run(settings: TriaxialSettings, engine: str = "yade") -> None
     """Refuse (``ValueError``, one line) a triaxial specimen too small for a periodic cell (Yade) or for a box of
     walls (LIGGGHTS: the same bound, a box at least 4 diameters wide, so that each wall's servo meets a dozen
     grains and more).
+
+    Parameters
+    ----------
+    settings : TriaxialSettings
+        The run's settings (its ``grains``).
+    engine : {"yade", "liggghts"}
+        The engine: Yade's periodic cell or LIGGGHTS's box of walls (named in the message).
+
+    Raises
+    ------
+    ValueError
+        If ``settings.grains`` is below :data:`MIN_TRIAXIAL_GRAINS`.
 
     Examples
     --------
@@ -168,6 +190,29 @@ def check_triaxial_run(settings: TriaxialSettings, engine: str = "yade") -> None
 
 def scene_settings(settings: Settings, test: str, seed: int) -> dict:
     """The ``grains.json["scene"]`` dictionary the Yade scene reads.
+
+    Parameters
+    ----------
+    settings : Settings
+        The run's settings (SI units: Young's modulus in Pa; the friction coefficient becomes ``friction_deg``,
+        degrees; the tilt's steps in degrees).
+    test : {"repose", "tilt"}
+        The virtual test under gravity.
+    seed : int
+        The run's seed number (``settings.seed + k``), written as ``seed`` (the Yade scene's own random seed) and
+        the seed of the grains' orientations (:func:`grainforge.dem.deck.grain_orientations`).
+
+    Returns
+    -------
+    dict
+        The scene's settings: ``test``, ``seed``, ``grains``, the contact model's (``young`` in Pa, ``poisson``,
+        ``friction_deg``, ``damping``), ``gravity`` (m/s²), the run's controls and ``orientations`` (one unit
+        quaternion ``(w, x, y, z)`` per grain).
+
+    Raises
+    ------
+    ValueError
+        If ``test`` is not one of :data:`TESTS`.
 
     Examples
     --------
@@ -223,9 +268,15 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
 
     Parameters
     ----------
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    settings : Settings or TriaxialSettings
+        The runs' settings (``grains``, ``spheres``, ``seeds``).
     available, make_seconds : int, float
         From :func:`check_inputs`: the grains the inputs hold, and the
         seconds to generate one (a recipe) before it becomes a template.
+    as_spheres : bool
+        Each grain a single sphere (``--as-spheres``): one contact sphere a grain.
     workers : int
         Yade runs at once (each on one core).
     shape, spacing : str, float
@@ -236,6 +287,11 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         The engine of the runs; a LIGGGHTS run is costed at
         :data:`ENGINE_FACTOR` of the Yade model (one core's work: MPI ranks
         are not counted as a speed-up).
+
+    Returns
+    -------
+    float
+        The estimated seconds: the templates' making, then every run with ``workers`` of them at once.
 
     Raises
     ------

@@ -65,6 +65,22 @@ def template_make_seconds(templates: int, available: int, make_seconds: float, p
     :data:`~grainforge.dem.template_choice.MEASURE_SECONDS` each; their cost
     is shared out over the ``min(templates, available)`` templates.
 
+    Parameters
+    ----------
+    templates : int
+        Templates wanted (``settings.templates``).
+    available : int
+        Grains the inputs hold (:func:`check_inputs`).
+    make_seconds : float
+        Seconds to make one grain (0 for files).
+    pool : int, optional
+        Grains measured to choose from; default :func:`grainforge.dem.template_choice.pool_size`.
+
+    Returns
+    -------
+    float
+        Seconds per template.
+
     Examples
     --------
     >>> round(template_make_seconds(40, 500, 0.03), 3)  # a pool of 200 grains for 40 templates
@@ -106,13 +122,30 @@ class ChosenGrains:
     measured: int
 
     def summary(self) -> str:
-        """The one line ``simulate`` prints: what was chosen from what, and the KS figures."""
+        """The one line ``simulate`` prints: what was chosen from what, and the KS figures.
+
+        Returns
+        -------
+        str
+            The line, e.g. how many grains were chosen from how many measured, with the KS statistics.
+        """
         from ..dem.template_choice import _summary
 
         return _summary(self.choice, len(self.picks), self.available, self.measured)
 
     def write_csv(self, path: str | os.PathLike) -> Path:
-        """``templates.csv`` (:func:`grainforge.dem.template_choice.write_templates_csv`)."""
+        """``templates.csv`` (:func:`grainforge.dem.template_choice.write_templates_csv`).
+
+        Parameters
+        ----------
+        path : path
+            The CSV file to write.
+
+        Returns
+        -------
+        Path
+            The file written (one row per template: name, source, descriptors; size in mm).
+        """
         from ..dem.template_choice import write_templates_csv
 
         return write_templates_csv(path, names=self.names, sources=self.sources, table=self.table,
@@ -149,6 +182,25 @@ def choose_grains(inputs: Sequence[str | os.PathLike], settings: Settings, *, po
     templates (seed :data:`~grainforge.dem.template_choice.CHOICE_SEED`). With
     ``settings.size`` every grain is scaled to one size: size is not matched.
     ``progress(done, total)`` is called after each grain measured.
+
+    Parameters
+    ----------
+    inputs : sequence of path
+        Mesh files, run folders, manifests (sizes in mm), or one TOML recipe.
+    settings : Settings
+        The runs' settings (``templates``; ``size``, mm, or None).
+    pool : int, optional
+        Grains generated or measured to choose from; default
+        :func:`grainforge.dem.template_choice.pool_size`.
+    workers : int
+        Processes measuring the pool.
+    progress : callable, optional
+        ``progress(done, total)`` after each grain measured.
+
+    Returns
+    -------
+    ChosenGrains
+        The chosen grains, their descriptors and the choice's statistics.
 
     Raises
     ------
@@ -198,6 +250,11 @@ def check_inputs(inputs: Sequence[str | os.PathLike]) -> tuple[int, float]:
     beyond a day of computing, e.g. ``count = 2**63 - 1``) is refused too:
     the simulated grains stand for that population.
 
+    Parameters
+    ----------
+    inputs : sequence of path
+        Mesh files, run folders, manifests, or one TOML recipe.
+
     Returns
     -------
     (int, float)
@@ -245,12 +302,19 @@ def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *,
         The grains' contact geometry: clumps of ``settings.spheres`` spheres, or
         level sets (:func:`grainforge.dem.levelset.level_set`) of grid ``spacing``
         (a fraction of the equivalent diameter), as ``grainforge dem`` makes them.
+    spacing : float
+        Level sets only: the grid spacing, a fraction of each grain's equivalent diameter.
     clump_accuracy : float, optional
         Build every clump to this intersection over union with its grain
         (:func:`grainforge.dem.clump.clump`, ``target_iou``), with at most
         ``settings.spheres`` spheres.
     chosen : ChosenGrains, optional
         The grains to make into templates, from :func:`choose_grains`.
+
+    Returns
+    -------
+    list of GrainTemplate
+        One template per chosen grain, in the order of ``chosen``.
 
     Raises
     ------

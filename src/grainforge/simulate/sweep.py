@@ -48,7 +48,18 @@ class JournalMismatch(ValueError):
 
 
 def deck_files(folder: str | os.PathLike) -> dict[str, bytes]:
-    """The files under ``folder`` as ``{relative POSIX path: bytes}`` (sorted by path)."""
+    """The files under ``folder`` as ``{relative POSIX path: bytes}`` (sorted by path).
+
+    Parameters
+    ----------
+    folder : path
+        A run's folder.
+
+    Returns
+    -------
+    dict of str to bytes
+        Each file's contents by its path relative to ``folder``.
+    """
     folder = Path(folder)
     return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
 
@@ -66,7 +77,7 @@ def write_files(folder: str | os.PathLike, files: dict[str, bytes]) -> None:
 DECK_MARK = "\0deck\0"
 
 
-def run_remote(run, files: dict[str, bytes], name: str, engine: str = "yade",
+def run_remote(run, files: dict[str, bytes], *, name: str, engine: str = "yade",
                mpi: int | None = None) -> tuple[dict[str, bytes], dict | None, str | None]:
     """One engine run on a Dask worker: the deck ``files`` in a temporary folder ``name``, run there by ``run``.
 
@@ -102,13 +113,32 @@ def run_remote(run, files: dict[str, bytes], name: str, engine: str = "yade",
     return made, result, error
 
 
-def run_on_cluster(executor, run, decks: Sequence[Path], which: Sequence[int], *, engine: str = "yade",
+def run_on_cluster(executor, run, *, decks: Sequence[Path], which: Sequence[int], engine: str = "yade",
                    mpi: int | None = None, progress=None, journal: SweepJournal | None = None) -> dict[int, dict]:
     """Run the decks ``decks[k]`` for ``k`` in ``which`` as tasks of ``executor`` (:func:`run_remote` with ``run``,
     :func:`grainforge.simulate.engine.run_deck`).
 
     Each run's files are written into its folder as it comes back (and recorded in ``journal``);
     ``progress(k, fraction, phase)`` says when a run is sent and when it is done.
+
+    Parameters
+    ----------
+    executor : grainforge.runtime.cluster.DaskExecutor
+        The cluster the runs are sent to (its ``submit``).
+    run : callable
+        :func:`grainforge.simulate.engine.run_deck`, run on the worker by :func:`run_remote`.
+    decks : sequence of Path
+        Every run's folder, its deck written.
+    which : sequence of int
+        The indices of the decks to run (the others are kept from a journal).
+    engine : {"yade", "liggghts"}
+        The engine of the decks.
+    mpi : int, optional
+        LIGGGHTS only: ranks of each run under ``mpirun`` on its worker.
+    progress : callable, optional
+        ``progress(k, fraction, phase)`` when run ``k`` is sent and when it is done.
+    journal : SweepJournal, optional
+        Records each run as it comes back.
 
     Returns
     -------
@@ -129,7 +159,8 @@ def run_on_cluster(executor, run, decks: Sequence[Path], which: Sequence[int], *
     futures = {}
     try:
         for k in which:
-            futures[executor.submit(run_remote, run, deck_files(decks[k]), decks[k].name, engine, mpi)] = k
+            futures[executor.submit(run_remote, run, deck_files(decks[k]), name=decks[k].name, engine=engine,
+                                    mpi=mpi)] = k
             if progress is not None:
                 progress(k, 0.0, "sent to the cluster")
         results = {}
@@ -183,7 +214,18 @@ class SweepJournal:
         self.reused = 0
 
     def bind(self, stage: str | os.PathLike) -> SweepJournal:
-        """Set the staging folder the runs are made in; returns ``self``."""
+        """Set the staging folder the runs are made in; returns ``self``.
+
+        Parameters
+        ----------
+        stage : path
+            The staging folder of the command.
+
+        Returns
+        -------
+        SweepJournal
+            This journal.
+        """
         self.stage = Path(stage)
         return self
 
@@ -192,13 +234,31 @@ class SweepJournal:
         return self.folder / SEP.join(rel.parts)
 
     def finished(self) -> list[str]:
-        """Journal names of the runs kept (sorted)."""
+        """Journal names of the runs kept (sorted).
+
+        Returns
+        -------
+        list of str
+            The names, empty when the journal folder does not exist.
+        """
         if not self.folder.is_dir():
             return []
         return sorted(p.name for p in self.folder.iterdir() if p.is_dir() and not p.name.startswith("."))
 
     def reuse(self, deck: str | os.PathLike, written: Sequence[str | os.PathLike]) -> dict | None:
         """Copy the kept run of ``deck`` into it and return its ``result.json``; ``None`` if none is kept.
+
+        Parameters
+        ----------
+        deck : path
+            The run's folder (in the staging folder).
+        written : sequence of path
+            The deck's files just written into it (:func:`grainforge.simulate.write_test_deck`).
+
+        Returns
+        -------
+        dict or None
+            The kept run's ``result.json``, or None when the journal holds no finished run of ``deck``.
 
         Raises
         ------
@@ -220,7 +280,13 @@ class SweepJournal:
         return json.loads((deck / "result.json").read_text())
 
     def record(self, deck: str | os.PathLike) -> None:
-        """Copy the finished run in ``deck`` into the journal (whole or not at all)."""
+        """Copy the finished run in ``deck`` into the journal (whole or not at all).
+
+        Parameters
+        ----------
+        deck : path
+            The finished run's folder (in the staging folder); the first run also writes the sweep's settings.
+        """
         deck = Path(deck)
         target = self._key(deck)
         self.folder.mkdir(parents=True, exist_ok=True)
@@ -265,6 +331,22 @@ def open_journal(out: str | os.PathLike, fingerprint: dict, *, resume: bool = Fa
     ``fingerprint`` is the sweep's settings, a JSON-able dict whose keys name them as the user does
     (``--friction``).  An interrupted sweep's journal is removed with ``overwrite``; reused with ``resume``
     when its settings are these; a journal with no finished run (a sweep stopped before its first) is removed.
+
+    Parameters
+    ----------
+    out : path
+        The sweep's output folder (the journal is ``out/.grainforge-sweep``).
+    fingerprint : dict
+        The sweep's settings.
+    resume : bool
+        Continue an interrupted sweep with these settings (``--resume``).
+    overwrite : bool
+        Remove an interrupted sweep's journal (``--overwrite``).
+
+    Returns
+    -------
+    SweepJournal
+        The journal, empty or holding the runs an interrupted sweep finished.
 
     Raises
     ------

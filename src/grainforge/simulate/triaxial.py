@@ -42,6 +42,22 @@ RECORDS = 200
 def triaxial_scene_settings(settings: TriaxialSettings, seed: int) -> dict:
     """The ``grains.json["scene"]`` dictionary the triaxial scene reads (no gravity; stresses in kPa).
 
+    Parameters
+    ----------
+    settings : TriaxialSettings
+        The run's settings (Young's modulus in Pa, confining stress in kPa, friction coefficient written as
+        ``friction_deg`` in degrees).
+    seed : int
+        The run's seed number (``settings.seed + k``), written as ``seed`` (the Yade scene's own random seed) and
+        the seed of the grains' orientations (:func:`grainforge.dem.deck.grain_orientations`).
+
+    Returns
+    -------
+    dict
+        The scene's settings: ``test`` (``"triaxial"``), ``seed``, ``grains``, the contact model's, ``gravity``
+        (0), ``confining_kpa`` (kPa), the servo's and the compaction's controls, ``records`` and
+        ``orientations`` (one unit quaternion ``(w, x, y, z)`` per grain).
+
     Examples
     --------
     >>> s = triaxial_scene_settings(TriaxialSettings(), 3)
@@ -74,6 +90,16 @@ def triaxial_scene_settings(settings: TriaxialSettings, seed: int) -> dict:
 def friction_angle(m):
     """Mobilised friction angle (degrees) of a stress ratio M = q/p′ in triaxial compression: sin φ = 3M/(6 + M).
 
+    Parameters
+    ----------
+    m : float or array_like
+        The stress ratio q/p′.
+
+    Returns
+    -------
+    float64 ndarray
+        φ in degrees, the shape of ``m`` (a 0-d array for a number).
+
     Examples
     --------
     >>> round(float(friction_angle(1.2)), 4)  # M = 6 sin φ / (3 − sin φ): φ = 30° gives M = 1.2
@@ -90,6 +116,16 @@ def dilatancy_angle(rate):
 
     Positive when the specimen dilates (ε_v falls as ε₁ grows), negative when it contracts.
 
+    Parameters
+    ----------
+    rate : float or array_like
+        dε_v/dε₁.
+
+    Returns
+    -------
+    float64 ndarray
+        ψ in degrees, the shape of ``rate`` (a 0-d array for a number).
+
     Examples
     --------
     >>> float(dilatancy_angle(0.0)) == 0.0
@@ -104,6 +140,18 @@ def dilatancy_angle(rate):
 def local_slope(x, y, window: int):
     """Least-squares slope of y(x) over a centred window of ``window`` points at every point (shortened at the
     ends, never under 2 points), vectorised with cumulative sums.
+
+    Parameters
+    ----------
+    x, y : (N,) array_like
+        The curve's points.
+    window : int
+        Points of the centred window (an even count takes one more).
+
+    Returns
+    -------
+    (N,) float64 ndarray
+        dy/dx at each point; NaN where the window's x do not vary, all NaN under 2 points.
 
     Examples
     --------
@@ -195,7 +243,18 @@ def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 
 
 
 def curve_table(result: dict) -> np.ndarray:
-    """The curve of a triaxial ``result.json`` as the (N, 7) array of :data:`CSV_COLUMNS` (stresses in kPa)."""
+    """The curve of a triaxial ``result.json`` as the (N, 7) array of :data:`CSV_COLUMNS` (stresses in kPa).
+
+    Parameters
+    ----------
+    result : dict
+        A triaxial run's ``result.json`` (stresses in Pa).
+
+    Returns
+    -------
+    (N, 7) float64 ndarray
+        One row per record, in the columns of :data:`CSV_COLUMNS`.
+    """
     cols = result["columns"]
     rec = np.asarray(result["records"], dtype=np.float64).reshape(-1, len(cols))
     col = {name: rec[:, k] for k, name in enumerate(cols)}
@@ -212,6 +271,18 @@ def measure_triaxial(result: dict) -> dict:
     range), the largest mean contact overlap over the grains' mean diameter (``overlap_over_d_max``), and
     ``problems``: why the run fails its own check (empty when it passes): a compaction that did not reach the
     confining stress at rest, no curve, or a lateral stress off by more than 5 % in the median.
+
+    Parameters
+    ----------
+    result : dict
+        A finished triaxial run's ``result.json``.
+
+    Returns
+    -------
+    dict
+        The row: ``test``, ``grains``, the angles in degrees (``peak_friction_deg``, ``ultimate_friction_deg``,
+        ``max_dilatancy_deg``, ...), the void ratios, the rates, the servo's errors, ``overlap_over_d_max`` and
+        ``problems``.
     """
     cols = result["columns"]
     rec = np.asarray(result["records"], dtype=np.float64).reshape(-1, len(cols))
@@ -253,6 +324,16 @@ def measure_triaxial(result: dict) -> dict:
 def summarise_triaxial(rows: Sequence[dict]) -> str:
     """The one line of a finished triaxial run: packing, void ratio and angles, mean ± sd over the seeds.
 
+    Parameters
+    ----------
+    rows : sequence of dict
+        The seeds' rows (:func:`measure_triaxial`; angles in degrees).
+
+    Returns
+    -------
+    str
+        The line.
+
     Examples
     --------
     >>> rows = [{"packing": "dense", "initial_void_ratio": 0.55, "peak_friction_deg": 40.0,
@@ -279,7 +360,20 @@ def summarise_triaxial(rows: Sequence[dict]) -> str:
 
 
 def write_triaxial_csv(result: dict, path: str | Path) -> Path:
-    """Write one seed's ``triaxial.csv`` (:data:`CSV_COLUMNS`, stresses in kPa, strains compression positive)."""
+    """Write one seed's ``triaxial.csv`` (:data:`CSV_COLUMNS`, stresses in kPa, strains compression positive).
+
+    Parameters
+    ----------
+    result : dict
+        The run's ``result.json``.
+    path : path
+        The CSV file to write.
+
+    Returns
+    -------
+    Path
+        The file written.
+    """
     from ..io import write_csv
 
     table = curve_table(result)
@@ -287,7 +381,20 @@ def write_triaxial_csv(result: dict, path: str | Path) -> Path:
 
 
 def triaxial_figure(results: Sequence[dict], rows: Sequence[dict]):
-    """The paper's triaxial figure: (a) q/p′ and (b) volumetric strain against axial strain, one curve per seed."""
+    """The paper's triaxial figure: (a) q/p′ and (b) volumetric strain against axial strain, one curve per seed.
+
+    Parameters
+    ----------
+    results : sequence of dict
+        Each seed's ``result.json``.
+    rows : sequence of dict
+        Each seed's row (:func:`measure_triaxial`), for the legend's angles (degrees).
+
+    Returns
+    -------
+    matplotlib.figure.Figure
+        The figure (two panels, axial strain shared).
+    """
     import matplotlib
 
     matplotlib.use("Agg")
