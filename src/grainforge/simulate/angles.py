@@ -175,6 +175,11 @@ def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> flo
         the threshold; NaN if the layer never failed, or if it had already
         failed at the first angle (start the tilt lower).
 
+    Raises
+    ------
+    ValueError
+        If ``history`` is not a (T, 2+) array.
+
     Examples
     --------
     >>> h = np.array([[20, 0.0], [21, 0.01], [22, 0.1], [23, 0.9]])

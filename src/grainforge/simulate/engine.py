@@ -247,6 +247,7 @@ def run_test(test: str, templates: Sequence, *, settings: Settings, out: str | o
         Engine runs at once (each single-threaded, or ``mpi`` ranks); the seeds' runs are
         independent, so the rows do not depend on it.
     engine : {"yade", "liggghts"}
+        The engine of the runs.
     mpi : int, optional
         LIGGGHTS only: ranks of each run under ``mpirun``.
     executor : grainforge.runtime.cluster.DaskExecutor, optional
@@ -261,6 +262,15 @@ def run_test(test: str, templates: Sequence, *, settings: Settings, out: str | o
     -------
     list of dict
         One row per seed, in seed order (see :func:`measure_result`), with ``label`` and ``seed``.
+
+    Raises
+    ------
+    FileExistsError
+        If a run's folder already holds a deck and ``overwrite`` is False.
+    EngineFailed
+        If a run fails (its folder is kept with its log); the other runs are stopped.
+    grainforge.simulate.sweep.JournalMismatch
+        If a deck differs from the one ``journal`` kept of the interrupted sweep.
     """
     out = Path(out)
     seeds = [settings.seed + k for k in range(settings.seeds)]

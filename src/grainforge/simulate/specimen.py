@@ -293,6 +293,7 @@ def build_population(inputs: Sequence[str | os.PathLike], settings: Settings, *,
         their grains are chosen by :func:`choose_grains` (representative of
         the population's shapes and sizes), unless ``chosen`` gives them.
     settings : Settings
+        The runs' settings (``templates``, ``spheres``, ``size`` in mm or None).
     as_spheres : bool
         Replace every grain by its volume-equivalent sphere (the sphere
         baseline of a comparison: same sizes, same mass, no shape).

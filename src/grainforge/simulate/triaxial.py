@@ -207,6 +207,11 @@ def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 
         ``peak_friction_deg`` (and ``peak_strain``, where it is reached), ``ultimate_friction_deg``
         (``ultimate_q_over_p``), ``max_dilatancy_deg`` (and ``max_dilatancy_strain``), ``peak_q_over_p``.
 
+    Raises
+    ------
+    ValueError
+        If the three curves are not 1-D arrays of one length.
+
     Examples
     --------
     >>> e = np.linspace(0, 0.2, 201)

@@ -66,12 +66,19 @@ def scene_text(test: str, shape: str = "clump") -> str:
     Parameters
     ----------
     test : {"repose", "tilt", "triaxial"}
+        The virtual test.
     shape : {"clump", "levelset"}
+        The grains' representation in Yade.
 
     Returns
     -------
     str
         Python text for Yade, appended to the grain library of :mod:`grainforge.dem.yade`.
+
+    Raises
+    ------
+    ValueError
+        For an unknown ``test`` or ``shape``.
 
     Examples
     --------
