@@ -14,8 +14,8 @@ from grainforge.analysis.aggregate import (
     radius_of_gyration,
 )
 from grainforge.geometry.solid import index_problems, signed_volume, solid_problems
-from grainforge.methods.dpa import aggregation as D
 from grainforge.methods._polyhedra import PRIMITIVES, intrudes, mirror, solid
+from grainforge.methods.dpa import aggregation as D
 from grainforge.params import ParameterError
 
 # ---------------------------------------------------------------- primaries
