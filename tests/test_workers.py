@@ -12,7 +12,8 @@ from pathlib import Path
 import pytest
 
 from grainforge.params import ParameterError
-from grainforge.runtime.workers import THREAD_VARS, RemoteTraceback, ordered_map, pid_alive, process_pool
+from grainforge.runtime.children import THREAD_VARS, pid_alive
+from grainforge.runtime.workers import RemoteTraceback, ordered_map, process_pool
 
 
 def test_pool_workers_get_one_blas_thread():
@@ -51,9 +52,11 @@ def test_workers_use_no_private_standard_library_internals():
     read a ``ProcessPoolExecutor``'s result pipe, ``pool._result_queue._writer``)."""
     import inspect
 
+    import grainforge.runtime.children as children
     import grainforge.runtime.workers as workers
 
     assert private_names(inspect.getsource(workers)) == []
+    assert private_names(inspect.getsource(children)) == []
     # the detector sees what the pools used to read
     old = "def close_pool(pool):\n    ps = pool._processes\n    w = getattr(pool._result_queue, '_writer')\n"
     assert sorted(private_names(old)) == [("close_pool", "_processes"), ("close_pool", "_result_queue"),

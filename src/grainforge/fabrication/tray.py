@@ -488,7 +488,7 @@ def remove_stale_temps(out: Path) -> list[Path]:
     """Remove temporary print files for ``out`` left by killed runs (their process is gone)."""
     import re
 
-    from ..runtime.workers import pid_alive
+    from ..runtime.children import pid_alive
 
     removed = []
     if not out.parent.is_dir():

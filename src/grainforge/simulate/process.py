@@ -10,7 +10,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..runtime.workers import die_with_parent
+from ..runtime.children import die_with_parent
 
 __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder",
            "mpi_slots", "check_mpi_ranks"]
@@ -141,7 +141,7 @@ def kill_running() -> None:
 
 
 def _kill(proc: subprocess.Popen) -> None:
-    from ..runtime.workers import kill_process_tree
+    from ..runtime.children import kill_process_tree
 
     kill_process_tree(proc.pid)
     proc.wait()

@@ -1,0 +1,344 @@
+"""Child processes: started with SIGINT blocked and single-threaded BLAS, watching the process that made them,
+and stopped with everything below them.
+
+The pools of :mod:`grainforge.runtime.workers` and the DEM engines of :mod:`grainforge.simulate.process` start
+their children with these habits and stop them through :func:`kill_process_tree` (the one kill path). Linux's
+``/proc`` (its documented interface to processes) is read where the standard library has no way at all: to
+list a process's descendants and a session's members (:func:`kill_process_tree`, which stops DEM engines and
+their ``mpirun`` ranks), and to find the fork server when a pool's start-up is cut short
+(:func:`stop_forkserver`; ``multiprocessing`` neither gives its pid nor stops it). Elsewhere those two do what
+the standard library can (the root process alone; nothing).
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator, Sequence
+from contextlib import contextmanager
+
+__all__ = ["single_threaded_children", "sigint_blocked", "THREAD_VARS", "WATCH_INTERVAL", "watch_parent",
+           "die_with_parent", "pid_alive", "stop_forkserver", "kill_process_tree", "TERMINATE_GRACE",
+           "stop_processes", "quiet_stderr"]
+
+#: seconds between a worker's checks that the process that made its pool is alive
+WATCH_INTERVAL = 0.25
+
+#: BLAS/OpenMP thread limits given to pool workers (unless the user set them): one worker = one core.
+THREAD_VARS = ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS")
+
+
+@contextmanager
+def single_threaded_children() -> Iterator[None]:
+    """Set the BLAS thread limits to 1 while worker processes start, then restore them.
+
+    :func:`process_pool` starts the fork server (whose environment its
+    workers inherit) and, without a fork server, the workers inside it.
+
+    Yields
+    ------
+    None
+
+    Examples
+    --------
+    >>> import os
+    >>> before = os.environ.get("OMP_NUM_THREADS")
+    >>> with single_threaded_children():
+    ...     inside = os.environ["OMP_NUM_THREADS"]
+    >>> inside if before is None else "1"
+    '1'
+    >>> os.environ.get("OMP_NUM_THREADS") == before
+    True
+    """
+    saved = {k: os.environ.get(k) for k in THREAD_VARS}
+    for k, v in saved.items():
+        if v is None:
+            os.environ[k] = "1"
+    try:
+        yield
+    finally:
+        for k, v in saved.items():
+            if v is None:
+                os.environ.pop(k, None)
+
+
+@contextmanager
+def sigint_blocked() -> Iterator[None]:
+    """Block SIGINT in this thread (POSIX), so processes started meanwhile inherit it blocked; a Ctrl-C
+    that arrives meanwhile is delivered when the block ends.
+
+    Yields
+    ------
+    None
+        Inside the block SIGINT is blocked (nothing is blocked where there is no ``pthread_sigmask``).
+
+    Examples
+    --------
+    >>> with sigint_blocked():
+    ...     pass
+    """
+    if not hasattr(signal, "pthread_sigmask"):
+        yield
+        return
+    old = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_SETMASK, old)
+
+
+def pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs (a zombie, dead but not yet reaped, counts as dead).
+
+    Parameters
+    ----------
+    pid : int
+        Process id.
+
+    Returns
+    -------
+    bool
+
+    Examples
+    --------
+    >>> pid_alive(os.getpid())
+    True
+    """
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as fh:
+            state = fh.read().rsplit(b")", 1)[1].split()[0]
+        return state not in (b"Z", b"X")
+    except (OSError, IndexError):
+        return True
+
+
+def die_with_parent() -> None:
+    """Ask the kernel to SIGKILL this process when its parent dies (Linux ``PR_SET_PDEATHSIG``; elsewhere nothing).
+
+    Also used as ``preexec_fn`` of engine subprocesses (Yade), so a killed
+    ``grainforge`` leaves no engine running.
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the owner decides
+    if sys.platform.startswith("linux"):
+        try:
+            import ctypes
+
+            libc = ctypes.CDLL(None, use_errno=True)
+            libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
+        except (OSError, AttributeError):
+            pass
+
+
+def watch_parent(owner: int) -> None:
+    """Pool-worker initializer: exit as soon as process ``owner`` (the pool's maker) is gone.
+
+    On Linux the kernel also sends SIGKILL when the worker's parent dies
+    (``PR_SET_PDEATHSIG``); the parent of a fork-server worker is the fork
+    server, not the owner, so a daemon thread polls the owner as well.
+
+    Parameters
+    ----------
+    owner : int
+        Process id of the pool's maker.
+    """
+    die_with_parent()
+
+    def watch():
+        while pid_alive(owner):
+            time.sleep(WATCH_INTERVAL)
+        os._exit(1)
+
+    if not pid_alive(owner):
+        os._exit(1)
+    threading.Thread(target=watch, name="grainforge-watch-parent", daemon=True).start()
+
+
+@contextmanager
+def quiet_stderr() -> Iterator[None]:
+    """File descriptor 2 on /dev/null meanwhile (for a child process started inside: it keeps it).
+
+    Yields
+    ------
+    None
+        Inside the block this process's standard error goes to ``/dev/null``; it is restored after.
+    """
+
+    try:
+        sys.stderr.flush()
+    except (AttributeError, ValueError, OSError):
+        pass
+    saved = os.dup(2)
+    null = os.open(os.devnull, os.O_WRONLY)
+    try:
+        os.dup2(null, 2)
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
+        os.close(null)
+
+
+#: seconds a stopped worker has to exit after SIGTERM before it gets SIGKILL
+TERMINATE_GRACE = 1.0
+
+
+def stop_processes(procs: Sequence) -> None:
+    """SIGTERM each of ``procs``, SIGKILL those still there after :data:`TERMINATE_GRACE`, and join them.
+
+    Parameters
+    ----------
+    procs : sequence of multiprocessing.Process
+        Started processes (those already ended are only joined).
+    """
+    for p in procs:
+        if p.exitcode is None:
+            p.terminate()
+    deadline = time.monotonic() + TERMINATE_GRACE
+    for p in procs:
+        p.join(max(0.0, deadline - time.monotonic()))
+    for p in procs:
+        if p.exitcode is None:
+            p.kill()
+            p.join(TERMINATE_GRACE)
+
+
+def _proc_stats():
+    """``(pid, fields)`` of every process, ``fields`` its ``/proc/PID/stat`` after the command name (state,
+    parent, group, session, ...); nothing where there is no ``/proc``."""
+    try:
+        entries = os.listdir("/proc")
+    except OSError:
+        return
+    for name in entries:
+        if not name.isdigit():
+            continue
+        try:
+            with open(f"/proc/{name}/stat", "rb") as fh:
+                fields = fh.read().rsplit(b")", 1)[1].split()
+        except (OSError, IndexError):
+            continue
+        yield int(name), fields
+
+
+def _children_of(pid: int) -> list[int]:
+    """Processes whose parent is ``pid`` (Linux ``/proc``; empty elsewhere)."""
+    return [p for p, fields in _proc_stats() if int(fields[1]) == pid]
+
+
+def _descendants(pid: int) -> list[int]:
+    """Every process below ``pid`` (children first, then theirs; Linux ``/proc``, empty elsewhere)."""
+    found, todo = [], [pid]
+    while todo:
+        kids = _children_of(todo.pop())
+        found += kids
+        todo += kids
+    return found
+
+
+def _session_members(sid: int) -> list[int]:
+    """Live processes (zombies aside) of session ``sid`` (Linux ``/proc``; empty elsewhere)."""
+    return [p for p, fields in _proc_stats() if int(fields[3]) == sid and fields[0] not in (b"Z", b"X")]
+
+
+#: passes over a killed session's members (each a few ms): a process forked while the previous pass ran
+SESSION_PASSES = 20
+
+
+def kill_process_tree(pid: int) -> None:
+    """SIGKILL process ``pid``, every process below it and, when it leads a process group of its own
+    (``start_new_session=True``), that group and every process of its session: the one kill path of
+    grainforge's child processes.
+
+    ``pid`` is stopped (SIGSTOP) first, so it cannot start new children while they are listed. Its
+    descendants can still fork while they are killed one by one, and a launcher may put them in process
+    groups of their own (Open MPI's ``mpirun`` puts each rank in one): an orphan forked at that moment
+    escapes the tree and the group. No process leaves a session but by ``setsid``, so when ``pid`` leads
+    a session of its own, its members are killed pass after pass until none is left. The caller still
+    reaps ``pid`` if it is its child (``Popen.wait``). A process already gone is no error. Never signals
+    this process's own group or session.
+
+    Parameters
+    ----------
+    pid : int
+        The root process (a child of this process, typically started with ``start_new_session=True``).
+
+    Examples
+    --------
+    >>> import subprocess, sys
+    >>> proc = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(60)"], start_new_session=True)
+    >>> kill_process_tree(proc.pid)
+    >>> proc.wait()
+    -9
+    """
+    try:
+        group = os.getpgid(pid)
+    except ProcessLookupError:
+        return
+    own_group = group == pid and group != os.getpgrp()
+    try:
+        os.kill(pid, signal.SIGSTOP)
+    except ProcessLookupError:
+        return
+    for child in _descendants(pid):
+        try:
+            os.kill(child, signal.SIGKILL)
+        except ProcessLookupError:
+            pass
+    try:
+        if own_group:
+            os.killpg(pid, signal.SIGKILL)
+        else:
+            os.kill(pid, signal.SIGKILL)
+    except (ProcessLookupError, PermissionError):
+        pass
+    try:
+        own_session = os.getsid(0) == pid
+    except OSError:
+        own_session = True
+    if own_group and not own_session:
+        for _ in range(SESSION_PASSES):
+            members = [m for m in _session_members(pid) if m != os.getpid()]
+            if not members:
+                break
+            for m in members:
+                try:
+                    os.kill(m, signal.SIGKILL)
+                except (ProcessLookupError, PermissionError):
+                    pass
+
+
+def _forkserver_pids() -> list[int]:
+    """Children of this process that are multiprocessing fork servers (found by their command line
+    in Linux ``/proc``; empty elsewhere)."""
+    found = []
+    for pid in _children_of(os.getpid()):
+        try:
+            with open(f"/proc/{pid}/cmdline", "rb") as fh:
+                cmdline = fh.read()
+        except OSError:
+            continue
+        if b"multiprocessing.forkserver" in cmdline:
+            found.append(pid)
+    return found
+
+
+def stop_forkserver() -> None:
+    """Kill this process's multiprocessing fork server and every process it forked (workers, also
+    half-started ones) with :func:`kill_process_tree`.
+
+    The fork server is found as the child of this process running ``multiprocessing.forkserver``.
+    The next pool starts a new one: ``multiprocessing.forkserver.ensure_running()`` reaps a dead fork
+    server and starts another.
+    """
+    for pid in _forkserver_pids():
+        if pid_alive(pid):
+            kill_process_tree(pid)
