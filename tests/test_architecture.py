@@ -218,3 +218,39 @@ def test_layout_layers_are_the_contract_layers():
         names[part] = "base"
     for part, (layer, _) in _layout_table().items():
         assert names[part.removesuffix("/").removesuffix(".py")] == layer, part
+
+
+#: the most lines of code a function in src/ may have (docstrings, comments and blank lines aside)
+MAX_FUNCTION_LINES = 80
+
+
+def function_lengths() -> list[tuple[int, str]]:
+    """(lines of code, ``module:function``) of every function and method in the package, longest first."""
+    rows = []
+    for name, path in MODULES.items():
+        if ".dem.scripts." in name:
+            continue  # the engine scripts run in Yade's interpreter (tests/test_dem_scripts.py)
+        text = path.read_text(encoding="utf-8")
+        lines = text.splitlines()
+        for node in ast.walk(ast.parse(text)):
+            if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                continue
+            first = node.body[0]
+            doc = (first.end_lineno - first.lineno + 1) if isinstance(first, ast.Expr) and \
+                isinstance(first.value, ast.Constant) and isinstance(first.value.value, str) else 0
+            code = [ln for ln in lines[node.lineno - 1:node.end_lineno] if ln.strip() and not ln.strip().startswith("#")]
+            rows.append((len(code) - doc, f"{name}:{node.name}"))
+    return sorted(rows, reverse=True)
+
+
+def test_no_function_is_longer_than_80_lines_of_code():
+    long = [f"{n} lines: {where}" for n, where in function_lengths() if n > MAX_FUNCTION_LINES]
+    assert long == [], "split these where their steps have names of their own:\n" + "\n".join(long)
+
+
+def test_the_longest_functions_are_listed_in_the_architecture_notes():
+    text = (SRC.parent / "docs" / "design" / "architecture.md").read_text(encoding="utf-8")
+    section = text.split("## The longest functions", 1)[1].split("\n## ", 1)[0]
+    listed = re.findall(r"^\| \d+ \| `grainforge\.([\w.]+):(\w+)`", section, flags=re.M)
+    longest = [tuple(where.removeprefix("grainforge.").split(":")) for _, where in function_lengths()[:15]]
+    assert sorted(listed) == sorted(longest), "docs/design/architecture.md's fifteen longest functions are others"
