@@ -7,8 +7,6 @@ the user nothing and no file is written:
   without ``--overwrite``, a file where a folder is needed (or the reverse),
   a folder that cannot be written into, an unsupported extension;
 - :func:`mesh_inputs`: mesh files, folders and manifests (:func:`grainforge.io.inputs.mesh_paths`);
-- :func:`remove_stale_temps`: temporary files of our own naming that a killed
-  run left behind.
 
 Each raises :class:`click.UsageError` / :class:`click.BadParameter`, which the
 ``grainforge`` group prints as one line with exit code 2.
@@ -31,14 +29,12 @@ from __future__ import annotations
 
 import os
 import tempfile
-import time
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
 import click
 
-__all__ = ["OutPath", "output_file", "output_dir", "check_writable", "mesh_inputs", "remove_stale_temps",
-           "refuse_existing"]
+__all__ = ["OutPath", "output_file", "output_dir", "check_writable", "mesh_inputs", "refuse_existing"]
 
 #: suffixes of the mesh files a folder argument expands to
 
@@ -171,24 +167,3 @@ def mesh_inputs(paths: Iterable[str | os.PathLike], what: str = "FILES") -> list
         raise click.BadParameter(str(exc), param_hint=what) from None
 
 
-def remove_stale_temps(folder: str | os.PathLike, prefix: str, suffix: str = ".tmp",
-                       min_age: float = 0.0) -> list[Path]:
-    """Remove temporary files (``prefix*suffix``) a killed earlier run left in ``folder``.
-
-    Only names of grainforge's own making are passed here (e.g. ``.tray.3mf.``
-    + ``.tmp``, as :func:`grainforge.io.atomic_write` makes them).  Files
-    younger than ``min_age`` seconds are kept (a run still writing them).
-    """
-    folder = Path(folder)
-    removed = []
-    if not folder.is_dir():
-        return removed
-    now = time.time()
-    for p in folder.glob(f"{prefix}*{suffix}"):
-        try:
-            if p.is_file() and now - p.stat().st_mtime >= min_age:
-                p.unlink()
-                removed.append(p)
-        except OSError:
-            pass
-    return removed

@@ -485,21 +485,21 @@ def _temp_prefix(out: Path, pid: int) -> str:
 
 
 def remove_stale_temps(out: Path) -> list[Path]:
-    """Remove temporary print files for ``out`` left by killed runs (their process is gone)."""
-    import re
+    """Remove temporary print files for ``out`` left by killed runs (their process is gone).
 
-    from ..runtime.children import pid_alive
+    Parameters
+    ----------
+    out : Path
+        The tray's print file.
 
-    removed = []
-    if not out.parent.is_dir():
-        return removed
-    pattern = re.compile(re.escape(f".{out.name}.pid") + r"(\d+)\..*\.tmp")
-    for p in out.parent.iterdir():
-        m = pattern.fullmatch(p.name)
-        if m and p.is_file() and not pid_alive(int(m.group(1))):
-            p.unlink(missing_ok=True)
-            removed.append(p)
-    return removed
+    Returns
+    -------
+    list of Path
+        The files removed (:func:`grainforge.runtime.children.remove_leftovers`).
+    """
+    from ..runtime.children import remove_leftovers
+
+    return remove_leftovers(out.parent, f".{out.name}.pid", suffix=".tmp")
 
 
 #: memory kept per grain until the end (CSV row, footprint polygon), bytes

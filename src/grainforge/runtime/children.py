@@ -22,7 +22,7 @@ from contextlib import contextmanager
 
 __all__ = ["single_threaded_children", "sigint_blocked", "THREAD_VARS", "WATCH_INTERVAL", "watch_parent",
            "die_with_parent", "pid_alive", "stop_forkserver", "kill_process_tree", "TERMINATE_GRACE",
-           "stop_processes", "quiet_stderr"]
+           "stop_processes", "quiet_stderr", "remove_leftovers"]
 
 #: seconds between a worker's checks that the process that made its pool is alive
 WATCH_INTERVAL = 0.25
@@ -342,3 +342,55 @@ def stop_forkserver() -> None:
     for pid in _forkserver_pids():
         if pid_alive(pid):
             kill_process_tree(pid)
+
+
+def remove_leftovers(folder, prefix: str, *, suffix: str = "") -> list:
+    """Remove what killed processes left in ``folder``: files and folders named ``prefix`` + PID + a non-digit
+    + anything + ``suffix``, whose process PID no longer runs (:func:`pid_alive`).
+
+    The one clean-up of the three kinds of leftovers a killed grainforge leaves: staging folders
+    (``.grainforge-staging-PID-…``), a tray's temporary print files (``.NAME.pidPID.….tmp``) and the
+    ``mpirun`` session folders in the temporary directory. What a running process owns is kept.
+
+    Parameters
+    ----------
+    folder : path-like
+        Where to look (nothing happens when it is not a folder).
+    prefix : str
+        The names' beginning, before the PID.
+    suffix : str
+        The names' end.
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+
+    Examples
+    --------
+    >>> import pathlib, tempfile
+    >>> d = pathlib.Path(tempfile.mkdtemp())
+    >>> dead = 2 ** 22 + 7  # above Linux's largest pid: no such process
+    >>> _ = (d / f".x.pid{dead}.ab.tmp").write_text(""); _ = (d / f".x.pid{os.getpid()}.cd.tmp").write_text("")
+    >>> [p.name for p in remove_leftovers(d, ".x.pid", suffix=".tmp")] == [f".x.pid{dead}.ab.tmp"]
+    True
+    """
+    import re
+    import shutil
+    from pathlib import Path
+
+    folder = Path(folder)
+    removed: list = []
+    if not folder.is_dir():
+        return removed
+    pattern = re.compile(re.escape(prefix) + r"(\d+)\D.*" + re.escape(suffix), flags=re.S)
+    for p in sorted(folder.iterdir()):
+        m = pattern.fullmatch(p.name)
+        if m is None or pid_alive(int(m.group(1))):
+            continue
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p, ignore_errors=True)
+        else:
+            p.unlink(missing_ok=True)
+        removed.append(p)
+    return removed

@@ -9,7 +9,6 @@ the files move, so a signal then is answered after the last one); an interrupt o
 from __future__ import annotations
 
 import os
-import re
 import shutil
 import signal
 import tempfile
@@ -18,7 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
-from .children import pid_alive
+from .children import remove_leftovers
 
 __all__ = ["signals_held", "STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
 
@@ -76,12 +75,7 @@ def remove_stale_staging(out: Path) -> None:
     out : Path
         An output folder (nothing happens when it does not exist).
     """
-    if not out.is_dir():
-        return
-    for stage in out.glob(STAGING_PREFIX + "*"):
-        m = re.match(re.escape(STAGING_PREFIX) + r"(\d+)-", stage.name)
-        if stage.is_dir() and m and not pid_alive(int(m.group(1))):
-            shutil.rmtree(stage, ignore_errors=True)
+    remove_leftovers(out, STAGING_PREFIX)
 
 
 #: hidden folder a run stages its files in (``.grainforge-staging-PID-XXXX``)

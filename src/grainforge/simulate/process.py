@@ -200,17 +200,9 @@ def _remove_stale_mpi_folders() -> None:
     """Remove the mpirun folders (:func:`mpi_session_folder`) of processes that no longer run."""
     import tempfile
 
-    base = Path(tempfile.gettempdir())
-    for folder in base.glob(f"{MPI_TMP_PREFIX}*-*"):
-        pid = folder.name[len(MPI_TMP_PREFIX):].split("-", 1)[0]
-        if not pid.isdigit() or int(pid) == os.getpid():
-            continue
-        try:
-            os.kill(int(pid), 0)
-        except ProcessLookupError:
-            _remove_folder(str(folder))
-        except OSError:  # another user's process: alive
-            continue
+    from ..runtime.children import remove_leftovers
+
+    remove_leftovers(tempfile.gettempdir(), MPI_TMP_PREFIX)
 
 
 #: environment variables through which batch systems give a job its number of MPI slots
