@@ -1,0 +1,267 @@
+"""The paper's drained triaxial comparison: three shapes, dense and loose, at 20 kPa.
+
+Runs ``grainforge simulate triaxial`` once per case, one engine run at a time (``--workers 1``, under
+``nice -n 5``): the volume-equivalent spheres of examples/paper-rough-spheres.toml (``--as-spheres``),
+the rough spheres (examples/paper-rough-spheres.toml) and the rough angular grains
+(examples/paper-rough-angular.toml), each ``--packing dense`` and ``--packing loose``, at the contact
+friction calibrated on the rough spheres' tilt angle (μ = 0.95, docs/simulate.md) and σ′₃ = 20 kPa.
+Each case writes its own folder ``<out>/<shape>-<packing>/`` (the command's outputs, plus ``run.json``:
+the CPU seconds of the command and of its engine, wall clock, load; ``<out>/runs.log`` has a line for every
+run, an interrupted one too); a case whose ``results.csv`` exists is not run again, so an interrupted
+comparison resumes at the next case.
+
+Then (or with ``--report-only``, from the existing outputs) it prints a markdown table (e0, peak φ and
+its axial strain, ultimate φ, largest dilatancy angle, ε_v at the end, lateral-stress error, steps,
+CPU seconds) and draws the paper's triaxial figure: (a) q/p′ and (b) volumetric strain against the
+axial strain, one curve per shape and packing (colour = shape, line style = packing), with the
+paper's ultimate q/p′ ≈ 1.5 as a reference line.
+
+    .venv/bin/python benchmarks/triaxial_comparison.py --seeds 1 --axial-strain 0.2 --inertial-number 2e-3
+    .venv/bin/python benchmarks/triaxial_comparison.py --seeds 1 --axial-strain 0.2 --inertial-number 2e-3 --report-only
+
+The engine runs use this checkout's ``src`` (``PYTHONPATH``), whatever grainforge the interpreter has
+installed. The defaults (3 seeds, 25 % of axial strain, I = 1e-3) are the full specification; see
+docs/simulate.md for what it costs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import csv
+import json
+import math
+import os
+import resource
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+SPHERES_TOML = "examples/paper-rough-spheres.toml"
+ANGULAR_TOML = "examples/paper-rough-angular.toml"
+#: (name, recipe, --as-spheres, colour) of each shape, in the figure's order
+SHAPES = [("spheres", SPHERES_TOML, True, "tab:blue"),
+          ("rough spheres", SPHERES_TOML, False, "tab:orange"),
+          ("rough angular", ANGULAR_TOML, False, "tab:green")]
+PACKINGS = [("dense", "-"), ("loose", "--")]
+#: the order the cases run in: the paper's two shapes first (the loose specimens, whose compaction is the
+#: shorter, before the dense ones of the angular grains), the sphere baseline last
+RUN_ORDER = [("rough spheres", "dense"), ("rough spheres", "loose"), ("rough angular", "loose"),
+             ("rough angular", "dense"), ("spheres", "dense"), ("spheres", "loose")]
+PAPER_ULTIMATE_M = 1.5  # the paper's ultimate q/p' of the rough spheres (phi about 37 deg)
+CLI = "import sys; from grainforge.cli.main import main; sys.exit(main())"
+
+
+def slug(shape: str, packing: str) -> str:
+    return f"{shape.replace(' ', '-')}-{packing}"
+
+
+def phi_of(m: float) -> float:
+    """Friction angle (deg) of a stress ratio M = q/p' in triaxial compression: sin phi = 3M/(6 + M)."""
+    return math.degrees(math.asin(3 * m / (6 + m)))
+
+
+def command(args, shape: str, packing: str, out: Path) -> list[str]:
+    _, recipe, as_spheres, _ = next(s for s in SHAPES if s[0] == shape)
+    cmd = ["nice", "-n", str(args.nice), sys.executable, "-c", CLI, "simulate", "triaxial", str(ROOT / recipe),
+           "--packing", packing, "--grains", str(args.grains), "--seeds", str(args.seeds), "--workers", "1",
+           "--friction", f"{args.friction:g}", "--confining-kpa", f"{args.confining_kpa:g}",
+           "--axial-strain", f"{args.axial_strain:g}", "--inertial-number", f"{args.inertial_number:g}",
+           "--out", str(out)]
+    if as_spheres:
+        cmd.insert(cmd.index("--packing"), "--as-spheres")
+    elif args.spheres != 10:
+        cmd[cmd.index("--out"):cmd.index("--out")] = ["--spheres", str(args.spheres)]
+    return cmd
+
+
+def run_case(args, shape: str, packing: str) -> int:
+    out = args.out / slug(shape, packing)
+    if (out / "results.csv").is_file():
+        print(f"{shape}, {packing}: done before ({out / 'results.csv'})", flush=True)
+        return 0
+    cmd = command(args, shape, packing, out)
+    env = dict(os.environ, PYTHONPATH=os.pathsep.join([str(ROOT / "src")] + (
+        [os.environ["PYTHONPATH"]] if os.environ.get("PYTHONPATH") else [])), OMP_NUM_THREADS="1")
+    print(f"{shape}, {packing}: {' '.join(cmd[3:4] + ['-c', repr(CLI)] + cmd[6:])}", flush=True)
+    start, load0 = time.time(), os.getloadavg()
+    c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    proc = subprocess.run(cmd, env=env, cwd=ROOT)
+    c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
+    with open(args.out / "runs.log", "a") as fh:  # every run, an interrupted one too (its CPU is spent all the same)
+        fh.write(f"{time.strftime('%Y-%m-%d %H:%M:%S', time.gmtime(start))} {slug(shape, packing)} exit "
+                 f"{proc.returncode} cpu_s {cpu:.1f} wall_s {time.time() - start:.1f}\n")
+    if (out / "results.csv").is_file():  # written on success and on a failed check (exit 3)
+        record = {"shape": shape, "packing": packing, "returncode": proc.returncode, "cpu_s": round(cpu, 1),
+                  "wall_s": round(time.time() - start, 1),
+                  "start_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime(start)),
+                  "end_utc": time.strftime("%Y-%m-%d %H:%M:%S", time.gmtime()),
+                  "load_start": [round(x, 2) for x in load0], "load_end": [round(x, 2) for x in os.getloadavg()],
+                  "command": cmd}
+        (out / "run.json").write_text(json.dumps(record, indent=1) + "\n")
+        print(f"{shape}, {packing}: exit {proc.returncode}, {cpu:.0f} s CPU, {record['wall_s']:.0f} s wall",
+              flush=True)
+    return proc.returncode
+
+
+def read_csv(path: Path) -> list[dict]:
+    with open(path, newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+def load_cases(out: Path) -> list[dict]:
+    """Every case with outputs: its results.csv rows, each seed's triaxial.csv curve, and run.json."""
+    cases = []
+    for shape, _, _, colour in SHAPES:
+        for packing, style in PACKINGS:
+            d = out / slug(shape, packing)
+            if not (d / "results.csv").is_file():
+                continue
+            rows = read_csv(d / "results.csv")
+            curves = [read_csv(d / f"triaxial-seed{r['seed']}" / "triaxial.csv") for r in rows]
+            run = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
+            cases.append({"shape": shape, "packing": packing, "colour": colour, "style": style, "rows": rows,
+                          "curves": curves, "run": run})
+    return cases
+
+
+def largest_dilatancy(curve: list[dict], window: int = 5) -> float:
+    """Largest dilatancy angle (deg) of a curve, as results.csv's (sin ψ = −d/(2 − d), d = dε_v/dε₁ the
+    least-squares slope over a centred window of 5 records) but over the records where the formula is in
+    range only: where d > 1 (a collapse contracting faster than the axial strain, seen in loose specimens)
+    −d/(2 − d) is outside [−1, 1], and results.csv's ``max_dilatancy_deg`` reads the clipped +90° there."""
+    import numpy as np
+
+    e = np.array([float(r["axial_strain"]) for r in curve])
+    v = np.array([float(r["volumetric_strain"]) for r in curve])
+    half, n = window // 2, len(e)
+    d = np.full(n, np.nan)
+    for i in range(n):
+        lo, hi = max(0, i - half), min(n, i + half + 1)
+        if hi - lo >= 2 and np.ptp(e[lo:hi]) > 0:
+            d[i] = np.polyfit(e[lo:hi], v[lo:hi], 1)[0]
+    s = -d / (2.0 - d)
+    ok = np.isfinite(s) & (np.abs(s) <= 1.0)
+    return float(np.degrees(np.arcsin(s[ok])).max()) if ok.any() else float("nan")
+
+
+def _stat(values, fmt: str) -> str:
+    if len(values) == 1:
+        return format(values[0], fmt)
+    m = sum(values) / len(values)
+    sd = math.sqrt(sum((v - m) ** 2 for v in values) / (len(values) - 1))
+    return f"{format(m, fmt)} ± {format(sd, fmt)}"
+
+
+def table(cases: list[dict]) -> str:
+    head = ("| shape | packing | seeds | e₀ | peak φ (at ε₁) | ultimate φ (last 5 %) | largest ψ | ε_v at the end "
+            "| lateral σ₃ error, median / max | steps | CPU s |")
+    lines = [head, "|" + "---|" * (head.count("|") - 1)]
+    for c in cases:
+        rows = c["rows"]
+        f = lambda key: [float(r[key]) for r in rows]  # noqa: E731
+        ev = [float(curve[-1]["volumetric_strain"]) for curve in c["curves"]]
+        psi = [largest_dilatancy(curve) for curve in c["curves"]]
+        clipped = any(float(r["max_dilatancy_deg"]) >= 89.999 for r in rows)
+        end = max(float(curve[-1]["axial_strain"]) for curve in c["curves"])
+        peak = f"{_stat(f('peak_friction_deg'), '.1f')}° ({_stat([100 * x for x in f('peak_axial_strain')], '.1f')} %)"
+        cpu = c["run"].get("cpu_s")
+        lines.append(
+            f"| {c['shape']} | {c['packing']} | {len(rows)} | {_stat(f('initial_void_ratio'), '.3f')} | {peak} "
+            f"| {_stat(f('ultimate_friction_deg'), '.1f')}° | {_stat(psi, '.1f')}°{' *' if clipped else ''} "
+            f"| {_stat([100 * x for x in ev], '+.1f')} % (at {100 * end:.0f} %) "
+            f"| {100 * max(f('lateral_stress_error_median')):.2f} % / {100 * max(f('lateral_stress_error_max')):.1f} % "
+            f"| {int(sum(f('steps'))):,} | {'' if cpu is None else f'{cpu:.0f}'} |")
+    total = sum(c["run"].get("cpu_s", 0.0) for c in cases)
+    if any(float(r["max_dilatancy_deg"]) >= 89.999 for c in cases for r in c["rows"]):
+        lines.append("")
+        lines.append("\\* results.csv reads 90° (the formula clipped where the specimen collapses, dε_v/dε₁ > 1); "
+                     "the column is over the records where it is in range")
+    lines.append("")
+    lines.append(f"total CPU of the {len(cases)} case(s): {total:.0f} s ({total / 60:.1f} min)")
+    return "\n".join(lines)
+
+
+def figure(cases: list[dict], title: str):
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4), dpi=120)
+    for c in cases:
+        for k, curve in enumerate(c["curves"]):
+            e1 = [100 * float(r["axial_strain"]) for r in curve]
+            label = f"{c['shape']}, {c['packing']}" if k == 0 else None
+            ax.plot(e1, [float(r["q_over_p"]) for r in curve], c["style"], color=c["colour"], lw=1.3, label=label)
+            bx.plot(e1, [100 * float(r["volumetric_strain"]) for r in curve], c["style"], color=c["colour"], lw=1.3,
+                    label=label)
+    ax.axhline(PAPER_ULTIMATE_M, color="k", ls=":", lw=1,
+               label=f"paper: ultimate q/p′ ≈ {PAPER_ULTIMATE_M} (φ ≈ {phi_of(PAPER_ULTIMATE_M):.0f}°)")
+    ax.set_xlabel("axial strain ε₁ (%)")
+    ax.set_ylabel("stress ratio q/p′")
+    ax.set_title("(a) stress ratio", loc="left")
+    ax.set_ylim(bottom=0)
+    bx.axhline(0, color="0.6", lw=0.8)
+    bx.set_xlabel("axial strain ε₁ (%)")
+    bx.set_ylabel("volumetric strain ε_v (%), compression +")
+    bx.set_title("(b) volumetric strain (below 0: dilation)", loc="left")
+    for a in (ax, bx):
+        a.set_xlim(left=0)
+        a.grid(alpha=0.3)
+    ax.legend(fontsize=7, loc="lower right")
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    return fig
+
+
+def main(argv=None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/out/triaxial-comparison",
+                    help="folder of the cases' outputs (one sub-folder per shape and packing)")
+    ap.add_argument("--grains", type=int, default=1000)
+    ap.add_argument("--seeds", type=int, default=3, help="seeds per case (the full specification: 3)")
+    ap.add_argument("--axial-strain", type=float, default=0.25)
+    ap.add_argument("--inertial-number", type=float, default=1e-3)
+    ap.add_argument("--friction", type=float, default=0.95, help="contact friction (calibrated on the rough "
+                    "spheres' tilt angle, 38 deg)")
+    ap.add_argument("--confining-kpa", type=float, default=20.0)
+    ap.add_argument("--spheres", type=int, default=10, help="spheres per clump (the sphere baseline: 1)")
+    ap.add_argument("--cases", default="", help="run only these, comma-separated slugs, e.g. rough-angular-loose")
+    ap.add_argument("--nice", type=int, default=5)
+    ap.add_argument("--report-only", action="store_true", help="no runs: the table and figure of existing outputs")
+    ap.add_argument("--figure", type=Path, default=ROOT / "docs/img/triaxial-comparison.png")
+    args = ap.parse_args(argv)
+    chosen = [c.strip() for c in args.cases.split(",") if c.strip()]
+    known = [slug(s, p) for s, p in RUN_ORDER]
+    if any(c not in known for c in chosen):
+        ap.error(f"--cases: choose among {', '.join(known)}")
+    if not args.report_only:
+        args.out.mkdir(parents=True, exist_ok=True)
+        for shape, packing in RUN_ORDER:
+            if chosen and slug(shape, packing) not in chosen:
+                continue
+            code = run_case(args, shape, packing)
+            if code not in (0, 3):  # 3: a run's own check failed, its outputs are written: go on
+                print(f"stopped: {shape}, {packing} exited {code}", file=sys.stderr)
+                return code
+    cases = load_cases(args.out)
+    if not cases:
+        print(f"no outputs in {args.out}", file=sys.stderr)
+        return 1
+    print(table(cases))
+    r = cases[0]["rows"][0]
+    title = (f"drained triaxial, σ′₃ = {float(r['confining_kpa']):g} kPa, {r['grains']} grains, μ = "
+             f"{float(r['setting_friction']):g}, I = {float(r['setting_inertial_number']):g}, "
+             f"{len(cases[0]['rows'])} seed(s) a case, the rough grains as clumps of {r['setting_spheres']} spheres (Yade)")
+    fig = figure(cases, title)
+    args.figure.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(args.figure, metadata={"Software": None})
+    print(f"figure: {args.figure}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
