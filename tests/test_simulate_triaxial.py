@@ -235,3 +235,11 @@ def test_a_noisy_volume_curve_makes_no_extreme_dilatancy_angle():
     assert 0.0 < a.max_dilatancy_deg < 5.0, a
     narrow = triaxial_angles(e, np.full_like(e, 0.5), ev, slope_strain=0.0)  # the old 5-record slope
     assert narrow.max_dilatancy_deg > 3 * a.max_dilatancy_deg
+
+
+def test_a_collapsing_specimen_has_no_positive_dilatancy_angle():
+    """A loose specimen collapsing at dε_v/dε₁ ≈ 2.5 made −d/(2 − d) = +5: clipped to +90°, a dilation."""
+    e = np.linspace(0.0, 0.1, 101)
+    ev = np.where(e < 0.03, 2.5 * e, 0.075 + 0.1 * (e - 0.03))  # collapse, then slow compression
+    a = triaxial_angles(e, np.full_like(e, 0.8), ev)
+    assert a.max_dilatancy_deg < 0.0, a

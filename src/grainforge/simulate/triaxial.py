@@ -114,7 +114,9 @@ def friction_angle(m):
 def dilatancy_angle(rate):
     """Dilatancy angle (degrees) from d = dε_v/dε₁ (ε_v, ε₁ compression positive): sin ψ = −d/(2 − d).
 
-    Positive when the specimen dilates (ε_v falls as ε₁ grows), negative when it contracts.
+    Positive when the specimen dilates (ε_v falls as ε₁ grows), negative when it contracts; −90° from d = 1 on
+    (a specimen collapsing so fast that its sides move inwards too: −d/(2 − d) leaves [−1, 1] there and, past
+    d = 2, changes sign).
 
     Parameters
     ----------
@@ -132,9 +134,13 @@ def dilatancy_angle(rate):
     True
     >>> round(float(dilatancy_angle(-0.5)), 4)  # sin ψ = 0.5/2.5
     11.537
+    >>> dilatancy_angle([1.0, 2.0, 2.5, np.nan]).tolist()  # a collapse is no dilation
+    [-90.0, -90.0, -90.0, nan]
     """
     d = np.asarray(rate, dtype=np.float64)
-    return np.degrees(np.arcsin(np.clip(-d / (2.0 - d), -1.0, 1.0))) + 0.0  # + 0.0: no -0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        sin = np.where(d < 1.0, -d / (2.0 - np.minimum(d, 1.0)), np.where(np.isnan(d), np.nan, -1.0))
+    return np.degrees(np.arcsin(np.clip(sin, -1.0, 1.0))) + 0.0  # + 0.0: no -0.0
 
 
 def local_slope(x, y, window: int):
