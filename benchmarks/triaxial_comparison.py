@@ -127,24 +127,16 @@ def load_cases(out: Path) -> list[dict]:
     return cases
 
 
-def largest_dilatancy(curve: list[dict], window: int = 5) -> float:
-    """Largest dilatancy angle (deg) of a curve, as results.csv's (sin ψ = −d/(2 − d), d = dε_v/dε₁ the
-    least-squares slope over a centred window of 5 records) but over the records where the formula is in
-    range only: where d > 1 (a collapse contracting faster than the axial strain, seen in loose specimens)
-    −d/(2 − d) is outside [−1, 1], and results.csv's ``max_dilatancy_deg`` reads the clipped +90° there."""
+def largest_dilatancy(curve: list[dict]) -> float:
+    """Largest dilatancy angle (deg) of a triaxial.csv curve, by the package's own measure
+    (:func:`grainforge.simulate.triaxial.triaxial_angles`): rebuilt from the curve, so a run measured before a
+    change of that measure reads as the package reads it now."""
     import numpy as np
 
-    e = np.array([float(r["axial_strain"]) for r in curve])
-    v = np.array([float(r["volumetric_strain"]) for r in curve])
-    half, n = window // 2, len(e)
-    d = np.full(n, np.nan)
-    for i in range(n):
-        lo, hi = max(0, i - half), min(n, i + half + 1)
-        if hi - lo >= 2 and np.ptp(e[lo:hi]) > 0:
-            d[i] = np.polyfit(e[lo:hi], v[lo:hi], 1)[0]
-    s = -d / (2.0 - d)
-    ok = np.isfinite(s) & (np.abs(s) <= 1.0)
-    return float(np.degrees(np.arcsin(s[ok])).max()) if ok.any() else float("nan")
+    from grainforge.simulate.triaxial import triaxial_angles
+
+    col = {k: np.array([float(r[k]) for r in curve]) for k in ("axial_strain", "q_over_p", "volumetric_strain")}
+    return float(triaxial_angles(col["axial_strain"], col["q_over_p"], col["volumetric_strain"]).max_dilatancy_deg)
 
 
 def _stat(values, fmt: str) -> str:
@@ -164,21 +156,16 @@ def table(cases: list[dict]) -> str:
         f = lambda key: [float(r[key]) for r in rows]  # noqa: E731
         ev = [float(curve[-1]["volumetric_strain"]) for curve in c["curves"]]
         psi = [largest_dilatancy(curve) for curve in c["curves"]]
-        clipped = any(float(r["max_dilatancy_deg"]) >= 89.999 for r in rows)
         end = max(float(curve[-1]["axial_strain"]) for curve in c["curves"])
         peak = f"{_stat(f('peak_friction_deg'), '.1f')}° ({_stat([100 * x for x in f('peak_axial_strain')], '.1f')} %)"
         cpu = c["run"].get("cpu_s")
         lines.append(
             f"| {c['shape']} | {c['packing']} | {len(rows)} | {_stat(f('initial_void_ratio'), '.3f')} | {peak} "
-            f"| {_stat(f('ultimate_friction_deg'), '.1f')}° | {_stat(psi, '.1f')}°{' *' if clipped else ''} "
+            f"| {_stat(f('ultimate_friction_deg'), '.1f')}° | {_stat(psi, '.1f')}° "
             f"| {_stat([100 * x for x in ev], '+.1f')} % (at {100 * end:.0f} %) "
             f"| {100 * max(f('lateral_stress_error_median')):.2f} % / {100 * max(f('lateral_stress_error_max')):.1f} % "
             f"| {int(sum(f('steps'))):,} | {'' if cpu is None else f'{cpu:.0f}'} |")
     total = sum(c["run"].get("cpu_s", 0.0) for c in cases)
-    if any(float(r["max_dilatancy_deg"]) >= 89.999 for c in cases for r in c["rows"]):
-        lines.append("")
-        lines.append("\\* results.csv reads 90° (the formula clipped where the specimen collapses, dε_v/dε₁ > 1); "
-                     "the column is over the records where it is in range")
     lines.append("")
     lines.append(f"total CPU of the {len(cases)} case(s): {total:.0f} s ({total / 60:.1f} min)")
     return "\n".join(lines)
