@@ -138,8 +138,7 @@ def dilatancy_angle(rate):
     [-90.0, -90.0, -90.0, nan]
     """
     d = np.asarray(rate, dtype=np.float64)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        sin = np.where(d < 1.0, -d / (2.0 - np.minimum(d, 1.0)), np.where(np.isnan(d), np.nan, -1.0))
+    sin = -d / (2.0 - np.minimum(d, 1.0))  # from d = 1 on: −d ≤ −1, clipped to −90°; NaN stays NaN
     return np.degrees(np.arcsin(np.clip(sin, -1.0, 1.0))) + 0.0  # + 0.0: no -0.0
 
 
