@@ -89,14 +89,18 @@ def test_a_worker_killed_mid_run_has_its_files_rerun_and_the_table_is_the_same(c
         wrap = real_bar(**kw)
 
         def it(items):
-            for k, item in enumerate(wrap(items)):
-                if k == 0:
+            for item in wrap(items):
+                # kill at the first result after which a worker still holds files (the first one's files may
+                # all be done by the time it arrives: the workers' first imports make file 0 the slowest)
+                if "pid" not in killed:
                     with distributed.Client(cluster.scheduler_address, set_as_default=False) as client:
                         busy = {w: keys for w, keys in client.processing().items() if keys}
-                        victim = sorted(busy)[0]
-                        killed["tasks"] = len(busy[victim])
-                        killed["pid"] = client.run(os.getpid, workers=[victim])[victim]
-                    os.kill(killed["pid"], signal.SIGKILL)
+                        if busy:
+                            victim = sorted(busy)[0]
+                            killed["tasks"] = len(busy[victim])
+                            killed["pid"] = client.run(os.getpid, workers=[victim])[victim]
+                    if "pid" in killed:
+                        os.kill(killed["pid"], signal.SIGKILL)
                 yield item
 
         return it
@@ -105,7 +109,7 @@ def test_a_worker_killed_mid_run_has_its_files_rerun_and_the_table_is_the_same(c
     dask = runner.invoke(cli, ["analyse", str(grains), "--csv", str(tmp_path / "dask.csv"),
                                "--scheduler", cluster.scheduler_address])
     assert dask.exit_code == 0, dask.output
-    assert killed["tasks"] >= 1  # the killed worker held files: they were measured again elsewhere
+    assert killed.get("tasks", 0) >= 1  # the killed worker held files: they were measured again elsewhere
     assert (tmp_path / "dask.csv").read_bytes() == (tmp_path / "local.csv").read_bytes()
     deadline = time.monotonic() + 60  # the nanny replaces the worker: the next tests have two again
     while time.monotonic() < deadline:
