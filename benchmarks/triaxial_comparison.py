@@ -18,6 +18,7 @@ paper's ultimate q/p′ ≈ 1.5 as a reference line.
 
     .venv/bin/python benchmarks/triaxial_comparison.py --seeds 1 --axial-strain 0.2 --inertial-number 2e-3
     .venv/bin/python benchmarks/triaxial_comparison.py --seeds 1 --axial-strain 0.2 --inertial-number 2e-3 --report-only
+    .venv/bin/python benchmarks/triaxial_comparison.py --engine liggghts --mpi 2
 
 The engine runs use this checkout's ``src`` (``PYTHONPATH``), whatever grainforge the interpreter has
 installed. The defaults (3 seeds, 25 % of axial strain, I = 1e-3) are the full specification; see
@@ -69,6 +70,8 @@ def command(args, shape: str, packing: str, out: Path) -> list[str]:
            "--friction", f"{args.friction:g}", "--confining-kpa", f"{args.confining_kpa:g}",
            "--axial-strain", f"{args.axial_strain:g}", "--inertial-number", f"{args.inertial_number:g}",
            "--out", str(out)]
+    if args.engine != "yade":
+        cmd[cmd.index("--out"):cmd.index("--out")] = ["--engine", args.engine, "--mpi", str(args.mpi)]
     if as_spheres:
         cmd.insert(cmd.index("--packing"), "--as-spheres")
     elif args.spheres != 10:
@@ -104,6 +107,13 @@ def run_case(args, shape: str, packing: str) -> int:
         print(f"{shape}, {packing}: exit {proc.returncode}, {cpu:.0f} s CPU, {record['wall_s']:.0f} s wall",
               flush=True)
     return proc.returncode
+
+
+def engine_name(row: dict) -> str:
+    """The engine of a results.csv row as the figure's title names it (runs before the column: Yade)."""
+    if row.get("engine", "yade") == "liggghts":
+        return f"LIGGGHTS, servo walls, mpirun -np {row.get('mpi_ranks', 1)}"
+    return "Yade, periodic cell"
 
 
 def read_csv(path: Path) -> list[dict]:
@@ -206,8 +216,12 @@ def figure(cases: list[dict], title: str):
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--out", type=Path, default=ROOT / "benchmarks/out/triaxial-comparison",
-                    help="folder of the cases' outputs (one sub-folder per shape and packing)")
+    ap.add_argument("--out", type=Path, default=None,
+                    help="folder of the cases' outputs (one sub-folder per shape and packing) [default: "
+                    "benchmarks/out/triaxial-comparison, with -liggghts for that engine]")
+    ap.add_argument("--engine", choices=["yade", "liggghts"], default="yade",
+                    help="Yade's periodic cell or LIGGGHTS's box of servo walls (each seed under mpirun -np --mpi)")
+    ap.add_argument("--mpi", type=int, default=2, help="LIGGGHTS: MPI ranks of each run")
     ap.add_argument("--grains", type=int, default=1000)
     ap.add_argument("--seeds", type=int, default=3, help="seeds per case (the full specification: 3)")
     ap.add_argument("--axial-strain", type=float, default=0.25)
@@ -219,8 +233,12 @@ def main(argv=None) -> int:
     ap.add_argument("--cases", default="", help="run only these, comma-separated slugs, e.g. rough-angular-loose")
     ap.add_argument("--nice", type=int, default=5)
     ap.add_argument("--report-only", action="store_true", help="no runs: the table and figure of existing outputs")
-    ap.add_argument("--figure", type=Path, default=ROOT / "docs/img/triaxial-comparison.png")
+    ap.add_argument("--figure", type=Path, default=None,
+                    help="[default: docs/img/triaxial-comparison.png, -liggghts.png for that engine]")
     args = ap.parse_args(argv)
+    suffix = "" if args.engine == "yade" else f"-{args.engine}"
+    args.out = args.out or ROOT / f"benchmarks/out/triaxial-comparison{suffix}"
+    args.figure = args.figure or ROOT / f"docs/img/triaxial-comparison{suffix}.png"
     chosen = [c.strip() for c in args.cases.split(",") if c.strip()]
     known = [slug(s, p) for s, p in RUN_ORDER]
     if any(c not in known for c in chosen):
@@ -242,7 +260,8 @@ def main(argv=None) -> int:
     r = cases[0]["rows"][0]
     title = (f"drained triaxial, σ′₃ = {float(r['confining_kpa']):g} kPa, {r['grains']} grains, μ = "
              f"{float(r['setting_friction']):g}, I = {float(r['setting_inertial_number']):g}, "
-             f"{len(cases[0]['rows'])} seed(s) a case, the rough grains as clumps of {r['setting_spheres']} spheres (Yade)")
+             f"{len(cases[0]['rows'])} seed(s) a case, the rough grains as clumps of {r['setting_spheres']} spheres "
+             f"({engine_name(r)})")
     fig = figure(cases, title)
     args.figure.parent.mkdir(parents=True, exist_ok=True)
     fig.savefig(args.figure, metadata={"Software": None})
