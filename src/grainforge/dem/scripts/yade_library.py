@@ -181,6 +181,14 @@ def contact_engines():
             [Law2_ScGeom_FrictPhys_CundallStrack()])
 
 
+def advance(n):
+    """Run n time steps in this thread.  O.run(n, True) starts the loop in a thread of its own and polls
+    for its end: measured, about 36 ms of wall clock a call, paid at every settling check.  The steps are
+    the same, so are the results."""
+    for _ in range(int(n)):
+        O.step()
+
+
 def kinetic_energy(ids):
     """Translational + rotational kinetic energy of clumps ``ids`` (J)."""
     e = 0.0

@@ -61,7 +61,7 @@ def pour():
     history = [[O.iter, O.time, ke]]
     recent = []
     for _ in range(max_checks):
-        O.run(check_every, True)
+        advance(check_every)
         ke = kinetic_energy(ids)
         history.append([O.iter, O.time, ke])
         recent = (recent + [ke])[-window:]
