@@ -154,7 +154,7 @@ def _stat(values, fmt: str) -> str:
         return format(values[0], fmt)
     m = sum(values) / len(values)
     sd = math.sqrt(sum((v - m) ** 2 for v in values) / (len(values) - 1))
-    return f"{format(m, fmt)} ± {format(sd, fmt)}"
+    return f"{format(m, fmt)} ± {format(sd, fmt.replace('+', ''))}"
 
 
 def table(cases: list[dict]) -> str:
