@@ -187,7 +187,7 @@ def figure(cases: list[dict], title: str):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 4.4), dpi=120)
+    fig, (ax, bx) = plt.subplots(1, 2, figsize=(11, 5.0), dpi=120)
     for c in cases:
         for k, curve in enumerate(c["curves"]):
             e1 = [100 * float(r["axial_strain"]) for r in curve]
@@ -208,9 +208,11 @@ def figure(cases: list[dict], title: str):
     for a in (ax, bx):
         a.set_xlim(left=0)
         a.grid(alpha=0.3)
-    ax.legend(fontsize=7, loc="lower right")
+    # one legend under both panels: inside either it hides curves
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=4, frameon=False)
     fig.suptitle(title, fontsize=9)
-    fig.tight_layout()
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
     return fig
 
 
