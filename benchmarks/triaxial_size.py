@@ -7,10 +7,10 @@ The runs, as recorded in docs/simulate.md (the loose rough angular grains, LIGGG
 
     .venv/bin/python benchmarks/triaxial_comparison.py --engine liggghts --mpi 2 --cases rough-angular-loose
     .venv/bin/python benchmarks/triaxial_comparison.py --engine liggghts --mpi 2 --cases rough-angular-loose \\
-        --grains 8000 --seeds 1 --out benchmarks/out/triaxial-size-8000 --figure /tmp/size-8000.png
+        --grains 8000 --seeds 1 --out benchmarks/out/triaxial-size-8000 --figure benchmarks/out/triaxial-size-8000/figure.png
     .venv/bin/python benchmarks/triaxial_comparison.py --engine liggghts --mpi 2 --cases rough-angular-loose \\
-        --spheres 20 --seeds 1 --out benchmarks/out/triaxial-clump-20 --figure /tmp/clump-20.png
-    (and --spheres 40 into benchmarks/out/triaxial-clump-40)
+        --spheres 20 --seeds 1 --out benchmarks/out/triaxial-clump-20 --figure benchmarks/out/triaxial-clump-20/figure.png
+    (and --spheres 40 into benchmarks/out/triaxial-clump-40, likewise)
     .venv/bin/python benchmarks/triaxial_size.py --case rough-angular-loose \\
         benchmarks/out/triaxial-comparison-liggghts benchmarks/out/triaxial-size-8000 \\
         benchmarks/out/triaxial-clump-20 benchmarks/out/triaxial-clump-40

@@ -181,11 +181,12 @@ def missing_in(page: Path) -> list[str]:
                 continue
             if prog == "grainforge":
                 inputs, outputs = classify(tokens[1:])
-            else:  # another program (yade, a benchmark script): the files it is given; what follows --out it writes
+            else:  # another program (yade, a benchmark script): the files it is given; what follows --out or
+                # --figure it writes
                 if prog == "nice":  # the program it runs, from the venv made by make
                     tokens = tokens[1:]
                 rest = tokens[1:]
-                outputs = [v for k, v in zip(rest, rest[1:]) if k == "--out"]
+                outputs = [v for k, v in zip(rest, rest[1:]) if k in ("--out", "--figure")]
                 inputs = [t for t in rest if not t.startswith("-") and ("/" in t or FILE_SUFFIX.search(t))
                           and t not in outputs]
             problems += [f"{page.name}: `{' '.join(tokens)}` reads {i}, which nothing provides"
