@@ -5,6 +5,7 @@ Hypothesis runs a bounded number of examples with no per-example deadline
 """
 
 import os
+import signal
 
 import pytest
 from hypothesis import HealthCheck, settings
@@ -15,6 +16,13 @@ settings.register_profile(
 )
 settings.register_profile("thorough", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("GRAINFORGE_HYPOTHESIS", "default"))
+
+# The signal tests interrupt commands as a terminal's Ctrl-C does. A suite started in the background of a
+# non-interactive shell (`nohup make test &`) inherits SIGINT ignored, and so would every command it starts:
+# a command rightly leaves an inherited ignored SIGINT alone, and six signal tests then fail. The suite runs
+# as a foreground job would: SIGINT at Python's default in the test processes (and the commands they start).
+if signal.getsignal(signal.SIGINT) is signal.SIG_IGN:
+    signal.signal(signal.SIGINT, signal.default_int_handler)
 
 
 def pytest_collection_modifyitems(config, items):
