@@ -181,6 +181,34 @@ def table(cases: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def finish_figure(fig, ax, bx, title: str) -> None:
+    """The triaxial figure's axes, labels, grid, one legend under both panels (inside either it hides
+    curves) and title: (a) q/p′ and (b) ε_v against ε₁."""
+    ax.set_xlabel("axial strain ε₁ (%)")
+    ax.set_ylabel("stress ratio q/p′")
+    ax.set_title("(a) stress ratio", loc="left")
+    ax.set_ylim(bottom=0)
+    bx.axhline(0, color="0.6", lw=0.8)
+    bx.set_xlabel("axial strain ε₁ (%)")
+    bx.set_ylabel("volumetric strain ε_v (%), compression +")
+    bx.set_title("(b) volumetric strain (below 0: dilation)", loc="left")
+    for a in (ax, bx):
+        a.set_xlim(left=0)
+        a.grid(alpha=0.3)
+    handles, labels = ax.get_legend_handles_labels()
+    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=4, frameon=False)
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout(rect=(0, 0.1, 1, 1))
+
+
+def save_figure(fig, path: Path) -> int:
+    """Write the figure (no software stamp: the same runs give the same bytes) and say where; 0 for main."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, metadata={"Software": None})
+    print(f"figure: {path}")
+    return 0
+
+
 def figure(cases: list[dict], title: str):
     import matplotlib
 
@@ -197,22 +225,7 @@ def figure(cases: list[dict], title: str):
                     label=label)
     ax.axhline(PAPER_ULTIMATE_M, color="k", ls=":", lw=1,
                label=f"paper: ultimate q/p′ ≈ {PAPER_ULTIMATE_M} (φ ≈ {phi_of(PAPER_ULTIMATE_M):.0f}°)")
-    ax.set_xlabel("axial strain ε₁ (%)")
-    ax.set_ylabel("stress ratio q/p′")
-    ax.set_title("(a) stress ratio", loc="left")
-    ax.set_ylim(bottom=0)
-    bx.axhline(0, color="0.6", lw=0.8)
-    bx.set_xlabel("axial strain ε₁ (%)")
-    bx.set_ylabel("volumetric strain ε_v (%), compression +")
-    bx.set_title("(b) volumetric strain (below 0: dilation)", loc="left")
-    for a in (ax, bx):
-        a.set_xlim(left=0)
-        a.grid(alpha=0.3)
-    # one legend under both panels: inside either it hides curves
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=4, frameon=False)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0.1, 1, 1))
+    finish_figure(fig, ax, bx, title)
     return fig
 
 
@@ -265,10 +278,7 @@ def main(argv=None) -> int:
              f"{len(cases[0]['rows'])} seed(s) a case, the rough grains as clumps of {r['setting_spheres']} spheres "
              f"({engine_name(r)})")
     fig = figure(cases, title)
-    args.figure.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.figure, metadata={"Software": None})
-    print(f"figure: {args.figure}")
-    return 0
+    return save_figure(fig, args.figure)
 
 
 if __name__ == "__main__":

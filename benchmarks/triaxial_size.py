@@ -23,7 +23,7 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from triaxial_comparison import ROOT, _stat, engine_name, read_csv  # noqa: E402
+from triaxial_comparison import ROOT, _stat, engine_name, finish_figure, read_csv, save_figure  # noqa: E402
 
 
 def load(folder: Path, case: str) -> dict:
@@ -66,21 +66,7 @@ def figure(runs: list[dict], title: str):
             label = r["label"] + (f" ({len(r['curves'])} seeds)" if len(r["curves"]) > 1 else "") if j == 0 else None
             ax.plot(e1, [float(x["q_over_p"]) for x in curve], color=colour, lw=1.1, label=label)
             bx.plot(e1, [100 * float(x["volumetric_strain"]) for x in curve], color=colour, lw=1.1)
-    ax.set_xlabel("axial strain ε₁ (%)")
-    ax.set_ylabel("stress ratio q/p′")
-    ax.set_title("(a) stress ratio", loc="left")
-    ax.set_ylim(bottom=0)
-    bx.axhline(0, color="0.6", lw=0.8)
-    bx.set_xlabel("axial strain ε₁ (%)")
-    bx.set_ylabel("volumetric strain ε_v (%), compression +")
-    bx.set_title("(b) volumetric strain (below 0: dilation)", loc="left")
-    for a in (ax, bx):
-        a.set_xlim(left=0)
-        a.grid(alpha=0.3)
-    handles, labels = ax.get_legend_handles_labels()
-    fig.legend(handles, labels, fontsize=7, loc="lower center", ncol=4, frameon=False)
-    fig.suptitle(title, fontsize=9)
-    fig.tight_layout(rect=(0, 0.08, 1, 1))
+    finish_figure(fig, ax, bx, title)
     return fig
 
 
@@ -101,10 +87,7 @@ def main(argv=None) -> int:
     title = (f"{args.case}: drained triaxial, σ′₃ = {float(r['confining_kpa']):g} kPa, μ = "
              f"{float(r['setting_friction']):g}, I = {float(r['setting_inertial_number']):g} ({engine_name(r)})")
     fig = figure(runs, title)
-    args.figure.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(args.figure, metadata={"Software": None})
-    print(f"figure: {args.figure}")
-    return 0
+    return save_figure(fig, args.figure)
 
 
 if __name__ == "__main__":
