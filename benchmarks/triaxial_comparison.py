@@ -121,19 +121,23 @@ def read_csv(path: Path) -> list[dict]:
         return list(csv.DictReader(fh))
 
 
+def read_case(d: Path) -> dict:
+    """A case folder's results.csv ``rows``, each seed's triaxial.csv ``curves`` and ``run`` (run.json, or {})."""
+    rows = read_csv(d / "results.csv")
+    curves = [read_csv(d / f"triaxial-seed{r['seed']}" / "triaxial.csv") for r in rows]
+    run = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
+    return {"rows": rows, "curves": curves, "run": run}
+
+
 def load_cases(out: Path) -> list[dict]:
-    """Every case with outputs: its results.csv rows, each seed's triaxial.csv curve, and run.json."""
+    """Every case with outputs (:func:`read_case`), with its shape, packing, colour and line style."""
     cases = []
     for shape, _, _, colour in SHAPES:
         for packing, style in PACKINGS:
             d = out / slug(shape, packing)
-            if not (d / "results.csv").is_file():
-                continue
-            rows = read_csv(d / "results.csv")
-            curves = [read_csv(d / f"triaxial-seed{r['seed']}" / "triaxial.csv") for r in rows]
-            run = json.loads((d / "run.json").read_text()) if (d / "run.json").is_file() else {}
-            cases.append({"shape": shape, "packing": packing, "colour": colour, "style": style, "rows": rows,
-                          "curves": curves, "run": run})
+            if (d / "results.csv").is_file():
+                cases.append({"shape": shape, "packing": packing, "colour": colour, "style": style,
+                              **read_case(d)})
     return cases
 
 

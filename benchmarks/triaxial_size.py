@@ -23,18 +23,13 @@ import sys
 from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from triaxial_comparison import ROOT, _stat, engine_name, finish_figure, read_csv, save_figure  # noqa: E402
+from triaxial_comparison import ROOT, _stat, engine_name, finish_figure, read_case, save_figure  # noqa: E402
 
 
 def load(folder: Path, case: str) -> dict:
-    d = folder / case
-    rows = read_csv(d / "results.csv")
-    curves = [read_csv(d / f"triaxial-seed{r['seed']}" / "triaxial.csv") for r in rows]
-    log = folder / "runs.log"  # "<date> <time> <case> exit <code> cpu_s <s> wall_s <s>", a line a run
-    runs = [ln.split() for ln in log.read_text().splitlines()] if log.is_file() else []
-    cpu = [float(r[6]) for r in runs if r[2] == case and r[4] in ("0", "3")]  # finished (3: a check failed)
-    return {"rows": rows, "curves": curves, "cpu": cpu[-1] if cpu else None,
-            "label": f"{rows[0]['grains']} grains, {rows[0]['setting_spheres']} spheres a clump"}
+    run = read_case(folder / case)
+    rows = run["rows"]
+    return {**run, "label": f"{rows[0]['grains']} grains, {rows[0]['setting_spheres']} spheres a clump"}
 
 
 def table(runs: list[dict]) -> str:
@@ -43,7 +38,7 @@ def table(runs: list[dict]) -> str:
     for r in runs:
         f = lambda key: [float(x[key]) for x in r["rows"]]  # noqa: E731
         problems = sum(1 for x in r["rows"] if x["problems"])
-        cpu = "" if r["cpu"] is None else f"{r['cpu']:.0f}"
+        cpu = "" if "cpu_s" not in r["run"] else f"{r['run']['cpu_s']:.0f}"
         lines.append(f"| {r['rows'][0]['grains']} | {r['rows'][0]['setting_spheres']} | {len(r['rows'])} "
                      f"| {_stat(f('initial_void_ratio'), '.3f')} | {_stat(f('peak_friction_deg'), '.1f')}° "
                      f"({_stat([100 * x for x in f('peak_axial_strain')], '.1f')} %) "

@@ -57,6 +57,13 @@ def angular_grains(tmp_path_factory):
     return out
 
 
+def require_long_lane(why: str) -> None:
+    """Skip a test of the opt-in long lane unless ``GRAINFORGE_LONG=1`` (``GRAINFORGE_LONG=1 make test``); ``why``
+    says what it costs and what checks the same in the suite meanwhile."""
+    if os.environ.get("GRAINFORGE_LONG") != "1":
+        pytest.skip(f"{why}: set GRAINFORGE_LONG=1")
+
+
 def require_engine(executable: str, package: str = "yade python3-yade liggghts lammps openmpi-bin") -> str:
     """The path of a DEM engine (or mpirun) the test needs: skipped with the reason where it is not
     installed, a failure where GRAINFORGE_REQUIRE_ENGINES=1 (CI: a missing engine is a failure)."""

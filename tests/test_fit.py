@@ -5,12 +5,12 @@ from __future__ import annotations
 import csv
 import gzip
 import math
-import os
 import re
 from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import require_long_lane
 
 from grainforge.cli.main import cli
 from grainforge.fit import FITS, compare, read_sand, recipe_text
@@ -599,9 +599,8 @@ def test_the_opening_fraction_recovers_the_synthetic_angular_sands_settings_with
     sand's resolutions) recovers every known mean setting within 5 %, and within three of its standard errors,
     which are under 10 % of the mean rounding (from the four Atlas descriptors alone about 30 %: docs/fit.md, "The
     sand's mean settings" and "What a scan's images add", where six fit seeds give rounding +0.7 % to +4.6 %)."""
-    if os.environ.get("GRAINFORGE_LONG") != "1":
-        pytest.skip("a fit of 4,800 angular grains (4.5 min of CPU, 7 min on a loaded machine): set GRAINFORGE_LONG=1; "
-                    "the suite's other twin-fit tests check the fit, benchmarks/fit_recovery.py the recovery at size")
+    require_long_lane("a fit of 4,800 angular grains (4.5 min of CPU, 7 min on a loaded machine); the suite's other "
+                      "twin-fit tests check the fit, benchmarks/fit_recovery.py the recovery at size")
     from grainforge.fit import fit_sand
 
     sand = read_sand(ANGULAR_SAND.with_name("synthetic-angular-sand-opening.csv"))

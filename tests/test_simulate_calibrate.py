@@ -10,7 +10,7 @@ import math
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from conftest import require_engine
+from conftest import require_engine, require_long_lane
 
 from grainforge.cli.main import cli
 from grainforge.simulate.friction_search import (
@@ -321,11 +321,8 @@ def test_quick_triaxial_calibration_in_yade_reads_the_ultimate_angles_simulate_t
     """Two --quick triaxial runs (μ 0.25 and 0.5) by `simulate triaxial`, then a calibration of two frictions
     between them aiming at the mean of their ultimate angles: it runs the same decks (Yade repeats a run), so
     each friction's angle is results.csv's ultimate_friction_deg, and μ is the interpolation between them."""
-    import os
-
-    if os.environ.get("GRAINFORGE_LONG") != "1":
-        pytest.skip("four triaxial runs in Yade (4-10 min): set GRAINFORGE_LONG=1; the stand-in engine tests "
-                    "(-k triaxial) check the same wiring in the suite")
+    require_long_lane("four triaxial runs in Yade (4-10 min); the stand-in engine tests (-k triaxial) check the "
+                      "same wiring in the suite")
     require_engine("yade")
     ultimate = {}
     for mu in (0.25, 0.5):

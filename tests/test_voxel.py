@@ -53,7 +53,7 @@ def test_ball_is_the_analytic_ball_away_from_the_surface(anchor):
 def test_a_generated_grain_agrees_with_trimesh_contains(seed):
     g = grainforge.cri(rng=seed)
     mesh = trimesh.Trimesh(g.vertices, g.faces, process=False)
-    # 16 cells across (about 4,000 cells): trimesh without embreex casts its rays in NumPy, 10 s here, 90 s at 24
+    # 16 cells across (about 4,000 cells): trimesh without embreex casts its rays in NumPy, 17 s in CI, 59 s at 24
     grid = grid_for(g.vertices, np.ptp(g.vertices, axis=0).max() / 16, pad=1)
     c = _centres(grid)
     ref = mesh.contains(c)
