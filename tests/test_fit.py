@@ -290,24 +290,25 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     i = reseeded[0]
     again = measure_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
-    again = fit_sand(sand, "rf", count=50, **{**kw, "refine": 0, "reseed": 0})
+    # the counts below on 20 twins (the design is the same 128 grains, from the cache)
+    again = fit_sand(sand, "rf", count=20, **{**kw, "refine": 0, "reseed": 0})
     # the design came from the cache; rf's surface settings are not determined by the means (five settings, four
-    # means), so no spread sensitivity is measured for them: the estimate's two rounds remade the 50, no more
-    assert again.grains_measured == 50 * (1 + fitmod.POPULATION_ROUNDS)
+    # means), so no spread sensitivity is measured for them: the estimate's two rounds remade the 20, no more
+    assert again.grains_measured == 20 * (1 + fitmod.POPULATION_ROUNDS)
     assert not any(again.population.spread.values())
     # the mean-settings estimate remakes as many twins as asked, each round, and the estimate counts them
-    fewer = fit_sand(sand, "rf", count=50, population_grains=20, **{**kw, "refine": 0, "reseed": 0})
-    assert fewer.grains_measured == 50 + 20 * fitmod.POPULATION_ROUNDS and fewer.population.grains == 20
-    assert fitmod.fit_grains("rf", count=50, design_grains=128, refine=0, population_grains=20,
+    fewer = fit_sand(sand, "rf", count=20, population_grains=10, **{**kw, "refine": 0, "reseed": 0})
+    assert fewer.grains_measured == 20 + 10 * fitmod.POPULATION_ROUNDS and fewer.population.grains == 10
+    assert fitmod.fit_grains("rf", count=20, design_grains=128, refine=0, population_grains=10,
                              cached=lambda m: True)[0] == fewer.grains_measured
-    # with slopes measured on the grains: each of rf's 5 settings raised and lowered on the 20 grains, counted
+    # with slopes measured on the grains: each of rf's 5 settings raised and lowered on the 10 grains, counted
     lines = []
-    measured = fit_sand(sand, "rf", count=50, population_grains=20, population_slopes="measured", log=lines.append,
+    measured = fit_sand(sand, "rf", count=20, population_grains=10, population_slopes="measured", log=lines.append,
                         **{**kw, "refine": 0, "reseed": 0})
-    assert measured.grains_measured == 50 + 20 * fitmod.POPULATION_ROUNDS + 2 * 5 * 20
-    assert fitmod.fit_grains("rf", count=50, design_grains=128, refine=0, population_grains=20,
+    assert measured.grains_measured == 20 + 10 * fitmod.POPULATION_ROUNDS + 2 * 5 * 10
+    assert fitmod.fit_grains("rf", count=20, design_grains=128, refine=0, population_grains=10,
                              population_slopes="measured", cached=lambda m: True)[0] == measured.grains_measured
-    assert any(line.startswith("population slopes: measured on 20 grains") for line in lines), lines
+    assert any(line.startswith("population slopes: measured on 10 grains") for line in lines), lines
     assert all(np.isfinite(v) for v in measured.population.mean.values())
     with pytest.raises(ValueError, match="slopes"):
         fit_sand(sand, "rf", count=50, population_slopes="guessed", **kw)
