@@ -161,10 +161,11 @@ def test_quick_calibration_in_yade(grains, tmp_path):
     """A --quick tilt calibration: a few frictions of one seed, all outputs, the command that uses μ."""
     require_engine("yade")
     out = tmp_path / "cal"
-    # a target inside what quick rough-angular layers reach over μ 0.05–1.5 (else: 'not reached', exit 2)
+    # a target inside what quick rough-angular layers reach over μ 0.05–1.5 (else: 'not reached', exit 2); the
+    # tilt in 2° steps (finer than the tolerance; each run about half the quick default's 1°)
     r = CliRunner().invoke(cli, ["simulate", "calibrate", "tilt", str(grains), "--out", str(out), "--quick",
                                  "--target-angle", "28", "--tolerance", "3", "--max-frictions", "4",
-                                 "--start", "0.3"])
+                                 "--start", "0.3", "--tilt-step", "2"])
     assert r.exit_code == 0, r.output
     rows = list(csv.DictReader((out / "calibration.csv").read_text().splitlines()))
     assert 2 <= len(rows) <= 4 and {"friction", "seed", "angle_deg"} <= set(rows[0])
