@@ -340,9 +340,9 @@ def read_lammps_body_data(path):
 def test_lammps_polyhedron_deck_runs(lmp, population, tmp_path):
     """LAMMPS rounded/polyhedron bodies at the default vertex count: read back with write_data (units micro: µm,
     pg, µs). The contacts' cost grows fast with the vertices: 14 s to settle at 12, 41 s at 16."""
-    from grainforge.dem.polyhedron import DEFAULT_VERTICES
     from grainforge.dem.lammps import rotation_matrix
     from grainforge.dem.lammps_body import MICRO
+    from grainforge.dem.polyhedron import DEFAULT_VERTICES
 
     L, M = MICRO["length"], MICRO["mass"]
     out, truth = make_deck(population, tmp_path, "lammps", "--shape", "polyhedron")
