@@ -79,7 +79,8 @@ def triaxial_scene_settings(settings: TriaxialSettings, seed: int) -> dict:
         # Yade's local damping 0.7 while compacting (the set damping while shearing): a frictionless packing of
         # 1,000 rough spheres came to rest (mean net force under 1 %) in 21,150 steps, where at 0.3 it still had
         # 3 % after 69,330 (the time limit); the static state does not depend on damping, the void ratio reached
-        # does a little (0.593 against 0.551, the latter not at rest)
+        # does a little (0.593 against 0.551, the latter not at rest); frictionless single spheres and 10-sphere
+        # clumps of the rough angular grains still stop at 1.5-3 % (docs/simulate.md)
         "compaction_servo_gain": 0.3, "compaction_damping": 0.7,
         # the isotropic state: every normal stress within 1 % of the goal and the mean net force on a grain under
         # 1 % of the mean contact force, at three checks in a row; given up after 3/rate_c of simulated time
