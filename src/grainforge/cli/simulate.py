@@ -30,12 +30,13 @@ SHAPES = ("clump", "levelset")
 RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
 #: what a test's scenes run where it differs from RUNS: the triaxial scenes take clumps only
 TEST_RUNS = {"triaxial": {"yade": ("clump",), "liggghts": ("clump",)}}
-#: why a test refuses a representation its engine has (said after the refusal): Yade's level-set contact gains
-#: kinetic energy in a frictionless collision (benchmarks/levelset_energy.py), so a level-set specimen heats up
-#: in the frictionless compaction instead of coming to rest at the confining stress (docs/simulate.md)
-TEST_SHAPE_WHY = {("triaxial", "levelset"): "Yade's level-set contact gains energy in a frictionless collision, a "
-                                            "grain pair parting with 20 times its kinetic energy: a specimen never "
-                                            "comes to rest at the confining stress; docs/simulate.md"}
+#: why a test refuses a representation its engine has, by (test, engine, shape), said in the refusal: Yade's
+#: level-set contact gains kinetic energy in a frictionless collision (benchmarks/levelset_energy.py), so a
+#: level-set specimen heats up in the frictionless compaction instead of coming to rest (docs/simulate.md)
+TEST_SHAPE_WHY = {("triaxial", "yade", "levelset"): "Yade's level-set contact gains energy in a frictionless "
+                                                    "collision, a grain pair parting with 20 times its kinetic "
+                                                    "energy: a specimen never comes to rest at the confining "
+                                                    "stress; docs/simulate.md"}
 #: engines simulate runs under mpirun (--mpi)
 MPI_ENGINES = ("liggghts",)
 #: the engines' names in progress bars
@@ -63,7 +64,7 @@ def check_engine(engine: str, mpi: int | None, shape: str, test: str | None = No
                                "use --workers for runs at once (or --engine liggghts --mpi N)")
     if shape not in runs[engine]:
         what = f"simulate {test}'s {engine} scene takes" if test in TEST_RUNS else f"simulate's {engine} scenes take"
-        why = TEST_SHAPE_WHY.get((test, shape)) if shape in RUNS[engine] else None
+        why = TEST_SHAPE_WHY.get((test, engine, shape))
         raise click.UsageError(f"--shape {shape}: {what} "
                                f"{', '.join('--shape ' + s for s in runs[engine])} only ("
                                + (why or f"grainforge dem --shape {shape} writes the deck") + ")")
