@@ -312,9 +312,9 @@ def test_triaxial_runs_that_fail_their_check_are_named_after_the_outputs(grains,
     rec = json.loads((out / "calibration.json").read_text())
     assert len(rec["failed_runs"]) == rec["runs"] == 2
     assert r.stderr.strip().splitlines()[-1] == (
-        "check failed: friction 0.5, seed 0: the isotropic compaction did not reach the confining stress at rest; "
-        "friction 1, seed 0: the isotropic compaction did not reach the confining stress at rest (calibration.csv "
-        "has every run)")
+        "check failed: friction 0.5, seed 0: the specimen was not at rest at the confining stress when the shearing "
+        "started; friction 1, seed 0: the specimen was not at rest at the confining stress when the shearing started "
+        "(calibration.csv has every run)")
 
 
 @pytest.mark.slow

@@ -26,7 +26,7 @@ pytestmark = pytest.mark.slow
 distributed = pytest.importorskip("distributed")
 
 #: a two-seed quick repose sweep, one run at a time locally (the interrupt lands between the seeds)
-ARGS = ["--quick", "--seeds", "2"]
+ARGS = ["--quick", "--seeds", "2", "--grains", "30"]  # 30 grains: the plumbing, not a heap to measure
 #: the file every engine run writes that differs between any two runs (see the module text)
 ENGINE_LOG = "yade.log"
 

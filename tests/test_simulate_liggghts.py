@@ -144,8 +144,9 @@ def test_mpi_command_lets_open_mpi_run_as_root_and_oversubscribe(monkeypatch, tm
 # ---- the real engine ------------------------------------------------------------------------------------
 
 def check_run(runner, grains, out, test, *extra):
+    # the plumbing at the tilt's 30 grains in both tests (the documented quick repose: test_documented_commands.py)
     r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick", "--engine", "liggghts",
-                            *extra])
+                            "--grains", str(QUICK["grains"]), *extra])
     # exit 3: a run failed its own check (a quick run may measure no angle), named on stderr
     assert r.exit_code == 0 or (r.exit_code == 3 and "check failed: seed" in r.stderr), r.output
     rows = list(csv.DictReader((out / "results.csv").read_text().splitlines()))

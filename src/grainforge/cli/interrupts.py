@@ -58,7 +58,7 @@ def preload(modules: Iterable[str]) -> None:
 
 def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "about") -> None:
     """Before a long job: load the plotting backend and ``modules`` (:func:`preload`), then, when
-    the job is estimated at over a minute, say so on stderr.
+    the job is estimated at 10 s or more, say so on stderr.
 
     ``seconds`` is the job's estimate; ``bound`` words it ("about", "at most about").
     """
@@ -71,11 +71,11 @@ def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "abou
 
 
 def say_estimate(seconds: float, *, bound: str = "about") -> None:
-    """On stderr, the job's estimated time when it is over a minute (nothing below)."""
+    """On stderr, the job's estimated time when it is 10 s or more (nothing below: a user waits for no such job)."""
     import click
 
     from ..runtime.estimate import duration
 
-    if seconds > 60:
+    if seconds >= 10:
         click.echo(f"estimated time: {bound} {duration(seconds)} (a rough model; the progress bar shows the "
                    "measured rate)", err=True)

@@ -119,8 +119,7 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
     :data:`grainforge.dem.clump.DEFAULT_SPHERE_CAP`.
 
     A triaxial test's settings are :class:`grainforge.simulate.TriaxialSettings` (``--quick``:
-    :data:`grainforge.simulate.QUICK_TRIAXIAL`, in LIGGGHTS
-    :data:`grainforge.simulate.settings.QUICK_TRIAXIAL_LIGGGHTS`).
+    :func:`grainforge.simulate.settings.quick_settings`).
 
     Raises
     ------
@@ -129,20 +128,15 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
         for its periodic cell, or (LIGGGHTS) for its walls cut among ``mpi`` ranks
         (:func:`grainforge.simulate.liggghts_triaxial.check_ranks`).
     """
-    from ..simulate import QUICK, QUICK_TRIAXIAL
-    from ..simulate.levelset_scenes import check_levelset_run, quick_levelset
-    from ..simulate.settings import QUICK_TRIAXIAL_LIGGGHTS, check_triaxial_run
+    from ..simulate.levelset_scenes import check_levelset_run
+    from ..simulate.settings import check_triaxial_run, quick_settings
 
     if clump_accuracy is not None and values.get("spheres") is None and not quick:
         from ..dem.clump import DEFAULT_SPHERE_CAP
 
         values = {**values, "spheres": DEFAULT_SPHERE_CAP}
     if quick:
-        if test == "triaxial":
-            quick_values = QUICK_TRIAXIAL_LIGGGHTS if engine == "liggghts" else QUICK_TRIAXIAL
-        else:
-            quick_values = {**QUICK, **quick_levelset(test, shape)}
-        values = {**quick_values, **{k: v for k, v in values.items() if v is not None}}
+        values = {**quick_settings(test, shape), **{k: v for k, v in values.items() if v is not None}}
     settings = build_params(_settings_cls(test), values)
     try:
         check_levelset_run(test, shape, settings)

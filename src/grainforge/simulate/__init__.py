@@ -23,9 +23,9 @@ Nothing is tuned to the paper's numbers; the contact friction is an input.
 
 from .engine import EngineFailed, measure_result, run_test, run_yade, summarise, write_test_deck, yade_executable
 from .run_folders import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage, staged
-from .settings import QUICK, QUICK_TRIAXIAL, TESTS, Settings, TriaxialSettings, check_size, scene_settings
+from .settings import QUICK, QUICK_REPOSE, QUICK_TRIAXIAL, TESTS, Settings, TriaxialSettings, check_size, scene_settings
 from .specimen import build_population, check_inputs
 
-__all__ = ["TESTS", "Settings", "TriaxialSettings", "QUICK", "QUICK_TRIAXIAL", "yade_executable", "scene_settings", "check_inputs", "build_population",
+__all__ = ["TESTS", "Settings", "TriaxialSettings", "QUICK", "QUICK_REPOSE", "QUICK_TRIAXIAL", "yade_executable", "scene_settings", "check_inputs", "build_population",
            "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage", "staged",
            "commit_stage", "discard_stage", "EngineFailed", "keep_failed", "FAILED_PREFIX"]

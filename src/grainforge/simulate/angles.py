@@ -151,6 +151,11 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     if not b < 0:  # the fitted surface does not fall outwards: a pile of a few grains, no slope to speak of
         raise ValueError("the heap is too flat or too small to measure an angle (its surface does not fall "
                          "outwards)")
+    if -b * (centres[i2 - 1] - centres[i1]) < 0.5 * (hi - lo):
+        # the rings chosen stand on a shelf of the heap: the line falls by less than half the band it was meant
+        # to span (a heap of two grain layers measured a "slope" of 0.3 degrees this way)
+        raise ValueError("the heap is too flat or too small to measure an angle (the fitted rings are a shelf, "
+                         "not a slope)")
     prof = np.column_stack([centres, mean_profile])
     return HeapAngle(angle=float(np.degrees(np.arctan(-b))), spread=float(np.nanstd(per_sector)),
                      sectors=per_sector, foot=foot, height=height, profile=prof[np.isfinite(prof[:, 1])],

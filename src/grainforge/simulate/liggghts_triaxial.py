@@ -454,7 +454,7 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
     lost = len(initial) - len(final)
     out = {k: rec[k] for k in ("test", "grains", "d_mean", "grain_density", "solid_volume", "confining", "packing",
                                "strain_rate", "compaction_strain_rate", "inertial_number", "dt")}
-    out.update(inserted=len(initial), lost=lost, compacted=bool(run["compacted"]),
+    out.update(inserted=len(initial), lost=lost, compacted=bool(run["compacted"]), settled=bool(run["settled"]),
                void_ratio_compacted=(run["volume_compacted"] - solid) / solid,
                void_ratio_initial=float((volume[0] - solid) / solid), cell_final=[lx[-1], ly[-1], lz[-1]],
                t_compaction=run["steps_compaction"] * rec["dt"], steps_compaction=int(run["steps_compaction"]),
