@@ -2,7 +2,8 @@
 
 Every command in a shell block of README.md and the guides whose comment states a cost as ``≈ N s``,
 ``≈ N min`` or ``≈ N h`` (the time of the whole command on 2 idle cores) is run as written — only its output
-(``--out``/``-o``) is moved into a temporary folder — and timed. The command's own estimate is read from its
+(``--out``/``-o``, and ``out/…`` inputs an earlier command of its block writes, which is run first) is moved into a
+temporary folder — and timed. The command's own estimate is read from its
 ``estimated time: [at most] about …`` line on stderr. Printed per command: the stated cost, the estimate, the
 measured wall time, the CPU time of the command and its engines, and the two ratios (stated / measured and
 estimate / measured). A stated cost or an estimate is meant to be within a factor of 1.5 of the run; rows
@@ -40,34 +41,58 @@ ESTIMATE = re.compile(r"estimated time: (at most )?about ([\d.e+]+) (s|min|h|day
 FACTOR = 1.5
 
 
-def documented() -> list[tuple[str, str, float]]:
-    """(page, command, stated seconds) of every shell-block command whose comment states a cost."""
+def _output(tokens: list[str]) -> str | None:
+    for flag in ("--out", "-o"):
+        if flag in tokens:
+            return tokens[tokens.index(flag) + 1].rstrip("/")
+    return None
+
+
+def documented() -> list[tuple[str, str, float, list[str]]]:
+    """(page, command, stated seconds, earlier commands it reads from) of every shell-block command whose comment
+    states a cost; the earlier ones are the same block's commands whose output the command names."""
     found = []
     for page in PAGES:
         text = page.read_text()
         for m in re.finditer(r"^```(?:sh|bash|console|shell)?\n(.*?)^```", text, re.S | re.M):
+            before: list[str] = []
             for line in m.group(1).replace("\\\n", " ").splitlines():
                 code, _, comment = line.partition(" #")
+                code = " ".join(code.split())
+                if not code.startswith("grainforge "):
+                    continue
+                tokens = shlex.split(code)
                 cost = COST.search(comment)
-                if cost and code.strip().startswith("grainforge "):
-                    found.append((page.relative_to(ROOT).as_posix(), " ".join(code.split()),
-                                  float(cost.group(1)) * UNIT[cost.group(2)]))
+                if cost:
+                    needs = [c for c in before if any(t.rstrip("/") == _output(shlex.split(c))
+                                                      for t in tokens[1:])]
+                    found.append((page.relative_to(ROOT).as_posix(), code,
+                                  float(cost.group(1)) * UNIT[cost.group(2)], needs))
+                before.append(code)
     return found
 
 
 def relocated(command: str, folder: Path) -> list[str]:
-    """The command's tokens with its output (``--out``/``-o``) in ``folder``, the grainforge of this Python."""
+    """The command's tokens with its output (``--out``/``-o``), and any earlier output it reads, in ``folder``;
+    the grainforge of this Python."""
     tokens = shlex.split(command)
+    for k, tok in enumerate(tokens):
+        if tok.startswith("out/"):
+            tokens[k] = str(folder / tok)
     for flag in ("--out", "-o"):
         if flag in tokens:
             k = tokens.index(flag) + 1
-            tokens[k] = str(folder / Path(tokens[k]).name)
+            tokens[k] = str(folder / tokens[k].lstrip("/"))
     return [sys.executable, "-c", "from grainforge.cli.main import main; main()", *tokens[1:]]
 
 
-def run(command: str) -> dict:
-    """Run one documented command; its wall and CPU seconds, its estimate and exit status."""
+def run(command: str, needs: list[str]) -> dict:
+    """Run one documented command (after the earlier ones it reads from, not timed); its wall and CPU seconds,
+    its estimate and exit status."""
     with tempfile.TemporaryDirectory(prefix="doc-costs-") as tmp:
+        for earlier in needs:
+            subprocess.run(relocated(earlier, Path(tmp)), cwd=ROOT, stdin=subprocess.DEVNULL, capture_output=True,
+                           check=True)
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         t = time.perf_counter()
         r = subprocess.run(relocated(command, Path(tmp)), cwd=ROOT, stdin=subprocess.DEVNULL,
@@ -99,14 +124,14 @@ def main() -> None:
     if args.max_minutes is not None:
         rows = [r for r in rows if r[2] <= 60 * args.max_minutes]
     if args.list:
-        for page, command, stated in rows:
-            print(f"{_fmt(stated):>9}  {page}: {command}")
+        for page, command, stated, needs in rows:
+            print(f"{_fmt(stated):>9}  {page}: {command}" + (f"  (after: {'; '.join(needs)})" if needs else ""))
         return
     print(f"load average before: {', '.join(f'{x:.2f}' for x in os.getloadavg())}")
     print("| command | page | stated | estimate | wall | CPU | stated/wall | estimate/wall | exit |")
     print("|---|---|---|---|---|---|---|---|---|")
-    for page, command, stated in rows:
-        m = run(command)
+    for page, command, stated, needs in rows:
+        m = run(command, needs)
         ratio_s, ratio_e = stated / m["wall"], m["estimate"] / m["wall"]
         flag = lambda x: "" if 1 / FACTOR <= x <= FACTOR else " ✗"  # noqa: E731
         est = ("≤ " if m["bound"] else "") + _fmt(m["estimate"])
