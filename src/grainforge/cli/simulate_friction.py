@@ -280,7 +280,14 @@ def _report(record: dict, search, rows, label: str, out: Path, warning: str | No
     if warning:
         click.echo(warning, err=True)
     sd = record["friction_sd"]
-    spread = f" ± {sd:.3f}" if math.isfinite(sd) else " (one seed: no spread)"
+    if math.isfinite(sd):
+        spread = f" ± {sd:.3f}"
+    elif record["evaluations"] < 2:  # the first friction was within the tolerance: no slope to carry a spread
+        spread = " (one friction tried: no slope, no uncertainty)"
+    elif math.isinf(sd):  # the angles do not rise with μ near it
+        spread = " (the angle does not rise with friction near it: no uncertainty)"
+    else:
+        spread = " (one seed: no spread)"
     note = "" if search.converged else f" (not converged in {max_evaluations} frictions: the bracket's interpolation)"
     test, target = record["test"], record["target_angle_deg"]
     of = f" ({record['angle']})" if test == "triaxial" else ""

@@ -16,11 +16,14 @@ below the target) or halves it (above), clamped to ``[low, high]``; a bound
 reached without bracketing the target means the target is out of reach (the
 angles reached are in :class:`Unreachable`).  It then narrows the bracket by
 the Illinois variant of the secant (false-position) method, which keeps a
-bracket and does not stall on one side, until an evaluated angle is within
-``tolerance`` of the target, the bracket is narrower than
-``friction_tolerance``, or ``max_evaluations`` are spent.  The estimate is the
-secant root of the final bracket (linear interpolation between its two ends),
-and the slope of that bracket is reported.
+bracket and does not stall on one side, until the bracket is narrower than
+``friction_tolerance`` or ``max_evaluations`` are spent.  The first evaluated
+angle within ``tolerance`` of the target ends the search at once, while
+bracketing too.  The estimate is the secant root of the final bracket (linear
+interpolation between its two ends), and the slope of that bracket is
+reported; an angle within the tolerance before the target was bracketed is
+the final bracket on its own (both ends): its friction is the estimate, the
+bracket has no slope (NaN).
 
 The seed-averaged angle is noisy: two runs at the same μ with other seeds
 differ by the standard error of the mean, ``sd / sqrt(seeds)``.  That error,
@@ -244,7 +247,8 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
     start : float
         First μ tried (clamped into the bounds).
     tolerance : float
-        Degrees: stop when an evaluated angle is this close to the target.
+        Degrees: stop at the first evaluated angle this close to the target (while bracketing too: that
+        friction is then the estimate).
     friction_tolerance : float
         Stop when the bracket is narrower than this in μ.
     max_evaluations : int
@@ -304,6 +308,9 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
             below = e if below is None or e.friction > below.friction else below
         if e.angle >= target:
             above = e if above is None or e.friction < above.friction else above
+        if abs(e.angle - target) <= tolerance:  # the first friction within the tolerance ends the search, bracketed
+            # or not (then the friction itself is the estimate: its bracket is the one evaluation)
+            return done(e if below is None else below, e if above is None else above, True)
         if below is not None and above is not None:
             break
         if above is None and e.friction >= high or below is None and e.friction <= low:
@@ -319,8 +326,6 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
                               (min(x.angle for x in evaluations), max(x.angle for x in evaluations)))
         e = evaluate(min(2.0 * e.friction, high) if above is None else max(0.5 * e.friction, low))
     # 2. narrow it: Illinois false position on f = angle - target
-    if abs(e.angle - target) <= tolerance:
-        return done(below, above, True)
     fb, fa = below.angle - target, above.angle - target
     side = 0
     while len(evaluations) < max_evaluations:
@@ -357,7 +362,8 @@ def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
     Returns
     -------
     float
-        The standard uncertainty of μ (inf for a zero slope).
+        The standard uncertainty of μ (inf for a slope that is not positive; NaN for no slope, one friction
+        tried).
 
     Examples
     --------
@@ -365,7 +371,11 @@ def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
     0.043
     >>> friction_uncertainty(0.0, 1.5, 3)
     inf
+    >>> friction_uncertainty(float("nan"), 1.5, 3)
+    nan
     """
+    if math.isnan(slope):
+        return float("nan")
     if not (math.isfinite(slope) and slope > 0):
         return float("inf")
     return float(angle_sd / math.sqrt(max(1, int(seeds))) / slope)
@@ -664,7 +674,8 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: 
     ev = sorted(search.evaluations, key=lambda e: e.friction)
     ax.plot([e.friction for e in ev], [e.angle for e in ev], "s-", color="C0", ms=6, label="seed average")
     ax.axhline(target, color="C3", ls="--", lw=1, label=f"target {target:g}°")
-    ax.axvline(search.friction, color="C2", lw=1.5, label=f"μ = {search.friction:.3f} ± {mu_sd:.3f}")
+    spread = f" ± {mu_sd:.3f}" if math.isfinite(mu_sd) else ""
+    ax.axvline(search.friction, color="C2", lw=1.5, label=f"μ = {search.friction:.3f}{spread}")
     if math.isfinite(mu_sd):
         ax.axvspan(search.friction - mu_sd, search.friction + mu_sd, color="C2", alpha=0.15)
     ax.set_xlabel("contact friction μ")
