@@ -72,6 +72,44 @@ def test_tilt_failure_angle_interpolates_and_reports_no_failure():
     assert math.isnan(tilt_failure_angle(h[2:]))      # had failed at the first angle: unknown
 
 
+def _drawn_crossing(ax, line, threshold):
+    """Where ``line`` as drawn (straight segments in display space: the log axis's) first rises above
+    ``threshold``, in data units."""
+    xy = ax.transData.transform(np.column_stack([line.get_xdata(), line.get_ydata()]))
+    level = ax.transData.transform([[0.0, threshold]])[0, 1]
+    k = int(np.nonzero(xy[:, 1] > level)[0][0])
+    (x0, y0), (x1, y1) = xy[k - 1], xy[k]
+    x = x0 + (x1 - x0) * (level - y0) / (y1 - y0)
+    return float(ax.transData.inverted().transform([[x, level]])[0, 0])
+
+
+@pytest.mark.parametrize("history", [
+    [[22.0, 0.0], [23.0, 0.004], [24.0, 0.05], [25.0, 1.5], [26.0, 3.0]],   # a slide: a jump of decades
+    [[15.0, 1e-5], [16.0, -0.002], [17.0, 0.3], [18.0, 0.45], [19.0, 0.6]],  # creep; a displacement below 0
+    [[30.0, 0.0], [30.5, 0.2], [31.0, 0.5], [31.5, 0.8]],                    # at the threshold, then over it
+])
+def test_the_tilt_figure_crosses_the_threshold_at_the_reported_failure_angle(history):
+    """tilt.png's line of a seed (as the command draws it: simulate.results.figure) crosses half a grain diameter,
+    read in the log axis's own space, at the angle results.csv reports (measure_result)."""
+    import matplotlib.pyplot as plt
+
+    from grainforge.simulate.engine import measure_result
+    from grainforge.simulate.results import figure
+
+    result = {"test": "tilt", "d_mean": 0.002, "grains": 30, "inserted": 30, "lost": 0, "steps": 1, "dt": 1e-5,
+              "time": 1.0, "history": history, "failure_angle": 1.0}
+    row = {"seed": 0, **measure_result(result)}
+    fig = figure("tilt", [result], [row])
+    ax = fig.axes[0]
+    (line,) = [ln for ln in ax.get_lines() if ln.get_label().startswith("seed 0")]
+    assert ax.get_yscale() == "log" and f"fails at {row['angle_deg']:.1f}°" in line.get_label()
+    assert _drawn_crossing(ax, line, 0.5) == pytest.approx(row["angle_deg"], abs=1e-9)
+    # the markers are the record's own increments
+    marks = np.column_stack([line.get_xdata(), line.get_ydata()])[line.get_markevery()]
+    assert marks == pytest.approx(np.maximum(np.array(history), [-np.inf, 1e-4]))
+    plt.close(fig)
+
+
 def test_settings_refuse_negative_friction_and_convert_mu_to_an_angle():
     with pytest.raises(ParameterError, match="friction"):
         Settings(friction=-0.1)

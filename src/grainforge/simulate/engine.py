@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .angles import heap_angle, tilt_failure_angle
+from .angles import TILT_FAILURE, heap_angle, tilt_failure_angle
 from .process import EngineFailed, find_executable, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 
@@ -176,7 +176,7 @@ def measure_result(result: dict) -> dict:
                        heap_foot_radius_mm=1e3 * h.foot, settled=bool(result["settled"]), note="")
     else:
         hist = np.asarray(result["history"], dtype=np.float64)
-        angle = tilt_failure_angle(hist[:, :2], displacement=0.5)
+        angle = tilt_failure_angle(hist[:, :2], displacement=TILT_FAILURE)
         row.update(angle_deg=angle, sector_sd_deg=float("nan"), settled=result["failure_angle"] is not None,
                    note="" if np.isfinite(angle) else "the layer did not fail, or had failed at the first angle")
     return row

@@ -11,9 +11,12 @@ import numpy as np
 
 from ..io import save_figure, write_csv
 from ..params import as_dict
-from .angles import heap_angle
+from .angles import TILT_FAILURE, heap_angle, tilt_curve
 
 __all__ = ["write_report", "figure"]
+
+#: the lowest displacement tilt.png's log axis shows (grain diameters); smaller ones are drawn on it
+DISPLACEMENT_FLOOR = 1e-4
 
 
 def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> list[Path]:
@@ -69,7 +72,9 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
     height against distance from the heap's axis, in mm) with the fitted slope;
     right, each seed's surface profile with its angle.  Tilt: the layer's mean
     downslope displacement against the tilt angle, per seed, with the failure
-    threshold and the failure angles.
+    threshold and the failure angles; between increments each line is the
+    interpolation the failure angle is read from (:func:`grainforge.simulate.angles.tilt_curve`), so it
+    crosses the threshold at the angle reported.
 
     Parameters
     ----------
@@ -136,15 +141,20 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
     else:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
         for k, (res, row) in enumerate(zip(results, rows)):
-            hist = np.asarray(res["history"])
-            ax.plot(hist[:, 0], np.maximum(hist[:, 1], 1e-4), "o-", ms=3, color=f"C{k}",
-                    label=f"seed {row['seed']}: fails at {row['angle_deg']:.1f}°"
-                    if math.isfinite(row["angle_deg"]) else f"seed {row['seed']}: no failure")
-        ax.axhline(0.5, color="0.3", ls="--", lw=1, label="failure: 0.5 grain diameters")
+            # between increments, as the failure angle interpolates them (tilt_failure_angle): the line crosses
+            # the threshold at the angle the legend gives
+            angles, disp, increments = tilt_curve(np.asarray(res["history"]), displacement=TILT_FAILURE)
+            failed = math.isfinite(row["angle_deg"])
+            ax.plot(angles, np.maximum(disp, DISPLACEMENT_FLOOR), "o-", ms=3, markevery=list(increments),
+                    color=f"C{k}", label=f"seed {row['seed']}: fails at {row['angle_deg']:.1f}°" if failed
+                    else f"seed {row['seed']}: no failure")
+            if failed:
+                ax.plot([row["angle_deg"]], [TILT_FAILURE], "|", ms=10, mew=1.5, color=f"C{k}")
+        ax.axhline(TILT_FAILURE, color="0.3", ls="--", lw=1, label="failure: 0.5 grain diameters")
         ax.set_xlabel("tilt angle (°)")
         ax.set_ylabel("mean downslope displacement (grain diameters)")
         ax.set_yscale("log")
-        ax.set_ylim(1e-4, 2.0)
+        ax.set_ylim(DISPLACEMENT_FLOOR, 2.0)
         ax.set_title("tilt table: a periodic layer on a rough plate")
         ax.legend(loc="upper left", fontsize=8)
     fig.tight_layout()
