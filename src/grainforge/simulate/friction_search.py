@@ -638,7 +638,7 @@ def calibration_record(search: FrictionSearch, rows: Sequence[dict], *, target: 
 
 
 def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, mu_sd: float,
-                       angle: str | None = None):
+                       angle: str | None = None, caption: str | None = None):
     """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty.
 
     Parameters
@@ -655,6 +655,8 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: 
         The uncertainty of μ (:func:`friction_uncertainty`; a band when finite).
     angle : {"ultimate", "peak"}, optional
         A triaxial test's friction angle (:func:`calibrated_angle`), named on the y axis.
+    caption : str, optional
+        The line above the plot (:func:`grainforge.simulate.results.figure_caption`: engine, population, rate).
 
     Returns
     -------
@@ -682,12 +684,15 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: 
     ax.set_ylabel(calibrated_angle(test, angle)[1] + " (°)")
     ax.set_title(f"calibration on the {test} test: {len(search.evaluations)} frictions, {len(rows)} runs")
     ax.legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
+    from .results import add_caption
+
+    add_caption(fig, caption)
     return fig
 
 
 def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, settings,
-                      command: str, out, low: float, high: float, angle: str | None = None) -> dict:
+                      command: str, out, low: float, high: float, angle: str | None = None,
+                      caption: str | None = None) -> dict:
     """Write ``calibration.csv`` (every run; a triaxial run's angles too), ``calibration.json`` and
     ``calibration.png`` into ``out``; the record (:func:`calibration_record`).
 
@@ -711,6 +716,9 @@ def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: f
         The bounds of μ searched.
     angle : {"ultimate", "peak"}, optional
         A triaxial test's friction angle (:func:`calibrated_angle`).
+    caption : str, optional
+        The figure's line naming the engine, the population and the rate
+        (:func:`grainforge.simulate.results.figure_caption`), also the PNG's ``Description``.
 
     Returns
     -------
@@ -729,6 +737,6 @@ def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: f
         else CALIBRATION_COLUMNS
     write_csv(out / "calibration.csv", [{k: r.get(k, "") for k in keep} for r in rows])
     (out / "calibration.json").write_text(json.dumps(record, indent=1) + "\n")
-    save_figure(calibration_figure(search, rows, target=target, test=test, mu_sd=record["friction_sd"], angle=angle),
-                out / "calibration.png")
+    save_figure(calibration_figure(search, rows, target=target, test=test, mu_sd=record["friction_sd"], angle=angle,
+                                   caption=caption), out / "calibration.png", description=caption)
     return record
