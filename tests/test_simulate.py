@@ -195,6 +195,72 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
     assert (out / f"{test}-seed0" / "run.py").is_file()
     assert "angle" in r.stderr + r.stdout
     check_placed_as_the_deck_says(out / f"{test}-seed0")
+    # the temporary folder this run's Yade made (/tmp/yade-*, named in its log) is gone
+    (named,) = yade_temp_folders(out / f"{test}-seed0" / "yade.log")
+    assert named.name.startswith("yade-") and not named.exists()
+
+
+def yade_temp_folders(log):
+    """The temporary folders a Yade run named in its log (the deck's first line)."""
+    from pathlib import Path
+
+    from grainforge.simulate.process import TEMPDIR_LINE
+
+    return [Path(ln.split(maxsplit=1)[1]) for ln in log.read_text().splitlines() if ln.startswith(TEMPDIR_LINE)]
+
+
+class _Stop(Exception):
+    """An interruption raised inside the engine run's progress callback (as a Ctrl-C is raised in its loop)."""
+
+
+def test_a_yade_run_stopped_leaves_no_temporary_folder(grains, tmp_path, monkeypatch):
+    """Yade makes /tmp/yade-XXXXXX whatever TMPDIR says, and leaves it when a -x script ends or when it is killed:
+    a real Yade tilt run, with TMPDIR pointed at a fresh folder, stopped at its first progress line (the engine
+    killed, as on Ctrl-C): the folder it named is gone, and none is in TMPDIR."""
+    require_engine("yade")
+    from grainforge.simulate import build_population, run_yade, write_test_deck
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    settings = Settings(**{**QUICK, "grains": 10, "templates": 2, "spheres": 2})
+    deck = tmp_path / "deck"
+    write_test_deck(build_population([grains], settings), "tilt", settings=settings, seed=0, out=deck)
+
+    def stop(fraction, phase):
+        raise _Stop(phase)
+
+    with pytest.raises(_Stop):
+        run_yade(deck, progress=stop)
+    (named,) = yade_temp_folders(deck / "yade.log")
+    assert named.name.startswith("yade-") and not named.exists()
+    assert not list(tmp.glob("yade-*"))
+
+
+@pytest.mark.parametrize("stopped", [True, False], ids=["stopped", "ended"])
+def test_a_temporary_folder_the_engine_names_is_removed_after_it_however_it_ended(tmp_path, stopped):
+    """A stand-in engine names two folders and is killed (the run stopped at its progress line), or ends by itself:
+    the one whose name begins with the engine's prefix is removed with what it holds, the other one kept."""
+    from grainforge.simulate.process import run_engine_process
+
+    mine, other = tmp_path / "yade-x", tmp_path / "kept"
+    engine = _fake_engine(tmp_path / "engine", f'mkdir "{mine}" "{other}"\ntouch "{mine}/file"\n'
+                                               f'echo "grainforge-tempdir {mine}"\necho "grainforge-tempdir {other}"\n'
+                                               'echo "grainforge-progress 0.5 running"\n'
+                                               + ("sleep 60\n" if stopped else ""))
+
+    def stop(fraction, phase):
+        if stopped:
+            raise _Stop(phase)
+
+    run = lambda: run_engine_process([str(engine)], tmp_path, log_path=tmp_path / "log", env={},  # noqa: E731
+                                     progress=stop, temp_prefix="yade-")
+    if stopped:
+        with pytest.raises(_Stop):
+            run()
+    else:
+        assert run() == 0
+    assert not mine.exists() and other.is_dir()
 
 
 def check_placed_as_the_deck_says(run_dir):
