@@ -80,7 +80,7 @@ def main(argv=None) -> int:
                 rows = run_test(args.test, templates, settings=settings, out=out, label=label, overwrite=True,
                                 workers=args.workers)
             c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
-            write_report(rows, out, args.test, settings)
+            write_report(rows, out, test=args.test, settings=settings)
             s = summarise(rows)
             cpu = (c1.ru_utime + c1.ru_stime) - (c0.ru_utime + c0.ru_stime)
             angles = ", ".join(f"{r['angle_deg']:.1f}" for r in rows)

@@ -55,7 +55,7 @@ def run_set(test, population, settings, out, engine, mpi=None, workers=1):
     rows = run_test(test, templates, settings=settings, out=out, label=label, overwrite=True, workers=workers, engine=engine,
                     mpi=mpi)
     c1, t1 = resource.getrusage(resource.RUSAGE_CHILDREN), time.time()
-    write_report(rows, out, test, settings)
+    write_report(rows, out, test=test, settings=settings)
     return rows, (c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime, t1 - t0)
 
 

@@ -39,7 +39,7 @@ def run_engine(engine: str, settings, as_spheres: bool, out: Path):
     c0, t0 = resource.getrusage(resource.RUSAGE_CHILDREN), time.time()
     rows = run_test("triaxial", templates, settings=settings, out=out, label=engine, overwrite=True, workers=1, engine=engine)
     c1, t1 = resource.getrusage(resource.RUSAGE_CHILDREN), time.time()
-    write_report(rows, out, "triaxial", settings)
+    write_report(rows, out, test="triaxial", settings=settings)
     return rows, (c1.ru_utime + c1.ru_stime - c0.ru_utime - c0.ru_stime, t1 - t0)
 
 

@@ -155,7 +155,10 @@ def check_placed(report, out, truth):
 
 def test_yade_deck_runs(yade, population, tmp_path):  # the engine first: skip before generating grains
     out, truth = make_deck(population, tmp_path, "yade")
-    run([yade, "-n", "-x", "run.py"], cwd=out)
+    proc = run([yade, "-n", "-x", "run.py"], cwd=out)
+    # run by hand, the deck names Yade's temporary folder first and removes it as it ends (Yade leaves it)
+    (named,) = [ln.split()[1] for ln in proc.stdout.splitlines() if ln.startswith("grainforge-tempdir ")]
+    assert os.path.basename(named).startswith("yade-") and not os.path.exists(named)
     report = json.loads((out / "results-yade.json").read_text())
     check_report(report, truth)
     check_placed(report, out, truth)

@@ -235,14 +235,19 @@ def test_printing_doc_shows_the_level_generate_chooses(runner, tmp_path):
 # -- pictures ----------------------------------------------------------------------------------------
 
 def _scale_bars(fig):
-    """(label, length in pixels) of every panel's scale bar."""
+    """(panel, label, length in mesh units) of every scale bar of a sheet."""
     bars = []
-    for ax in fig.axes:
-        line = next(ln for ln in ax.lines if ln.get_label() == "scale bar")
-        x = line.get_xdata()
-        text = next(t.get_text() for t in ax.texts if t.get_text().endswith(" mm"))
-        bars.append((text, round(float(x[1] - x[0]), 6)))
+    for k, ax in enumerate(fig.axes):
+        for line in (ln for ln in ax.lines if ln.get_label() == "scale bar"):
+            x = line.get_xdata()
+            text = next(t.get_text() for t in ax.texts if t.get_text().endswith(" mm"))
+            bars.append((k, text, round(float(x[1] - x[0]), 6)))
     return bars
+
+
+def _grain_pixels(fig):
+    """Each panel's grain: its pixels (not the white background)."""
+    return [float((np.asarray(ax.images[0].get_array())[..., :3].sum(-1) < 2.9).sum()) for ax in fig.axes]
 
 
 def test_common_scale_sheet_has_one_scale_bar_and_true_relative_sizes():
@@ -252,15 +257,55 @@ def test_common_scale_sheet_has_one_scale_bar_and_true_relative_sizes():
 
     small, large = trimesh.creation.icosphere(3, radius=1.0), trimesh.creation.icosphere(3, radius=4.0)
     fig = contact_sheet_figure([small, large], ["1 mm", "4 mm"], unit="mm", dpi=60, common_scale=True)
-    bars = _scale_bars(fig)
-    assert bars[0] == bars[1]
+    # one bar, under the first panel of the last row, as long as it says (the axes are in mm)
+    assert [(k, text) for k, text, _ in _scale_bars(fig)] == [(0, "2 mm")]
+    assert _scale_bars(fig)[0][2] == 2.0
     # the small sphere covers (1/4)² of the large one's pixels
-    areas = [float((np.asarray(ax.images[0].get_array())[..., :3].sum(-1) < 2.9).sum()) for ax in fig.axes]
+    areas = _grain_pixels(fig)
     assert areas[0] / areas[1] == pytest.approx(1 / 16, rel=0.1)
     plt.close(fig)
     own = contact_sheet_figure([small, large], ["1 mm", "4 mm"], unit="mm", dpi=60)
-    assert _scale_bars(own)[0][0] != _scale_bars(own)[1][0]  # each filling its panel: two scales
+    assert [(k, text) for k, text, _ in _scale_bars(own)] == [(0, "0.5 mm"), (1, "2 mm")]  # each filling its panel
     plt.close(own)
+
+
+def test_render_draws_grains_at_one_scale_with_one_scale_bar(tmp_path, monkeypatch):
+    """`grainforge render` of grains of 1 and 4 mm: every panel at one scale (equal axis limits, in mm), one
+    scale bar for the sheet, their sizes compare; --own-scale: each filling its panel, a bar each."""
+    import grainforge.io
+
+    figures = []
+    save = grainforge.io.save_figure
+
+    def capture(fig, path, **kw):
+        figures.append(fig)
+        return save(fig, path, **kw)
+
+    monkeypatch.setattr(grainforge.io, "save_figure", capture)
+    files = []
+    for r in (0.5, 2.0, 1.0):
+        files.append(tmp_path / f"grain-{r:g}.stl")
+        trimesh.creation.icosphere(3, radius=r).export(files[-1])
+    from click.testing import CliRunner
+
+    runner = CliRunner()
+    r = runner.invoke(cli, ["render", *map(str, files), "-o", str(tmp_path / "sheet.png"), "--columns", "2"])
+    assert r.exit_code == 0, r.output
+    fig = figures[-1]
+    limits = {(ax.get_xlim(), ax.get_ylim()) for ax in fig.axes}
+    assert len(limits) == 1  # one scale: the same limits, in mm, on every panel
+    (xlim, _), = limits
+    assert xlim[1] == pytest.approx(2.0, rel=0.03)  # half a panel: the largest grain's radius, in mm
+    bars = _scale_bars(fig)
+    assert len(bars) == 1 and bars[0][0] == 2 and bars[0][1].endswith(" mm")  # under the last row's first panel
+    areas = _grain_pixels(fig)
+    assert areas[0] / areas[1] == pytest.approx(1 / 16, rel=0.1) and areas[2] / areas[1] == pytest.approx(1 / 4, rel=0.1)
+    assert (tmp_path / "sheet.png").stat().st_size > 1000
+    r = runner.invoke(cli, ["render", *map(str, files), "-o", str(tmp_path / "own.png"), "--own-scale"])
+    assert r.exit_code == 0, r.output
+    own = figures[-1]
+    assert len({(ax.get_xlim(), ax.get_ylim()) for ax in own.axes}) == 3
+    assert [k for k, _, _ in _scale_bars(own)] == [0, 1, 2]
 
 
 def test_dpa_figure_sheets_use_one_scale(monkeypatch, tmp_path):

@@ -145,10 +145,14 @@ def test_render_has_a_scale_bar_when_the_grain_has_a_physical_size():
         assert len(bars) == 1
         texts = [t.get_text() for t in ax.texts]
         assert texts == ["0.5 mm"]
-        # the bar's length in pixels matches 0.5 mm at the picture's scale
+        # the panel's axes are in mm: the bar is 0.5 long, and the 2 mm grain spans 2 of the picture's width
         x = bars[0].get_xdata()
-        px = 60 * 1.0                                       # panel pixels
-        assert (x[1] - x[0]) == pytest.approx(0.5 * (px / 2 - 2) / 1.0, rel=0.02)
+        assert (x[1] - x[0]) == pytest.approx(0.5)
+        image = ax.images[0]
+        left, right, _, _ = image.get_extent()
+        grain = np.asarray(image.get_array())[..., :3].sum(-1) < 2.9
+        columns = np.flatnonzero(grain.any(axis=0))
+        assert (columns[-1] - columns[0] + 1) * (right - left) / grain.shape[1] == pytest.approx(2.0, rel=0.05)
     plain = contact_sheet_figure([sphere], ["a"], panel_size=1.0, dpi=60)
     assert not plain.axes[0].get_lines() and not plain.axes[0].texts   # model units: no bar
 

@@ -72,6 +72,44 @@ def test_tilt_failure_angle_interpolates_and_reports_no_failure():
     assert math.isnan(tilt_failure_angle(h[2:]))      # had failed at the first angle: unknown
 
 
+def _drawn_crossing(ax, line, threshold):
+    """Where ``line`` as drawn (straight segments in display space: the log axis's) first rises above
+    ``threshold``, in data units."""
+    xy = ax.transData.transform(np.column_stack([line.get_xdata(), line.get_ydata()]))
+    level = ax.transData.transform([[0.0, threshold]])[0, 1]
+    k = int(np.nonzero(xy[:, 1] > level)[0][0])
+    (x0, y0), (x1, y1) = xy[k - 1], xy[k]
+    x = x0 + (x1 - x0) * (level - y0) / (y1 - y0)
+    return float(ax.transData.inverted().transform([[x, level]])[0, 0])
+
+
+@pytest.mark.parametrize("history", [
+    [[22.0, 0.0], [23.0, 0.004], [24.0, 0.05], [25.0, 1.5], [26.0, 3.0]],   # a slide: a jump of decades
+    [[15.0, 1e-5], [16.0, -0.002], [17.0, 0.3], [18.0, 0.45], [19.0, 0.6]],  # creep; a displacement below 0
+    [[30.0, 0.0], [30.5, 0.2], [31.0, 0.5], [31.5, 0.8]],                    # at the threshold, then over it
+])
+def test_the_tilt_figure_crosses_the_threshold_at_the_reported_failure_angle(history):
+    """tilt.png's line of a seed (as the command draws it: simulate.results.figure) crosses half a grain diameter,
+    read in the log axis's own space, at the angle results.csv reports (measure_result)."""
+    import matplotlib.pyplot as plt
+
+    from grainforge.simulate.engine import measure_result
+    from grainforge.simulate.results import figure
+
+    result = {"test": "tilt", "d_mean": 0.002, "grains": 30, "inserted": 30, "lost": 0, "steps": 1, "dt": 1e-5,
+              "time": 1.0, "history": history, "failure_angle": 1.0}
+    row = {"seed": 0, **measure_result(result)}
+    fig = figure("tilt", [result], [row])
+    ax = fig.axes[0]
+    (line,) = [ln for ln in ax.get_lines() if ln.get_label().startswith("seed 0")]
+    assert ax.get_yscale() == "log" and f"fails at {row['angle_deg']:.1f}°" in line.get_label()
+    assert _drawn_crossing(ax, line, 0.5) == pytest.approx(row["angle_deg"], abs=1e-9)
+    # the markers are the record's own increments
+    marks = np.column_stack([line.get_xdata(), line.get_ydata()])[line.get_markevery()]
+    assert marks == pytest.approx(np.maximum(np.array(history), [-np.inf, 1e-4]))
+    plt.close(fig)
+
+
 def test_settings_refuse_negative_friction_and_convert_mu_to_an_angle():
     with pytest.raises(ParameterError, match="friction"):
         Settings(friction=-0.1)
@@ -160,6 +198,72 @@ def test_quick_run_in_yade(runner, grains, tmp_path, test):
     assert (out / f"{test}-seed0" / "run.py").is_file()
     assert "angle" in r.stderr + r.stdout
     check_placed_as_the_deck_says(out / f"{test}-seed0")
+    # the temporary folder this run's Yade made (/tmp/yade-*, named in its log) is gone
+    (named,) = yade_temp_folders(out / f"{test}-seed0" / "yade.log")
+    assert named.name.startswith("yade-") and not named.exists()
+
+
+def yade_temp_folders(log):
+    """The temporary folders a Yade run named in its log (the deck's first line)."""
+    from pathlib import Path
+
+    from grainforge.simulate.process import TEMPDIR_LINE
+
+    return [Path(ln.split(maxsplit=1)[1]) for ln in log.read_text().splitlines() if ln.startswith(TEMPDIR_LINE)]
+
+
+class _Stop(Exception):
+    """An interruption raised inside the engine run's progress callback (as a Ctrl-C is raised in its loop)."""
+
+
+def test_a_yade_run_stopped_leaves_no_temporary_folder(grains, tmp_path, monkeypatch):
+    """Yade makes /tmp/yade-XXXXXX whatever TMPDIR says, and leaves it when a -x script ends or when it is killed:
+    a real Yade tilt run, with TMPDIR pointed at a fresh folder, stopped at its first progress line (the engine
+    killed, as on Ctrl-C): the folder it named is gone, and none is in TMPDIR."""
+    require_engine("yade")
+    from grainforge.simulate import build_population, run_yade, write_test_deck
+
+    tmp = tmp_path / "tmp"
+    tmp.mkdir()
+    monkeypatch.setenv("TMPDIR", str(tmp))
+    settings = Settings(**{**QUICK, "grains": 10, "templates": 2, "spheres": 2})
+    deck = tmp_path / "deck"
+    write_test_deck(build_population([grains], settings), "tilt", settings=settings, seed=0, out=deck)
+
+    def stop(fraction, phase):
+        raise _Stop(phase)
+
+    with pytest.raises(_Stop):
+        run_yade(deck, progress=stop)
+    (named,) = yade_temp_folders(deck / "yade.log")
+    assert named.name.startswith("yade-") and not named.exists()
+    assert not list(tmp.glob("yade-*"))
+
+
+@pytest.mark.parametrize("stopped", [True, False], ids=["stopped", "ended"])
+def test_a_temporary_folder_the_engine_names_is_removed_after_it_however_it_ended(tmp_path, stopped):
+    """A stand-in engine names two folders and is killed (the run stopped at its progress line), or ends by itself:
+    the one whose name begins with the engine's prefix is removed with what it holds, the other one kept."""
+    from grainforge.simulate.process import run_engine_process
+
+    mine, other = tmp_path / "yade-x", tmp_path / "kept"
+    engine = _fake_engine(tmp_path / "engine", f'mkdir "{mine}" "{other}"\ntouch "{mine}/file"\n'
+                                               f'echo "grainforge-tempdir {mine}"\necho "grainforge-tempdir {other}"\n'
+                                               'echo "grainforge-progress 0.5 running"\n'
+                                               + ("sleep 60\n" if stopped else ""))
+
+    def stop(fraction, phase):
+        if stopped:
+            raise _Stop(phase)
+
+    run = lambda: run_engine_process([str(engine)], tmp_path, log_path=tmp_path / "log", env={},  # noqa: E731
+                                     progress=stop, temp_prefix="yade-")
+    if stopped:
+        with pytest.raises(_Stop):
+            run()
+    else:
+        assert run() == 0
+    assert not mine.exists() and other.is_dir()
 
 
 def check_placed_as_the_deck_says(run_dir):

@@ -88,6 +88,23 @@ def test_a_flat_angle_stops_at_the_evaluation_budget_not_converged():
     assert lo.friction < 0.7071 <= hi.friction
 
 
+@pytest.mark.parametrize("hit, offset", [(0.5, 0.3), (0.5, -0.3), (0.25, 0.3), (0.25, -0.3)],
+                         ids=["first-below", "first-above", "second-bracketing", "second-not-bracketing"])
+def test_the_first_angle_within_the_tolerance_ends_the_search_while_bracketing_too(hit, offset):
+    """The first friction (0.5) or the second (0.25, halved from 0.5 whose angle is above the target) lands 0.3°
+    from the target, within the 0.5° tolerance: no further friction is tried. Above the target, the second does not
+    bracket it (both angles are above): that friction is then the estimate itself."""
+    target = smooth(hit) + offset
+    tried = []
+    s = search_friction(lambda mu: tried.append(mu) or smooth(mu), target, tolerance=0.5)
+    assert tried == ([0.5] if hit == 0.5 else [0.5, 0.25])
+    assert s.converged and [e.friction for e in s.evaluations] == tried
+    if hit == 0.25 and offset > 0:  # bracketed by 0.25 and 0.5: their interpolation
+        assert s.friction == pytest.approx(0.25 + (target - smooth(0.25)) * 0.25 / (smooth(0.5) - smooth(0.25)))
+    else:  # one friction within the tolerance, the target not bracketed: that friction, no bracket slope
+        assert s.friction == hit and s.bracket == (s.evaluations[-1],) * 2 and math.isnan(s.slope)
+
+
 def test_a_nan_angle_stops_the_search():
     with pytest.raises(ValueError, match="no angle could be measured at friction 0.5"):
         search_friction(lambda mu: float("nan"), 30.0)
@@ -158,7 +175,8 @@ def test_the_printed_command_uses_the_calibrated_friction():
 
 @pytest.mark.slow
 def test_quick_calibration_in_yade(grains, tmp_path):
-    """A --quick tilt calibration: a few frictions of one seed, all outputs, the command that uses μ."""
+    """A --quick tilt calibration: up to four frictions of one seed, stopping at the first within the tolerance;
+    all outputs, the command that uses μ."""
     require_engine("yade")
     out = tmp_path / "cal"
     # a target inside what quick rough-angular layers reach over μ 0.05–1.5 (else: 'not reached', exit 2); the
@@ -168,7 +186,9 @@ def test_quick_calibration_in_yade(grains, tmp_path):
                                  "--start", "0.3", "--tilt-step", "2"])
     assert r.exit_code == 0, r.output
     rows = list(csv.DictReader((out / "calibration.csv").read_text().splitlines()))
-    assert 2 <= len(rows) <= 4 and {"friction", "seed", "angle_deg"} <= set(rows[0])
+    assert 1 <= len(rows) <= 4 and {"friction", "seed", "angle_deg"} <= set(rows[0])
+    # one seed: each row is a friction's angle; every friction before the last missed the tolerance
+    assert all(abs(float(row["angle_deg"]) - 28.0) > 3.0 for row in rows[:-1])
     rec = json.loads((out / "calibration.json").read_text())
     assert 0.05 <= rec["friction"] <= 1.5 and rec["runs"] == len(rows)
     (lo_mu, lo_a), (hi_mu, hi_a) = rec["bracket"]
@@ -284,6 +304,30 @@ def test_a_triaxial_calibration_reaches_the_ultimate_friction_angle(grains, tmp_
     assert rec["command"] in r.stdout and rec["command"].startswith("grainforge simulate triaxial ")
     assert f"--friction {rec['friction']:.3g}" in rec["command"] and "--quick" in rec["command"]
     assert (out / "calibration.png").stat().st_size > 10_000
+
+
+@pytest.mark.parametrize("frictions, target", [
+    ([0.5], _friction_angle(1.0) + 0.3),           # the start within the tolerance
+    ([0.5, 0.25], _friction_angle(0.75) - 0.3),    # halved to 0.25, within the tolerance, above: not bracketed
+])
+def test_a_calibration_stops_at_the_first_friction_within_the_tolerance(grains, tmp_path, stand_in_yade, frictions,
+                                                                        target):
+    """On the stand-in engine (ultimate stress ratio 0.5 + μ): a friction whose angle is within the 0.5° tolerance
+    ends the calibration, bracketed or not; no further friction is run, and that friction is the estimate."""
+    out = tmp_path / "cal"
+    r = CliRunner().invoke(cli, ["simulate", "calibrate", "triaxial", str(grains), "--out", str(out), "--quick",
+                                 "--target-angle", f"{target:.4f}"])
+    assert r.exit_code == 0, r.output
+    rows = list(csv.DictReader((out / "calibration.csv").read_text().splitlines()))
+    assert [float(row["friction"]) for row in rows] == frictions
+    assert sorted(p.name for p in (out / "runs").iterdir()) == [f"e{k}-mu{mu:.4f}" for k, mu in enumerate(frictions)]
+    rec = json.loads((out / "calibration.json").read_text())
+    assert rec["converged"] and rec["evaluations"] == rec["runs"] == len(frictions)
+    assert rec["friction"] == frictions[-1]
+    assert abs(float(rows[-1]["angle_deg"]) - target) <= 0.5
+    assert f"friction {frictions[-1]:.3f}" in r.stdout and f"({len(frictions)} runs)" in r.stdout
+    if len(frictions) == 1:
+        assert "one friction tried: no slope, no uncertainty" in r.stdout
 
 
 def test_a_triaxial_calibration_out_of_reach_ends_as_a_tilt_one_does(grains, tmp_path, stand_in_yade):

@@ -432,7 +432,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         run_test,
         staged,
     )
-    from ..simulate.results import write_report
+    from ..simulate.results import figure_caption, write_report
     from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
@@ -456,7 +456,9 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             runs.close()
         rows = _annotated(rows, shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
-        write_report(rows, stage, test, settings)
+        caption = figure_caption(test, settings, templates=templates, label=label, engine=engine, mpi=mpi,
+                                 spacing=spacing if shape == "levelset" else None, rows=rows)
+        write_report(rows, stage, test=test, settings=settings, caption=caption)
         chosen.write_csv(stage / "templates.csv")
         with signals_held():  # the outputs appear together; the finished runs' journal is then no longer needed
             commit_stage(stage, out, overwrite=overwrite)

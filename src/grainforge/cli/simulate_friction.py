@@ -166,6 +166,7 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     ready_for_work(HEAVY_MODULES + ("grainforge.simulate.friction_search",), seconds, bound="at most about")
     from ..simulate import EngineFailed, commit_stage, staged
     from ..simulate.friction_search import Unreachable, run_calibration, write_calibration
+    from ..simulate.results import figure_caption
     from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
@@ -197,8 +198,10 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
         command = use_command(test, inputs, search.friction, given, quick=quick, as_spheres=as_spheres,
                               shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
+        caption = figure_caption(test, settings, templates=templates, label=label, engine=engine, mpi=mpi,
+                                 spacing=ls_spacing if shape == "levelset" else None, rows=rows, friction=False)
         record = write_calibration(search, rows, target=target_angle, test=test, settings=settings, command=command,
-                                   out=stage, low=low, high=high, angle=angle)
+                                   out=stage, low=low, high=high, angle=angle, caption=caption)
         chosen.write_csv(stage / "templates.csv")
         with signals_held():  # the outputs appear together; the finished runs' journal is then no longer needed
             commit_stage(stage, out, overwrite=overwrite)
@@ -280,7 +283,14 @@ def _report(record: dict, search, rows, label: str, out: Path, warning: str | No
     if warning:
         click.echo(warning, err=True)
     sd = record["friction_sd"]
-    spread = f" ± {sd:.3f}" if math.isfinite(sd) else " (one seed: no spread)"
+    if math.isfinite(sd):
+        spread = f" ± {sd:.3f}"
+    elif record["evaluations"] < 2:  # the first friction was within the tolerance: no slope to carry a spread
+        spread = " (one friction tried: no slope, no uncertainty)"
+    elif math.isinf(sd):  # the angles do not rise with μ near it
+        spread = " (the angle does not rise with friction near it: no uncertainty)"
+    else:
+        spread = " (one seed: no spread)"
     note = "" if search.converged else f" (not converged in {max_evaluations} frictions: the bracket's interpolation)"
     test, target = record["test"], record["target_angle_deg"]
     of = f" ({record['angle']})" if test == "triaxial" else ""

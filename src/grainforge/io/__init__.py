@@ -186,7 +186,7 @@ def atomic_write(path: str | os.PathLike, data: bytes | str) -> Path:
     return path
 
 
-def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Path:
+def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None, description: str | None = None) -> Path:
     """Write a matplotlib figure (atomically) and close it: JPEG for ``.jpg``/``.jpeg``, PNG otherwise.
 
     No "Software" metadata is written, so the same figure gives the same bytes.
@@ -199,6 +199,8 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
         The image file (``.jpg``/``.jpeg`` for JPEG at quality 92, anything else PNG).
     dpi : float, optional
         Resolution in dots per inch (default: the figure's own).
+    description : str, optional
+        A PNG's ``Description`` text (what the figure shows, e.g. its caption); not written into a JPEG.
 
     Returns
     -------
@@ -211,7 +213,8 @@ def save_figure(fig, path: str | os.PathLike, *, dpi: float | None = None) -> Pa
     if Path(path).suffix.lower() in (".jpg", ".jpeg"):
         fig.savefig(buf, format="jpeg", dpi="figure" if dpi is None else dpi, pil_kwargs={"quality": 92})
     else:
-        fig.savefig(buf, format="png", dpi="figure" if dpi is None else dpi, metadata={"Software": None})
+        metadata = {"Software": None, **({"Description": description} if description else {})}
+        fig.savefig(buf, format="png", dpi="figure" if dpi is None else dpi, metadata=metadata)
     plt.close(fig)
     return atomic_write(path, buf.getvalue())
 

@@ -14,7 +14,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["HeapAngle", "heap_angle", "tilt_failure_angle"]
+__all__ = ["HeapAngle", "heap_angle", "tilt_failure_angle", "tilt_curve", "TILT_FAILURE"]
+
+#: the tilt test's failure threshold: a mean downslope displacement of half a grain diameter
+TILT_FAILURE = 0.5
 
 
 @dataclass(frozen=True)
@@ -176,9 +179,11 @@ def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> flo
     Returns
     -------
     float
-        Degrees, interpolated linearly between the two increments that bracket
-        the threshold; NaN if the layer never failed, or if it had already
-        failed at the first angle (start the tilt lower).
+        Degrees, interpolated linearly (displacement linear in the tilt angle)
+        between the two increments that bracket the threshold; NaN if the layer
+        never failed, or if it had already failed at the first angle (start the
+        tilt lower).  :func:`tilt_curve` draws the record with the same
+        interpolation.
 
     Raises
     ------
@@ -203,3 +208,57 @@ def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> flo
     a0, d0 = h[k - 1, :2]
     a1, d1 = h[k, :2]
     return float(a0 + (a1 - a0) * (displacement - d0) / (d1 - d0))
+
+
+def tilt_curve(history: np.ndarray, *, displacement: float = 0.5, samples: int = 16):
+    """The line ``tilt.png`` draws of a tilt record: the interpolation :func:`tilt_failure_angle` reads its angle
+    from, sampled.
+
+    Between two increments the displacement is linear in the tilt angle (a curve on a log axis, so it is drawn
+    as ``samples`` short segments per increment), and the point where it first exceeds ``displacement`` — the
+    failure angle — is one of the line's vertices: the line crosses the threshold exactly at the reported angle.
+
+    Parameters
+    ----------
+    history : (T, 2+) float64
+        Tilt angle (degrees) and mean downslope displacement (grain diameters) after each increment.
+    displacement : float
+        Failure threshold in grain diameters.
+    samples : int
+        Segments drawn per increment (≥ 1).
+
+    Returns
+    -------
+    angles, displacements : (M,) float64
+        The line's vertices, in increasing tilt.
+    increments : (T,) int64
+        The indices of the record's own increments among the vertices (where markers go).
+
+    Raises
+    ------
+    ValueError
+        If ``history`` is not a (T, 2+) array.
+
+    Examples
+    --------
+    >>> h = np.array([[20, 0.0], [21, 0.01], [22, 0.1], [23, 0.9]])
+    >>> a, d, marks = tilt_curve(h, samples=2)
+    >>> a.tolist()
+    [20.0, 20.5, 21.0, 21.5, 22.0, 22.5, 22.5, 23.0]
+    >>> d[marks].tolist() == h[:, 1].tolist(), float(d[a == tilt_failure_angle(h)][0])
+    (True, 0.5)
+    """
+    h = np.asarray(history, dtype=np.float64)
+    if h.ndim != 2 or h.shape[1] < 2:
+        raise ValueError("history must be a (T, 2) array of angle, displacement")
+    a0, d0 = h[:-1, 0], h[:-1, 1]
+    t = np.arange(max(1, int(samples))) / max(1, int(samples))
+    angles = np.append((a0[:, None] + t * (h[1:, 0] - a0)[:, None]).ravel(), h[-1:, 0])
+    disp = np.append((d0[:, None] + t * (h[1:, 1] - d0)[:, None]).ravel(), h[-1:, 1])
+    increments = np.arange(len(h)) * len(t)
+    failure = tilt_failure_angle(h, displacement=displacement)
+    if np.isfinite(failure):  # the crossing, a vertex of its own: after every vertex at or below its angle
+        at = int(np.searchsorted(angles, failure, side="right"))
+        angles, disp = np.insert(angles, at, failure), np.insert(disp, at, displacement)
+        increments = increments + (increments >= at)
+    return angles, disp, increments

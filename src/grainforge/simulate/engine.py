@@ -9,12 +9,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .angles import heap_angle, tilt_failure_angle
+from .angles import TILT_FAILURE, heap_angle, tilt_failure_angle
 from .process import EngineFailed, find_executable, kill_running, run_engine_process
 from .settings import Settings, scene_settings
 
 __all__ = ["yade_executable", "write_test_deck", "run_yade", "run_engine_process", "EngineFailed", "measure_result",
            "run_deck", "run_test", "summarise"]
+
+
+#: the name's beginning of the temporary folder every Yade process makes (``/tmp/yade-XXXXXX``, whatever ``TMPDIR``
+#: says) and leaves behind: the deck names it, and it is removed after the run (:func:`run_yade`)
+YADE_TEMP_PREFIX = "yade-"
 
 
 def yade_executable() -> str:
@@ -101,7 +106,9 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
 
     The scene's ``grainforge-progress`` lines are passed to ``progress(fraction,
     phase)``; Yade's own output goes to ``deck/yade.log``.  The Yade process is
-    killed if this call is interrupted (no orphan engine left running).
+    killed if this call is interrupted (no orphan engine left running).  The
+    temporary folder Yade makes (``/tmp/yade-*``), which the deck names on its
+    first line, is removed after the run, however it ended.
 
     Parameters
     ----------
@@ -126,7 +133,7 @@ def run_yade(deck: str | os.PathLike, *, progress: Callable[[float, str], None] 
     deck = Path(deck)
     log_path = deck / "yade.log"
     rc = run_engine_process([yade_executable(), "-n", "-x", "run.py"], deck, log_path=log_path, env={},
-                            progress=progress, timeout=timeout)
+                            progress=progress, timeout=timeout, temp_prefix=YADE_TEMP_PREFIX)
     if rc != 0 or not (deck / "result.json").is_file():
         tail = [ln.strip() for ln in log_path.read_text(errors="replace").splitlines() if ln.strip()]
         raise EngineFailed(f"Yade failed in {deck} (exit {rc}): {tail[-1] if tail else 'no output'}", deck)
@@ -176,7 +183,7 @@ def measure_result(result: dict) -> dict:
                        heap_foot_radius_mm=1e3 * h.foot, settled=bool(result["settled"]), note="")
     else:
         hist = np.asarray(result["history"], dtype=np.float64)
-        angle = tilt_failure_angle(hist[:, :2], displacement=0.5)
+        angle = tilt_failure_angle(hist[:, :2], displacement=TILT_FAILURE)
         row.update(angle_deg=angle, sector_sd_deg=float("nan"), settled=result["failure_angle"] is not None,
                    note="" if np.isfinite(angle) else "the layer did not fail, or had failed at the first angle")
     return row

@@ -16,11 +16,14 @@ below the target) or halves it (above), clamped to ``[low, high]``; a bound
 reached without bracketing the target means the target is out of reach (the
 angles reached are in :class:`Unreachable`).  It then narrows the bracket by
 the Illinois variant of the secant (false-position) method, which keeps a
-bracket and does not stall on one side, until an evaluated angle is within
-``tolerance`` of the target, the bracket is narrower than
-``friction_tolerance``, or ``max_evaluations`` are spent.  The estimate is the
-secant root of the final bracket (linear interpolation between its two ends),
-and the slope of that bracket is reported.
+bracket and does not stall on one side, until the bracket is narrower than
+``friction_tolerance`` or ``max_evaluations`` are spent.  The first evaluated
+angle within ``tolerance`` of the target ends the search at once, while
+bracketing too.  The estimate is the secant root of the final bracket (linear
+interpolation between its two ends), and the slope of that bracket is
+reported; an angle within the tolerance before the target was bracketed is
+the final bracket on its own (both ends): its friction is the estimate, the
+bracket has no slope (NaN).
 
 The seed-averaged angle is noisy: two runs at the same μ with other seeds
 differ by the standard error of the mean, ``sd / sqrt(seeds)``.  That error,
@@ -244,7 +247,8 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
     start : float
         First μ tried (clamped into the bounds).
     tolerance : float
-        Degrees: stop when an evaluated angle is this close to the target.
+        Degrees: stop at the first evaluated angle this close to the target (while bracketing too: that
+        friction is then the estimate).
     friction_tolerance : float
         Stop when the bracket is narrower than this in μ.
     max_evaluations : int
@@ -304,6 +308,9 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
             below = e if below is None or e.friction > below.friction else below
         if e.angle >= target:
             above = e if above is None or e.friction < above.friction else above
+        if abs(e.angle - target) <= tolerance:  # the first friction within the tolerance ends the search, bracketed
+            # or not (then the friction itself is the estimate: its bracket is the one evaluation)
+            return done(e if below is None else below, e if above is None else above, True)
         if below is not None and above is not None:
             break
         if above is None and e.friction >= high or below is None and e.friction <= low:
@@ -319,8 +326,6 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
                               (min(x.angle for x in evaluations), max(x.angle for x in evaluations)))
         e = evaluate(min(2.0 * e.friction, high) if above is None else max(0.5 * e.friction, low))
     # 2. narrow it: Illinois false position on f = angle - target
-    if abs(e.angle - target) <= tolerance:
-        return done(below, above, True)
     fb, fa = below.angle - target, above.angle - target
     side = 0
     while len(evaluations) < max_evaluations:
@@ -357,7 +362,8 @@ def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
     Returns
     -------
     float
-        The standard uncertainty of μ (inf for a zero slope).
+        The standard uncertainty of μ (inf for a slope that is not positive; NaN for no slope, one friction
+        tried).
 
     Examples
     --------
@@ -365,7 +371,11 @@ def friction_uncertainty(slope: float, angle_sd: float, seeds: int) -> float:
     0.043
     >>> friction_uncertainty(0.0, 1.5, 3)
     inf
+    >>> friction_uncertainty(float("nan"), 1.5, 3)
+    nan
     """
+    if math.isnan(slope):
+        return float("nan")
     if not (math.isfinite(slope) and slope > 0):
         return float("inf")
     return float(angle_sd / math.sqrt(max(1, int(seeds))) / slope)
@@ -628,7 +638,7 @@ def calibration_record(search: FrictionSearch, rows: Sequence[dict], *, target: 
 
 
 def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, mu_sd: float,
-                       angle: str | None = None):
+                       angle: str | None = None, caption: str | None = None):
     """Angle against μ: every run, each evaluation's mean, the target, the estimate with its uncertainty.
 
     Parameters
@@ -645,6 +655,8 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: 
         The uncertainty of μ (:func:`friction_uncertainty`; a band when finite).
     angle : {"ultimate", "peak"}, optional
         A triaxial test's friction angle (:func:`calibrated_angle`), named on the y axis.
+    caption : str, optional
+        The line above the plot (:func:`grainforge.simulate.results.figure_caption`: engine, population, rate).
 
     Returns
     -------
@@ -664,19 +676,23 @@ def calibration_figure(search: FrictionSearch, rows: Sequence[dict], *, target: 
     ev = sorted(search.evaluations, key=lambda e: e.friction)
     ax.plot([e.friction for e in ev], [e.angle for e in ev], "s-", color="C0", ms=6, label="seed average")
     ax.axhline(target, color="C3", ls="--", lw=1, label=f"target {target:g}°")
-    ax.axvline(search.friction, color="C2", lw=1.5, label=f"μ = {search.friction:.3f} ± {mu_sd:.3f}")
+    spread = f" ± {mu_sd:.3f}" if math.isfinite(mu_sd) else ""
+    ax.axvline(search.friction, color="C2", lw=1.5, label=f"μ = {search.friction:.3f}{spread}")
     if math.isfinite(mu_sd):
         ax.axvspan(search.friction - mu_sd, search.friction + mu_sd, color="C2", alpha=0.15)
     ax.set_xlabel("contact friction μ")
     ax.set_ylabel(calibrated_angle(test, angle)[1] + " (°)")
     ax.set_title(f"calibration on the {test} test: {len(search.evaluations)} frictions, {len(rows)} runs")
     ax.legend(fontsize=8, loc="lower right")
-    fig.tight_layout()
+    from .results import add_caption
+
+    add_caption(fig, caption)
     return fig
 
 
 def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: float, test: str, settings,
-                      command: str, out, low: float, high: float, angle: str | None = None) -> dict:
+                      command: str, out, low: float, high: float, angle: str | None = None,
+                      caption: str | None = None) -> dict:
     """Write ``calibration.csv`` (every run; a triaxial run's angles too), ``calibration.json`` and
     ``calibration.png`` into ``out``; the record (:func:`calibration_record`).
 
@@ -700,6 +716,9 @@ def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: f
         The bounds of μ searched.
     angle : {"ultimate", "peak"}, optional
         A triaxial test's friction angle (:func:`calibrated_angle`).
+    caption : str, optional
+        The figure's line naming the engine, the population and the rate
+        (:func:`grainforge.simulate.results.figure_caption`), also the PNG's ``Description``.
 
     Returns
     -------
@@ -718,6 +737,6 @@ def write_calibration(search: FrictionSearch, rows: Sequence[dict], *, target: f
         else CALIBRATION_COLUMNS
     write_csv(out / "calibration.csv", [{k: r.get(k, "") for k in keep} for r in rows])
     (out / "calibration.json").write_text(json.dumps(record, indent=1) + "\n")
-    save_figure(calibration_figure(search, rows, target=target, test=test, mu_sd=record["friction_sd"], angle=angle),
-                out / "calibration.png")
+    save_figure(calibration_figure(search, rows, target=target, test=test, mu_sd=record["friction_sd"], angle=angle,
+                                   caption=caption), out / "calibration.png", description=caption)
     return record

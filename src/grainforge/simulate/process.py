@@ -46,12 +46,21 @@ def find_executable(variable: str, name: str, missing: str) -> str:
     return exe
 
 
+#: the line by which an engine names a temporary folder of its own, ``grainforge-tempdir PATH``
+#: (:func:`run_engine_process` removes it when the engine has ended)
+TEMPDIR_LINE = "grainforge-tempdir"
+
+
 def run_engine_process(cmd: Sequence[str], cwd: Path, *, log_path: Path, env: dict,
-                       progress: Callable[[float, str], None] | None, timeout: float | None = None) -> int:
+                       progress: Callable[[float, str], None] | None, timeout: float | None = None,
+                       temp_prefix: str | None = None) -> int:
     """Run an engine command in ``cwd`` (its own session), its output to ``log_path``; its exit status.
 
     ``grainforge-progress <fraction> <phase>`` lines go to ``progress``.  On any exception
-    (an interrupt) the process and everything below it (an mpirun's ranks) are killed.
+    (an interrupt) the process and everything below it (an mpirun's ranks) are killed.  A folder the
+    engine names by a ``grainforge-tempdir PATH`` line (:data:`TEMPDIR_LINE`; Yade's ``/tmp/yade-*``,
+    which Yade leaves behind) is removed once the engine has ended, however it ended, if its name begins
+    with ``temp_prefix``.
 
     Parameters
     ----------
@@ -67,6 +76,9 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, *, log_path: Path, env: di
         ``progress(fraction, phase)`` for each ``grainforge-progress`` line; None ignores them.
     timeout : float, optional
         Seconds to wait for the process after its output has ended; None waits for ever.
+    temp_prefix : str, optional
+        The name's beginning of the temporary folders the engine may name (``"yade-"``): those are removed
+        after it; None removes none.
 
     Returns
     -------
@@ -86,20 +98,46 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, *, log_path: Path, env: di
                                            start_new_session=True, preexec_fn=_engine_child))
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a signal that came meanwhile is handled now
+        named = []  # the engine's own temporary folders
         try:
             for line in proc.stdout:
                 log.write(line)
                 if line.startswith("grainforge-progress") and progress is not None:
                     _, frac, *phase = line.split()
                     progress(float(frac), " ".join(phase))
+                elif line.startswith(TEMPDIR_LINE) and temp_prefix:
+                    named.append(line[len(TEMPDIR_LINE):].strip())
             rc = proc.wait(timeout=timeout)
         except BaseException:
             _kill(proc)
+            if temp_prefix:  # a folder named in output not yet read when the interrupt came
+                rest = _unread(proc.stdout)
+                log.write(rest)
+                named += [ln[len(TEMPDIR_LINE):].strip() for ln in rest.splitlines() if ln.startswith(TEMPDIR_LINE)]
             raise
         finally:
             proc.stdout.close()
             _RUNNING.discard(proc)
+            for folder in named:  # the engine has ended (or was killed and reaped): its folder is no one's now
+                _remove_engine_folder(folder, temp_prefix)
     return rc
+
+
+def _unread(stream) -> str:
+    """What a killed engine wrote that was not read yet (without waiting: nothing if its pipe is still open)."""
+    try:
+        os.set_blocking(stream.fileno(), False)
+        return stream.read() or ""
+    except (OSError, TypeError, ValueError):  # no data without waiting, or the stream already closed
+        return ""
+
+
+def _remove_engine_folder(folder: str, prefix: str) -> None:
+    """Remove a temporary folder an engine named, if it is one: an absolute path to a directory (not a link)
+    whose name begins with ``prefix``."""
+    path = Path(folder)
+    if path.is_absolute() and path.name.startswith(prefix) and path.is_dir() and not path.is_symlink():
+        _remove_folder(str(path))
 
 
 _STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}

@@ -11,12 +11,16 @@ import numpy as np
 
 from ..io import save_figure, write_csv
 from ..params import as_dict
-from .angles import heap_angle
+from .angles import TILT_FAILURE, heap_angle, tilt_curve
 
-__all__ = ["write_report", "figure"]
+__all__ = ["write_report", "figure", "figure_caption", "add_caption"]
+
+#: the lowest displacement tilt.png's log axis shows (grain diameters); smaller ones are drawn on it
+DISPLACEMENT_FLOOR = 1e-4
 
 
-def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> list[Path]:
+def write_report(rows: Sequence[dict], out: str | Path, *, test: str, settings,
+                 caption: str | None = None) -> list[Path]:
     """Write ``out/results.csv`` (one row per seed, the settings in every row) and ``out/<test>.png``; for a
     triaxial test also each seed's ``triaxial-seed<k>/triaxial.csv``.
 
@@ -31,6 +35,9 @@ def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> 
     settings : Settings or TriaxialSettings
         The runs' settings, written into every row as ``setting_<name>`` (SI units; a triaxial test's stresses in
         kPa).
+    caption : str, optional
+        The figure's line naming the engine, the population and the rate (:func:`figure_caption`), also the
+        PNG's ``Description``.
 
     Returns
     -------
@@ -47,10 +54,105 @@ def write_report(rows: Sequence[dict], out: str | Path, test: str, settings) -> 
 
         paths += [write_triaxial_csv(res, out / f"{test}-seed{r['seed']}" / "triaxial.csv")
                   for res, r in zip(results, rows)]
-        paths.append(save_figure(triaxial_figure(results, rows), out / f"{test}.png"))
+        fig = triaxial_figure(results, rows)
+        add_caption(fig, caption)
+        paths.append(save_figure(fig, out / f"{test}.png", description=caption))
         return paths
-    paths.append(save_figure(figure(test, results, rows), out / f"{test}.png"))
+    paths.append(save_figure(figure(test, results, rows, caption), out / f"{test}.png", description=caption))
     return paths
+
+
+#: the engines' names in the figures' captions
+ENGINE_NAMES = {"yade": "Yade", "liggghts": "LIGGGHTS"}
+
+
+def figure_caption(test: str, settings, *, templates: Sequence, label: str, engine: str = "yade",
+                   mpi: int | None = None, spacing: float | None = None, rows: Sequence[dict] = (),
+                   friction: bool = True) -> str:
+    """The line every figure of a virtual test carries: the engine, the population and the test's rate.
+
+    Parameters
+    ----------
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    settings : Settings or TriaxialSettings
+        The runs' settings (grains, the tilt's steps, the triaxial test's inertial number, μ).
+    templates : sequence of GrainTemplate
+        The templates the runs drew their grains from (:func:`grainforge.simulate.build_population`): their
+        number and representation (clumps and their sphere counts, or level sets).
+    label : str
+        The population's name (the inputs', or ``--label``).
+    engine : {"yade", "liggghts"}
+        The engine of the runs.
+    mpi : int, optional
+        LIGGGHTS's MPI ranks per run.
+    spacing : float, optional
+        A level set's grid spacing, in equivalent diameters.
+    rows : sequence of dict
+        The runs' rows: a triaxial run's ``strain_rate_per_s`` (the strain rate its inertial number set).
+    friction : bool
+        Name the contact friction μ (a calibration's figure, whose runs vary it, does not).
+
+    Returns
+    -------
+    str
+        ``engine · population: N grains from T templates, representation · [μ ·] rate``.
+
+    Examples
+    --------
+    >>> from .settings import Settings
+    >>> figure_caption("tilt", Settings(), templates=[], label="sand.toml")
+    'Yade · sand.toml: 200 grains from 0 templates · μ = 0.5 · tilt 0.5° every 8 √(d/g) from 10°'
+    """
+    from .settings import LIFT_SPEED, TILT_HOLD
+
+    name = ENGINE_NAMES.get(engine, engine) + (f", {mpi} MPI ranks" if mpi else "")
+    population = f"{label}: {settings.grains} grains from {len(templates)} template" + "s" * (len(templates) != 1)
+    shapes = {getattr(t, "shape", "clump") for t in templates}
+    if shapes == {"levelset"}:
+        population += ", level sets" + (f" (grid {spacing:g} d)" if spacing is not None else "")
+    elif templates and all(getattr(t, "clump", None) is not None for t in templates):
+        counts = sorted(len(t.clump.radii) for t in templates)
+        if counts[-1] == 1:
+            population += ", one sphere a grain"
+        else:
+            many = f"{counts[0]}" if counts[0] == counts[-1] else f"{counts[0]}–{counts[-1]}"
+            population += f", clumps of {many} spheres"
+    if test == "tilt":
+        rate = f"tilt {settings.tilt_step:g}° every {TILT_HOLD:g} √(d/g) from {settings.tilt_start:g}°"
+    elif test == "repose":
+        rate = ("cylinder removed at once" if engine == "liggghts"
+                else f"cylinder lifted at {LIFT_SPEED:g} √(g d)")
+    else:
+        rates = [float(r["strain_rate_per_s"]) for r in rows if r.get("strain_rate_per_s") is not None]
+        rate = f"sheared at I = {settings.inertial_number:g}" + (f" (ε̇ = {rates[0]:.3g}/s)" if rates else "")
+    parts = [name, population] + ([f"μ = {settings.friction:g}"] if friction else []) + [rate]
+    return " · ".join(parts)
+
+
+def add_caption(fig, caption: str | None) -> None:
+    """Put ``caption`` (:func:`figure_caption`) above a figure's panels, wrapped to its width between its
+    `` · ``-separated parts, and lay the figure out.
+
+    Parameters
+    ----------
+    fig : matplotlib.figure.Figure
+        The figure, its panels drawn.
+    caption : str or None
+        The line; None lays the figure out without one.
+    """
+    import textwrap
+
+    if caption:
+        width = max(40, int(fig.get_figwidth() * 16))  # characters of 8 pt a line
+        lines: list[str] = []
+        for part in caption.split(" · "):
+            if lines and len(lines[-1]) + 3 + len(part) <= width:
+                lines[-1] += " · " + part
+            else:
+                lines += textwrap.wrap(part, width) or [""]
+        fig.suptitle("\n".join(lines), fontsize=8, color="0.2")
+    fig.tight_layout()
 
 
 def _heap(result: dict):
@@ -62,14 +164,16 @@ def _heap(result: dict):
         return None
 
 
-def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
+def figure(test: str, results: Sequence[dict], rows: Sequence[dict], caption: str | None = None):
     """The figure of a finished test: the final heap (or the tilt record) and the measured angle.
 
     Repose: left, a side view of the first seed's heap (every contact sphere,
     height against distance from the heap's axis, in mm) with the fitted slope;
     right, each seed's surface profile with its angle.  Tilt: the layer's mean
     downslope displacement against the tilt angle, per seed, with the failure
-    threshold and the failure angles.
+    threshold and the failure angles; between increments each line is the
+    interpolation the failure angle is read from (:func:`grainforge.simulate.angles.tilt_curve`), so it
+    crosses the threshold at the angle reported.
 
     Parameters
     ----------
@@ -79,6 +183,8 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
         Each seed's ``result.json`` (lengths in m).
     rows : sequence of dict
         Each seed's row (:func:`grainforge.simulate.measure_result`; angles in degrees).
+    caption : str, optional
+        The line above the panels (:func:`figure_caption`: engine, population, rate).
 
     Returns
     -------
@@ -136,16 +242,21 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict]):
     else:
         fig, ax = plt.subplots(figsize=(7, 4.2), dpi=120)
         for k, (res, row) in enumerate(zip(results, rows)):
-            hist = np.asarray(res["history"])
-            ax.plot(hist[:, 0], np.maximum(hist[:, 1], 1e-4), "o-", ms=3, color=f"C{k}",
-                    label=f"seed {row['seed']}: fails at {row['angle_deg']:.1f}°"
-                    if math.isfinite(row["angle_deg"]) else f"seed {row['seed']}: no failure")
-        ax.axhline(0.5, color="0.3", ls="--", lw=1, label="failure: 0.5 grain diameters")
+            # between increments, as the failure angle interpolates them (tilt_failure_angle): the line crosses
+            # the threshold at the angle the legend gives
+            angles, disp, increments = tilt_curve(np.asarray(res["history"]), displacement=TILT_FAILURE)
+            failed = math.isfinite(row["angle_deg"])
+            ax.plot(angles, np.maximum(disp, DISPLACEMENT_FLOOR), "o-", ms=3, markevery=list(increments),
+                    color=f"C{k}", label=f"seed {row['seed']}: fails at {row['angle_deg']:.1f}°" if failed
+                    else f"seed {row['seed']}: no failure")
+            if failed:
+                ax.plot([row["angle_deg"]], [TILT_FAILURE], "|", ms=10, mew=1.5, color=f"C{k}")
+        ax.axhline(TILT_FAILURE, color="0.3", ls="--", lw=1, label="failure: 0.5 grain diameters")
         ax.set_xlabel("tilt angle (°)")
         ax.set_ylabel("mean downslope displacement (grain diameters)")
         ax.set_yscale("log")
-        ax.set_ylim(1e-4, 2.0)
+        ax.set_ylim(DISPLACEMENT_FLOOR, 2.0)
         ax.set_title("tilt table: a periodic layer on a rough plate")
         ax.legend(loc="upper left", fontsize=8)
-    fig.tight_layout()
+    add_caption(fig, caption)
     return fig

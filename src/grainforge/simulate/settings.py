@@ -59,6 +59,11 @@ class Settings(GrainSettings):
     tilt_start: float = param(10.0, "first tilt angle of the tilt test", unit="deg", low=0.0, high=60.0)
 
 
+#: the repose cylinder's lift speed in Yade, in √(g d) (d the mean equivalent diameter; LIGGGHTS removes it at once)
+LIFT_SPEED = 0.5
+#: the tilt test's hold at each tilt angle, in √(d/g)
+TILT_HOLD = 8.0
+
 #: settings of ``simulate tilt --quick``: a few tens of grains, a minute a run (plumbing, not a measurement)
 QUICK = dict(grains=30, templates=6, spheres=6, seeds=1, tilt_step=1.0, tilt_start=15.0)
 #: settings of ``simulate repose --quick``: the fewest grains whose heap has a slope to measure. A heap stands
@@ -263,9 +268,9 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
         "test": test, "seed": int(seed), "grains": settings.grains, "young": settings.young,
         "poisson": settings.poisson, "friction_deg": math.degrees(math.atan(settings.friction)),
         "damping": settings.damping, "gravity": 9.81, "dt_safety": 0.3, "check_every": 500,
-        "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": 0.5,
+        "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": LIFT_SPEED,
         "max_time_factor": 8.0, "tilt_step_deg": settings.tilt_step, "tilt_start_deg": settings.tilt_start,
-        "tilt_hold": 8.0, "failure_displacement": 0.5, "layer_depth": 4.0,
+        "tilt_hold": TILT_HOLD, "failure_displacement": 0.5, "layer_depth": 4.0,
         # grain k of the scene is placed in orientation k (w, x, y, z): uniformly random, drawn here
         "orientations": orientation_rows(grain_orientations(settings.grains, seed)),
     }

@@ -343,12 +343,14 @@ def view_radius(mesh) -> float:
 
 
 def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size: int = 400,
-          unit: str | None = None, radius: float | None = None) -> None:
-    """Draw a shaded picture of ``mesh`` on a (2D) matplotlib axis.
+          unit: str | None = None, radius: float | None = None, scale_bar: bool = True) -> None:
+    """Draw a shaded picture of ``mesh`` on a (2D) matplotlib axis whose data coordinates are the mesh's units.
 
-    With ``unit`` (the unit of the mesh coordinates, e.g. ``"mm"``) a scale bar
-    is drawn in the lower left corner (:func:`scale_bar_length`).  ``radius``:
-    as for :func:`render_image` (one scale for several pictures).
+    The picture is centred on the axis's origin, and its half-width is ``radius``
+    (and a margin of 2 pixels): pictures drawn at one ``radius`` have equal axis
+    limits.  With ``unit`` (the unit of the mesh coordinates, e.g. ``"mm"``) a
+    strip below the picture holds a scale bar (:func:`scale_bar_length`), drawn
+    unless ``scale_bar`` is False (a sheet at one scale draws one bar for all).
 
     Parameters
     ----------
@@ -363,25 +365,27 @@ def shade(ax, mesh, *, color=SAND, elev: float = 20.0, azim: float = -60.0, size
     size : int, default 400
         Picture width and height, pixels.
     unit : str, optional
-        Unit of the mesh coordinates: draw a scale bar.
+        Unit of the mesh coordinates: leave a strip for a scale bar below the picture.
     radius : float, optional
-        Half the picture's width in mesh units (one scale for several pictures).
+        Half the picture's width in mesh units (one scale for several pictures; default: the mesh's
+        :func:`view_radius`, so that it fills the picture).
+    scale_bar : bool, default True
+        With ``unit``: draw the scale bar in the strip (False: the strip stays empty).
     """
+    radius = view_radius(mesh) if radius is None else float(radius)
+    half = radius * size / (size - 4.0)  # the picture's half-width: render_image keeps 2 pixels a side free
     ax.imshow(render_image(mesh, size=size, color=color, elev=elev, azim=azim, radius=radius),
-              interpolation="antialiased")
+              interpolation="antialiased", extent=(-half, half, -half, half))
     ax.set_axis_off()
     if unit:
-        radius = view_radius(mesh) if radius is None else float(radius)
-        per_unit = (size / 2 - 2) / radius  # pixels per mesh unit, as render_image projects
-        length = scale_bar_length(size / per_unit)
-        # in a strip below the picture, so that it never covers the grain
-        x0, y0 = 0.04 * size, 1.07 * size
-        ax.plot([x0, x0 + length * per_unit], [y0, y0], color="black", lw=2.5, solid_capstyle="butt",
-                label="scale bar")
-        ax.text(x0 + length * per_unit + 0.03 * size, y0, f"{length:g} {unit}", ha="left", va="center",
-                fontsize=7)
-        ax.set_xlim(-0.5, size - 0.5)
-        ax.set_ylim(1.12 * size, -0.5)
+        if scale_bar:
+            length = scale_bar_length(2 * half)
+            # in a strip below the picture, so that it never covers the grain
+            x0, y0 = -0.92 * half, -1.14 * half
+            ax.plot([x0, x0 + length], [y0, y0], color="black", lw=2.5, solid_capstyle="butt", label="scale bar")
+            ax.text(x0 + length + 0.06 * half, y0, f"{length:g} {unit}", ha="left", va="center", fontsize=7)
+        ax.set_xlim(-half, half)
+        ax.set_ylim(-1.24 * half, half)
 
 
 def scale_bar_length(width: float) -> float:
@@ -469,11 +473,13 @@ def contact_sheet_figure(
         Surface colour.
     unit : str, optional
         Unit of the mesh coordinates (``"mm"`` for files): each panel gets a
-        scale bar.  Without it (grains in model units) there is none.
+        scale bar, or, at one scale, the sheet gets one (under the first panel
+        of its last row).  Without it (grains in model units) there is none.
     common_scale : bool
         Draw every panel at one scale (that of the largest mesh), with one
-        scale-bar length for the whole sheet, rather than each mesh filling
-        its panel: sizes compare across panels.
+        scale bar for the whole sheet, rather than each mesh filling its panel:
+        sizes compare across panels, whose axis limits (in mesh units) are then
+        equal.
     radius : float, optional
         The one scale to draw every panel at, as a half-width in mesh units
         (for several sheets at one scale: the largest :func:`view_radius` of all).
@@ -505,11 +511,14 @@ def contact_sheet_figure(
     title_in = 0.4 if title else 0.0
     height = rows * (panel_size + label_in) + title_in
     fig = plt.figure(figsize=(panel_size * cols, height), dpi=dpi)
+    one_scale = common_scale or radius is not None
     if radius is None and common_scale:
         radius = max(view_radius(m) for m in meshes)
     for i, (m, lab) in enumerate(zip(meshes, labels)):
         ax = fig.add_subplot(rows, cols, i + 1)
-        shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit, radius=radius)
+        # at one scale, one bar for the sheet: under the first panel of the last row
+        shade(ax, m, color=color, elev=elev, azim=azim, size=px, unit=unit, radius=radius,
+              scale_bar=not one_scale or i == (rows - 1) * cols)
         ax.set_title(lab, fontsize=8, pad=2)
     if title:
         import textwrap

@@ -1,14 +1,22 @@
 # Yade deck written by grainforge. Run from inside this folder:  yade -n -x run.py
 # Units: SI (m, kg, s). Every grain is a clump whose mass, centre and inertia are the
 # mesh's exact values (see grains.json and docs/dem.md).
+import atexit
 import json
 import math
 import os
 import random
+import shutil
 import sys
 
 from yade import *  # noqa: F401,F403  (Yade's own namespace)
 from yade import utils
+
+# Yade makes a temporary folder, /tmp/yade-XXXXXX, that it leaves behind when a script run with -x ends: it is
+# named first (grainforge removes it after the run, also after a run it stopped) and removed as this run ends
+YADE_TEMP = os.path.dirname(O.tmpFilename())  # noqa: F405
+print("grainforge-tempdir", YADE_TEMP, flush=True)
+atexit.register(shutil.rmtree, YADE_TEMP, True)
 
 DECK = json.load(open("grains.json"))
 SETTINGS = DECK["scene"]
