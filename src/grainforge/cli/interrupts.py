@@ -23,7 +23,7 @@ from collections.abc import Iterable
 
 from ..runtime.staging import _handled, signals_held
 
-__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "STARTUP_MODULES"]
+__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_short_estimate", "STARTUP_MODULES"]
 
 #: modules every working command needs, loaded by ``cli.main`` at start-up, while a signal still ends the
 #: process at once (nothing written, no process started): trimesh swallows a ``KeyboardInterrupt`` raised
@@ -56,26 +56,43 @@ def preload(modules: Iterable[str]) -> None:
             importlib.import_module(name)
 
 
-def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "about") -> None:
+def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "about",
+                   most: float | None = None) -> None:
     """Before a long job: load the plotting backend and ``modules`` (:func:`preload`), then, when
-    the job is estimated at 10 s or more, say so on stderr.
+    the job is estimated at over a minute, say so on stderr (a shorter one of 10 s or more:
+    :func:`say_short_estimate`, once the inputs are read).
 
-    ``seconds`` is the job's estimate; ``bound`` words it ("about", "at most about").
+    ``seconds`` is the job's estimate; ``bound`` words it ("about", "at most about"); ``most``, the
+    longest it may take where that differs (a search that may need more runs than usual).
     """
     preload(["matplotlib"])
     import matplotlib
 
     matplotlib.use("Agg")
     preload(modules)  # before any work: no lazy import later can swallow a Ctrl-C
-    say_estimate(seconds, bound=bound)
+    say_estimate(seconds, bound=bound, most=most)
 
 
-def say_estimate(seconds: float, *, bound: str = "about") -> None:
-    """On stderr, the job's estimated time when it is 10 s or more (nothing below: a user waits for no such job)."""
+#: estimates longer than this are said before any work; shorter ones of at least SHORT_JOB_SECONDS when the
+#: inputs have been read (:func:`say_short_estimate`), so that a refused input is still the only line
+LONG_JOB_SECONDS, SHORT_JOB_SECONDS = 60.0, 10.0
+
+
+def say_estimate(seconds: float, *, bound: str = "about", most: float | None = None,
+                 within: tuple[float, float] = (LONG_JOB_SECONDS, float("inf"))) -> None:
+    """On stderr, the job's estimated time when it is over ``within[0]`` and at most ``within[1]`` seconds
+    (by default over a minute), and the longest it may take when ``most`` is given and larger."""
     import click
 
     from ..runtime.estimate import duration
 
-    if seconds >= 10:
-        click.echo(f"estimated time: {bound} {duration(seconds)} (a rough model; the progress bar shows the "
-                   "measured rate)", err=True)
+    if within[0] < seconds <= within[1]:
+        longest = f"at most {duration(most)}; " if most is not None and most > seconds else ""
+        click.echo(f"estimated time: {bound} {duration(seconds)} ({longest}a rough model; the progress bar shows "
+                   "the measured rate)", err=True)
+
+
+def say_short_estimate(seconds: float, *, most: float | None = None) -> None:
+    """The estimate of a job of 10 s to a minute, once its inputs are read and before its main work (a longer
+    one was said by :func:`ready_for_work`)."""
+    say_estimate(seconds, most=most, within=(SHORT_JOB_SECONDS, LONG_JOB_SECONDS))

@@ -402,7 +402,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..runtime.estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from ..simulate.specimen import template_make_seconds
-    from .interrupts import ready_for_work, signals_held
+    from .interrupts import ready_for_work, say_short_estimate, signals_held
 
     settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi)
     outputs = [out / "results.csv", out / f"{test}.png", out / "templates.csv"] + [
@@ -439,6 +439,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     chosen = choose_templates(inputs, settings, pool, workers if executor is None else (os.cpu_count() or 1))
     templates = make_templates(inputs, settings, as_spheres, shape, spacing, chosen=chosen,
                                clump_accuracy=clump_accuracy)
+    say_short_estimate(seconds)  # a job of 10 s to a minute, once its grains are read and made
     runs, progress = _seed_progress(test, engine, mpi, settings)
     # every output is made in a hidden staging folder and moved into --out when all are complete: an
     # interrupt or a failed run leaves nothing (a SIGKILL leaves the staging folder, which the next run removes)

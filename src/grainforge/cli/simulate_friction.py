@@ -131,8 +131,8 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     from ..runtime.cluster import SchedulerLost
     from ..runtime.estimate import TooLargeError
     from ..simulate import check_inputs
-    from ..simulate.friction_search import calibration_seconds
-    from .interrupts import ready_for_work, signals_held
+    from ..simulate.friction_search import TYPICAL_EVALUATIONS, calibration_seconds
+    from .interrupts import ready_for_work, say_short_estimate, signals_held
 
     low, high = _check_search(target_angle, friction_range, start)
     _check_test_options(test, values, angle)
@@ -156,14 +156,16 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     pool = min(available, 4 * settings.templates) if quick else None
     executor, workers = engine_runners(scheduler, workers, mpi)
     try:
-        seconds = calibration_seconds(test, settings, max_evaluations=max_evaluations, available=available,
-                                      make_seconds=make_seconds, pool=pool, as_spheres=as_spheres, workers=workers,
-                                      shape=shape, spacing=ls_spacing, engine=engine)
+        cost = dict(available=available, make_seconds=make_seconds, pool=pool, as_spheres=as_spheres,
+                    workers=workers, shape=shape, spacing=ls_spacing, engine=engine)
+        most = calibration_seconds(test, settings, max_evaluations=max_evaluations, **cost)
+        seconds = calibration_seconds(test, settings, max_evaluations=min(TYPICAL_EVALUATIONS, max_evaluations),
+                                      **cost)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     if executor is None:  # on a cluster, the engine is the workers'
         check_installed(engine, mpi)
-    ready_for_work(HEAVY_MODULES + ("grainforge.simulate.friction_search",), seconds, bound="at most about")
+    ready_for_work(HEAVY_MODULES + ("grainforge.simulate.friction_search",), seconds, most=most)
     from ..simulate import EngineFailed, commit_stage, staged
     from ..simulate.friction_search import Unreachable, run_calibration, write_calibration
     from ..simulate.results import figure_caption
@@ -173,6 +175,7 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     chosen = choose_templates(inputs, settings, pool, workers if executor is None else (os.cpu_count() or 1))
     templates = make_templates(inputs, settings, as_spheres, shape, ls_spacing, chosen=chosen,
                                clump_accuracy=clump_accuracy)
+    say_short_estimate(seconds, most=most)  # a job of 10 s to a minute, once its grains are read and made
     runs, progress, evaluated = _progress(test, engine, settings, max_evaluations)
     with staged(out) as stage:
         try:

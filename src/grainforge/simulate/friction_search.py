@@ -172,6 +172,12 @@ def calibrated_angle(test: str, angle: str | None = None) -> tuple[str, str]:
     return "angle_deg", TEST_ANGLES[test]
 
 
+#: frictions a calibration usually tries before one is within the tolerance (the up-front estimate's count; its
+#: longest is ``--max-frictions``): the secant search from μ = 0.5 brackets the target in two and lands within
+#: 0.5° in one or two more (docs/benchmarks.md, *What the documented commands cost*)
+TYPICAL_EVALUATIONS = 4
+
+
 def calibration_seconds(test: str, settings, *, max_evaluations: int, available: int, make_seconds: float = 0.0,
                         pool: int | None = None, as_spheres: bool = False, workers: int = 1, shape: str = "clump",
                         spacing: float = 0.05, engine: str = "yade") -> float:
