@@ -224,6 +224,14 @@ CASES: list[Case] = [
       for cmd in ("scan", "analyse")
       for name, err in (("flat", r"not a 3D image"), ("float", r"float32 image cannot hold labels"),
                         ("void", r"no grain: every voxel is 0"), ("one-label", r"every voxel is label 1"))],
+    # a scan cut short (a copy that stopped): one line naming the file, not tifffile's log lines and mmap's error
+    *[Case(f"{cmd}-truncated-{kind}", [cmd, f"{{in}}/{arg}", "--voxel-size-um", "10", "--atlas-csv", "s.csv"],
+           err=re.escape(named) + r": truncated (TIFF image|\.npy array): .* but the file has \d+ bytes")
+      for cmd in ("scan", "analyse")
+      for kind, arg, named in (("tiff", "trunc.tif", "trunc.tif"), ("tiff-header", "trunc-head.tif", "trunc-head.tif"),
+                               ("npy", "trunc.npy", "trunc.npy"), ("slice", "trunc-slices", "trunc-slices/s2.tif"))],
+    Case("scan-truncated-compressed-tiff", ["scan", "{in}/trunc-zip.tif", "--voxel-size-um", "10"],
+         err=r"trunc-zip\.tif: truncated or damaged TIFF image \(\d+ bytes; tifffile: .*\); copy the file again"),
     Case("scan-raw-size", ["scan", "{in}/labels.raw", "--raw-shape", "12", "12", "13", "--raw-dtype", "uint16",
                            "--voxel-size-um", "10", "--atlas-csv", "s.csv"], err=r"needs \d+ bytes: check --raw-shape"),
     *[Case(f"scan-voxel-size-{v}", ["scan", "{in}/labels.npy", "--voxel-size-um", v, "--atlas-csv", "s.csv"],
@@ -330,7 +338,30 @@ def inputs(tmp_path_factory) -> Path:
     np.save(d / "float.npy", labels.astype(np.float32))
     np.save(d / "void.npy", np.zeros_like(labels))
     np.save(d / "one-label.npy", np.ones_like(labels))
+    _truncated_images(d, labels)
     return d
+
+
+def _truncated_images(d: Path, labels: np.ndarray) -> None:
+    """Real TIFF and .npy files of ``labels``, then cut short as an interrupted copy leaves them."""
+    import tifffile
+
+    def cut(name: str, keep) -> None:
+        data = (d / name).read_bytes()
+        (d / name).write_bytes(data[: keep(len(data))])
+
+    tifffile.imwrite(d / "trunc.tif", labels)  # uncompressed, memory-mapped: its pixel data cut
+    cut("trunc.tif", lambda n: n // 2)
+    tifffile.imwrite(d / "trunc-head.tif", labels)  # its first page's tags cut too
+    cut("trunc-head.tif", lambda n: 200)
+    tifffile.imwrite(d / "trunc-zip.tif", labels, compression="zlib")  # page by page: the page chain cut
+    cut("trunc-zip.tif", lambda n: 2 * n // 3)
+    np.save(d / "trunc.npy", labels)
+    cut("trunc.npy", lambda n: n // 2)
+    (d / "trunc-slices").mkdir()
+    for z in range(len(labels)):
+        tifffile.imwrite(d / "trunc-slices" / f"s{z}.tif", labels[z])
+    cut("trunc-slices/s2.tif", lambda n: n // 2)
 
 
 # --------------------------------------------------------------------------- the harness

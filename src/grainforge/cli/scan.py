@@ -158,7 +158,6 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
         outputs.commit()
     finally:
         outputs.discard()
-    click.echo(table_text(rows, TABLE))
     _report(rows, boxes, n_border, n_small, thin, keep_border, min_voxels, atlas_csv, labels_out, meshes,
             bad_meshes, pieces)
 

@@ -25,6 +25,8 @@ Examples
 
 from __future__ import annotations
 
+import contextlib
+import logging
 import math
 import re
 from pathlib import Path
@@ -207,14 +209,55 @@ def _tiff_voxel_size(tif) -> float | None:
         return None
 
 
+@contextlib.contextmanager
+def _tifffile_warnings():
+    """tifffile's logged warnings (a page or tag it could not read: a cut file) collected, not printed: a list of
+    messages, filled while the block runs."""
+    messages: list[str] = []
+
+    class _Keep(logging.Handler):
+        def emit(self, record):
+            messages.append(re.sub(r"<[^>]*>\s*", "", record.getMessage()).strip())
+
+    log = logging.getLogger("tifffile")
+    handler, propagate = _Keep(logging.WARNING), log.propagate
+    log.addHandler(handler)
+    log.propagate = False
+    try:
+        yield messages
+    finally:
+        log.removeHandler(handler)
+        log.propagate = propagate
+
+
+def _check_tiff_whole(path: Path, series, warned: list[str]) -> None:
+    """Refuse a TIFF cut short (a copy or download that stopped): image data that end past the file's end, or
+    pages and tags tifffile could not read, in one line naming the file (instead of tifffile's log lines and a
+    memory map's "mmap length is greater than file size")."""
+    size = path.stat().st_size
+    ends = [int(o) + int(c) for page in series.pages if page is not None
+            for o, c in zip(page.dataoffsets, page.databytecounts)]
+    if series.dataoffset is not None:
+        ends.append(int(series.dataoffset) + int(series.nbytes))
+    end = max(ends, default=0)
+    if end > size:
+        raise ValueError(f"{path}: truncated TIFF image: its image data end at byte {end} but the file has {size} "
+                         "bytes; copy the file again")
+    if warned:
+        raise ValueError(f"{path}: truncated or damaged TIFF image ({size} bytes; tifffile: {warned[0]}); copy "
+                         "the file again")
+
+
 def _open_tiff(path: Path) -> Volume:
     tifffile = tifffile_module()
-    try:
-        tif = tifffile.TiffFile(path)
-    except Exception as exc:
-        raise ValueError(f"{path}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+    with _tifffile_warnings() as warned:
+        try:
+            tif = tifffile.TiffFile(path)
+            series = tif.series[0]
+        except Exception as exc:
+            raise ValueError(f"{path}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
     with tif:
-        series = tif.series[0]
+        _check_tiff_whole(path, series, warned)
         shape = _check_3d(path, series.shape, "its first series")
         dtype = series.dtype
         size = _tiff_voxel_size(tif)
@@ -242,8 +285,9 @@ def _open_slices(path: Path) -> Volume:
     if not files:
         raise ValueError(f"{path}: a folder without TIFF slices ({', '.join(TIFF_SUFFIXES)})")
     try:
-        with tifffile.TiffFile(files[0]) as tif:
+        with _tifffile_warnings() as warned, tifffile.TiffFile(files[0]) as tif:
             first = tif.series[0]
+            _check_tiff_whole(files[0], first, warned)
             plane, dtype = tuple(s for s in first.shape if s != 1), first.dtype
             size = _tiff_voxel_size(tif)
     except ValueError:
@@ -259,7 +303,13 @@ def _open_slices(path: Path) -> Volume:
         out = np.empty((max(z1 - z0, 0), *plane), dtype)
         for k, z in enumerate(range(z0, z1)):
             try:
-                a = tifffile.imread(files[z])
+                with _tifffile_warnings() as warned, tifffile.TiffFile(files[z]) as tif:
+                    _check_tiff_whole(files[z], tif.series[0], warned)
+                    a = tif.asarray()
+            except ValueError as exc:
+                if str(exc).startswith(str(files[z])):
+                    raise
+                raise ValueError(f"{files[z]}: not a readable TIFF image ({exc})") from None
             except Exception as exc:
                 raise ValueError(f"{files[z]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
             a = np.asarray(a)
@@ -269,6 +319,25 @@ def _open_slices(path: Path) -> Volume:
         return out
 
     return Volume(path, (len(files), *plane), dtype, read, voxel_size_um=size)
+
+
+def _check_npy_whole(path: Path) -> None:
+    """Refuse a ``.npy`` file shorter than its header announces (a cut copy), in one line naming the file; a file
+    whose header cannot be read passes (the caller reports it)."""
+    try:
+        with open(path, "rb") as fh:
+            fmt = np.lib.format
+            version = fmt.read_magic(fh)
+            header = fmt.read_array_header_1_0 if version == (1, 0) else fmt.read_array_header_2_0
+            shape, _, dtype = header(fh)
+            start = fh.tell()
+    except Exception:
+        return
+    need = start + math.prod(shape) * dtype.itemsize
+    size = path.stat().st_size
+    if size < need:
+        raise ValueError(f"{path}: truncated .npy array: its header announces a {' x '.join(map(str, shape))} "
+                         f"{dtype.name} array ({need} bytes) but the file has {size} bytes; copy the file again")
 
 
 def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
@@ -337,6 +406,7 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
         try:
             m = np.load(path, mmap_mode="r", allow_pickle=False)
         except Exception as exc:
+            _check_npy_whole(path)
             raise ValueError(f"{path}: not a readable .npy array ({exc.__class__.__name__}: {exc})") from None
         if not isinstance(m, np.memmap):
             raise ValueError(f"{path}: not a .npy array")
