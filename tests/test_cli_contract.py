@@ -563,6 +563,45 @@ def test_failed_batch_does_not_block_the_fixed_rerun(case_dir, inputs):
     assert (d / "b" / "manifest.csv").is_file()
 
 
+# --------------------------------------------------------------------------- a Dask scheduler nothing answers at
+
+def _closed_port() -> int:
+    """A local port nothing listens on (bound, then released)."""
+    import socket
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+SCHEDULER_COMMANDS = {
+    "batch": ["batch", "{in}/good.toml", "--out", "b"],
+    "analyse": ["analyse", "{in}/grains", "--csv", "a.csv"],
+    "fit": ["fit", str(Path(__file__).resolve().parent / "data" / "synthetic-rf-sand.csv"), "--out", "f"],
+    "simulate": ["simulate", "repose", "{in}/grains", "--out", "s"],
+    "simulate-calibrate": ["simulate", "calibrate", "tilt", "{in}/grains", "--target-angle", "30", "--out", "c"],
+}
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("command", sorted(SCHEDULER_COMMANDS))
+def test_a_refused_scheduler_connection_is_one_line_at_once(command, case_dir, inputs):
+    """``--scheduler tcp://127.0.0.1:PORT`` where nothing listens: the refusal is seen at once (not after Dask's 20 s
+    of retries), one line naming the address, exit 2, nothing written.  The real CLI with its default timeout; the
+    bound is generous (the command's imports take a few seconds on a loaded machine)."""
+    d, _ = case_dir
+    before = _snapshot(d, inputs)
+    address = f"tcp://127.0.0.1:{_closed_port()}"
+    t0 = time.monotonic()
+    code, err = run_process(Case(command, [*SCHEDULER_COMMANDS[command], "--scheduler", address], timeout=60), d,
+                            inputs)
+    took = time.monotonic() - t0
+    assert code == 2 and "Traceback" not in err and len(err.strip().splitlines()) == 1, err
+    assert f"cannot connect to the Dask scheduler at {address}: connection refused" in err, err
+    assert took < 10, f"the refusal took {took:.1f} s"
+    assert _snapshot(d, inputs) == before
+
+
 # --------------------------------------------------------------------------- interrupts
 
 def _wait_for(predicate, timeout: float, proc: subprocess.Popen) -> None:

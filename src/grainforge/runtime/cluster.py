@@ -10,16 +10,19 @@ estimate, the refusals and the writing of the outputs.
 
 Dask is an optional extra (``pip install 'grainforge[dask]'``), imported here
 only when a scheduler is given.  :func:`dask_executor` refuses, in one line
-(a ``ValueError``), an address that is not one, a scheduler that does not
-answer within :data:`CONNECT_TIMEOUT` and workers that run another grainforge
+(a ``ValueError``), an address that is not one, an address where nothing
+listens (at once: :func:`probe` tries a TCP connection first), a scheduler that
+does not answer within :data:`CONNECT_TIMEOUT` and workers that run another grainforge
 version; a scheduler lost during the run raises :class:`SchedulerLost`.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
+import errno
 import logging
 import re
+import socket
 import threading
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
@@ -28,7 +31,7 @@ from typing import Any
 from .._version import __version__
 
 __all__ = ["CONNECT_TIMEOUT", "INSTALL", "DaskExecutor", "SchedulerLost", "VersionMismatch", "check_address",
-           "connect", "dask_executor"]
+           "connect", "dask_executor", "probe"]
 
 #: how long ``--scheduler`` waits for the scheduler to answer
 CONNECT_TIMEOUT = "20s"
@@ -38,6 +41,8 @@ INSTALL = "pip install 'grainforge[dask]'"
 
 #: the communication protocols a Dask scheduler listens on
 SCHEMES = ("tcp", "tls", "ws", "wss", "ucx", "inproc")
+#: the protocols carried over a TCP connection (:func:`probe` tries it before Dask does)
+TCP_SCHEMES = ("tcp", "tls", "ws", "wss")
 
 
 class SchedulerLost(RuntimeError):
@@ -100,6 +105,64 @@ def check_address(address: str) -> str:
         raise ValueError(f"--scheduler {address!r}: not a Dask scheduler address; give tcp://HOST:PORT, the address "
                          "the scheduler prints (e.g. tcp://10.0.0.5:8786)")
     return text
+
+
+def _seconds(timeout: str) -> float:
+    """Seconds of a Dask timeout string (``"20s"``, ``"1.5s"``, ``"2m"``, ``"500ms"``) or a number."""
+    m = re.fullmatch(r"\s*([0-9.]+)\s*(ms|s|m|)\s*", str(timeout))
+    if not m:
+        return 20.0
+    return float(m.group(1)) * {"ms": 1e-3, "s": 1.0, "": 1.0, "m": 60.0}[m.group(2)]
+
+
+def probe(address: str, timeout: float) -> None:
+    """Refuse at once a scheduler address where nothing listens: a TCP connection to its host and port, refused or
+    unroutable in milliseconds, instead of Dask's retries until its timeout (20 s for ``tcp://127.0.0.1:1``).
+
+    An address whose protocol is not carried over TCP (``ucx``, ``inproc``) is left to Dask.
+
+    Parameters
+    ----------
+    address : str
+        The scheduler's address (:func:`check_address`).
+    timeout : float
+        Seconds to wait for a host that neither answers nor refuses.
+
+    Raises
+    ------
+    ValueError
+        One line naming the address and why: connection refused, host not found, no route, no answer.
+
+    Examples
+    --------
+    >>> with socket.socket() as s:
+    ...     s.bind(("127.0.0.1", 0)); port = s.getsockname()[1]   # a port nothing listens on
+    >>> probe(f"tcp://127.0.0.1:{port}", 5)
+    Traceback (most recent call last):
+    ...
+    ValueError: cannot connect to the Dask scheduler at tcp://127.0.0.1:...: connection refused (nothing listens ...
+    """
+    scheme, sep, rest = address.rpartition("://")
+    if (scheme if sep else "tcp") not in TCP_SCHEMES:
+        return
+    host, _, port = rest.rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    where = f"cannot connect to the Dask scheduler at {address}"
+    try:
+        with socket.create_connection((host, int(port)), timeout=timeout):
+            return
+    except socket.gaierror:
+        raise ValueError(f"{where}: host {host!r} not found; check --scheduler") from None
+    except TimeoutError:
+        raise ValueError(f"{where}: no answer within {timeout:g} s; check --scheduler, and that the scheduler "
+                         "runs and its port is open") from None
+    except ConnectionRefusedError:
+        raise ValueError(f"{where}: connection refused (nothing listens on port {port} of {host}); start the "
+                         "scheduler (dask scheduler) or give the address it prints") from None
+    except OSError as exc:
+        reason = {errno.EHOSTUNREACH: "no route to the host", errno.ENETUNREACH: "network unreachable"}.get(
+            exc.errno, exc.strerror or type(exc).__name__)
+        raise ValueError(f"{where}: {reason}; check --scheduler") from None
 
 
 def _distributed():
@@ -181,17 +244,22 @@ def connect(address: str, *, timeout: str | None = None) -> Iterator[Any]:
     Raises
     ------
     ValueError
-        Dask not installed, a bad address, no answer within ``timeout``
-        (default :data:`CONNECT_TIMEOUT`), workers of another version.
+        Dask not installed, a bad address, nothing listening there (at once,
+        :func:`probe`), no answer within ``timeout`` (default
+        :data:`CONNECT_TIMEOUT`), workers of another version.
     """
     address = check_address(address)
     distributed = _distributed()
+    probe(address, _seconds(timeout or CONNECT_TIMEOUT))
     with _quiet_dask_logs():
         try:
             client = distributed.Client(address, timeout=timeout or CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
             raise ValueError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
+        except MemoryError:  # something else answers there: its first bytes read as a huge Dask message
+            raise ValueError(f"cannot connect to the Dask scheduler at {address}: what answers there does not speak "
+                             "Dask's protocol; give the address the scheduler prints") from None
         try:
             check_versions(client, address)
             yield client
