@@ -259,6 +259,43 @@ def test_a_signal_as_the_outputs_appear_is_honoured(tmp_path, inputs, command, s
         assert left in (set(), set(files)), sorted(left)
 
 
+@pytest.mark.slow  # a real batch, stopped, then resumed by the command it names
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM], ids=["SIGINT", "SIGTERM"])
+def test_a_stopped_batch_says_what_it_kept_and_how_to_resume(tmp_path, inputs, sig):
+    """``batch`` is the exception to "all outputs or none": stopped mid-way, it keeps its finished grains and their
+    journal for ``--resume``, and says so before the signal's line: how many of how many grains, where, and the
+    command that continues; that command, run as printed, makes the rest and keeps the grains it names."""
+    import re
+    import shlex
+
+    recipe = tmp_path / "big.toml"
+    recipe.write_text('method = "fso"\ncount = 150\nseed = 1\n[params]\nsubdivisions = 3\n[size]\nmm = 1.0\n')
+    work = tmp_path / "work"
+    work.mkdir()
+    proc = _start(["batch", str(recipe), "--out", "b", "--workers", "1"], work, inputs)
+    deadline = time.monotonic() + 300
+    while len(list(work.glob("b/.grainforge-batch/grain-*.json"))) < 3:
+        if proc.poll() is not None:
+            pytest.fail(f"the batch ended before the signal: {proc.communicate()[1].decode()}")
+        assert time.monotonic() < deadline, "no grain was recorded"
+        time.sleep(0.02)
+    sent = time.monotonic()
+    if not _signal_running(proc, sig):
+        pytest.skip("the batch had finished before the signal")
+    lines = _stopped(proc, sig, sent, work)
+    kept = len(list(work.glob("b/.grainforge-batch/grain-*.json")))
+    assert kept >= 3 and not (work / "b" / "manifest.csv").exists()
+    m = re.fullmatch(r"kept (\d+) of 150 fso grain\(s\) in b \(no manifest\.csv yet\); to make the rest: (.*)",
+                     lines[-2])
+    assert m and int(m.group(1)) == kept, lines
+    command = shlex.split(m.group(2))
+    assert command == ["grainforge", "batch", str(recipe), "--out", "b", "--resume"]
+    resumed = subprocess.run(CLI + command[1:], cwd=work, capture_output=True, text=True, timeout=600)
+    assert resumed.returncode == 0, resumed.stderr
+    assert f"wrote {150 - kept} fso grain(s) (kept {kept} intact from the interrupted batch)" in resumed.stderr
+    assert len((work / "b" / "manifest.csv").read_text().splitlines()) == 151
+
+
 @pytest.mark.parametrize("writer", ["generate", "commit_stage"])
 def test_a_signal_while_outputs_move_into_place_waits_for_the_last(tmp_path, monkeypatch, writer):
     """The window the test above can only hit by chance, made certain: a SIGINT raised as the first output is

@@ -41,18 +41,28 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
         from ..runtime.cluster import check_address
 
         check_address(scheduler)
+    from .main import Terminated
+
     try:
         result = run_batch(r, out, workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,
                            progress=progress_bar(total=r.count, desc=f"{r.method} population"))
     except FileExistsError as exc:
         raise click.UsageError(str(exc)) from None
     except SchedulerLost as exc:
-        from ..population import JOURNAL
-
-        kept = len(list((out / JOURNAL).glob("grain-*.json"))) if (out / JOURNAL).is_dir() else 0
+        kept = _kept(out)
         raise click.ClickException(
             f"{exc}; kept the {kept} grain(s) finished in {out} (no manifest.csv yet): rerun with --resume "
             "to make the rest" if kept else f"{exc}; nothing kept in {out}: rerun when the cluster is back") from None
+    except (KeyboardInterrupt, Terminated) as exc:
+        # the exception to "all outputs or none": the finished grains stay, with their journal, for --resume
+        kept = _kept(out)
+        if not kept:
+            raise
+        click.echo(f"kept {kept} of {r.count} {r.method} grain(s) in {out} (no manifest.csv yet); to make the "
+                   f"rest: {resume_command(recipe, out)}", err=True)
+        if isinstance(exc, KeyboardInterrupt):  # as click's own Abort, without the blank line it echoes first
+            raise click.exceptions.Abort() from exc
+        raise
     if result["generated"] == 0 and result["reused"] == r.count:
         click.echo(f"the batch in {out} is already complete: all {r.count} {r.method} grains are intact, "
                    "none generated; manifest.csv, manifest.json and population.png rewritten", err=True)
@@ -65,3 +75,33 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
     if grading:
         click.echo(f"grading curve: max deviation from target {grading['max_abs_deviation_percent']:.1f} "
                    f"percentage points (by {grading['basis']})", err=True)
+
+
+def _kept(out: Path) -> int:
+    """Grains a stopped batch recorded in ``out``'s journal (kept for ``--resume``)."""
+    from ..population import JOURNAL
+
+    return len(list((out / JOURNAL).glob("grain-*.json"))) if (out / JOURNAL).is_dir() else 0
+
+
+def resume_command(recipe, out) -> str:
+    """The command that continues a stopped batch of ``recipe`` in ``out``, quoted for a POSIX shell.
+
+    Parameters
+    ----------
+    recipe, out : path
+        As given to the stopped command.
+
+    Returns
+    -------
+    str
+        ``grainforge batch RECIPE --out OUT --resume``.
+
+    Examples
+    --------
+    >>> resume_command("sand.toml", "my grains")
+    "grainforge batch sand.toml --out 'my grains' --resume"
+    """
+    import shlex
+
+    return f"grainforge batch {shlex.quote(str(recipe))} --out {shlex.quote(str(out))} --resume"
