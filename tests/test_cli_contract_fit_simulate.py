@@ -166,6 +166,13 @@ CASES = [
       for a in (["--grains", "20001"], ["--grains", "1"], ["--seeds", "101"], ["--spheres", "0"],
                 ["--templates", "0"], ["--friction", "nan"], ["--size", "0"], ["--workers", "0"],
                 ["--workers", "1000"])],
+    # --spheres: one range, 2-1000, in every command that makes clumps (dem's rows: tests/test_dem_limits.py)
+    *[Case(f"simulate-{'-'.join(cmd)}-spheres-{n}", ["simulate", *cmd, "{in}/ang", "--out", "o", *extra, "--spheres", n],
+           r"'--spheres': must be in \[2, 1000\], got " + n)
+      for cmd, extra in ((["repose"], []), (["tilt"], []), (["triaxial"], []),
+                         (["calibrate", "tilt"], ["--target-angle", "30"]),
+                         (["calibrate", "triaxial"], ["--target-angle", "30"]))
+      for n in ("1", "1001")],
     # simulate: engine, MPI and representation combinations no scene runs
     Case("simulate-mpi-with-yade", _sim("repose", "--mpi", "2"), r"--mpi: yade runs one process per seed"),
     Case("simulate-liggghts-mpi-0", _sim("tilt", "--engine", "liggghts", "--mpi", "0"), r"--mpi"),
@@ -225,6 +232,27 @@ def test_cli_contract_fit_simulate(case: Case, case_dir, inputs):
     assert len(err.strip().splitlines()) == case.lines, f"expected {case.lines} line(s) on stderr:\n{err}"
     assert re.search(case.err, err), f"stderr does not match {case.err!r}:\n{err}"
     assert _snapshot(case_dir, inputs) == before
+
+
+def test_spheres_has_one_range_in_every_command():
+    """``--spheres`` of ``dem``, ``simulate TEST`` and ``simulate calibrate TEST``: the same declared range
+    (:data:`grainforge.cli.options.SPHERES_RANGE`, the simulation settings' own declaration alike), stated in each
+    command's help."""
+    from click.testing import CliRunner
+
+    from grainforge.cli.options import SPHERES_RANGE
+    from grainforge.params import specs
+    from grainforge.simulate.settings import GrainSettings
+
+    spec = next(s for s in specs(GrainSettings) if s.name == "spheres")
+    assert (spec.low, spec.high) == SPHERES_RANGE == (2, 1000)
+    dem = next(p for p in cli.commands["dem"].params if p.name == "spheres")
+    assert (dem.type.min, dem.type.max) == SPHERES_RANGE
+    for command in (["dem"], ["simulate", "repose"], ["simulate", "tilt"], ["simulate", "triaxial"],
+                    ["simulate", "calibrate", "tilt"]):
+        out = CliRunner().invoke(cli, [*command, "--help"]).output
+        text = " ".join(re.search(r"\n  --spheres (.*?)\n  -", out, re.S).group(1).split())
+        assert "range: [2, 1000]" in text, (command, text)
 
 
 def test_errors_of_workers_cross_the_process_pool():

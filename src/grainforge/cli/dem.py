@@ -10,6 +10,7 @@ import click
 
 from .options import (
     EXIT_CHECK_FAILED,
+    SPHERES_RANGE,
     FiniteFloatRange,
     clump_accuracy_option,
     overwrite_option,
@@ -49,7 +50,7 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
               show_default=True, help="Grain representation (what the engine supports).")
 @click.option("--density", type=FiniteFloatRange(1.0, 1e5), default=2650.0, show_default=True,
               help="Solid density, kg/m³.")
-@click.option("--spheres", type=click.IntRange(2, 1000), default=30, show_default=True,
+@click.option("--spheres", type=click.IntRange(*SPHERES_RANGE), default=30, show_default=True,
               help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
                    "With --clump-accuracy, the most a clump may take (100 when --spheres is not given).")
 @click.option("--refine-iterations", "refine", type=click.IntRange(0, 10000), default=0, show_default=True,

@@ -134,6 +134,12 @@ def seed_option(help: str = "Seed S of the first grain.", default: int | None = 
     return click.option("--seed", type=click.IntRange(min=0), default=default, show_default=show, help=help)
 
 
+#: the spheres of a clump, ``--spheres`` of ``dem``, ``simulate`` and ``simulate calibrate`` alike (the simulation
+#: settings declare it too, :class:`grainforge.simulate.settings.GrainSettings`; a test compares them): two at least,
+#: since one sphere is not the grain's shape (the sphere baseline is ``simulate --as-spheres``, the volume-equivalent
+#: sphere) and LIGGGHTS and LAMMPS refuse a rigid body of one sphere; 1,000 at most (``dem``'s clumps built to an
+#: accuracy reach 130 spheres on angular grains; the time and memory estimates refuse what would not run)
+SPHERES_RANGE = (2, 1000)
 #: --clump-accuracy (``dem`` and ``simulate``): build each clump to an intersection over union instead of a
 #: fixed sphere count
 clump_accuracy_option = click.option(

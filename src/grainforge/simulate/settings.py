@@ -27,8 +27,8 @@ class GrainSettings:
                         low=2, high=20000)
     templates: int = param(40, "distinct grains made into clumps; the test draws from them with replacement "
                            "and random orientations", kind="int", low=1, high=20000)
-    spheres: int = param(10, "spheres per clump (grainforge.dem.clump; more = closer to the mesh, slower)",
-                         kind="int", low=1, high=200)
+    spheres: int = param(10, "spheres per clump, as for grainforge dem (grainforge.dem.clump; more = closer to the "
+                         "mesh, slower; one sphere per grain: --as-spheres)", kind="int", low=2, high=1000)
     size: float | None = param(None, "equivalent diameter every grain is scaled to", unit="mm", low=0.01,
                                high=1000, optional=True,
                                shown_default="the files' own size in mm, or the recipe's sizes")
