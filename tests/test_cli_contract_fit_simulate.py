@@ -255,6 +255,77 @@ def test_spheres_has_one_range_in_every_command():
         assert "range: [2, 1000]" in text, (command, text)
 
 
+class _Accepted(Exception):
+    """Raised where a command has passed every check and would start its work (``ready_for_work``)."""
+
+
+#: MPI refusals whose line suggests another command: (test words, options, batch allocation or None)
+MPI_REFUSALS = [
+    (["triaxial"], ["--mpi", "3"], None),  # beyond 2 cores, and slabs too thin for 200 grains
+    (["triaxial"], ["--mpi", "64"], "64"),  # slabs too thin for 200 grains, 64 ranks allocated
+    (["triaxial"], ["--mpi", "27", "--grains", "100"], "27"),
+    (["triaxial"], ["--mpi", "100"], "64"),  # beyond the allocation, and slabs too thin
+    (["triaxial"], ["--mpi", "2", "--workers", "2"], None),
+    (["repose"], ["--mpi", "3"], None),
+    (["calibrate", "triaxial"], ["--target-angle", "30", "--mpi", "3"], None),
+    (["calibrate", "triaxial"], ["--target-angle", "30", "--mpi", "64"], "64"),
+]
+
+
+def _suggestions(args: list[str], line: str) -> list[list[str]]:
+    """The commands a refusal's line suggests: ``use --mpi N`` and ``--grains G or more``, each in place of the
+    refused option in ``args`` (``fewer --workers``: without ``--workers``)."""
+    def replaced(option: str, value: str | None) -> list[str]:
+        out, skip = [], False
+        for a in args:
+            if skip:
+                skip = False
+                continue
+            if a == option:
+                skip = True
+                continue
+            out.append(a)
+        return out + ([option, value] if value is not None else [])
+
+    found = [replaced("--mpi", m) for m in re.findall(r"use --mpi (\d+)", line)]
+    found += [replaced("--grains", g) for g in re.findall(r"--grains (\d+) or more", line)]
+    if "fewer --workers" in line:
+        found.append(replaced("--workers", None))
+    return found
+
+
+@pytest.mark.parametrize("test, options, allocation", MPI_REFUSALS,
+                         ids=["-".join(t + o + ([f"slots{a}"] if a else [])) for t, o, a in MPI_REFUSALS])
+def test_an_mpi_refusal_suggests_only_commands_that_are_accepted(test, options, allocation, case_dir, inputs,
+                                                                  monkeypatch):
+    """``simulate --engine liggghts --mpi N`` refused (beyond the cores or the allocation, or a triaxial specimen
+    too small for N ranks' slabs): every command its line suggests (``--mpi M``, ``--grains G``, fewer
+    ``--workers``) passes every check on the same machine, up to the start of the work, where the test stops it."""
+    import grainforge.cli.interrupts as interrupts
+
+    monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1})  # a 2-core machine
+    monkeypatch.setattr("os.cpu_count", lambda: 2)
+    for name in ("SLURM_NTASKS", "SLURM_NPROCS", "PBS_NP", "NSLOTS", "LSB_DJOB_NUMPROC", "PBS_NODEFILE"):
+        monkeypatch.delenv(name, raising=False)
+    if allocation:
+        monkeypatch.setenv("SLURM_NTASKS", allocation)
+
+    def accepted(*args, **kwargs):
+        raise _Accepted()
+
+    monkeypatch.setattr(interrupts, "ready_for_work", accepted)
+    args = ["simulate", *test, str(inputs / "ang"), "--out", "o", "--engine", "liggghts", *options]
+    r = _invoke(args)
+    lines = r.stderr.strip().splitlines()
+    assert r.exit_code == 2 and len(lines) == 1 and "--mpi" in lines[0], r.stderr
+    suggested = _suggestions(args, lines[0])
+    assert suggested, lines[0]
+    for command in suggested:
+        again = _invoke(command)
+        assert isinstance(again.exception, _Accepted), (lines[0], command, again.stderr)
+    assert not (case_dir / "o").exists()
+
+
 def test_errors_of_workers_cross_the_process_pool():
     """A worker's RecipeError or ParameterError reaches the command as itself (it pickles), not as a
     BrokenProcessPool."""

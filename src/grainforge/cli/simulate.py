@@ -112,7 +112,8 @@ def check_representation(shape: str, spacing: float | None, as_spheres: bool, sp
 
 
 def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accuracy: float | None = None, *,
-                 engine: str = "yade", mpi: int | None = None):
+                 engine: str = "yade", mpi: int | None = None, workers: int | None = None,
+                 scheduler: str | None = None):
     """The run's :class:`grainforge.simulate.Settings` from the options (``--quick`` filling what is not given).
 
     With ``clump_accuracy``, ``spheres`` is the cap of every clump: the one given, or ``--quick``'s, or
@@ -125,8 +126,10 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
     ------
     click.BadParameter, click.UsageError
         For a setting out of its range, a level-set run Yade cannot set up, or a triaxial specimen too small
-        for its periodic cell, or (LIGGGHTS) for its walls cut among ``mpi`` ranks
-        (:func:`grainforge.simulate.liggghts_triaxial.check_ranks`).
+        for its periodic cell, or (LIGGGHTS) ``mpi`` ranks (× ``workers`` runs at once) beyond this machine's
+        (:func:`check_ranks_here`; not with a ``scheduler``, whose workers decide) or too many for the
+        specimen's walls (:func:`grainforge.simulate.liggghts_triaxial.check_ranks`): the ranks first, and
+        each line's remedy passes the other check.
     """
     from ..simulate.levelset_scenes import check_levelset_run
     from ..simulate.settings import check_triaxial_run, quick_settings
@@ -142,13 +145,41 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
         check_levelset_run(test, shape, settings)
         if test == "triaxial":
             check_triaxial_run(settings, engine)
+        available = None if scheduler is not None else check_ranks_here(test, engine, settings, mpi, workers)
         if test == "triaxial" and engine == "liggghts":
             from ..simulate.liggghts_triaxial import check_ranks
 
-            check_ranks(settings, mpi)
+            check_ranks(settings, mpi, available)
     except ValueError as exc:
         raise click.UsageError(str(exc)) from None
     return settings
+
+
+def local_workers(workers: int | None, mpi: int | None) -> int:
+    """Engine runs at once on this machine: ``--workers``, else the cores divided by ``--mpi``."""
+    import os
+
+    return workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+
+
+def check_ranks_here(test: str, engine: str, settings, mpi: int | None, workers: int | None) -> int | None:
+    """Refuse (``ValueError``) ``mpi`` ranks × the runs at once beyond this machine's ranks
+    (:func:`grainforge.simulate.process.check_mpi_ranks`; for a LIGGGHTS triaxial test the ``--mpi`` suggested is
+    one its specimen can be cut among too); the ranks a run may have here (``None`` without ``mpi``)."""
+    if mpi is None:
+        return None
+    from ..simulate.process import check_mpi_ranks, mpi_slots
+
+    runs = local_workers(workers, mpi)
+    usable = None
+    if test == "triaxial" and engine == "liggghts":
+        from ..simulate.liggghts_triaxial import largest_ranks
+
+        def usable(n: int) -> int:
+            return largest_ranks(settings, n)
+
+    check_mpi_ranks(mpi, runs, usable=usable)
+    return mpi_slots()[0] // runs
 
 
 def choose_templates(inputs, settings, pool: int | None, workers: int):
@@ -282,14 +313,13 @@ def engine_runners(scheduler: str | None, workers: int | None, mpi: int | None):
     """Who runs the engine: ``(executor, workers)`` — the cluster's (:func:`cluster_executor`; its threads size
     the estimate, and its workers decide how many ranks they hold), or ``(None, workers)`` on this machine's
     cores (default: the cores divided by ``mpi``), with MPI ranks beyond them refused in one line (exit 2)."""
-    import os
 
     from ..simulate.process import check_mpi_ranks
 
     if scheduler is not None:
         executor = cluster_executor(scheduler)
         return executor, executor.workers
-    workers = workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+    workers = local_workers(workers, mpi)
     try:
         check_mpi_ranks(mpi, workers)  # before anything starts: ranks beyond the cores are refused
     except ValueError as exc:
@@ -404,7 +434,8 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..simulate.specimen import template_make_seconds
     from .interrupts import ready_for_work, say_short_estimate, signals_held
 
-    settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi)
+    settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi, workers=workers,
+                            scheduler=scheduler)
     outputs = [out / "results.csv", out / f"{test}.png", out / "templates.csv"] + [
         out / f"{test}-seed{settings.seed + k}" for k in range(settings.seeds)]
     outputs += [out / "clumps.csv"] if clump_accuracy is not None else []

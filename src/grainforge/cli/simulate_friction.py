@@ -140,7 +140,8 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     check_engine(engine, mpi, shape, test)
     check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
     given = dict(values)
-    settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi)
+    settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi, workers=workers,
+                            scheduler=scheduler)
     outputs = OUTPUTS + (("clumps.csv",) if clump_accuracy is not None else ())
     out = output_dir(out, overwrite=overwrite, files=[out / name for name in outputs])
     ls_spacing = 0.05 if spacing is None else spacing

@@ -45,7 +45,7 @@ import numpy as np
 from ..rng import as_generator
 from .settings import DENSEST_FRACTION, TriaxialSettings
 
-__all__ = ["WALLS", "deck_files", "write_deck", "collect_triaxial", "processor_grid", "check_ranks",
+__all__ = ["WALLS", "deck_files", "write_deck", "collect_triaxial", "processor_grid", "check_ranks", "largest_ranks",
            "MIN_RANK_DIAMETERS", "SERVO_STEPS", "UNBALANCED"]
 
 #: the walls, by the axis they move along and their side (0: low, 1: high)
@@ -104,10 +104,45 @@ def processor_grid(ranks: int) -> tuple[int, int, int]:
     return best
 
 
-def check_ranks(settings: TriaxialSettings, mpi: int | None) -> None:
+def _width(settings: TriaxialSettings) -> float:
+    """The compacted specimen's side in grain diameters (``settings.grains`` spheres at the densest solid
+    fraction)."""
+    return (settings.grains * (math.pi / 6.0) / DENSEST_FRACTION) ** (1.0 / 3.0)
+
+
+def largest_ranks(settings: TriaxialSettings, most: int) -> int:
+    """The most ranks, ``most`` at most, among which a LIGGGHTS triaxial specimen of ``settings`` can be cut (every
+    rank's slab at least :data:`MIN_RANK_DIAMETERS` grain diameters thick: :func:`check_ranks` accepts it).
+
+    Parameters
+    ----------
+    settings : TriaxialSettings
+        The run's settings (``grains``).
+    most : int
+        The ranks available (``--mpi`` asked, or the cores).
+
+    Returns
+    -------
+    int
+        At least 1 (one rank cuts nothing).
+
+    Examples
+    --------
+    >>> largest_ranks(TriaxialSettings(grains=200), 64), largest_ranks(TriaxialSettings(grains=200), 3)
+    (8, 2)
+    """
+    allowed = max(1, int(_width(settings) // MIN_RANK_DIAMETERS))
+    top = min(int(most), allowed**3)  # more ranks than that cut some side more than ``allowed`` ways
+    return next((r for r in range(top, 1, -1) if max(processor_grid(r)) <= allowed), 1)
+
+
+def check_ranks(settings: TriaxialSettings, mpi: int | None, available: int | None = None) -> None:
     """Refuse (``ValueError``, one line) a LIGGGHTS triaxial specimen too small for ``mpi`` ranks: the compacted
     cube (``settings.grains`` spheres at the densest solid fraction) cut by :func:`processor_grid` would leave a
     rank a slab under :data:`MIN_RANK_DIAMETERS` grain diameters thick.
+
+    Every remedy the line offers passes the other checks: the ``--mpi`` it names is within ``available`` ranks,
+    and ``--grains`` is offered only where ``mpi`` ranks are available and the grains within the setting's range.
 
     Parameters
     ----------
@@ -115,6 +150,9 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None) -> None:
         The run's settings (``grains``).
     mpi : int or None
         Ranks of each run (``--mpi``); ``None`` or 1: nothing to check.
+    available : int, optional
+        Ranks a run may have here (:func:`grainforge.simulate.process.mpi_slots` over the runs at once); None: no
+        limit known (the cluster's workers decide).
 
     Raises
     ------
@@ -128,22 +166,30 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None) -> None:
     Traceback (most recent call last):
     ...
     ValueError: --mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use --mpi 8 (or another count cut at most 2 ways per side), or --grains 626 or more
+    >>> check_ranks(TriaxialSettings(grains=200), 3, available=2)
+    Traceback (most recent call last):
+    ...
+    ValueError: --mpi 3: a triaxial specimen of 200 grains is about 5.5 grain diameters wide; cut 3 ways (the 3 × 1 × 1 ranks' grid) a rank's slab would be 1.8 diameters thick, under the 2 a rank needs: use --mpi 2 (or another count cut at most 2 ways per side)
     """
+    from ..params import specs
+
     if mpi is None or mpi <= 1:
         return
-    width = (settings.grains * (math.pi / 6.0) / DENSEST_FRACTION) ** (1.0 / 3.0)
+    width = _width(settings)
     grid = processor_grid(mpi)
     cuts = max(grid)
     if width / cuts >= MIN_RANK_DIAMETERS:
         return
     allowed = int(width // MIN_RANK_DIAMETERS)
-    fits = max(r for r in range(1, mpi + 1) if max(processor_grid(r)) <= allowed)
+    fits = largest_ranks(settings, mpi if available is None else min(mpi, available))
     grains = math.ceil((MIN_RANK_DIAMETERS * cuts) ** 3 * DENSEST_FRACTION / (math.pi / 6.0))
+    most_grains = next(s.high for s in specs(TriaxialSettings) if s.name == "grains")
+    more = (available is None or mpi <= available) and grains <= most_grains
     raise ValueError(f"--mpi {mpi}: a triaxial specimen of {settings.grains} grains is about {width:.1f} grain "
                      f"diameters wide; cut {cuts} ways (the {' × '.join(map(str, grid))} ranks' grid) a rank's slab "
                      f"would be {width / cuts:.1f} diameters thick, under the {MIN_RANK_DIAMETERS:g} a rank needs: "
-                     f"use --mpi {fits} (or another count cut at most {allowed} ways per side), or --grains {grains} "
-                     "or more")
+                     f"use --mpi {fits} (or another count cut at most {allowed} ways per side)"
+                     + (f", or --grains {grains} or more" if more else ""))
 
 
 def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleNamespace:

@@ -304,7 +304,8 @@ def mpi_slots(environ: dict | None = None) -> tuple[int, str]:
     return best
 
 
-def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict | None = None) -> None:
+def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict | None = None,
+                    usable=None) -> None:
     """Refuse ``mpi`` ranks per run (× ``workers`` runs at once) beyond :func:`mpi_slots`.
 
     Parameters
@@ -315,6 +316,10 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
         Runs at once (``--workers``); None counts one.
     environ : dict, optional
         As :func:`mpi_slots`.
+    usable : callable, optional
+        ``usable(n)``: the most ranks, ``n`` at most, the run itself can be cut among (a LIGGGHTS triaxial
+        specimen's, :func:`grainforge.simulate.liggghts_triaxial.largest_ranks`), so that the ``--mpi`` the line
+        suggests passes that check too; default any ``n``.
 
     Raises
     ------
@@ -336,6 +341,8 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
     if mpi * runs > slots:
         what = f"--mpi {mpi}" + (f" × --workers {runs}" if runs > 1 else "")
         largest = max(1, slots // runs)
+        if usable is not None:
+            largest = max(1, usable(largest))
         raise ValueError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
                          + (" (or fewer --workers)" if runs > 1 else "")
                          + ", or run inside a batch allocation or with a hostfile that provides more")
