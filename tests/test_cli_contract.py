@@ -241,6 +241,18 @@ CASES: list[Case] = [
          err=r"no such file"),
     Case("scan-unwritable", ["scan", "{in}/labels.npy", "--voxel-size-um", "10", "--atlas-csv", "ro/s.csv"],
          err=r"--atlas-csv: cannot write", readonly=True),
+    # --segment on an image already labelled: refused (its labels would be lost) unless --ignore-labels
+    *[Case(f"{cmd}-segment-labelled", [cmd, "{in}/labels.npy", "--segment", "--voxel-size-um", "10", "--atlas-csv",
+                                       "s.csv"],
+           err=r"labels\.npy: already labelled \(2 labels, 1–2\): --segment takes a binary image .*drop --segment "
+               r".* --ignore-labels") for cmd in ("scan", "analyse")],
+    Case("scan-ignore-labels-without-segment", ["scan", "{in}/labels.npy", "--ignore-labels", "--voxel-size-um", "10"],
+         err=r"--ignore-labels needs --segment"),
+    Case("scan-segment-ignore-labels", ["scan", "{in}/labels.npy", "--segment", "--ignore-labels", "--voxel-size-um",
+                                        "10", "--atlas-csv", "s.csv"], code=0, lines=3,
+         err=r"segmented: 2 grain\(s\)(.|\n)*2 grain\(s\) measured of 2 label\(s\)", creates=("s.csv",)),
+    Case("scan-segment-binary-255", ["scan", "{in}/binary-255.npy", "--segment", "--voxel-size-um", "10"], code=0,
+         lines=2, err=r"segmented: 2 grain\(s\)(.|\n)*2 grain\(s\) measured of 2 label\(s\)"),
     Case("scan-labels", ["scan", "{in}/labels.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv"], code=0,
          lines=2, err=r"2 grain\(s\) measured of 2 label\(s\)\n.*wrote 2 grain\(s\) to s\.csv", creates=("s.csv",)),
     # simulate calibrate triaxial: the target, the triaxial settings (simulate triaxial's checks), other tests'
@@ -338,6 +350,7 @@ def inputs(tmp_path_factory) -> Path:
     np.save(d / "float.npy", labels.astype(np.float32))
     np.save(d / "void.npy", np.zeros_like(labels))
     np.save(d / "one-label.npy", np.ones_like(labels))
+    np.save(d / "binary-255.npy", np.where(labels > 0, 255, 0).astype(np.uint8))  # binary: one non-zero value
     _truncated_images(d, labels)
     return d
 

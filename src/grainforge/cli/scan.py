@@ -70,6 +70,9 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
 @click.option("--segment", is_flag=True,
               help="IMAGE is binary (non-zero is grain): split touching grains by a distance-transform watershed "
                    "first.")
+@click.option("--ignore-labels", is_flag=True,
+              help="With --segment: segment an image that holds several non-zero values (already labelled) as "
+                   "binary, every non-zero voxel grain; without it such an image is refused.")
 @click.option("--marker-distance", type=FiniteFloatRange(min=0, min_open=True), default=None, show_default="0.4",
               help="With --segment: least distance between two grains' markers, as a fraction of the typical "
                    "grain diameter; larger merges more, smaller splits more.")
@@ -90,8 +93,8 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
                                       "(as `analyse`).")
 @overwrite_option("Replace existing outputs.")
 @workers_option("Processes measuring grains; the rows do not depend on it.", default_text="one per CPU")
-def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_distance, marker_depth, labels_out,
-         meshes, min_voxels, keep_border, convention, overwrite, workers):
+def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_labels, marker_distance, marker_depth,
+         labels_out, meshes, min_voxels, keep_border, convention, overwrite, workers):
     """Sand-Atlas descriptors of every grain of a 3D image IMAGE (a μCT scan).
 
     IMAGE is a labelled volume (one integer per grain, 0 the void) or, with
@@ -113,13 +116,13 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
     from .progress import progress_bar
 
     marker_distance, marker_depth = _check_options(image, segment, marker_distance, marker_depth, labels_out,
-                                                   atlas_csv, meshes, voxel_size_um, overwrite)
+                                                   atlas_csv, meshes, voxel_size_um, overwrite, ignore_labels)
     volume, voxel_size_um = _open_image(image, raw_shape, raw_dtype, voxel_size_um)
     total = int(np.prod(volume.shape, dtype=np.int64))
     preload(["scipy.ndimage", "skimage.measure", "skimage.segmentation", "skimage.feature", "skimage.morphology",
              "trimesh"])
     if segment:
-        volume = _segment_image(volume, image, total, marker_distance, marker_depth)
+        volume = _segment_image(volume, image, total, marker_distance, marker_depth, ignore_labels)
     Z = volume.shape[0]
     slabs = progress_bar(total=-(-Z // sc._slab_size(volume)), desc="boxes", unit="slab")
     boxes = sc.label_boxes(volume, progress=slabs)
@@ -163,14 +166,14 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, marker_
 
 
 def _check_options(image, segment, marker_distance, marker_depth, labels_out, atlas_csv, meshes, voxel_size_um,
-                   overwrite):
+                   overwrite, ignore_labels=False):
     """Every option checked before the image is read; the marker settings with their defaults."""
     from ..analysis import scan as sc
     from ..io.volume import LABEL_SUFFIXES
 
     if not segment:
         for name, given in (("--marker-distance", marker_distance), ("--marker-depth", marker_depth),
-                            ("--labels-out", labels_out)):
+                            ("--labels-out", labels_out), ("--ignore-labels", ignore_labels or None)):
             if given is not None:
                 raise click.UsageError(f"{name} needs --segment (the labels of a labelled image are its own)")
     marker_distance = sc.MARKER_DISTANCE if marker_distance is None else marker_distance
@@ -216,8 +219,9 @@ def _open_image(image, raw_shape, raw_dtype, voxel_size_um):
     return volume, voxel_size_um
 
 
-def _segment_image(volume, image, total, marker_distance, marker_depth):
-    """A binary image split into labelled grains (a distance-transform watershed)."""
+def _segment_image(volume, image, total, marker_distance, marker_depth, ignore_labels=False):
+    """A binary image split into labelled grains (a distance-transform watershed).  An image of several non-zero
+    values (labelled already, or greyscale) is refused unless ``ignore_labels``: its labels would be lost."""
     import numpy as np
 
     from ..analysis import scan as sc
@@ -227,11 +231,21 @@ def _segment_image(volume, image, total, marker_distance, marker_depth):
     check_memory(total * (sc.SEGMENT_BYTES_PER_VOXEL + volume.dtype.itemsize),
                  what=f"segmenting a {' x '.join(map(str, volume.shape))} image", option="the image's size "
                  "(segment sub-volumes)")
-    binary = volume.whole() != 0
+    whole = volume.whole()
+    binary = whole != 0
     if not binary.any():
         raise click.UsageError(f"{image}: no grain: every voxel is 0")
     if binary.all():
         raise click.UsageError(f"{image}: every voxel is grain: no void, so no grains to tell apart")
+    if not ignore_labels:
+        first = whole.flat[int(np.argmax(binary))]
+        if np.any(binary & (whole != first)):
+            values = np.unique(whole[binary])
+            raise click.UsageError(
+                f"{image}: already labelled ({len(values)} labels, {values[0]}–{values[-1]}): --segment takes a binary "
+                "image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to "
+                "segment its non-zero voxels anew (a greyscale image: threshold it first)")
+    del whole
     labels, seg_info = sc.segment(binary, marker_distance=marker_distance, marker_depth=marker_depth)
     del binary
     if labels.max() < 2**16:
