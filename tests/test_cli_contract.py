@@ -237,6 +237,15 @@ CASES: list[Case] = [
     *[Case(f"scan-voxel-size-{v}", ["scan", "{in}/labels.npy", "--voxel-size-um", v, "--atlas-csv", "s.csv"],
            err=r"--voxel-size-um") for v in ("0", "-1", "nan", "inf")],
     Case("scan-no-voxel-size", ["scan", "{in}/labels.npy", "--atlas-csv", "s.csv"], err=r"give --voxel-size-um"),
+    # one voxel size, in µm or mm, for meshes and images alike (--voxel-size-um and --voxel-size-mm everywhere)
+    *[Case(f"{cmd}-voxel-size-both", [cmd, f"{{in}}/{name}", "--voxel-size-um", "10", "--voxel-size-mm", "0.01"],
+           err=r"give --voxel-size-um or --voxel-size-mm, not both")
+      for cmd, name in (("analyse", "grain.stl"), ("analyse", "labels.npy"), ("scan", "labels.npy"))],
+    *[Case(f"analyse-mesh-{flag}-too-coarse", ["analyse", "{in}/grain.stl", flag, v],
+           err=re.escape(flag) + r": .*grain\.stl: .* voxels across .*; measure at a voxel size of at most [0-9.]+ mm")
+      for flag, v in (("--voxel-size-um", "100000"), ("--voxel-size-mm", "100"))],
+    Case("scan-voxel-size-mm-1e308", ["scan", "{in}/labels.npy", "--voxel-size-mm", "1e308"],
+         err=r"'--voxel-size-mm': 1e\+308 mm is inf µm, not a usable voxel size"),
     Case("scan-missing", ["scan", "{in}/nothere.npy", "--voxel-size-um", "10", "--atlas-csv", "s.csv"],
          err=r"no such file"),
     Case("scan-unwritable", ["scan", "{in}/labels.npy", "--voxel-size-um", "10", "--atlas-csv", "ro/s.csv"],
@@ -574,6 +583,26 @@ def test_failed_batch_does_not_block_the_fixed_rerun(case_dir, inputs):
     code, err = run_case(Case("fixed", ["batch", "{in}/good.toml", "--out", "b", "--workers", "1"]), d, inputs)
     assert code == 0, err
     assert (d / "b" / "manifest.csv").is_file()
+
+
+# --------------------------------------------------------------------------- one voxel size option, two units
+
+@pytest.mark.parametrize("kind", ["mesh", "image"])
+def test_the_voxel_size_in_um_or_mm_gives_the_same_table(kind, case_dir, inputs):
+    """``analyse`` of a mesh (mm) and of an image (µm, which ``scan`` measures) take the voxel size as
+    ``--voxel-size-um`` or ``--voxel-size-mm``: the same voxel size in either unit writes the same table, byte for
+    byte (the README's ``analyse --voxel-size-mm`` and ``fit --voxel-size-um 7.3`` keep their spelling)."""
+    d, _ = case_dir
+    source = "{in}/grain.stl" if kind == "mesh" else "{in}/labels.npy"
+    extra = ["--no-fractal", "--no-fourier", "--workers", "1"] if kind == "mesh" else ["--workers", "1"]
+    tables = []
+    for flag, value in (("--voxel-size-um", "50"), ("--voxel-size-mm", "0.05")):
+        out = f"{flag.rsplit('-', 1)[1]}.csv"
+        code, err = run_case(Case(flag, ["analyse", source, flag, value, "--atlas-csv", out, *extra]), d, inputs)
+        assert code == 0 and "Traceback" not in err, err
+        tables.append((d / out).read_bytes())
+    assert tables[0] == tables[1]
+    assert b"50" in tables[0].splitlines()[1]  # the table's voxel size column, in µm
 
 
 # --------------------------------------------------------------------------- a Dask scheduler nothing answers at

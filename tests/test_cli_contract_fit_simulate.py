@@ -125,6 +125,12 @@ CASES = [
            r"ottawa-7\.3um\.csv: at a voxel size of .* voxels across; the fit measures grains 5 to 1000")
       for v in ("1e-30", "1e30", "1e6", "0.001", "0.4", "200")],
     *[Case(f"fit-voxel-size-{v}", _fit("--voxel-size-um", v), r"voxel.size") for v in ("nan", "inf", "0", "-1")],
+    # the same voxel size in mm (--voxel-size-mm, as analyse and scan take it too)
+    *[Case(f"fit-voxel-size-mm-{v}", _fit("--voxel-size-mm", v),
+           r"ottawa-7\.3um\.csv: at a voxel size of .* voxels across; the fit measures grains 5 to 1000")
+      for v in ("1e-33", "1e3")],
+    Case("fit-voxel-size-um-and-mm", _fit("--voxel-size-um", "7.3", "--voxel-size-mm", "0.0073"),
+         r"give --voxel-size-um or --voxel-size-mm, not both"),
     # fit: huge work refused up front, by the declared range or the estimate
     Case("fit-count-1e9", _fit("--voxel-size-um", "7.3", "--count", "1000000000"), r"--count.*not in the range"),
     Case("fit-design-grains-1e9", _fit("--voxel-size-um", "7.3", "--design-grains", "1000000000"),

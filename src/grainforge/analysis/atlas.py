@@ -91,7 +91,7 @@ def image_cells(extents, voxel_size: float) -> float:
 
 
 def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_across: float | None = None,
-                        workers: int = 1, memory: float | None = None) -> None:
+                        workers: int = 1, memory: float | None = None, unit: str = "") -> None:
     """Refuse, before any image is made, a Sand-Atlas measurement that means nothing or cannot fit in memory.
 
     Parameters
@@ -105,6 +105,8 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
     memory : float, optional
         Bytes the measurement may use (default: half of this machine's memory,
         :func:`grainforge.runtime.estimate.check_memory`).
+    unit : str, optional
+        The lengths' unit, named after a voxel size the message suggests (``"mm"``).
 
     Raises
     ------
@@ -134,7 +136,8 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
         h = d_eq / voxels_across if voxel_size is None else voxel_size
         across = d_eq / h
         if across < MIN_VOXELS_ACROSS:
-            fix = (f"a voxel size of at most {d_eq / MIN_VOXELS_ACROSS:.3g}" if voxel_size is not None
+            fix = (f"a voxel size of at most {d_eq / MIN_VOXELS_ACROSS:.3g}{' ' + unit if unit else ''}"
+                   if voxel_size is not None
                    else f"{MIN_VOXELS_ACROSS:g} voxels across or more")
             raise ValueError(f"{name}: {across:.3g} voxels across its equivalent diameter is below "
                              f"{MIN_VOXELS_ACROSS:g}, where the Atlas descriptors measure shape (a ball 4 voxels "
@@ -148,7 +151,7 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
         if voxel_size is None:
             fits = f"--voxels-across {math.floor(voxels_across * shrink)}"
         else:
-            fits = f"a voxel size of {voxel_size / shrink:.3g} or more"
+            fits = f"a voxel size of {voxel_size / shrink:.3g}{' ' + unit if unit else ''} or more"
         raise TooLargeError(f"{worst_name}: its voxel image ({worst:.3g} cells) would need about "
                             f"{need / 1024**3:.3g} GiB with {max(1, int(workers))} grain(s) measured at once; the "
                             f"limit is {budget / 1024**3:.3g} GiB (half this machine's memory): the largest that "

@@ -9,7 +9,14 @@ from pathlib import Path
 import click
 
 from ..units import with_unit
-from .options import FiniteFloatRange, overwrite_option, renamed_option, workers_option
+from .options import (
+    FiniteFloatRange,
+    overwrite_option,
+    renamed_option,
+    voxel_size_flag,
+    voxel_size_options,
+    workers_option,
+)
 from .paths import OutPath, mesh_inputs, output_file
 
 #: columns of the terminal table (all columns go to --csv and --json)
@@ -88,7 +95,7 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
             bodies.append((f"{path}" + (f" (body {k})" if k else ""), v.max(axis=0) - v.min(axis=0), d_eq))
     try:
         check_atlas_request(bodies, voxel_size=atlas.get("voxel_size"), voxels_across=atlas.get("voxels_across"),
-                            workers=workers)
+                            workers=workers, unit="mm")
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     except ValueError as exc:
@@ -105,19 +112,18 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
               help="Fourier descriptors D2…D16 of the three principal projections.")
 @click.option("--primary-volume", type=FiniteFloatRange(min=0, min_open=True), default=None,
               help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
-@click.option("--voxel-size-mm", "voxel_size", type=FiniteFloatRange(min=0, min_open=True), default=None,
-              help="Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
-                   "in mm (the files' unit: 7.3 µm is 0.0073); see docs/validation.md.")
+@voxel_size_options("mm", "Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
+                          "in mm (the files' unit: 7.3 µm is 0.0073); see docs/validation.md.")
 @renamed_option("--voxel-size", "--voxel-size-mm", "mm")
 @click.option("--voxels-across", type=FiniteFloatRange(min=2), default=None,
-              help="As --voxel-size-mm, with the voxel size set to d_eq / this number.")
+              help="As --voxel-size-um/--voxel-size-mm, with the voxel size set to d_eq / this number.")
 @click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
               show_default=True,
               help="atlas_sphericity as the Sand Atlas computed it (spam's cube, clipped above the centre of "
                    "mass) or on the whole grain; docs/validation.md.")
 @click.option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
               help="Also write the atlas_* columns as a Sand Atlas table that `grainforge fit` reads (lengths in "
-                   "µm, the files being in mm), with each grain's opening fraction; needs --voxel-size-mm or "
+                   "µm, the files being in mm), with each grain's opening fraction; needs a voxel size or "
                    "--voxels-across. Bodies that are not closed are left out.")
 @overwrite_option("Replace an existing --csv or --atlas-csv file.")
 @workers_option("Processes measuring files; rows do not depend on it.", default_text="one per CPU, at most one per file")
@@ -160,7 +166,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     if primary_volume is not None and not math.isfinite(primary_volume):
         raise click.BadParameter(f"must be a finite volume, got {primary_volume}", param_hint="'--primary-volume'")
     if voxel_size is not None and voxels_across is not None:
-        raise click.UsageError("give --voxel-size-mm or --voxels-across, not both")
+        raise click.UsageError(f"give {voxel_size_flag('--voxel-size-mm')} or --voxels-across, not both")
     atlas = None
     if voxel_size is not None:
         atlas = {"voxel_size": voxel_size, "convention": sphericity}
@@ -170,7 +176,8 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
         output_file(csv_out, overwrite=overwrite, option="--csv", suffixes=(".csv",))
     if atlas_csv is not None:
         if atlas is None:
-            raise click.UsageError("--atlas-csv needs --voxel-size-mm or --voxels-across (the scan's resolution)")
+            raise click.UsageError("--atlas-csv needs --voxel-size-mm (or --voxel-size-um) or --voxels-across (the "
+                                   "scan's resolution)")
         output_file(atlas_csv, overwrite=overwrite, option="--atlas-csv", suffixes=(".csv",))
         if csv_out is not None and Path(csv_out).resolve() == Path(atlas_csv).resolve():
             raise click.UsageError("--csv and --atlas-csv must be different files")
@@ -186,7 +193,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
             n = min(len(files), workers or os.cpu_count() or 1)
         if atlas is not None:  # the memory a worker needs: each Dask worker has its own
             _check_atlas(files, atlas, 1 if executor else n,
-                         "--voxel-size-mm" if voxel_size is not None else "--voxels-across")
+                         voxel_size_flag("--voxel-size-mm") if voxel_size is not None else "--voxels-across")
         rows = _measure_files(files, n, executor, dict(fractal=fractal, fourier=fourier,
                                                        primary_volume=primary_volume, atlas=atlas))
     columns = ANALYSE_COLUMNS(fourier, atlas=atlas is not None)

@@ -6,7 +6,15 @@ from pathlib import Path
 
 import click
 
-from .options import EXIT_CHECK_FAILED, FiniteFloatRange, overwrite_option, renamed_option, seed_option, workers_option
+from .options import (
+    EXIT_CHECK_FAILED,
+    FiniteFloatRange,
+    overwrite_option,
+    renamed_option,
+    seed_option,
+    voxel_size_options,
+    workers_option,
+)
 from .paths import OutPath, output_dir
 from .progress import progress_bar
 
@@ -24,8 +32,8 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
 @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
               help="Folder for recipe.toml, fit.csv, fit-stats.csv and fit.png.")
-@click.option("--voxel-size-um", "voxel_size", type=FiniteFloatRange(min=0, min_open=True), default=None,
-              help="Voxel size of the sand's scan in µm; required unless the CSV has a 'Voxel Size (µm)' column.")
+@voxel_size_options("um", "Voxel size of the sand's scan in µm; required unless the CSV has a 'Voxel Size (µm)' "
+                          "column.")
 @renamed_option("--voxel-size", "--voxel-size-um", "µm")
 @click.option("--method", default="rf", show_default=True,
               help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best. "

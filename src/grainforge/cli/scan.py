@@ -11,7 +11,7 @@ from pathlib import Path
 import click
 
 from .analyse import table_text
-from .options import FiniteFloatRange, overwrite_option, workers_option
+from .options import FiniteFloatRange, overwrite_option, voxel_size_flag, voxel_size_options, workers_option
 from .paths import OutPath, output_dir, output_file
 
 #: columns written after the Sand Atlas's (:data:`grainforge.fit.SAND_HEADER` and the opening fraction)
@@ -58,8 +58,8 @@ def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
 
 @click.command()
 @click.argument("image", type=click.Path(path_type=Path))
-@click.option("--voxel-size-um", type=FiniteFloatRange(min=0, min_open=True), default=None,
-              help="Voxel edge in µm (default: from the TIFF's metadata, where it says).")
+@voxel_size_options("um", "Voxel edge in µm (default: from the TIFF's metadata, where it says).",
+                    name="voxel_size_um")
 @click.option("--raw-shape", type=click.IntRange(min=1), nargs=3, default=None, metavar="Z Y X",
               help="IMAGE is raw binary (no header, C order) of this shape.")
 @click.option("--raw-dtype", default=None, metavar="DTYPE",
@@ -100,7 +100,7 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_
     IMAGE is a labelled volume (one integer per grain, 0 the void) or, with
     --segment, a binary one: a multi-page TIFF, a folder of TIFF slices, a
     .npy array, or raw binary (--raw-shape, --raw-dtype).  Each grain is cut
-    out of the image and measured as `analyse --voxel-size-mm` measures a
+    out of the image and measured as `analyse --voxel-size-um` measures a
     mesh's voxel image; the image is read slab by slab, never whole (but
     for --segment).  Grains touching the image's faces and labels under
     --min-voxels are counted and left out.  The table goes to stdout;
@@ -179,7 +179,7 @@ def _check_options(image, segment, marker_distance, marker_depth, labels_out, at
     marker_distance = sc.MARKER_DISTANCE if marker_distance is None else marker_distance
     marker_depth = sc.MARKER_DEPTH if marker_depth is None else marker_depth
     if voxel_size_um is not None and not math.isfinite(voxel_size_um):
-        raise click.BadParameter(f"must be a finite size, got {voxel_size_um}", param_hint="'--voxel-size-um'")
+        raise click.BadParameter(f"must be a finite size, got {voxel_size_um}", param_hint=f"'{voxel_size_flag()}'")
     if not math.isfinite(marker_distance):
         raise click.BadParameter(f"must be finite, got {marker_distance}", param_hint="'--marker-distance'")
     if not math.isfinite(marker_depth):
@@ -211,7 +211,8 @@ def _open_image(image, raw_shape, raw_dtype, voxel_size_um):
         if voxel_size_um is None:
             voxel_size_um = volume.voxel_size_um
             if voxel_size_um is None:
-                raise click.UsageError(f"{image}: no voxel size in the file: give --voxel-size-um")
+                raise click.UsageError(f"{image}: no voxel size in the file: give --voxel-size-um (or "
+                                       "--voxel-size-mm)")
             click.echo(f"voxel size from {image}'s metadata: {voxel_size_um:g} µm", err=True)
         sc.check_labels(volume.dtype, str(image))
     except TooLargeError as exc:
