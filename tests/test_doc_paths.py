@@ -3,19 +3,29 @@
 A new user copies the commands of the README and the docs: each input file they
 name must be in the repository (e.g. ``examples/images/micrograph.png``), or be
 written by an earlier command of the same page (``--out out/cri`` before
-``out/cri/*.stl``), or by ``make demo`` (the set-up every page assumes).  The
-commands are read with the real ``grainforge`` command tree: an argument whose
-type is a path and not an output is an input; an output (``OutPath``) is what
-the command creates.  Commands in a transcript followed by ``Error:`` show a
-refusal and read nothing.  Inline code naming a file of the repository
+``out/cri/*.stl``), or by ``make demo`` (the set-up every page assumes: its
+virtual environment and ``out/demo``).  The commands are read with the real
+``grainforge`` command tree: an argument whose type is a path and not an output
+is an input; an output (``OutPath``) is what the command creates.  Other
+programs create what follows ``--out``, ``--figure``, ``-o`` or ``>``, and the
+target of ``python3 -m venv DIR``, ``mkdir DIR``, ``git clone URL DIR`` and
+``touch FILE``.  Commands in a transcript followed by ``Error:`` show a refusal
+and read nothing.  Inline code naming a file of the repository
 (``examples/...``, ``benchmarks/...``) must name one that exists.
+
+"In the repository" means a file git tracks (or would: untracked files not
+ignored count), never what happens to lie on this machine: an ignored ``out/``
+or ``.venv`` of earlier runs, or an absolute path such as ``/tmp/clumptools``,
+so that the outcome is the same on a fresh clone.
 """
 
 from __future__ import annotations
 
-import glob
+import fnmatch
+import functools
 import re
 import shlex
+import subprocess
 from pathlib import Path, PurePosixPath
 
 import click
@@ -145,10 +155,37 @@ def _norm(path: str, cwd: str = "") -> PurePosixPath:
     return PurePosixPath(*parts)
 
 
+@functools.cache
+def repository_paths() -> frozenset[PurePosixPath]:
+    """The repository's files and their folders, relative to its root: what git tracks, and untracked files it does
+    not ignore (a new page's new example before ``git add``); without git (an unpacked source archive), every file
+    under the root but the ignored leftovers of runs (``out/``, the virtual environment, caches)."""
+    try:
+        listed = subprocess.run(["git", "-C", str(ROOT), "ls-files", "-z", "--cached", "--others", "--exclude-standard"],
+                                capture_output=True, check=True).stdout.decode().split("\0")
+        files = [PurePosixPath(f) for f in listed if f and (ROOT / f).exists()]
+    except (OSError, subprocess.CalledProcessError):
+        skip = {"out", ".venv", ".git", ".hypothesis", ".pytest_cache", ".ruff_cache", "site"}
+        files = [PurePosixPath(p.relative_to(ROOT).as_posix()) for p in ROOT.rglob("*")
+                 if p.is_file() and not skip & set(p.relative_to(ROOT).parts)]
+    return frozenset(files) | {d for f in files for d in f.parents if str(d) != "."}
+
+
+def in_repository(p: PurePosixPath) -> bool:
+    """Whether the relative path ``p`` (a glob allowed, ``*`` within one folder) names something of the repository."""
+    paths = repository_paths()
+    if not any(c in str(p) for c in "*?["):
+        return p in paths
+    parts = [re.compile(fnmatch.translate(q)) for q in p.parts]
+    return any(len(q.parts) == len(parts) and all(r.match(x) for r, x in zip(parts, q.parts)) for q in paths)
+
+
 def available(path: str, created: set[PurePosixPath], cwd: str = "") -> bool:
-    """Whether ``path`` (a glob allowed) is in the repository or under something an earlier command wrote."""
+    """Whether ``path`` (a glob allowed) is in the repository or under something an earlier command wrote (an
+    absolute path or one in the home folder only if a command wrote it: what this machine holds there counts
+    for nothing)."""
     p = _norm(path, cwd)
-    if glob.glob(str(ROOT / p)):
+    if not (p.is_absolute() or path.startswith("~")) and in_repository(p):
         return True
     head = []
     for q in p.parts:  # the part of a glob before its first wildcard
@@ -159,11 +196,47 @@ def available(path: str, created: set[PurePosixPath], cwd: str = "") -> bool:
     return any(c == base or c in base.parents or c == p for c in created)
 
 
+#: a shell variable assignment before a command (``OMP_NUM_THREADS=1 nice ...``)
+ASSIGNMENT = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*=")
+
+
+def other_program(tokens: list[str]) -> tuple[str, list[str], list[str]]:
+    """(program, inputs, outputs) of a command line that is not grainforge's: the files it is given are read; it
+    creates what follows ``--out``, ``--figure``, ``-o`` or ``>``, and the target of ``python -m venv DIR``,
+    ``virtualenv DIR``, ``mkdir DIR``, ``git clone URL [DIR]``, ``touch FILE``.  Variable assignments before the
+    program are skipped, and so is ``nice`` (the program it runs, from the venv made by make, is the program)."""
+    while tokens and ASSIGNMENT.match(tokens[0]):
+        tokens = tokens[1:]
+    if tokens and PurePosixPath(tokens[0]).name == "nice":
+        tokens = tokens[1:]
+    if not tokens:
+        return "", [], []
+    prog, rest = PurePosixPath(tokens[0]).name, tokens[1:]
+    outputs = [v for k, v in zip(rest, rest[1:]) if k in ("--out", "--figure", "-o", ">", ">>")]
+    words = [t for t in rest if not t.startswith("-")]
+    if prog.startswith("python") and rest[:2] == ["-m", "venv"] or prog == "virtualenv":
+        outputs += words[1:] if prog.startswith("python") else words
+    elif prog in ("mkdir", "touch"):
+        outputs += words
+    elif prog == "git" and words[:1] == ["clone"] and len(words) >= 2:
+        outputs.append(words[2] if len(words) > 2 else PurePosixPath(words[1]).name.removesuffix(".git"))
+    inputs = [t for t in rest if not t.startswith("-") and ("/" in t or FILE_SUFFIX.search(t)) and "://" not in t
+              and t not in outputs and t not in (">", ">>")]
+    return prog, inputs, outputs
+
+
+def setup_created() -> set[PurePosixPath]:
+    """What ``make demo`` (the set-up every page assumes) creates: its virtual environment and the demo's outputs."""
+    m = re.search(r"^VENV\s*:?=\s*(\S+)", (ROOT / "Makefile").read_text(), re.M)
+    created = {_norm(m.group(1))} if m else set()
+    for args in makefile_recipe("demo"):
+        created |= {_norm(o) for o in classify(args[1:])[1]}
+    return created
+
+
 def missing_in(page: Path) -> list[str]:
     """Input paths of the page's example commands that nothing provides."""
-    created: set[PurePosixPath] = set()
-    for args in makefile_recipe("demo"):  # the set-up every page assumes
-        created |= {_norm(o) for o in classify(args[1:])[1]}
+    created = setup_created()
     problems = []
     for lang, body in fenced_blocks(page.read_text()):
         if lang not in SHELL_LANGS:
@@ -181,14 +254,8 @@ def missing_in(page: Path) -> list[str]:
                 continue
             if prog == "grainforge":
                 inputs, outputs = classify(tokens[1:])
-            else:  # another program (yade, a benchmark script): the files it is given; what follows --out or
-                # --figure it writes
-                if prog == "nice":  # the program it runs, from the venv made by make
-                    tokens = tokens[1:]
-                rest = tokens[1:]
-                outputs = [v for k, v in zip(rest, rest[1:]) if k in ("--out", "--figure")]
-                inputs = [t for t in rest if not t.startswith("-") and ("/" in t or FILE_SUFFIX.search(t))
-                          and t not in outputs]
+            else:  # another program (yade, a benchmark script): the files it is given, and what it creates
+                _, inputs, outputs = other_program(tokens)
             problems += [f"{page.name}: `{' '.join(tokens)}` reads {i}, which nothing provides"
                          for i in inputs if not available(i, created, cwd)]
             created |= {_norm(o, cwd) for o in outputs}
@@ -196,7 +263,7 @@ def missing_in(page: Path) -> list[str]:
     for span in re.findall(r"`([^`\n]+)`", text):
         for tok in span.split():
             tok = tok.strip("(),;:")
-            if tok.startswith(REPO_DIRS) and not glob.glob(str(ROOT / tok.split("::")[0].split("#")[0])):
+            if tok.startswith(REPO_DIRS) and not in_repository(_norm(tok.split("::")[0].split("#")[0])):
                 problems.append(f"{page.name}: `{span}` names {tok}, which is not in the repository")
     return problems
 
@@ -224,6 +291,30 @@ def test_the_checker_sees_a_missing_file_and_an_earlier_output(tmp_path):
     assert len(problems) == 4, problems
     assert [p.split(" reads ")[-1].split(",")[0] for p in problems[:3]] == ["micrograph.png", "a.png", "out/y/*.stl"]
     assert "examples/no-such-recipe.toml" in problems[3]
+
+
+def test_what_a_command_creates_counts_and_this_machine_does_not(tmp_path):
+    """The target of ``python3 -m venv``, ``mkdir``, ``git clone``, ``-o`` or ``>`` is provided to the commands after
+    it; a file that merely lies on this machine (an absolute path, an ignored leftover of a run) is not, whether it
+    exists or not; the set-up's virtual environment is, behind variable assignments and ``nice``."""
+    leftover = tmp_path / "leftover.png"
+    leftover.write_bytes(b"not in the repository")
+    page = tmp_path / "page.md"
+    page.write_text("```console\n"
+                    "python3 -m venv /tmp/doc-paths-venv && /tmp/doc-paths-venv/bin/pip install x\n"
+                    "grainforge fourier /tmp/doc-paths-venv/lib/a.png --csv a.csv\n"
+                    "mkdir -p work/sub && grainforge check work/sub/*.stl\n"
+                    "git clone https://example.org/tools.git && grainforge check tools/g.stl\n"
+                    "git clone https://example.org/x.git here && grainforge check here/g.stl\n"
+                    "OMP_NUM_THREADS=1 nice .venv/bin/python benchmarks/bench_scan.py --size 10 -o fig.png\n"
+                    "grainforge fourier fig.png --csv b.csv\n"
+                    f"grainforge fourier {leftover} --csv c.csv\n"
+                    "grainforge fourier out/never-made/x.png --csv d.csv\n"
+                    "```\n")
+    problems = missing_in(page)
+    assert [p.split(" reads ")[-1].split(",")[0] for p in problems] == [str(leftover), "out/never-made/x.png"], \
+        problems
+    assert not in_repository(PurePosixPath(".venv")) and not in_repository(PurePosixPath("out"))
 
 
 def test_example_images_are_what_the_code_makes(tmp_path):
