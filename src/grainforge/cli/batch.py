@@ -41,7 +41,7 @@ def batch(recipe, out, workers, scheduler, resume, overwrite):
         from ..runtime.cluster import check_address
 
         check_address(scheduler)
-    from .main import Terminated
+    from .interrupts import Terminated
 
     try:
         result = run_batch(r, out, workers=workers, scheduler=scheduler, resume=resume, overwrite=overwrite,

@@ -23,7 +23,8 @@ from collections.abc import Iterable
 
 from ..runtime.staging import _handled, signals_held
 
-__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_short_estimate", "STARTUP_MODULES"]
+__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_short_estimate", "STARTUP_MODULES",
+           "Terminated"]
 
 #: modules every working command needs, loaded by ``cli.main`` at start-up, while a signal still ends the
 #: process at once (nothing written, no process started): trimesh swallows a ``KeyboardInterrupt`` raised
@@ -32,6 +33,10 @@ STARTUP_MODULES = ("numpy", "scipy.spatial", "trimesh")
 
 #: the signals a command stops on, with the line it prints
 SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
+
+
+class Terminated(BaseException):
+    """Raised in the main thread on SIGTERM, so every ``finally`` cleans up (staging folders, temp files, pools)."""
 
 
 def _exit_now(signum, frame):  # pragma: no cover - exercised by a real signal

@@ -14,7 +14,7 @@ import threading
 import time
 from pathlib import Path
 
-from .interrupts import SIGNALS, _exit_now  # the standard library only: quick
+from .interrupts import SIGNALS, Terminated, _exit_now  # the standard library only: quick
 
 # A signal is honoured at every moment of a command's life, one mechanism for every command:
 #
@@ -61,11 +61,6 @@ import click  # noqa: E402
 from .._version import __version__  # noqa: E402
 from ..params import ParameterError  # noqa: E402
 from .interrupts import STARTUP_MODULES, preload  # noqa: E402
-
-
-class Terminated(BaseException):
-    """Raised in the main thread on SIGTERM, so every ``finally`` cleans up (staging folders, temp files, pools)."""
-
 
 #: the exceptions the command's signal handlers raise
 _SIGNAL_EXCEPTIONS = (Terminated, KeyboardInterrupt)
