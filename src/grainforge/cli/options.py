@@ -413,7 +413,8 @@ def voxel_size_options(unit: str, help: str, name: str = "voxel_size") -> Callab
                     raise click.BadParameter(f"{v:g} {words[u]} is {value:g} {words[unit]}, not a usable voxel size",
                                              param_hint=f"'--voxel-size-{u}'")
             kwargs[name] = value
-            click.get_current_context().meta[VOXEL_FLAG] = f"--voxel-size-{given[0][1] if given else unit}"
+            if given:
+                click.get_current_context().meta[VOXEL_FLAG] = f"--voxel-size-{given[0][1]}"
             return f(*args, **kwargs)
 
         other = "mm" if unit == "um" else "um"
