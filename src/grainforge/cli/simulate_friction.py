@@ -142,8 +142,7 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     given = dict(values)
     settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi, workers=workers,
                             scheduler=scheduler)
-    outputs = OUTPUTS + (("clumps.csv",) if clump_accuracy is not None else ())
-    out = output_dir(out, overwrite=overwrite, files=[out / name for name in outputs])
+    out = output_dir(out, overwrite=overwrite, files=[out / n for n in OUTPUTS + ("clumps.csv",) * (clump_accuracy is not None)])
     ls_spacing = 0.05 if spacing is None else spacing
     # every (friction, seed) run is journaled; the search's settings decide which frictions are tried
     search_options = dict(target_angle=target_angle, friction_range=list(friction_range), start=start,
