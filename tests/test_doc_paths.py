@@ -15,7 +15,7 @@ and read nothing.  Inline code naming a file of the repository
 
 "In the repository" means a file git tracks (or would: untracked files not
 ignored count), never what happens to lie on this machine: an ignored ``out/``
-or ``.venv`` of earlier runs, or an absolute path such as ``/tmp/clumptools``,
+or ``.venv`` of earlier runs, or an absolute path (the throwaway venv of benchmarks.md),
 so that the outcome is the same on a fresh clone.
 """
 
