@@ -2,7 +2,7 @@
 
 Every command in a shell block of README.md and the guides whose comment states a cost as ``≈ N s``,
 ``≈ N min`` or ``≈ N h`` (the time of the whole command on 2 idle cores) is run as written — only its output
-(``--out``/``-o``, and ``out/…`` inputs an earlier command of its block writes, which is run first) is moved into a
+(``--out``/``-o``, and ``out/…`` inputs an earlier command of its page writes, which is run first) is moved into a
 temporary folder — and timed. The command's own estimate is read from its
 ``estimated time: [at most] about …`` line on stderr. Printed per command: the stated cost, the estimate, the
 measured wall time, the CPU time of the command and its engines, and the two ratios (stated / measured and
@@ -50,13 +50,15 @@ def _output(tokens: list[str]) -> str | None:
 
 def documented() -> list[tuple[str, str, float, list[str]]]:
     """(page, command, stated seconds, earlier commands it reads from) of every shell-block command whose comment
-    states a cost; the earlier ones are the same block's commands whose output the command names."""
+    states a cost; the earlier ones are the same page's commands whose output the command names."""
     found = []
     for page in PAGES:
         text = page.read_text()
-        for m in re.finditer(r"^```(?:sh|bash|console|shell)?\n(.*?)^```", text, re.S | re.M):
-            before: list[str] = []
-            for line in m.group(1).replace("\\\n", " ").splitlines():
+        before: list[str] = []
+        for m in re.finditer(r"^```([\w+-]*)[^\n]*\n(.*?)^```", text, re.S | re.M):  # every block, in order
+            if m.group(1).lower() not in ("", "sh", "bash", "console", "shell"):
+                continue
+            for line in m.group(2).replace("\\\n", " ").splitlines():
                 code, _, comment = line.partition(" #")
                 code = " ".join(code.split())
                 if not code.startswith("grainforge "):
