@@ -157,3 +157,26 @@ def test_the_caption_names_each_engine_representation_and_rate(kw, expected):
     for part in expected:
         assert part in caption, (part, caption)
     assert caption.startswith(("Yade · sand: 200 grains", "LIGGGHTS, 2 MPI ranks · sand: 200 grains"))
+
+
+def test_a_run_of_a_minute_or_less_says_its_estimate_once_its_grains_are_made(grains, tmp_path, monkeypatch):
+    """A quick tilt (estimated at 10 s to a minute) says its estimate on stderr after the templates' line, before
+    the engine runs; a calibration says its usual time and its longest (all --max-frictions)."""
+    import re
+
+    _stand_in(tmp_path, monkeypatch, "tilt")
+    r = CliRunner().invoke(cli, ["simulate", "tilt", str(grains), "--out", str(tmp_path / "s"),
+                                                 "--quick"])
+    assert r.exit_code == 0, r.output
+    lines = r.output.splitlines()  # stdout and stderr as they came
+    said = [k for k, ln in enumerate(lines) if ln.startswith("estimated time: about ")]
+    assert len(said) == 1 and lines[said[0]] in r.stderr, r.output
+    assert any(ln.startswith("templates: ") for ln in lines[:said[0]]), r.output
+    seconds = float(re.match(r"estimated time: about ([\d.]+) s", lines[said[0]]).group(1))
+    assert 10 <= seconds <= 60
+    cal = CliRunner().invoke(cli, ["simulate", "calibrate", "tilt", str(grains), "--out",
+                                                   str(tmp_path / "c"), "--quick", "--target-angle", "31.6"])
+    assert cal.exit_code == 0, cal.output
+    line = next(ln for ln in cal.stderr.splitlines() if ln.startswith("estimated time: "))
+    usual, most = re.match(r"estimated time: about ([\d.]+) (?:s|min) \(at most ([\d.]+) (?:s|min);", line).groups()
+    assert float(most) > float(usual) or "min" in line.split("(at most")[1]
