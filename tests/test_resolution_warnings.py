@@ -43,7 +43,10 @@ def test_tray_budget_below_tolerance_is_said_prominently_and_previews_have_their
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     warnings = [ln for ln in lines if ln.startswith("WARNING:")]
     assert warnings and lines[-len(warnings):] == warnings          # last, where they are seen
-    assert "triangle budget (--max-triangles 400 for 4 grains: 100 faces per grain) caps the mesh at level 1" \
+    assert ("triangle budget (--max-triangles 400 a print file, --plates 1, for 4 grains: 100 faces per grain) "
+            "caps the mesh at level 1 (80 faces)") in warnings[0]
+    assert "exceeds the printer tolerance 16.0 µm" in warnings[0]
+    # FSO is fractal: the finest level allowed is the best the tolerance gets, and one grain of it needs a larger budget
+    assert "level 6 (81920 faces a grain" in warnings[0] and "--max-triangles 81920 or more and --plates auto" \
         in warnings[0]
-    assert "exceeds the printer tolerance 16.0 µm" in warnings[0] and "--max-triangles 1280" in warnings[0]
     assert f"previews {tmp_path / 'plates' / 't-plate1.png'}" in res.stderr
