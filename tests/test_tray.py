@@ -227,6 +227,8 @@ def test_cli_tray_warns_when_grains_are_below_the_printers_reliable_size(runner,
         (["missing-folder", "--out", "x.3mf"], "no such file"),
         (["--method", "fso", "--plates", "0", "--out", "x.3mf"], "positive whole number of print files or 'auto'"),
         (["--method", "fso", "--plates", "some", "--out", "x.3mf"], "positive whole number of print files or 'auto'"),
+        (["--method", "fso", "--param", "subdivisions=1", "--count", "1001", "--plates", "1001", "--out", "x.3mf"],
+         "1001 print files is more than 1000"),
     ],
 )
 def test_cli_tray_bad_input(runner, tmp_path, monkeypatch, extra, message):

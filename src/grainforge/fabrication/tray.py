@@ -574,6 +574,8 @@ THREEMF_BYTES_PER_TRIANGLE = 13
 #: bytes of a binary STL per triangle (exact), plus :data:`STL_HEADER_BYTES` a file
 STL_BYTES_PER_TRIANGLE = 50
 STL_HEADER_BYTES = 84
+#: most print files a tray plans (each also gets a preview): more is a budget or --plates mistyped
+MAX_FILES = 1000
 
 
 def file_bytes(triangles: int, fmt: str, files: int = 1) -> int:
@@ -856,7 +858,8 @@ def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf
     Raises
     ------
     ValueError
-        For a bad ``plates`` or ``max_triangles``, or a job refused by its estimate.
+        For a bad ``plates`` or ``max_triangles``, more than :data:`MAX_FILES` print files, or a job refused
+        by its estimate.
     """
     from .printers import get_printer
 
@@ -882,6 +885,9 @@ def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf
         files = _ceil_div(n, max(1, budget // resolution.faces))
     else:
         files = None
+    if files is not None and files > MAX_FILES:
+        raise ValueError(f"a tray of {n} grains in {files} print files is more than {MAX_FILES} files (each with its "
+                         f"preview); raise --max-triangles or lower --plates")
     per_file = None if files is None else _ceil_div(n, files)
     plan = TrayPlan(source, printer, fmt, plates, budget, files, per_file, max_faces, resolution, given=given)
     return plan.explained(max_subdivisions) if explain else plan
