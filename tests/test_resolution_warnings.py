@@ -38,12 +38,16 @@ def test_no_warning_when_the_shape_is_kept(runner, tmp_path):
 def test_tray_budget_below_tolerance_is_said_prominently_and_previews_have_their_folder(runner, tmp_path):
     out = tmp_path / "plates" / "t.3mf"
     res = runner.invoke(cli, ["tray", "--method", "fso", "--count", "4", "--size", "2", "--max-triangles", "400",
-                              "--printer", "objet-eden-250", "--workers", "1", "--out", str(out)])
+                              "--max-subdivisions", "4", "--printer", "objet-eden-250", "--workers", "1",
+                              "--out", str(out)])
     assert res.exit_code == 0, res.output
     lines = [ln for ln in res.stderr.splitlines() if ln.strip()]
     warnings = [ln for ln in lines if ln.startswith("WARNING:")]
     assert warnings and lines[-len(warnings):] == warnings          # last, where they are seen
-    assert "triangle budget (--max-triangles 400 for 4 grains: 100 faces per grain) caps the mesh at level 1" \
-        in warnings[0]
-    assert "exceeds the printer tolerance 16.0 µm" in warnings[0] and "--max-triangles 1280" in warnings[0]
+    assert ("triangle budget (--max-triangles 400 a print file, --plates 1, for 4 grains: 100 faces per grain) "
+            "caps the mesh at level 1 (80 faces)") in warnings[0]
+    assert "exceeds the printer tolerance 16.0 µm" in warnings[0]
+    # FSO is fractal: the finest level allowed is the best the tolerance gets, and one grain of it needs a larger budget
+    assert "level 4 (5120 faces a grain" in warnings[0] and "is the finest allowed (--max-subdivisions 4)" \
+        in warnings[0] and "--max-triangles 5120 or more and --plates auto" in warnings[0]
     assert f"previews {tmp_path / 'plates' / 't-plate1.png'}" in res.stderr

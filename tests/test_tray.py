@@ -225,6 +225,10 @@ def test_cli_tray_warns_when_grains_are_below_the_printers_reliable_size(runner,
         (["--out", "x.3mf"], "give grain files"),
         (["--method", "fso", "--printer", "eden", "--out", "x.3mf"], "printer must be one of"),
         (["missing-folder", "--out", "x.3mf"], "no such file"),
+        (["--method", "fso", "--plates", "0", "--out", "x.3mf"], "positive whole number of print files or 'auto'"),
+        (["--method", "fso", "--plates", "some", "--out", "x.3mf"], "positive whole number of print files or 'auto'"),
+        (["--method", "fso", "--param", "subdivisions=1", "--count", "1001", "--plates", "1001", "--out", "x.3mf"],
+         "1001 print files is more than 1000"),
     ],
 )
 def test_cli_tray_bad_input(runner, tmp_path, monkeypatch, extra, message):
@@ -251,3 +255,176 @@ def test_a_3mf_tray_is_read_back_by_trimesh_as_written(tmp_path):
         assert m.is_watertight and m.body_count == 1
         assert m.bounds[0] == pytest.approx([float(r["x_mm"]), float(r["y_mm"]), float(r["z_mm"])], abs=1e-4)
         assert m.volume == pytest.approx(float(r["volume_mm3"]), rel=1e-5)
+
+
+# ------------------------------------------------------------------ the plan, and print files within a budget
+
+#: a coarse PolyJet profile (tolerance 60 µm) on which the 2 mm grains of ``PLATES`` need subdivisions 3
+COARSE = '[printer.coarse]\ntechnology = "polyjet"\nbuild_volume = [100, 100, 50]\nresolution = 0.12\n'
+#: rough-angular CRI grains with 8 contour modes: CRI band-limits a grain's contours to the 2^s modes its level
+#: resolves, so with 8 modes levels 3 and finer sample one surface, and the grain made one level finer than a
+#: written one shows the true surface above the written edges.  10 grains: the tolerance's 1,280 faces a grain
+#: fit 3 grains in a file of 4,000 triangles.
+PLATES = ["tray", "--method", "cri", "--preset", "rough-angular", "--param", "modes=8", "--count", "10", "--size",
+          "2", "--max-triangles", "4000"]
+
+
+@pytest.fixture
+def coarse(tmp_path):
+    f = tmp_path / "coarse.toml"
+    f.write_text(COARSE)
+    return f
+
+
+def _rough_angular():
+    from grainforge.cli.tray import parse_param_values
+
+    return parse_param_values("cri", ["modes=8"], "rough-angular")[0]
+
+
+def _written_deviation(mesh, params, seed: int, size: float) -> float:
+    """Chordal deviation of a grain as written: the largest distance between the midpoint of an edge of the mesh
+    read back and the grain's surface point above it (on the grain made one level finer: its vertex above each
+    edge, that surface's point in the direction of the edge's midpoint), in mm."""
+    import dataclasses
+
+    from scipy.spatial import cKDTree
+
+    from grainforge.geometry.geodesic import icosphere
+    from grainforge.methods import generate
+
+    w = np.asarray(mesh.vertices, dtype=np.float64)
+    level = int(round(np.log((len(w) - 2) / 10) / np.log(4)))
+    assert len(w) == 10 * 4**level + 2  # a geodesic mesh of that level
+    f = generate("cri", dataclasses.replace(params, subdivisions=level + 1), seed).vertices
+    a = f[: len(w)]  # the level's vertices come first on the finer sphere
+    ca, cw = a.mean(axis=0), w.mean(axis=0)
+    u, sv, vt = np.linalg.svd((a - ca).T @ (w - cw))
+    d = np.diag([1.0, 1.0, np.sign(np.linalg.det(u @ vt))])
+    rot = (u @ d @ vt).T  # the tray's rotation, and its scale to the printed size (Umeyama)
+    scale = float(np.trace(np.diag(sv) @ d) / ((a - ca) ** 2).sum())
+    moved = scale * (f - ca) @ rot.T + cw
+    assert np.abs(moved[: len(w)] - w).max() < 2e-3  # the file holds this grain, at this size (within 2 µm)
+    sphere, _ = icosphere(level + 1)
+    edges = np.asarray(mesh.edges_unique)
+    mid = sphere[edges[:, 0]] + sphere[edges[:, 1]]
+    dist, above = cKDTree(sphere).query(mid / np.linalg.norm(mid, axis=1, keepdims=True))
+    assert dist.max() < 1e-9
+    return float(np.linalg.norm(moved[above] - w[edges].mean(axis=1), axis=1).max())
+
+
+def test_plates_auto_keeps_every_file_within_the_budget_and_every_grain_within_the_tolerance(runner, tmp_path,
+                                                                                           coarse):
+    pytest.importorskip("lxml")
+    import trimesh
+
+    out = tmp_path / "t.3mf"
+    res = runner.invoke(cli, PLATES + ["--printer", str(coarse), "--plates", "auto", "--out", str(out)])
+    assert res.exit_code == 0, res.output
+    assert "WARNING" not in res.stderr
+    files = sorted(tmp_path.glob("t-plate*.3mf"))
+    assert [f.name for f in files] == [f"t-plate{k}.3mf" for k in range(1, 5)] and not out.exists()
+    rows = _rows(tmp_path / "t.csv")
+    params, tolerance = _rough_angular(), get_printer(str(coarse)).max_deviation
+    seen = []
+    for k, f in enumerate(files, 1):
+        meshes = trimesh.load(f, file_type="3mf", process=False).dump(concatenate=False)
+        assert 2 <= len(meshes) <= 3  # 10 grains over 4 files, as evenly as they divide
+        assert sum(len(m.faces) for m in meshes) <= 4000  # the file's triangle budget
+        assert sorted(m.metadata["name"] for m in meshes) == [r["name"] for r in rows if int(r["plate"]) == k]
+        for m in meshes:
+            seed = int(m.metadata["name"].split("-")[1])
+            seen.append(seed)
+            assert len(m.faces) == 1280  # the tolerance's level for every grain, not a budget's
+            assert _written_deviation(m, params, seed, 2.0) <= tolerance
+    assert sorted(seen) == list(range(10))
+
+
+def test_one_file_caps_the_mesh_and_the_plan_says_so_before_any_grain_is_made(tmp_path, coarse):
+    events = []
+
+    def progress(grains):
+        for p in grains:
+            events.append(("grain", p.index))
+            yield p
+
+    res = build_tray(GeneratorSource("cri", _rough_angular(), tuple(range(10)), 2.0), str(coarse),
+                     tmp_path / "t.3mf", max_triangles=4000, workers=1, progress=progress,
+                     say=lambda line: events.append(("say", line)))
+    said = [text for kind, text in events if kind == "say"]
+    first_grain = next(k for k, (kind, _) in enumerate(events) if kind == "grain")
+    assert all(kind == "say" for kind, _ in events[:first_grain]) and len(said) == first_grain  # all said first
+    # one file of 4,000 triangles: 400 faces a grain, so subdivisions 2 (320 faces), above the tolerance
+    assert res.files == [tmp_path / "t.3mf"] and {r["faces"] for r in res.rows} == {320}
+    text = "\n".join(said)
+    assert "plan: 10 grains in 1 print file, 320 faces a grain" in text
+    assert f"caps the mesh at level 2 (320 faces): its chordal deviation {res.resolution.deviation * 1000:.1f} µm " \
+           "exceeds the printer tolerance 60.0 µm" in text
+    assert "level 3 (1280 faces a grain" in text and "--plates auto (here --plates 4) writes as 4 print files" in text
+
+
+def test_the_plan_is_printed_even_when_the_run_is_interrupted(tmp_path, coarse):
+    """Ctrl-C once the plan is out (the grains being made): exit 130, the plan was said, nothing written."""
+    import os
+    import signal
+    import subprocess
+    import sys
+
+    from tests._processes import kill_sessions
+
+    out = tmp_path / "out" / "t.3mf"
+    argv = [sys.executable, "-c", "from grainforge.cli.main import main; main()", *PLATES[:7], "--count", "3000",
+            "--size", "2", "--max-triangles", "60000", "--printer", str(coarse), "--workers", "1", "--out", str(out)]
+    proc = subprocess.Popen(argv, stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE,
+                            start_new_session=True, env=dict(os.environ, COLUMNS="200"))
+    try:
+        said = []
+        for line in iter(proc.stderr.readline, b""):
+            said.append(line.decode())
+            if said[-1].startswith("plan: level 3"):  # the last line of the plan
+                break
+        os.killpg(proc.pid, signal.SIGINT)
+        _, err = proc.communicate(timeout=60)
+    finally:
+        kill_sessions([proc])
+    assert proc.returncode == 130
+    assert any(s.startswith("plan: 3000 grains in 1 print file, 20 faces a grain") for s in said), said
+    assert any("caps the mesh at level 0 (20 faces)" in s for s in said)
+    assert "Traceback" not in err.decode()
+    assert not out.parent.exists()  # nothing written, not even the folder
+
+
+def test_plates_n_spreads_grains_evenly_at_the_finest_level_that_fits(coarse):
+    from grainforge.fabrication.tray import plan_tray
+
+    src = GeneratorSource("cri", _rough_angular(), tuple(range(10)), 2.0)
+    three = plan_tray(src, str(coarse), plates=3, max_triangles=4000)  # 4 grains a file: 1,000 faces a grain
+    four = plan_tray(src, str(coarse), plates=4, max_triangles=4000)   # 3 grains a file: 1,333 faces a grain
+    assert (three.resolution.subdivisions, three.files, three.per_file) == (2, 3, 4)
+    assert three.needed.subdivisions == 3 and three.needed_files() == 4
+    assert (four.resolution.subdivisions, four.files, four.per_file) == (3, 4, 3) and four.needed is None
+    assert [four.file_of(i) for i in range(10)] == [0, 0, 0, 1, 1, 2, 2, 2, 3, 3]
+
+
+def test_plate_split_is_byte_identical_for_any_worker_count(runner, tmp_path, coarse):
+    args = PLATES + ["--printer", str(coarse), "--plates", "auto", "--count", "7"]
+    for workers in ("1", "2"):
+        res = runner.invoke(cli, args + ["--workers", workers, "--out", str(tmp_path / workers / "t.3mf")])
+        assert res.exit_code == 0, res.output
+    one = sorted(p.name for p in (tmp_path / "1").iterdir())
+    assert one == sorted(p.name for p in (tmp_path / "2").iterdir())
+    assert len([n for n in one if n.endswith(".3mf")]) == 3  # 7 grains, 3 to a file
+    for name in one:
+        if not name.endswith(".png"):
+            assert (tmp_path / "1" / name).read_bytes() == (tmp_path / "2" / name).read_bytes(), name
+
+
+def test_plates_auto_on_mesh_files_starts_a_file_where_the_budget_is_reached(runner, tmp_path):
+    folder = tmp_path / "grains"
+    write_run("fso", SMALL, seeds=range(5), out=folder, size=2.0)  # 320 faces each
+    res = runner.invoke(cli, ["tray", str(folder), "--max-triangles", "700", "--plates", "auto", "--workers", "1",
+                              "--out", str(tmp_path / "t.stl")])
+    assert res.exit_code == 0, res.output
+    assert "plan: 5 grains in print files of at most 700 triangles" in res.stderr
+    counts = [int.from_bytes(f.read_bytes()[80:84], "little") for f in sorted(tmp_path.glob("t-plate*.stl"))]
+    assert counts == [640, 640, 320]

@@ -1,4 +1,4 @@
-"""``grainforge tray``: lay out many grains on a printer's build plates in one print file."""
+"""``grainforge tray``: lay out many grains on a printer's build plates in one print file or several."""
 
 from __future__ import annotations
 
@@ -57,6 +57,29 @@ def parse_param_values(method: str, pairs, preset: str | None):
     return build_params(module.Params, values), values
 
 
+class Plates(click.ParamType):
+    """``--plates``: a positive number of print files, or ``auto``."""
+
+    name = "N|auto"
+
+    def convert(self, value, param, ctx):
+        text = str(value).strip().lower()
+        if text == "auto":
+            return "auto"
+        try:
+            n = int(text)
+        except ValueError:
+            n = 0
+        if n < 1:
+            self.fail(f"expected a positive whole number of print files or 'auto', got {value!r}", param, ctx)
+        return n
+
+
+def _say(line: str) -> None:
+    """A line of the tray's plan, said before it makes any grain (stderr)."""
+    click.echo(line, err=True)
+
+
 @click.command()
 @click.argument("inputs", nargs=-1, type=click.Path(path_type=Path))
 @click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
@@ -79,12 +102,15 @@ def parse_param_values(method: str, pairs, preset: str | None):
 @click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
               show_default="6", help="Finest mesh level resolution matching may choose.")
 @click.option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
-              help="Triangle budget of the whole job for resolution matching (per grain: budget / count).")
+              help="Triangle budget of one print file, what a slicer takes (per grain: budget x plates / count).")
+@click.option("--plates", default="1", show_default=True, type=Plates(),
+              help="Print files to spread the grains over (STEM-plateK.EXT), each within --max-triangles; "
+                   "auto: as many as give every grain the printer's tolerance.")
 @workers_option("Processes making grains (the output does not depend on it).", default=2)
 @overwrite_option()
 def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, size_definition, gap,
-         max_subdivisions, max_triangles, workers, overwrite):
-    """Lay out grains on the build plates of a printer, at least --gap apart, in one print file.
+         max_subdivisions, max_triangles, plates, workers, overwrite):
+    """Lay out grains on the build plates of a printer, at least --gap apart, in one print file or several.
 
     Grains come from INPUTS (mesh files, folders of them, or manifest.csv files
     written by `grainforge generate`) or are generated on the fly with --method:
@@ -93,9 +119,12 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
           --printer objet-eden-250 --out tray.3mf
 
     Generated grains get the mesh resolution their printed size and the
-    printer call for (unless --param subdivisions=N is given); the choice is
-    reported and recorded in the CSV.  PolyJet printers stack grains in 3D;
-    others get one layer, each grain resting on a stable face.
+    printer call for (unless --param subdivisions=N is given), within the
+    triangle budget of the print files; the choice, and what the budget does
+    to the surface, are said before any grain is made and recorded in the
+    CSV.  --plates auto spreads the grains over as many files as the
+    printer's tolerance needs.  PolyJet printers stack grains in 3D; others
+    get one layer, each grain resting on a stable face.
     """
     from ..fabrication.printers import get_printer
     from ..fabrication.tray import FileSource, GeneratorSource, build_tray
@@ -120,7 +149,8 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
     try:
         result = build_tray(
             source, printer, out, gap=gap, workers=workers, overwrite=overwrite, match_resolution=match,
-            max_subdivisions=max_subdivisions, max_triangles=max_triangles, progress=progress_bar(total=len(source), desc="tray"),
+            max_subdivisions=max_subdivisions, max_triangles=max_triangles, plates=plates,
+            progress=progress_bar(total=len(source), desc="tray"), say=_say,
         )
     except ParameterError as exc:
         raise bad_parameter(exc) from None
@@ -129,17 +159,14 @@ def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, s
     warnings = []
     res = result.resolution
     if res is not None:
-        click.echo(f"resolution matching ({printer.name}, {printer.resolution * 1000:g} µm): {res.describe()}", err=True)
-        if not res.converged:
-            cause = (f"the triangle budget (--max-triangles {max_triangles} for {len(result.rows)} grains: "
-                     f"{max(20, max_triangles // len(result.rows))} faces per grain)" if res.limited_by == "budget"
-                     else "--max-subdivisions")
-            need = len(result.rows) * 20 * 4 ** (res.subdivisions + 1)
+        budget = result.plan.warning()
+        if budget is not None:
+            warnings.append(budget)
+        elif not res.converged:
             warnings.append(
-                f"{cause} caps the mesh at level {res.subdivisions}: its chordal deviation "
+                f"--max-subdivisions caps the mesh at level {res.subdivisions}: its chordal deviation "
                 f"{res.deviation * 1000:.1f} µm exceeds the printer tolerance {res.tolerance * 1000:.1f} µm, so the "
-                f"printed surface will show the mesh facets"
-                + (f"; --max-triangles {need} allows the next level" if res.limited_by == "budget" else ""))
+                f"printed surface will show the mesh facets")
         shape = res.shape_warning(source.size)
         if shape is not None:
             warnings.append(shape + ("" if res.limited_by == "budget" else

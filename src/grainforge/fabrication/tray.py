@@ -45,14 +45,15 @@ import numpy as np
 from ..rng import RNGLike, as_generator
 
 __all__ = [
-    "ShelfPacker", "GeneratorSource", "FileSource", "Prepared", "TrayResult", "build_tray",
+    "ShelfPacker", "GeneratorSource", "FileSource", "Prepared", "TrayPlan", "TrayResult", "build_tray", "plan_tray",
     "orient_principal", "orient_stable", "tray_outputs", "min_mesh_distance",
 ]
 
 OUT_FORMATS = (".3mf", ".stl")
-#: triangles per print job that resolution matching may spend (about a 1 GB binary STL);
-#: print-preparation software handles jobs of this size, and it keeps the paper's
-#: 8,000-grain tray within two minutes and 2 GB.  See docs/printing.md.
+#: triangles a print file may hold (about a 1 GB binary STL, 260 MB of 3MF): print-preparation software
+#: handles files of this size.  With one file (``plates=1``) it keeps the paper's 8,000-grain tray within
+#: two minutes and 2 GB; ``plates="auto"`` spreads finer grains over as many such files as they need.
+#: See docs/printing.md.
 DEFAULT_TRIANGLE_BUDGET = 20_000_000
 
 
@@ -230,11 +231,22 @@ class ShelfPacker:
                 self.z += self.layer_height + self.gap
                 self.y, self.layer_height = 0.0, 0.0
                 self.layers += 1
-            else:  # new plate
-                self.plate += 1
-                self.x = self.y = self.z = 0.0
-                self.row_depth = self.layer_height = 0.0
-                self.layers = 1
+            else:
+                self.new_plate()
+
+    def new_plate(self) -> int:
+        """Start the next plate (the current one is full, or its print file reached its triangle budget).
+
+        Returns
+        -------
+        int
+            The new plate, counted from 0.
+        """
+        self.plate += 1
+        self.x = self.y = self.z = 0.0
+        self.row_depth = self.layer_height = 0.0
+        self.layers = 1
+        return self.plate
 
 
 # --------------------------------------------------------------------------- sources
@@ -375,6 +387,7 @@ class TrayResult:
     resolution: Any = None
     gap: float = 0.0
     layers: list[int] = field(default_factory=list)
+    plan: Any = None
 
 
 def tray_outputs(out: Path, plates: int) -> tuple[list[Path], list[Path], Path]:
@@ -535,9 +548,9 @@ def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, 
     return out, fmt, gap
 
 
-def _matched_source(source, printer, max_subdivisions: int | None, max_triangles: int | None):
-    """``(source, resolution)``: generated grains at the subdivisions their printed size calls for
-    (``resolution`` None and ``source`` as given when that does not apply)."""
+def _matched_source(source, printer, max_subdivisions: int | None, max_faces: int | None):
+    """``(source, resolution)``: generated grains at the subdivisions their printed size calls for, with at most
+    ``max_faces`` faces a grain (``resolution`` None and ``source`` as given when that does not apply)."""
     from .resolution import MAX_MATCHED, match_subdivisions, supports_matching
 
     if not (isinstance(source, GeneratorSource) and supports_matching(source.method)):
@@ -546,11 +559,338 @@ def _matched_source(source, printer, max_subdivisions: int | None, max_triangles
         source.method, source.params, size=source.size, size_definition=source.size_definition, printer=printer,
         seeds=source.seeds[:3],
         max_level=MAX_MATCHED if max_subdivisions is None else max_subdivisions,
-        max_faces=None if max_triangles is None else max(20, int(max_triangles) // len(source)),
+        max_faces=max_faces,
     )
     source = dataclasses.replace(source, params=dataclasses.replace(source.params,
                                                                      subdivisions=resolution.subdivisions))
     return source, resolution
+
+
+# --------------------------------------------------------------------------- the plan
+
+#: bytes of a 3MF tray per triangle, about: the compressed XML measured 12.5 at subdivisions 6 and 12.9 at 3
+#: (2 mm CRI grains; docs/printing.md)
+THREEMF_BYTES_PER_TRIANGLE = 13
+#: bytes of a binary STL per triangle (exact), plus :data:`STL_HEADER_BYTES` a file
+STL_BYTES_PER_TRIANGLE = 50
+STL_HEADER_BYTES = 84
+#: most print files a tray plans (each also gets a preview): more is a budget or --plates mistyped
+MAX_FILES = 1000
+
+
+def file_bytes(triangles: int, fmt: str, files: int = 1) -> int:
+    """About the bytes ``files`` print files holding ``triangles`` triangles in all take on disk.
+
+    Parameters
+    ----------
+    triangles : int
+        Triangles of all the files.
+    fmt : {".3mf", ".stl"}
+        The print format (STL: exact; 3MF: :data:`THREEMF_BYTES_PER_TRIANGLE`).
+    files : int, default 1
+        How many files they are spread over.
+
+    Returns
+    -------
+    int
+
+    Examples
+    --------
+    >>> file_bytes(1000, ".stl", files=2)
+    50168
+    """
+    if fmt == ".stl":
+        return STL_BYTES_PER_TRIANGLE * int(triangles) + STL_HEADER_BYTES * int(files)
+    return THREEMF_BYTES_PER_TRIANGLE * int(triangles)
+
+
+def _bytes_text(n: float) -> str:
+    """``"8.5 GB"``, ``"133 MB"``, ``"12 kB"`` (decimal units, two or three significant digits)."""
+    for unit, size in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= size:
+            return f"{n / size:.2g} {unit}" if n / size < 10 else f"{n / size:.0f} {unit}"
+    return f"{n:.0f} B"
+
+
+def plates_value(plates: int | str) -> int | str:
+    """``plates`` checked: a positive number of print files, or ``"auto"``.
+
+    Parameters
+    ----------
+    plates : int or "auto"
+        As given to :func:`build_tray`.
+
+    Returns
+    -------
+    int or "auto"
+
+    Raises
+    ------
+    ValueError
+        For anything else.
+
+    Examples
+    --------
+    >>> plates_value("auto"), plates_value(3)
+    ('auto', 3)
+    """
+    if plates == "auto":
+        return "auto"
+    if isinstance(plates, (int, np.integer)) and not isinstance(plates, bool) and plates >= 1:
+        return int(plates)
+    raise ValueError(f"plates must be a positive number of print files or 'auto', got {plates!r}")
+
+
+def _ceil_div(a: int, b: int) -> int:
+    return -(-int(a) // int(b))
+
+
+@dataclass(frozen=True)
+class TrayPlan:
+    """How a tray spreads its grains over print files and meshes them, decided before any grain is made.
+
+    Attributes
+    ----------
+    source : GeneratorSource or FileSource
+        The grains (generated ones at the chosen ``subdivisions``).
+    printer : Printer
+    fmt : str
+        ``".3mf"`` or ``".stl"``.
+    plates : int or "auto"
+        As asked for.
+    max_triangles : int or None
+        Triangle budget of one print file (None: no budget).
+    files : int or None
+        Print files the split makes (more if the grains do not fit as many build plates); None when they are
+        counted as the grains are read (``"auto"`` without resolution matching: a file ends where the next
+        grain would exceed ``max_triangles``).
+    per_file : int or None
+        Most grains in one print file (None: no fixed number).
+    max_faces : int or None
+        Faces a grain the budget allows resolution matching.
+    resolution : Resolution or None
+        The mesh level generated grains get (None: no resolution matching).
+    needed : Resolution or None
+        When the budget caps the level below the printer tolerance: what the tolerance alone asks for
+        (found by :meth:`explained`).
+    given : GeneratorSource or FileSource
+        The grains as given (before resolution matching).
+    """
+
+    source: Any
+    printer: Any
+    fmt: str
+    plates: int | str
+    max_triangles: int | None
+    files: int | None
+    per_file: int | None
+    max_faces: int | None = None
+    resolution: Any = None
+    needed: Any = None
+    given: Any = None
+
+    @property
+    def count(self) -> int:
+        """Grains in the tray."""
+        return len(self.source)
+
+    def file_of(self, index: int) -> int | None:
+        """The print file (from 0) grain ``index`` goes to: the grains in order, as evenly as they divide.
+
+        Parameters
+        ----------
+        index : int
+            The grain's index (0 to ``count - 1``).
+
+        Returns
+        -------
+        int or None
+            None when the files are made as the grains are read (:attr:`files` is None).
+        """
+        return None if self.files is None else int(index) * self.files // self.count
+
+    def needed_files(self) -> int | None:
+        """Print files of at most ``max_triangles`` that the tolerance's level (:attr:`needed`) takes.
+
+        Returns
+        -------
+        int or None
+            None when nothing is needed, there is no budget, or one grain alone exceeds the budget.
+        """
+        if self.needed is None or self.max_triangles is None or self.needed.faces > self.max_triangles:
+            return None
+        return _ceil_div(self.count, self.max_triangles // self.needed.faces)
+
+    def budget_problem(self) -> str | None:
+        """When the triangle budget caps the mesh below the printer tolerance: what that does to the surface.
+
+        Returns
+        -------
+        str or None
+        """
+        r = self.resolution
+        if r is None or r.limited_by != "budget":
+            return None
+        return (f"the triangle budget (--max-triangles {self.max_triangles} a print file, --plates {self.plates}, "
+                f"for {self.count} grains: {self.max_faces} faces per grain) caps the mesh at level {r.subdivisions} "
+                f"({r.faces} faces): its chordal deviation {r.deviation * 1000:.1f} µm exceeds the printer tolerance "
+                f"{r.tolerance * 1000:.1f} µm (half the {self.printer.name} resolution), so the printed surface "
+                f"will show the mesh facets")
+
+    def advice(self) -> str | None:
+        """When the budget caps the mesh: the level the tolerance asks for, what it costs and how to get it.
+
+        Returns
+        -------
+        str or None
+            None until :attr:`needed` is known (:meth:`explained`).
+        """
+        need, n, budget = self.needed, self.count, self.max_triangles
+        if need is None:
+            return None
+        reach = ("meets the tolerance" if need.converged else
+                 f"is the finest allowed (--max-subdivisions {need.subdivisions})" if need.limited_by == "max level"
+                 else "comes closest")
+        text = (f"level {need.subdivisions} ({need.faces} faces a grain, {need.deviation * 1000:.1f} µm) {reach}: "
+                f"{n * need.faces:,} triangles")
+        k = self.needed_files()
+        if k is None:
+            return text + f", more than a print file of --max-triangles {budget}: give --max-triangles " \
+                          f"{need.faces} or more and --plates auto"
+        size = _bytes_text(file_bytes(n * need.faces, self.fmt, k))
+        return text + (f", which --plates auto (here --plates {k}) writes as {k} print file{'s' * (k > 1)} of at most "
+                       f"{budget:,} triangles, {size} in all, or --max-triangles {n * need.faces} as one file")
+
+    def explained(self, max_subdivisions: int | None = None) -> TrayPlan:
+        """This plan with :attr:`needed` found, when the budget caps the mesh (pilot grains at finer levels).
+
+        Parameters
+        ----------
+        max_subdivisions : int, optional
+            Finest level considered (as :func:`plan_tray`).
+
+        Returns
+        -------
+        TrayPlan
+        """
+        if self.budget_problem() is None or self.needed is not None:
+            return self
+        _, needed = _matched_source(self.given, self.printer, max_subdivisions, None)
+        return dataclasses.replace(self, needed=needed)
+
+    def lines(self) -> list[str]:
+        """What the tray will do, for the user, before it starts: the mesh level, the print files, the budget.
+
+        Returns
+        -------
+        list of str
+            One line each; empty when there is nothing to decide (mesh files or given subdivisions, one file).
+        """
+        r, n = self.resolution, self.count
+        out = []
+        if r is not None:
+            out.append(f"resolution matching ({self.printer.name}, {self.printer.resolution * 1000:g} µm): "
+                       f"{r.describe()}")
+        if self.files is None:
+            out.append(f"plan: {n} grains in print files of at most {self.max_triangles:,} triangles "
+                       f"(--plates auto): a file ends where the next grain would pass that")
+        elif r is not None or self.files > 1:
+            split = "1 print file" if self.files == 1 else f"{self.files} print files of up to {self.per_file} grains"
+            text = f"plan: {n} grains in {split}"
+            if r is not None:
+                text += (f", {r.faces:,} faces a grain: {n * r.faces:,} triangles (at most {self.per_file * r.faces:,}"
+                         f" a file" + ("" if self.max_triangles is None else f", budget {self.max_triangles:,}")
+                         + f"), about {_bytes_text(file_bytes(n * r.faces, self.fmt, self.files))}")
+            out.append(text)
+        for extra in (self.budget_problem(), self.advice()):
+            if extra is not None:
+                out.append("plan: " + extra)
+        return out
+
+    def warning(self) -> str | None:
+        """The budget's problem and the advice in one sentence (the command repeats it last), or None.
+
+        Returns
+        -------
+        str or None
+        """
+        problem, advice = self.budget_problem(), self.advice()
+        return None if problem is None else problem + ("" if advice is None else "; " + advice)
+
+
+def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf", plates: int | str = 1,
+              max_triangles: int | None = DEFAULT_TRIANGLE_BUDGET, match_resolution: bool = True,
+              max_subdivisions: int | None = None, workers: int = 2, explain: bool = True) -> TrayPlan:
+    """Decide, before any grain is made, the grains' mesh level and how they are spread over print files.
+
+    Each print file holds at most ``max_triangles`` triangles.  ``plates=N``
+    spreads the grains evenly over N files, so each grain may have
+    ``max_triangles // ceil(count / N)`` faces and resolution matching
+    chooses within that; ``plates="auto"`` gives every grain the level the
+    printer tolerance asks for (each grain within the budget) and makes as
+    many files as those triangles need.  Resolution matching runs its pilot
+    grains here.
+
+    Parameters
+    ----------
+    source : GeneratorSource or FileSource
+    printer : Printer or str
+    fmt : {".3mf", ".stl"}
+        The print format (for the size estimate).
+    plates : int or "auto", default 1
+        Print files to spread the grains over.
+    max_triangles : int, optional
+        Triangle budget of one print file (None: no budget).
+    match_resolution : bool
+        As :func:`build_tray`.
+    max_subdivisions : int, optional
+        Finest level resolution matching may choose.
+    workers : int
+        Processes that will make the grains (for the refusal of a job that would take more than a day).
+    explain : bool, default True
+        When the budget caps the level: also find the level the tolerance asks for
+        (:meth:`TrayPlan.explained`; its pilot grains are the finest).
+
+    Returns
+    -------
+    TrayPlan
+
+    Raises
+    ------
+    ValueError
+        For a bad ``plates`` or ``max_triangles``, more than :data:`MAX_FILES` print files, or a job refused
+        by its estimate.
+    """
+    from .printers import get_printer
+
+    printer = get_printer(printer)
+    plates = plates_value(plates)
+    if max_triangles is not None and (int(max_triangles) != max_triangles or max_triangles < 1):
+        raise ValueError(f"max_triangles must be a positive whole number, got {max_triangles!r}")
+    budget = None if max_triangles is None else int(max_triangles)
+    n = len(source)
+    if budget is None:
+        max_faces = None
+    else:
+        max_faces = budget if plates == "auto" else max(20, budget // _ceil_div(n, min(plates, n)))
+    given, resolution = source, None
+    if match_resolution:
+        source, resolution = _matched_source(source, printer, max_subdivisions, max_faces)
+    _check_size_of_job(source, workers)
+    if plates != "auto":
+        files = min(plates, n)
+    elif budget is None:
+        files = 1
+    elif resolution is not None:
+        files = _ceil_div(n, max(1, budget // resolution.faces))
+    else:
+        files = None
+    if files is not None and files > MAX_FILES:
+        raise ValueError(f"a tray of {n} grains in {files} print files is more than {MAX_FILES} files (each with its "
+                         f"preview); raise --max-triangles or lower --plates")
+    per_file = None if files is None else _ceil_div(n, files)
+    plan = TrayPlan(source, printer, fmt, plates, budget, files, per_file, max_faces, resolution, given=given)
+    return plan.explained(max_subdivisions) if explain else plan
 
 
 def _csv_row(p: Prepared, plate: int, position: tuple[float, float, float], resolution) -> dict[str, Any]:
@@ -602,6 +942,57 @@ def _write_previews_and_table(out: Path, plates: int, footprints, layers_of, row
     return files, previews, csv_path, layer_count
 
 
+class _PlateFiles:
+    """The plates being filled: the packer, the open print file, and each plate's footprints and layers."""
+
+    def __init__(self, out: Path, fmt: str, printer, gap: float, plan: TrayPlan):
+        self.out, self.fmt, self.plan = out, fmt, plan
+        self.packer = ShelfPacker(printer.build_volume, gap, printer.stacking)
+        self.temps: list[Path] = []
+        self.footprints: list[list[np.ndarray]] = []
+        self.layers_of: list[list[int]] = []
+        self.writer = self.fh = None
+        self.plate = -1
+        self.part: int | None = 0  # the plan's print file of the last grain
+        self.triangles = 0  # on the open plate
+
+    def add(self, p: Prepared) -> tuple[int, tuple[float, float, float]]:
+        """Place ``p`` (on a new plate when it starts the plan's next print file) and write it: its plate and
+        position."""
+        part = self.plan.file_of(p.index)
+        if self.plate < 0:
+            self.packer.compact(self.plan.per_file or self.plan.count, p.extents)
+        elif part != self.part or (part is None and self.triangles + p.faces > self.plan.max_triangles):
+            self.packer.new_plate()
+        self.part = part
+        pl, x, y, z = self.packer.place(p.extents)
+        if pl != self.plate:
+            self.close()
+            self.fh, self.writer = _open_plate(self.out, self.fmt, self.temps)
+            self.footprints.append([])
+            self.layers_of.append([])
+            self.plate, self.triangles = pl, 0
+        self.writer.add_object(p.name, p.payload, (x, y, z))
+        self.footprints[-1].append(p.footprint + np.array([x, y], dtype=np.float32))
+        self.layers_of[-1].append(self.packer.layers - 1)
+        self.triangles += p.faces
+        return pl, (x, y, z)
+
+    def close(self) -> None:
+        """Finish the open print file."""
+        if self.writer is not None:
+            self.writer.close()
+            self.fh.close()
+            self.writer = None
+
+    def abort(self) -> None:
+        """Release the open print file unfinished (the caller deletes the temporary files)."""
+        if self.writer is not None:
+            self.writer.abort()
+        if self.fh is not None and not self.fh.closed:
+            self.fh.close()
+
+
 def build_tray(
     source: GeneratorSource | FileSource,
     printer,
@@ -613,7 +1004,9 @@ def build_tray(
     match_resolution: bool = True,
     max_subdivisions: int | None = None,
     max_triangles: int | None = DEFAULT_TRIANGLE_BUDGET,
+    plates: int | str = 1,
     progress: Callable[[Iterable], Iterable] | None = None,
+    say: Callable[[str], Any] | None = None,
 ) -> TrayResult:
     """Lay out grains on the build plates of ``printer`` and write the print file(s).
 
@@ -636,11 +1029,19 @@ def build_tray(
     max_subdivisions : int, optional
         Finest level resolution matching may choose.
     max_triangles : int, optional
-        Triangle budget of the whole job for resolution matching (default
-        :data:`DEFAULT_TRIANGLE_BUDGET`; ``None``: no budget).  Each grain may
-        use ``max_triangles // count`` faces.
+        Triangle budget of one print file (default :data:`DEFAULT_TRIANGLE_BUDGET`;
+        ``None``: no budget); see :func:`plan_tray`.
+    plates : int or "auto", default 1
+        Print files to spread the grains over (``STEM-plateK.EXT`` when more
+        than one; more plates when the grains do not fit as many build
+        plates); ``"auto"``: as many as the printer tolerance needs, each
+        within ``max_triangles`` (:func:`plan_tray`).
     progress : callable, optional
         Wraps the iterator of grains (a progress bar).
+    say : callable, optional
+        Called with each line of the plan (:meth:`TrayPlan.lines`) as soon as
+        it is known, all before any grain is made (the command line prints
+        them on stderr).
 
     Returns
     -------
@@ -649,7 +1050,7 @@ def build_tray(
     Raises
     ------
     ValueError
-        For a bad extension, gap, or a grain that does not fit the printer.
+        For a bad extension, gap, ``plates``, or a grain that does not fit the printer.
     FileExistsError
         If an output exists and ``overwrite`` is false.
     """
@@ -657,61 +1058,45 @@ def build_tray(
 
     printer = get_printer(printer)
     out, fmt, gap = _checked_request(source, printer, out, gap, overwrite)
-    resolution = None
-    if match_resolution:
-        source, resolution = _matched_source(source, printer, max_subdivisions, max_triangles)
-    _check_size_of_job(source, workers)
+    plan = plan_tray(source, printer, fmt=fmt, plates=plates, max_triangles=max_triangles,
+                     match_resolution=match_resolution, max_subdivisions=max_subdivisions, workers=workers,
+                     explain=False)
+    say = (lambda line: None) if say is None else say
+    for line in plan.lines():
+        say(line)
+    plan = plan.explained(max_subdivisions)  # the finest pilot grains: said once the plan so far is
+    if plan.advice() is not None:
+        say("plan: " + plan.advice())
 
     from ..runtime.staging import signals_held
 
     made = [q for q in [out.parent, *out.parent.parents] if not q.exists()]
     out.parent.mkdir(parents=True, exist_ok=True)
     remove_stale_temps(out)
-    packer = ShelfPacker(printer.build_volume, gap, printer.stacking)
-    temps: list[Path] = []
+    state = _PlateFiles(out, fmt, printer, gap, plan)
     written: list[Path] = []  # outputs already in place: removed again if the run does not complete
     rows: list[dict[str, Any]] = []
-    footprints: list[list[np.ndarray]] = []
-    layers_of: list[list[int]] = []
-    writer = fh = stream = None
-    plate = -1
+    stream = None
     try:
-        it = stream = _prepared_in_order(_tasks(source, fmt, printer.stacking), workers)
+        it = stream = _prepared_in_order(_tasks(plan.source, fmt, printer.stacking), workers)
         if progress is not None:
             it = progress(it)
         for p in it:
-            if not rows:
-                packer.compact(len(source), p.extents)
-            pl, x, y, z = packer.place(p.extents)
-            if pl != plate:
-                if writer is not None:
-                    writer.close()
-                    fh.close()
-                fh, writer = _open_plate(out, fmt, temps)
-                footprints.append([])
-                layers_of.append([])
-                plate = pl
-            writer.add_object(p.name, p.payload, (x, y, z))
-            footprints[-1].append(p.footprint + np.array([x, y], dtype=np.float32))
-            layers_of[-1].append(packer.layers - 1)
-            rows.append(_csv_row(p, pl, (x, y, z), resolution))
-        writer.close()
-        fh.close()
-        files, previews, csv_path, layer_count = _write_previews_and_table(out, len(temps), footprints, layers_of,
-                                                                          rows, printer, gap, written)
+            pl, position = state.add(p)
+            rows.append(_csv_row(p, pl, position, plan.resolution))
+        state.close()
+        files, previews, csv_path, layer_count = _write_previews_and_table(
+            out, len(state.temps), state.footprints, state.layers_of, rows, printer, gap, written)
         with signals_held():  # the print files last, together: all outputs or none
-            for tmp, final in zip(temps, files):
+            for tmp, final in zip(state.temps, files):
                 os.replace(tmp, final)
                 written.append(final)
-            temps = []
+            state.temps = []
     except BaseException:
         if stream is not None:
             stream.close()  # stops the workers now (an error, Ctrl-C, SIGTERM), not after their current chunks
-        if writer is not None:
-            writer.abort()
-        if fh is not None and not fh.closed:
-            fh.close()
-        for t in temps + written:
+        state.abort()
+        for t in state.temps + written:
             t.unlink(missing_ok=True)
         for q in made:  # folders this call created, innermost first, if still empty
             try:
@@ -719,7 +1104,7 @@ def build_tray(
             except OSError:
                 break
         raise
-    return TrayResult(files, previews, csv_path, rows, len(files), resolution, gap, layer_count)
+    return TrayResult(files, previews, csv_path, rows, len(files), plan.resolution, gap, layer_count, plan)
 
 
 def min_mesh_distance(parts: Sequence, within: float, samples: int = 2000, rng: RNGLike = 0) -> float:
