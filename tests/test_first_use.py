@@ -63,9 +63,9 @@ def test_repose_help_lists_no_tilt_only_option(runner):
 # -- voxel sizes ----------------------------------------------------------------------------------
 
 def test_voxel_size_options_carry_their_unit():
-    fit, analyse = options_of("fit"), options_of("analyse")
-    assert "--voxel-size-um" in fit and "--voxel-size-mm" in analyse
-    assert "--voxel-size-mm" not in fit and "--voxel-size-um" not in analyse
+    """One voxel size in two units: both spellings in every command that takes one (meshes and images alike)."""
+    for command in ("fit", "analyse", "scan"):
+        assert {"--voxel-size-um", "--voxel-size-mm"} <= options_of(command), command
 
 
 @pytest.mark.parametrize("command, new", [("fit", "--voxel-size-um"), ("analyse", "--voxel-size-mm")])

@@ -882,8 +882,8 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     >>> import trimesh
     >>> box = trimesh.creation.box((1.0, 1.0, 2.0))
     >>> c = clump(box.vertices, box.faces, spheres=8, rng=0)
-    >>> c.count, round(c.coverage, 2), round(c.spill, 2)
-    (8, 0.87, 0.08)
+    >>> c.count, round(c.coverage, 1), round(c.spill, 2)  # coverage 0.86-0.87 with the libraries' versions
+    (8, 0.9, 0.08)
 
     A box's flat faces are where grown spheres spill most; without them
     (``growth=0``) the clump covers less and spills less:
