@@ -888,9 +888,9 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     A box's flat faces are where grown spheres spill most; without them
     (``growth=0``) the clump covers less and spills less:
 
-    >>> c = clump(box.vertices, box.faces, spheres=8, rng=0, growth=0)
-    >>> c.count, round(c.coverage, 2), round(c.spill, 2)
-    (8, 0.79, 0.03)
+    >>> flat = clump(box.vertices, box.faces, spheres=8, rng=0, growth=0)
+    >>> flat.count, round(flat.coverage, 1), flat.coverage < c.coverage, flat.spill < c.spill
+    (8, 0.8, True, True)
 
     Built to an accuracy instead: a ball needs one sphere for an intersection
     over union of 0.85, the box eight for 0.8; twenty do not reach 0.85.
@@ -900,11 +900,11 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
     >>> b.count, b.meets_target, round(b.accuracy.iou, 3)
     (1, True, 0.875)
     >>> c = clump(box.vertices, box.faces, spheres=20, target_iou=0.8, measure_resolution=40)
-    >>> c.count, c.meets_target, round(c.accuracy.iou, 3)
-    (8, True, 0.806)
+    >>> c.count, c.meets_target, 0.8 <= c.accuracy.iou < 0.81
+    (8, True, True)
     >>> c = clump(box.vertices, box.faces, spheres=20, target_iou=0.85, measure_resolution=40)
-    >>> c.count, c.meets_target, round(c.accuracy.iou, 3)
-    (20, False, 0.841)
+    >>> c.count, c.meets_target, 0.83 < c.accuracy.iou < 0.85
+    (20, False, True)
     """
     from scipy import ndimage
 
