@@ -189,3 +189,47 @@ def test_liggghts_sphere_holds_below_tan_theta_mu_r_and_rolls_above(tmp_path):
     below, above = _liggghts_incline(tmp_path, BELOW), _liggghts_incline(tmp_path, ABOVE)
     assert abs(below) < 0.01 * RADIUS
     assert above == pytest.approx(_rolled(ABOVE), rel=0.15)
+
+
+# ---- grainforge dem ---------------------------------------------------------------------------------------
+
+def _dem(tmp_path, name, *extra):
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    grains = tmp_path / "grains"
+    if not grains.exists():
+        r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(grains), "--count", "2", "--size", "2",
+                                     "--subdivisions", "3", "--preset", "rough-angular"])
+        assert r.exit_code == 0, r.output
+    out = tmp_path / name
+    return CliRunner().invoke(cli, ["dem", str(grains), "--out", str(out), "--spheres", "4", *extra]), out
+
+
+def test_dem_liggghts_deck_rolls_only_when_asked(tmp_path):
+    r, plain = _dem(tmp_path, "plain", "--engine", "liggghts")
+    assert r.exit_code == 0, r.output
+    r, zero = _dem(tmp_path, "zero", "--engine", "liggghts", "--rolling-friction", "0")
+    assert r.exit_code == 0, r.output
+    assert (zero / "in.run").read_text() == (plain / "in.run").read_text()
+    assert (zero / "grains.json").read_text() == (plain / "grains.json").read_text()
+    r, rolls = _dem(tmp_path, "rolls", "--engine", "liggghts", "--rolling-friction", str(MU_R))
+    assert r.exit_code == 0, r.output
+    run = (rolls / "in.run").read_text()
+    models = [row for row in run.splitlines() if row.startswith("pair_style") or "wall/gran" in row]
+    assert len(models) == 6 and all("rolling_friction epsd2" in row for row in models)
+    line = next(row for row in run.splitlines() if "coefficientRollingFriction" in row)
+    assert float(line.split("peratomtypepair 1")[1]) == pytest.approx(2 * MU_R)
+
+
+def test_dem_yade_deck_carries_the_setting_and_lammps_refuses_it(tmp_path):
+    r, plain = _dem(tmp_path, "plain")
+    assert r.exit_code == 0, r.output
+    assert "rolling_friction" not in json.loads((plain / "grains.json").read_text())["scene"]
+    r, rolls = _dem(tmp_path, "rolls", "--rolling-friction", str(MU_R))
+    assert r.exit_code == 0, r.output
+    assert json.loads((rolls / "grains.json").read_text())["scene"]["rolling_friction"] == MU_R
+    assert (rolls / "run.py").read_text() == (plain / "run.py").read_text()  # the script reads the setting
+    r, lammps = _dem(tmp_path, "lammps", "--engine", "lammps", "--rolling-friction", str(MU_R))
+    assert r.exit_code == 2 and "--rolling-friction" in r.output and not lammps.exists()

@@ -50,6 +50,9 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
               show_default=True, help="Grain representation (what the engine supports).")
 @click.option("--density", type=FiniteFloatRange(1.0, 1e5), default=2650.0, show_default=True,
               help="Solid density, kg/m³.")
+@click.option("--rolling-friction", type=FiniteFloatRange(0.0, 1.0), default=0.0, show_default=True,
+              help="Rolling resistance μ_r of the contacts: a contact's rolling moment is limited to μ_r·F_n·r, r the "
+                   "smaller sphere's radius (Yade and LIGGGHTS clumps; docs/simulate.md, Rolling resistance).")
 @click.option("--spheres", type=click.IntRange(*SPHERES_RANGE), default=30, show_default=True,
               help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
                    "With --clump-accuracy, the most a clump may take (100 when --spheres is not given).")
@@ -77,7 +80,7 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
                    "templates.csv); --count or --grains then apply to them.")
 @workers_option("Processes.", default_text="CPU count")
 @overwrite_option("Replace existing deck files.")
-def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,
+def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,
         seed, workers, overwrite, template_count=None):
     """Write a DEM deck of the grains in INPUTS (mesh files, generate/batch folders, manifests).
 
@@ -108,6 +111,8 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
         elif engine == "lammps" and vertices > MAX_VERTICES:
             raise click.BadParameter(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}",
                                      param_hint="--vertices")
+    if rolling_friction > 0 and (engine == "lammps" or shape != "clump"):
+        raise click.UsageError("--rolling-friction is written for --shape clump in Yade and LIGGGHTS decks only")
     if grains is not None and count is not None:
         raise click.UsageError("give --count (copies of each grain) or --grains (the total), not both")
     if seed is not None and grains is None:
@@ -156,7 +161,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
     from .interrupts import signals_held
 
     with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
-        written = write_deck(engine, templates, out, overwrite=overwrite)
+        written = write_deck(engine, templates, out, overwrite=overwrite, rolling_friction=rolling_friction)
         if chosen is not None:
             written.append(_write_templates_csv(out, chosen, unit))
     if clump_accuracy is None:
