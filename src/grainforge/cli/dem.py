@@ -161,7 +161,15 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     from .interrupts import signals_held
 
     with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
-        written = write_deck(engine, templates, out, overwrite=overwrite, rolling_friction=rolling_friction)
+        if rolling_friction > 0:  # the pour's default settings and μ_r (absent at 0: the deck as without it)
+            if engine == "yade":
+                from ..dem import yade as engine_deck
+            else:
+                from ..dem import liggghts as engine_deck
+            settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
+            written = engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
+        else:
+            written = write_deck(engine, templates, out, overwrite=overwrite)
         if chosen is not None:
             written.append(_write_templates_csv(out, chosen, unit))
     if clump_accuracy is None:

@@ -8,8 +8,7 @@ from pathlib import Path
 __all__ = ["write_deck"]
 
 
-def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: bool = False,
-               rolling_friction: float = 0.0) -> list[Path]:
+def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: bool = False) -> list[Path]:
     """Write the ``engine`` deck (``"yade"``, ``"liggghts"``, ``"lammps"``) of ``templates`` into ``out``.
 
     LAMMPS: templates that are all ``"polyhedron"`` take the body deck (:mod:`grainforge.dem.lammps_body`),
@@ -26,9 +25,6 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
         The deck's folder (created if missing).
     overwrite : bool
         Replace existing files (otherwise an existing file is refused before anything is written).
-    rolling_friction : float
-        Rolling resistance μ_r of the contacts (0: none, the deck as without it); Yade and LIGGGHTS clumps only
-        (docs/simulate.md, *Rolling resistance*).
 
     Returns
     -------
@@ -38,8 +34,7 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
     Raises
     ------
     ValueError
-        For an unknown engine or a template shape the engine does not support, or rolling resistance for LAMMPS
-        or shapes other than clumps.
+        For an unknown engine or a template shape the engine does not support.
     FileExistsError
         If a file of the deck exists and ``overwrite`` is false.
     """
@@ -58,12 +53,4 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
         from .lammps_body import write_deck as w
     else:
         from .lammps import write_deck as w
-    if rolling_friction > 0:
-        if engine == "lammps" or any(t.shape != "clump" for t in templates):
-            raise ValueError("rolling resistance is written for clumps of spheres in Yade and LIGGGHTS only")
-        from .liggghts import pour_settings as liggghts_pour
-        from .yade import pour_settings as yade_pour
-
-        settings = {**(yade_pour() if engine == "yade" else liggghts_pour()), "rolling_friction": rolling_friction}
-        return w(templates, out, overwrite=overwrite, settings=settings)
     return w(templates, out, overwrite=overwrite)
