@@ -289,6 +289,8 @@ def sweep_fingerprint(test: str, inputs, settings, **options) -> dict:
 
     record = {"test": test, "inputs": [str(Path(p).resolve()) for p in inputs]}
     for key, value in {**asdict(settings), **options}.items():
+        if key == "rolling_friction" and not value:  # none: the record of a sweep begun before the setting existed
+            continue
         record["--" + key.replace("_", "-")] = value
     return record
 
