@@ -93,7 +93,10 @@ def _rolled(theta_deg: float) -> float:
 YADE_INCLINE = '''
 R = SETTINGS["radius"]
 mat = contact_material()
-O.bodies.append(utils.facet([(-1.0, -1.0, 0.0), (1.0, -1.0, 0.0), (0.0, 1.0, 0.0)], fixed=True, material=mat))
+if SETTINGS["support"] == "sphere":  # a fixed sphere of the same radius below: a grain-grain contact
+    O.bodies.append(utils.sphere((0.0, 0.0, -R), R, fixed=True, material=mat))
+else:
+    O.bodies.append(utils.facet([(-1.0, -1.0, 0.0), (1.0, -1.0, 0.0), (0.0, 1.0, 0.0)], fixed=True, material=mat))
 b = O.bodies[O.bodies.append(utils.sphere((0.0, 0.0, R), R, material=mat))]
 b.state.mass = SETTINGS["density"] * 4.0 / 3.0 * math.pi * R ** 3
 b.state.inertia = Vector3(1, 1, 1) * 0.4 * b.state.mass * R ** 2
@@ -105,16 +108,18 @@ newton.gravity = (SETTINGS["gravity"] * math.sin(theta), 0.0, -SETTINGS["gravity
 newton.damping = 0.0
 x0 = b.state.pos[0]
 advance(int(SETTINGS["hold"] / O.dt))
-i = O.interactions.all()[0]
-write_result({"displacement": b.state.pos[0] - x0, "phys": type(i.phys).__name__, "max_roll": i.phys.maxRollPl})
+touching = O.interactions.all()  # none once a sphere has rolled off the one below
+i = touching[0] if touching else None
+write_result({"displacement": b.state.pos[0] - x0, "phys": type(i.phys).__name__ if i else None,
+              "max_roll": i.phys.maxRollPl if i else None})
 '''
 
 
-def _yade_incline(tmp_path, theta_deg: float) -> dict:
+def _yade_incline(tmp_path, theta_deg: float, support: str = "plane") -> dict:
     yade = require_engine("yade")
     scene = {**scene_settings(Settings(rolling_friction=MU_R, friction=1.0), "tilt", 0), "incline_deg": theta_deg,
-             "radius": RADIUS, "density": DENSITY, "settle": SETTLE, "hold": HOLD}
-    out = tmp_path / f"yade-{theta_deg:g}"
+             "radius": RADIUS, "density": DENSITY, "settle": SETTLE, "hold": HOLD, "support": support}
+    out = tmp_path / f"yade-{support}-{theta_deg:g}"
     out.mkdir()
     for name, text in yade_deck_files([], scene=COMMON + "\n" + YADE_INCLINE, settings=scene).items():
         (out / name).write_text(text)
@@ -233,3 +238,11 @@ def test_dem_yade_deck_carries_the_setting_and_lammps_refuses_it(tmp_path):
     assert (rolls / "run.py").read_text() == (plain / "run.py").read_text()  # the script reads the setting
     r, lammps = _dem(tmp_path, "lammps", "--engine", "lammps", "--rolling-friction", str(MU_R))
     assert r.exit_code == 2 and "--rolling-friction" in r.output and not lammps.exists()
+
+
+def test_a_yade_sphere_on_a_grain_of_its_size_holds_below_tan_theta_mu_r_and_rolls_above(tmp_path):
+    """The grain-grain limit is μ_r F_n r too: at 0.9 μ_r a limit of half that would let the sphere roll off.
+    Above, it starts rolling over the sphere below (a falling motion)."""
+    below, above = (_yade_incline(tmp_path, a, "sphere")["displacement"] for a in (BELOW, ABOVE))
+    assert abs(below) < 0.01 * RADIUS
+    assert above > 0.5 * RADIUS
