@@ -152,8 +152,6 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
                                 size_range=size_range, **({} if clump_accuracy is None else
                                                           {"target_iou": clump_accuracy,
                                                            "min_spheres": 2 if engine in TWO_SPHERE_ENGINES else 1}))
-    from ..dem.engines import write_deck
-
     placed = [t.clump.count for t in templates if t.clump is not None]
     if clump_accuracy is None and placed and min(placed) < spheres:
         click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
@@ -161,15 +159,7 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     from .interrupts import signals_held
 
     with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
-        if rolling_friction > 0:  # the pour's default settings and μ_r (absent at 0: the deck as without it)
-            if engine == "yade":
-                from ..dem import yade as engine_deck
-            else:
-                from ..dem import liggghts as engine_deck
-            settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
-            written = engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
-        else:
-            written = write_deck(engine, templates, out, overwrite=overwrite)
+        written = _write_deck(engine, templates, out, overwrite, rolling_friction)
         if chosen is not None:
             written.append(_write_templates_csv(out, chosen, unit))
     if clump_accuracy is None:
@@ -182,6 +172,21 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
                f"{ENGINE_COMMAND[engine]}", err=True)
     if warning:  # the deck is written and usable; its clumps fail their own check (docs/cli-contract.md)
         sys.exit(EXIT_CHECK_FAILED)
+
+
+def _write_deck(engine: str, templates, out: Path, overwrite: bool, rolling_friction: float) -> list:
+    """The deck's files written: :func:`grainforge.dem.engines.write_deck`, or with rolling resistance the engine's
+    own writer with the pour's default settings and ``rolling_friction`` (absent at 0: the deck as without it)."""
+    if rolling_friction <= 0:
+        from ..dem.engines import write_deck
+
+        return write_deck(engine, templates, out, overwrite=overwrite)
+    if engine == "yade":
+        from ..dem import yade as engine_deck
+    else:
+        from ..dem import liggghts as engine_deck
+    settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
+    return engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
 
 
 def _missing(templates) -> list:

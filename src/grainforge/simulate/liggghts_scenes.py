@@ -397,9 +397,9 @@ def rolling_table(rolling_friction: float, r_grain: float, r_base: float | None,
 
     Examples
     --------
-    >>> rolling_table(0.1, 1e-3, 1e-3)[0]
+    >>> [round(c, 6) for c in rolling_table(0.1, 1e-3, 1e-3)[0]]
     [0.2, 0.2, 0.1]
-    >>> rolling_table(0.1, 1e-3, None, walls=False)[0]
+    >>> [round(c, 6) for c in rolling_table(0.1, 1e-3, None, walls=False)[0]]
     [0.2, 0.2, 0.0]
     """
     def coefficient(r1, r2):
