@@ -50,6 +50,9 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
               show_default=True, help="Grain representation (what the engine supports).")
 @click.option("--density", type=FiniteFloatRange(1.0, 1e5), default=2650.0, show_default=True,
               help="Solid density, kg/m³.")
+@click.option("--rolling-friction", type=FiniteFloatRange(0.0, 1.0), default=0.0, show_default=True,
+              help="Rolling resistance μ_r of the contacts: a contact's rolling moment is limited to μ_r·F_n·r, r the "
+                   "smaller sphere's radius (Yade and LIGGGHTS clumps; docs/simulate.md, Rolling resistance).")
 @click.option("--spheres", type=click.IntRange(*SPHERES_RANGE), default=30, show_default=True,
               help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
                    "With --clump-accuracy, the most a clump may take (100 when --spheres is not given).")
@@ -77,7 +80,7 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
                    "templates.csv); --count or --grains then apply to them.")
 @workers_option("Processes.", default_text="CPU count")
 @overwrite_option("Replace existing deck files.")
-def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,
+def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,
         seed, workers, overwrite, template_count=None):
     """Write a DEM deck of the grains in INPUTS (mesh files, generate/batch folders, manifests).
 
@@ -108,6 +111,8 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
         elif engine == "lammps" and vertices > MAX_VERTICES:
             raise click.BadParameter(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}",
                                      param_hint="--vertices")
+    if rolling_friction > 0 and (engine == "lammps" or shape != "clump"):
+        raise click.UsageError("--rolling-friction is written for --shape clump in Yade and LIGGGHTS decks only")
     if grains is not None and count is not None:
         raise click.UsageError("give --count (copies of each grain) or --grains (the total), not both")
     if seed is not None and grains is None:
@@ -147,8 +152,6 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
                                 size_range=size_range, **({} if clump_accuracy is None else
                                                           {"target_iou": clump_accuracy,
                                                            "min_spheres": 2 if engine in TWO_SPHERE_ENGINES else 1}))
-    from ..dem.engines import write_deck
-
     placed = [t.clump.count for t in templates if t.clump is not None]
     if clump_accuracy is None and placed and min(placed) < spheres:
         click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
@@ -156,7 +159,7 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
     from .interrupts import signals_held
 
     with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
-        written = write_deck(engine, templates, out, overwrite=overwrite)
+        written = _write_deck(engine, templates, out, overwrite, rolling_friction)
         if chosen is not None:
             written.append(_write_templates_csv(out, chosen, unit))
     if clump_accuracy is None:
@@ -169,6 +172,21 @@ def dem(inputs, out, engine, shape, density, spheres, refine, clump_accuracy, ve
                f"{ENGINE_COMMAND[engine]}", err=True)
     if warning:  # the deck is written and usable; its clumps fail their own check (docs/cli-contract.md)
         sys.exit(EXIT_CHECK_FAILED)
+
+
+def _write_deck(engine: str, templates, out: Path, overwrite: bool, rolling_friction: float) -> list:
+    """The deck's files written: :func:`grainforge.dem.engines.write_deck`, or with rolling resistance the engine's
+    own writer with the pour's default settings and ``rolling_friction`` (absent at 0: the deck as without it)."""
+    if rolling_friction <= 0:
+        from ..dem.engines import write_deck
+
+        return write_deck(engine, templates, out, overwrite=overwrite)
+    if engine == "yade":
+        from ..dem import yade as engine_deck
+    else:
+        from ..dem import liggghts as engine_deck
+    settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
+    return engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
 
 
 def _missing(templates) -> list:

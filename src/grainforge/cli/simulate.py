@@ -89,7 +89,7 @@ def check_installed(engine: str, mpi: int | None) -> None:
 
 
 def check_representation(shape: str, spacing: float | None, as_spheres: bool, spheres: int | None,
-                         clump_accuracy: float | None = None) -> None:
+                         clump_accuracy: float | None = None, rolling_friction: float | None = None) -> None:
     """Refuse, in one line, options of another grain representation (as ``grainforge dem`` does).
 
     Raises
@@ -97,8 +97,12 @@ def check_representation(shape: str, spacing: float | None, as_spheres: bool, sp
     click.UsageError
         For ``--spacing`` without ``--shape levelset``, or ``--spheres`` or
         ``--as-spheres`` with it; ``--clump-accuracy`` with a level set or
-        ``--as-spheres`` (one sphere per grain, exactly).
+        ``--as-spheres`` (one sphere per grain, exactly); ``--rolling-friction`` above 0 with a level set (its
+        contacts carry no rolling moment law).
     """
+    if shape != "clump" and rolling_friction:
+        raise click.UsageError("--rolling-friction acts at sphere contacts: use it with --shape clump (or "
+                               "--as-spheres)")
     if clump_accuracy is not None and (shape != "clump" or as_spheres):
         raise click.UsageError("--clump-accuracy builds clumps to an accuracy: use it with --shape clump, "
                                "without --as-spheres")
@@ -285,6 +289,8 @@ def sweep_fingerprint(test: str, inputs, settings, **options) -> dict:
 
     record = {"test": test, "inputs": [str(Path(p).resolve()) for p in inputs]}
     for key, value in {**asdict(settings), **options}.items():
+        if key == "rolling_friction" and not value:  # none: the record of a sweep begun before the setting existed
+            continue
         record["--" + key.replace("_", "-")] = value
     return record
 
@@ -369,7 +375,8 @@ def _command(test: str, doc: str):
                 resume, clump_accuracy, **values):
         check_cluster_options(scheduler, workers, resume, overwrite)
         check_engine(engine, mpi, shape, test)
-        check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
+        check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy,
+                             values.get("rolling_friction"))
         _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, engine=engine, mpi=mpi,
              shape=shape, spacing=0.05 if spacing is None else spacing, clump_accuracy=clump_accuracy,
              scheduler=scheduler, resume=resume)

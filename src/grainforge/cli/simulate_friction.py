@@ -138,7 +138,7 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     _check_test_options(test, values, angle)
     check_cluster_options(scheduler, workers, resume, overwrite)
     check_engine(engine, mpi, shape, test)
-    check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy)
+    check_representation(shape, spacing, as_spheres, values.get("spheres"), clump_accuracy, values.get("rolling_friction"))
     given = dict(values)
     settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi, workers=workers,
                             scheduler=scheduler)

@@ -310,7 +310,8 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         Clump templates (SI units), each inserted ``count`` times; the orientations are drawn from
         ``settings["seed"]`` (:func:`grainforge.dem.deck.grain_orientations`).
     settings : dict, optional
-        The pour's settings (default :func:`pour_settings`).
+        The pour's settings (default :func:`pour_settings`), and ``rolling_friction`` (μ_r, only when > 0: the
+        rolling resistance, ``rolling_friction epsd2``).
 
     Returns
     -------
@@ -323,6 +324,7 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         If a template is not a clump, or the deck needs more seeds than :func:`seed_table` holds.
     """
     s = settings or pour_settings()
+    rolling = float(s.get("rolling_friction", 0.0))
     n_t = len(templates)
     n = sum(t.count for t in templates)
     # one distinct seed per random fix: templates, the mass-fraction distribution, one distribution
@@ -347,6 +349,11 @@ def deck_files(templates: Sequence, *, settings: dict | None = None) -> dict:
         "x0": lo, "x1": hi, "y0": lo, "y1": hi, "z0": fmt(-0.5 * cell), "z1": fmt((layers + 2) * cell),
         "skin": fmt(0.5 * rmin), "young": fmt(s["young"]), "poisson": fmt(s["poisson"]),
         "restitution": fmt(s["restitution"]), "friction": fmt(s["friction"]), "dt": fmt(dt), "width": fmt(width),
+        # rolling resistance (``rolling_friction`` μ_r, set only when > 0): grains and walls share atom type 1, whose
+        # coefficient 2 μ_r gives two equal spheres the limit μ_r F_n r (a wall, where R* = r: 2 μ_r F_n r)
+        "model": "model hertz tangential history" + (" rolling_friction epsd2" if rolling > 0 else ""),
+        "rolling": (f"\nfix rf all property/global coefficientRollingFriction peratomtypepair 1 {fmt(2.0 * rolling)}"
+                    if rolling > 0 else ""),
         "multisphere": block("liggghts-multisphere.in"), "ke_threshold": fmt(ke_threshold),
         "check_every": sched["check_every"], "vtk_every": s["vtk_every"],
         "settle_loop": settle_loop(sched["fall_steps"], sched["check_every"], sched["max_checks"],

@@ -46,7 +46,8 @@ import numpy as np
 from ..rng import as_generator
 from .settings import Settings, scene_settings
 
-__all__ = ["liggghts_executable", "mpirun_executable", "contact_table", "deck_files", "write_test_deck",
+__all__ = ["liggghts_executable", "mpirun_executable", "contact_table", "contact_model", "rolling_table",
+           "rolling_fix", "deck_files", "write_test_deck",
            "engine_command", "run_liggghts", "MAX_CUTS"]
 
 #: atom types of the scenes: grain spheres, fixed base spheres, walls (plane and cylinder)
@@ -57,6 +58,9 @@ MAX_CUTS = 64
 #: options
 CONTACT_MODEL = "model hooke/stiffness tangential history"
 CONTACT_OPTIONS = "absolute_damping off tangential_damping on limitForce on"
+#: the rolling resistance model added to :data:`CONTACT_MODEL` when ``rolling_friction`` > 0: elastic-plastic
+#: spring (Iwashita and Oda), its moment limited to μ_r F_n R* with R* = r₁r₂/(r₁+r₂) (r for a wall)
+ROLLING_MODEL = "rolling_friction epsd2"
 #: a prime larger than the seed table: seeds k * _STRIDE (mod its length) are distinct within a deck
 _STRIDE = 1_000_003
 
@@ -343,6 +347,92 @@ def _grain_files(templates: Sequence, plan: SimpleNamespace, settings: Settings,
     return files
 
 
+def contact_model(rolling_friction: float) -> str:
+    """The ``pair_style gran`` / ``fix wall/gran`` model: :data:`CONTACT_MODEL`, with :data:`ROLLING_MODEL`
+    when there is rolling resistance.
+
+    Parameters
+    ----------
+    rolling_friction : float
+        The settings' μ_r (0: none, the model as without the setting).
+
+    Returns
+    -------
+    str
+        The model words of the deck.
+
+    Examples
+    --------
+    >>> contact_model(0.0)
+    'model hooke/stiffness tangential history'
+    >>> contact_model(0.1)
+    'model hooke/stiffness tangential history rolling_friction epsd2'
+    """
+    return CONTACT_MODEL + (" " + ROLLING_MODEL if rolling_friction > 0 else "")
+
+
+def rolling_table(rolling_friction: float, r_grain: float, r_base: float | None, walls: bool = True) -> list:
+    """Per type pair (GRAIN, BASE, WALL) LIGGGHTS's coefficient of rolling friction for the limit moment
+    μ_r F_n min(r₁, r₂) of Yade's ``CohFrictPhys``.
+
+    LIGGGHTS limits the rolling moment to c F_n R*, R* = r₁r₂/(r₁+r₂) (r for a wall); the coefficient
+    c = μ_r min(r₁, r₂)(r₁ + r₂)/(r₁ r₂) gives the same limit: 2 μ_r for two spheres of one size, μ_r for a
+    sphere on a wall, at the mean contact-sphere radius (exact for spheres of one size).
+
+    Parameters
+    ----------
+    rolling_friction : float
+        μ_r.
+    r_grain : float
+        Mean contact-sphere radius of the grains (m).
+    r_base : float or None
+        Radius of the fixed base spheres (m); None: no base (the grains' pair value).
+    walls : bool
+        Whether the walls have rolling resistance (the triaxial box's frictionless walls have none).
+
+    Returns
+    -------
+    list
+        3 × 3 nested lists of coefficients.
+
+    Examples
+    --------
+    >>> [round(c, 6) for c in rolling_table(0.1, 1e-3, 1e-3)[0]]
+    [0.2, 0.2, 0.1]
+    >>> [round(c, 6) for c in rolling_table(0.1, 1e-3, None, walls=False)[0]]
+    [0.2, 0.2, 0.0]
+    """
+    def coefficient(r1, r2):
+        return rolling_friction * min(r1, r2) * (r1 + r2) / (r1 * r2)
+
+    c_gg = coefficient(r_grain, r_grain)
+    c_gb = c_gg if r_base is None else coefficient(r_grain, r_base)
+    c_gw = rolling_friction if walls else 0.0
+    # pairs of two fixed things never touch: they take the grain pair's value
+    return [[c_gg, c_gb, c_gw], [c_gb, c_gg, c_gg], [c_gw, c_gg, c_gg]]
+
+
+def rolling_fix(table: list) -> str:
+    """The line after the ``coefficientFriction`` fix that sets the rolling friction per type pair.
+
+    Parameters
+    ----------
+    table : list
+        :func:`rolling_table`'s 3 × 3 coefficients.
+
+    Returns
+    -------
+    str
+        A newline and the ``fix ... property/global coefficientRollingFriction`` command.
+
+    Examples
+    --------
+    >>> rolling_fix(rolling_table(0.1, 1e-3, None, walls=False)).split()[:6]
+    ['fix', 'rf', 'all', 'property/global', 'coefficientRollingFriction', 'peratomtypepair']
+    """
+    return "\nfix rf all property/global coefficientRollingFriction peratomtypepair 3 " + _per_type_pair(table)
+
+
 def _per_type_pair(values) -> str:
     """A 3 × 3 per-type-pair table as ``property/global ... peratomtypepair 3`` takes it (row by row)."""
     from ..dem.deck import fmt
@@ -362,8 +452,10 @@ def _head_values(test: str, seed: int, plan: SimpleNamespace, settings: Settings
             "z1": fmt(plan.geo["top"]), "skin": fmt(0.25 * plan.d), "kn": _per_type_pair(table["kn"]),
             "kt": _per_type_pair(table["kt"]), "gamman": _per_type_pair(table["gamman"]),
             "gammat": _per_type_pair(table["gamman"]), "friction": " ".join([fmt(settings.friction)] * 9),
-            "model": CONTACT_MODEL, "options": CONTACT_OPTIONS, "dt": fmt(plan.dt), "gravity": fmt(plan.g),
-            "base_type": BASE, "multisphere": block("liggghts-multisphere.in"), "every": plan.every}
+            "rolling": (rolling_fix(rolling_table(settings.rolling_friction, plan.r_grain, plan.geo["r_base"]))
+                        if settings.rolling_friction > 0 else ""),
+            "model": contact_model(settings.rolling_friction), "options": CONTACT_OPTIONS, "dt": fmt(plan.dt),
+            "gravity": fmt(plan.g), "base_type": BASE, "multisphere": block("liggghts-multisphere.in"), "every": plan.every}
 
 
 def _repose_values(plan: SimpleNamespace) -> dict:
@@ -408,7 +500,7 @@ def _run_text(test: str, seed: int, plan: SimpleNamespace, settings: Settings) -
     own = _repose_values(plan) if test == "repose" else _tilt_values(plan)
     return render(f"liggghts-{test}.in", {
         "head": block("liggghts-scene-head.in", _head_values(test, seed, plan, settings)),
-        "model": CONTACT_MODEL, "options": CONTACT_OPTIONS, "wall_type": WALL,
+        "model": contact_model(settings.rolling_friction), "options": CONTACT_OPTIONS, "wall_type": WALL,
         "insert": block("liggghts-scene-insert.in"), "tail": block("liggghts-scene-tail.in", {"grain_type": GRAIN}),
         **own})
 

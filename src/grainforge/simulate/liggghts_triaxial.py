@@ -271,7 +271,7 @@ def _run_text(plan: SimpleNamespace, settings: TriaxialSettings, seed: int) -> s
     the dense specimen's friction phase (``liggghts-triaxial-friction.in``) and the scenes' shared parts."""
     from ..dem.deck import fmt
     from ..dem.text import block, render
-    from .liggghts_scenes import CONTACT_MODEL, CONTACT_OPTIONS, GRAIN, WALL, _per_type_pair
+    from .liggghts_scenes import CONTACT_OPTIONS, GRAIN, WALL, _per_type_pair, contact_model, rolling_fix, rolling_table
 
     scene, dt, sigma = plan.scene, plan.dt, plan.sigma
     mu = settings.friction
@@ -304,7 +304,11 @@ def _run_text(plan: SimpleNamespace, settings: TriaxialSettings, seed: int) -> s
         "gamman": _per_type_pair(plan.table["gamman"]), "gammat": _per_type_pair(plan.table["gamman"]),
         "friction_compaction": _per_type_pair([[compaction_mu, 0.0, 0.0], [0.0, 0.0, 0.0], [0.0, 0.0, 0.0]]),
         "friction_compaction_text": f"μ = {compaction_mu:g}", "packing": settings.packing,
-        "model": CONTACT_MODEL, "options": CONTACT_OPTIONS, "dt": fmt(dt), "sigma": fmt(sigma), "wall_type": WALL,
+        "model": contact_model(settings.rolling_friction), "options": CONTACT_OPTIONS, "dt": fmt(dt),
+        "sigma": fmt(sigma), "wall_type": WALL,
+        # the grains' rolling resistance from the start (as in Yade's cell); the frictionless walls have none
+        "rolling": (rolling_fix(rolling_table(settings.rolling_friction, plan.r_grain, None, walls=False))
+                    if settings.rolling_friction > 0 else ""),
         "multisphere": block("liggghts-multisphere.in"), "every": CHECK_EVERY,
         "insert": block("liggghts-scene-insert.in"), "tail": block("liggghts-scene-tail.in", {"grain_type": GRAIN}),
         "compaction": isotropic("compaction", max_checks, 0.0, 0.15, "compaction"), "friction_on": friction_on,

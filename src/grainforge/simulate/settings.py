@@ -41,6 +41,9 @@ class GrainSettings:
                             low=0.0, high=5.0)
     damping: float = param(0.3, "Yade's local (non-viscous) damping, the same for every shape", low=0.0,
                            high=0.9)
+    rolling_friction: float = param(0.0, "rolling resistance μ_r: a contact's rolling moment is limited to "
+                                    "μ_r·F_n·r, r the smaller contact sphere's radius (0: none; clumps and "
+                                    "spheres only; docs/simulate.md, Rolling resistance)", low=0.0, high=1.0)
     seeds: int = param(3, "independent runs (seeds seed, seed+1, ...); the angle is reported with its spread",
                        kind="int", low=1, high=100)
     seed: int = param(0, "first seed", kind="int", low=0, high=2**31 - 1)
@@ -271,6 +274,8 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
         "ke_ratio": 1e-4, "base_roughness": settings.base_roughness, "lift_speed": LIFT_SPEED,
         "max_time_factor": 8.0, "tilt_step_deg": settings.tilt_step, "tilt_start_deg": settings.tilt_start,
         "tilt_hold": TILT_HOLD, "failure_displacement": 0.5, "layer_depth": 4.0,
+        # written only when set, so that a deck without rolling resistance is as before
+        **({"rolling_friction": settings.rolling_friction} if settings.rolling_friction > 0 else {}),
         # grain k of the scene is placed in orientation k (w, x, y, z): uniformly random, drawn here
         "orientations": orientation_rows(grain_orientations(settings.grains, seed)),
     }

@@ -87,6 +87,8 @@ def triaxial_scene_settings(settings: TriaxialSettings, seed: int) -> dict:
         # (the quick runs came to rest in about 0.9/rate_c)
         "stress_tolerance": 0.01, "unbalanced": 0.01, "compaction_time_factor": 3.0,
         "records": RECORDS,
+        # written only when set, so that a deck without rolling resistance is as before
+        **({"rolling_friction": settings.rolling_friction} if settings.rolling_friction > 0 else {}),
         # grain k of the scene is placed in orientation k (w, x, y, z): uniformly random, drawn here
         "orientations": orientation_rows(grain_orientations(settings.grains, seed)),
     }

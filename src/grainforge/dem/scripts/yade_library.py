@@ -82,6 +82,27 @@ _CONTACT = []
 _PHANTOM_MATS = {}
 
 
+def rolling_friction():
+    """The rolling resistance coefficient mu_r of the contacts (0: none, the scene's Cundall-Strack contacts)."""
+    return float(SETTINGS.get("rolling_friction", 0.0))
+
+
+def shape_rolls():
+    """Whether the contacts have rolling resistance: clumps of spheres (or single spheres) with rolling_friction."""
+    return DECK["shape"] == "clump" and rolling_friction() > 0.0
+
+
+def rolling_functors(geoms):
+    """(Ig2, Ip2, Law2) of the sphere contacts with rolling resistance: ScGeom6D geometry where Yade has it
+    (sphere-sphere, facet-sphere, box-sphere), CohFrictPhys and the moment law; a contact with a Wall keeps its
+    ScGeom and gets the Cundall-Strack law, without rolling resistance (Yade has no Ig2_Wall_Sphere_ScGeom6D)."""
+    six = {"Ig2_Sphere_Sphere_ScGeom": Ig2_Sphere_Sphere_ScGeom6D, "Ig2_Facet_Sphere_ScGeom": Ig2_Facet_Sphere_ScGeom6D}
+    return ([six[type(g).__name__]() if type(g).__name__ in six else g for g in geoms],
+            [Ip2_CohFrictMat_CohFrictMat_CohFrictPhys()],
+            [Law2_ScGeom6D_CohFrictPhys_CohesionMoment(always_use_moment_law=True, useIncrementalForm=True),
+             Law2_ScGeom_FrictPhys_CundallStrack()])
+
+
 def contact_material():
     """The (massless) contact material of every grain's contact bodies, also used by the walls."""
     if not _CONTACT:
@@ -89,6 +110,11 @@ def contact_material():
                   label="grain")
         if DECK["shape"] == "polyhedron":
             mat = PolyhedraMat(young=SETTINGS["poly_young"], **kw)
+        elif shape_rolls():
+            # rolling resistance: the rolling moment of a contact is limited to etaRoll * F_n * min(r1, r2) (Yade's
+            # CohFrictPhys.maxRollPl); no cohesion, no twisting resistance (etaTwist 0: no twisting moment)
+            mat = CohFrictMat(young=SETTINGS["young"], isCohesive=False, momentRotationLaw=True,
+                              etaRoll=rolling_friction(), etaTwist=0.0, **kw)
         else:
             mat = FrictMat(young=SETTINGS["young"], **kw)
         _CONTACT.append(O.materials.append(mat))
@@ -183,6 +209,9 @@ def contact_engines():
                 [Ig2_LevelSet_LevelSet_ScGeom(), Ig2_Wall_LevelSet_ScGeom()],
                 [Ip2_FrictMat_FrictMat_FrictPhys()],
                 [Law2_ScGeom_FrictPhys_CundallStrack(sphericalBodies=False)])
+    if shape_rolls():
+        return ([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()],) + rolling_functors([Ig2_Sphere_Sphere_ScGeom(),
+                                                                           Ig2_Wall_Sphere_ScGeom()])
     return ([Bo1_Sphere_Aabb(), Bo1_Wall_Aabb()],
             [Ig2_Sphere_Sphere_ScGeom(), Ig2_Wall_Sphere_ScGeom()],
             [Ip2_FrictMat_FrictMat_FrictPhys()],
