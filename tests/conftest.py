@@ -78,6 +78,20 @@ def require_engine(executable: str, package: str = "yade python3-yade liggghts l
     return path
 
 
+@pytest.fixture
+def three_cri_grains(tmp_path):
+    """A `generate` folder of three 2 mm rough-angular CRI grains at subdivisions 3 (the simulate tests' inputs)."""
+    from click.testing import CliRunner
+
+    from grainforge.cli.main import cli
+
+    out = tmp_path / "g"
+    r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(out), "--count", "3", "--size", "2",
+                                 "--subdivisions", "3", "--preset", "rough-angular"])
+    assert r.exit_code == 0, r.output
+    return out
+
+
 @pytest.fixture(scope="session")
 def grain_files(tmp_path_factory):
     """A folder of three grains of 4 mm-ish scale: an FSO, a CRI and a DPA grain (seeds 0, 1, 2)."""

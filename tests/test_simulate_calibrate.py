@@ -125,12 +125,8 @@ def test_uncertainty_from_the_seed_spread_and_slope():
 # ---- the command: refusals before any work ----------------------------------------------------------
 
 @pytest.fixture
-def grains(tmp_path):
-    out = tmp_path / "g"
-    r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(out), "--count", "3", "--size", "2",
-                                 "--subdivisions", "3", "--preset", "rough-angular"])
-    assert r.exit_code == 0, r.output
-    return out
+def grains(three_cri_grains):
+    return three_cri_grains
 
 
 @pytest.mark.parametrize("args, message", [

@@ -45,12 +45,8 @@ json.dump(out, open("result.json", "w"))
 
 
 @pytest.fixture
-def grains(tmp_path):
-    out = tmp_path / "g"
-    r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(out), "--count", "3", "--size", "2",
-                                 "--subdivisions", "3", "--preset", "rough-angular"])
-    assert r.exit_code == 0, r.output
-    return out
+def grains(three_cri_grains):
+    return three_cri_grains
 
 
 @pytest.fixture

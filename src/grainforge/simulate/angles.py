@@ -166,6 +166,14 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
                      fit=(float(a), float(b)), fitted=(float(centres[i1]), float(centres[i2 - 1])))
 
 
+def _tilt_record(history) -> np.ndarray:
+    """A tilt record as a (T, 2+) float64 array, or ``ValueError``."""
+    h = np.asarray(history, dtype=np.float64)
+    if h.ndim != 2 or h.shape[1] < 2:
+        raise ValueError("history must be a (T, 2) array of angle, displacement")
+    return h
+
+
 def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> float:
     """The tilt angle at which the layer's mean downslope displacement first exceeds ``displacement``.
 
@@ -197,9 +205,7 @@ def tilt_failure_angle(history: np.ndarray, *, displacement: float = 0.5) -> flo
     >>> round(tilt_failure_angle(h), 2)
     22.5
     """
-    h = np.asarray(history, dtype=np.float64)
-    if h.ndim != 2 or h.shape[1] < 2:
-        raise ValueError("history must be a (T, 2) array of angle, displacement")
+    h = _tilt_record(history)
     over = np.nonzero(h[:, 1] > displacement)[0]
     if len(over) == 0:
         return float("nan")
@@ -249,9 +255,7 @@ def tilt_curve(history: np.ndarray, *, displacement: float = 0.5, samples: int =
     >>> d[marks].tolist() == h[:, 1].tolist(), float(d[a == tilt_failure_angle(h)][0])
     (True, 0.5)
     """
-    h = np.asarray(history, dtype=np.float64)
-    if h.ndim != 2 or h.shape[1] < 2:
-        raise ValueError("history must be a (T, 2) array of angle, displacement")
+    h = _tilt_record(history)
     a0, d0 = h[:-1, 0], h[:-1, 1]
     t = np.arange(max(1, int(samples))) / max(1, int(samples))
     angles = np.append((a0[:, None] + t * (h[1:, 0] - a0)[:, None]).ravel(), h[-1:, 0])
