@@ -21,8 +21,6 @@ import signal
 import sys
 from collections.abc import Iterable
 
-from ..runtime.staging import _handled, signals_held
-
 __all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_short_estimate", "STARTUP_MODULES",
            "Terminated"]
 
@@ -37,6 +35,15 @@ SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
 
 class Terminated(BaseException):
     """Raised in the main thread on SIGTERM, so every ``finally`` cleans up (staging folders, temp files, pools)."""
+
+
+def signals_held():
+    """Hold SIGINT and SIGTERM for a block that must not stop half-way and deliver the first as it ends
+    (:func:`grainforge.runtime.staging.signals_held`, imported when used: this module is loaded before the
+    command's signal handlers are armed, so it imports the standard library only)."""
+    from ..runtime.staging import signals_held as held
+
+    return held()
 
 
 def _exit_now(signum, frame):  # pragma: no cover - exercised by a real signal
@@ -56,6 +63,8 @@ def preload(modules: Iterable[str]) -> None:
     --------
     >>> preload(["json"])
     """
+    from ..runtime.staging import _handled
+
     with _handled(_exit_now):
         for name in modules:
             importlib.import_module(name)

@@ -12,7 +12,6 @@ import signal
 import sys
 import threading
 import time
-from pathlib import Path
 
 from .interrupts import SIGNALS, Terminated, _exit_now  # the standard library only: quick
 
@@ -55,6 +54,8 @@ def _arm_starting() -> None:
 
 # loading click and the commands takes a second on a busy machine
 _arm_starting()
+
+from pathlib import Path  # noqa: E402 (after the handlers: pathlib loads urllib and ipaddress, 30 ms)
 
 import click  # noqa: E402
 
