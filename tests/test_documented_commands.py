@@ -50,10 +50,10 @@ COMMANDS = _distinct(quick_commands())
 
 
 def test_the_docs_show_a_quick_command_for_every_simulate_test():
-    """The quick checks a user is shown cover every test and calibration, in both engines where documented."""
+    """The quick checks a user is shown cover every test and the tilt calibration, the triaxial test in both
+    engines (the triaxial calibration's wiring is tested on a stand-in engine, and in Yade on the long lane)."""
     shown = {" ".join(t[1:3]) if t[1:3] != ["simulate", "calibrate"] else " ".join(t[1:4]) for _, t in COMMANDS}
-    assert {"simulate repose", "simulate tilt", "simulate triaxial", "simulate calibrate tilt",
-            "simulate calibrate triaxial"} <= shown, shown
+    assert {"simulate repose", "simulate tilt", "simulate triaxial", "simulate calibrate tilt"} <= shown, shown
     engines = {("liggghts" if "liggghts" in t else "yade") for _, t in COMMANDS if t[2] == "triaxial"}
     assert engines == {"yade", "liggghts"}
 

@@ -19,10 +19,10 @@ from conftest import require_engine
 from grainforge.cli.main import cli
 from grainforge.simulate import TriaxialSettings, build_population
 from grainforge.simulate import liggghts_triaxial as lt
-from grainforge.simulate.settings import QUICK_TRIAXIAL
+from grainforge.simulate.settings import QUICK_TRIAXIAL_LIGGGHTS
 from grainforge.simulate.triaxial import CSV_COLUMNS, triaxial_scene_settings
 
-QUICK = TriaxialSettings(**QUICK_TRIAXIAL)
+QUICK = TriaxialSettings(**QUICK_TRIAXIAL_LIGGGHTS)
 
 
 @pytest.fixture(scope="module")
@@ -61,7 +61,7 @@ def test_grain_k_takes_row_k_of_the_scenes_orientations(templates):
     """The deck inserts grain k in row k of the orientations the Yade scene of that seed places it in."""
     from test_orientations import assert_uniform, liggghts_quaternions, matrices
 
-    settings = TriaxialSettings(**{**QUICK_TRIAXIAL, "grains": 300})
+    settings = TriaxialSettings(**{**QUICK_TRIAXIAL_LIGGGHTS, "grains": 300})
     files = lt.deck_files(templates, settings, 5)
     q = liggghts_quaternions(files["in.insert"])
     yade = triaxial_scene_settings(settings, 5)["orientations"]
@@ -103,7 +103,7 @@ def test_six_plates_close_the_box_and_stay_inside_the_domain(templates):
 
 @pytest.mark.parametrize("packing", ["dense", "loose"])
 def test_the_deck_uses_the_contact_settings(templates, packing):
-    s = TriaxialSettings(**{**QUICK_TRIAXIAL, "packing": packing, "friction": 0.7, "young": 2e8,
+    s = TriaxialSettings(**{**QUICK_TRIAXIAL_LIGGGHTS, "packing": packing, "friction": 0.7, "young": 2e8,
                             "poisson": 0.25})
     files = lt.deck_files(templates, s, 0)
     run = files["in.run"]

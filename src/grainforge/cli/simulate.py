@@ -143,7 +143,7 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
 
         values = {**values, "spheres": DEFAULT_SPHERE_CAP}
     if quick:
-        values = {**quick_settings(test, shape), **{k: v for k, v in values.items() if v is not None}}
+        values = {**quick_settings(test, shape, engine), **{k: v for k, v in values.items() if v is not None}}
     settings = build_params(_settings_cls(test), values)
     try:
         check_levelset_run(test, shape, settings)
