@@ -474,3 +474,35 @@ def test_an_as_spheres_template_is_bounded_by_its_sphere():
     t = _template((v, np.asarray(g.faces), "g", Settings(), "test", 0, True, "clump", 0.05, None))
     assert t.clump.radii.tolist() == [pytest.approx(t.d_eq / 2.0)]
     assert t.bounding_radius == pytest.approx(t.d_eq / 2.0, rel=0.01)
+
+
+def test_an_owned_engine_ends_as_its_command_and_dies_with_its_owner(tmp_path):
+    """Engines start through runtime.children.run_owned (no preexec_fn): the command's exit status and its signal
+    come back as they were; an owner killed by SIGKILL takes the command with it (the launcher polls the owner)."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from _processes import alive, assert_gone
+
+    from grainforge.runtime.children import owned_command
+
+    assert subprocess.run(owned_command(["sh", "-c", "exit 3"])).returncode == 3
+    assert subprocess.run(owned_command(["sh", "-c", "kill -TERM $$"])).returncode == -signal.SIGTERM
+    pid_file = tmp_path / "engine.pid"
+    engine = [sys.executable, "-c", f"import os, time; open({str(pid_file)!r}, 'w').write(str(os.getpid())); "
+              "time.sleep(60)"]
+    owner = subprocess.Popen([sys.executable, "-c", "import subprocess, time\n"
+                              "from grainforge.runtime.children import owned_command\n"
+                              f"subprocess.Popen(owned_command({engine!r}), start_new_session=True)\n"
+                              "time.sleep(60)"])
+    deadline = time.monotonic() + 30
+    while not (pid_file.exists() and pid_file.read_text()):
+        assert time.monotonic() < deadline, "the owned command never started"
+        time.sleep(0.05)
+    pid = int(pid_file.read_text())
+    assert alive(pid)
+    owner.kill()
+    owner.wait()
+    assert_gone([pid], wait=5.0)

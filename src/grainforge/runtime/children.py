@@ -21,7 +21,7 @@ from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 
 __all__ = ["single_threaded_children", "sigint_blocked", "THREAD_VARS", "WATCH_INTERVAL", "watch_parent",
-           "die_with_parent", "pid_alive", "stop_forkserver", "kill_process_tree", "TERMINATE_GRACE",
+           "die_with_parent", "owned_command", "run_owned", "pid_alive", "stop_forkserver", "kill_process_tree", "TERMINATE_GRACE",
            "stop_processes", "quiet_stderr", "remove_leftovers"]
 
 #: seconds between a worker's checks that the process that made its pool is alive
@@ -124,8 +124,7 @@ def pid_alive(pid: int) -> bool:
 def die_with_parent() -> None:
     """Ask the kernel to SIGKILL this process when its parent dies (Linux ``PR_SET_PDEATHSIG``; elsewhere nothing).
 
-    Also used as ``preexec_fn`` of engine subprocesses (Yade), so a killed
-    ``grainforge`` leaves no engine running.
+    Used by pool workers (:func:`watch_parent`); engine processes are owned through :func:`run_owned`.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the whole group: the owner decides
     if sys.platform.startswith("linux"):
@@ -136,6 +135,68 @@ def die_with_parent() -> None:
             libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG = 1
         except (OSError, AttributeError):
             pass
+
+
+def owned_command(cmd: Sequence[str]) -> list[str]:
+    """``cmd`` run under :func:`run_owned` on behalf of this process: the command line to start instead.
+
+    The engine processes are started this way, not with a ``preexec_fn`` (which Python documents as unsafe
+    once threads exist, and whose ``PR_SET_PDEATHSIG`` follows the *thread* that forked, so an engine started
+    from a pool thread would be killed when that thread ends, and kept when the process dies otherwise).
+
+    Parameters
+    ----------
+    cmd : sequence of str
+        The command and its arguments.
+
+    Returns
+    -------
+    list of str
+        This Python running :func:`run_owned` with this process as the owner, then ``cmd``.
+
+    Examples
+    --------
+    >>> owned_command(["yade", "-x", "run.py"])[-3:]
+    ['yade', '-x', 'run.py']
+    """
+    return [sys.executable, "-c", "from grainforge.runtime.children import run_owned; run_owned()",
+            str(os.getpid()), *map(str, cmd)]
+
+
+def run_owned(argv: Sequence[str] | None = None, *, poll: float = 0.2) -> None:
+    """Run a command for an owner process and end with it: ``python -c ... OWNER CMD...`` (:func:`owned_command`).
+
+    This launcher, single-threaded and started in a session of its own, ignores SIGINT (Ctrl-C reaches the
+    owner, which decides), takes SIGTERM at its default, starts ``CMD`` (which inherits both), and waits for it,
+    polling the owner every ``poll`` seconds: when the owner is gone (killed, even by SIGKILL), it kills its
+    whole process group, the command and what the command started. It ends as the command ended: the same
+    exit status, or the same signal.
+
+    Parameters
+    ----------
+    argv : sequence of str, optional
+        The owner's pid, then the command; ``sys.argv[1:]`` when None.
+    poll : float
+        Seconds between two looks at the owner.
+    """
+    import subprocess
+
+    args = list(sys.argv[1:] if argv is None else argv)
+    owner, cmd = int(args[0]), args[1:]
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    proc = subprocess.Popen(cmd)
+    while True:
+        try:
+            status = proc.wait(timeout=poll)
+            break
+        except subprocess.TimeoutExpired:
+            if not pid_alive(owner) or os.getppid() != owner:
+                os.killpg(0, signal.SIGKILL)  # the command, its children and this launcher
+    if status < 0:  # ended by a signal: end by it too
+        signal.signal(-status, signal.SIG_DFL)
+        os.kill(os.getpid(), -status)
+    sys.exit(status)
 
 
 def watch_parent(owner: int) -> None:

@@ -4,13 +4,12 @@ progress lines read, killed with everything below them (an mpirun's ranks) on an
 from __future__ import annotations
 
 import os
-import signal
 import subprocess
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..runtime.children import die_with_parent
+from ..runtime.children import owned_command
 
 __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder",
            "mpi_slots", "check_mpi_ranks"]
@@ -87,17 +86,11 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, *, log_path: Path, env: di
     """
     env = dict(os.environ, OMP_NUM_THREADS="1", **env)
     with open(log_path, "w", buffering=1) as log:
-        # SIGINT and SIGTERM are blocked while the child is forked: with a ``preexec_fn`` the child runs
-        # Python's after-fork code with this process's handlers, and a signal sent to the whole group at
-        # that moment would raise this command's Terminated/KeyboardInterrupt inside the child (a
-        # traceback on the shared stderr).  The child unblocks them once its own handlers are set.
-        held = signal.pthread_sigmask(signal.SIG_BLOCK, _STOP_SIGNALS)
-        try:
-            proc = _track(subprocess.Popen(list(cmd), cwd=cwd, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-                                           stdin=subprocess.DEVNULL, text=True, errors="replace", env=env,
-                                           start_new_session=True, preexec_fn=_engine_child))
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, held)  # a signal that came meanwhile is handled now
+        # in a session of its own, through a launcher that ignores Ctrl-C and kills the engine when this
+        # process is gone (no preexec_fn: unsafe with threads, and this may run in a pool thread)
+        proc = _track(subprocess.Popen(owned_command(cmd), cwd=cwd, stdout=subprocess.PIPE,
+                                       stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
+                                       errors="replace", env=env, start_new_session=True))
         named = []  # the engine's own temporary folders
         try:
             for line in proc.stdout:
@@ -138,21 +131,6 @@ def _remove_engine_folder(folder: str, prefix: str) -> None:
     path = Path(folder)
     if path.is_absolute() and path.name.startswith(prefix) and path.is_dir() and not path.is_symlink():
         _remove_folder(str(path))
-
-
-_STOP_SIGNALS = {signal.SIGINT, signal.SIGTERM}
-
-
-def _engine_child() -> None:
-    """``preexec_fn`` of an engine process, run in the forked child with SIGINT and SIGTERM blocked.
-
-    Ctrl-C is ignored (it reaches the whole group; the owner decides and kills the engine), SIGTERM
-    takes its default action, the kernel kills the engine if its owner dies; then the two signals are
-    unblocked, so one sent during the fork ends the child quietly instead of running the owner's handler.
-    """
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)
-    die_with_parent()  # also ignores SIGINT
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, _STOP_SIGNALS)
 
 
 class EngineFailed(RuntimeError):
