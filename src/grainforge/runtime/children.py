@@ -140,7 +140,7 @@ def die_with_parent() -> None:
 def owned_command(cmd: Sequence[str]) -> list[str]:
     """``cmd`` run under :func:`run_owned` on behalf of this process: the command line to start instead.
 
-    The engine processes are started this way, not with a ``preexec_fn`` (which Python documents as unsafe
+    The engine processes are started this way, not with a pre-exec hook of ``subprocess`` (which Python documents as unsafe
     once threads exist, and whose ``PR_SET_PDEATHSIG`` follows the *thread* that forked, so an engine started
     from a pool thread would be killed when that thread ends, and kept when the process dies otherwise).
 

@@ -87,7 +87,7 @@ def run_engine_process(cmd: Sequence[str], cwd: Path, *, log_path: Path, env: di
     env = dict(os.environ, OMP_NUM_THREADS="1", **env)
     with open(log_path, "w", buffering=1) as log:
         # in a session of its own, through a launcher that ignores Ctrl-C and kills the engine when this
-        # process is gone (no preexec_fn: unsafe with threads, and this may run in a pool thread)
+        # process is gone (no pre-exec hook: unsafe with threads, and this may run in a pool thread)
         proc = _track(subprocess.Popen(owned_command(cmd), cwd=cwd, stdout=subprocess.PIPE,
                                        stderr=subprocess.STDOUT, stdin=subprocess.DEVNULL, text=True,
                                        errors="replace", env=env, start_new_session=True))
