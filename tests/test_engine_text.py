@@ -16,8 +16,8 @@ from click.testing import CliRunner
 
 import grainforge.dem.text as text
 from grainforge.cli.main import cli
-from grainforge.cli.simulate import RUNS, TEST_RUNS
 from grainforge.dem.text import fill, render
+from grainforge.simulate.capabilities import RUNS, TEST_RUNS
 
 #: an unfilled placeholder: "@name" or "@{name}" (an "@@" is written as "@")
 PLACEHOLDER = re.compile(r"@(\{?[a-z_][a-z0-9_]*)")

@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from ..simulate.capabilities import ENGINE_NAMES, ENGINES, SHAPES, TILT_ONLY
 from .options import (
     EXIT_CHECK_FAILED,
     FiniteFloatRange,
@@ -19,55 +20,15 @@ from .options import (
 )
 from .paths import OutPath, output_dir
 
-#: settings only the tilt test reads: not offered by `simulate repose`
-TILT_ONLY = ("tilt_step", "tilt_start")
-#: engines and grain representations the options name (the DEM decks' ones, grainforge dem)
-ENGINES = ("yade", "liggghts")
-#: representations the scenes run (Yade: both; LIGGGHTS: clumps). Polyhedra are `grainforge dem`'s only:
-#: neither engine's scenes take them, so --help does not offer them
-SHAPES = ("clump", "levelset")
-#: what simulate's scenes can run, per engine
-RUNS = {"yade": ("clump", "levelset"), "liggghts": ("clump",)}
-#: what a test's scenes run where it differs from RUNS: the triaxial scenes take clumps only
-TEST_RUNS = {"triaxial": {"yade": ("clump",), "liggghts": ("clump",)}}
-#: why a test refuses a representation its engine has, by (test, engine, shape), said in the refusal: Yade's
-#: level-set contact gains kinetic energy in a frictionless collision (benchmarks/levelset_energy.py), so a
-#: level-set specimen heats up in the frictionless compaction instead of coming to rest (docs/simulate.md)
-TEST_SHAPE_WHY = {("triaxial", "yade", "levelset"): "Yade's level-set contact gains energy in a frictionless "
-                                                    "collision, a grain pair parting with 20 times its kinetic "
-                                                    "energy: a specimen never comes to rest at the confining "
-                                                    "stress; docs/simulate.md"}
-#: engines simulate runs under mpirun (--mpi)
-MPI_ENGINES = ("liggghts",)
-#: the engines' names in progress bars
-ENGINE_NAMES = {"yade": "Yade", "liggghts": "LIGGGHTS"}
-
 
 def check_engine(engine: str, mpi: int | None, shape: str, test: str | None = None) -> None:
-    """Refuse, in one line and before any work, an engine/representation/MPI combination simulate cannot run.
+    """:func:`grainforge.simulate.capabilities.check_engine`'s refusal as one line, exit 2."""
+    from ..simulate.capabilities import check_engine as check
 
-    Raises
-    ------
-    click.UsageError
-        For an engine simulate has no scene for, ``--mpi`` with an engine
-        that does not run under MPI, a ``--shape`` the engine's scenes cannot
-        take (whether the engine is installed is :func:`check_installed`'s); ``test`` names the test whose
-        scenes run (:data:`TEST_RUNS`).
-    """
-    runs = TEST_RUNS.get(test, RUNS)
-    if not runs[engine]:
-        what = f"simulate {test}" if test in TEST_RUNS else "simulate"
-        raise click.UsageError(f"--engine {engine}: {what} has no {engine} scene yet (grainforge dem "
-                               f"--engine {engine} writes a pour deck); use --engine yade")
-    if mpi is not None and engine not in MPI_ENGINES:
-        raise click.UsageError(f"--mpi: {engine} runs one process per seed here, not under mpirun; "
-                               "use --workers for runs at once (or --engine liggghts --mpi N)")
-    if shape not in runs[engine]:
-        what = f"simulate {test}'s {engine} scene takes" if test in TEST_RUNS else f"simulate's {engine} scenes take"
-        why = TEST_SHAPE_WHY.get((test, engine, shape))
-        raise click.UsageError(f"--shape {shape}: {what} "
-                               f"{', '.join('--shape ' + s for s in runs[engine])} only ("
-                               + (why or f"grainforge dem --shape {shape} writes the deck") + ")")
+    try:
+        check(engine, mpi, shape, test)
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
 
 
 def check_installed(engine: str, mpi: int | None) -> None:

@@ -11,6 +11,7 @@ from pathlib import Path
 
 import click
 
+from ..simulate.capabilities import ENGINE_NAMES, ENGINES, SHAPES, TILT_ONLY
 from .options import (
     EXIT_CHECK_FAILED,
     FINITE_FLOAT,
@@ -22,11 +23,7 @@ from .options import (
 )
 from .paths import OutPath, output_dir
 from .simulate import (
-    ENGINE_NAMES,
-    ENGINES,
     HEAVY_MODULES,
-    SHAPES,
-    TILT_ONLY,
     _settings_cls,
     check_cluster_options,
     check_engine,
