@@ -381,17 +381,6 @@ def _seed_progress(test: str, engine: str, mpi, settings):
     return runs, progress
 
 
-def _annotated(rows, *, shape, spacing, engine, mpi, clump_accuracy):
-    """results.csv's rows with the settings that differ from the defaults (the default runs' rows unchanged)."""
-    if shape != "clump":  # the representation
-        rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
-    if engine != "yade":  # the engine and its MPI ranks
-        rows = [{**r, "engine": engine, "mpi_ranks": mpi or 1} for r in rows]
-    if clump_accuracy is not None:  # the clumps' accuracy target
-        rows = [{**r, "clump_accuracy": clump_accuracy} for r in rows]
-    return rows
-
-
 def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values, *, engine="yade", mpi=None,
          shape="clump", spacing=0.05, clump_accuracy=None, scheduler=None, resume=False):
     import os
@@ -431,7 +420,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         run_test,
         staged,
     )
-    from ..simulate.results import figure_caption, write_report
+    from ..simulate.results import annotate_rows, failed_runs, figure_caption, result_line, write_report
     from ..simulate.sweep import JournalMismatch
 
     label = label or ("spheres from " if as_spheres else "") + ", ".join(Path(p).name for p in inputs)
@@ -454,7 +443,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
             raise click.UsageError(str(exc)) from None
         finally:
             runs.close()
-        rows = _annotated(rows, shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
+        rows = annotate_rows(rows, shape=shape, spacing=spacing, engine=engine, mpi=mpi, clump_accuracy=clump_accuracy)
         warning = clump_outputs(templates, settings, clump_accuracy, stage, out)
         caption = figure_caption(test, settings, templates=templates, label=label, engine=engine, mpi=mpi,
                                  spacing=spacing if shape == "levelset" else None, rows=rows)
@@ -471,54 +460,6 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
         if failed:
             click.echo(f"check failed: {failed} (results.csv has every run)", err=True)
         sys.exit(EXIT_CHECK_FAILED)
-
-
-def result_line(test: str, rows, label: str, out: Path) -> str:
-    """The line a finished run prints: the measured angle(s) over the seeds and where the outputs are."""
-    from ..simulate import summarise
-
-    where = f"{out / 'results.csv'}, {out / (test + '.png')}"
-    if test == "triaxial":
-        from ..simulate.triaxial import summarise_triaxial
-
-        return f"{label}: {summarise_triaxial(rows)}; {where}"
-    summary = summarise(rows)
-    sd = summary["angle_sd_deg"]
-    spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"
-    name = "angle of repose" if test == "repose" else "tilt failure angle"
-    if summary["runs"] == 0:
-        return f"{label}: no {name} measured ({rows[0].get('note', '')}); {out / 'results.csv'}"
-    return f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; {where}"
-
-
-def failed_runs(rows, first_seed: int) -> str:
-    """The runs that fail their own check, in one line: no angle measured, a repose heap not at rest, grains lost;
-    a triaxial run's own ``problems`` (:func:`grainforge.simulate.triaxial.measure_triaxial`).
-
-    Examples
-    --------
-    >>> failed_runs([{"test": "repose", "angle_deg": float("nan"), "settled": True, "lost": 0, "note": "too flat"},
-    ...              {"test": "repose", "angle_deg": 30.0, "settled": False, "lost": 2, "note": ""}], 0)
-    'seed 0: no angle (too flat); seed 1: not at rest at the end, 2 grain(s) lost'
-    >>> failed_runs([{"test": "triaxial", "seed": 4, "problems": "no stress ratio recorded", "lost": 0}], 0)
-    'seed 4: no stress ratio recorded'
-    """
-    import math
-
-    out = []
-    for k, r in enumerate(rows):
-        why = []
-        if r.get("test") == "triaxial":
-            why += [r["problems"]] if r.get("problems") else []
-        elif not math.isfinite(float(r["angle_deg"])):
-            why.append(f"no angle ({r.get('note') or 'not measured'})")
-        if r.get("test") == "repose" and not r.get("settled", True):
-            why.append("not at rest at the end")
-        if int(r.get("lost", 0)):
-            why.append(f"{int(r['lost'])} grain(s) lost")
-        if why:
-            out.append(f"seed {r.get('seed', first_seed + k)}: " + ", ".join(why))
-    return "; ".join(out)
 
 
 repose = _command("repose", """Angle of repose: a cylinder of grains on a rough base is lifted and the heap measured.

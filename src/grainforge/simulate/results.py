@@ -13,7 +13,7 @@ from ..io import save_figure, write_csv
 from ..params import as_dict
 from .angles import TILT_FAILURE, heap_angle, tilt_curve
 
-__all__ = ["write_report", "figure", "figure_caption", "add_caption"]
+__all__ = ["write_report", "figure", "figure_caption", "add_caption", "annotate_rows", "result_line", "failed_runs"]
 
 #: the lowest displacement tilt.png's log axis shows (grain diameters); smaller ones are drawn on it
 DISPLACEMENT_FLOOR = 1e-4
@@ -260,3 +260,114 @@ def figure(test: str, results: Sequence[dict], rows: Sequence[dict], caption: st
         ax.legend(loc="upper left", fontsize=8)
     add_caption(fig, caption)
     return fig
+
+
+def annotate_rows(rows: list[dict], *, shape: str, spacing: float, engine: str, mpi: int | None,
+                  clump_accuracy: float | None) -> list[dict]:
+    """``results.csv``'s rows with the settings that differ from the defaults (the default runs' rows unchanged).
+
+    Parameters
+    ----------
+    rows : list of dict
+        One row per seed.
+    shape, spacing : str, float
+        The grains' representation and a level set's grid (added when not ``"clump"``).
+    engine, mpi : str, int or None
+        The engine and its MPI ranks (added when not Yade).
+    clump_accuracy : float or None
+        The clumps' accuracy target (added when given).
+
+    Returns
+    -------
+    list of dict
+        The rows, each with those columns added.
+
+    Examples
+    --------
+    >>> annotate_rows([{"seed": 0}], shape="clump", spacing=0.05, engine="liggghts", mpi=None, clump_accuracy=None)
+    [{'seed': 0, 'engine': 'liggghts', 'mpi_ranks': 1}]
+    """
+    if shape != "clump":  # the representation
+        rows = [{**r, "shape": shape, "spacing": spacing} for r in rows]
+    if engine != "yade":  # the engine and its MPI ranks
+        rows = [{**r, "engine": engine, "mpi_ranks": mpi or 1} for r in rows]
+    if clump_accuracy is not None:  # the clumps' accuracy target
+        rows = [{**r, "clump_accuracy": clump_accuracy} for r in rows]
+    return rows
+
+
+def result_line(test: str, rows: list[dict], label: str, out) -> str:
+    """The line a finished run prints: the measured angle(s) over the seeds and where the outputs are.
+
+    Parameters
+    ----------
+    test : {"repose", "tilt", "triaxial"}
+        The virtual test.
+    rows : list of dict
+        ``results.csv``'s rows.
+    label : str
+        The population's name.
+    out : pathlib.Path
+        The output folder.
+
+    Returns
+    -------
+    str
+        ``label: <angle> ± <sd> ...; <results.csv>, <figure>``, or what was not measured and why.
+    """
+    from . import summarise
+
+    where = f"{out / 'results.csv'}, {out / (test + '.png')}"
+    if test == "triaxial":
+        from .triaxial import summarise_triaxial
+
+        return f"{label}: {summarise_triaxial(rows)}; {where}"
+    summary = summarise(rows)
+    sd = summary["angle_sd_deg"]
+    spread = f" ± {sd:.1f}° (sd over {summary['runs']} seeds)" if summary["runs"] > 1 else " (one seed)"
+    name = "angle of repose" if test == "repose" else "tilt failure angle"
+    if summary["runs"] == 0:
+        return f"{label}: no {name} measured ({rows[0].get('note', '')}); {out / 'results.csv'}"
+    return f"{label}: {name} {summary['angle_mean_deg']:.1f}°{spread}; {where}"
+
+
+def failed_runs(rows: list[dict], first_seed: int) -> str:
+    """The runs that fail their own check, in one line: no angle measured, a repose heap not at rest, grains lost;
+    a triaxial run's own ``problems`` (:func:`grainforge.simulate.triaxial.measure_triaxial`).
+
+    Parameters
+    ----------
+    rows : list of dict
+        ``results.csv``'s rows.
+    first_seed : int
+        The first seed (a row without ``seed`` is numbered from it).
+
+    Returns
+    -------
+    str
+        ``seed <k>: <why>`` for each failing run, joined by ``; `` (empty when every run passes).
+
+    Examples
+    --------
+    >>> failed_runs([{"test": "repose", "angle_deg": float("nan"), "settled": True, "lost": 0, "note": "too flat"},
+    ...              {"test": "repose", "angle_deg": 30.0, "settled": False, "lost": 2, "note": ""}], 0)
+    'seed 0: no angle (too flat); seed 1: not at rest at the end, 2 grain(s) lost'
+    >>> failed_runs([{"test": "triaxial", "seed": 4, "problems": "no stress ratio recorded", "lost": 0}], 0)
+    'seed 4: no stress ratio recorded'
+    """
+    import math
+
+    out = []
+    for k, r in enumerate(rows):
+        why = []
+        if r.get("test") == "triaxial":
+            why += [r["problems"]] if r.get("problems") else []
+        elif not math.isfinite(float(r["angle_deg"])):
+            why.append(f"no angle ({r.get('note') or 'not measured'})")
+        if r.get("test") == "repose" and not r.get("settled", True):
+            why.append("not at rest at the end")
+        if int(r.get("lost", 0)):
+            why.append(f"{int(r['lost'])} grain(s) lost")
+        if why:
+            out.append(f"seed {r.get('seed', first_seed + k)}: " + ", ".join(why))
+    return "; ".join(out)
