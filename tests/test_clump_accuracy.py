@@ -133,7 +133,7 @@ def test_deck_reports_each_grain_and_names_the_ones_that_miss(grain_files, tmp_p
 
 
 def test_many_misses_are_counted_with_the_table(grain_files, tmp_path, monkeypatch):
-    monkeypatch.setattr("grainforge.cli.dem.NAMED_MISSES", 0)
+    monkeypatch.setattr("grainforge.dem.template.NAMED_MISSES", 0)
     out = tmp_path / "deck"
     r = _dem(grain_files, out, "--clump-accuracy", "0.9", "--spheres", "3")
     assert r.exit_code == 3, r.output

@@ -29,8 +29,6 @@ SHAPE_OPTIONS = {("spheres", "--spheres"): "clump", ("refine", "--refine-iterati
                  ("vertices", "--vertices"): "polyhedron", ("spacing", "--spacing"): "levelset"}
 #: engines that refuse a rigid body of one sphere: a clump built to an accuracy target takes two at least there
 TWO_SPHERE_ENGINES = ("liggghts", "lammps")
-#: grains named one by one in the warning about clumps that miss their accuracy target; more are counted
-NAMED_MISSES = 10
 
 
 def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
@@ -165,6 +163,8 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     if clump_accuracy is None:
         click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
         return
+    from ..dem.template import accuracy_summary, accuracy_warning
+
     warning = accuracy_warning(templates, spheres, out / "clumps.csv")
     if warning:
         click.echo(warning, err=True)
@@ -187,54 +187,6 @@ def _write_deck(engine: str, templates, out: Path, overwrite: bool, rolling_fric
         from ..dem import liggghts as engine_deck
     settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
     return engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
-
-
-def _missing(templates) -> list:
-    return [t for t in templates if t.clump is not None and t.clump.meets_target is False]
-
-
-def accuracy_warning(templates, cap: int, table) -> str | None:
-    """The one warning line naming the clumps that miss their accuracy target within ``cap`` spheres (``None``
-    when every clump reaches it): up to :data:`NAMED_MISSES` grains by name with their intersection over union,
-    more as a count and the table (``clumps.csv``) that lists them.
-
-    Examples
-    --------
-    >>> from types import SimpleNamespace as NS
-    >>> miss = NS(name="dpa-0002", clump=NS(meets_target=False, target=0.9, accuracy=NS(iou=0.8123), count=30))
-    >>> print(accuracy_warning([miss], 30, "deck/clumps.csv"))
-    warning: 1 grain does not reach the intersection over union 0.9 within 30 spheres: dpa-0002 (0.812)
-    """
-    missing = _missing(templates)
-    if not missing:
-        return None
-    target = missing[0].clump.target
-    head = (f"warning: {len(missing)} grain{'s do' if len(missing) > 1 else ' does'} not reach the intersection "
-            f"over union {target:g} within {cap} spheres")
-    if len(missing) <= NAMED_MISSES:
-        return head + ": " + ", ".join(f"{t.name} ({t.clump.accuracy.iou:.3f})" for t in missing)
-    return f"{head} (of {len(templates)}); {table} lists them (meets_target false)"
-
-
-def accuracy_summary(templates, cap: int) -> str:
-    """``clumps of 3/12/30 spheres (min/median/max, at most 30); 9 of 10 grains reach IoU 0.85``.
-
-    Examples
-    --------
-    >>> from types import SimpleNamespace as NS
-    >>> ts = [NS(clump=NS(count=n, meets_target=n < 30, target=0.85)) for n in (1, 12, 30)]
-    >>> accuracy_summary(ts, 30)
-    'clumps of 1/12/30 spheres (min/median/max, at most 30); 2 of 3 grains reach IoU ≥ 0.85'
-    """
-    import statistics
-
-    clumps = [t.clump for t in templates if t.clump is not None]
-    if not clumps:
-        return "no clumps"
-    counts = [c.count for c in clumps]
-    met = sum(bool(c.meets_target) for c in clumps)
-    return (f"clumps of {min(counts)}/{statistics.median(counts):g}/{max(counts)} spheres (min/median/max, at most "
-            f"{cap}); {met} of {len(clumps)} grains reach IoU ≥ {clumps[0].target:g}")
 
 
 def _templates_plan(inputs, paths, k: int, out: Path, overwrite: bool) -> int:

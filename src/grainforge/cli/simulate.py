@@ -189,7 +189,7 @@ def clump_outputs(templates, settings, clump_accuracy: float | None, stage, out)
         return None
     from ..dem.clump import clump_table
     from ..dem.deck import template_record
-    from .dem import accuracy_warning
+    from ..dem.template import accuracy_warning
 
     (Path(stage) / "clumps.csv").write_text(clump_table([template_record(t) for t in templates]))
     return accuracy_warning(templates, settings.spheres, Path(out) / "clumps.csv")
@@ -242,18 +242,6 @@ def check_cluster_options(scheduler: str | None, workers: int | None, resume: bo
             check_address(scheduler)
         except ValueError as exc:
             raise click.UsageError(str(exc)) from None
-
-
-def sweep_fingerprint(test: str, inputs, settings, **options) -> dict:
-    """The settings of a sweep that decide its runs, keyed as the user names them (the journal's ``sweep.json``)."""
-    from dataclasses import asdict
-
-    record = {"test": test, "inputs": [str(Path(p).resolve()) for p in inputs]}
-    for key, value in {**asdict(settings), **options}.items():
-        if key == "rolling_friction" and not value:  # none: the record of a sweep begun before the setting existed
-            continue
-        record["--" + key.replace("_", "-")] = value
-    return record
 
 
 def open_sweep(out: Path, fingerprint: dict, resume: bool, overwrite: bool):
@@ -389,6 +377,7 @@ def _run(test, inputs, out, quick, as_spheres, label, workers, overwrite, values
     from ..runtime.estimate import TooLargeError
     from ..simulate import check_inputs, check_size
     from ..simulate.specimen import template_make_seconds
+    from ..simulate.sweep import sweep_fingerprint
     from .interrupts import ready_for_work, say_short_estimate, signals_held
 
     settings = run_settings(test, values, quick, shape, clump_accuracy, engine=engine, mpi=mpi, workers=workers,

@@ -39,7 +39,6 @@ from .simulate import (
     run_settings,
     scheduler_lost,
     scheduler_option,
-    sweep_fingerprint,
 )
 
 #: outputs of a calibration in --out (its runs go to runs/)
@@ -128,7 +127,8 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     from ..runtime.cluster import SchedulerLost
     from ..runtime.estimate import TooLargeError
     from ..simulate import check_inputs
-    from ..simulate.friction_search import TYPICAL_EVALUATIONS, calibration_seconds
+    from ..simulate.friction_search import calibration_estimate
+    from ..simulate.sweep import sweep_fingerprint
     from .interrupts import ready_for_work, say_short_estimate, signals_held
 
     low, high = _check_search(target_angle, friction_range, start)
@@ -153,11 +153,9 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     pool = min(available, 4 * settings.templates) if quick else None
     executor, workers = engine_runners(scheduler, workers, mpi)
     try:
-        cost = dict(available=available, make_seconds=make_seconds, pool=pool, as_spheres=as_spheres,
-                    workers=workers, shape=shape, spacing=ls_spacing, engine=engine)
-        most = calibration_seconds(test, settings, max_evaluations=max_evaluations, **cost)
-        seconds = calibration_seconds(test, settings, max_evaluations=min(TYPICAL_EVALUATIONS, max_evaluations),
-                                      **cost)
+        seconds, most = calibration_estimate(test, settings, max_evaluations=max_evaluations, available=available,
+                                             make_seconds=make_seconds, pool=pool, as_spheres=as_spheres,
+                                             workers=workers, shape=shape, spacing=ls_spacing, engine=engine)
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
     if executor is None:  # on a cluster, the engine is the workers'

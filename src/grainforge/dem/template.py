@@ -19,7 +19,7 @@ import numpy as np
 from ..rng import RNGLike
 from .massprops import MassProperties, mass_properties
 
-__all__ = ["GrainTemplate", "prepare", "SHAPES"]
+__all__ = ["GrainTemplate", "prepare", "SHAPES", "accuracy_warning", "accuracy_summary", "NAMED_MISSES"]
 
 #: representations a template can carry
 SHAPES = ("clump", "polyhedron", "levelset")
@@ -266,3 +266,78 @@ def check_level_set_budget(vertices: np.ndarray, faces: np.ndarray, *, unit: flo
         return
     v, mp = _in_metres(vertices, f, unit)
     level_set_grid((v - mp.centroid) @ mp.axes, f, spacing=spacing)
+
+
+#: grains named one by one in the warning about clumps that miss their accuracy target; more are counted
+NAMED_MISSES = 10
+
+
+def accuracy_warning(templates, cap: int, table) -> str | None:
+    """The one warning line naming the clumps that miss their accuracy target within ``cap`` spheres.
+
+    Up to :data:`NAMED_MISSES` grains by name with their intersection over union, more as a count and the table
+    (``clumps.csv``) that lists them.
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        The templates (those without a clump, or without a target, are not counted).
+    cap : int
+        The clumps' sphere cap.
+    table : str or path
+        The clump table the line names when it counts the misses.
+
+    Returns
+    -------
+    str or None
+        The line, or None when every clump reaches its target.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> miss = NS(name="dpa-0002", clump=NS(meets_target=False, target=0.9, accuracy=NS(iou=0.8123), count=30))
+    >>> print(accuracy_warning([miss], 30, "deck/clumps.csv"))
+    warning: 1 grain does not reach the intersection over union 0.9 within 30 spheres: dpa-0002 (0.812)
+    """
+    missing = [t for t in templates if t.clump is not None and t.clump.meets_target is False]
+    if not missing:
+        return None
+    target = missing[0].clump.target
+    head = (f"warning: {len(missing)} grain{'s do' if len(missing) > 1 else ' does'} not reach the intersection "
+            f"over union {target:g} within {cap} spheres")
+    if len(missing) <= NAMED_MISSES:
+        return head + ": " + ", ".join(f"{t.name} ({t.clump.accuracy.iou:.3f})" for t in missing)
+    return f"{head} (of {len(templates)}); {table} lists them (meets_target false)"
+
+
+def accuracy_summary(templates, cap: int) -> str:
+    """The clumps' sphere counts and how many reach their accuracy target, in one phrase.
+
+    Parameters
+    ----------
+    templates : sequence of GrainTemplate
+        The templates (those without a clump are left out).
+    cap : int
+        The clumps' sphere cap.
+
+    Returns
+    -------
+    str
+        ``clumps of 3/12/30 spheres (min/median/max, at most 30); 9 of 10 grains reach IoU ≥ 0.85``.
+
+    Examples
+    --------
+    >>> from types import SimpleNamespace as NS
+    >>> ts = [NS(clump=NS(count=n, meets_target=n < 30, target=0.85)) for n in (1, 12, 30)]
+    >>> accuracy_summary(ts, 30)
+    'clumps of 1/12/30 spheres (min/median/max, at most 30); 2 of 3 grains reach IoU ≥ 0.85'
+    """
+    import statistics
+
+    clumps = [t.clump for t in templates if t.clump is not None]
+    if not clumps:
+        return "no clumps"
+    counts = [c.count for c in clumps]
+    met = sum(bool(c.meets_target) for c in clumps)
+    return (f"clumps of {min(counts)}/{statistics.median(counts):g}/{max(counts)} spheres (min/median/max, at most "
+            f"{cap}); {met} of {len(clumps)} grains reach IoU ≥ {clumps[0].target:g}")

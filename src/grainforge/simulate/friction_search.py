@@ -40,7 +40,7 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
-__all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "friction_uncertainty", "pooled_sd",
+__all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "calibration_estimate", "friction_uncertainty", "pooled_sd",
            "local_slope", "calibrated_angle", "calibration_seconds", "failed_calibration_runs",
            "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
            "TARGET_RANGE", "FRICTION_RANGE", "TRIAXIAL_ANGLES", "check_target"]
@@ -233,6 +233,43 @@ def calibration_seconds(test: str, settings, *, max_evaluations: int, available:
                             f"{settings.grains} grains would take about {duration(seconds)} of computing (limit "
                             f"{_limit()}); lower --max-frictions, --grains or --seeds")
     return float(seconds)
+
+
+def calibration_estimate(test: str, settings, *, max_evaluations: int, **cost) -> tuple[float, float]:
+    """The seconds a calibration usually takes (:data:`TYPICAL_EVALUATIONS` frictions) and the most it may take
+    (``max_evaluations``); refuse one whose longest is beyond the limit (:func:`calibration_seconds`).
+
+    Parameters
+    ----------
+    test : {"repose", "tilt", "triaxial"}
+        The test calibrated on.
+    settings : Settings or TriaxialSettings
+        One friction's runs' settings.
+    max_evaluations : int
+        The most frictions the search may try.
+    **cost
+        :func:`calibration_seconds`'s other arguments (``available``, ``make_seconds``, ``pool``, ...).
+
+    Returns
+    -------
+    (float, float)
+        The usual and the longest estimate, in seconds.
+
+    Raises
+    ------
+    grainforge.runtime.estimate.TooLargeError
+        As :func:`calibration_seconds`.
+
+    Examples
+    --------
+    >>> from .settings import Settings
+    >>> usual, most = calibration_estimate("tilt", Settings(), max_evaluations=8, available=3)
+    >>> usual < most
+    True
+    """
+    most = calibration_seconds(test, settings, max_evaluations=max_evaluations, **cost)
+    usual = calibration_seconds(test, settings, max_evaluations=min(TYPICAL_EVALUATIONS, max_evaluations), **cost)
+    return usual, most
 
 
 def search_friction(angle_of: Callable[[float], float], target: float, *, low: float = FRICTION_RANGE[0],

@@ -33,7 +33,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["JOURNAL", "SweepJournal", "open_journal", "deck_files", "run_remote", "run_on_cluster", "JournalMismatch"]
+__all__ = ["JOURNAL", "SweepJournal", "open_journal", "sweep_fingerprint", "deck_files", "run_remote", "run_on_cluster", "JournalMismatch"]
 
 #: the folder inside ``--out`` that keeps the finished runs of a sweep until its outputs are committed
 JOURNAL = ".grainforge-sweep"
@@ -390,3 +390,40 @@ def open_journal(out: str | os.PathLike, fingerprint: dict, *, resume: bool = Fa
     for tmp in journal.folder.glob(".*"):  # a copy cut short by the interrupt
         shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
     return journal
+
+
+def sweep_fingerprint(test: str, inputs, settings, **options) -> dict:
+    """The settings of a sweep that decide its runs, keyed as the user names them (the journal's ``sweep.json``).
+
+    Parameters
+    ----------
+    test : str
+        The test (``"repose"``, ``"calibrate tilt"``, ...).
+    inputs : sequence of path
+        The inputs (recorded resolved).
+    settings : Settings or TriaxialSettings
+        The runs' settings.
+    **options
+        Further settings of the command (engine, ranks, representation, the search's options).
+
+    Returns
+    -------
+    dict
+        ``test``, ``inputs`` and every setting as ``--name``: value (``--rolling-friction`` only when above 0, so
+        that a sweep begun before the setting existed resumes).
+
+    Examples
+    --------
+    >>> from grainforge.simulate import Settings
+    >>> record = sweep_fingerprint("repose", [], Settings(), engine="yade")
+    >>> record["test"], record["--grains"], record["--engine"], "--rolling-friction" in record
+    ('repose', 200, 'yade', False)
+    """
+    from dataclasses import asdict
+
+    record = {"test": test, "inputs": [str(Path(p).resolve()) for p in inputs]}
+    for key, value in {**asdict(settings), **options}.items():
+        if key == "rolling_friction" and not value:  # none: the record of a sweep begun before the setting existed
+            continue
+        record["--" + key.replace("_", "-")] = value
+    return record
