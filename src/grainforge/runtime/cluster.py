@@ -351,8 +351,12 @@ class DaskExecutor(cf.Executor):
             self.submitted += 1
 
         def cancelled(f: cf.Future) -> None:
-            if f.cancelled():
+            if not f.cancelled() or self._closing:
+                return  # a shutdown cancels its pending tasks in one call, and may close the client after
+            try:
                 fut.cancel()
+            except Exception:  # noqa: BLE001 - a client already closed (its loop gone) holds nothing to cancel
+                pass
 
         out.add_done_callback(cancelled)
         fut.add_done_callback(lambda f: self._settle(f, out))
