@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry.moments import sphere_diameter
 from ..geometry.rotations import random_rotation
 
 __all__ = ["voxelise", "voxel_image", "opening_fraction", "atlas_descriptors", "voxel_descriptors", "ATLAS_COLUMNS",
@@ -529,7 +530,7 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0, *, convention: 
     sph = math.pi ** (1 / 3) * (6 * V) ** (2 / 3) / area if area > 0 else math.nan
     conv = n / _hull_count(mask)
     return {
-        "voxels": int(n), "volume": V, "equivalent_diameter": (6 * V / math.pi) ** (1 / 3),
+        "voxels": int(n), "volume": V, "equivalent_diameter": float(sphere_diameter(V)),
         "major": float(major), "middle": float(middle), "minor": float(minor),
         "sphericity": float(sph), "convexity": float(conv),
         "flatness": float(minor / middle) if middle > 0 else math.nan,
@@ -644,7 +645,7 @@ def voxel_image(
     if not is_closed(f, len(v)):
         raise ValueError("the mesh is not closed: a voxel image needs an inside")
     vol = abs(signed_volume(v, f))
-    d_mesh = (6 * vol / math.pi) ** (1 / 3)
+    d_mesh = float(sphere_diameter(vol))
     if voxels_across is not None:
         if not (math.isfinite(voxels_across) and voxels_across > 0):
             raise ValueError(f"voxels across must be a positive number, got {voxels_across!r}")

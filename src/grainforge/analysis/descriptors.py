@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..geometry.moments import sphere_diameter
 from ..geometry.solid import is_closed
 from .mass import mass_properties
 
@@ -114,7 +115,7 @@ def basic_descriptors(obj) -> dict[str, float]:
 def _basic(v: np.ndarray, mp: dict, hull) -> dict[str, float]:
     """The :data:`BASIC_COLUMNS` from the mass properties and the convex hull (None if degenerate)."""
     V, A = mp["volume"], mp["area"]
-    d_eq = float(np.cbrt(6.0 * V / np.pi)) if V > 0 else 0.0
+    d_eq = float(sphere_diameter(V)) if V > 0 else 0.0
     sph = float(np.pi ** (1 / 3) * (6 * V) ** (2 / 3) / A) if V > 0 and A > 0 else 0.0
     hull_v = float(hull.volume) if hull is not None else 0.0
     L, I, S = _box_dimensions(v, hull)

@@ -10,7 +10,7 @@ import numpy as np
 
 from ..geometry.solid import solid_problems, split_bodies, volume_and_centroid
 
-__all__ = ["split_bodies", "read_bodies", "body_flags", "analyse_mesh", "analyse_file", "solid_grain",
+__all__ = ["split_bodies", "read_bodies", "body_flags", "analyse_mesh", "analyse_file", "grain_sizes", "solid_grain",
            "ANALYSE_COLUMNS"]
 
 #: identity and quality columns that precede the descriptors in ``analyse`` output
@@ -259,6 +259,52 @@ def analyse_file(path: str | Path, **options) -> list[dict[str, Any]]:
         row["flags"] = " ".join(x for x in (*extra, row["flags"]) if x)
         rows.append(row)
     return rows
+
+
+def grain_sizes(path: str | Path) -> list[tuple[str, np.ndarray, float]]:
+    """The grains of a mesh file (the bodies :func:`analyse_file` gives a row), by name, extents and d_eq.
+
+    What :func:`grainforge.analysis.atlas.check_atlas_request` checks before any voxel image is made.
+
+    Parameters
+    ----------
+    path : str or Path
+        A mesh file in mm.
+
+    Returns
+    -------
+    list of (str, (3,) float64, float)
+        Per grain: the file's name (with `` (body k)`` after the first grain), its bounding-box
+        extents and its equivalent diameter (:func:`grainforge.geometry.moments.sphere_diameter`;
+        NaN for a body without positive volume), in mm.
+
+    Raises
+    ------
+    ValueError
+        As :func:`read_bodies`.
+
+    Examples
+    --------
+    >>> import tempfile, trimesh, pathlib
+    >>> p = pathlib.Path(tempfile.mkdtemp()) / "cube.stl"
+    >>> _ = trimesh.creation.box(extents=(2, 2, 2)).export(p)
+    >>> [(name.endswith("cube.stl"), e.tolist(), round(d, 4)) for name, e, d in grain_sizes(p)]
+    [(True, [2.0, 2.0, 2.0], 2.4814)]
+    """
+    import math
+
+    from ..geometry.moments import signed_volume, sphere_diameter
+    from ..geometry.solid import body_nesting
+
+    found = read_bodies(path)
+    enclosing, _ = body_nesting(found)
+    grains = [b for b, e in zip(found, enclosing) if e is None]  # an inner shell is no grain (analyse_file)
+    sizes = []
+    for k, (v, f) in enumerate(grains):
+        vol = signed_volume(v, f) if len(f) else 0.0
+        d_eq = float(sphere_diameter(vol)) if vol > 0 else math.nan
+        sizes.append((f"{path}" + (f" (body {k})" if k else ""), v.max(axis=0) - v.min(axis=0), d_eq))
+    return sizes
 
 
 def solid_grain(path: str | Path, *, mm: bool = False) -> tuple[np.ndarray, np.ndarray]:

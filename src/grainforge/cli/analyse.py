@@ -79,20 +79,13 @@ def _json_value(v):
 def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
     """Before any image is made: every body's image means something and the largest fits in memory."""
     from ..analysis.atlas import check_atlas_request
-    from ..analysis.measure import read_bodies
-    from ..geometry.solid import body_nesting, signed_volume
+    from ..analysis.measure import grain_sizes
     from ..runtime.estimate import TooLargeError
     from .progress import progress_bar
 
     bodies = []
     for path in progress_bar(total=len(files), desc="check", unit="file")(files):
-        found = read_bodies(path)
-        enclosing, _ = body_nesting(found)
-        grains = [b for b, e in zip(found, enclosing) if e is None]  # an inner shell is no grain (analyse_file)
-        for k, (v, f) in enumerate(grains):
-            vol = signed_volume(v, f) if len(f) else 0.0
-            d_eq = (6.0 * vol / math.pi) ** (1.0 / 3.0) if vol > 0 else math.nan
-            bodies.append((f"{path}" + (f" (body {k})" if k else ""), v.max(axis=0) - v.min(axis=0), d_eq))
+        bodies += grain_sizes(path)
     try:
         check_atlas_request(bodies, voxel_size=atlas.get("voxel_size"), voxels_across=atlas.get("voxels_across"),
                             workers=workers, unit="mm")

@@ -169,12 +169,12 @@ class Clump:
 
 
 def _equivalent_diameter(vertices, faces) -> float:
-    from ..geometry.solid import signed_volume
+    from ..geometry.moments import signed_volume, sphere_diameter
 
     vol = signed_volume(vertices, faces)
     if not vol > 0:
         raise ValueError(f"the grain's volume must be positive, got {vol!r}")
-    return float((6.0 * vol / np.pi) ** (1.0 / 3.0))
+    return float(sphere_diameter(vol))
 
 
 def union_mask(centres: np.ndarray, radii: np.ndarray, grid) -> np.ndarray:

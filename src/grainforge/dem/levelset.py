@@ -99,11 +99,11 @@ def level_set_grid(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 
     >>> level_set_grid(s.vertices, s.faces, spacing=0.2).shape
     (12, 12, 12)
     """
-    from ..geometry.solid import signed_volume
+    from ..geometry.moments import signed_volume, sphere_diameter
 
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
-    d = (6 * signed_volume(v, f) / np.pi) ** (1 / 3)
+    d = float(sphere_diameter(signed_volume(v, f)))
     grid = grid_for(v, spacing * d, pad=int(pad))
     n_nodes = int(np.prod(grid.shape))
     if n_nodes > MAX_NODES:

@@ -68,7 +68,9 @@ class MassProperties:
     @property
     def equivalent_diameter(self) -> float:
         """Diameter of the sphere of the same volume."""
-        return float((6.0 * self.volume / np.pi) ** (1.0 / 3.0))
+        from ..geometry.moments import sphere_diameter
+
+        return float(sphere_diameter(self.volume))
 
     def quaternion(self) -> np.ndarray:
         """The rotation ``axes`` as a unit quaternion ``(w, x, y, z)`` with w ≥ 0.

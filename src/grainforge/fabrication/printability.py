@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry.moments import equivalent_diameter  # re-exported: it lived here
 from ..geometry.solid import moller_trumbore
 from ..rng import as_generator
 
@@ -393,35 +394,6 @@ def _short_rays(mesh, idx, origins, normals, length, eps, max_pairs: int = MAX_P
             hit = ok & (u >= 0) & (w >= 0) & (u + w <= 1) & (t * length > eps) & (t <= 1)
             np.minimum.at(out, ray_k[hit], t[hit] * length + eps)
     return out
-
-
-def equivalent_diameter(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Diameter of the sphere of the mesh's volume, (6|V|/π)^(1/3) (0 for no faces); cheap, so it comes first.
-
-    Parameters
-    ----------
-    vertices : (V, 3) array_like of float
-        Vertex positions, mm.
-    faces : (F, 3) array_like of int
-        Triangles, counter-clockwise seen from outside.
-
-    Returns
-    -------
-    float
-        mm.
-
-    Examples
-    --------
-    >>> import trimesh
-    >>> b = trimesh.creation.box(extents=(1.0, 1.0, 1.0))
-    >>> round(equivalent_diameter(b.vertices, b.faces), 4)   # (6/π)^(1/3)
-    1.2407
-    """
-    from ..geometry.solid import signed_volume
-
-    f = np.asarray(faces, dtype=np.int64)
-    vol = signed_volume(np.asarray(vertices, dtype=np.float64), f) if len(f) else 0.0
-    return float(np.cbrt(6 * abs(vol) / np.pi))
 
 
 def check_mesh(vertices: np.ndarray, faces: np.ndarray, printer, name: str = "part") -> CheckResult:

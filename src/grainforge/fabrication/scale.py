@@ -19,10 +19,10 @@ SIZE_DEFINITIONS = {
 
 def _current_size(grain, definition: str) -> float:
     from ..analysis.descriptors import principal_dimensions
-    from ..geometry.solid import signed_volume
+    from ..geometry.moments import signed_volume, sphere_diameter
 
     if definition == "equivalent":
-        return float(np.cbrt(6.0 * signed_volume(grain.vertices, grain.faces) / np.pi))
+        return float(sphere_diameter(signed_volume(grain.vertices, grain.faces)))
     L, I, _ = principal_dimensions(grain)
     return I if definition == "sieve" else L
 

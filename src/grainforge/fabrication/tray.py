@@ -42,6 +42,7 @@ from typing import Any
 
 import numpy as np
 
+from ..geometry.moments import sphere_diameter
 from ..rng import RNGLike, as_generator
 
 __all__ = [
@@ -900,7 +901,7 @@ def _csv_row(p: Prepared, plate: int, position: tuple[float, float, float], reso
         "index": p.index, "name": p.name, "source": p.source, "plate": plate + 1,
         "x": x, "y": y, "z": z,
         "size_x": float(p.extents[0]), "size_y": float(p.extents[1]), "size_z": float(p.extents[2]),
-        "volume": p.volume, "equivalent_diameter": float(np.cbrt(6 * p.volume / np.pi)),
+        "volume": p.volume, "equivalent_diameter": float(sphere_diameter(p.volume)),
         "faces": p.faces, "subdivisions": p.subdivisions,
         "chordal_deviation": None if resolution is None else resolution.deviation,
         "resolution_limited_by": None if resolution is None else resolution.limited_by,

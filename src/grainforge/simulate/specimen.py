@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import math
 import os
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -19,17 +18,19 @@ def _sphere_mesh(d: float):
     import trimesh
 
     m = trimesh.creation.icosphere(subdivisions=4, radius=0.5)
-    scale = d / (6.0 * m.volume / math.pi) ** (1.0 / 3.0)
+    from ..geometry.moments import sphere_diameter
+
+    scale = d / sphere_diameter(m.volume)
     return np.asarray(m.vertices) * scale, np.asarray(m.faces, dtype=np.int64)
 
 
 def _template(args):
     from ..dem.template import prepare
-    from ..geometry.solid import signed_volume
+    from ..geometry.moments import signed_volume, sphere_diameter
 
     vertices, faces, name, settings, source, k, as_spheres, shape, spacing, clump_accuracy = args
     if as_spheres:
-        d = (6.0 * signed_volume(vertices, faces) / math.pi) ** (1.0 / 3.0)
+        d = float(sphere_diameter(signed_volume(vertices, faces)))
         vertices, faces = _sphere_mesh(d)
         t = prepare(vertices, faces, name=name, unit=1e-3, density=settings.density, spheres=1, source=source,
                     rng=k)
@@ -46,9 +47,9 @@ def _template(args):
 
 
 def _scaled_to(vertices, faces, size):
-    from ..geometry.solid import signed_volume
+    from ..geometry.moments import signed_volume, sphere_diameter
 
-    d = (6.0 * signed_volume(vertices, faces) / math.pi) ** (1.0 / 3.0)
+    d = float(sphere_diameter(signed_volume(vertices, faces)))
     return vertices * (size / d)
 
 
