@@ -21,6 +21,7 @@ import numpy as np
 __all__ = [
     "N_RAYS", "FD_ORDERS", "PLANES", "descriptors_from_radii",
     "principal_axes", "silhouette_radii", "projection_descriptors", "fd_columns",
+    "MICROGRAPH_COLUMNS", "MICROGRAPH_MM_COLUMNS", "RAY_BYTES", "RAY_MEMORY", "check_rays", "micrograph_rows",
 ]
 
 #: rays cast from the centroid (docs/design/algorithms.md §2b)
@@ -405,3 +406,99 @@ def projection_descriptors(
             out[f"fd_{name}_{n}"] = float(d)
     out["fd_star_shaped"] = 1.0 if star else 0.0
     return out
+
+
+#: columns of a micrograph's rows (:func:`micrograph_rows`): positions and sizes state their unit, pixels (x to
+#: the right from the left edge, y = −row: up); the descriptors are dimensionless
+MICROGRAPH_COLUMNS = ["image", "grain", "x_px", "y_px", "area_px2", "r0_px", "star_shaped", "elongation",
+                      "irregularity", "roughness"] + [f"D{n}" for n in FD_ORDERS]
+#: the columns in millimetres that a pixel size adds (placed after ``image`` and ``grain``)
+MICROGRAPH_MM_COLUMNS = ["x_mm", "y_mm", "area_mm2", "r0_mm"]
+#: memory one ray costs while a grain's radii are cast (bytes; 1e8 rays held 5.9 GB)
+RAY_BYTES = 64
+#: largest memory the rays of one grain may take
+RAY_MEMORY = 2 * 1024**3
+
+
+def check_rays(rays: int) -> None:
+    """Refuse a number of rays per grain whose radii would not fit in memory (estimated first).
+
+    Parameters
+    ----------
+    rays : int
+        Rays cast from each grain's area centroid (:func:`micrograph_rows`).
+
+    Raises
+    ------
+    ValueError
+        Above :data:`RAY_MEMORY` at :data:`RAY_BYTES` per ray; the message names the most rays that fit.
+
+    Examples
+    --------
+    >>> check_rays(128)
+    >>> check_rays(10**8)
+    Traceback (most recent call last):
+    ...
+    ValueError: 100000000 rays need about 6.0 GiB per grain (limit 2 GiB); use at most 33554432 (the descriptors need only 34)
+    """
+    need = rays * RAY_BYTES
+    if need > RAY_MEMORY:
+        raise ValueError(
+            f"{rays} rays need about {need / 1024**3:.1f} GiB per grain (limit {RAY_MEMORY / 1024**3:.0f} GiB); "
+            f"use at most {RAY_MEMORY // RAY_BYTES} (the descriptors need only {2 * FD_ORDERS[-1] + 2})")
+
+
+def micrograph_rows(path: str, *, min_area: int, threshold: float | None, foreground: str, rays: int,
+                    pixel_size: float | None = None):
+    """Fourier descriptors D2..D16 of every grain of one micrograph, as rows, and the scan summary.
+
+    Positions and sizes are in pixels (``x_px``, ``area_px2``, ...) and, with
+    ``pixel_size`` (µm per pixel), also in millimetres (``x_mm``, ``area_mm2``, ...);
+    elongation, irregularity and roughness are D2, D3 and D8 (:data:`MICROGRAPH_COLUMNS`).
+
+    Parameters
+    ----------
+    path : str
+        The image file.
+    min_area : int
+        Specks smaller than this many pixels are skipped.
+    threshold : float or None
+        Grey level separating grains and background; None: Otsu's.
+    foreground : {"auto", "dark", "bright"}
+        Which side of the threshold the grains are.
+    rays : int
+        Rays cast from each grain's area centroid.
+    pixel_size : float, optional
+        Micrometres per pixel: adds the :data:`MICROGRAPH_MM_COLUMNS`.
+
+    Returns
+    -------
+    rows : list of dict
+        One per grain measured, keyed by the column names.
+    scan : grainforge.outline.contours.GrainScan
+        The image's scan (grains skipped at the border, too small, or not measurable).
+
+    Raises
+    ------
+    ValueError
+        An image that cannot be read, or bad settings (:func:`grainforge.outline.contours.scan_image`).
+    """
+    from ..outline.contours import scan_image
+
+    n_max = FD_ORDERS[-1]
+    scan = scan_image(path, min_area=min_area, threshold=threshold, foreground=foreground, n_angles=rays)
+    rows = []
+    for i, (c, area) in enumerate(zip(scan.contours, scan.areas)):
+        D = c.descriptors(n_max)
+        row = {
+            "image": path, "grain": i, "x_px": round(float(c.centroid[0]), 3), "y_px": round(float(-c.centroid[1]), 3),
+            "area_px2": area, "r0_px": round(c.scale, 4), "star_shaped": c.star_shaped,
+            "elongation": float(D[2]), "irregularity": float(D[3]), "roughness": float(D[8]),
+        }
+        row.update({f"D{n}": float(D[n]) for n in FD_ORDERS})
+        if pixel_size is not None:
+            mm = pixel_size / 1000.0
+            row.update({"x_mm": row["x_px"] * mm, "y_mm": row["y_px"] * mm, "area_mm2": area * mm * mm,
+                        "r0_mm": c.scale * mm})
+        rows.append(row)
+    return rows, scan

@@ -7,42 +7,9 @@ import click
 from .options import FINITE_FLOAT, FiniteFloatRange, overwrite_option
 from .paths import OutPath, output_file
 
-#: descriptors printed per grain (D2..D16)
+#: descriptors printed per grain (D2..D16: grainforge.analysis.fourier.FD_ORDERS; a number here, so that
+#: --help loads no numpy)
 N_MAX = 16
-
-
-def descriptor_rows(path: str, *, min_area: int, threshold, foreground: str, rays: int,
-                    pixel_size: float | None = None):
-    """Rows (dicts) for every grain of one image, and the scan summary.
-
-    Positions and sizes are in pixels (``x_px``, ``area_px2``, ...) and, with
-    ``pixel_size`` (µm per pixel), also in millimetres (``x_mm``, ``area_mm2``, ...).
-    """
-    from ..outline.contours import scan_image
-
-    scan = scan_image(path, min_area=min_area, threshold=threshold, foreground=foreground, n_angles=rays)
-    rows = []
-    for i, (c, area) in enumerate(zip(scan.contours, scan.areas)):
-        D = c.descriptors(N_MAX)
-        row = {
-            "image": path, "grain": i, "x_px": round(float(c.centroid[0]), 3), "y_px": round(float(-c.centroid[1]), 3),
-            "area_px2": area, "r0_px": round(c.scale, 4), "star_shaped": c.star_shaped,
-            "elongation": float(D[2]), "irregularity": float(D[3]), "roughness": float(D[8]),
-        }
-        row.update({f"D{n}": float(D[n]) for n in range(2, N_MAX + 1)})
-        if pixel_size is not None:
-            mm = pixel_size / 1000.0
-            row.update({"x_mm": row["x_px"] * mm, "y_mm": row["y_px"] * mm, "area_mm2": area * mm * mm,
-                        "r0_mm": c.scale * mm})
-        rows.append(row)
-    return rows, scan
-
-
-#: positions and sizes state their unit: pixels (x to the right from the left edge, y = −row: up) and,
-#: with --pixel-size, millimetres (PHYSICAL); descriptors are dimensionless.
-COLUMNS = ["image", "grain", "x_px", "y_px", "area_px2", "r0_px", "star_shaped", "elongation", "irregularity",
-           "roughness"] + [f"D{n}" for n in range(2, N_MAX + 1)]
-PHYSICAL = ["x_mm", "y_mm", "area_mm2", "r0_mm"]
 
 
 @click.command()
@@ -71,6 +38,7 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
     """
     import math
 
+    from ..analysis.fourier import MICROGRAPH_COLUMNS, MICROGRAPH_MM_COLUMNS, check_rays, micrograph_rows
     from ..io import atomic_write, csv_text
 
     if threshold is not None and not math.isfinite(threshold):
@@ -79,14 +47,17 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
         raise click.BadParameter(f"must be a finite number of µm per pixel, got {pixel_size}", param_hint="'--pixel-size'")
     if csv_path is not None:
         output_file(csv_path, overwrite=overwrite, option="--csv", suffixes=(".csv",))
-    _check_rays(rays)
+    try:
+        check_rays(rays)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="'--rays'") from None
     all_rows = []
     border = small = bad = 0
     failed: list[str] = []
     for path in images:
         try:
-            rows, scan = descriptor_rows(path, min_area=min_area, threshold=threshold,
-                                         foreground=foreground, rays=rays, pixel_size=pixel_size)
+            rows, scan = micrograph_rows(path, min_area=min_area, threshold=threshold,
+                                          foreground=foreground, rays=rays, pixel_size=pixel_size)
         except ValueError as exc:
             message = " ".join(str(exc).split())
             failed.append(path)
@@ -108,7 +79,8 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
             f"no grain measured in {len(images)} image(s) (skipped {border} touching the border, "
             f"{small} below {min_area} px" + (f", {len(failed)} image(s) unreadable or empty" if failed else "") + ")"
         )
-    text = csv_text(all_rows, COLUMNS[:2] + (PHYSICAL if pixel_size is not None else []) + COLUMNS[2:])
+    mm = MICROGRAPH_MM_COLUMNS if pixel_size is not None else []
+    text = csv_text(all_rows, MICROGRAPH_COLUMNS[:2] + mm + MICROGRAPH_COLUMNS[2:])
     if csv_path is not None:
         atomic_write(csv_path, text)
     else:
@@ -122,18 +94,3 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
         click.echo(f"skipped {len(failed)} of {len(images)} image(s): {', '.join(failed)}", err=True)
         raise SystemExit(1)
 
-
-#: memory one ray costs while a grain's radii are cast (bytes; 1e8 rays held 5.9 GB)
-RAY_BYTES = 64
-#: largest memory the rays of one grain may take
-RAY_MEMORY = 2 * 1024**3
-
-
-def _check_rays(rays: int) -> None:
-    """Refuse --rays that would not fit in memory (estimate first)."""
-    need = rays * RAY_BYTES
-    if need > RAY_MEMORY:
-        raise click.BadParameter(
-            f"{rays} rays need about {need / 1024**3:.1f} GiB per grain (limit {RAY_MEMORY / 1024**3:.0f} GiB); "
-            f"use at most {RAY_MEMORY // RAY_BYTES} (the descriptors need only {2 * N_MAX + 2})",
-            param_hint="'--rays'")

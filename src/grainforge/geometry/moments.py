@@ -199,8 +199,8 @@ def second_moments(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.n
 def sphere_diameter(volume):
     """Diameter of the sphere of volume ``volume``: d = (6V/π)^(1/3).
 
-    The one place grainforge turns a volume into an equivalent diameter (a cube root, exact for
-    perfect cubes, rather than a power of 1/3).
+    The one place grainforge turns a volume into an equivalent diameter (``np.cbrt``, not a power
+    of the rounded 1/3).
 
     Parameters
     ----------
@@ -216,8 +216,10 @@ def sphere_diameter(volume):
     --------
     >>> float(sphere_diameter(np.pi / 6.0))
     1.0
-    >>> float(sphere_diameter(36.0 * np.pi))   # a ball of radius 3
+    >>> round(float(sphere_diameter(36.0 * np.pi)), 12)   # a ball of radius 3
     6.0
+    >>> sphere_diameter(np.array([np.pi / 6.0, 0.0])).tolist()
+    [1.0, 0.0]
     """
     return np.cbrt(6.0 * volume / np.pi)
 
