@@ -49,7 +49,8 @@ import numpy as np
 
 from .atlas import OPENING_RADIUS, SIGMA, opening_fraction, voxel_descriptors
 
-__all__ = ["LabelBox", "measure_scan", "scan_seconds", "label_boxes", "measure_labels", "measure_grain", "check_labels", "segment", "grain_mesh",
+__all__ = ["LabelBox", "measure_scan", "scan_seconds", "label_boxes", "measure_labels", "measure_grain", "check_labels", "segment", "segment_volume",
+           "image_problem", "grain_mesh",
            "compare_labels", "MIN_VOXELS", "MAX_LABEL", "SLAB_VOXELS", "SEGMENT_BYTES_PER_VOXEL",
            "MARKER_DISTANCE", "MARKER_DEPTH", "typical_diameter", "scan_memory", "MEASURE_BYTES_PER_CELL"]
 
@@ -499,6 +500,115 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
     n = int(labels.max())
     return labels, {"typical_diameter": typical, "min_distance": md, "depth": depth, "markers": int(len(peaks)),
                     "grains": n}
+
+
+def segment_volume(volume, *, marker_distance: float = MARKER_DISTANCE, marker_depth: float = MARKER_DEPTH,
+                   ignore_labels: bool = False, name: str = "the image"):
+    """A binary 3-D image split into labelled grains (:func:`segment`), its memory estimated first.
+
+    An image of several non-zero values (labelled already, or greyscale) is refused unless
+    ``ignore_labels``: its labels would be lost.
+
+    Parameters
+    ----------
+    volume : grainforge.io.volume.Volume
+        The image; non-zero is grain.
+    marker_distance, marker_depth : float
+        As :func:`segment`.
+    ignore_labels : bool
+        Segment an image of several non-zero values as binary, every non-zero voxel grain.
+    name : str
+        The image as messages name it.
+
+    Returns
+    -------
+    labels : grainforge.io.volume.Volume
+        The grains' labels (uint16 when they fit, else int32), named ``name``.
+    info : dict
+        :func:`segment`'s.
+
+    Raises
+    ------
+    ValueError
+        An image without void or without grain, or already labelled (without ``ignore_labels``), one line
+        naming ``name``; :class:`grainforge.runtime.estimate.TooLargeError` if segmenting it would not fit
+        in memory.
+
+    Examples
+    --------
+    >>> from grainforge.io.volume import Volume
+    >>> z, y, x = np.indices((30, 30, 50))
+    >>> two = ((z - 15) ** 2 + (y - 15) ** 2 + (x - 14) ** 2 <= 100) | ((z - 15) ** 2 + (y - 15) ** 2 + (x - 32) ** 2 <= 100)
+    >>> labels, info = segment_volume(Volume.from_array(two.astype(np.uint8)))
+    >>> info["grains"], labels.dtype.name
+    (2, 'uint16')
+    >>> segment_volume(Volume.from_array(two.astype(np.uint8) * (1 + (x > 23))), name="scan.npy")
+    Traceback (most recent call last):
+    ...
+    ValueError: scan.npy: already labelled (2 labels, 1–2): --segment takes a binary image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to segment its non-zero voxels anew (a greyscale image: threshold it first)
+    """
+    from ..io.volume import Volume
+    from ..runtime.estimate import check_memory
+
+    total = int(np.prod(volume.shape, dtype=np.int64))
+    check_memory(total * (SEGMENT_BYTES_PER_VOXEL + volume.dtype.itemsize),
+                 what=f"segmenting a {' x '.join(map(str, volume.shape))} image", option="the image's size "
+                 "(segment sub-volumes)")
+    whole = volume.whole()
+    binary = whole != 0
+    if not binary.any():
+        raise ValueError(f"{name}: no grain: every voxel is 0")
+    if binary.all():
+        raise ValueError(f"{name}: every voxel is grain: no void, so no grains to tell apart")
+    if not ignore_labels:
+        first = whole.flat[int(np.argmax(binary))]
+        if np.any(binary & (whole != first)):
+            values = np.unique(whole[binary])
+            raise ValueError(
+                f"{name}: already labelled ({len(values)} labels, {values[0]}–{values[-1]}): --segment takes a binary "
+                "image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to "
+                "segment its non-zero voxels anew (a greyscale image: threshold it first)")
+    del whole
+    labels, info = segment(binary, marker_distance=marker_distance, marker_depth=marker_depth)
+    del binary
+    if labels.max() < 2**16:
+        labels = labels.astype(np.uint16)
+    return Volume.from_array(labels, name), info
+
+
+def image_problem(boxes: list[LabelBox], total: int, *, segmented: bool, name: str = "the image") -> str | None:
+    """Why an image holds no grains to measure (empty, one label everywhere, one label: a binary image), or None.
+
+    Parameters
+    ----------
+    boxes : list of LabelBox
+        The image's labels (:func:`label_boxes`).
+    total : int
+        The image's voxels.
+    segmented : bool
+        The labels come from :func:`segment_volume` (one label is then one grain).
+    name : str
+        The image as the line names it.
+
+    Returns
+    -------
+    str or None
+        One line, or None for an image with grains to tell apart.
+
+    Examples
+    --------
+    >>> image_problem([LabelBox(1, (0, 0, 0), (2, 2, 2), 8)], 8, segmented=False, name="a.npy")
+    'a.npy: every voxel is label 1: no void, so no grains to tell apart'
+    >>> image_problem([LabelBox(1, (0, 0, 0), (2, 2, 2), 8)], 64, segmented=True) is None
+    True
+    """
+    if not boxes:
+        return f"{name}: no grain: every voxel is 0"
+    if len(boxes) == 1 and boxes[0].voxels == total:
+        return f"{name}: every voxel is label {boxes[0].label}: no void, so no grains to tell apart"
+    if len(boxes) == 1 and not segmented:
+        return f"{name}: one label only ({boxes[0].label}): a binary image? add --segment to split its grains"
+    return None
 
 
 def compare_labels(truth: np.ndarray, found: np.ndarray, *, share: float = 0.5, min_voxels: int = 0) -> dict[str, int]:

@@ -2,8 +2,6 @@
 
 from __future__ import annotations
 
-import csv
-import io
 import math
 import os
 from pathlib import Path
@@ -14,9 +12,6 @@ from .analyse import table_text
 from .options import FiniteFloatRange, overwrite_option, voxel_size_flag, voxel_size_options, workers_option
 from .paths import OutPath, output_dir, output_file
 
-#: columns written after the Sand Atlas's (:data:`grainforge.fit.SAND_HEADER` and the opening fraction)
-EXTRA_COLUMNS = (("voxels", "Voxels (-)"), ("centroid_x", "Centroid X (µm)"), ("centroid_y", "Centroid Y (µm)"),
-                 ("centroid_z", "Centroid Z (µm)"), ("border", "Border (-)"))
 #: the terminal table
 TABLE = (
     ("label", "label", "{}"), ("voxels", "voxels", "{}"), ("flags", "flags", "{}"),
@@ -27,33 +22,6 @@ TABLE = (
 )
 #: mesh file of a grain
 MESH_NAME = "grain-{:06d}.stl"
-
-
-def scan_table_text(rows, voxel_size_um: float) -> str:
-    """The measured grains as a Sand Atlas CSV (:data:`grainforge.fit.SAND_HEADER`, the opening fraction) plus
-    :data:`EXTRA_COLUMNS`; Particle ID is the grain's label.  Values as :func:`grainforge.fit.write_sand` writes
-    them (6 significant digits, lengths in µm)."""
-    from ..fit import DESCRIPTORS, OPENING_COLUMN, SAND_HEADER
-
-    out = io.StringIO()
-    w = csv.writer(out, lineterminator="\r\n")
-    w.writerow([*SAND_HEADER, OPENING_COLUMN, *(h for _, h in EXTRA_COLUMNS)])
-    for r in rows:
-        cells = [r["volume"], r["equivalent_diameter"], *(r[k] for k in DESCRIPTORS), voxel_size_um,
-                 r["opening_fraction"], r["voxels"], r["centroid_x"], r["centroid_y"], r["centroid_z"]]
-        w.writerow([int(r["label"]), *(f"{float(x):.6g}" for x in cells), int(bool(r["border"]))])
-    return out.getvalue()
-
-
-def _refuse_image(boxes, total: int, segmented: bool, path) -> None:
-    """One line for an image without grains to measure: empty, one label everywhere, one label (a binary image)."""
-    if not boxes:
-        raise click.UsageError(f"{path}: no grain: every voxel is 0")
-    if len(boxes) == 1 and boxes[0].voxels == total:
-        raise click.UsageError(f"{path}: every voxel is label {boxes[0].label}: no void, so no grains to tell apart")
-    if len(boxes) == 1 and not segmented:
-        raise click.UsageError(f"{path}: one label only ({boxes[0].label}): a binary image? add --segment to split "
-                               "its grains")
 
 
 @click.command()
@@ -122,11 +90,13 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_
     preload(["scipy.ndimage", "skimage.measure", "skimage.segmentation", "skimage.feature", "skimage.morphology",
              "trimesh"])
     if segment:
-        volume = _segment_image(volume, image, total, marker_distance, marker_depth, ignore_labels)
+        volume = _segment_image(volume, image, marker_distance, marker_depth, ignore_labels)
     Z = volume.shape[0]
     slabs = progress_bar(total=-(-Z // sc._slab_size(volume)), desc="boxes", unit="slab")
     boxes = sc.label_boxes(volume, progress=slabs)
-    _refuse_image(boxes, total, segment, image)
+    problem = sc.image_problem(boxes, total, segmented=segment, name=str(image))
+    if problem:
+        raise click.UsageError(problem)
     todo = [b for b in boxes if b.voxels >= min_voxels and (keep_border or not b.touches(volume.shape))]
     n_small = sum(1 for b in boxes if b.voxels < min_voxels)
     n_border = sum(1 for b in boxes if b.voxels >= min_voxels and b.touches(volume.shape))
@@ -152,7 +122,9 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_
             volume, boxes, voxel_size_um=h_um, min_voxels=min_voxels, border=keep_border, convention=convention,
             workers=n_workers, mesh_folder=stage, mesh_name=MESH_NAME, progress=bar)
         if atlas_csv is not None:
-            outputs.temp(Path(atlas_csv)).write_text(scan_table_text(rows, h_um), encoding="utf-8", newline="")
+            from ..fit.sand import scan_sand_text
+
+            outputs.temp(Path(atlas_csv)).write_text(scan_sand_text(rows, h_um), encoding="utf-8", newline="")
         if labels_out is not None:
             from ..io.volume import write_labels
 
@@ -220,38 +192,15 @@ def _open_image(image, raw_shape, raw_dtype, voxel_size_um):
     return volume, voxel_size_um
 
 
-def _segment_image(volume, image, total, marker_distance, marker_depth, ignore_labels=False):
-    """A binary image split into labelled grains (a distance-transform watershed).  An image of several non-zero
-    values (labelled already, or greyscale) is refused unless ``ignore_labels``: its labels would be lost."""
-    import numpy as np
-
+def _segment_image(volume, image, marker_distance, marker_depth, ignore_labels=False):
+    """A binary image split into labelled grains (:func:`grainforge.analysis.scan.segment_volume`)."""
     from ..analysis import scan as sc
-    from ..io.volume import Volume
-    from ..runtime.estimate import check_memory
 
-    check_memory(total * (sc.SEGMENT_BYTES_PER_VOXEL + volume.dtype.itemsize),
-                 what=f"segmenting a {' x '.join(map(str, volume.shape))} image", option="the image's size "
-                 "(segment sub-volumes)")
-    whole = volume.whole()
-    binary = whole != 0
-    if not binary.any():
-        raise click.UsageError(f"{image}: no grain: every voxel is 0")
-    if binary.all():
-        raise click.UsageError(f"{image}: every voxel is grain: no void, so no grains to tell apart")
-    if not ignore_labels:
-        first = whole.flat[int(np.argmax(binary))]
-        if np.any(binary & (whole != first)):
-            values = np.unique(whole[binary])
-            raise click.UsageError(
-                f"{image}: already labelled ({len(values)} labels, {values[0]}–{values[-1]}): --segment takes a binary "
-                "image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to "
-                "segment its non-zero voxels anew (a greyscale image: threshold it first)")
-    del whole
-    labels, seg_info = sc.segment(binary, marker_distance=marker_distance, marker_depth=marker_depth)
-    del binary
-    if labels.max() < 2**16:
-        labels = labels.astype(np.uint16)
-    volume = Volume.from_array(labels, str(image))
+    try:
+        volume, seg_info = sc.segment_volume(volume, marker_distance=marker_distance, marker_depth=marker_depth,
+                                             ignore_labels=ignore_labels, name=str(image))
+    except ValueError as exc:
+        raise click.UsageError(str(exc)) from None
     click.echo(f"segmented: {seg_info['grains']} grain(s) from {seg_info['markers']} marker(s) (typical "
                f"diameter {seg_info['typical_diameter']:.3g} voxels; markers at least {seg_info['min_distance']} "
                f"voxels apart and {seg_info['depth']:.2g} voxels deep)", err=True)

@@ -76,6 +76,7 @@ from .sand import (
     MIN_GRAINS,
     OPENING_COLUMN,
     SAND_HEADER,
+    SCAN_COLUMNS,
     SPHERICITY_MAX,
     VOXEL_COLUMN,
     VOXELS_ACROSS,
@@ -83,6 +84,7 @@ from .sand import (
     check_sand,
     measured_across,
     read_sand,
+    scan_sand_text,
     uses_opening,
     write_sand,
 )
@@ -100,7 +102,7 @@ from .settings import (
 
 __all__ = [
     "DESCRIPTORS", "COLUMNS", "VOXEL_COLUMN", "OPENING_COLUMN", "SPHERICITY_MAX", "MIN_GRAINS", "VOXELS_ACROSS",
-    "Sand", "read_sand", "SAND_HEADER", "write_sand", "check_sand", "measured_across", "uses_opening",
+    "Sand", "read_sand", "SAND_HEADER", "write_sand", "SCAN_COLUMNS", "scan_sand_text", "check_sand", "measured_across", "uses_opening",
     "OPENING_RADIUS", "MAX_VOXELS_ACROSS", "METHOD_CAP", "Setting", "ASPECT_SETTINGS", "MethodFit", "FITS", "register",
     "RF_DECAY_B1", "resolve_cap", "RESEED_SHARE", "RESEED_MOST", "FIT_GRAIN_SECONDS", "FIT_VOXEL_SECONDS",
     "FIT_ACROSS_REF", "FIT_MAKE_SECONDS", "EXPECTED_MEASUREMENTS", "FIT_VOXEL_BYTES", "FIT_ROW_BYTES", "MAX_MINUTES",

@@ -322,6 +322,49 @@ def write_sand(path: str | os.PathLike, equivalent_diameter: Sequence[float], va
     return atomic_write(path, out.getvalue())
 
 
+#: the columns a scan's table adds after :data:`SAND_HEADER` and :data:`OPENING_COLUMN` (:func:`scan_sand_text`)
+SCAN_COLUMNS = (("voxels", "Voxels (-)"), ("centroid_x", "Centroid X (µm)"), ("centroid_y", "Centroid Y (µm)"),
+                ("centroid_z", "Centroid Z (µm)"), ("border", "Border (-)"))
+
+
+def scan_sand_text(rows: Sequence[Mapping], voxel_size_um: float) -> str:
+    """A μCT scan's measured grains as a Sand Atlas CSV text that :func:`read_sand` reads.
+
+    :data:`SAND_HEADER`, the :data:`OPENING_COLUMN`, then :data:`SCAN_COLUMNS`; Particle ID is the grain's
+    label.  Values as :func:`write_sand` writes them (6 significant digits, lengths in µm).
+
+    Parameters
+    ----------
+    rows : sequence of mapping
+        The measured grains (:func:`grainforge.analysis.scan.measure_scan`'s rows: ``label``, ``volume``,
+        ``equivalent_diameter``, the :data:`DESCRIPTORS`, ``opening_fraction``, ``voxels``, the centroid, µm,
+        and ``border``).
+    voxel_size_um : float
+        The scan's voxel size, µm.
+
+    Returns
+    -------
+    str
+        The CSV text, CRLF line ends.
+
+    Examples
+    --------
+    >>> row = dict(label=7, volume=523.6, equivalent_diameter=10.0, sphericity=0.9, convexity=0.95, flatness=0.8,
+    ...            elongation=0.7, opening_fraction=0.99, voxels=523, centroid_x=1.0, centroid_y=2.0,
+    ...            centroid_z=3.0, border=False)
+    >>> scan_sand_text([row], 1.0).splitlines()[1]
+    '7,523.6,10,0.9,0.95,0.8,0.7,1,0.99,523,1,2,3,0'
+    """
+    out = io.StringIO()
+    w = csv.writer(out, lineterminator="\r\n")
+    w.writerow([*SAND_HEADER, OPENING_COLUMN, *(h for _, h in SCAN_COLUMNS)])
+    for r in rows:
+        cells = [r["volume"], r["equivalent_diameter"], *(r[k] for k in DESCRIPTORS), voxel_size_um,
+                 r["opening_fraction"], r["voxels"], r["centroid_x"], r["centroid_y"], r["centroid_z"]]
+        w.writerow([int(r["label"]), *(f"{float(x):.6g}" for x in cells), int(bool(r["border"]))])
+    return out.getvalue()
+
+
 def check_sand(sand: Sand) -> None:
     """Refuse a sand that cannot be fitted: fewer than :data:`MIN_GRAINS` grains, or a column without spread.
 
