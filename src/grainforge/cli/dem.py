@@ -87,7 +87,7 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     `lmp -in in.run` (docs/dem.md).
     """
     from ..dem import SUPPORTED
-    from ..dem.inputs import build_templates, pour_counts
+    from ..dem.inputs import build_templates, check_level_set_files, pour_counts
     from ..io.inputs import mesh_paths
     from .progress import progress_bar
 
@@ -133,13 +133,13 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     announce = _estimate(files, shape, spheres, refine, spacing, min(workers, files), clump_accuracy is not None)
     # a spacing too fine for a grain: refused before the estimate is said and any work (--templates: once chosen)
     if shape == "levelset" and template_count is None:
-        _check_level_set_budget([p for p, c in zip(paths, counts) if c > 0], unit, spacing)
+        check_level_set_files([p for p, c in zip(paths, counts) if c > 0], unit=unit, spacing=spacing)
     announce()  # (the measuring of --templates, minutes at most, shows its own progress bar)
     if template_count is not None:
         chosen = _choose_templates(inputs, paths, template_count, workers)
         paths = chosen.paths
         if shape == "levelset":
-            _check_level_set_budget([p for p, c in zip(paths, counts) if c > 0], unit, spacing)
+            check_level_set_files([p for p, c in zip(paths, counts) if c > 0], unit=unit, spacing=spacing)
     from ..dem.inputs import GRAIN_SIZE_RANGE, MIN_GRAIN_SIZE
 
     # every grain's size is checked before its representation is built (the costly part)
@@ -154,12 +154,14 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     if clump_accuracy is None and placed and min(placed) < spheres:
         click.echo(f"clumps have {min(placed)}–{max(placed)} spheres (at most {spheres} asked): the placement "
                    "stops when another sphere adds no coverage", err=True)
+    from ..dem.engines import write_deck
+    from ..dem.template_choice import write_chosen_templates
     from .interrupts import signals_held
 
     with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
-        written = _write_deck(engine, templates, out, overwrite, rolling_friction)
+        written = write_deck(engine, templates, out, overwrite=overwrite, rolling_friction=rolling_friction)
         if chosen is not None:
-            written.append(_write_templates_csv(out, chosen, unit))
+            written.append(write_chosen_templates(out, chosen, unit))
     if clump_accuracy is None:
         click.echo(f"wrote {len(written)} files to {out}; run from inside it: {ENGINE_COMMAND[engine]}", err=True)
         return
@@ -172,21 +174,6 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
                f"{ENGINE_COMMAND[engine]}", err=True)
     if warning:  # the deck is written and usable; its clumps fail their own check (docs/cli-contract.md)
         sys.exit(EXIT_CHECK_FAILED)
-
-
-def _write_deck(engine: str, templates, out: Path, overwrite: bool, rolling_friction: float) -> list:
-    """The deck's files written: :func:`grainforge.dem.engines.write_deck`, or with rolling resistance the engine's
-    own writer with the pour's default settings and ``rolling_friction`` (absent at 0: the deck as without it)."""
-    if rolling_friction <= 0:
-        from ..dem.engines import write_deck
-
-        return write_deck(engine, templates, out, overwrite=overwrite)
-    if engine == "yade":
-        from ..dem import yade as engine_deck
-    else:
-        from ..dem import liggghts as engine_deck
-    settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
-    return engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
 
 
 def _templates_plan(inputs, paths, k: int, out: Path, overwrite: bool) -> int:
@@ -213,29 +200,6 @@ def _choose_templates(inputs, paths, k: int, workers: int):
         chosen = choose_files(inputs, paths, k=k, workers=workers, progress=step)
     click.echo(chosen.summary(k) + "; templates.csv", err=True)
     return chosen
-
-
-def _write_templates_csv(out: Path, chosen, unit: float) -> Path:
-    """templates.csv: the chosen grains under their deck names, sizes in mm."""
-    from ..dem.inputs import _unique_names
-    from ..dem.template_choice import TEMPLATES_CSV, write_templates_csv
-
-    table = chosen.table.copy()
-    table[:, -1] *= unit * 1e3
-    return write_templates_csv(out / TEMPLATES_CSV, names=_unique_names(chosen.paths),
-                               sources=[str(p) for p in chosen.paths], table=table, choice=chosen.choice)
-
-
-def _check_level_set_budget(paths, unit: float, spacing: float) -> None:
-    from ..dem.inputs import read_grain
-    from ..dem.template import check_level_set_budget
-
-    for p in paths:
-        v, f = read_grain(p, check=False)
-        try:
-            check_level_set_budget(v, f, unit=unit, spacing=spacing)
-        except ValueError as exc:
-            raise ValueError(f"{p}: {exc}") from None
 
 
 def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int,

@@ -8,7 +8,8 @@ from pathlib import Path
 __all__ = ["write_deck"]
 
 
-def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: bool = False) -> list[Path]:
+def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: bool = False,
+               rolling_friction: float = 0.0) -> list[Path]:
     """Write the ``engine`` deck (``"yade"``, ``"liggghts"``, ``"lammps"``) of ``templates`` into ``out``.
 
     LAMMPS: templates that are all ``"polyhedron"`` take the body deck (:mod:`grainforge.dem.lammps_body`),
@@ -25,6 +26,9 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
         The deck's folder (created if missing).
     overwrite : bool
         Replace existing files (otherwise an existing file is refused before anything is written).
+    rolling_friction : float
+        Rolling resistance μ_r of the contacts, written with the engine's pour settings (Yade and LIGGGHTS
+        clumps); 0 (the default) writes no rolling resistance: the deck as without it.
 
     Returns
     -------
@@ -34,7 +38,8 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
     Raises
     ------
     ValueError
-        For an unknown engine or a template shape the engine does not support.
+        For an unknown engine, a template shape the engine does not support, or rolling resistance where
+        it is not written (LAMMPS, shapes other than clumps).
     FileExistsError
         If a file of the deck exists and ``overwrite`` is false.
     """
@@ -45,6 +50,15 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
     for t in templates:
         if t.shape not in SUPPORTED[engine]:
             raise ValueError(f"{engine} does not support shape {t.shape!r}")
+    if rolling_friction > 0:
+        if engine == "lammps" or any(t.shape != "clump" for t in templates):
+            raise ValueError("rolling resistance is written for clumps in Yade and LIGGGHTS decks only")
+        if engine == "yade":
+            from . import yade as engine_deck
+        else:
+            from . import liggghts as engine_deck
+        settings = {**engine_deck.pour_settings(), "rolling_friction": rolling_friction}
+        return engine_deck.write_deck(templates, out, overwrite=overwrite, settings=settings)
     if engine == "yade":
         from .yade import write_deck as w
     elif engine == "liggghts":

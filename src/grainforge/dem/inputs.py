@@ -17,6 +17,7 @@ __all__ = [
     "read_grain",
     "load_template",
     "build_templates",
+    "check_level_set_files",
     "enclosure_problems",
     "pour_counts",
     "MAX_POUR_GRAINS",
@@ -251,3 +252,30 @@ def build_templates(paths: Sequence[Path], *, workers: int = 1,
     # would first run every queued grain to its end)
     return list(wrap(ordered_map(_load_one, tasks, workers=workers, preload=["grainforge.dem.template",
                                                                       "grainforge.dem.clump"])))
+
+
+def check_level_set_files(paths: Iterable[str | Path], *, unit: float, spacing: float) -> None:
+    """Refuse, before any work, a grain file whose level set at ``spacing`` would exceed the node budget.
+
+    Parameters
+    ----------
+    paths : iterable of path
+        The grain files.
+    unit : float
+        Metres per file unit.
+    spacing : float
+        The grid spacing, as a fraction of the equivalent diameter.
+
+    Raises
+    ------
+    ValueError
+        :func:`grainforge.dem.template.check_level_set_budget`'s line, after the file's name.
+    """
+    from .template import check_level_set_budget
+
+    for p in paths:
+        v, f = read_grain(p, check=False)
+        try:
+            check_level_set_budget(v, f, unit=unit, spacing=spacing)
+        except ValueError as exc:
+            raise ValueError(f"{p}: {exc}") from None

@@ -25,7 +25,7 @@ from .representative import DESCRIPTORS, TemplateChoice, choose_representative, 
 
 __all__ = ["POOL_FACTOR", "POOL_MIN", "POOL_MAX", "MAX_CANDIDATES", "MEASURE_SECONDS", "TEMPLATES_CSV",
            "CHOICE_SEED", "pool_size", "pool_workers", "spread", "mesh_descriptors", "manifest_descriptors", "ChosenFiles",
-           "files_to_measure", "choose_files", "write_templates_csv"]
+           "files_to_measure", "choose_files", "write_templates_csv", "write_chosen_templates"]
 
 #: a pool of candidates to measure (grains to generate, files without manifest values): POOL_FACTOR × K grains,
 #: at least POOL_MIN, at most POOL_MAX (or K when K is larger: then every pooled grain is taken)
@@ -405,3 +405,28 @@ def write_templates_csv(path: str | os.PathLike, *, names: Sequence[str], source
                  else f"all {choice.candidates} candidates taken")
         w.writerow(["KS", label, *(f"{choice.ks[d]:.4f}" for d in DESCRIPTORS)])
     return path
+
+
+def write_chosen_templates(folder: str | os.PathLike, chosen: ChosenFiles, unit: float) -> Path:
+    """``templates.csv`` (:data:`TEMPLATES_CSV`) in a deck's folder: the chosen grains under their deck names.
+
+    Parameters
+    ----------
+    folder : str or path
+        The deck's folder.
+    chosen : ChosenFiles
+        The grains chosen (:func:`choose_files`), their sizes in file units.
+    unit : float
+        Metres per file unit; the sizes are written in mm.
+
+    Returns
+    -------
+    Path
+        The file written (:func:`write_templates_csv`).
+    """
+    from .inputs import _unique_names
+
+    table = chosen.table.copy()
+    table[:, -1] *= unit * 1e3
+    return write_templates_csv(Path(folder) / TEMPLATES_CSV, names=_unique_names(chosen.paths),
+                               sources=[str(p) for p in chosen.paths], table=table, choice=chosen.choice)
