@@ -145,10 +145,10 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
     grain with the options of `grainforge scan` (docs/guide/scan.md).
     """
     import contextlib
-    import os
 
     from ..analysis.measure import ANALYSE_COLUMNS
     from ..io import write_csv
+    from ..runtime.workers import default_workers
 
     if scheduler is not None and workers is not None:
         raise click.UsageError("--workers is for the local processes; the Dask cluster (--scheduler) has its own")
@@ -183,7 +183,7 @@ def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_siz
             executor = stack.enter_context(dask_executor(scheduler))  # refused in one line before any work
             n = executor.workers
         else:
-            n = min(len(files), workers or os.cpu_count() or 1)
+            n = min(len(files), default_workers(workers))
         if atlas is not None:  # the memory a worker needs: each Dask worker has its own
             _check_atlas(files, atlas, 1 if executor else n,
                          voxel_size_flag("--voxel-size-mm") if voxel_size is not None else "--voxels-across")

@@ -71,14 +71,13 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
 
 def _estimate(primitive: str, primaries: int, count: int, workers) -> None:
     """Refuse a calibration beyond a day before any work (option: --repeats, or --primaries)."""
-    import os
-
     from ..methods.dpa import Params
     from ..runtime.estimate import TooLargeError
+    from ..runtime.workers import default_workers
     from .generate import announce_estimate
 
     try:
         announce_estimate("dpa", Params(primitive=primitive, primaries=primaries), count,
-                          workers=workers or os.cpu_count() or 1, count_option="--repeats (or the --exponents grid)")
+                          workers=default_workers(workers), count_option="--repeats (or the --exponents grid)")
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 
@@ -89,6 +88,7 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     from ..dem import SUPPORTED
     from ..dem.inputs import build_templates, check_level_set_files, pour_counts
     from ..io.inputs import mesh_paths
+    from ..runtime.workers import default_workers
     from .progress import progress_bar
 
     ctx = click.get_current_context()
@@ -128,7 +128,7 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
         counts = [count] * n_templates
     else:
         counts = pour_counts(n_templates, grains, rng=0 if seed is None else seed).tolist()
-    workers = workers or os.cpu_count() or 1
+    workers = default_workers(workers)
     files = sum(c > 0 for c in counts)
     announce = _estimate(files, shape, spheres, refine, spacing, min(workers, files), clump_accuracy is not None)
     # a spacing too fine for a grain: refused before the estimate is said and any work (--templates: once chosen)

@@ -154,15 +154,14 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
 
 def _run_fit(s, out, executor, kw: dict, max_minutes: float):
     """Check the fit's size, announce it and run it (on ``executor``, a Dask cluster, if given); its result."""
-    import os
-
     from ..fit import METHOD_CAP, check_fit_size, fit_sand
     from ..runtime.cluster import SchedulerLost
     from ..runtime.estimate import TooLargeError, duration
+    from ..runtime.workers import default_workers
     from .interrupts import ready_for_work
 
     cores = executor.workers if executor is not None else None
-    kw["workers"] = kw["workers"] or os.cpu_count() or 1
+    kw["workers"] = default_workers(kw["workers"])
     kw["max_across"] = METHOD_CAP if kw["max_across"] is None else kw["max_across"] or None
     try:
         seconds = check_fit_size(s, kw["method"], count=kw["count"], design_grains=kw["design_grains"],
@@ -174,7 +173,7 @@ def _run_fit(s, out, executor, kw: dict, max_minutes: float):
         raise click.UsageError(str(exc)) from None
     ready_for_work(HEAVY_MODULES, 0.0)
     where = (f"the Dask cluster's {cores} worker thread(s)" if executor is not None
-             else f"{min(kw['workers'], os.cpu_count() or 1)} core(s)")
+             else f"{min(kw['workers'], default_workers())} core(s)")
     click.echo(f"estimated time: about {duration(seconds)} on {where} (a rough model; each phase's progress bar "
                "shows the measured rate)", err=True)
     state = {"desc": "fit"}

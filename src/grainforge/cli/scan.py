@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 import click
@@ -80,6 +79,7 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_
     from ..analysis import scan as sc
     from ..io.outputs import OutputSet
     from ..runtime.estimate import TooLargeError, check_memory
+    from ..runtime.workers import default_workers
     from .interrupts import preload, say_estimate
     from .progress import progress_bar
 
@@ -100,7 +100,7 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_
     todo = [b for b in boxes if b.voxels >= min_voxels and (keep_border or not b.touches(volume.shape))]
     n_small = sum(1 for b in boxes if b.voxels < min_voxels)
     n_border = sum(1 for b in boxes if b.voxels >= min_voxels and b.touches(volume.shape))
-    n_workers = max(1, min(workers or os.cpu_count() or 1, len(todo)))
+    n_workers = max(1, min(default_workers(workers), len(todo)))
     if not todo:
         raise click.UsageError(f"{image}: no grain to measure among {len(boxes)} label(s): {n_border} touch the "
                                f"image's faces (--keep-border measures them), {n_small} are under --min-voxels "

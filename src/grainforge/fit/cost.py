@@ -196,7 +196,9 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
                                 opening=any(uses_opening(sand, caps[m]) for m in methods))
     option = "--count" + (" or fit one --method" if method == "auto" else "")
     if cores is None:
-        cores = max(1, min(int(workers), os.cpu_count() or 1))
+        from ..runtime.workers import default_workers
+
+        cores = max(1, min(int(workers), default_workers()))
     else:
         cores, workers = max(1, int(cores)), 1
     check_job(most, each, what=f"fit --method {method}, measuring up to {most} grains,", option=option, workers=cores)

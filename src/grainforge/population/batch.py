@@ -274,13 +274,14 @@ def run_batch(
         The Dask scheduler lost mid-run: the grains recorded so far stay, with
         their journal, for ``resume``.
     """
+    from ..runtime.workers import default_workers
     from .generate import MANIFEST
 
     if workers is not None and workers < 1:
         raise ValueError(f"workers must be >= 1, got {workers}")
     out = Path(out)
     journal = out / JOURNAL
-    n_workers = 1 if scheduler else min(workers or os.cpu_count() or 1, recipe.count)
+    n_workers = 1 if scheduler else min(default_workers(workers), recipe.count)
     check_recipe_size(recipe, n_workers)  # before anything: a job beyond a day is refused
     check_extremes(recipe)  # every distribution's range can make a grain (pilot grains, nothing written)
     if not resume and journal.is_dir() and not any(journal.glob("grain-*.json")) \
@@ -343,8 +344,9 @@ def _run_batch(recipe, out, names, *, workers, scheduler, resume, overwrite, pro
     if scheduler:
         results = _dask_results(recipe, todo, scheduler)
     else:
-        n = workers or os.cpu_count() or 1
-        n = min(n, max(len(todo), 1))
+        from ..runtime.workers import default_workers
+
+        n = min(default_workers(workers), max(len(todo), 1))
         results = _local_results(recipe, todo, n, n == 1 if in_process is None else in_process)
     stream = results
     if progress is not None:

@@ -53,7 +53,7 @@ from .children import (
     watch_parent,
 )
 
-__all__ = ["process_pool", "ordered_map", "close_pool", "RemoteTraceback"]
+__all__ = ["default_workers", "process_pool", "ordered_map", "close_pool", "RemoteTraceback"]
 
 class RemoteTraceback(Exception):
     """The traceback of an exception raised in a pool worker, set as that exception's ``__cause__`` (as
@@ -385,6 +385,31 @@ class WorkerPool(Executor):
             if not future.done():
                 future.set_exception(error)
         stop_processes(procs)
+
+
+def default_workers(workers: int | None = None) -> int:
+    """The number of worker processes: ``workers`` when given, else one per CPU of this machine.
+
+    The one default of every ``--workers`` option and ``workers=`` argument.
+
+    Parameters
+    ----------
+    workers : int, optional
+        The workers asked for; None (or 0) asks for the default.
+
+    Returns
+    -------
+    int
+        ``workers``, or ``os.cpu_count()`` (1 when the CPU count is unknown).
+
+    Examples
+    --------
+    >>> default_workers(3)
+    3
+    >>> default_workers() == (os.cpu_count() or 1)
+    True
+    """
+    return workers or os.cpu_count() or 1
 
 
 def process_pool(workers: int, preload: Sequence[str] = ()):

@@ -627,7 +627,9 @@ def engine_command(mpi: int | None = None) -> tuple[list[str], dict]:
     if mpi is None:
         return [exe, "-in", "in.run", "-log", "none"], {}
     env = {"OMPI_MCA_mpi_yield_when_idle": "1"}
-    if mpi > (os.cpu_count() or 1):
+    from ..runtime.workers import default_workers
+
+    if mpi > default_workers():  # more ranks than CPUs
         env["OMPI_MCA_rmaps_base_oversubscribe"] = "1"
     if hasattr(os, "geteuid") and os.geteuid() == 0:
         env.update(OMPI_ALLOW_RUN_AS_ROOT="1", OMPI_ALLOW_RUN_AS_ROOT_CONFIRM="1")

@@ -257,7 +257,9 @@ def mpi_slots(environ: dict | None = None) -> tuple[int, str]:
     import re
 
     env = os.environ if environ is None else environ
-    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    from ..runtime.workers import default_workers
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else default_workers()
     best = (cores, f"{cores} core(s) here")
     for name in ALLOCATION_VARIABLES:
         value = env.get(name, "").strip()

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import os
 from dataclasses import dataclass
 
 from ..params import param, validate
@@ -364,6 +363,7 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     True
     """
     from ..runtime.estimate import SECONDS_LIMIT, TooLargeError, _limit, check_memory, dem_template_seconds, duration
+    from ..runtime.workers import default_workers
 
     templates = min(settings.templates, available)
     spheres = 1 if as_spheres else settings.spheres
@@ -381,7 +381,7 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
     if test != "triaxial":
         per_run *= ENGINE_FACTOR[engine]
-    at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
+    at_once = max(1, min(int(workers), settings.seeds, default_workers()))
     total = make + per_run * settings.seeds / at_once
     grain = f"{spheres} sphere(s)" if shape == "clump" else f"level sets of spacing {spacing:g}"
     raise_spacing = "" if shape == "clump" else ", or raise --spacing"

@@ -411,7 +411,9 @@ def calibrate(
     children = root.spawn(len(exps) * repeats)
     tasks = [(primitive, int(primaries), float(exps[k // repeats]), children[k]) for k in range(len(children))]
     if workers is None:
-        workers = os.cpu_count() or 1
+        from ...runtime.workers import default_workers
+
+        workers = default_workers()
     if workers < 1:
         raise ParameterError("workers", f"must be >= 1, got {workers!r}")
     if workers == 1 or len(tasks) == 1:
