@@ -38,7 +38,7 @@ def main():
     print(f"mesh: {len(v)} vertices, {len(f)} faces; load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
     D.describe(g)  # warm-up (imports, caches)
 
-    mp = D.mass_properties(v, f)
+    mp = D.mesh_moments(v, f)
     hull = D._hull(v)
     centre, axes = fourier.principal_axes(v, f, mp)
     u, r = fractal.radial_function(v, mp["centroid"])
@@ -49,7 +49,7 @@ def main():
 
     stages = [
         ("closed check", lambda: D.is_closed(f, len(v))),
-        ("volume, area, centroid, second moments", lambda: D.mass_properties(v, f)),
+        ("volume, area, centroid, second moments", lambda: D.mesh_moments(v, f)),
         ("convex hull (scipy)", lambda: D._hull(v)),
         ("basic columns incl. minimum-volume box (analysis.box)", lambda: D._basic(v, mp, hull)),
         ("principal axes", lambda: fourier.principal_axes(v, f, mp)),

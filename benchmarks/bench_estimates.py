@@ -2,7 +2,7 @@
 
 ``grainforge fit`` refuses a search estimated beyond a day with a per-grain
 cost of ``FIT_GRAIN_SECONDS + FIT_MAKE_SECONDS[method] + FIT_VOXEL_SECONDS·(voxels across / 69)³``
-(:func:`grainforge.fit.grain_seconds`, :func:`grainforge.fit.check_fit_size`); ``grainforge simulate`` counts
+(:func:`grainforge.fit.measured_grain_seconds`, :func:`grainforge.fit.check_fit_size`); ``grainforge simulate`` counts
 ``TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS·spheres`` per clump template
 (:func:`grainforge.simulate.check_size`; its Yade part comes from the runs
 of docs/simulate.md and ``benchmarks/bench_simulate.py``).  This prints, per
@@ -49,7 +49,7 @@ def main() -> None:
             atlas_descriptors(g, voxels_across=across, rotation=np.random.default_rng(k))
 
         best, med = cpu_seconds(one, args.repeat)
-        model = fit.grain_seconds("rf", across)
+        model = fit.measured_grain_seconds("rf", across)
         print(f"{across:>14} {best:8.3f} {med:8.3f} {model:8.3f}")
 
     print("\nfit: making one grain of each fitted method at its fit resolution, CPU s")

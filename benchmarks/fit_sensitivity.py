@@ -19,7 +19,7 @@ import sys
 
 import numpy as np
 
-from grainforge.fit import DESCRIPTORS, measure_grain, read_sand, recipe_text
+from grainforge.fit import DESCRIPTORS, measure_made_grain, read_sand, recipe_text
 
 
 def main(n: int = 30, eps: float = 1e-5) -> None:
@@ -57,8 +57,8 @@ def main(n: int = 30, eps: float = 1e-5) -> None:
     print(f"grain | {' | '.join(DESCRIPTORS)} (recipe, then elongation mean + {eps:g})")
     for i in range(n):
         choices.clear()
-        a = np.array(measure_grain(t0, i, voxel_size_um=7.3)[1:5])
-        b = np.array(measure_grain(t1, i, voxel_size_um=7.3)[1:5])
+        a = np.array(measure_made_grain(t0, i, voxel_size_um=7.3)[1:5])
+        b = np.array(measure_made_grain(t1, i, voxel_size_um=7.3)[1:5])
         (ca, lo_a, second_a), (cb, _, _) = choices[0], choices[-1]
         flipped += ca != cb
         if np.abs(a - b).max() > 1e-3 or ca != cb:

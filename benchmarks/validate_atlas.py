@@ -65,7 +65,7 @@ def mesh_vs_voxel_table():
         ("CRI D=(0,0.09,0.006) 1:0.76:0.58", "cri", dict(descriptors=(0, 0.09, 0.006), aspect=(1, 0.76, 0.58))),
         ("FSO default", "fso", dict()),
     ]
-    from grainforge.analysis.mass import mass_properties
+    from grainforge.analysis.mass import mesh_moments
 
     print("| grain | d_eq voxel/mesh | sphericity voxel (mesh Wadell) | convexity voxel (mesh) "
           "| flatness voxel (mesh inertia ellipsoid) | elongation voxel (mesh inertia ellipsoid) |")
@@ -76,7 +76,7 @@ def mesh_vs_voxel_table():
             g = grainforge.generate(method, get(method).Params(**kw), seed)
             d = atlas_descriptors(g, voxels_across=69, rotation=seed)
             m = describe(g, fractal=False, fourier=False)
-            lam = np.sort(np.linalg.eigvalsh(mass_properties(g.vertices, g.faces)["covariance"]))[::-1]
+            lam = np.sort(np.linalg.eigvalsh(mesh_moments(g.vertices, g.faces)["covariance"]))[::-1]
             ax = 2 * np.sqrt(5 * lam)  # the mesh's own inertia-equivalent ellipsoid
             acc.append((d["equivalent_diameter"] / m["equivalent_diameter"], d["sphericity"], m["sphericity"],
                         d["convexity"], m["convexity"], d["flatness"], ax[2] / ax[1], d["elongation"],

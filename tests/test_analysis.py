@@ -21,7 +21,7 @@ from grainforge.analysis.descriptors import (
     basic_descriptors,
     describe,
     is_closed,
-    mass_properties,
+    mesh_moments,
     principal_dimensions,
 )
 from grainforge.analysis.fourier import (
@@ -283,7 +283,7 @@ def test_is_closed_and_mass_properties():
     assert not is_closed(b.faces[:, ::-1][[0, 1]], 8)
     flipped = np.vstack([b.faces[:6], b.faces[6:, ::-1]])  # inconsistent orientation
     assert not is_closed(flipped, 8)
-    assert mass_properties(b.vertices, b.faces[:, ::-1])["volume"] == pytest.approx(-1.0)
+    assert mesh_moments(b.vertices, b.faces[:, ::-1])["volume"] == pytest.approx(-1.0)
 
 
 def test_split_bodies_and_flags(tmp_path):

@@ -124,21 +124,21 @@ ALLOWED: dict[tuple[str, str], str] = {
         "Yade scene seeds its own random.Random; LIGGGHTS's primes) and naming its folder; every stream of the run "
         "is derived from it by the deck writers, so a deck is remade from the number its results record"
     ),
-    ("seed", "grainforge.simulate.liggghts_scenes:deck_files"): (
+    ("seed", "grainforge.simulate.liggghts_scenes:run_deck_files"): (
         "seed is the run's seed number written into the LIGGGHTS deck: its fix insert/particletemplate seeds "
         "(primes of the seed table) and the layout's stream (SeedSequence([seed, 28]) through grainforge.rng) are "
         "derived from it, so a deck is remade from the number its results record"
     ),
     ("seed", "grainforge.simulate.liggghts_scenes:write_test_deck"): (
-        "seed is the run's seed number written into the LIGGGHTS deck, as liggghts_scenes.deck_files"
+        "seed is the run's seed number written into the LIGGGHTS deck, as liggghts_scenes.run_deck_files"
     ),
-    ("seed", "grainforge.simulate.liggghts_triaxial:deck_files"): (
+    ("seed", "grainforge.simulate.liggghts_triaxial:triaxial_deck_files"): (
         "seed is the triaxial run's seed number written into the LIGGGHTS deck: LIGGGHTS's own seeds (primes of the "
         "seed table) and the lattice's stream (SeedSequence([seed, 28]) through grainforge.rng) are derived from "
         "it, so a deck is remade from the number its results record"
     ),
     ("seed", "grainforge.simulate.liggghts_triaxial:write_deck"): (
-        "seed is the triaxial run's seed number written into the LIGGGHTS deck, as liggghts_triaxial.deck_files"
+        "seed is the triaxial run's seed number written into the LIGGGHTS deck, as liggghts_triaxial.triaxial_deck_files"
     ),
 }
 

@@ -70,7 +70,7 @@ def test_analyse_and_fit_name_the_convention(tmp_path):
     from click.testing import CliRunner
 
     from grainforge.cli.main import cli
-    from grainforge.fit import measure_grain
+    from grainforge.fit import measure_made_grain
 
     runner = CliRunner()
     res = runner.invoke(cli, ["generate", "cri", "--seed", "3", "--size", "2", "--out", str(tmp_path / "g")])
@@ -84,6 +84,6 @@ def test_analyse_and_fit_name_the_convention(tmp_path):
         sph[convention] = json.loads(res.stdout)[0]["atlas_sphericity"]
     assert sph["atlas"] - sph["whole"] > 0.003, sph  # this grain is one spam clips
     text = 'method = "cri"\ncount = 1\nseed = 3\n[size]\nmm = 0.35\n'
-    a = measure_grain(text, 0, voxel_size_um=7.3)
-    w = measure_grain(text, 0, voxel_size_um=7.3, convention="whole")
+    a = measure_made_grain(text, 0, voxel_size_um=7.3)
+    w = measure_made_grain(text, 0, voxel_size_um=7.3, convention="whole")
     assert a[2:5] == w[2:5]  # convexity, flatness, elongation do not depend on it

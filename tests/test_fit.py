@@ -272,14 +272,14 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     """A tiny design and population: grain i of the recipe, made as batch makes it, measures exactly as the fit
     measured it; fit.png is drawn; the design is cached."""
     import grainforge.fit as fitmod
-    from grainforge.fit import fit_sand, measure_grain, write_outputs
+    from grainforge.fit import fit_sand, measure_made_grain, write_outputs
 
     sand = read_sand(RF_SAND)
     kw = dict(refine=1, design_grains=128, max_across=TEST_ACROSS, cache=design_cache)
     result = fit_sand(sand, "rf", count=50, **kw)
     assert len(result.generated) == 50
     for i in (0, 7):
-        again = measure_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
+        again = measure_made_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
         assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     assert np.allclose(result.targets, sand.table()[result.sand_rows])
     paths = write_outputs(sand, result, tmp_path / "out")
@@ -288,7 +288,7 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     reseeded = [i for i, s in enumerate(result.seeds) if s != fitmod.grain_seed(2024, i)]
     assert reseeded and "\nseed = [" in result.recipe
     i = reseeded[0]
-    again = measure_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
+    again = measure_made_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
     # the counts below on 20 twins (the design is the same 128 grains, from the cache)
     again = fit_sand(sand, "rf", count=20, **{**kw, "refine": 0, "reseed": 0})
@@ -448,7 +448,7 @@ def test_each_method_is_measured_at_its_own_resolution_cap(tmp_path):
         check_fit_size(sand, "fso", max_minutes=15, **kw)
     extra = (fit_grains("fso", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0]
              - fit_grains("rf", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0])
-    each = fitmod.grain_seconds("fso", measured_across(sand, 150.0))
+    each = fitmod.measured_grain_seconds("fso", measured_across(sand, 150.0))
     rf_grains = fit_grains("rf", count=500, design_grains=400, refine=4, reseed=fitmod.RESEED)[0]
     making = fitmod.FIT_MAKE_SECONDS["fso"] - fitmod.FIT_MAKE_SECONDS["rf"]  # every grain pays fso's making
     assert extra == 600

@@ -1,12 +1,13 @@
-"""The one mass-integral implementation (grainforge.geometry.solid.second_moments) against trimesh and analytic solids."""
+"""The one mass-integral implementation (grainforge.geometry.moments.second_moments) and the one equivalent
+diameter (grainforge.geometry.moments.sphere_diameter) against trimesh and analytic solids."""
 
 import numpy as np
 import pytest
 import trimesh
 
-from grainforge.analysis.mass import mass_properties as analysis_mass
+from grainforge.analysis.mass import mesh_moments as analysis_mass
 from grainforge.dem.massprops import mass_properties as dem_mass
-from grainforge.geometry.solid import second_moments
+from grainforge.geometry.moments import second_moments, sphere_diameter
 
 TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
 TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
@@ -51,3 +52,34 @@ def test_both_callers_match_trimesh(seed):
     # the two views of one integral: inertia = tr(C) 1 − C with C = V · covariance
     C = a["covariance"] * a["volume"]
     assert np.allclose(d.inertia, np.trace(C) * np.eye(3) - C, rtol=1e-12, atol=1e-14)
+
+
+@pytest.mark.parametrize("r", [0.5, 1.0, 3.0, 1e-3, 2.5e4])
+def test_sphere_diameter_of_analytic_balls(r):
+    """d = (6V/π)^(1/3) of a ball's volume 4πr³/3 is its diameter 2r, to rounding."""
+    assert float(sphere_diameter(4.0 / 3.0 * np.pi * r**3)) == pytest.approx(2 * r, rel=4e-16)
+    assert np.allclose(sphere_diameter(np.array([np.pi / 6, 36 * np.pi])), [1.0, 6.0], rtol=4e-16, atol=0)
+
+
+def test_every_equivalent_diameter_is_the_one_function():
+    """The mesh's d_eq as the printer check, the descriptors, the DEM templates, the clumps and the level-set
+    grid see it: the same bits, all from sphere_diameter (a grain far from a ball, so that no rounding hides)."""
+    from grainforge.analysis.descriptors import basic_descriptors
+    from grainforge.dem.clump import _equivalent_diameter as clump_d
+    from grainforge.fabrication.printability import equivalent_diameter
+    from grainforge.fabrication.scale import to_size
+    from grainforge.geometry.moments import signed_volume
+    from grainforge.grain import Grain
+
+    g = trimesh.creation.box((1.0, 2.0, 3.1))  # (6V/π)**(1/3) and np.cbrt(6V/π) differ in the last bit here
+    v, f = np.asarray(g.vertices, float), np.asarray(g.faces, np.int64)
+    d = float(sphere_diameter(signed_volume(v, f)))
+    assert d == pytest.approx((6 * 6.2 / np.pi) ** (1 / 3), rel=1e-14)
+    assert equivalent_diameter(v, f) == d
+    assert equivalent_diameter(v, f[:, ::-1]) == d  # |V|: an inward mesh has the same size
+    assert basic_descriptors(g)["equivalent_diameter"] == d
+    assert dem_mass(v, f).equivalent_diameter == d
+    assert clump_d(v, f) == d
+    grain = Grain(v, f, method="box", params=None, seed=0)
+    sized = to_size(grain, 2.0)
+    assert float(sphere_diameter(signed_volume(sized.vertices, sized.faces))) == pytest.approx(2.0, rel=1e-14)

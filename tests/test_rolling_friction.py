@@ -50,10 +50,10 @@ def _rolling_coefficients(text: str) -> list[float]:
 
 @pytest.mark.parametrize("test", ["repose", "tilt"])
 def test_liggghts_scene_decks_carry_the_rolling_resistance_only_when_set(templates, test):
-    plain = lg.deck_files(templates, test, Settings(**QUICK), 0)
-    assert lg.deck_files(templates, test, Settings(**QUICK, rolling_friction=0.0), 0) == plain
+    plain = lg.run_deck_files(templates, test, Settings(**QUICK), 0)
+    assert lg.run_deck_files(templates, test, Settings(**QUICK, rolling_friction=0.0), 0) == plain
     assert "rolling" not in plain["in.run"].lower()
-    run = lg.deck_files(templates, test, Settings(**QUICK, rolling_friction=MU_R), 0)["in.run"]
+    run = lg.run_deck_files(templates, test, Settings(**QUICK, rolling_friction=MU_R), 0)["in.run"]
     models = [row for row in run.splitlines() if row.startswith("pair_style") or "wall/gran" in row]
     assert models and all("rolling_friction epsd2" in row for row in models)
     c = _rolling_coefficients(run)  # types grain, base, wall: LIGGGHTS's c R* is μ_r min(r1, r2)
@@ -65,9 +65,9 @@ def test_liggghts_scene_decks_carry_the_rolling_resistance_only_when_set(templat
 
 
 def test_liggghts_triaxial_deck_rolls_between_grains_not_on_its_frictionless_walls(templates):
-    plain = lt.deck_files(templates, TriaxialSettings(**QUICK_TRIAXIAL), 0)
+    plain = lt.triaxial_deck_files(templates, TriaxialSettings(**QUICK_TRIAXIAL), 0)
     assert "rolling" not in plain["in.run"].lower()
-    run = lt.deck_files(templates, TriaxialSettings(**QUICK_TRIAXIAL, rolling_friction=MU_R), 0)["in.run"]
+    run = lt.triaxial_deck_files(templates, TriaxialSettings(**QUICK_TRIAXIAL, rolling_friction=MU_R), 0)["in.run"]
     assert "pair_style gran model hooke/stiffness tangential history rolling_friction epsd2" in run
     c = _rolling_coefficients(run)
     assert c[0] == pytest.approx(2 * MU_R) and c[2] == 0.0 and c[6] == 0.0

@@ -53,7 +53,7 @@ def yade_record_keys(scene: str) -> set:
 @pytest.mark.parametrize("test", ["repose", "tilt"])
 def test_deck_is_the_same_for_the_same_seed_and_differs_between_seeds(templates, test):
     s = Settings(**QUICK)
-    a, b, c = (lg.deck_files(templates, test, s, seed) for seed in (0, 0, 1))
+    a, b, c = (lg.run_deck_files(templates, test, s, seed) for seed in (0, 0, 1))
     assert a == b
     assert a["in.insert"] != c["in.insert"] and a["in.base"] != c["in.base"]
     # every grain inserted once, each insertion its own prime seed
@@ -65,14 +65,14 @@ def test_clump_types_of_the_drawn_templates_are_consecutive(grains):
     """LIGGGHTS stops unless the multisphere types are 1, 2, ... with no gap: templates not drawn are left out."""
     s = Settings(**{**QUICK, "grains": 3, "templates": 3})
     templates = build_population([grains], s)
-    files = lg.deck_files(templates, "tilt", s, 0)
+    files = lg.run_deck_files(templates, "tilt", s, 0)
     types = [int(t) for t in re.findall(r" type (\d+) mass", files["in.templates"])]
     assert types == list(range(1, len(types) + 1))
     used = {int(t) for t in re.findall(r"distributiontemplate pdd(\d+)", files["in.insert"])}
     assert used == set(types)
     s2 = Settings(**{**QUICK, "grains": 2, "templates": 3})
     for seed in range(6):  # two grains drawn from three templates: some seed leaves one out
-        files = lg.deck_files(templates, "tilt", s2, seed)
+        files = lg.run_deck_files(templates, "tilt", s2, seed)
         types = [int(t) for t in re.findall(r" type (\d+) mass", files["in.templates"])]
         assert types == list(range(1, len(types) + 1))
 
@@ -80,7 +80,7 @@ def test_clump_types_of_the_drawn_templates_are_consecutive(grains):
 @pytest.mark.parametrize("test", ["repose", "tilt"])
 def test_deck_uses_the_yade_contact_settings(templates, test):
     s = Settings(**QUICK, friction=0.7, young=2e6, poisson=0.25)
-    files = lg.deck_files(templates, test, s, 0)
+    files = lg.run_deck_files(templates, test, s, 0)
     run = files["in.run"]
     assert "pair_style gran model hooke/stiffness tangential history" in run
     kn = [float(x) for x in re.search(r"fix kn all property/global kn peratomtypepair 3 (.*)", run)[1].split()]
@@ -99,7 +99,7 @@ def test_deck_uses_the_yade_contact_settings(templates, test):
 
 def test_a_sphere_is_a_multisphere_with_an_inner_sphere_that_never_touches(grains):
     s = Settings(**QUICK)
-    files = lg.deck_files(build_population([grains], s, as_spheres=True), "tilt", s, 0)
+    files = lg.run_deck_files(build_population([grains], s, as_spheres=True), "tilt", s, 0)
     xyzr = [text for name, text in files.items() if name.endswith(".xyzr")]
     assert xyzr
     for text in xyzr:

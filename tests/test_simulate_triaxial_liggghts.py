@@ -50,7 +50,7 @@ def _numbers(line: str) -> list[float]:
 
 
 def test_the_deck_is_the_same_for_a_seed_and_differs_between_seeds(templates):
-    a, b, c = (lt.deck_files(templates, QUICK, seed) for seed in (0, 0, 1))
+    a, b, c = (lt.triaxial_deck_files(templates, QUICK, seed) for seed in (0, 0, 1))
     assert a == b
     assert a["in.insert"] != c["in.insert"]
     seeds = [int(m) for m in re.findall(r"insert/pack seed (\d+)", a["in.insert"])]
@@ -62,7 +62,7 @@ def test_grain_k_takes_row_k_of_the_scenes_orientations(templates):
     from test_orientations import assert_uniform, liggghts_quaternions, matrices
 
     settings = TriaxialSettings(**{**QUICK_TRIAXIAL_LIGGGHTS, "grains": 300})
-    files = lt.deck_files(templates, settings, 5)
+    files = lt.triaxial_deck_files(templates, settings, 5)
     q = liggghts_quaternions(files["in.insert"])
     yade = triaxial_scene_settings(settings, 5)["orientations"]
     assert np.allclose(q, yade, rtol=0, atol=1e-14)
@@ -75,7 +75,7 @@ def _plate(text: str) -> np.ndarray:
 
 
 def test_six_plates_close_the_box_and_stay_inside_the_domain(templates):
-    files = lt.deck_files(templates, QUICK, 0)
+    files = lt.triaxial_deck_files(templates, QUICK, 0)
     run = files["in.run"]
     lo, hi = (float(x) for x in re.search(r"region domain block (\S+) (\S+)", run).groups())
     rec = json.loads(files["grains.json"])["result"]
@@ -105,7 +105,7 @@ def test_six_plates_close_the_box_and_stay_inside_the_domain(templates):
 def test_the_deck_uses_the_contact_settings(templates, packing):
     s = TriaxialSettings(**{**QUICK_TRIAXIAL_LIGGGHTS, "packing": packing, "friction": 0.7, "young": 2e8,
                             "poisson": 0.25})
-    files = lt.deck_files(templates, s, 0)
+    files = lt.triaxial_deck_files(templates, s, 0)
     run = files["in.run"]
     kn = _numbers(re.search(r"fix kn all property/global kn peratomtypepair 3 (.*)", run)[1])
     kt = _numbers(re.search(r"fix kt all property/global kt peratomtypepair 3 (.*)", run)[1])

@@ -162,12 +162,12 @@ def test_size_outside_physical_range_is_refused(size, tmp_path, runner):
     assert not (tmp_path / "o").exists() or not any((tmp_path / "o").iterdir())
 
 
-def test_check_size_range():
-    from grainforge.fabrication.scale import check_size
+def test_check_target_size_range():
+    from grainforge.fabrication.scale import check_target_size
 
-    assert check_size(1e-3) == 1e-3 and check_size(1e4) == 1e4
+    assert check_target_size(1e-3) == 1e-3 and check_target_size(1e4) == 1e4
     with pytest.raises(ParameterError):
-        check_size(1e-300)
+        check_target_size(1e-300)
 
 
 def test_check_does_not_crash_on_zero_area_faces(tmp_path, runner):

@@ -16,11 +16,11 @@ import numpy as np
 
 from ..geometry.moments import sphere_diameter
 from ..geometry.solid import is_closed
-from .mass import mass_properties
+from .mass import mesh_moments
 
 __all__ = [
     "basic_descriptors", "principal_dimensions", "describe", "BASIC_COLUMNS", "DESCRIPTOR_COLUMNS",
-    "mass_properties", "is_closed",
+    "mesh_moments", "is_closed",
 ]
 
 #: the measured columns every manifest carries, in order.
@@ -109,7 +109,7 @@ def basic_descriptors(obj) -> dict[str, float]:
     (0.806, 1.0)
     """
     v, f = _arrays(obj)
-    return _basic(v, mass_properties(v, f), _hull(v))
+    return _basic(v, mesh_moments(v, f), _hull(v))
 
 
 def _basic(v: np.ndarray, mp: dict, hull) -> dict[str, float]:
@@ -176,7 +176,7 @@ def describe(
         raise ValueError("the mesh holds no triangles")
     if closed is None:
         closed = is_closed(f, len(v))
-    mp = mass_properties(v, f)
+    mp = mesh_moments(v, f)
     hull = _hull(v)
     out: dict[str, float] = _basic(v, mp, hull)
     L, I, S = out["L"], out["I"], out["S"]

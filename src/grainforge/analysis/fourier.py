@@ -102,7 +102,7 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
     For a closed mesh with positive volume the axes are those of the solid's
     second moments; otherwise of the area-weighted surface.
 
-    ``mass`` may pass precomputed :func:`~grainforge.analysis.mass.mass_properties`.
+    ``mass`` may pass precomputed :func:`~grainforge.analysis.mass.mesh_moments`.
 
     Parameters
     ----------
@@ -111,7 +111,7 @@ def principal_axes(vertices: np.ndarray, faces: np.ndarray, mass=None) -> tuple[
     faces : (F, 3) array_like of int
         Triangles, counter-clockwise seen from outside.
     mass : dict, optional
-        :func:`~grainforge.analysis.mass.mass_properties` of the mesh, if computed already.
+        :func:`~grainforge.analysis.mass.mesh_moments` of the mesh, if computed already.
 
     Returns
     -------

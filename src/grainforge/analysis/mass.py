@@ -1,4 +1,4 @@
-"""Mass properties of closed triangle meshes: volume, area, centroid, second moments.
+"""Volume, area, centroid and second moments of closed triangle meshes (:func:`mesh_moments`).
 
 Used by :mod:`grainforge.analysis.descriptors` and :mod:`grainforge.analysis.fourier`;
 a module of its own so that ``fourier`` does not import ``descriptors`` (which imports ``fourier``).
@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["mass_properties", "principal_moments"]
+__all__ = ["mesh_moments", "principal_moments"]
 
 
-def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> dict:
+def mesh_moments(vertices: np.ndarray, faces: np.ndarray) -> dict:
     """Volume, area, centroid and second central moments of a closed triangle mesh.
 
     The integrals are :func:`grainforge.geometry.solid.second_moments` (the one
@@ -58,7 +58,7 @@ def principal_moments(v: np.ndarray, f: np.ndarray, mp: dict | None = None) -> t
     f : (F, 3) ndarray of int
         Faces.
     mp : dict, optional
-        :func:`mass_properties` of the mesh, if computed already.
+        :func:`mesh_moments` of the mesh, if computed already.
 
     Returns
     -------
@@ -68,7 +68,7 @@ def principal_moments(v: np.ndarray, f: np.ndarray, mp: dict | None = None) -> t
         Per unit volume (or area), in the square of the vertices' unit.
     """
     if mp is None:
-        mp = mass_properties(v, f)
+        mp = mesh_moments(v, f)
     if mp["volume"] > 0 and np.all(np.linalg.eigvalsh(mp["covariance"]) > 0):
         return mp["centroid"], mp["covariance"]
     fa = mp["face_areas"]

@@ -7,7 +7,7 @@ import numpy as np
 from ..params import ParameterError
 from ..units import MESH_SIZE_RANGE_MM, SIZE_RANGE_MM
 
-__all__ = ["SIZE_DEFINITIONS", "MESH_SIZE_RANGE_MM", "SIZE_RANGE_MM", "check_size", "scale_factor", "to_size"]
+__all__ = ["SIZE_DEFINITIONS", "MESH_SIZE_RANGE_MM", "SIZE_RANGE_MM", "check_target_size", "scale_factor", "to_size"]
 
 #: definition -> description
 SIZE_DEFINITIONS = {
@@ -32,7 +32,7 @@ def _current_size(grain, definition: str) -> float:
 MIN_SIZE_MM, MAX_SIZE_MM = SIZE_RANGE_MM
 
 
-def check_size(size: float, definition: str = "equivalent") -> float:
+def check_target_size(size: float, definition: str = "equivalent") -> float:
     """Validate a size in mm and its definition; return the size as a float.
 
     Parameters
@@ -88,7 +88,7 @@ def scale_factor(grain, size: float, definition: str = "equivalent") -> float:
     ValueError
         For a non-positive size or an unknown definition.
     """
-    return check_size(size, definition) / _current_size(grain, definition)
+    return check_target_size(size, definition) / _current_size(grain, definition)
 
 
 def to_size(grain, size: float, definition: str = "equivalent"):
@@ -111,7 +111,7 @@ def to_size(grain, size: float, definition: str = "equivalent"):
     Raises
     ------
     ValueError
-        As :func:`check_size`.
+        As :func:`check_target_size`.
 
     Examples
     --------

@@ -35,7 +35,7 @@ from .cost import (
     RESEED_SHARE,
     check_fit_size,
     fit_grains,
-    grain_seconds,
+    measured_grain_seconds,
 )
 from .designs import (
     DESIGN_ACROSS_LOW,
@@ -48,7 +48,7 @@ from .designs import (
     design_path,
     setting_identifiability,
 )
-from .made_grains import MeasurePool, measure_grain, measure_settings
+from .made_grains import MeasurePool, measure_made_grain, measure_settings
 from .mean_settings import (
     DETERMINED_MIN,
     OPENING_ROUNDS,
@@ -106,8 +106,8 @@ __all__ = [
     "OPENING_RADIUS", "MAX_VOXELS_ACROSS", "METHOD_CAP", "Setting", "ASPECT_SETTINGS", "MethodFit", "FITS", "register",
     "RF_DECAY_B1", "resolve_cap", "RESEED_SHARE", "RESEED_MOST", "FIT_GRAIN_SECONDS", "FIT_VOXEL_SECONDS",
     "FIT_ACROSS_REF", "FIT_MAKE_SECONDS", "EXPECTED_MEASUREMENTS", "FIT_VOXEL_BYTES", "FIT_ROW_BYTES", "MAX_MINUTES",
-    "fit_grains", "check_fit_size", "grain_seconds", "GRADING_PERCENTS", "grading", "recipe_text", "twin_recipe_text",
-    "grain_seed", "reseed_seed", "measure_grain", "measure_settings", "MeasurePool", "DESIGN_GRAINS",
+    "fit_grains", "check_fit_size", "measured_grain_seconds", "GRADING_PERCENTS", "grading", "recipe_text", "twin_recipe_text",
+    "grain_seed", "reseed_seed", "measure_made_grain", "measure_settings", "MeasurePool", "DESIGN_GRAINS",
     "DESIGN_ACROSS_LOW", "DESIGN_SEED", "DESIGN_VERSION", "design_path", "Design", "design", "IDENTIFIABLE_R2",
     "setting_identifiability", "OPENING_ROUNDS", "OPENING_TRUST", "OPENING_SECANT_MIN", "POPULATION_GRAINS",
     "POPULATION_ROUNDS", "POPULATION_SLOPES", "SLOPE_CHOICES", "SLOPES_MEASURED_FROM", "SLOPE_GRAINS", "SLOPE_STEP",

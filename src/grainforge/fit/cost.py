@@ -1,7 +1,7 @@
 """What a fit costs, estimated before any work: the grains it measures, its time and its memory.
 
 :func:`fit_grains` counts the grains a fit measures (expected, and at most),
-:func:`grain_seconds` prices one, and :func:`check_fit_size` refuses a fit
+:func:`measured_grain_seconds` prices one, and :func:`check_fit_size` refuses a fit
 estimated over ``--max-minutes``, a day or the machine's memory, in one line
 naming what to change (docs/fit.md).
 """
@@ -185,7 +185,7 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     caps = {m: resolve_cap(m, max_across) for m in methods}
     highs = {m: _design_high(sand, caps[m]) for m in methods}
     acrosses = {m: measured_across(sand, caps[m]) for m in methods}
-    costs = {m: grain_seconds(m, acrosses[m]) for m in methods}
+    costs = {m: measured_grain_seconds(m, acrosses[m]) for m in methods}
     dear = max(methods, key=lambda m: costs[m])
     across, each, design_high, max_across = acrosses[dear], costs[dear], highs[dear], caps[dear]
     fresh = [m for m in methods
@@ -222,7 +222,7 @@ def check_fit_size(sand: Sand, method: str, *, count: int, design_grains: int = 
     return seconds
 
 
-def grain_seconds(method: str, across) -> float:
+def measured_grain_seconds(method: str, across) -> float:
     """The estimate's CPU seconds for one grain of ``method`` measured at ``across`` voxels across (the mean over
     an array): :data:`FIT_GRAIN_SECONDS` + the method's :data:`FIT_MAKE_SECONDS` + :data:`FIT_VOXEL_SECONDS` ×
     (across / :data:`FIT_ACROSS_REF`)³. A method without a measured making time is costed at the dearest's.
@@ -241,7 +241,7 @@ def grain_seconds(method: str, across) -> float:
 
     Examples
     --------
-    >>> round(grain_seconds("rf", 69.0), 3), round(grain_seconds("fso", 69.0), 3)
+    >>> round(measured_grain_seconds("rf", 69.0), 3), round(measured_grain_seconds("fso", 69.0), 3)
     (0.15, 0.294)
     """
     return FIT_GRAIN_SECONDS + _make_seconds(method) + FIT_VOXEL_SECONDS * float(np.mean(

@@ -1,6 +1,6 @@
 """Grains made and measured the Sand Atlas way: one by one, on a worker pool or on a Dask cluster.
 
-:func:`measure_grain` measures grain ``index`` of a recipe exactly as
+:func:`measure_made_grain` measures grain ``index`` of a recipe exactly as
 ``batch`` makes it; :func:`measure_settings` one grain of given parameters
 and ``rng`` (the grain's seed); :class:`MeasurePool` runs many such jobs, each
 result in its job's place, and counts the grains and CPU seconds they took.
@@ -28,7 +28,7 @@ def _recipe(text: str):
     return parse_recipe(text, source="<fit>")
 
 
-def measure_grain(text: str, index: int, *, voxel_size_um: float, convention: str = "atlas",
+def measure_made_grain(text: str, index: int, *, voxel_size_um: float, convention: str = "atlas",
                   max_across: float | None = None) -> tuple[float, ...]:
     """Grain ``index`` of recipe ``text`` as ``batch`` makes it, measured the Atlas way.
 
@@ -65,7 +65,7 @@ def measure_grain(text: str, index: int, *, voxel_size_um: float, convention: st
     Examples
     --------
     >>> text = 'method = "rf"\\ncount = 2\\nseed = 1\\n[params]\\nsubdivisions = 3\\n[size]\\nmm = 0.12\\n'
-    >>> d = measure_grain(text, 1, voxel_size_um=10.0)
+    >>> d = measure_made_grain(text, 1, voxel_size_um=10.0)
     >>> round(d[0], 6), len(d), bool(0.5 < d[1] < 1.1)
     (120.0, 6, True)
     """

@@ -142,7 +142,7 @@ def second_moments(vertices: np.ndarray, faces: np.ndarray) -> tuple[float, np.n
     """Volume, volume centroid and second central moment of a closed triangle mesh, exactly.
 
     The one implementation of the solid's mass integrals: :func:`grainforge.dem.massprops.mass_properties`
-    (inertia tensor) and :func:`grainforge.analysis.mass.mass_properties` (covariance) both call it.
+    (inertia tensor) and :func:`grainforge.analysis.mass.mesh_moments` (covariance) both call it.
     Each face ``(a, b, c)`` and the vertex mean span a signed tetrahedron of volume
     ``det[a, b, c] / 6``; its second moment is ``det/120 · (a aᵀ + b bᵀ + c cᵀ + (a+b+c)(a+b+c)ᵀ)``.
     Summing and shifting to the centroid gives ``C = ∫ (x − x̄)(x − x̄)ᵀ dV``.

@@ -42,8 +42,8 @@ def yade_executable() -> str:
 def write_test_deck(templates: Sequence, test: str, *, settings: Settings, seed: int, out: str | os.PathLike,
                     overwrite: bool = False, engine: str = "yade") -> list[Path]:
     """Write the deck of one run of ``test`` into ``out`` (Yade: ``yade -n -x run.py`` from inside it;
-    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts_scenes.deck_files`, a triaxial test's
-    :func:`grainforge.simulate.liggghts_triaxial.deck_files`).
+    ``engine="liggghts"``: :func:`grainforge.simulate.liggghts_scenes.run_deck_files`, a triaxial test's
+    :func:`grainforge.simulate.liggghts_triaxial.triaxial_deck_files`).
 
     In Yade, the templates' shape (clumps, or level sets: :mod:`grainforge.simulate.levelset_scenes`) picks the scene;
     ``settings`` of a triaxial test are :class:`~grainforge.simulate.TriaxialSettings`.

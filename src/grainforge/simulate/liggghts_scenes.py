@@ -4,7 +4,7 @@ The scenes are the Yade ones of :mod:`grainforge.simulate.yade_scenes`, laid out
 here in Python (grainforge draws the population, the lattice, the jitter and
 the rough base for the seed) and written as a LIGGGHTS input deck (``in.run``:
 the template ``grainforge/dem/texts/liggghts-<test>.in`` with the numbers
-computed and formatted here, :func:`deck_files`):
+computed and formatted here, :func:`run_deck_files`):
 
 - every grain is a ``particletemplate/multisphere`` with the mesh's exact mass
   and inertia tensor (:func:`grainforge.dem.liggghts.template_fix`, as
@@ -12,7 +12,7 @@ computed and formatted here, :func:`deck_files`):
   lattice node in a random orientation (LIGGGHTS's random numbers, seeded by
   primes drawn for the seed);
 - the rough base is a grid of fixed spheres (``fix freeze``), the repose
-  cylinder a granular cylinder wall removed at once (not lifted: see :func:`deck_files`), the tilt
+  cylinder a granular cylinder wall removed at once (not lifted: see :func:`run_deck_files`), the tilt
   layer periodic in x and y with gravity turned step by step;
 - contacts are linear springs with Coulomb friction (``hooke/stiffness`` with
   tangential history) with the Yade scenes' k_n, k_s/k_n and μ, and a viscous
@@ -47,7 +47,7 @@ from ..rng import as_generator
 from .settings import Settings, scene_settings
 
 __all__ = ["liggghts_executable", "mpirun_executable", "contact_table", "contact_model", "rolling_table",
-           "rolling_fix", "deck_files", "write_test_deck",
+           "rolling_fix", "run_deck_files", "write_test_deck",
            "engine_command", "run_liggghts", "MAX_CUTS"]
 
 #: atom types of the scenes: grain spheres, fixed base spheres, walls (plane and cylinder)
@@ -505,7 +505,7 @@ def _run_text(test: str, seed: int, plan: SimpleNamespace, settings: Settings) -
         **own})
 
 
-def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) -> dict:
+def run_deck_files(templates: Sequence, test: str, settings: Settings, seed: int) -> dict:
     """``{relative path: text}`` of the LIGGGHTS deck of one run of ``test`` (nothing written).
 
     Run from inside the folder with ``liggghts -in in.run`` or ``mpirun -np P liggghts -in in.run``.
@@ -568,7 +568,7 @@ def deck_files(templates: Sequence, test: str, settings: Settings, seed: int) ->
 
 def write_test_deck(templates: Sequence, test: str, *, settings: Settings, seed: int, out: str | os.PathLike,
                     overwrite: bool = False) -> list[Path]:
-    """Write the LIGGGHTS deck of one run of ``test`` into ``out`` (see :func:`deck_files`).
+    """Write the LIGGGHTS deck of one run of ``test`` into ``out`` (see :func:`run_deck_files`).
 
     Parameters
     ----------
@@ -579,7 +579,7 @@ def write_test_deck(templates: Sequence, test: str, *, settings: Settings, seed:
     settings : Settings
         The run's settings.
     seed : int
-        The run's seed number (:func:`deck_files`).
+        The run's seed number (:func:`run_deck_files`).
     out : path
         The deck's folder (created).
     overwrite : bool
@@ -597,7 +597,7 @@ def write_test_deck(templates: Sequence, test: str, *, settings: Settings, seed:
     """
     from ..dem.deck import write_files
 
-    return write_files(deck_files(templates, test, settings, seed), out, overwrite=overwrite)
+    return write_files(run_deck_files(templates, test, settings, seed), out, overwrite=overwrite)
 
 
 def engine_command(mpi: int | None = None) -> tuple[list[str], dict]:

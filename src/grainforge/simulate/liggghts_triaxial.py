@@ -45,7 +45,7 @@ import numpy as np
 from ..rng import as_generator
 from .settings import DENSEST_FRACTION, TriaxialSettings
 
-__all__ = ["WALLS", "deck_files", "write_deck", "collect_triaxial", "processor_grid", "check_ranks", "largest_ranks",
+__all__ = ["WALLS", "triaxial_deck_files", "write_deck", "collect_triaxial", "processor_grid", "check_ranks", "largest_ranks",
            "MIN_RANK_DIAMETERS", "SERVO_STEPS", "UNBALANCED"]
 
 #: the walls, by the axis they move along and their side (0: low, 1: high)
@@ -326,7 +326,7 @@ def _run_text(plan: SimpleNamespace, settings: TriaxialSettings, seed: int) -> s
     return render("liggghts-triaxial.in", values)
 
 
-def deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> dict:
+def triaxial_deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> dict:
     """``{relative path: text}`` of the LIGGGHTS deck of one triaxial run (nothing written).
 
     Run from inside the folder with ``liggghts -in in.run`` or ``mpirun -np P liggghts -in in.run``: the grains'
@@ -373,12 +373,12 @@ def deck_files(templates: Sequence, settings: TriaxialSettings, seed: int) -> di
 
 def write_deck(templates: Sequence, settings: TriaxialSettings, *, seed: int, out: str | os.PathLike,
                overwrite: bool = False) -> list[Path]:
-    """Write the LIGGGHTS deck of one triaxial run into ``out`` (see :func:`deck_files`).
+    """Write the LIGGGHTS deck of one triaxial run into ``out`` (see :func:`triaxial_deck_files`).
 
     Parameters
     ----------
     templates, settings, seed
-        As :func:`deck_files`.
+        As :func:`triaxial_deck_files`.
     out : path
         The run's folder.
     overwrite : bool
@@ -391,7 +391,7 @@ def write_deck(templates: Sequence, settings: TriaxialSettings, *, seed: int, ou
     """
     from ..dem.deck import write_files
 
-    return write_files(deck_files(templates, settings, seed), out, overwrite=overwrite)
+    return write_files(triaxial_deck_files(templates, settings, seed), out, overwrite=overwrite)
 
 
 def _snapshots(path: Path) -> dict[int, np.ndarray]:

@@ -4,7 +4,7 @@ On a cluster
     Each engine run (one seed at one friction) is one Dask task running
     :func:`grainforge.simulate.engine.run_deck`, the function the local pool
     runs.  The driver writes the deck as usual (in its staging folder), sends
-    the deck's files to the task as bytes (:func:`deck_files`); the task
+    the deck's files to the task as bytes (:func:`read_deck`); the task
     (:func:`run_remote`) writes them into a temporary folder on its worker,
     runs the engine there (under ``mpirun -np N`` with ``--mpi``) and returns
     the files the run made or changed (``result.json``, the engine's log, …),
@@ -33,7 +33,7 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
-__all__ = ["JOURNAL", "SweepJournal", "open_journal", "sweep_fingerprint", "deck_files", "run_remote", "run_on_cluster", "JournalMismatch"]
+__all__ = ["JOURNAL", "SweepJournal", "open_journal", "sweep_fingerprint", "read_deck", "run_remote", "run_on_cluster", "JournalMismatch"]
 
 #: the folder inside ``--out`` that keeps the finished runs of a sweep until its outputs are committed
 JOURNAL = ".grainforge-sweep"
@@ -47,7 +47,7 @@ class JournalMismatch(ValueError):
     """A ``--resume`` whose settings or decks are not those of the interrupted sweep."""
 
 
-def deck_files(folder: str | os.PathLike) -> dict[str, bytes]:
+def read_deck(folder: str | os.PathLike) -> dict[str, bytes]:
     """The files under ``folder`` as ``{relative POSIX path: bytes}`` (sorted by path).
 
     Parameters
@@ -65,7 +65,7 @@ def deck_files(folder: str | os.PathLike) -> dict[str, bytes]:
 
 
 def write_files(folder: str | os.PathLike, files: dict[str, bytes]) -> None:
-    """Write ``files`` (:func:`deck_files`' form) under ``folder``."""
+    """Write ``files`` (as :func:`read_deck` returns them) under ``folder``."""
     folder = Path(folder)
     for name, data in files.items():
         path = folder / name
@@ -86,7 +86,7 @@ def run_remote(run, files: dict[str, bytes], *, name: str, engine: str = "yade",
     run : callable
         :func:`grainforge.simulate.engine.run_deck` (passed in: this module does not import the engine's).
     files : dict of str to bytes
-        The deck (:func:`deck_files`).
+        The deck (:func:`read_deck`).
     name : str
         The run's folder name (``repose-seed0``).
     engine, mpi
@@ -109,7 +109,7 @@ def run_remote(run, files: dict[str, bytes], *, name: str, engine: str = "yade",
             result = run(deck, engine=engine, mpi=mpi)
         except EngineFailed as exc:
             error = str(exc).replace(str(deck), DECK_MARK)
-        made = {k: v for k, v in deck_files(deck).items() if files.get(k) != v}
+        made = {k: v for k, v in read_deck(deck).items() if files.get(k) != v}
     return made, result, error
 
 
@@ -159,7 +159,7 @@ def run_on_cluster(executor, run, *, decks: Sequence[Path], which: Sequence[int]
     futures = {}
     try:
         for k in which:
-            futures[executor.submit(run_remote, run, deck_files(decks[k]), name=decks[k].name, engine=engine,
+            futures[executor.submit(run_remote, run, read_deck(decks[k]), name=decks[k].name, engine=engine,
                                     mpi=mpi)] = k
             if progress is not None:
                 progress(k, 0.0, "sent to the cluster")
