@@ -85,30 +85,12 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     the deck from inside --out: `yade -n -x run.py`, `liggghts -in in.run` or
     `lmp -in in.run` (docs/dem.md).
     """
-    from ..dem import SUPPORTED
-    from ..dem.inputs import build_templates, check_level_set_files, pour_counts
+    from ..dem.inputs import build_templates, check_level_set_files, pour_copies, pour_counts
     from ..io.inputs import mesh_paths
     from ..runtime.workers import default_workers
     from .progress import progress_bar
 
-    ctx = click.get_current_context()
-    _refuse_foreign_options(ctx, shape)
-    if clump_accuracy is not None and ctx.get_parameter_source("spheres") in (None, click.core.ParameterSource.DEFAULT):
-        from ..dem.clump import DEFAULT_SPHERE_CAP
-
-        spheres = DEFAULT_SPHERE_CAP  # the cap of a clump built to an accuracy target, --spheres not given
-    if shape not in SUPPORTED[engine]:
-        raise click.UsageError(f"--engine {engine} does not support --shape {shape} "
-                               f"(supported: {', '.join(SUPPORTED[engine])})")
-    if shape == "polyhedron":
-        from ..dem.lammps_body import MAX_VERTICES
-        from ..dem.polyhedron import DEFAULT_VERTICES
-
-        if vertices is None:
-            vertices = DEFAULT_VERTICES[engine]
-        elif engine == "lammps" and vertices > MAX_VERTICES:
-            raise click.BadParameter(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}",
-                                     param_hint="--vertices")
+    spheres, vertices = _representation(engine, shape, spheres, clump_accuracy, vertices)
     if rolling_friction > 0 and (engine == "lammps" or shape != "clump"):
         raise click.UsageError("--rolling-friction is written for --shape clump in Yade and LIGGGHTS decks only")
     if grains is not None and count is not None:
@@ -121,11 +103,10 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     if template_count is not None:  # K representative grains (those without a manifest's measures are measured)
         n_templates = _templates_plan(inputs, paths, template_count, out, overwrite)
     if grains is None:
-        count = 1 if count is None else count
-        if count * n_templates > MAX_POUR_GRAINS:
-            raise click.BadParameter(f"{n_templates} grain files × {count} = {count * n_templates} grains; a pour "
-                                     f"holds at most {MAX_POUR_GRAINS}", param_hint="--count")
-        counts = [count] * n_templates
+        try:
+            counts = pour_copies(n_templates, 1 if count is None else count)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--count") from None
     else:
         counts = pour_counts(n_templates, grains, rng=0 if seed is None else seed).tolist()
     workers = default_workers(workers)
@@ -174,6 +155,29 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
                f"{ENGINE_COMMAND[engine]}", err=True)
     if warning:  # the deck is written and usable; its clumps fail their own check (docs/cli-contract.md)
         sys.exit(EXIT_CHECK_FAILED)
+
+
+def _representation(engine: str, shape: str, spheres: int, clump_accuracy, vertices):
+    """The --shape options checked against the engine; the sphere cap and the polyhedra's vertex cap."""
+    from ..dem import SUPPORTED
+
+    ctx = click.get_current_context()
+    _refuse_foreign_options(ctx, shape)
+    if clump_accuracy is not None and ctx.get_parameter_source("spheres") in (None, click.core.ParameterSource.DEFAULT):
+        from ..dem.clump import DEFAULT_SPHERE_CAP
+
+        spheres = DEFAULT_SPHERE_CAP  # the cap of a clump built to an accuracy target, --spheres not given
+    if shape not in SUPPORTED[engine]:
+        raise click.UsageError(f"--engine {engine} does not support --shape {shape} "
+                               f"(supported: {', '.join(SUPPORTED[engine])})")
+    if shape == "polyhedron":
+        from ..dem.polyhedron import engine_vertices
+
+        try:
+            vertices = engine_vertices(engine, vertices)
+        except ValueError as exc:
+            raise click.BadParameter(str(exc), param_hint="--vertices") from None
+    return spheres, vertices
 
 
 def _templates_plan(inputs, paths, k: int, out: Path, overwrite: bool) -> int:

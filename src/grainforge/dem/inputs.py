@@ -20,6 +20,7 @@ __all__ = [
     "check_level_set_files",
     "enclosure_problems",
     "pour_counts",
+    "pour_copies",
     "MAX_POUR_GRAINS",
 ]
 
@@ -113,6 +114,37 @@ def pour_counts(templates: int, grains: int, rng: RNGLike = 0) -> np.ndarray:
     extra = as_generator(rng).choice(templates, size=grains % templates, replace=False)
     counts[extra] += 1
     return counts
+
+
+def pour_copies(templates: int, count: int = 1) -> list[int]:
+    """Copies of each of ``templates`` input grains in a pour of ``count`` copies of each.
+
+    Parameters
+    ----------
+    templates : int
+        Input grains (templates).
+    count : int
+        Copies of each.
+
+    Returns
+    -------
+    list of int
+        ``count`` per template.
+
+    Raises
+    ------
+    ValueError
+        If the pour would hold more than :data:`MAX_POUR_GRAINS` grains.
+
+    Examples
+    --------
+    >>> pour_copies(3, 2)
+    [2, 2, 2]
+    """
+    if count * templates > MAX_POUR_GRAINS:
+        raise ValueError(f"{templates} grain files × {count} = {count * templates} grains; a pour "
+                         f"holds at most {MAX_POUR_GRAINS}")
+    return [count] * templates
 
 
 def read_grain(path: str | Path, *, check: bool = True) -> tuple[np.ndarray, np.ndarray]:

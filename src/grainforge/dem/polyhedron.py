@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["convex_polyhedron", "DEFAULT_VERTICES"]
+__all__ = ["convex_polyhedron", "DEFAULT_VERTICES", "engine_vertices"]
 
 #: engine -> hull vertices of ``grainforge dem --shape polyhedron`` when ``--vertices`` is not
 #: given: a 14-grain pour of 2 mm grains settles in well under 2 min on 2 cores in each (contact
@@ -75,3 +75,37 @@ def convex_polyhedron(vertices: np.ndarray, *, max_vertices: int | None = None) 
         chosen.append(k)
     sub = hull[np.sort(chosen)]
     return sub[np.sort(ConvexHull(sub).vertices)]
+
+
+def engine_vertices(engine: str, vertices: int | None = None) -> int:
+    """The most convex-hull vertices of a polyhedron written for ``engine``: ``vertices``, or its default.
+
+    Parameters
+    ----------
+    engine : {"yade", "lammps"}
+        The engine the polyhedra are for.
+    vertices : int, optional
+        The most asked for; default :data:`DEFAULT_VERTICES` of the engine.
+
+    Returns
+    -------
+    int
+        The vertex cap.
+
+    Raises
+    ------
+    ValueError
+        More than LAMMPS reads per body (:data:`grainforge.dem.lammps_body.MAX_VERTICES`).
+
+    Examples
+    --------
+    >>> engine_vertices("yade"), engine_vertices("lammps", 20)
+    (16, 20)
+    """
+    from .lammps_body import MAX_VERTICES
+
+    if vertices is None:
+        return DEFAULT_VERTICES[engine]
+    if engine == "lammps" and vertices > MAX_VERTICES:
+        raise ValueError(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}")
+    return vertices
