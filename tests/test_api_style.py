@@ -56,6 +56,11 @@ ALLOWED: dict[tuple[str, str], str] = {
         "build_tray(source, printer, out, *, ...): what to print, on which printer and into which file are all "
         "required, and read in that order as the command line does; the options are keyword-only"
     ),
+    ("positional", "grainforge.dem.engines:write_deck"): (
+        "write_deck(engine, templates, out, *, overwrite, rolling_friction): the engine, the grains and the deck's "
+        "folder are all required, in the order `grainforge dem` reads them (each engine's writer takes "
+        "(templates, out)); the options are keyword-only"
+    ),
     ("positional", "grainforge.viz.render:contact_sheet"): (
         "contact_sheet(meshes, labels, out, *, ...): the meshes, one label each and the PNG file are the data "
         "(contact_sheet_figure takes the first two); the drawing options are keyword-only"
