@@ -83,3 +83,16 @@ def test_every_equivalent_diameter_is_the_one_function():
     grain = Grain(v, f, method="box", params=None, seed=0)
     sized = to_size(grain, 2.0)
     assert float(sphere_diameter(signed_volume(sized.vertices, sized.faces))) == pytest.approx(2.0, rel=1e-14)
+
+
+def test_the_equivalent_diameter_is_written_once():
+    """No module but geometry/moments.py writes d = (6V/π)^(1/3) itself (as a cube root or a power of 1/3)."""
+    import re
+    from pathlib import Path
+
+    formula = re.compile(r"cbrt\(\s*6(\.0)?\s*\*|\(\s*6(\.0)?\s*\*[^()\n]*(\([^()\n]*\))?[^()\n]*/\s*(np|math)\.pi\s*\)"
+                         r"\s*\*\*\s*\(\s*1(\.0)?\s*/\s*3")
+    src = Path(__file__).resolve().parents[1] / "src" / "grainforge"
+    found = sorted({p.relative_to(src).as_posix() for p in src.rglob("*.py")
+                    for line in p.read_text(encoding="utf-8").splitlines() if formula.search(line)})
+    assert found == ["geometry/moments.py"]
