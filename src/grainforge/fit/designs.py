@@ -32,7 +32,9 @@ DESIGN_ACROSS_LOW = 10.0
 #: root seed of every design (designs do not depend on the sand or the fit's seed); bump DESIGN_VERSION
 #: when a generator or the measurement changes, so that cached designs are not reused
 DESIGN_SEED = 20261202
-DESIGN_VERSION = 1
+#: 2: a grain's voxel size (d_eq / voxels across) and its d_eq are np.cbrt's (geometry.moments.sphere_diameter), not a power
+#: of 1/3: the designs' measurements change in their last bits
+DESIGN_VERSION = 2
 
 
 def _design_high(sand: Sand, max_across: float | None) -> float:
