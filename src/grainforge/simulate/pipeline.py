@@ -241,7 +241,9 @@ def local_workers(workers: int | None, mpi: int | None) -> int:
     int
         ``workers``, else the cores divided by ``mpi``.
     """
-    return workers or max(1, (os.cpu_count() or 1) // (mpi or 1))
+    from ..runtime.workers import default_workers
+
+    return workers or max(1, default_workers() // (mpi or 1))
 
 
 def _ranks_here(test: str, engine: str, settings, mpi: int | None, workers: int | None) -> int | None:
@@ -453,9 +455,10 @@ def _prepare(o: _Options, stack: ExitStack, *, kind: str, out, outputs: Sequence
     if executor is None:  # on a cluster, the engine is the workers'
         check_installed(o.engine, o.mpi)
     o.say(Estimate(seconds, most))
+    from ..runtime.workers import default_workers
     from .specimen import build_population, choose_grains
 
-    chosen = choose_grains(o.inputs, o.settings, pool=pool, workers=workers if executor is None else (os.cpu_count() or 1),
+    chosen = choose_grains(o.inputs, o.settings, pool=pool, workers=workers if executor is None else default_workers(),
                            progress=lambda done, total: o.say(Count("grains", done, total)))
     o.say(Note(chosen.summary() + "; templates.csv"))
     what = "clumps" if o.shape == "clump" else "level sets"
