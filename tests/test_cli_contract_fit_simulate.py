@@ -695,7 +695,7 @@ def test_a_signal_swallowed_by_a_library_still_ends_the_command_after_the_grace(
     SIGTERM raises; the command then still ends, with the usual line and code, SIGNAL_GRACE seconds later."""
     code = textwrap.dedent("""
         import signal, sys, time
-        import grainforge.cli.main as m
+        import grainforge.cli.interrupts as m
         m.SIGNAL_GRACE = 0.5
         signal.signal(signal.SIGTERM, m._terminate)
         while True:
@@ -717,7 +717,7 @@ def test_a_signal_raised_inside_a_finalizer_is_raised_again_in_the_main_thread()
     exception there into the signal again, so the command stops at the next line of its own code, no traceback."""
     code = textwrap.dedent("""
         import sys
-        import grainforge.cli.main as m
+        import grainforge.cli.interrupts as m
         import signal
         signal.signal(signal.SIGTERM, m._terminate)
         sys.unraisablehook = m._signal_in_finalizer(sys.unraisablehook)

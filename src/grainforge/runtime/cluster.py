@@ -29,6 +29,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from .._version import __version__
+from ..errors import InputError
 
 __all__ = ["CONNECT_TIMEOUT", "INSTALL", "DaskExecutor", "SchedulerLost", "VersionMismatch", "check_address",
            "connect", "dask_executor", "probe"]
@@ -61,7 +62,7 @@ class SchedulerLost(RuntimeError):
                          + (f" ({reason})" if reason else ""))
 
 
-class VersionMismatch(ValueError):
+class VersionMismatch(InputError):
     """A Dask worker runs another grainforge version than this process (its results could differ)."""
 
 

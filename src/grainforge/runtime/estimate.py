@@ -26,6 +26,8 @@ from __future__ import annotations
 import os
 from typing import Any
 
+from ..errors import InputError
+
 __all__ = ["SECONDS_LIMIT", "grain_seconds", "check_job", "check_memory", "machine_memory", "duration",
            "TooLargeError", "icosphere_vertices", "dem_template_seconds"]
 
@@ -59,7 +61,7 @@ LEVELSET_NODE_COEFFICIENT = 5.5e-3
 LEVELSET_NODE_EXPONENT = 0.745
 
 
-class TooLargeError(ValueError):
+class TooLargeError(InputError):
     """A request that would take longer than :data:`SECONDS_LIMIT` or more memory than the machine has."""
 
 

@@ -33,6 +33,8 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..errors import InputError
+
 __all__ = ["JOURNAL", "SweepJournal", "open_journal", "sweep_fingerprint", "deck_files", "run_remote", "run_on_cluster", "JournalMismatch"]
 
 #: the folder inside ``--out`` that keeps the finished runs of a sweep until its outputs are committed
@@ -43,7 +45,7 @@ SETTINGS_FILE = "sweep.json"
 SEP = "+"
 
 
-class JournalMismatch(ValueError):
+class JournalMismatch(InputError):
     """A ``--resume`` whose settings or decks are not those of the interrupted sweep."""
 
 
