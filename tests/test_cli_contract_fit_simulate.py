@@ -261,8 +261,12 @@ def test_spheres_has_one_range_in_every_command():
         assert "range: [2, 1000]" in text, (command, text)
 
 
-class _Accepted(Exception):
-    """Raised where a command has passed every check and would start its work (``ready_for_work``)."""
+class _Accepted(SystemExit):
+    """Raised where a command has passed every check and would start its work (``ready_for_work``): a SystemExit,
+    which the command group lets through as it is (any other exception would be reported as a bug, exit 1)."""
+
+    def __init__(self):
+        super().__init__(99)
 
 
 #: MPI refusals whose line suggests another command: (test words, options, batch allocation or None)

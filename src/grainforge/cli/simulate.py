@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ..simulate.capabilities import ENGINE_NAMES, ENGINES, SHAPES, TILT_ONLY
+from .help_style import option
 from .options import (
     EXIT_CHECK_FAILED,
     FiniteFloatRange,
@@ -214,17 +215,17 @@ def journal_kept(journal) -> str:
 
 
 #: ``--scheduler`` of simulate and simulate calibrate
-scheduler_option = click.option(
+scheduler_option = option(
     "--scheduler", metavar="ADDRESS", default=None,
     help="Run each engine run (one seed at one friction) as a task on an existing Dask distributed cluster, e.g. "
-         "tcp://host:8786 (needs grainforge[dask], and grainforge and the engine on the workers); the outputs are "
-         "the local run's. With --mpi each task runs `mpirun -np N` on its worker: the cluster's workers decide "
-         "the cores (the local check of --mpi against this machine's cores does not apply).")
+   "tcp://host:8786 (needs grainforge[dask], and grainforge and the engine on the workers); the outputs are "
+   "the local run's. With --mpi each task runs `mpirun -np N` on its worker: the cluster's workers decide "
+   "the cores (the local check of --mpi against this machine's cores does not apply).")
 #: ``--resume`` of simulate and simulate calibrate
-resume_option = click.option(
+resume_option = option(
     "--resume", is_flag=True,
     help="Continue an interrupted run from the engine runs it finished (kept in --out/.grainforge-sweep), with "
-         "the same settings: those are not run again.")
+   "the same settings: those are not run again.")
 
 
 def check_cluster_options(scheduler: str | None, workers: int | None, resume: bool, overwrite: bool) -> None:
@@ -291,30 +292,30 @@ def scheduler_lost(exc, journal) -> click.ClickException:
 def _command(test: str, doc: str):
     @click.command(name=test, help=doc)
     @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-    @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-                  help="Folder for the decks (one per seed), results.csv and the figure.")
-    @click.option("--quick", is_flag=True,
-                  help="A few tens of grains (triaxial: 100, a short shearing at a larger strain rate), seconds to a "
-                       "minute per run: checks the set-up, measures nothing meaningful.")
-    @click.option("--as-spheres", is_flag=True,
-                  help="Replace every grain by its volume-equivalent sphere (the sphere baseline).")
-    @click.option("--label", default=None, show_default="the inputs' names",
-                  help="Name of this population in results.csv.")
+    @option("--out", "out", required=True, type=OutPath(file_okay=False),
+            help="Folder for the decks (one per seed), results.csv and the figure.")
+    @option("--quick", is_flag=True,
+            help="A few tens of grains (triaxial: 100, a short shearing at a larger strain rate), seconds to a "
+                 "minute per run: checks the set-up, measures nothing meaningful.")
+    @option("--as-spheres", is_flag=True,
+            help="Replace every grain by its volume-equivalent sphere (the sphere baseline).")
+    @option("--label", default=None, show_default="the inputs' names",
+            help="Name of this population in results.csv.")
     @workers_option("Engine runs (seeds) at once, each on one core or on --mpi ranks.",
                     default_text="CPU count divided by --mpi")
-    @click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
-                  help="DEM engine of the runs: Yade, or LIGGGHTS (the same scenes as multisphere clumps; "
-                       "docs/simulate.md says where the engines differ).")
-    @click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
-                  help="LIGGGHTS only: run each seed under `mpirun -np N` (the box cut into N columns; the triaxial box "
-                       "into N parts). "
-                       "Yade runs one process per seed: use --workers.")
-    @click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
-                  help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "
-                       "signed distance field, as grainforge dem writes it).")
-    @click.option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
-                  show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
-                                            "(as grainforge dem).")
+    @option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
+            help="DEM engine of the runs: Yade, or LIGGGHTS (the same scenes as multisphere clumps; "
+                 "docs/simulate.md says where the engines differ).")
+    @option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
+            help="LIGGGHTS only: run each seed under `mpirun -np N` (the box cut into N columns; the triaxial box "
+                 "into N parts). "
+                 "Yade runs one process per seed: use --workers.")
+    @option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
+            help="Grain representation: clump (--spheres sets its size) or, in Yade, levelset (the mesh's "
+                 "signed distance field, as grainforge dem writes it).")
+    @option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
+            show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter "
+                                      "(as grainforge dem).")
     @overwrite_option("Replace an earlier result in --out.")
     @scheduler_option
     @resume_option

@@ -12,6 +12,7 @@ from pathlib import Path
 import click
 
 from ..simulate.capabilities import ENGINE_NAMES, ENGINES, SHAPES, TILT_ONLY
+from .help_style import option
 from .options import (
     EXIT_CHECK_FAILED,
     FINITE_FLOAT,
@@ -75,38 +76,38 @@ def use_command(test: str, inputs, friction: float, given: dict, *, quick: bool,
 @click.command(name="calibrate")
 @click.argument("test", type=click.Choice(["tilt", "repose", "triaxial"]))
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--target-angle", type=FINITE_FLOAT, required=True,
-              help="The measured angle to reach, degrees (5 to 80): a tilt failure angle, an angle of repose, or a "
-                   "triaxial friction angle (--angle).")
-@click.option("--angle", type=click.Choice(["ultimate", "peak"]), default=None,
-              show_default="ultimate", help="Triaxial only: the friction angle --target-angle is: ultimate (from "
-                                            "the mean q/p′ over the last 5 % of the axial strain, results.csv's "
-                                            "ultimate_friction_deg) or peak.")
-@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder for calibration.csv, calibration.json, calibration.png and the runs (runs/).")
-@click.option("--friction-range", type=(FINITE_FLOAT, FINITE_FLOAT), default=(0.05, 1.5), show_default=True,
-              help="Bounds of the μ search.")
-@click.option("--start", type=FiniteFloatRange(min=0.0), default=0.5, show_default=True,
-              help="First μ tried (inside --friction-range).")
-@click.option("--tolerance", type=FiniteFloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
-              help="Stop when a seed-averaged angle is this close to the target, degrees.")
-@click.option("--max-frictions", "max_evaluations", type=click.IntRange(min=2, max=30), default=8, show_default=True,
-              help="At most this many frictions tried (each runs every seed).")
-@click.option("--quick", is_flag=True,
-              help="A few tens of grains (triaxial: 100, a short shearing), seconds to a minute per run: checks the "
-                   "set-up, calibrates nothing meaningful.")
-@click.option("--as-spheres", is_flag=True, help="Replace every grain by its volume-equivalent sphere.")
-@click.option("--label", default=None, show_default="the inputs' names", help="Name of the population.")
+@option("--target-angle", type=FINITE_FLOAT, required=True,
+        help="The measured angle to reach, degrees (5 to 80): a tilt failure angle, an angle of repose, or a "
+             "triaxial friction angle (--angle).")
+@option("--angle", type=click.Choice(["ultimate", "peak"]), default=None,
+        show_default="ultimate", help="Triaxial only: the friction angle --target-angle is: ultimate (from "
+                                      "the mean q/p′ over the last 5 % of the axial strain, results.csv's "
+                                      "ultimate_friction_deg) or peak.")
+@option("--out", "out", required=True, type=OutPath(file_okay=False),
+        help="Folder for calibration.csv, calibration.json, calibration.png and the runs (runs/).")
+@option("--friction-range", type=(FINITE_FLOAT, FINITE_FLOAT), default=(0.05, 1.5), show_default=True,
+        help="Bounds of the μ search.")
+@option("--start", type=FiniteFloatRange(min=0.0), default=0.5, show_default=True,
+        help="First μ tried (inside --friction-range).")
+@option("--tolerance", type=FiniteFloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
+        help="Stop when a seed-averaged angle is this close to the target, degrees.")
+@option("--max-frictions", "max_evaluations", type=click.IntRange(min=2, max=30), default=8, show_default=True,
+        help="At most this many frictions tried (each runs every seed).")
+@option("--quick", is_flag=True,
+        help="A few tens of grains (triaxial: 100, a short shearing), seconds to a minute per run: checks the "
+             "set-up, calibrates nothing meaningful.")
+@option("--as-spheres", is_flag=True, help="Replace every grain by its volume-equivalent sphere.")
+@option("--label", default=None, show_default="the inputs' names", help="Name of the population.")
 @workers_option("Engine runs (seeds) at once, each on one core or on --mpi ranks.",
                 default_text="CPU count divided by --mpi")
-@click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
-              help="DEM engine (as simulate tilt|repose|triaxial).")
-@click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
-              help="LIGGGHTS only: run each seed under `mpirun -np N`.")
-@click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
-              help="Grain representation (as simulate tilt|repose; triaxial: clump only).")
-@click.option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
-              show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter.")
+@option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True,
+        help="DEM engine (as simulate tilt|repose|triaxial).")
+@option("--mpi", type=click.IntRange(min=1, max=4096), default=None,
+        help="LIGGGHTS only: run each seed under `mpirun -np N`.")
+@option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True,
+        help="Grain representation (as simulate tilt|repose; triaxial: clump only).")
+@option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
+        show_default="0.05", help="Level set: grid spacing as a fraction of the equivalent diameter.")
 @overwrite_option("Replace an earlier calibration in --out.")
 @scheduler_option
 @resume_option
