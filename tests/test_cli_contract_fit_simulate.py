@@ -644,7 +644,7 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
     (stage / "repose-seed0").mkdir()
     (stage / "repose-seed0" / "run.py").write_text("new")
     (stage / "results.csv").write_text("rows")
-    with pytest.raises(FileExistsError, match="repose-seed0 exists; use --overwrite"):
+    with pytest.raises(FileExistsError, match="repose-seed0 exists; use overwrite"):
         commit_stage(stage, out)
     assert sorted(p.name for p in out.iterdir()) == sorted([stage.name, "repose-seed0"])
     assert [p.name for p in (out / "repose-seed0").iterdir()] == ["old.txt"]

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError
+
 #: the four descriptors that are matched
 DESCRIPTORS = ("sphericity", "convexity", "flatness", "elongation")
 #: Sand Atlas column of each quantity (units in the header; lengths in µm)
@@ -94,16 +96,16 @@ def _sand_text(path: Path) -> str:
         raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
     for magic, what in _MAGIC:
         if data.startswith(magic):
-            raise ValueError(f"{path}: not a CSV table: the file is {what}")
+            raise FileFormatError(f"{path}: not a CSV table: the file is {what}")
     if b"\x00" in data[:4096]:
-        raise ValueError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
+        raise FileFormatError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         byte = data[exc.start]
         guess = data[exc.start:exc.start + 1].decode("latin-1")
-        raise ValueError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
-                         "or Windows-1252): save the table as UTF-8") from None
+        raise FileFormatError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
+                             "or Windows-1252): save the table as UTF-8") from None
 
 
 def _check_separator(path: Path, header: Sequence[str]) -> None:
