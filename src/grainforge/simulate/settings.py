@@ -161,6 +161,10 @@ TRIAXIAL_DT_FACTOR = 0.3
 #: steps of the isotropic compaction (and, dense, of the friction switched on) over √(E/σ′₃)/(0.3 I_c): 16,000
 #: for 100 grains, 31,500 for 500 (dense rough spheres, I_c = 0.01, E/σ′₃ = 5000: 23,570 × 1.34)
 TRIAXIAL_COMPACTION_FACTOR = 1.4
+#: the same at the compaction's time limit (3 / ε̇_c; the scene's time step is 0.34 d √(ρ/E) for clumps of a few
+#: spheres, so 3 × 0.3 / 0.34): the quick dense rough-angular specimen (100 clumps of 6 spheres) ends its
+#: compaction there, still creeping, after 62,200 steps (2.64 in these units), where the rough spheres take 24,690
+TRIAXIAL_COMPACTION_LIMIT_FACTOR = 2.65
 #: Yade seconds per grain and step of the triaxial scene (one core): a fixed part (the clump, its six mass
 #: spheres, the servo's sum over the contacts every 10 steps) and a part per contact sphere; set to the
 #: 500-grain run of 10-sphere clumps (1.9e-5 s a grain-step on a loaded machine), above the 100-grain runs of
@@ -174,16 +178,20 @@ TRIAXIAL_GRAIN_STEP_SECONDS, TRIAXIAL_SPHERE_STEP_SECONDS = 2e-6, 1.7e-6
 TRIAXIAL_LIGGGHTS_GRAIN_STEP_SECONDS, TRIAXIAL_LIGGGHTS_SPHERE_STEP_SECONDS = 0.7e-6, 0.14e-6
 
 
-def triaxial_steps(settings: TriaxialSettings) -> float:
+def triaxial_steps(settings: TriaxialSettings, *, longest: bool = False) -> float:
     """Estimated time steps of one triaxial run: the compaction's and the shearing's.
 
     The shearing takes ε_a / (ε̇ dt) steps, with ε̇ = I √(σ′₃/ρ)/d and dt ≈ 0.3 d √(ρ/E): that is
-    ε_a √(E/σ′₃) / (0.3 I), whatever the grains' size and density.
+    ε_a √(E/σ′₃) / (0.3 I), whatever the grains' size and density. The compaction usually takes
+    :data:`TRIAXIAL_COMPACTION_FACTOR` √(E/σ′₃)/(0.3 I_c) steps; ``longest`` counts it to its time limit
+    (:data:`TRIAXIAL_COMPACTION_LIMIT_FACTOR`), where frictionless angular clumps that creep end it.
 
     Parameters
     ----------
     settings : TriaxialSettings
         The run's settings (Young's modulus in Pa, confining stress in kPa, axial strain and inertial number).
+    longest : bool, default False
+        Count the compaction to its time limit.
 
     Returns
     -------
@@ -194,10 +202,13 @@ def triaxial_steps(settings: TriaxialSettings) -> float:
     --------
     >>> round(triaxial_steps(TriaxialSettings()))  # 58,926 shearing + 32,998 compaction
     91924
+    >>> round(triaxial_steps(TriaxialSettings(), longest=True))  # the compaction to its time limit: 62,461
+    121387
     """
     stiffness = math.sqrt(settings.young / (1e3 * settings.confining_kpa))
     shear = settings.axial_strain * stiffness / (TRIAXIAL_DT_FACTOR * settings.inertial_number)
-    compaction = TRIAXIAL_COMPACTION_FACTOR * stiffness / (TRIAXIAL_DT_FACTOR * COMPACTION_INERTIAL_NUMBER)
+    factor = TRIAXIAL_COMPACTION_LIMIT_FACTOR if longest else TRIAXIAL_COMPACTION_FACTOR
+    compaction = factor * stiffness / (TRIAXIAL_DT_FACTOR * COMPACTION_INERTIAL_NUMBER)
     return float(shear + compaction)
 
 
@@ -297,6 +308,11 @@ YADE_GRAIN_SECONDS, YADE_SPHERE_SECONDS = 0.25, 0.03
 ENGINE_FACTOR = {"yade": 1.0, "liggghts": 0.3}
 #: a tilt run takes longer than a repose run of as many grains (the tilt steps; docs/simulate.md)
 TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
+#: seconds of a command's own start and end (its imports, the figure, results.csv): about 2.5 s of CPU
+START_SECONDS = 3.0
+#: seconds of an engine's start-up and of reading its run back, per run: Yade's own imports take about 2.2 s of
+#: CPU before the scene, LIGGGHTS starts in a tenth of a second (its deck's set-up is in the model)
+RUN_START_SECONDS = {"yade": 2.5, "liggghts": 0.5}
 #: seconds to make one clump template: about 0.08 s at 10 spheres, 0.15 s at 200
 TEMPLATE_SECONDS, TEMPLATE_SPHERE_SECONDS = 0.08, 0.0005
 #: Yade's memory per contact sphere (bytes: the body, its bound, its contacts)
@@ -311,7 +327,7 @@ YADE_LEVELSET_NODE_BYTES = 16.0
 
 def check_size(test: str, settings: Settings, *, available: int, make_seconds: float = 0.0,
                as_spheres: bool = False, workers: int = 1, shape: str = "clump", spacing: float = 0.05,
-               engine: str = "yade") -> float:
+               engine: str = "yade", longest: bool = False) -> float:
     """Estimated seconds of a virtual test; refuse one beyond a day or half the machine's memory.
 
     A triaxial test (``settings`` a :class:`TriaxialSettings`) is costed per time step
@@ -339,11 +355,15 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         The engine of the runs; a LIGGGHTS run is costed at
         :data:`ENGINE_FACTOR` of the Yade model (one core's work: MPI ranks
         are not counted as a speed-up).
+    longest : bool, default False
+        A triaxial run's compaction counted to its time limit (``triaxial_steps(longest=True)``): the most
+        the runs may take, where the usual estimate counts a compaction that ends on its criteria.
 
     Returns
     -------
     float
-        The estimated seconds: the templates' making, then every run with ``workers`` of them at once.
+        The estimated seconds: the start (:data:`START_SECONDS`), the templates' making, then every run
+        (each with its engine's start, :data:`RUN_START_SECONDS`) with ``workers`` of them at once.
 
     Raises
     ------
@@ -369,10 +389,10 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
     spheres = 1 if as_spheres else settings.spheres
     make = templates * (make_seconds + TEMPLATE_SECONDS + TEMPLATE_SPHERE_SECONDS * spheres)
     if test == "triaxial" and engine == "liggghts":  # the walled box's own cost per step (no ENGINE_FACTOR)
-        per_run = triaxial_steps(settings) * settings.grains * (
+        per_run = triaxial_steps(settings, longest=longest) * settings.grains * (
             TRIAXIAL_LIGGGHTS_GRAIN_STEP_SECONDS + TRIAXIAL_LIGGGHTS_SPHERE_STEP_SECONDS * spheres)
     elif test == "triaxial":  # its own model: steps from the strain rate and the time step (triaxial_steps)
-        per_run = triaxial_steps(settings) * settings.grains * (TRIAXIAL_GRAIN_STEP_SECONDS
+        per_run = triaxial_steps(settings, longest=longest) * settings.grains * (TRIAXIAL_GRAIN_STEP_SECONDS
                                                                 + TRIAXIAL_SPHERE_STEP_SECONDS * spheres)
     else:
         per_run = TEST_FACTOR[test] * settings.grains * (YADE_GRAIN_SECONDS + YADE_SPHERE_SECONDS * spheres)
@@ -381,8 +401,9 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
     if test != "triaxial":
         per_run *= ENGINE_FACTOR[engine]
+    per_run += RUN_START_SECONDS[engine]
     at_once = max(1, min(int(workers), settings.seeds, os.cpu_count() or 1))
-    total = make + per_run * settings.seeds / at_once
+    total = START_SECONDS + make + per_run * settings.seeds / at_once
     grain = f"{spheres} sphere(s)" if shape == "clump" else f"level sets of spacing {spacing:g}"
     raise_spacing = "" if shape == "clump" else ", or raise --spacing"
     if total > SECONDS_LIMIT:
