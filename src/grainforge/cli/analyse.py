@@ -61,7 +61,7 @@ def _write_atlas_table(path: Path, rows) -> None:
 
     grains = [r for r in rows if math.isfinite(r.get("atlas_sphericity", math.nan))]
     if not grains:
-        raise ValueError("--atlas-csv: no closed body to measure; nothing written")
+        raise click.UsageError("--atlas-csv: no closed body to measure; nothing written")
     write_sand(path, [1000.0 * r["atlas_equivalent_diameter"] for r in grains],
                {k: [r["atlas_" + k] for r in grains] for k in DESCRIPTORS},
                voxel_size=[1000.0 * r["atlas_voxel_size"] for r in grains],

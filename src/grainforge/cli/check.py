@@ -55,7 +55,7 @@ def check(files, printer_spec, as_csv):
             for part in parts:  # a file in another unit than mm: refused before any part is checked
                 problem = mesh_size_problem(part.vertices, "the mesh" if len(parts) == 1 else f"part {part.name}")
                 if problem is not None:
-                    raise ValueError(f"{path}: {problem}")
+                    raise click.UsageError(f"{path}: {problem}")
             for part in parts:
                 small = printer.size_problem(equivalent_diameter(part.vertices, part.faces))
                 if small is not None:  # before the slower tests, so that it is seen at once

@@ -236,7 +236,7 @@ def _check_level_set_budget(paths, unit: float, spacing: float) -> None:
         try:
             check_level_set_budget(v, f, unit=unit, spacing=spacing)
         except ValueError as exc:
-            raise ValueError(f"{p}: {exc}") from None
+            raise click.UsageError(f"{p}: {exc}") from None
 
 
 def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float, workers: int,
