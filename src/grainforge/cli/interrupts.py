@@ -25,6 +25,10 @@ import time
 from collections.abc import Iterable
 from contextlib import contextmanager
 
+from .startup import SIGNALS
+from .startup import exit_now as _exit_now
+from .startup import usual as _usual
+
 __all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_short_estimate", "STARTUP_MODULES",
            "Terminated", "arm_starting", "signals_raised", "leave_on_signal", "leave_if_signalled",
            "run_as_console_script",
@@ -35,8 +39,6 @@ __all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_sho
 #: while it loads, and it is the longest import (a second or more on a busy machine)
 STARTUP_MODULES = ("numpy", "scipy.spatial", "trimesh")
 
-#: the signals a command stops on, with the line it prints
-SIGNALS = {signal.SIGINT: "Interrupted.", signal.SIGTERM: "Terminated."}
 
 
 class Terminated(BaseException):
@@ -62,10 +64,6 @@ class Terminated(BaseException):
 # keeps the default handlers, or a worker stopped by its owner would print the owner's line.
 
 _WORKER = "__mp_main__" in sys.modules
-
-
-def _usual(signum: int):
-    return signal.default_int_handler if signum == signal.SIGINT else signal.SIG_DFL
 
 
 def _owned() -> list[int]:
@@ -312,14 +310,6 @@ def signals_held():
     from ..runtime.staging import signals_held as held
 
     return held()
-
-
-def _exit_now(signum, frame):  # pragma: no cover - exercised by a real signal
-    try:
-        sys.stderr.write(SIGNALS[signum] + "\n")
-        sys.stderr.flush()
-    finally:
-        os._exit(128 + signum)
 
 
 def preload(modules: Iterable[str]) -> None:
