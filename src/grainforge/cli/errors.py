@@ -129,11 +129,27 @@ def write_crash_report(exc: BaseException) -> Path:
     return path
 
 
+#: the most characters of a bug's message its line repeats (the whole is in the traceback's file)
+BUG_MESSAGE_CHARS = 200
+
+
 def bug_line(exc: BaseException, report: Path | None) -> str:
-    """The one line of a bug: the exception, its message, where its traceback is."""
-    what = type(exc).__qualname__ + (f": {one_line(exc)}" if one_line(exc) else "")
-    where = f"the traceback is in {report}" if report is not None else "its traceback could not be written"
-    return f"a bug in grainforge ({what}); {where}: please report it with that file"
+    """The one line of a bug: the exception, its message (cut at :data:`BUG_MESSAGE_CHARS`), where its traceback is.
+
+    Examples
+    --------
+    >>> bug_line(TypeError("x" * 300), Path("/tmp/grainforge-crash-1.txt"))[:40]
+    'a bug in grainforge (TypeError: xxxxxxxx'
+    >>> bug_line(KeyError("volume"), None)
+    "a bug in grainforge (KeyError: 'volume'); its traceback could not be written: please report it"
+    """
+    message = one_line(exc)
+    if len(message) > BUG_MESSAGE_CHARS:
+        message = message[:BUG_MESSAGE_CHARS - 1] + "…"
+    what = type(exc).__qualname__ + (f": {message}" if message else "")
+    if report is None:
+        return f"a bug in grainforge ({what}); its traceback could not be written: please report it"
+    return f"a bug in grainforge ({what}); the traceback is in {report}: please report it with that file"
 
 
 def report(exc: Exception, command: str | None) -> int:
