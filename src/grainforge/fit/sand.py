@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import FileFormatError
+from ..errors import FileFormatError, InputError
 
 #: the four descriptors that are matched
 DESCRIPTORS = ("sphericity", "convexity", "flatness", "elongation")
@@ -239,14 +239,15 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
     _check_ids_and_volumes(path, rows, header)
     if voxel_size is None:
         if "voxel_size" not in data:
-            raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size-um)")
+            raise InputError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size ({{voxel_size}})",
+                             setting="voxel_size")
         voxel_size = float(np.median(data["voxel_size"]))
     elif "voxel_size" in data:
         column = np.asarray(data["voxel_size"])
         if not np.allclose(column, voxel_size, rtol=1e-6, atol=0):
-            raise ValueError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
+            raise InputError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
                              f"{VOXEL_COLUMN!r} column ({np.median(column):g} µm): give one of them (drop "
-                             "--voxel-size-um to use the column)")
+                             "{voxel_size} to use the column)", setting="voxel_size")
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise ValueError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")
     across = np.asarray(data["equivalent_diameter"]) / voxel_size
