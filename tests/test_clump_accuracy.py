@@ -214,10 +214,10 @@ def test_simulate_cap_is_spheres_or_the_default_or_quicks():
 def test_calibrate_prints_a_command_with_the_target():
     from grainforge.cli.simulate_friction import use_command
 
-    words = use_command("tilt", ["g"], 0.6, {}, quick=False, as_spheres=False, shape="clump", spacing=None,
+    words = use_command("tilt", ["g"], friction=0.6, given={}, quick=False, as_spheres=False, shape="clump", spacing=None,
                         clump_accuracy=0.85).split()
     assert words[words.index("--clump-accuracy") + 1] == "0.85"
-    assert "--clump-accuracy" not in use_command("tilt", ["g"], 0.6, {}, quick=False, as_spheres=False,
+    assert "--clump-accuracy" not in use_command("tilt", ["g"], friction=0.6, given={}, quick=False, as_spheres=False,
                                                  shape="clump", spacing=None)
 
 

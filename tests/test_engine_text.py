@@ -74,8 +74,8 @@ DEM_CASES = [["--engine", "liggghts", "--spheres", "6", "--count", "2"],
 
 
 def test_every_template_is_used_by_a_writer_and_no_placeholder_reaches_an_engine(grains, tmp_path, monkeypatch):
-    import grainforge.cli.simulate as cli_simulate
     import grainforge.simulate.engine as engine
+    import grainforge.simulate.pipeline as pipeline
 
     read = set()
     real = text.template_text
@@ -85,7 +85,7 @@ def test_every_template_is_used_by_a_writer_and_no_placeholder_reaches_an_engine
         return real(name)
 
     monkeypatch.setattr(text, "template_text", spy)
-    monkeypatch.setattr(cli_simulate, "check_installed", lambda engine, mpi: None)  # no engine runs here
+    monkeypatch.setattr(pipeline, "check_installed", lambda engine, mpi: None)  # no engine runs here
     inputs = {}
 
     def written(deck, **kw):

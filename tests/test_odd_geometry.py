@@ -145,13 +145,13 @@ def test_solid_grain_is_analyses_check(files):
 
 def test_simulate_refuses_a_hollow_grain_before_the_engine(files, tmp_path, monkeypatch):
     import grainforge.simulate
-    from grainforge.cli import simulate as sim_cli
+    import grainforge.simulate.pipeline as pipeline
 
     def no_engine(*args, **kwargs):
         raise AssertionError("the engine was started")
 
-    monkeypatch.setattr(sim_cli, "check_installed", lambda *a, **k: None)
-    monkeypatch.setattr(grainforge.simulate, "run_test", no_engine)
+    monkeypatch.setattr(pipeline, "check_installed", lambda *a, **k: None)
+    monkeypatch.setattr(grainforge.simulate.engine, "run_test", no_engine)
     out = tmp_path / "sim"
     r = CliRunner().invoke(cli, ["simulate", "repose", str(files / "hollow.stl"), "--quick", "--out", str(out),
                                  "--workers", "1"])

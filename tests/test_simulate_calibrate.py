@@ -163,7 +163,7 @@ def test_tilt_options_are_refused_for_a_repose_calibration(grains, tmp_path):
 def test_the_printed_command_uses_the_calibrated_friction():
     from grainforge.cli.simulate_friction import use_command
 
-    cmd = use_command("tilt", ["x.toml"], 0.6321, {"grains": 50, "seeds": None}, quick=False, as_spheres=False,
+    cmd = use_command("tilt", ["x.toml"], friction=0.6321, given={"grains": 50, "seeds": None}, quick=False, as_spheres=False,
                       shape="levelset", spacing=0.1)
     assert cmd == ("grainforge simulate tilt x.toml --friction 0.632 --grains 50 --shape levelset --spacing 0.1 "
                    "--out out/tilt-calibrated")
@@ -215,12 +215,12 @@ def test_the_printed_command_keeps_the_engine_and_its_mpi_ranks():
 
     from grainforge.cli.simulate_friction import use_command
 
-    words = shlex.split(use_command("tilt", ["g"], 0.2, {"grains": 100}, quick=False, as_spheres=False,
+    words = shlex.split(use_command("tilt", ["g"], friction=0.2, given={"grains": 100}, quick=False, as_spheres=False,
                                     shape="clump", spacing=None, engine="liggghts", mpi=2))
     assert words[words.index("--engine") + 1] == "liggghts"
     assert words[words.index("--mpi") + 1] == "2"
     assert words[words.index("--friction") + 1] == "0.2"
-    yade = shlex.split(use_command("tilt", ["g"], 0.2, {}, quick=False, as_spheres=False, shape="clump",
+    yade = shlex.split(use_command("tilt", ["g"], friction=0.2, given={}, quick=False, as_spheres=False, shape="clump",
                                    spacing=None))
     assert "--engine" not in yade and "--mpi" not in yade
 

@@ -162,9 +162,11 @@ class _LosingExecutor:
 
 def test_a_scheduler_lost_mid_run_is_one_line_and_keeps_the_finished_runs(grains, runner, tmp_path, monkeypatch):
     require_engine("yade")
-    import grainforge.cli.simulate as simulate_cli
+    from contextlib import nullcontext
 
-    monkeypatch.setattr(simulate_cli, "cluster_executor", lambda address: _LosingExecutor())
+    import grainforge.runtime.cluster as cluster
+
+    monkeypatch.setattr(cluster, "dask_executor", lambda address: nullcontext(_LosingExecutor()))
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *ARGS,
                             "--scheduler", "tcp://10.0.0.5:8786"])
@@ -218,7 +220,7 @@ def test_mpi_ranks_on_a_cluster_are_the_workers_to_decide(grains, runner, tmp_pa
     connect: a stand-in connection that stops it there)."""
     import click
 
-    import grainforge.cli.simulate as simulate_cli
+    import grainforge.runtime.cluster as cluster
 
     args = ["simulate", "repose", str(grains), "--out", str(tmp_path / "sim"), "--quick", "--engine", "liggghts",
             "--mpi", "4096"]
@@ -228,6 +230,6 @@ def test_mpi_ranks_on_a_cluster_are_the_workers_to_decide(grains, runner, tmp_pa
     def connect(address):
         raise click.UsageError(f"connected to {address}")
 
-    monkeypatch.setattr(simulate_cli, "cluster_executor", connect)
+    monkeypatch.setattr(cluster, "dask_executor", connect)
     r = runner.invoke(cli, [*args, "--scheduler", "tcp://10.0.0.5:8786"])
     assert r.exit_code == 2 and "connected to tcp://10.0.0.5:8786" in r.stderr, r.output

@@ -315,7 +315,7 @@ def result_line(test: str, rows: list[dict], label: str, out) -> str:
     str
         ``label: <angle> ± <sd> ...; <results.csv>, <figure>``, or what was not measured and why.
     """
-    from . import summarise
+    from .engine import summarise
 
     where = f"{out / 'results.csv'}, {out / (test + '.png')}"
     if test == "triaxial":
