@@ -261,8 +261,12 @@ def test_spheres_has_one_range_in_every_command():
         assert "range: [2, 1000]" in text, (command, text)
 
 
-class _Accepted(Exception):
-    """Raised where a command has passed every check and would start its work (``ready_for_work``)."""
+class _Accepted(SystemExit):
+    """Raised where a command has passed every check and would start its work (``ready_for_work``): a SystemExit,
+    which the command group lets through as it is (any other exception would be reported as a bug, exit 1)."""
+
+    def __init__(self):
+        super().__init__(99)
 
 
 #: MPI refusals whose line suggests another command: (test words, options, batch allocation or None)
@@ -640,7 +644,7 @@ def test_simulate_stage_commits_all_outputs_together_and_a_killed_runs_stage_is_
     (stage / "repose-seed0").mkdir()
     (stage / "repose-seed0" / "run.py").write_text("new")
     (stage / "results.csv").write_text("rows")
-    with pytest.raises(FileExistsError, match="repose-seed0 exists; use --overwrite"):
+    with pytest.raises(FileExistsError, match="repose-seed0 exists; use overwrite"):
         commit_stage(stage, out)
     assert sorted(p.name for p in out.iterdir()) == sorted([stage.name, "repose-seed0"])
     assert [p.name for p in (out / "repose-seed0").iterdir()] == ["old.txt"]
@@ -695,7 +699,7 @@ def test_a_signal_swallowed_by_a_library_still_ends_the_command_after_the_grace(
     SIGTERM raises; the command then still ends, with the usual line and code, SIGNAL_GRACE seconds later."""
     code = textwrap.dedent("""
         import signal, sys, time
-        import grainforge.cli.main as m
+        import grainforge.cli.interrupts as m
         m.SIGNAL_GRACE = 0.5
         signal.signal(signal.SIGTERM, m._terminate)
         while True:
@@ -717,7 +721,7 @@ def test_a_signal_raised_inside_a_finalizer_is_raised_again_in_the_main_thread()
     exception there into the signal again, so the command stops at the next line of its own code, no traceback."""
     code = textwrap.dedent("""
         import sys
-        import grainforge.cli.main as m
+        import grainforge.cli.interrupts as m
         import signal
         signal.signal(signal.SIGTERM, m._terminate)
         sys.unraisablehook = m._signal_in_finalizer(sys.unraisablehook)

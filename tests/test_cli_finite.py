@@ -27,7 +27,7 @@ import click
 import pytest
 
 from grainforge.cli.main import cli
-from grainforge.cli.options import FloatList
+from grainforge.cli.options import FiniteFloat, FloatList
 
 ROOT = Path(__file__).resolve().parents[1]
 OTTAWA = ROOT / "examples" / "sand-atlas" / "ottawa-7.3um.csv"
@@ -72,7 +72,7 @@ def _commands(group: click.Group = cli, path: tuple[str, ...] = ()):
 def _holds_floats(t: click.ParamType) -> bool:
     if isinstance(t, click.Tuple):
         return any(_holds_floats(u) for u in t.types)
-    return isinstance(t, (click.types.FloatParamType, FloatList))
+    return isinstance(t, (click.types.FloatParamType, FiniteFloat, FloatList))
 
 
 def _float_options(cmd: click.Command) -> list[click.Option]:

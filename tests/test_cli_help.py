@@ -116,3 +116,14 @@ def test_group_help_follows_the_registries(runner, monkeypatch):
     assert "zzmethod" in _section(res.output, "Generator methods (grainforge generate METHOD)")
     assert "calibrate zzsub" in _section(res.output, "Subcommands")
     assert "A subcommand added by the test." in res.output
+
+
+def test_every_option_is_declared_in_the_help_style():
+    """Every option of every command is declared with ``grainforge.cli.help_style.option`` (the one help style,
+    through click's public ``cls``), not a plain ``click.option`` whose help would end in click's own style."""
+    from grainforge.cli.help_style import HelpOption, unstyled_options
+    from grainforge.cli.main import cli
+
+    assert unstyled_options(cli) == []
+    count = cli.commands["generate"].commands["fso"].params
+    assert any(isinstance(p, HelpOption) for p in count)

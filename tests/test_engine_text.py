@@ -50,8 +50,12 @@ def grains(tmp_path_factory):
     return out
 
 
-class _Written(Exception):
-    """Raised in place of the engine run once the deck is read back."""
+class _Written(SystemExit):
+    """Raised in place of the engine run once the deck is read back: a SystemExit, which the command group lets
+    through as it is (any other exception would be reported as a bug, exit 1)."""
+
+    def __init__(self):
+        super().__init__(99)
 
 
 def _simulate_cases():

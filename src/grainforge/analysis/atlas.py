@@ -150,13 +150,13 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
     if need > budget:
         shrink = (budget / need) ** (1.0 / 3.0) * 0.97  # the image's cells go as the resolution cubed
         if voxel_size is None:
-            fits = f"--voxels-across {math.floor(voxels_across * shrink)}"
+            fits = f"{{voxels_across}} {math.floor(voxels_across * shrink)}"
         else:
             fits = f"a voxel size of {voxel_size / shrink:.3g}{' ' + unit if unit else ''} or more"
         raise TooLargeError(f"{worst_name}: its voxel image ({worst:.3g} cells) would need about "
                             f"{need / 1024**3:.3g} GiB with {max(1, int(workers))} grain(s) measured at once; the "
                             f"limit is {budget / 1024**3:.3g} GiB (half this machine's memory): the largest that "
-                            f"fits is {fits} (or fewer --workers)")
+                            f"fits is {fits} (or fewer {{workers}})", setting=("voxels_across", "workers"))
 
 
 def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from .atlas import OPENING_RADIUS, SIGMA, opening_fraction, voxel_descriptors
 
 __all__ = ["LabelBox", "measure_scan", "scan_seconds", "label_boxes", "measure_labels", "measure_grain", "check_labels", "segment", "segment_volume",
@@ -129,12 +130,13 @@ def check_labels(dtype, path: str = "the image") -> None:
     >>> check_labels(np.dtype("float32"), "scan.tif")
     Traceback (most recent call last):
     ...
-    ValueError: scan.tif: a float32 image cannot hold labels (one integer per grain, 0 the void): threshold a greyscale image to a binary one first and give it with --segment
+    grainforge.errors.InputError: scan.tif: a float32 image cannot hold labels (one integer per grain, 0 the void): threshold a greyscale image to a binary one first and give it with segment
     """
     dtype = np.dtype(dtype)
     if dtype.kind not in "biu":
-        raise ValueError(f"{path}: a {dtype.name} image cannot hold labels (one integer per grain, 0 the void): "
-                         "threshold a greyscale image to a binary one first and give it with --segment")
+        raise InputError(f"{path}: a {dtype.name} image cannot hold labels (one integer per grain, 0 the void): "
+                         "threshold a greyscale image to a binary one first and give it with {segment}",
+                         setting="segment")
 
 
 def _slab_size(volume) -> int:

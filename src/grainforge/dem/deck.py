@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import OutputExistsError
 from ..rng import RNGLike
 
 __all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop",
@@ -573,5 +574,5 @@ def write_files(files: Mapping[str, str | bytes], out: str | Path, *, overwrite:
     if not overwrite:
         existing = [out / p for p in files if (out / p).exists()]
         if existing:
-            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+            raise OutputExistsError(f"{existing[0]} exists; use {{overwrite}}", setting="overwrite")
     return [atomic_write(out / p, data) for p, data in files.items()]

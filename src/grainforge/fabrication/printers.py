@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import FileFormatError
+
 __all__ = ["Printer", "PRINTERS", "get_printer", "load_printers", "TECHNOLOGIES"]
 
 TECHNOLOGIES = ("polyjet", "fdm", "sla")
@@ -225,7 +227,7 @@ def load_printers(path: str | Path) -> dict[str, Printer]:
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: not a valid TOML file ({exc})") from None
+        raise FileFormatError(f"{path}: not a valid TOML file ({exc})") from None
     tables = data.get("printer")
     if not isinstance(tables, dict) or not tables or not all(isinstance(t, dict) for t in tables.values()):
         raise ValueError(f"{path}: expected one or more [printer.NAME] tables")

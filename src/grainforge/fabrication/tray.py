@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError, OutputExistsError
 from ..geometry.moments import sphere_diameter
 from ..rng import RNGLike, as_generator
 from .layout import ShelfPacker, orient_principal, orient_stable
@@ -135,7 +136,7 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
 
         problem = mesh_size_problem(v)
         if problem is not None:
-            raise ValueError(f"{path}: {problem} (or give tray --size)")
+            raise InputError(f"{path}: {problem} (or give {{size}})", setting="size")
     return path.stem, str(path), v, f, None
 
 
@@ -336,10 +337,10 @@ def _check_size_of_job(source, workers: int) -> None:
     from ..runtime.estimate import check_job, check_memory, grain_seconds
 
     n = len(source)
-    check_memory(n * ROW_BYTES, what=f"a tray of {n} grains", option="--count")
+    check_memory(n * ROW_BYTES, what=f"a tray of {n} grains", option="{count}", setting="count")
     if isinstance(source, GeneratorSource):
         check_job(n, grain_seconds(source.method, source.params), what=f"a tray of {n} {source.method} grains",
-                  option="--count", workers=workers)
+                  option="{count}", setting="count", workers=workers)
 
 
 def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, str, float]:
@@ -347,7 +348,7 @@ def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, 
     out = Path(out)
     fmt = out.suffix.lower()
     if fmt not in OUT_FORMATS:
-        raise ValueError(f"--out must end in .3mf or .stl, got {out.name!r}")
+        raise InputError(f"{{out}} must end in .3mf or .stl, got {out.name!r}", setting="out")
     gap = printer.default_gap if gap is None else float(gap)
     if not np.isfinite(gap) or gap <= 0:
         raise ValueError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
@@ -356,7 +357,7 @@ def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, 
     if not overwrite:
         existing = _existing_outputs(out)
         if existing:
-            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+            raise OutputExistsError(f"{existing[0]} exists; use {{overwrite}}", setting="overwrite")
     return out, fmt, gap
 
 

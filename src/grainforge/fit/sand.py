@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError, InputError
+
 #: the four descriptors that are matched
 DESCRIPTORS = ("sphericity", "convexity", "flatness", "elongation")
 #: Sand Atlas column of each quantity (units in the header; lengths in µm)
@@ -94,16 +96,16 @@ def _sand_text(path: Path) -> str:
         raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
     for magic, what in _MAGIC:
         if data.startswith(magic):
-            raise ValueError(f"{path}: not a CSV table: the file is {what}")
+            raise FileFormatError(f"{path}: not a CSV table: the file is {what}")
     if b"\x00" in data[:4096]:
-        raise ValueError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
+        raise FileFormatError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         byte = data[exc.start]
         guess = data[exc.start:exc.start + 1].decode("latin-1")
-        raise ValueError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
-                         "or Windows-1252): save the table as UTF-8") from None
+        raise FileFormatError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
+                             "or Windows-1252): save the table as UTF-8") from None
 
 
 def _check_separator(path: Path, header: Sequence[str]) -> None:
@@ -237,14 +239,15 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
     _check_ids_and_volumes(path, rows, header)
     if voxel_size is None:
         if "voxel_size" not in data:
-            raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size-um)")
+            raise InputError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size ({{voxel_size}})",
+                             setting="voxel_size")
         voxel_size = float(np.median(data["voxel_size"]))
     elif "voxel_size" in data:
         column = np.asarray(data["voxel_size"])
         if not np.allclose(column, voxel_size, rtol=1e-6, atol=0):
-            raise ValueError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
+            raise InputError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
                              f"{VOXEL_COLUMN!r} column ({np.median(column):g} µm): give one of them (drop "
-                             "--voxel-size-um to use the column)")
+                             "{voxel_size} to use the column)", setting="voxel_size")
     if not (math.isfinite(voxel_size) and voxel_size > 0):
         raise ValueError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")
     across = np.asarray(data["equivalent_diameter"]) / voxel_size

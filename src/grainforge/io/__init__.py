@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._version import __version__
+from ..errors import FileFormatError
 from .inputs import MESH_SUFFIXES
 from .sniff import what_is
 from .stl import check_stl, read_stl, stl_header
@@ -361,18 +362,18 @@ def read_mesh(path: str | os.PathLike):
                 head = fh.read(16)
             other = what_is(head)
             if other is not None:
-                raise ValueError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
+                raise FileFormatError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
             loaded = trimesh.load(path, force="mesh", process=False)
     except ValueError as exc:
         if str(exc).startswith(f"{path}:"):  # ours: it names the file already
             raise
         detail = " ".join(str(exc).split()) or type(exc).__name__
-        raise ValueError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
+        raise FileFormatError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # trimesh raises many types for corrupt input
         detail = " ".join(str(exc).split()) or type(exc).__name__
-        raise ValueError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
+        raise FileFormatError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
         raise ValueError(f"{path}: holds no triangles")
     if not np.isfinite(np.asarray(loaded.vertices)).all():

@@ -37,6 +37,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .._version import __version__
+from ..errors import FileFormatError
 
 __all__ = [
     "ThreeMFWriter", "mesh_xml", "read_3mf", "read_3mf_file", "Part",
@@ -230,11 +231,11 @@ def read_3mf(file) -> list[Part]:
     try:
         zf = zipfile.ZipFile(file)
     except (zipfile.BadZipFile, OSError) as exc:
-        raise ValueError(f"not a 3MF file ({exc})") from None
+        raise FileFormatError(f"not a 3MF file ({exc})") from None
     with zf:
         names = {n.lower(): n for n in zf.namelist()}
         if _MODEL.lower() not in names:
-            raise ValueError("not a 3MF file (no 3D/3dmodel.model)")
+            raise FileFormatError("not a 3MF file (no 3D/3dmodel.model)")
         objects: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         items: list[tuple[str, np.ndarray]] = []
         with zf.open(names[_MODEL.lower()]) as fh:
@@ -295,11 +296,12 @@ def read_3mf_file(path) -> list[Part]:
     try:
         parts = read_3mf(path)
     except (ValueError, ElementTree.ParseError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise FileFormatError(f"{path}: {exc}") from None
     except OSError as exc:
         raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # a malformed package: missing elements or attributes, bad indices
-        raise ValueError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+        detail = " ".join(str(exc).split())
+        raise FileFormatError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {detail})") from None
     if not parts:
         raise ValueError(f"{path}: holds no objects")
     for part in parts:

@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError
+
 __all__ = ["load_image", "otsu_threshold", "grain_masks", "draw_contours"]
 
 
@@ -67,7 +69,7 @@ def load_image(image) -> np.ndarray:
                     im = im.convert("L")
                 arr = np.asarray(im, dtype=np.float64)
         except (UnidentifiedImageError, OSError, ValueError) as exc:
-            raise ValueError(f"{path}: cannot read image ({exc})") from None
+            raise FileFormatError(f"{path}: cannot read image ({exc})") from None
     else:
         arr = np.asarray(image, dtype=np.float64)
     if arr.ndim == 3:

@@ -40,6 +40,8 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from ..errors import InputError
+
 __all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "calibration_estimate", "friction_uncertainty", "pooled_sd",
            "local_slope", "calibrated_angle", "calibration_seconds", "failed_calibration_runs",
            "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
@@ -90,7 +92,7 @@ class FrictionSearch:
     converged: bool
 
 
-class Unreachable(ValueError):
+class Unreachable(InputError):
     """The target angle lies outside the angles reached in the μ range (``reached``: lowest, highest angle)."""
 
     def __init__(self, message: str, reached: tuple[float, float]):

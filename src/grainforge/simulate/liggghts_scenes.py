@@ -100,7 +100,7 @@ def mpirun_executable() -> str:
     from .process import find_executable
 
     return find_executable("GRAINFORGE_MPIRUN", "mpirun",
-                           "--mpi: mpirun is not installed (on Debian: apt-get install openmpi-bin)")
+                           "{mpi}: mpirun is not installed (on Debian: apt-get install openmpi-bin)", setting="mpi")
 
 
 def restitution_of_local_damping(damping: float) -> float:

@@ -9,13 +9,14 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import EngineMissing
 from ..runtime.children import owned_command
 
 __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder",
            "mpi_slots", "check_mpi_ranks"]
 
 
-def find_executable(variable: str, name: str, missing: str) -> str:
+def find_executable(variable: str, name: str, missing: str, setting: str | None = None) -> str:
     """Path of command ``name``, or of the command the environment variable ``variable`` names.
 
     Parameters
@@ -26,6 +27,8 @@ def find_executable(variable: str, name: str, missing: str) -> str:
         The command looked up on ``PATH`` when ``variable`` is not set.
     missing : str
         The message of the error raised when the command is not found.
+    setting : str, optional
+        The setting that asks for the command, named in ``missing`` as ``{setting}`` (``mpi``).
 
     Returns
     -------
@@ -34,14 +37,14 @@ def find_executable(variable: str, name: str, missing: str) -> str:
 
     Raises
     ------
-    FileNotFoundError
-        With the message ``missing`` when there is none.
+    grainforge.errors.EngineMissing
+        With the message ``missing`` when there is none (a ``FileNotFoundError``).
     """
     import shutil
 
     exe = shutil.which(os.environ.get(variable, name))
     if exe is None:
-        raise FileNotFoundError(missing)
+        raise EngineMissing(missing, setting=setting)
     return exe
 
 
