@@ -175,11 +175,11 @@ def label_boxes(volume, *, progress=None) -> list[LabelBox]:
         if slab.dtype == bool:
             slab = slab.view(np.uint8)
         if slab.dtype.kind == "i" and slab.size and slab.min() < 0:
-            raise ValueError(f"{volume.path}: negative values ({int(slab.min())}): labels are 0 (void) and positive "
+            raise InputError(f"{volume.path}: negative values ({int(slab.min())}): labels are 0 (void) and positive "
                              "integers")
         m = int(slab.max()) if slab.size else 0
         if m > MAX_LABEL:
-            raise ValueError(f"{volume.path}: label {m} is beyond {MAX_LABEL}: number the labels 1, 2, 3, ... "
+            raise InputError(f"{volume.path}: label {m} is beyond {MAX_LABEL}: number the labels 1, 2, 3, ... "
                              "(skimage.segmentation.relabel_sequential)")
         if m > top:  # grow the tables
             grow = m + 1 - (0 if counts is None else len(counts))
@@ -331,7 +331,7 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
 
     h = float(voxel_size)
     if not (math.isfinite(h) and h > 0):
-        raise ValueError(f"voxel size must be a positive number, got {voxel_size!r}")
+        raise InputError(f"voxel size must be a positive number, got {voxel_size!r}")
     shape = volume.shape
     boxes = list(boxes)
     todo = [b for b in boxes if b.voxels >= min_voxels and (border or not b.touches(shape))]
@@ -471,12 +471,12 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
     from skimage.segmentation import watershed
 
     if not (math.isfinite(marker_distance) and marker_distance > 0):
-        raise ValueError(f"marker distance must be a positive fraction of the typical grain size, got {marker_distance!r}")
+        raise InputError(f"marker distance must be a positive fraction of the typical grain size, got {marker_distance!r}")
     if not (math.isfinite(marker_depth) and marker_depth >= 0):
-        raise ValueError(f"marker depth must be a fraction of the typical grain size >= 0, got {marker_depth!r}")
+        raise InputError(f"marker depth must be a fraction of the typical grain size >= 0, got {marker_depth!r}")
     b = np.asarray(binary) != 0
     if not b.any():
-        raise ValueError("the binary image has no grain voxel")
+        raise InputError("the binary image has no grain voxel")
     d = ndimage.distance_transform_edt(b).astype(np.float32)
     typical = typical_diameter(d, b)
     md = max(1, int(round(marker_distance * typical)))
@@ -632,7 +632,7 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
     verts, faces, _, _ = marching_cubes(smooth, level=0.5, allow_degenerate=False)
     bodies = split_bodies(verts.astype(np.float64), faces.astype(np.int64))
     if not bodies:
-        raise ValueError("the grain's surface is empty")
+        raise InputError("the grain's surface is empty")
     vols = [abs(signed_volume(v, f)) for v, f in bodies]
     v, f = bodies[int(np.argmax(vols))]
     xyz = (v[:, ::-1] - pad + np.asarray(lo, np.float64)[::-1] + 0.5) * float(voxel_size)

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..errors import InputError
+
 __all__ = ["write_deck"]
 
 
@@ -41,10 +43,10 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
     from . import SUPPORTED
 
     if engine not in SUPPORTED:
-        raise ValueError(f"engine must be one of {', '.join(SUPPORTED)}, got {engine!r}")
+        raise InputError(f"engine must be one of {', '.join(SUPPORTED)}, got {engine!r}")
     for t in templates:
         if t.shape not in SUPPORTED[engine]:
-            raise ValueError(f"{engine} does not support shape {t.shape!r}")
+            raise InputError(f"{engine} does not support shape {t.shape!r}")
     if engine == "yade":
         from .yade import write_deck as w
     elif engine == "liggghts":

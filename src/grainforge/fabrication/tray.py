@@ -214,7 +214,7 @@ class ShelfPacker:
         """
         a, b, c = (float(e) for e in extents)
         if a > self.W or b > self.D or c > self.H:
-            raise ValueError(
+            raise InputError(
                 f"a grain of {a:.3g} x {b:.3g} x {c:.3g} mm does not fit the build volume "
                 f"{self.W:g} x {self.D:g} x {self.H:g} mm"
             )
@@ -311,12 +311,12 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
     path = Path(task["path"])
     parts = read_parts(path)
     if len(parts) != 1:
-        raise ValueError(f"{path}: holds {len(parts)} parts; a tray takes one grain per file")
+        raise InputError(f"{path}: holds {len(parts)} parts; a tray takes one grain per file")
     part = parts[0]
     v, f = part.vertices, part.faces
     problems = solid_problems(v, f)
     if problems:
-        raise ValueError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
+        raise InputError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
     if task["size"] is not None:
         v = v * scale_factor(part, task["size"], task["size_definition"])
     else:  # printed as it is, in mm
@@ -539,9 +539,9 @@ def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, 
         raise InputError(f"{{out}} must end in .3mf or .stl, got {out.name!r}", setting="out")
     gap = printer.default_gap if gap is None else float(gap)
     if not np.isfinite(gap) or gap <= 0:
-        raise ValueError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
+        raise InputError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
     if len(source) == 0:
-        raise ValueError("no grains to lay out")
+        raise InputError("no grains to lay out")
     if not overwrite:
         existing = _existing_outputs(out)
         if existing:
@@ -639,7 +639,7 @@ def plates_value(plates: int | str) -> int | str:
         return "auto"
     if isinstance(plates, (int, np.integer)) and not isinstance(plates, bool) and plates >= 1:
         return int(plates)
-    raise ValueError(f"plates must be a positive number of print files or 'auto', got {plates!r}")
+    raise InputError(f"plates must be a positive number of print files or 'auto', got {plates!r}")
 
 
 def _ceil_div(a: int, b: int) -> int:
@@ -867,7 +867,7 @@ def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf
     printer = get_printer(printer)
     plates = plates_value(plates)
     if max_triangles is not None and (int(max_triangles) != max_triangles or max_triangles < 1):
-        raise ValueError(f"max_triangles must be a positive whole number, got {max_triangles!r}")
+        raise InputError(f"max_triangles must be a positive whole number, got {max_triangles!r}")
     budget = None if max_triangles is None else int(max_triangles)
     n = len(source)
     if budget is None:
@@ -887,7 +887,7 @@ def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf
     else:
         files = None
     if files is not None and files > MAX_FILES:
-        raise ValueError(f"a tray of {n} grains in {files} print files is more than {MAX_FILES} files (each with its "
+        raise InputError(f"a tray of {n} grains in {files} print files is more than {MAX_FILES} files (each with its "
                          f"preview); raise --max-triangles or lower --plates")
     per_file = None if files is None else _ceil_div(n, files)
     plan = TrayPlan(source, printer, fmt, plates, budget, files, per_file, max_faces, resolution, given=given)

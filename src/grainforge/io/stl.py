@@ -23,7 +23,7 @@ from typing import BinaryIO
 import numpy as np
 
 from .._version import __version__
-from ..errors import FileFormatError
+from ..errors import FileFormatError, InputError
 from .sniff import what_is
 
 __all__ = ["STL_DTYPE", "TRUNCATED_FACTOR", "stl_header", "stl_triangles", "STLWriter", "check_stl", "read_stl",
@@ -120,7 +120,7 @@ class STLWriter:
 
     def close(self) -> None:
         if self.triangles >= 2**32:
-            raise ValueError(f"binary STL holds at most 2^32 - 1 triangles, got {self.triangles}; use .3mf")
+            raise InputError(f"binary STL holds at most 2^32 - 1 triangles, got {self.triangles}; use .3mf")
         end = self._fh.tell()
         self._fh.seek(self._start + 80)
         self._fh.write(struct.pack("<I", self.triangles))
@@ -175,7 +175,7 @@ def check_stl(path: str | os.PathLike) -> None:
     with path.open("rb") as fh:
         head = fh.read(1024)
     if size == 0:
-        raise ValueError(f"{path}: empty file")
+        raise InputError(f"{path}: empty file")
     other = what_is(head)
     if other is not None:
         raise FileFormatError(f"{path}: not an STL file (it is {other})")
@@ -183,7 +183,7 @@ def check_stl(path: str | os.PathLike) -> None:
         n = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
         if size == 84 + 50 * n:
             if n == 0:
-                raise ValueError(f"{path}: binary STL with no facets")
+                raise InputError(f"{path}: binary STL with no facets")
             return
     if head.lstrip()[:5].lower() == b"solid":
         try:

@@ -37,7 +37,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .._version import __version__
-from ..errors import FileFormatError
+from ..errors import FileFormatError, InputError
 
 __all__ = [
     "ThreeMFWriter", "mesh_xml", "read_3mf", "read_3mf_file", "Part",
@@ -262,7 +262,7 @@ def read_3mf(file) -> list[Part]:
     parts = []
     for oid, m in items:
         if oid not in objects:
-            raise ValueError(f"3MF build item refers to missing object {oid}")
+            raise InputError(f"3MF build item refers to missing object {oid}")
         name, v, f = objects[oid]
         parts.append(Part(name, v @ m[:3, :3].T + m[:3, 3], f))
     return parts
@@ -292,19 +292,19 @@ def read_3mf_file(path) -> list[Part]:
 
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+        raise InputError(f"{path}: no such file")
     try:
         parts = read_3mf(path)
     except (ValueError, ElementTree.ParseError) as exc:
         raise FileFormatError(f"{path}: {exc}") from None
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
+        raise InputError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # a malformed package: missing elements or attributes, bad indices
         detail = " ".join(str(exc).split())
         raise FileFormatError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {detail})") from None
     if not parts:
-        raise ValueError(f"{path}: holds no objects")
+        raise InputError(f"{path}: holds no objects")
     for part in parts:
         if not np.isfinite(part.vertices).all():
-            raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
+            raise InputError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
     return parts

@@ -61,7 +61,7 @@ def tifffile_module():
     try:
         import tifffile
     except ImportError:
-        raise ValueError(TIFFFILE_HINT) from None
+        raise InputError(TIFFFILE_HINT) from None
     return tifffile
 
 
@@ -167,9 +167,9 @@ def _check_3d(path: Path, shape, what: str) -> tuple[int, int, int]:
     shape = tuple(int(s) for s in shape)
     squeezed = tuple(s for s in shape if s != 1) if len(shape) > 3 else shape
     if len(squeezed) != 3:
-        raise ValueError(f"{path}: not a 3D image: {what} has shape {shape} (a volume has 3 axes, Z Y X)")
+        raise InputError(f"{path}: not a 3D image: {what} has shape {shape} (a volume has 3 axes, Z Y X)")
     if min(squeezed) < 1:
-        raise ValueError(f"{path}: the image is empty (shape {shape})")
+        raise InputError(f"{path}: the image is empty (shape {shape})")
     return squeezed  # type: ignore[return-value]
 
 
@@ -202,7 +202,7 @@ def _tiff_voxel_size(tif) -> float | None:
         size = xy * scale
         z = meta.get("spacing")
         if z is not None and not math.isclose(float(z) * scale, size, rel_tol=1e-3):
-            raise ValueError(f"{tif.filehandle.path}: anisotropic voxels ({size:g} µm in x and y, "
+            raise InputError(f"{tif.filehandle.path}: anisotropic voxels ({size:g} µm in x and y, "
                              f"{float(z) * scale:g} µm in z): the descriptors need cubic voxels")
         return float(size) if math.isfinite(size) and size > 0 else None
     except ValueError:
@@ -268,7 +268,7 @@ def _open_tiff(path: Path) -> Volume:
     if offset is not None:  # uncompressed, contiguous: map it
         return Volume(path, shape, dtype, _mapped_reader(path, offset, shape, dtype), voxel_size_um=size)
     if npages != shape[0]:
-        raise ValueError(f"{path}: a compressed TIFF with {npages} page(s) for {shape[0]} slices: save it "
+        raise InputError(f"{path}: a compressed TIFF with {npages} page(s) for {shape[0]} slices: save it "
                          "uncompressed, as one page per slice, or as .npy")
 
     def read(z0: int, z1: int) -> np.ndarray:
@@ -285,7 +285,7 @@ def _open_slices(path: Path) -> Volume:
     files = sorted((q for q in path.iterdir() if q.suffix.lower() in TIFF_SUFFIXES and q.is_file()
                     and not q.name.startswith(".")), key=_natural_key)
     if not files:
-        raise ValueError(f"{path}: a folder without TIFF slices ({', '.join(TIFF_SUFFIXES)})")
+        raise InputError(f"{path}: a folder without TIFF slices ({', '.join(TIFF_SUFFIXES)})")
     try:
         with _tifffile_warnings() as warned, tifffile.TiffFile(files[0]) as tif:
             first = tif.series[0]
@@ -297,9 +297,9 @@ def _open_slices(path: Path) -> Volume:
     except Exception as exc:
         raise FileFormatError(f"{files[0]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
     if len(plane) != 2:
-        raise ValueError(f"{files[0]}: a slice must be a 2D image; it has shape {first.shape}")
+        raise InputError(f"{files[0]}: a slice must be a 2D image; it has shape {first.shape}")
     if len(files) < 2:
-        raise ValueError(f"{path}: not a 3D image: one TIFF slice")
+        raise InputError(f"{path}: not a 3D image: one TIFF slice")
 
     def read(z0: int, z1: int) -> np.ndarray:
         out = np.empty((max(z1 - z0, 0), *plane), dtype)
@@ -317,7 +317,7 @@ def _open_slices(path: Path) -> Volume:
                                       f"{exc})") from None
             a = np.asarray(a)
             if a.size != out[k].size or a.dtype != dtype:
-                raise ValueError(f"{files[z]}: slice of shape {a.shape} ({a.dtype}); the first is {plane} ({dtype})")
+                raise InputError(f"{files[z]}: slice of shape {a.shape} ({a.dtype}); the first is {plane} ({dtype})")
             out[k] = a.reshape(plane)
         return out
 
@@ -380,10 +380,10 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
     """
     path = Path(path)
     if not path.exists():
-        raise ValueError(f"{path}: no such file or folder")
+        raise InputError(f"{path}: no such file or folder")
     if raw_shape is not None:
         if path.is_dir():
-            raise ValueError(f"{path}: a folder; a raw image is one file")
+            raise InputError(f"{path}: a folder; a raw image is one file")
         try:
             dtype = np.dtype(raw_dtype or "uint16")
         except TypeError:
@@ -415,7 +415,7 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
             raise FileFormatError(f"{path}: not a .npy array")
         shape = _check_3d(path, m.shape, "the array")
         if m.dtype.hasobject or m.dtype.names is not None:
-            raise ValueError(f"{path}: an array of {m.dtype}, not an image")
+            raise InputError(f"{path}: an array of {m.dtype}, not an image")
         order = "F" if (m.flags.f_contiguous and not m.flags.c_contiguous) else "C"
         offset, dtype = int(m.offset), m.dtype
         del m
@@ -466,7 +466,7 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, f
     path = Path(path)
     suffix = (fmt or path.suffix).lower()
     if suffix not in LABEL_SUFFIXES:
-        raise ValueError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
+        raise InputError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
     tifffile = tifffile_module() if suffix != ".npy" else None
     with atomic_file(path) as tmp:
         if suffix == ".npy":

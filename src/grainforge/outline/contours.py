@@ -36,6 +36,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..errors import InputError
 from ..params import ParameterError
 from ..rng import RNGLike, as_generator
 from .imaging import grain_masks, load_image
@@ -190,9 +191,9 @@ class Contour:
     def __post_init__(self):
         r = np.array(self.radii, dtype=np.float64).ravel()
         if r.size < 8:
-            raise ValueError(f"a contour needs at least 8 radii, got {r.size}")
+            raise InputError(f"a contour needs at least 8 radii, got {r.size}")
         if not np.isfinite(r).all() or r.min() <= 0:
-            raise ValueError("contour radii must be finite and positive")
+            raise InputError("contour radii must be finite and positive")
         mean = float(r.mean())
         r = r / mean
         r.setflags(write=False)
@@ -647,7 +648,7 @@ class Contour:
 
         lab = label(mask, connectivity=2)
         if lab.max() == 0:
-            raise ValueError("image holds no grain (nothing on the foreground side of the threshold)")
+            raise InputError("image holds no grain (nothing on the foreground side of the threshold)")
         sizes = np.bincount(lab.ravel())
         sizes[0] = 0
         largest = lab == int(np.argmax(sizes))
@@ -746,7 +747,7 @@ def polygon_contour(points, *, n_angles: int = DEFAULT_ANGLES, source: str = "po
     if len(p) > 1 and np.allclose(p[0], p[-1]):
         p = p[:-1]
     if len(p) < 3:
-        raise ValueError("an outline needs at least 3 points")
+        raise InputError("an outline needs at least 3 points")
     cx, cy = _area_centroid(p[:, 0], p[:, 1])
     radii, star = _ray_cast(p[:, 0] - cx, p[:, 1] - cy, n_angles)
     return Contour(radii, 1.0, (cx, cy), star, source)
@@ -793,7 +794,7 @@ def _area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """
     area, cx, cy = polygon_area_centroid(x, y)
     if abs(area) < 1e-12:
-        raise ValueError("grain is too small to trace a contour")
+        raise InputError("grain is too small to trace a contour")
     return cx, cy
 
 
@@ -852,7 +853,7 @@ def _ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, 
     radii = np.full(n_angles, -np.inf)
     np.maximum.at(radii, ray, dist[ok])
     if not np.isfinite(radii).all():
-        raise ValueError("grain boundary does not enclose its centroid; cannot cast rays")
+        raise InputError("grain boundary does not enclose its centroid; cannot cast rays")
     star = bool((np.bincount(ray, minlength=n_angles) == 1).all())
     return radii, star
 
@@ -904,7 +905,7 @@ def mask_contour(
     if not filled:
         m = binary_fill_holes(m)
     if not m.any():
-        raise ValueError("mask holds no grain")
+        raise InputError("mask holds no grain")
     padded = np.pad(m, 1).astype(np.float64)
     loops = find_contours(padded, 0.5)
     loop = max(loops, key=len)
@@ -988,7 +989,7 @@ def scan_image(
     (2, [600, 800], 1, 1)
     """
     if min_area < 0:
-        raise ValueError(f"min_area must be a non-negative number of pixels, got {min_area!r}")
+        raise InputError(f"min_area must be a non-negative number of pixels, got {min_area!r}")
     from skimage.measure import label, regionprops
 
     mask = grain_masks(load_image(image), threshold=threshold, foreground=foreground)

@@ -278,7 +278,7 @@ def run_batch(
     from .generate import MANIFEST
 
     if workers is not None and workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+        raise InputError(f"workers must be >= 1, got {workers}")
     out = Path(out)
     journal = out / JOURNAL
     n_workers = 1 if scheduler else min(workers or os.cpu_count() or 1, recipe.count)

@@ -14,7 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..analysis.descriptors import BASIC_COLUMNS, basic_descriptors
-from ..errors import OutputExistsError
+from ..errors import InputError, OutputExistsError
 from ..fabrication.scale import check_size, to_size
 from ..io import FORMATS, _cell, export_bytes, file_mode
 from ..io.inputs import MANIFEST, read_manifest
@@ -322,7 +322,7 @@ def write_run(
         For bad parameters (named).
     """
     if fmt not in FORMATS:
-        raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        raise InputError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     check_size(size, size_definition)  # before anything is generated or written
     out = Path(out)
     count = len(seeds)

@@ -208,7 +208,7 @@ def load_recipe(path: str | os.PathLike) -> Recipe:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read recipe ({exc})") from None
+        raise InputError(f"{path}: cannot read recipe ({exc})") from None
     return parse_recipe(text, source=str(path))
 
 

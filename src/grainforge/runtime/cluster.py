@@ -141,7 +141,7 @@ def probe(address: str, timeout: float) -> None:
     >>> probe(f"tcp://127.0.0.1:{port}", 5)
     Traceback (most recent call last):
     ...
-    ValueError: cannot connect to the Dask scheduler at tcp://127.0.0.1:...: connection refused (nothing listens ...
+    grainforge.errors.InputError: cannot connect to the Dask scheduler at tcp://127.0.0.1:...: connection refused (nothing listens ...
     """
     scheme, sep, rest = address.rpartition("://")
     if (scheme if sep else "tcp") not in TCP_SCHEMES:
@@ -158,7 +158,7 @@ def probe(address: str, timeout: float) -> None:
         raise InputError(f"{where}: no answer within {timeout:g} s; check {{scheduler}}, and that the scheduler "
                          "runs and its port is open", setting="scheduler") from None
     except ConnectionRefusedError:
-        raise ValueError(f"{where}: connection refused (nothing listens on port {port} of {host}); start the "
+        raise InputError(f"{where}: connection refused (nothing listens on port {port} of {host}); start the "
                          "scheduler (dask scheduler) or give the address it prints") from None
     except OSError as exc:
         reason = {errno.EHOSTUNREACH: "no route to the host", errno.ENETUNREACH: "network unreachable"}.get(
@@ -257,9 +257,9 @@ def connect(address: str, *, timeout: str | None = None) -> Iterator[Any]:
             client = distributed.Client(address, timeout=timeout or CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise ValueError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
+            raise InputError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
         except MemoryError:  # something else answers there: its first bytes read as a huge Dask message
-            raise ValueError(f"cannot connect to the Dask scheduler at {address}: what answers there does not speak "
+            raise InputError(f"cannot connect to the Dask scheduler at {address}: what answers there does not speak "
                              "Dask's protocol; give the address the scheduler prints") from None
         try:
             check_versions(client, address)

@@ -9,7 +9,7 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
-from ..errors import EngineMissing
+from ..errors import EngineMissing, InputError
 from ..runtime.children import owned_command
 
 __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder",
@@ -312,7 +312,7 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
     >>> check_mpi_ranks(100000, environ={})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: --mpi 100000: only ... rank(s) available (... core(s) here); use --mpi ... or fewer, or run ...
+    grainforge.errors.InputError: --mpi 100000: only ... rank(s) available (... core(s) here); use --mpi ... or fewer, or run ...
     >>> check_mpi_ranks(64, environ={"SLURM_NTASKS": "100000"})  # a batch allocation provides them
     """
     if mpi is None:
@@ -324,6 +324,6 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
         largest = max(1, slots // runs)
         if usable is not None:
             largest = max(1, usable(largest))
-        raise ValueError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
+        raise InputError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
                          + (" (or fewer --workers)" if runs > 1 else "")
                          + ", or run inside a batch allocation or with a hostfile that provides more")
