@@ -313,7 +313,7 @@ def test_the_largest_resolution_named_fits_and_one_more_does_not():
     budget = 2e8
     with pytest.raises(TooLargeError) as info:
         check_atlas_request(body, voxels_across=400, memory=budget)
-    n = int(str(info.value).split("--voxels-across ")[1].split()[0])
+    n = int(str(info.value).split("voxels_across ")[1].split()[0])  # the library names the setting
     check_atlas_request(body, voxels_across=n, memory=budget)
     assert image_cells(body[0][1], 0.8 / n) * IMAGE_BYTES_PER_CELL <= budget
     with pytest.raises(TooLargeError):  # and a tenth more does not
