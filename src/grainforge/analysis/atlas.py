@@ -373,7 +373,7 @@ def straddling_cubes(volume: np.ndarray, level: float) -> np.ndarray:
     ``level`` and some are not; only those cubes hold surface.  The mask marks
     each such cube at its lowest and its highest corner, so scikit-image
     visits every straddling cube whichever corner it tests, and skips most of
-    the others (the surface is the same: ``tests/test_atlas.py``).
+    the others (the surface is the same: ``tests/analysis/test_atlas.py``).
 
     Examples
     --------

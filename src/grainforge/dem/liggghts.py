@@ -76,7 +76,7 @@ _SEED_STRIDE = 1_000_003
 # LIGGGHTS refuses so small a region otherwise), and the box margins beyond the
 # walls (lower _MARGIN_LO, upper _MARGIN_HI cells, an irrational ratio) keep every cut of up to
 # 32 parts per side at least 4e-5 cells away from every node of a lattice up to 300 cells
-# wide (tests/test_dem.py) — 400 times the region's half-width.
+# wide (tests/dem/test_dem.py) — 400 times the region's half-width.
 _NODE_BOX = 2e-7
 _MARGIN_LO = 0.05
 _MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2

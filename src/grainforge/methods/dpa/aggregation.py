@@ -661,7 +661,7 @@ def separate_pinches(vertices: np.ndarray, faces: np.ndarray, gap: float = PINCH
     touch at a corner (a small fillet).  The two sides then stay ``gap`` apart
     instead of touching; the volume changes by about ``gap``/3 of the area of
     the faces around each moved vertex (≤ 2e-3 primary volumes per pinched
-    edge at the default, measured in ``tests/test_dpa.py``).
+    edge at the default, measured in ``tests/methods/test_dpa.py``).
 
     Parameters
     ----------
