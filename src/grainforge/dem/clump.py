@@ -592,6 +592,30 @@ def _exact_gain(c, r, ci, h, axes, shape, u_in, u_out, spill_weight):
     return gain, blk, lo, hi
 
 
+def _candidates(points, depth, inside_idx, h, overshoot, growth):
+    """The greedy's candidate spheres (:func:`_greedy`'s arguments of the same names).
+
+    Returns
+    -------
+    twins : int
+        Candidates per centre: candidate t is centre t // twins, grown when t is odd.
+    cp, cidx : ndarray
+        The candidate centres and their cell indices (grid order, x index first).
+    cr, cap : (K,) float64
+        Each candidate's radius and the cap it reaches beyond its centre's depth.
+    """
+    cand = depth > 1.0 * h
+    twins = 2 if growth > 0 else 1
+    bd, cp, cidx = depth[cand], points[cand], inside_idx[cand]
+    dd = np.repeat(bd, twins) if twins > 1 else bd
+    cr = dd - 0.5 * h + overshoot
+    if twins > 1:
+        cr[1::2] += growth * dd[1::2]
+    beyond = np.maximum(cr - dd, 0.0)
+    cap = np.pi * beyond**2 * (3.0 * cr - beyond) / 3.0
+    return twins, cp, cidx, cr, cap
+
+
 def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weight, growth=0.0):
     """Greedy spheres on the working grid.
 
@@ -635,16 +659,7 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     are dropped and the next 8 are counted: the greedy ends when no candidate is left with a
     positive estimate, or at ``n`` spheres.
     """
-    cand = depth > 1.0 * h
-    # the centres (grid order, x index first); candidate t is centre t // twins, grown when t is odd
-    twins = 2 if growth > 0 else 1
-    bd, cp, cidx = depth[cand], points[cand], inside_idx[cand]
-    dd = np.repeat(bd, twins) if twins > 1 else bd
-    cr = dd - 0.5 * h + overshoot
-    if twins > 1:
-        cr[1::2] += growth * dd[1::2]
-    beyond = np.maximum(cr - dd, 0.0)
-    cap = np.pi * beyond**2 * (3.0 * cr - beyond) / 3.0
+    twins, cp, cidx, cr, cap = _candidates(points, depth, inside_idx, h, overshoot, growth)
     # uncovered cells inside and outside the grain (one array each: two counts per candidate)
     u_in = inside.copy()
     u_out = ~inside
