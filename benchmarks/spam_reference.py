@@ -1,4 +1,4 @@
-"""Reference true sphericities from spam (the Sand Atlas's library), for ``tests/test_atlas_convention.py``.
+"""Reference true sphericities from spam (the Sand Atlas's library), for ``tests/analysis/test_atlas_convention.py``.
 
 Voxelises grains at 2 mm with 0.029 mm voxels (voxel centres inside the mesh,
 ``grainforge.analysis.atlas.voxelise``), measures each with
@@ -15,7 +15,7 @@ best in a separate environment: run this script's ``--measure`` step there::
 
 ``--scan`` (in spam's environment, after ``--masks``) puts the four grains side by side in one labelled
 volume, touching, labels 1–4, and stores it with spam's true sphericity of each label measured on that
-volume in ``tests/data/spam-scan.npz``, for ``tests/test_scan.py`` (``grainforge scan`` against spam on the
+volume in ``tests/data/spam-scan.npz``, for ``tests/fit/test_scan.py`` (``grainforge scan`` against spam on the
 same labelled image).
 """
 

@@ -12,7 +12,7 @@ each pytest process, and processes nobody waits for.
 Usage::
 
     .venv/bin/python benchmarks/suite_cpu.py [--top 30] [--markdown] -- -n 2 -m "not slow"
-    .venv/bin/python benchmarks/suite_cpu.py -- -n 0 tests/test_cli_contract.py
+    .venv/bin/python benchmarks/suite_cpu.py -- -n 0 tests/cli/test_cli_contract.py
 """
 
 from __future__ import annotations

@@ -3,7 +3,7 @@
     python examples/images/make_images.py
 
 They are synthetic, made by grainforge itself (``grainforge.viz.demo.example_images``): there are no
-real micrographs in this repository.  Same code, same pixels (``tests/test_doc_paths.py`` checks).
+real micrographs in this repository.  Same code, same pixels (``tests/project/test_doc_paths.py`` checks).
 """
 
 from pathlib import Path

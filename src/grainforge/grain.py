@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 
 from ._version import __version__
+from .errors import InputError
 
 __all__ = ["Grain"]
 
@@ -71,9 +72,9 @@ class Grain:
         object.__setattr__(self, "faces", _frozen(self.faces, np.int64))
         object.__setattr__(self, "info", MappingProxyType(dict(self.info)))
         if self.vertices.ndim != 2 or self.vertices.shape[1] != 3:
-            raise ValueError(f"vertices must have shape (V, 3), got {self.vertices.shape}")
+            raise InputError(f"vertices must have shape (V, 3), got {self.vertices.shape}")
         if self.faces.ndim != 2 or self.faces.shape[1] != 3:
-            raise ValueError(f"faces must have shape (F, 3), got {self.faces.shape}")
+            raise InputError(f"faces must have shape (F, 3), got {self.faces.shape}")
 
     @property
     def mesh(self):
@@ -105,7 +106,7 @@ class Grain:
         """
         factor = float(factor)
         if not np.isfinite(factor) or factor <= 0:
-            raise ValueError(f"scale factor must be a positive number, got {factor!r}")
+            raise InputError(f"scale factor must be a positive number, got {factor!r}")
         info = dict(self.info)
         info["scale"] = info.get("scale", 1.0) * factor
         return dataclasses.replace(self, vertices=self.vertices * factor, info=info)

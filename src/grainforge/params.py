@@ -29,6 +29,8 @@ import numbers
 from dataclasses import dataclass, field
 from typing import Any
 
+from .errors import InputError
+
 __all__ = [
     "ParameterError",
     "ParamSpec",
@@ -42,7 +44,7 @@ __all__ = [
 _KEY = "grainforge"
 
 
-class ParameterError(ValueError):
+class ParameterError(InputError):
     """A parameter value is out of range or malformed.
 
     Attributes
@@ -57,7 +59,7 @@ class ParameterError(ValueError):
     def __init__(self, name: str, reason: str):
         self.name = name
         self.reason = reason
-        super().__init__(f"{name} {reason}")
+        super().__init__(f"{name} {reason}", setting=name)
 
     def __reduce__(self):
         """Rebuild from the constructor's arguments (a worker's error crosses a process pool intact).

@@ -28,6 +28,8 @@ from typing import TypeAlias
 
 import numpy as np
 
+from .errors import InputError
+
 __all__ = ["RNGLike", "as_generator", "resolve_rng", "seed_sequence"]
 
 #: what a public ``rng`` argument accepts
@@ -37,7 +39,7 @@ RNGLike: TypeAlias = None | int | np.integer | np.random.SeedSequence | np.rando
 def _seed(value: int | np.integer) -> int:
     seed = int(value)
     if seed < 0:
-        raise ValueError(f"seed must be a non-negative integer, got {seed}")
+        raise InputError(f"seed must be a non-negative integer, got {seed}")
     return seed
 
 
@@ -88,7 +90,7 @@ def resolve_rng(rng: RNGLike) -> tuple[np.random.Generator, int | None]:
     if isinstance(rng, np.random.SeedSequence):
         plain = not rng.spawn_key and isinstance(rng.entropy, (int, np.integer))
         return np.random.default_rng(rng), (int(rng.entropy) if plain else None)
-    raise ValueError(
+    raise InputError(
         f"rng must be None, a non-negative int, a numpy SeedSequence or a numpy Generator, got {rng!r}"
     )
 
@@ -154,6 +156,6 @@ def seed_sequence(rng: RNGLike) -> np.random.SeedSequence:
         return np.random.SeedSequence()
     if isinstance(rng, (int, np.integer)) and not isinstance(rng, (bool, np.bool_)):
         return np.random.SeedSequence(_seed(rng))
-    raise ValueError(
+    raise InputError(
         f"rng must be None, a non-negative int, a numpy SeedSequence or a numpy Generator, got {rng!r}"
     )

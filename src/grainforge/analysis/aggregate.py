@@ -21,6 +21,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = [
     "aggregate_dimension",
     "scaling_dimension",
@@ -229,9 +231,9 @@ def mass_radius_fit(primaries, gyration_radii) -> tuple[float, float]:
     n = np.asarray(primaries, dtype=np.float64).ravel()
     r = np.asarray(gyration_radii, dtype=np.float64).ravel()
     if n.shape != r.shape:
-        raise ValueError("primaries and gyration_radii must have the same length")
+        raise InputError("primaries and gyration_radii must have the same length")
     if len(np.unique(r)) < 2:
-        raise ValueError("the mass-radius fit needs at least two different radii of gyration")
+        raise InputError("the mass-radius fit needs at least two different radii of gyration")
     slope, intercept = np.polyfit(np.log(r), np.log(n), 1)
     return float(slope), float(np.exp(intercept))
 

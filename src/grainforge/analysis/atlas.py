@@ -41,6 +41,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.moments import sphere_diameter
 from ..geometry.rotations import random_rotation
 
@@ -123,12 +124,12 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
     >>> check_atlas_request([("g", [1.0, 1.0, 1.0], 1.0)], voxels_across=4)
     Traceback (most recent call last):
     ...
-    ValueError: g: 4 voxels across its equivalent diameter is below 5, where the Atlas descriptors measure shape (a ball 4 voxels across has a true sphericity of about 1.5); measure at 5 voxels across or more
+    grainforge.errors.InputError: g: 4 voxels across its equivalent diameter is below 5, where the Atlas descriptors measure shape (a ball 4 voxels across has a true sphericity of about 1.5); measure at 5 voxels across or more
     """
     from ..runtime.estimate import TooLargeError, machine_memory
 
     if (voxel_size is None) == (voxels_across is None):
-        raise ValueError("give exactly one of voxel_size and voxels_across")
+        raise InputError("give exactly one of voxel_size and voxels_across")
     budget = 0.5 * machine_memory() if memory is None else float(memory)
     worst, worst_name = 0.0, ""
     for name, extents, d_eq in bodies:
@@ -140,7 +141,7 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
             fix = (f"a voxel size of at most {d_eq / MIN_VOXELS_ACROSS:.3g}{' ' + unit if unit else ''}"
                    if voxel_size is not None
                    else f"{MIN_VOXELS_ACROSS:g} voxels across or more")
-            raise ValueError(f"{name}: {across:.3g} voxels across its equivalent diameter is below "
+            raise InputError(f"{name}: {across:.3g} voxels across its equivalent diameter is below "
                              f"{MIN_VOXELS_ACROSS:g}, where the Atlas descriptors measure shape (a ball 4 voxels "
                              f"across has a true sphericity of about 1.5); measure at {fix}")
         cells = image_cells(extents, h)
@@ -150,13 +151,13 @@ def check_atlas_request(bodies, *, voxel_size: float | None = None, voxels_acros
     if need > budget:
         shrink = (budget / need) ** (1.0 / 3.0) * 0.97  # the image's cells go as the resolution cubed
         if voxel_size is None:
-            fits = f"--voxels-across {math.floor(voxels_across * shrink)}"
+            fits = f"{{voxels_across}} {math.floor(voxels_across * shrink)}"
         else:
             fits = f"a voxel size of {voxel_size / shrink:.3g}{' ' + unit if unit else ''} or more"
         raise TooLargeError(f"{worst_name}: its voxel image ({worst:.3g} cells) would need about "
                             f"{need / 1024**3:.3g} GiB with {max(1, int(workers))} grain(s) measured at once; the "
                             f"limit is {budget / 1024**3:.3g} GiB (half this machine's memory): the largest that "
-                            f"fits is {fits} (or fewer --workers)")
+                            f"fits is {fits} (or fewer {{workers}})", setting=("voxels_across", "workers"))
 
 
 def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray]:
@@ -203,7 +204,7 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
 
     h = float(voxel_size)
     if not (math.isfinite(h) and h > 0):
-        raise ValueError(f"voxel size must be a positive number, got {voxel_size!r}")
+        raise InputError(f"voxel size must be a positive number, got {voxel_size!r}")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     # voxel centres on the lattice h·(k + 1/2): independent of where the box starts; one empty voxel
@@ -211,7 +212,7 @@ def voxelise(vertices, faces, voxel_size: float) -> tuple[np.ndarray, np.ndarray
     grid = grid_for(v, h, pad=1, anchor="lattice")
     shape = grid.shape
     if np.prod(np.asarray(shape, dtype=np.float64)) > 2e8:
-        raise ValueError(f"voxel size {h:g} gives a {shape[0]}x{shape[1]}x{shape[2]} image: too fine for this grain")
+        raise InputError(f"voxel size {h:g} gives a {shape[0]}x{shape[1]}x{shape[2]} image: too fine for this grain")
     # columns along x (the image's slowest axis): the parity sweep goes over whole (y, z) planes
     return inside_mask(v, f, grid, axis=0, rule="parity"), grid.origin
 
@@ -372,7 +373,7 @@ def straddling_cubes(volume: np.ndarray, level: float) -> np.ndarray:
     ``level`` and some are not; only those cubes hold surface.  The mask marks
     each such cube at its lowest and its highest corner, so scikit-image
     visits every straddling cube whichever corner it tests, and skips most of
-    the others (the surface is the same: ``tests/test_atlas.py``).
+    the others (the surface is the same: ``tests/analysis/test_atlas.py``).
 
     Examples
     --------
@@ -494,7 +495,7 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0, *, convention: 
     pxy, pxz, pyz = (u8.sum(axis=k, dtype=np.int32).astype(np.float64) for k in (2, 1, 0))
     n = int(pxy.sum())
     if n == 0:
-        raise ValueError("the voxel image is empty (the grain is smaller than a voxel)")
+        raise InputError("the voxel image is empty (the grain is smaller than a voxel)")
     h = float(voxel_size)
     V = n * h**3
     x, y, z = (np.arange(k, dtype=np.float64) for k in mask.shape)
@@ -522,7 +523,7 @@ def voxel_descriptors(mask: np.ndarray, voxel_size: float = 1.0, *, convention: 
         sub[tuple(slice(pad, pad + e) for e in hi - lo)] = mask[tuple(slice(a, b) for a, b in zip(lo, hi))]
         smooth = gaussian_filter(sub, SIGMA, mode="constant", truncate=4.0)
     else:
-        raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+        raise InputError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
     # degenerate triangles add no area: keeping them skips scikit-image's clean-up pass; the mask
     # limits scikit-image's work to the cubes that straddle the level (the same surface, bit for bit)
     verts, tris, _, _ = marching_cubes(smooth, level=0.5, allow_degenerate=True, mask=straddling_cubes(smooth, 0.5))
@@ -641,19 +642,19 @@ def voxel_image(
     else:
         v, f = np.asarray(mesh_or_vertices, np.float64), np.asarray(faces, np.int64)
     if (voxel_size is None) == (voxels_across is None):
-        raise ValueError("give exactly one of voxel_size and voxels_across")
+        raise InputError("give exactly one of voxel_size and voxels_across")
     if not is_closed(f, len(v)):
-        raise ValueError("the mesh is not closed: a voxel image needs an inside")
+        raise InputError("the mesh is not closed: a voxel image needs an inside")
     vol = abs(signed_volume(v, f))
     d_mesh = float(sphere_diameter(vol))
     if voxels_across is not None:
         if not (math.isfinite(voxels_across) and voxels_across > 0):
-            raise ValueError(f"voxels across must be a positive number, got {voxels_across!r}")
+            raise InputError(f"voxels across must be a positive number, got {voxels_across!r}")
         h = d_mesh / float(voxels_across)
     else:
         h = float(voxel_size)
         if not (math.isfinite(h) and h > 0):
-            raise ValueError(f"voxel size must be a positive number, got {voxel_size!r}")
+            raise InputError(f"voxel size must be a positive number, got {voxel_size!r}")
     if rotation is not None:
         if isinstance(rotation, (np.ndarray, list, tuple)) and np.shape(rotation) == (3, 3):
             R = np.asarray(rotation, dtype=np.float64)
@@ -702,11 +703,11 @@ def opening_fraction(mask: np.ndarray, radius: float) -> float:
     from scipy import ndimage
 
     if not (math.isfinite(radius) and radius > 0):
-        raise ValueError(f"radius must be a positive number of voxels, got {radius!r}")
+        raise InputError(f"radius must be a positive number of voxels, got {radius!r}")
     m = np.pad(np.asarray(mask, bool), int(math.ceil(radius)) + 2)
     total = int(m.sum())
     if total == 0:
-        raise ValueError("the mask is empty")
+        raise InputError("the mask is empty")
     # a voxel centre's distance to the grain's surface is its distance to the nearest outside centre less
     # half a voxel; the eroded set reaches half a voxel beyond its outermost centres
     core = ndimage.distance_transform_edt(m) > radius + 0.5

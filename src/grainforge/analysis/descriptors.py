@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.moments import sphere_diameter
 from ..geometry.solid import is_closed
 from .mass import mesh_moments
@@ -173,7 +174,7 @@ def describe(
 
     v, f = _arrays(obj)
     if len(f) == 0:
-        raise ValueError("the mesh holds no triangles")
+        raise InputError("the mesh holds no triangles")
     if closed is None:
         closed = is_closed(f, len(v))
     mp = mesh_moments(v, f)
@@ -206,7 +207,7 @@ def describe(
     out["radius_of_gyration"] = float(np.sqrt(max(np.trace(mp["covariance"]), 0.0)))
     if primary_volume is not None:
         if not primary_volume > 0:
-            raise ValueError(f"primary_volume must be positive, got {primary_volume!r}")
+            raise InputError(f"primary_volume must be positive, got {primary_volume!r}")
         Vn = mp["volume"] / primary_volume
         An = (L + I + S) / 3.0 / np.cbrt(primary_volume)
         out["aggregate_dimension"] = float(np.log(Vn) / np.log(An)) if Vn > 1 and An > 1 else float("nan")

@@ -18,6 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = [
     "N_RAYS", "FD_ORDERS", "PLANES", "descriptors_from_radii",
     "principal_axes", "silhouette_radii", "projection_descriptors", "fd_columns",
@@ -89,10 +91,10 @@ def descriptors_from_radii(r: np.ndarray, orders=FD_ORDERS) -> np.ndarray:
 
     r = np.asarray(r, dtype=np.float64)
     if not r.mean() > 0:
-        raise ValueError("mean radius must be positive")
+        raise InputError("mean radius must be positive")
     orders = np.asarray(orders)
     if orders.max() >= len(r) // 2 + 1:
-        raise ValueError(f"order {int(orders.max())} needs more than {len(r)} radii")
+        raise InputError(f"order {int(orders.max())} needs more than {len(r)} radii")
     return descriptors_of_radii(r)[orders]
 
 
@@ -223,7 +225,7 @@ def silhouette_radii(
     r = np.full(n_rays, -np.inf)
     np.maximum.at(r, ray, t_hi)
     if not np.all(np.isfinite(r[wanted])):
-        raise ValueError("the silhouette does not surround its centroid")
+        raise InputError("the silhouette does not surround its centroid")
     r[~wanted] = np.nan
     if len(ray) == 0:
         return r, True
@@ -439,11 +441,11 @@ def check_rays(rays: int) -> None:
     >>> check_rays(10**8)
     Traceback (most recent call last):
     ...
-    ValueError: 100000000 rays need about 6.0 GiB per grain (limit 2 GiB); use at most 33554432 (the descriptors need only 34)
+    grainforge.errors.InputError: 100000000 rays need about 6.0 GiB per grain (limit 2 GiB); use at most 33554432 (the descriptors need only 34)
     """
     need = rays * RAY_BYTES
     if need > RAY_MEMORY:
-        raise ValueError(
+        raise InputError(
             f"{rays} rays need about {need / 1024**3:.1f} GiB per grain (limit {RAY_MEMORY / 1024**3:.0f} GiB); "
             f"use at most {RAY_MEMORY // RAY_BYTES} (the descriptors need only {2 * FD_ORDERS[-1] + 2})")
 

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.solid import solid_problems, split_bodies, volume_and_centroid
 
 __all__ = ["split_bodies", "read_bodies", "body_flags", "analyse_mesh", "analyse_file", "grain_sizes", "solid_grain",
@@ -88,10 +89,10 @@ def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, 
         m = read_mesh(path)
         v, f = np.asarray(m.vertices), np.asarray(m.faces)
     if not np.all(np.isfinite(v)):
-        raise ValueError(f"{path}: holds non-finite vertex coordinates")
+        raise InputError(f"{path}: holds non-finite vertex coordinates")
     bodies = split_bodies(v, f)
     if not bodies:
-        raise ValueError(f"{path}: holds no triangles")
+        raise InputError(f"{path}: holds no triangles")
     size_problem = None
     if mm:
         from ..geometry.solid import mesh_size_problem as size_problem
@@ -99,7 +100,7 @@ def read_bodies(path: str | Path, *, mm: bool = True) -> list[tuple[np.ndarray, 
         what = "the mesh" if len(bodies) == 1 else f"body {k}"
         problem = precision_problem(bv, what) or (size_problem(bv, what) if size_problem else None)
         if problem:
-            raise ValueError(f"{path}: {problem}")
+            raise InputError(f"{path}: {problem}")
     return bodies
 
 
@@ -342,24 +343,24 @@ def solid_grain(path: str | Path, *, mm: bool = False) -> tuple[np.ndarray, np.n
     enclosing, overlapping = body_nesting(bodies)
     for inner, outer in enumerate(enclosing):
         if outer is not None:
-            raise ValueError(f"{path}: not a closed solid (cavity: body {inner} is an inner shell of body {outer}, "
+            raise InputError(f"{path}: not a closed solid (cavity: body {inner} is an inner shell of body {outer}, "
                              "the wall of a void; analyse flags it cavity): a DEM grain has no void; remove the "
                              "inner shell to fill it")
     if len(bodies) > 1:
         kind = "overlapping bodies" if overlapping else "bodies"
-        raise ValueError(f"{path}: not a closed solid ({len(bodies)} {kind}; analyse flags it multi-body"
+        raise InputError(f"{path}: not a closed solid ({len(bodies)} {kind}; analyse flags it multi-body"
                          + (" overlapping" if overlapping else "") + "): a grain file holds one grain; "
                          + ("merge them into one surface" if overlapping else "write one file per grain"))
     v, f = bodies[0]
     flags, _, _, problems = body_flags(v, f, merged=True)
     if "open" in flags:
-        raise ValueError(f"{path}: not a closed solid (open boundary or inconsistent orientation; analyse flags it "
+        raise InputError(f"{path}: not a closed solid (open boundary or inconsistent orientation; analyse flags it "
                          "open); close the surface, `grainforge check` lists its problems")
     if "not-solid" in flags:
-        raise ValueError(f"{path}: not a closed solid ({'; '.join(problems)}; analyse flags it not-solid); "
+        raise InputError(f"{path}: not a closed solid ({'; '.join(problems)}; analyse flags it not-solid); "
                          "`grainforge check` lists its problems")
     if "inverted" in flags:
-        raise ValueError(f"{path}: not a closed solid (non-positive volume: its faces point inward; analyse flags it "
+        raise InputError(f"{path}: not a closed solid (non-positive volume: its faces point inward; analyse flags it "
                          "inverted); flip the faces' orientation")
     return v, f
 
@@ -381,7 +382,7 @@ def _analyse_data(task: tuple[str, bytes, dict[str, Any]]) -> list[dict[str, Any
         try:
             rows = analyse_file(local, **options)
         except ValueError as exc:
-            raise ValueError(str(exc).replace(str(local), name)) from None
+            raise InputError(str(exc).replace(str(local), name)) from None
     for row in rows:
         row["file"] = name
     return rows

@@ -47,6 +47,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from .atlas import OPENING_RADIUS, SIGMA, opening_fraction, voxel_descriptors
 
 __all__ = ["LabelBox", "measure_scan", "scan_seconds", "label_boxes", "measure_labels", "measure_grain", "check_labels", "segment", "segment_volume",
@@ -129,12 +130,13 @@ def check_labels(dtype, path: str = "the image") -> None:
     >>> check_labels(np.dtype("float32"), "scan.tif")
     Traceback (most recent call last):
     ...
-    ValueError: scan.tif: a float32 image cannot hold labels (one integer per grain, 0 the void): threshold a greyscale image to a binary one first and give it with --segment
+    grainforge.errors.InputError: scan.tif: a float32 image cannot hold labels (one integer per grain, 0 the void): threshold a greyscale image to a binary one first and give it with segment
     """
     dtype = np.dtype(dtype)
     if dtype.kind not in "biu":
-        raise ValueError(f"{path}: a {dtype.name} image cannot hold labels (one integer per grain, 0 the void): "
-                         "threshold a greyscale image to a binary one first and give it with --segment")
+        raise InputError(f"{path}: a {dtype.name} image cannot hold labels (one integer per grain, 0 the void): "
+                         "threshold a greyscale image to a binary one first and give it with {segment}",
+                         setting="segment")
 
 
 def _slab_size(volume) -> int:
@@ -174,11 +176,11 @@ def label_boxes(volume, *, progress=None) -> list[LabelBox]:
         if slab.dtype == bool:
             slab = slab.view(np.uint8)
         if slab.dtype.kind == "i" and slab.size and slab.min() < 0:
-            raise ValueError(f"{volume.path}: negative values ({int(slab.min())}): labels are 0 (void) and positive "
+            raise InputError(f"{volume.path}: negative values ({int(slab.min())}): labels are 0 (void) and positive "
                              "integers")
         m = int(slab.max()) if slab.size else 0
         if m > MAX_LABEL:
-            raise ValueError(f"{volume.path}: label {m} is beyond {MAX_LABEL}: number the labels 1, 2, 3, ... "
+            raise InputError(f"{volume.path}: label {m} is beyond {MAX_LABEL}: number the labels 1, 2, 3, ... "
                              "(skimage.segmentation.relabel_sequential)")
         if m > top:  # grow the tables
             grow = m + 1 - (0 if counts is None else len(counts))
@@ -330,7 +332,7 @@ def measure_labels(volume, boxes: Iterable[LabelBox], *, voxel_size: float, min_
 
     h = float(voxel_size)
     if not (math.isfinite(h) and h > 0):
-        raise ValueError(f"voxel size must be a positive number, got {voxel_size!r}")
+        raise InputError(f"voxel size must be a positive number, got {voxel_size!r}")
     shape = volume.shape
     boxes = list(boxes)
     todo = [b for b in boxes if b.voxels >= min_voxels and (border or not b.touches(shape))]
@@ -470,12 +472,12 @@ def segment(binary: np.ndarray, *, marker_distance: float = MARKER_DISTANCE,
     from skimage.segmentation import watershed
 
     if not (math.isfinite(marker_distance) and marker_distance > 0):
-        raise ValueError(f"marker distance must be a positive fraction of the typical grain size, got {marker_distance!r}")
+        raise InputError(f"marker distance must be a positive fraction of the typical grain size, got {marker_distance!r}")
     if not (math.isfinite(marker_depth) and marker_depth >= 0):
-        raise ValueError(f"marker depth must be a fraction of the typical grain size >= 0, got {marker_depth!r}")
+        raise InputError(f"marker depth must be a fraction of the typical grain size >= 0, got {marker_depth!r}")
     b = np.asarray(binary) != 0
     if not b.any():
-        raise ValueError("the binary image has no grain voxel")
+        raise InputError("the binary image has no grain voxel")
     d = ndimage.distance_transform_edt(b).astype(np.float32)
     typical = typical_diameter(d, b)
     md = max(1, int(round(marker_distance * typical)))
@@ -545,7 +547,7 @@ def segment_volume(volume, *, marker_distance: float = MARKER_DISTANCE, marker_d
     >>> segment_volume(Volume.from_array(two.astype(np.uint8) * (1 + (x > 23))), name="scan.npy")
     Traceback (most recent call last):
     ...
-    ValueError: scan.npy: already labelled (2 labels, 1–2): --segment takes a binary image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to segment its non-zero voxels anew (a greyscale image: threshold it first)
+    grainforge.errors.InputError: scan.npy: already labelled (2 labels, 1–2): --segment takes a binary image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to segment its non-zero voxels anew (a greyscale image: threshold it first)
     """
     from ..io.volume import Volume
     from ..runtime.estimate import check_memory
@@ -557,14 +559,14 @@ def segment_volume(volume, *, marker_distance: float = MARKER_DISTANCE, marker_d
     whole = volume.whole()
     binary = whole != 0
     if not binary.any():
-        raise ValueError(f"{name}: no grain: every voxel is 0")
+        raise InputError(f"{name}: no grain: every voxel is 0")
     if binary.all():
-        raise ValueError(f"{name}: every voxel is grain: no void, so no grains to tell apart")
+        raise InputError(f"{name}: every voxel is grain: no void, so no grains to tell apart")
     if not ignore_labels:
         first = whole.flat[int(np.argmax(binary))]
         if np.any(binary & (whole != first)):
             values = np.unique(whole[binary])
-            raise ValueError(
+            raise InputError(
                 f"{name}: already labelled ({len(values)} labels, {values[0]}–{values[-1]}): --segment takes a binary "
                 "image (0 void, one value grain); drop --segment to measure its labels, or add --ignore-labels to "
                 "segment its non-zero voxels anew (a greyscale image: threshold it first)")
@@ -740,7 +742,7 @@ def grain_mesh(mask: np.ndarray, lo=(0, 0, 0), voxel_size: float = 1.0, *,
     verts, faces, _, _ = marching_cubes(smooth, level=0.5, allow_degenerate=False)
     bodies = split_bodies(verts.astype(np.float64), faces.astype(np.int64))
     if not bodies:
-        raise ValueError("the grain's surface is empty")
+        raise InputError("the grain's surface is empty")
     vols = [abs(signed_volume(v, f)) for v, f in bodies]
     v, f = bodies[int(np.argmax(vols))]
     xyz = (v[:, ::-1] - pad + np.asarray(lo, np.float64)[::-1] + 0.5) * float(voxel_size)

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike, as_generator
 from .fourier import FD_ORDERS, N_RAYS, _outline_radii, _polygon_area_centroid_of_radii, descriptors_from_radii
 
@@ -113,7 +114,7 @@ def section_radii(mesh, normal, *, origin=None, n_rays: int = N_RAYS, outline: s
     [[1.0, 1.414214], [1.0, 1.414214]]
     """
     if outline not in OUTLINES:
-        raise ValueError(f"outline must be one of {', '.join(OUTLINES)}, got {outline!r}")
+        raise InputError(f"outline must be one of {', '.join(OUTLINES)}, got {outline!r}")
     mesh = _trimesh(mesh)
     o = np.asarray(mesh.center_mass if origin is None else origin, dtype=np.float64)
     n = np.asarray(normal, dtype=np.float64)
@@ -125,16 +126,16 @@ def section_radii(mesh, normal, *, origin=None, n_rays: int = N_RAYS, outline: s
 
     seg = mesh_plane(mesh, n, o)
     if len(seg) == 0:
-        raise ValueError("the plane does not cut the mesh")
+        raise InputError("the plane does not cut the mesh")
     q = (seg.reshape(-1, 3) - o) @ basis.T
     edges = np.arange(len(q)).reshape(-1, 2)
     r, _ = _outline_radii(q, edges, CENTROID_RAYS)
     if not np.isfinite(r).all():
-        raise ValueError("the section does not surround the plane's origin")
+        raise InputError("the section does not surround the plane's origin")
     c = _polygon_area_centroid_of_radii(r, np.zeros(2))
     r, _ = _outline_radii(q - c, edges, n_rays)
     if not np.isfinite(r).all():
-        raise ValueError("the section does not surround its area centroid")
+        raise InputError("the section does not surround its area centroid")
     return r, o + c @ basis
 
 
@@ -154,7 +155,7 @@ def _loop_contour(mesh, normal, origin, basis, n_rays):
             return polygon_contour(pts @ basis.T, n_angles=n_rays, source="section")
         except ValueError:
             continue
-    raise ValueError("no closed outline around the centroid in the section")
+    raise InputError("no closed outline around the centroid in the section")
 
 
 def section_descriptors(mesh, normal, *, origin=None, orders=FD_ORDERS, n_rays: int = N_RAYS,

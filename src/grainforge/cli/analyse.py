@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ..units import with_unit
+from .help_style import option
 from .options import (
     FiniteFloatRange,
     overwrite_option,
@@ -60,7 +61,7 @@ def _write_atlas_table(path: Path, rows) -> None:
 
     grains = [r for r in rows if math.isfinite(r.get("atlas_sphericity", math.nan))]
     if not grains:
-        raise ValueError("--atlas-csv: no closed body to measure; nothing written")
+        raise click.UsageError("--atlas-csv: no closed body to measure; nothing written")
     write_sand(path, [1000.0 * r["atlas_equivalent_diameter"] for r in grains],
                {k: [r["atlas_" + k] for r in grains] for k in DESCRIPTORS},
                voxel_size=[1000.0 * r["atlas_voxel_size"] for r in grains],
@@ -97,33 +98,33 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--csv", "csv_out", type=OutPath(dir_okay=False), default=None,
-              help="Also write every column to this CSV file.")
-@click.option("--json", "as_json", is_flag=True, help="Print JSON (a list of rows, all columns) instead of the table.")
-@click.option("--fractal/--no-fractal", default=True, show_default=True, help="Estimate the surface fractal dimension.")
-@click.option("--fourier/--no-fourier", default=True, show_default=True,
-              help="Fourier descriptors D2…D16 of the three principal projections.")
-@click.option("--primary-volume", type=FiniteFloatRange(min=0, min_open=True), default=None,
-              help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
+@option("--csv", "csv_out", type=OutPath(dir_okay=False), default=None,
+        help="Also write every column to this CSV file.")
+@option("--json", "as_json", is_flag=True, help="Print JSON (a list of rows, all columns) instead of the table.")
+@option("--fractal/--no-fractal", default=True, show_default=True, help="Estimate the surface fractal dimension.")
+@option("--fourier/--no-fourier", default=True, show_default=True,
+        help="Fourier descriptors D2…D16 of the three principal projections.")
+@option("--primary-volume", type=FiniteFloatRange(min=0, min_open=True), default=None,
+        help="Volume of an aggregate's primary particle (file units³): reports D_A (paper Eq. 5).")
 @voxel_size_options("mm", "Also measure the Sand-Atlas way (atlas_* columns) on a voxel image of this voxel size "
                           "in mm (the files' unit: 7.3 µm is 0.0073); see docs/validation.md.")
 @renamed_option("--voxel-size", "--voxel-size-mm", "mm")
-@click.option("--voxels-across", type=FiniteFloatRange(min=2), default=None,
-              help="As --voxel-size-um/--voxel-size-mm, with the voxel size set to d_eq / this number.")
-@click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
-              show_default=True,
-              help="atlas_sphericity as the Sand Atlas computed it (spam's cube, clipped above the centre of "
-                   "mass) or on the whole grain; docs/validation.md.")
-@click.option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
-              help="Also write the atlas_* columns as a Sand Atlas table that `grainforge fit` reads (lengths in "
-                   "µm, the files being in mm), with each grain's opening fraction; needs a voxel size or "
-                   "--voxels-across. Bodies that are not closed are left out.")
+@option("--voxels-across", type=FiniteFloatRange(min=2), default=None,
+        help="As --voxel-size-um/--voxel-size-mm, with the voxel size set to d_eq / this number.")
+@option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
+        show_default=True,
+        help="atlas_sphericity as the Sand Atlas computed it (spam's cube, clipped above the centre of "
+             "mass) or on the whole grain; docs/validation.md.")
+@option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
+        help="Also write the atlas_* columns as a Sand Atlas table that `grainforge fit` reads (lengths in "
+             "µm, the files being in mm), with each grain's opening fraction; needs a voxel size or "
+             "--voxels-across. Bodies that are not closed are left out.")
 @overwrite_option("Replace an existing --csv or --atlas-csv file.")
 @workers_option("Processes measuring files; rows do not depend on it.", default_text="one per CPU, at most one per file")
-@click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Measure the files on an existing Dask distributed cluster, e.g. tcp://host:8786 (each file is "
-                   "sent to a worker; needs grainforge[dask] and the same grainforge on the workers); the rows are "
-                   "the same.")
+@option("--scheduler", metavar="ADDRESS", default=None,
+        help="Measure the files on an existing Dask distributed cluster, e.g. tcp://host:8786 (each file is "
+             "sent to a worker; needs grainforge[dask] and the same grainforge on the workers); the rows are "
+             "the same.")
 def analyse(files, csv_out, as_json, fractal, fourier, primary_volume, voxel_size, voxels_across, sphericity,
             atlas_csv, overwrite, workers, scheduler):
     """Shape descriptors of mesh FILES (STL, OBJ, PLY, 3MF, or folders of them), one row per body.

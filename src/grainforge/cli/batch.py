@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from .help_style import option
 from .options import overwrite_option, workers_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
@@ -13,13 +14,13 @@ from .progress import progress_bar
 
 @click.command()
 @click.argument("recipe", type=click.Path(exists=True, dir_okay=False, path_type=Path))
-@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder for the grains, manifest.csv, manifest.json and population.png.")
+@option("--out", "out", required=True, type=OutPath(file_okay=False),
+        help="Folder for the grains, manifest.csv, manifest.json and population.png.")
 @workers_option("Local worker processes.", default_text="the CPU count")
-@click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
-                   "(needs grainforge[dask]; workers must import the same grainforge).")
-@click.option("--resume", is_flag=True, help="Continue an interrupted batch: keep intact grains, make the rest.")
+@option("--scheduler", metavar="ADDRESS", default=None,
+        help="Run on an existing Dask distributed cluster, e.g. tcp://host:8786 "
+             "(needs grainforge[dask]; workers must import the same grainforge).")
+@option("--resume", is_flag=True, help="Continue an interrupted batch: keep intact grains, make the rest.")
 @overwrite_option("Replace the outputs of an earlier batch in --out.")
 def batch(recipe, out, workers, scheduler, resume, overwrite):
     """Generate the population described by RECIPE (TOML) into --out.

@@ -6,6 +6,7 @@ import click
 
 from ..methods.dpa import PRIMITIVES
 from ..params import ParameterError
+from .help_style import option
 from .options import bad_parameter, overwrite_option, seed_option, workers_option
 from .paths import OutPath, output_dir
 from .progress import progress_bar
@@ -17,19 +18,19 @@ def calibrate():
 
 
 @calibrate.command(name="dpa")
-@click.option("--primitive", default="cube", show_default=True,
-              type=click.Choice(PRIMITIVES),
-              help="Primary particle shape.")
-@click.option("--primaries", default=200, show_default=True, type=click.IntRange(min=1, max=100_000),
-              help="Number of primaries N per aggregate.")
-@click.option("--exponents", default="0.5:10:0.5", show_default=True,
-              help="The ε grid: A:B:STEP (inclusive) or a comma-separated list.")
-@click.option("--repeats", default=10, show_default=True, type=click.IntRange(min=1),
-              help="Aggregates (seeds) per ε.")
+@option("--primitive", default="cube", show_default=True,
+        type=click.Choice(PRIMITIVES),
+        help="Primary particle shape.")
+@option("--primaries", default=200, show_default=True, type=click.IntRange(min=1, max=100_000),
+        help="Number of primaries N per aggregate.")
+@option("--exponents", default="0.5:10:0.5", show_default=True,
+        help="The ε grid: A:B:STEP (inclusive) or a comma-separated list.")
+@option("--repeats", default=10, show_default=True, type=click.IntRange(min=1),
+        help="Aggregates (seeds) per ε.")
 @seed_option("Root seed (aggregate k uses SeedSequence(seed).spawn(...)[k]).")
 @workers_option("Worker processes; results do not depend on it.", default_text="one per CPU")
-@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder for calibration.csv and calibration.png.")
+@option("--out", "out", required=True, type=OutPath(file_okay=False),
+        help="Folder for calibration.csv and calibration.png.")
 @overwrite_option()
 def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, overwrite):
     """Mean and spread of D_A (Eq. 5) and porosity over seeds, for each ε of a grid.

@@ -6,6 +6,8 @@ from pathlib import Path
 
 import click
 
+from .help_style import option
+
 #: every column states its unit (``_mm``, ``_%``) or is a count or a word; ``*_status`` says whether the
 #: number next to it was measured or is the measuring horizon (``thicker``: a lower bound).
 COLUMNS = ("file", "part", "status", "faces", "d_eq_mm", "solid", "self_intersections", "min_wall_mm",
@@ -22,9 +24,9 @@ def _table(rows: list[dict]) -> str:
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
-              help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
-@click.option("--csv", "as_csv", is_flag=True, help="Print the table as CSV instead of aligned text.")
+@option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
+        help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
+@option("--csv", "as_csv", is_flag=True, help="Print the table as CSV instead of aligned text.")
 def check(files, printer_spec, as_csv):
     """Check mesh FILES (STL, OBJ, PLY, 3MF, or folders of them; every object of a 3MF) against a printer.
 
@@ -53,7 +55,7 @@ def check(files, printer_spec, as_csv):
             for part in parts:  # a file in another unit than mm: refused before any part is checked
                 problem = mesh_size_problem(part.vertices, "the mesh" if len(parts) == 1 else f"part {part.name}")
                 if problem is not None:
-                    raise ValueError(f"{path}: {problem}")
+                    raise click.UsageError(f"{path}: {problem}")
             for part in parts:
                 small = printer.size_problem(equivalent_diameter(part.vertices, part.faces))
                 if small is not None:  # before the slower tests, so that it is seen at once

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from .help_style import option
 from .options import (
     EXIT_CHECK_FAILED,
     SPHERES_RANGE,
@@ -40,41 +41,41 @@ def _refuse_foreign_options(ctx: click.Context, shape: str) -> None:
 
 @click.command()
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder of the deck.")
-@click.option("--engine", type=click.Choice(["yade", "liggghts", "lammps"]), default="yade", show_default=True)
-@click.option("--shape", type=click.Choice(["clump", "polyhedron", "levelset"]), default="clump",
-              show_default=True, help="Grain representation (what the engine supports).")
-@click.option("--density", type=FiniteFloatRange(1.0, 1e5), default=2650.0, show_default=True,
-              help="Solid density, kg/m³.")
-@click.option("--rolling-friction", type=FiniteFloatRange(0.0, 1.0), default=0.0, show_default=True,
-              help="Rolling resistance μ_r of the contacts: a contact's rolling moment is limited to μ_r·F_n·r, r the "
-                   "smaller sphere's radius (Yade and LIGGGHTS clumps; docs/simulate.md, Rolling resistance).")
-@click.option("--spheres", type=click.IntRange(*SPHERES_RANGE), default=30, show_default=True,
-              help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
-                   "With --clump-accuracy, the most a clump may take (100 when --spheres is not given).")
-@click.option("--refine-iterations", "refine", type=click.IntRange(0, 10000), default=0, show_default=True,
-              help="Clump: L-BFGS iterations refining all spheres after the greedy placement "
-                   "(30: a few points more coverage for several times the CPU; 0: off).")
+@option("--out", "out", required=True, type=OutPath(file_okay=False),
+        help="Folder of the deck.")
+@option("--engine", type=click.Choice(["yade", "liggghts", "lammps"]), default="yade", show_default=True)
+@option("--shape", type=click.Choice(["clump", "polyhedron", "levelset"]), default="clump",
+        show_default=True, help="Grain representation (what the engine supports).")
+@option("--density", type=FiniteFloatRange(1.0, 1e5), default=2650.0, show_default=True,
+        help="Solid density, kg/m³.")
+@option("--rolling-friction", type=FiniteFloatRange(0.0, 1.0), default=0.0, show_default=True,
+        help="Rolling resistance μ_r of the contacts: a contact's rolling moment is limited to μ_r·F_n·r, r the "
+             "smaller sphere's radius (Yade and LIGGGHTS clumps; docs/simulate.md, Rolling resistance).")
+@option("--spheres", type=click.IntRange(*SPHERES_RANGE), default=30, show_default=True,
+        help="Clump: spheres per clump (the accuracy/cost knob; at most, fewer when more add no coverage). "
+             "With --clump-accuracy, the most a clump may take (100 when --spheres is not given).")
+@option("--refine-iterations", "refine", type=click.IntRange(0, 10000), default=0, show_default=True,
+        help="Clump: L-BFGS iterations refining all spheres after the greedy placement "
+             "(30: a few points more coverage for several times the CPU; 0: off).")
 @clump_accuracy_option
-@click.option("--vertices", type=click.IntRange(4, 10000), default=None,
-              help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts). "
-                   "Default: 16 for Yade, 12 for LAMMPS (LAMMPS reads at most 56).")
-@click.option("--spacing", type=FiniteFloatRange(0.01, 0.5), default=0.05, show_default=True,
-              help="Level set: grid spacing as a fraction of the equivalent diameter.")
-@click.option("--unit", type=FiniteFloatRange(1e-9, 1e3), default=1e-3, show_default=True,
-              help="Metres per file unit (grainforge files are in mm: 0.001).")
-@click.option("--count", type=click.IntRange(1), default=None, show_default="1",
-              help="Copies of each grain in the example pour.")
-@click.option("--grains", type=click.IntRange(1, MAX_POUR_GRAINS), default=None,
-              help="Instead of --count: the pour's total number of grains, drawn from the input grains in "
-                   "proportion (each taken grains // inputs times; the rest go to inputs drawn with --seed).")
+@option("--vertices", type=click.IntRange(4, 10000), default=None,
+        help="Polyhedron: at most this many convex-hull vertices (fewer: faster contacts). "
+             "Default: 16 for Yade, 12 for LAMMPS (LAMMPS reads at most 56).")
+@option("--spacing", type=FiniteFloatRange(0.01, 0.5), default=0.05, show_default=True,
+        help="Level set: grid spacing as a fraction of the equivalent diameter.")
+@option("--unit", type=FiniteFloatRange(1e-9, 1e3), default=1e-3, show_default=True,
+        help="Metres per file unit (grainforge files are in mm: 0.001).")
+@option("--count", type=click.IntRange(1), default=None, show_default="1",
+        help="Copies of each grain in the example pour.")
+@option("--grains", type=click.IntRange(1, MAX_POUR_GRAINS), default=None,
+        help="Instead of --count: the pour's total number of grains, drawn from the input grains in "
+             "proportion (each taken grains // inputs times; the rest go to inputs drawn with --seed).")
 @seed_option("Seed of the --grains draw.", default=None, default_text="0")
-@click.option("--templates", "template_count", type=click.IntRange(1), default=None,
-              show_default="every input grain",
-              help="Write K templates chosen from the input grains so that their sphericity, convexity, flatness, "
-                   "elongation and size are distributed as all the inputs' (KS figures printed and written to "
-                   "templates.csv); --count or --grains then apply to them.")
+@option("--templates", "template_count", type=click.IntRange(1), default=None,
+        show_default="every input grain",
+        help="Write K templates chosen from the input grains so that their sphericity, convexity, flatness, "
+             "elongation and size are distributed as all the inputs' (KS figures printed and written to "
+             "templates.csv); --count or --grains then apply to them.")
 @workers_option("Processes.", default_text="CPU count")
 @overwrite_option("Replace existing deck files.")
 def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, clump_accuracy, vertices, spacing, unit, count, grains,

@@ -7,13 +7,14 @@ from pathlib import Path
 
 import click
 
+from .help_style import option
 from .options import overwrite_option
 from .paths import OutPath, output_dir
 
 
 @click.command()
-@click.option("--out", default=Path("out/demo"), show_default=True, type=OutPath(file_okay=False))
-@click.option("--quick", is_flag=True, help="Fewer, coarser grains (for a fast check).")
+@option("--out", default=Path("out/demo"), show_default=True, type=OutPath(file_okay=False))
+@option("--quick", is_flag=True, help="Fewer, coarser grains (for a fast check).")
 @overwrite_option("Replace the outputs of an earlier demo in --out (make demo does).")
 def demo(out, quick, overwrite):
     """Generate the paper-style galleries (grains, manifests, contact sheets) into OUT."""

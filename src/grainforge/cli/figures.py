@@ -4,15 +4,16 @@ from __future__ import annotations
 
 import click
 
+from .help_style import option
 from .options import overwrite_option
 from .paths import OutPath, output_dir
 
 
 @click.command()
-@click.option("--out", required=True, type=OutPath(file_okay=False), help="Folder for the PNGs.")
-@click.option("--only", "only", multiple=True, type=click.IntRange(1, 9), help="Only this figure (repeatable).")
-@click.option("--subdivisions", type=click.IntRange(2, 6), default=5, show_default=True,
-              help="Icosphere level of the FSO and CRI grains (lower is faster).")
+@option("--out", required=True, type=OutPath(file_okay=False), help="Folder for the PNGs.")
+@option("--only", "only", multiple=True, type=click.IntRange(1, 9), help="Only this figure (repeatable).")
+@option("--subdivisions", type=click.IntRange(2, 6), default=5, show_default=True,
+        help="Icosphere level of the FSO and CRI grains (lower is faster).")
 @overwrite_option("Replace existing figure files.")
 def figures(out, only, subdivisions, overwrite):
     """Regenerate the paper's Figures 1-6 (FSO, contours, CRI, DPA) into OUT, plus 7-9.

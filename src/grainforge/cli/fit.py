@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from .help_style import option
 from .options import (
     EXIT_CHECK_FAILED,
     FiniteFloatRange,
@@ -30,51 +31,51 @@ HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "s
 
 @click.command()
 @click.argument("sand", type=click.Path(dir_okay=False, path_type=Path))
-@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder for recipe.toml, fit.csv, fit-stats.csv and fit.png.")
+@option("--out", "out", required=True, type=OutPath(file_okay=False),
+        help="Folder for recipe.toml, fit.csv, fit-stats.csv and fit.png.")
 @voxel_size_options("um", "Voxel size of the sand's scan in µm; required unless the CSV has a 'Voxel Size (µm)' "
                           "column.")
 @renamed_option("--voxel-size", "--voxel-size-um", "µm")
-@click.option("--method", default="rf", show_default=True,
-              help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best. "
-                   "rf grains respond smoothly to their settings, CRI grains less so (docs/fit.md).")
-@click.option("--count", type=click.IntRange(min=500, max=10**7), default=500, show_default=True,
-              help="Grains of the recipe (>= 500), each the twin of one sand grain: sand rows drawn without "
-                   "replacement, or all rows and then repeats when --count exceeds the sand's.")
-@click.option("--refine", type=click.IntRange(min=0, max=10), default=4, show_default=True,
-              help="Rounds of per-grain refinement of the twins that miss their sand grain.")
-@click.option("--reseed", type=click.IntRange(min=0, max=20), default=6, show_default=True,
-              help="Other seeds tried by each twin still off by more than 0.03 after the refinement (a kept seed "
-                   "is written to the recipe).")
-@click.option("--population-grains", type=click.IntRange(min=10, max=10**7), default=300, show_default=True,
-              help="Twins remade in each round that estimates the sand's mean settings (2 rounds; 4 with an "
-                   "opening-fraction column; at most --count): its standard errors shrink as 1/sqrt(grains), down "
-                   "to what the sand's grain count allows.")
-@click.option("--population-slopes", type=click.Choice(["auto", "measured", "model"]), default="auto",
-              show_default=True,
-              help="Slopes the mean-settings estimate steps through: measured on the grains (2 x settings x up to "
-                   "300 grains more; matches the means to their noise on large tables), the design model's "
-                   "(free, off on angular sands), or auto: measured from --population-grains 1000. With an "
-                   "opening-fraction column they are always measured (the model does not predict it).")
-@click.option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
-              help="Grains of the method's design (the inverse model's data; measured once, then cached).")
-@click.option("--max-voxels-across", "max_across", type=FiniteFloatRange(min=0), default=None,
-              help="Measure generated grains at most this many voxels across; 0: at the sand's resolution, however "
-                   "fine. [default: the method's cap, where its grains' descriptors have converged: 150 for rf, cri "
-                   "and angular; none for fso (docs/fit.md)]")
-@click.option("--max-minutes", type=FiniteFloatRange(min=0, min_open=True), default=60.0, show_default=True,
-              help="Refuse a fit estimated to take longer (wall clock on --workers).")
-@click.option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
-              help="Where designs are cached (see docs/fit.md) [default: $GRAINFORGE_CACHE or ~/.cache/grainforge]")
+@option("--method", default="rf", show_default=True,
+        help="Generator to fit (a method registered in grainforge.fit.FITS), or auto: each, keep the best. "
+             "rf grains respond smoothly to their settings, CRI grains less so (docs/fit.md).")
+@option("--count", type=click.IntRange(min=500, max=10**7), default=500, show_default=True,
+        help="Grains of the recipe (>= 500), each the twin of one sand grain: sand rows drawn without "
+             "replacement, or all rows and then repeats when --count exceeds the sand's.")
+@option("--refine", type=click.IntRange(min=0, max=10), default=4, show_default=True,
+        help="Rounds of per-grain refinement of the twins that miss their sand grain.")
+@option("--reseed", type=click.IntRange(min=0, max=20), default=6, show_default=True,
+        help="Other seeds tried by each twin still off by more than 0.03 after the refinement (a kept seed "
+             "is written to the recipe).")
+@option("--population-grains", type=click.IntRange(min=10, max=10**7), default=300, show_default=True,
+        help="Twins remade in each round that estimates the sand's mean settings (2 rounds; 4 with an "
+             "opening-fraction column; at most --count): its standard errors shrink as 1/sqrt(grains), down "
+             "to what the sand's grain count allows.")
+@option("--population-slopes", type=click.Choice(["auto", "measured", "model"]), default="auto",
+        show_default=True,
+        help="Slopes the mean-settings estimate steps through: measured on the grains (2 x settings x up to "
+             "300 grains more; matches the means to their noise on large tables), the design model's "
+             "(free, off on angular sands), or auto: measured from --population-grains 1000. With an "
+             "opening-fraction column they are always measured (the model does not predict it).")
+@option("--design-grains", type=click.IntRange(min=50, max=20000), default=400, show_default=True,
+        help="Grains of the method's design (the inverse model's data; measured once, then cached).")
+@option("--max-voxels-across", "max_across", type=FiniteFloatRange(min=0), default=None,
+        help="Measure generated grains at most this many voxels across; 0: at the sand's resolution, however "
+             "fine. [default: the method's cap, where its grains' descriptors have converged: 150 for rf, cri "
+             "and angular; none for fso (docs/fit.md)]")
+@option("--max-minutes", type=FiniteFloatRange(min=0, min_open=True), default=60.0, show_default=True,
+        help="Refuse a fit estimated to take longer (wall clock on --workers).")
+@option("--cache-dir", type=click.Path(file_okay=False, path_type=Path), default=None,
+        help="Where designs are cached (see docs/fit.md) [default: $GRAINFORGE_CACHE or ~/.cache/grainforge]")
 @seed_option("Root seed of the recipe.", default=2024)
 @workers_option("Worker processes.", default_text="CPU count")
-@click.option("--scheduler", metavar="ADDRESS", default=None,
-              help="Measure the grains on an existing Dask distributed cluster, e.g. tcp://host:8786 (needs "
-                   "grainforge[dask] and the same grainforge on the workers); the outputs are the same.")
-@click.option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
-              show_default=True,
-              help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
-                   "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
+@option("--scheduler", metavar="ADDRESS", default=None,
+        help="Measure the grains on an existing Dask distributed cluster, e.g. tcp://host:8786 (needs "
+             "grainforge[dask] and the same grainforge on the workers); the outputs are the same.")
+@option("--sphericity-convention", "sphericity", type=click.Choice(["atlas", "whole"]), default="atlas",
+        show_default=True,
+        help="How the generated grains' true sphericity is measured: as the Sand Atlas did (spam's cube, "
+             "clipped above the centre of mass) or on the whole grain; docs/validation.md.")
 @overwrite_option("Replace recipe.toml, fit.csv, fit-stats.csv and fit.png in --out.")
 def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains, population_slopes, design_grains,
         max_across, max_minutes, cache_dir, seed, workers, scheduler, sphericity, overwrite):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from .help_style import option
 from .options import FINITE_FLOAT, FiniteFloatRange, overwrite_option
 from .paths import OutPath, output_file
 
@@ -14,18 +15,18 @@ N_MAX = 16
 
 @click.command()
 @click.argument("images", nargs=-1, required=True, type=click.Path(dir_okay=False, path_type=str))
-@click.option("--csv", "csv_path", type=OutPath(dir_okay=False), default=None,
-              help="Write the table to this CSV file instead of stdout.")
+@option("--csv", "csv_path", type=OutPath(dir_okay=False), default=None,
+        help="Write the table to this CSV file instead of stdout.")
 @overwrite_option("Replace an existing --csv file.")
-@click.option("--min-area", default=50, show_default=True, type=click.IntRange(min=0),
-              help="Skip specks smaller than this many pixels.")
-@click.option("--threshold", type=FINITE_FLOAT, default=None, show_default="Otsu", help="Grey level separating grains and background.")
-@click.option("--foreground", type=click.Choice(["auto", "dark", "bright"]), default="auto", show_default=True,
-              help="Which side of the threshold the grains are; auto: the side covering fewer border pixels.")
-@click.option("--pixel-size", type=FiniteFloatRange(min=0, min_open=True), default=None, metavar="UM",
-              help="Micrometres per pixel: adds x_mm, y_mm, area_mm2 and r0_mm (physical) columns.")
-@click.option("--rays", default=128, show_default=True, type=click.IntRange(min=2 * N_MAX + 2),
-              help="Rays cast from each grain's area centroid.")
+@option("--min-area", default=50, show_default=True, type=click.IntRange(min=0),
+        help="Skip specks smaller than this many pixels.")
+@option("--threshold", type=FINITE_FLOAT, default=None, show_default="Otsu", help="Grey level separating grains and background.")
+@option("--foreground", type=click.Choice(["auto", "dark", "bright"]), default="auto", show_default=True,
+        help="Which side of the threshold the grains are; auto: the side covering fewer border pixels.")
+@option("--pixel-size", type=FiniteFloatRange(min=0, min_open=True), default=None, metavar="UM",
+        help="Micrometres per pixel: adds x_mm, y_mm, area_mm2 and r0_mm (physical) columns.")
+@option("--rays", default=128, show_default=True, type=click.IntRange(min=2 * N_MAX + 2),
+        help="Rays cast from each grain's area centroid.")
 def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, pixel_size):
     """Fourier descriptors D2..D16 of every grain in IMAGE... (one CSV row per grain).
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import click
 
+from .help_style import option
 from .options import FloatList
 
 HELP = (
@@ -26,8 +27,8 @@ class AspectType(FloatList):
 
 
 OPTIONS = [
-    click.option("--aspect", "aspect", type=AspectType(3), default=None,
-                 help="Target ratio L:I:S of the principal dimensions, e.g. 2:1.5:1."),
+    option("--aspect", "aspect", type=AspectType(3), default=None,
+           help="Target ratio L:I:S of the principal dimensions, e.g. 2:1.5:1."),
 ]
 
 

@@ -6,13 +6,14 @@ from __future__ import annotations
 import click
 
 from ..params import ParameterError
+from .help_style import option
 from .options import FINITE_FLOAT, bad_parameter, build_params
 
 OPTIONS = [
-    click.option("--target-fractal-dimension", "target", type=FINITE_FLOAT, default=None,
-                 help="Aim at this aggregate fractal dimension D_A: ε is taken from the calibration curve of "
-                      "the primitive and N (cached; computed with a progress bar on first use). "
-                      "Exclusive with --exponent."),
+    option("--target-fractal-dimension", "target", type=FINITE_FLOAT, default=None,
+           help="Aim at this aggregate fractal dimension D_A: ε is taken from the calibration curve of "
+                "the primitive and N (cached; computed with a progress bar on first use). "
+                "Exclusive with --exponent."),
 ]
 
 

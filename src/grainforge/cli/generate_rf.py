@@ -2,9 +2,8 @@
 
 from __future__ import annotations
 
-import click
-
 from .generate_cri import AspectType
+from .help_style import option
 
 HELP = (
     "\n\nTarget spectrum from mean section descriptors (--descriptors D2,D3,D8 or --preset, with the CRI "
@@ -14,6 +13,6 @@ EXCLUDE = ("aspect",)
 
 
 OPTIONS = [
-    click.option("--aspect", "aspect", type=AspectType(3), default=None,
-                 help="Stretch the grain so that its x:y:z extents are in the ratio L:I:S, e.g. 2:1.5:1."),
+    option("--aspect", "aspect", type=AspectType(3), default=None,
+           help="Stretch the grain so that its x:y:z extents are in the ratio L:I:S, e.g. 2:1.5:1."),
 ]

@@ -7,6 +7,7 @@ from pathlib import Path
 import click
 
 from ..viz.plots import KINDS
+from .help_style import option
 from .options import overwrite_option
 from .paths import OutPath, output_file
 
@@ -14,8 +15,8 @@ from .paths import OutPath, output_file
 @click.command()
 @click.argument("kind", type=click.Choice(tuple(KINDS)))
 @click.argument("manifests", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--out", required=True, type=OutPath(dir_okay=False), help="PNG to write.")
-@click.option("--title", default=None, help="Plot title.")
+@option("-o", "--out", required=True, type=OutPath(dir_okay=False), help="PNG to write.")
+@option("--title", default=None, help="Plot title.")
 @overwrite_option("Replace an existing OUT.")
 def plot(kind, manifests, out, title, overwrite):
     """Plot KIND for one or more MANIFEST CSVs (overlaid, with a legend).

@@ -6,6 +6,7 @@ from pathlib import Path
 
 import click
 
+from .help_style import option
 from .options import overwrite_option
 from .paths import OutPath, mesh_inputs, output_file
 
@@ -15,14 +16,14 @@ IMAGE_SUFFIXES = (".png", ".jpg", ".jpeg")
 
 @click.command()
 @click.argument("files", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("-o", "--out", required=True, type=OutPath(dir_okay=False),
-              help="Image to write: .png, or .jpg/.jpeg (JPEG).")
-@click.option("--columns", type=click.IntRange(min=1), default=None, show_default="about square",
-              help="Panels per row (at most the number of panels).")
-@click.option("--title", default=None, help="Title above the panels.")
-@click.option("--common-scale/--own-scale", default=True, show_default=True,
-              help="Draw every grain at one scale (the largest's) with one scale bar, so that their sizes compare; "
-                   "or each filling its own panel, with a scale bar of its own.")
+@option("-o", "--out", required=True, type=OutPath(dir_okay=False),
+        help="Image to write: .png, or .jpg/.jpeg (JPEG).")
+@option("--columns", type=click.IntRange(min=1), default=None, show_default="about square",
+        help="Panels per row (at most the number of panels).")
+@option("--title", default=None, help="Title above the panels.")
+@option("--common-scale/--own-scale", default=True, show_default=True,
+        help="Draw every grain at one scale (the largest's) with one scale bar, so that their sizes compare; "
+             "or each filling its own panel, with a scale bar of its own.")
 @overwrite_option("Replace an existing OUT.")
 def render(files, out, columns, title, common_scale, overwrite):
     """Render mesh FILES (STL, OBJ, PLY, 3MF, or folders of them) as a labelled contact sheet.

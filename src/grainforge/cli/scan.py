@@ -8,6 +8,7 @@ from pathlib import Path
 import click
 
 from .analyse import table_text
+from .help_style import option
 from .options import FiniteFloatRange, overwrite_option, voxel_size_flag, voxel_size_options, workers_option
 from .paths import OutPath, output_dir, output_file
 
@@ -27,37 +28,37 @@ MESH_NAME = "grain-{:06d}.stl"
 @click.argument("image", type=click.Path(path_type=Path))
 @voxel_size_options("um", "Voxel edge in µm (default: from the TIFF's metadata, where it says).",
                     name="voxel_size_um")
-@click.option("--raw-shape", type=click.IntRange(min=1), nargs=3, default=None, metavar="Z Y X",
-              help="IMAGE is raw binary (no header, C order) of this shape.")
-@click.option("--raw-dtype", default=None, metavar="DTYPE",
-              help="The raw image's NumPy dtype (uint8, uint16, uint32, <u2 for little-endian ...; default uint16).")
-@click.option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
-              help="Write the measured grains as a Sand Atlas table that `grainforge fit` reads (µm), with each "
-                   "grain's opening fraction, voxels, centroid and border flag.")
-@click.option("--segment", is_flag=True,
-              help="IMAGE is binary (non-zero is grain): split touching grains by a distance-transform watershed "
-                   "first.")
-@click.option("--ignore-labels", is_flag=True,
-              help="With --segment: segment an image that holds several non-zero values (already labelled) as "
-                   "binary, every non-zero voxel grain; without it such an image is refused.")
-@click.option("--marker-distance", type=FiniteFloatRange(min=0, min_open=True), default=None, show_default="0.4",
-              help="With --segment: least distance between two grains' markers, as a fraction of the typical "
-                   "grain diameter; larger merges more, smaller splits more.")
-@click.option("--marker-depth", type=FiniteFloatRange(min=0), default=None, show_default="0.08",
-              help="With --segment: how far a distance-map maximum must rise above its saddle to seed a grain, "
-                   "as a fraction of the typical grain diameter; larger ignores more shallow maxima.")
-@click.option("--labels-out", type=OutPath(dir_okay=False), default=None,
-              help="With --segment: write the labels (.npy, .tif or .tiff).")
-@click.option("--meshes", "meshes", type=OutPath(file_okay=False), default=None,
-              help="Write each measured grain as a closed one-body STL in mm, at its place in the scan, into "
-                   "this folder (grain-LABEL.stl).")
-@click.option("--min-voxels", type=click.IntRange(min=1), default=66, show_default=True,
-              help="Labels of fewer voxels are counted, not measured (66: a ball 5 voxels across).")
-@click.option("--keep-border", is_flag=True,
-              help="Also measure grains that touch the image's faces (flagged `border`; left out by default).")
-@click.option("--sphericity-convention", "convention", type=click.Choice(["atlas", "whole"]), default="atlas",
-              show_default=True, help="True sphericity as the Sand Atlas computed it or on the whole grain "
-                                      "(as `analyse`).")
+@option("--raw-shape", type=click.IntRange(min=1), nargs=3, default=None, metavar="Z Y X",
+        help="IMAGE is raw binary (no header, C order) of this shape.")
+@option("--raw-dtype", default=None, metavar="DTYPE",
+        help="The raw image's NumPy dtype (uint8, uint16, uint32, <u2 for little-endian ...; default uint16).")
+@option("--atlas-csv", type=OutPath(dir_okay=False), default=None,
+        help="Write the measured grains as a Sand Atlas table that `grainforge fit` reads (µm), with each "
+             "grain's opening fraction, voxels, centroid and border flag.")
+@option("--segment", is_flag=True,
+        help="IMAGE is binary (non-zero is grain): split touching grains by a distance-transform watershed "
+             "first.")
+@option("--ignore-labels", is_flag=True,
+        help="With --segment: segment an image that holds several non-zero values (already labelled) as "
+             "binary, every non-zero voxel grain; without it such an image is refused.")
+@option("--marker-distance", type=FiniteFloatRange(min=0, min_open=True), default=None, show_default="0.4",
+        help="With --segment: least distance between two grains' markers, as a fraction of the typical "
+             "grain diameter; larger merges more, smaller splits more.")
+@option("--marker-depth", type=FiniteFloatRange(min=0), default=None, show_default="0.08",
+        help="With --segment: how far a distance-map maximum must rise above its saddle to seed a grain, "
+             "as a fraction of the typical grain diameter; larger ignores more shallow maxima.")
+@option("--labels-out", type=OutPath(dir_okay=False), default=None,
+        help="With --segment: write the labels (.npy, .tif or .tiff).")
+@option("--meshes", "meshes", type=OutPath(file_okay=False), default=None,
+        help="Write each measured grain as a closed one-body STL in mm, at its place in the scan, into "
+             "this folder (grain-LABEL.stl).")
+@option("--min-voxels", type=click.IntRange(min=1), default=66, show_default=True,
+        help="Labels of fewer voxels are counted, not measured (66: a ball 5 voxels across).")
+@option("--keep-border", is_flag=True,
+        help="Also measure grains that touch the image's faces (flagged `border`; left out by default).")
+@option("--sphericity-convention", "convention", type=click.Choice(["atlas", "whole"]), default="atlas",
+        show_default=True, help="True sphericity as the Sand Atlas computed it or on the whole grain "
+                                "(as `analyse`).")
 @overwrite_option("Replace existing outputs.")
 @workers_option("Processes measuring grains; the rows do not depend on it.", default_text="one per CPU")
 def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_labels, marker_distance, marker_depth,

@@ -9,6 +9,7 @@ from pathlib import Path
 import click
 
 from ..simulate.capabilities import TILT_ONLY
+from .help_style import option
 from .options import EXIT_CHECK_FAILED, param_options
 from .paths import OutPath, output_dir
 from .simulate_options import Reporter, run_failures, run_options, run_settings
@@ -42,8 +43,8 @@ def settings_cls(test: str = "repose"):
 def _command(test: str, doc: str):
     @click.command(name=test, help=doc)
     @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-    @click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-                  help="Folder for the decks (one per seed), results.csv and the figure.")
+    @option("--out", "out", required=True, type=OutPath(file_okay=False),
+            help="Folder for the decks (one per seed), results.csv and the figure.")
     @run_options()
     @param_options(settings_cls(test), exclude=TILT_ONLY if test == "repose" else ())
     def command(inputs, out, quick, as_spheres, label, workers, engine, mpi, shape, spacing, overwrite, scheduler,

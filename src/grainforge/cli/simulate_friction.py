@@ -10,6 +10,7 @@ import click
 
 from ..simulate.calibration import use_command
 from ..simulate.capabilities import TILT_ONLY
+from .help_style import option
 from .options import EXIT_CHECK_FAILED, FINITE_FLOAT, FiniteFloatRange, param_options
 from .paths import OutPath, output_dir
 from .simulate import check_options, settings_cls
@@ -25,23 +26,23 @@ def _option(name: str) -> str:
 @click.command(name="calibrate")
 @click.argument("test", type=click.Choice(["tilt", "repose", "triaxial"]))
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
-@click.option("--target-angle", type=FINITE_FLOAT, required=True,
-              help="The measured angle to reach, degrees (5 to 80): a tilt failure angle, an angle of repose, or a "
-                   "triaxial friction angle (--angle).")
-@click.option("--angle", type=click.Choice(["ultimate", "peak"]), default=None,
-              show_default="ultimate", help="Triaxial only: the friction angle --target-angle is: ultimate (from "
-                                            "the mean q/p′ over the last 5 % of the axial strain, results.csv's "
-                                            "ultimate_friction_deg) or peak.")
-@click.option("--out", "out", required=True, type=OutPath(file_okay=False),
-              help="Folder for calibration.csv, calibration.json, calibration.png and the runs (runs/).")
-@click.option("--friction-range", type=(FINITE_FLOAT, FINITE_FLOAT), default=(0.05, 1.5), show_default=True,
-              help="Bounds of the μ search.")
-@click.option("--start", type=FiniteFloatRange(min=0.0), default=0.5, show_default=True,
-              help="First μ tried (inside --friction-range).")
-@click.option("--tolerance", type=FiniteFloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
-              help="Stop when a seed-averaged angle is this close to the target, degrees.")
-@click.option("--max-frictions", "max_evaluations", type=click.IntRange(min=2, max=30), default=8, show_default=True,
-              help="At most this many frictions tried (each runs every seed).")
+@option("--target-angle", type=FINITE_FLOAT, required=True,
+        help="The measured angle to reach, degrees (5 to 80): a tilt failure angle, an angle of repose, or a "
+             "triaxial friction angle (--angle).")
+@option("--angle", type=click.Choice(["ultimate", "peak"]), default=None,
+        show_default="ultimate", help="Triaxial only: the friction angle --target-angle is: ultimate (from "
+                                      "the mean q/p′ over the last 5 % of the axial strain, results.csv's "
+                                      "ultimate_friction_deg) or peak.")
+@option("--out", "out", required=True, type=OutPath(file_okay=False),
+        help="Folder for calibration.csv, calibration.json, calibration.png and the runs (runs/).")
+@option("--friction-range", type=(FINITE_FLOAT, FINITE_FLOAT), default=(0.05, 1.5), show_default=True,
+        help="Bounds of the μ search.")
+@option("--start", type=FiniteFloatRange(min=0.0), default=0.5, show_default=True,
+        help="First μ tried (inside --friction-range).")
+@option("--tolerance", type=FiniteFloatRange(min=0.0, min_open=True), default=0.5, show_default=True,
+        help="Stop when a seed-averaged angle is this close to the target, degrees.")
+@option("--max-frictions", "max_evaluations", type=click.IntRange(min=2, max=30), default=8, show_default=True,
+        help="At most this many frictions tried (each runs every seed).")
 @run_options(calibration=True)
 @param_options(settings_cls(), exclude=("friction",))
 @param_options(settings_cls("triaxial"), exclude=tuple(f.name for f in fields(settings_cls())))

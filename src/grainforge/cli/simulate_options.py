@@ -13,6 +13,7 @@ from contextlib import contextmanager
 import click
 
 from ..simulate.capabilities import ENGINE_NAMES, ENGINES, SHAPES
+from .help_style import option
 from .options import FiniteFloatRange, bad_parameter, clump_accuracy_option, overwrite_option, workers_option
 
 __all__ = ["HEAVY_MODULES", "run_options", "scheduler_option", "resume_option", "run_settings", "Reporter",
@@ -29,17 +30,17 @@ HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.sp
                  "grainforge.runtime.workers", "grainforge.dem.representative", "grainforge.dem.template_choice")
 
 #: ``--scheduler`` of simulate and simulate calibrate
-scheduler_option = click.option(
+scheduler_option = option(
     "--scheduler", metavar="ADDRESS", default=None,
     help="Run each engine run (one seed at one friction) as a task on an existing Dask distributed cluster, e.g. "
-         "tcp://host:8786 (needs grainforge[dask], and grainforge and the engine on the workers); the outputs are "
-         "the local run's. With --mpi each task runs `mpirun -np N` on its worker: the cluster's workers decide "
-         "the cores (the local check of --mpi against this machine's cores does not apply).")
+   "tcp://host:8786 (needs grainforge[dask], and grainforge and the engine on the workers); the outputs are "
+   "the local run's. With --mpi each task runs `mpirun -np N` on its worker: the cluster's workers decide "
+   "the cores (the local check of --mpi against this machine's cores does not apply).")
 #: ``--resume`` of simulate and simulate calibrate
-resume_option = click.option(
+resume_option = option(
     "--resume", is_flag=True,
     help="Continue an interrupted run from the engine runs it finished (kept in --out/.grainforge-sweep), with "
-         "the same settings: those are not run again.")
+   "the same settings: those are not run again.")
 
 #: the help of the run options: a virtual test's, and a calibration's where it differs
 _HELP = {
@@ -69,16 +70,16 @@ def run_options(calibration: bool = False):
     differs), as one decorator."""
     help = {k: v[calibration] for k, v in _HELP.items()}
     decorators = [
-        click.option("--quick", is_flag=True, help=help["quick"]),
-        click.option("--as-spheres", is_flag=True, help=help["as_spheres"]),
-        click.option("--label", default=None, show_default="the inputs' names", help=help["label"]),
+        option("--quick", is_flag=True, help=help["quick"]),
+        option("--as-spheres", is_flag=True, help=help["as_spheres"]),
+        option("--label", default=None, show_default="the inputs' names", help=help["label"]),
         workers_option("Engine runs (seeds) at once, each on one core or on --mpi ranks.",
                        default_text="CPU count divided by --mpi"),
-        click.option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True, help=help["engine"]),
-        click.option("--mpi", type=click.IntRange(min=1, max=4096), default=None, help=help["mpi"]),
-        click.option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True, help=help["shape"]),
-        click.option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
-                     show_default="0.05", help=help["spacing"]),
+        option("--engine", type=click.Choice(ENGINES), default="yade", show_default=True, help=help["engine"]),
+        option("--mpi", type=click.IntRange(min=1, max=4096), default=None, help=help["mpi"]),
+        option("--shape", type=click.Choice(SHAPES), default="clump", show_default=True, help=help["shape"]),
+        option("--spacing", type=FiniteFloatRange(min=0.0, max=0.5, min_open=True), default=None,
+               show_default="0.05", help=help["spacing"]),
         overwrite_option(help["overwrite"]),
         scheduler_option,
         resume_option,

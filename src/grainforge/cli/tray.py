@@ -8,6 +8,7 @@ import click
 
 from ..fabrication.tray import DEFAULT_TRIANGLE_BUDGET
 from ..params import ParameterError
+from .help_style import option
 from .options import (
     FiniteFloatRange,
     bad_parameter,
@@ -82,30 +83,30 @@ def _say(line: str) -> None:
 
 @click.command()
 @click.argument("inputs", nargs=-1, type=click.Path(path_type=Path))
-@click.option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
-              help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
-@click.option("--out", required=True, type=OutPath(dir_okay=False),
-              help="Print file: .3mf (one named object per grain) or .stl (binary). "
-                   "Also writes STEM.csv and STEM-plateK.png.")
-@click.option("--method", default=None, help="Generate grains on the fly with this method (instead of INPUTS).")
-@click.option("--preset", default=None, help="The method's preset (same as --param preset=NAME).")
-@click.option("--param", "params", multiple=True, metavar="NAME=VALUE",
-              help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
+@option("--printer", "printer_spec", default="objet-eden-250", show_default=True,
+        help="Printer profile: objet-eden-250, generic-fdm, generic-sla, or FILE.toml[#NAME].")
+@option("--out", required=True, type=OutPath(dir_okay=False),
+        help="Print file: .3mf (one named object per grain) or .stl (binary). "
+             "Also writes STEM.csv and STEM-plateK.png.")
+@option("--method", default=None, help="Generate grains on the fly with this method (instead of INPUTS).")
+@option("--preset", default=None, help="The method's preset (same as --param preset=NAME).")
+@option("--param", "params", multiple=True, metavar="NAME=VALUE",
+        help="A method parameter, repeatable (e.g. --param fractal_dimension=2.6).")
 @count_option("Number of generated grains; grain i uses seed S + i.")
 @seed_option()
-@click.option("--size", default=None, type=FiniteFloatRange(min=1e-3, max=1e4),
-              show_default="10 for generated grains; files keep their size",
-              help="Grain size in mm, 0.001 (1 µm) to 10000 (10 m) (see --size-definition).")
+@option("--size", default=None, type=FiniteFloatRange(min=1e-3, max=1e4),
+        show_default="10 for generated grains; files keep their size",
+        help="Grain size in mm, 0.001 (1 µm) to 10000 (10 m) (see --size-definition).")
 @size_definition_option
-@click.option("--gap", default=None, type=FiniteFloatRange(min=0, min_open=True),
-              show_default="two printer resolutions", help="Minimum distance between grains in mm.")
-@click.option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
-              show_default="6", help="Finest mesh level resolution matching may choose.")
-@click.option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
-              help="Triangle budget of one print file, what a slicer takes (per grain: budget x plates / count).")
-@click.option("--plates", default="1", show_default=True, type=Plates(),
-              help="Print files to spread the grains over (STEM-plateK.EXT), each within --max-triangles; "
-                   "auto: as many as give every grain the printer's tolerance.")
+@option("--gap", default=None, type=FiniteFloatRange(min=0, min_open=True),
+        show_default="two printer resolutions", help="Minimum distance between grains in mm.")
+@option("--max-subdivisions", default=None, type=click.IntRange(0, 7),
+        show_default="6", help="Finest mesh level resolution matching may choose.")
+@option("--max-triangles", default=DEFAULT_TRIANGLE_BUDGET, show_default=True, type=click.IntRange(min=20),
+        help="Triangle budget of one print file, what a slicer takes (per grain: budget x plates / count).")
+@option("--plates", default="1", show_default=True, type=Plates(),
+        help="Print files to spread the grains over (STEM-plateK.EXT), each within --max-triangles; "
+             "auto: as many as give every grain the printer's tolerance.")
 @workers_option("Processes making grains (the output does not depend on it).", default=2)
 @overwrite_option()
 def tray(inputs, printer_spec, out, method, preset, params, count, seed, size, size_definition, gap,

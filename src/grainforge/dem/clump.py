@@ -48,6 +48,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.voxel import grid_for, inside_mask
 from ..rng import as_generator
 
@@ -173,7 +174,7 @@ def _equivalent_diameter(vertices, faces) -> float:
 
     vol = signed_volume(vertices, faces)
     if not vol > 0:
-        raise ValueError(f"the grain's volume must be positive, got {vol!r}")
+        raise InputError(f"the grain's volume must be positive, got {vol!r}")
     return float(sphere_diameter(vol))
 
 
@@ -466,7 +467,7 @@ def clump_accuracy(vertices: np.ndarray, faces: np.ndarray, centres: np.ndarray,
     (0.51, 0.51, 0.0)
     """
     if int(resolution) < 10:
-        raise ValueError(f"resolution must be ≥ 10 cells per diameter, got {int(resolution)}")
+        raise InputError(f"resolution must be ≥ 10 cells per diameter, got {int(resolution)}")
     v = np.asarray(vertices, dtype=np.float64)
     return _Measure(v, faces, _equivalent_diameter(v, faces), resolution)(centres, radii)
 
@@ -483,7 +484,7 @@ class _Measure:
     def __init__(self, v: np.ndarray, faces, d: float, resolution: int):
         resolution = int(resolution)
         if resolution < 10:
-            raise ValueError(f"resolution must be ≥ 10 cells per diameter, got {resolution}")
+            raise InputError(f"resolution must be ≥ 10 cells per diameter, got {resolution}")
         self.v, self.faces, self.d, self.resolution = v, faces, d, resolution
         self.grains: dict = {}
         self.calls = 0
@@ -536,14 +537,14 @@ def check_target(target) -> float:
     >>> check_target(float("nan"))
     Traceback (most recent call last):
     ...
-    ValueError: the accuracy target (intersection over union) must be a number in (0, 1), got nan
+    grainforge.errors.InputError: the accuracy target (intersection over union) must be a number in (0, 1), got nan
     """
     try:
         t = float(target)
     except (TypeError, ValueError):
         t = math.nan
     if not (math.isfinite(t) and 0.0 < t < 1.0):
-        raise ValueError(f"the accuracy target (intersection over union) must be a number in (0, 1), got {target!r}")
+        raise InputError(f"the accuracy target (intersection over union) must be a number in (0, 1), got {target!r}")
     return t
 
 
@@ -591,6 +592,30 @@ def _exact_gain(c, r, ci, h, axes, shape, u_in, u_out, spill_weight):
     return gain, blk, lo, hi
 
 
+def _candidates(points, depth, inside_idx, h, overshoot, growth):
+    """The greedy's candidate spheres (:func:`_greedy`'s arguments of the same names).
+
+    Returns
+    -------
+    twins : int
+        Candidates per centre: candidate t is centre t // twins, grown when t is odd.
+    cp, cidx : ndarray
+        The candidate centres and their cell indices (grid order, x index first).
+    cr, cap : (K,) float64
+        Each candidate's radius and the cap it reaches beyond its centre's depth.
+    """
+    cand = depth > 1.0 * h
+    twins = 2 if growth > 0 else 1
+    bd, cp, cidx = depth[cand], points[cand], inside_idx[cand]
+    dd = np.repeat(bd, twins) if twins > 1 else bd
+    cr = dd - 0.5 * h + overshoot
+    if twins > 1:
+        cr[1::2] += growth * dd[1::2]
+    beyond = np.maximum(cr - dd, 0.0)
+    cap = np.pi * beyond**2 * (3.0 * cr - beyond) / 3.0
+    return twins, cp, cidx, cr, cap
+
+
 def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weight, growth=0.0):
     """Greedy spheres on the working grid.
 
@@ -634,16 +659,7 @@ def _greedy(points, depth, inside_idx, grid, n, h, inside, overshoot, spill_weig
     are dropped and the next 8 are counted: the greedy ends when no candidate is left with a
     positive estimate, or at ``n`` spheres.
     """
-    cand = depth > 1.0 * h
-    # the centres (grid order, x index first); candidate t is centre t // twins, grown when t is odd
-    twins = 2 if growth > 0 else 1
-    bd, cp, cidx = depth[cand], points[cand], inside_idx[cand]
-    dd = np.repeat(bd, twins) if twins > 1 else bd
-    cr = dd - 0.5 * h + overshoot
-    if twins > 1:
-        cr[1::2] += growth * dd[1::2]
-    beyond = np.maximum(cr - dd, 0.0)
-    cap = np.pi * beyond**2 * (3.0 * cr - beyond) / 3.0
+    twins, cp, cidx, cr, cap = _candidates(points, depth, inside_idx, h, overshoot, growth)
     # uncovered cells inside and outside the grain (one array each: two counts per candidate)
     u_in = inside.copy()
     u_out = ~inside
@@ -910,15 +926,15 @@ def clump(vertices: np.ndarray, faces: np.ndarray, *, spheres: int = 30, resolut
 
     spheres = int(spheres)
     if spheres < 1:
-        raise ValueError(f"spheres must be ≥ 1, got {spheres!r}")
+        raise InputError(f"spheres must be ≥ 1, got {spheres!r}")
     if not spill_weight > 0:
-        raise ValueError(f"spill_weight must be positive, got {spill_weight!r}")
+        raise InputError(f"spill_weight must be positive, got {spill_weight!r}")
     if not (math.isfinite(growth) and growth >= 0):
-        raise ValueError(f"growth must be a finite number ≥ 0, got {growth!r}")
+        raise InputError(f"growth must be a finite number ≥ 0, got {growth!r}")
     if target_iou is not None:
         target_iou = check_target(target_iou)
         if int(measure_resolution) < 10:
-            raise ValueError(f"measure_resolution must be ≥ 10 cells per diameter, got {measure_resolution!r}")
+            raise InputError(f"measure_resolution must be ≥ 10 cells per diameter, got {measure_resolution!r}")
     rng = as_generator(rng)
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)

@@ -9,6 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError, OutputExistsError
 from ..rng import RNGLike
 
 __all__ = ["xyzr_text", "clump_vtk_text", "write_files", "template_record", "fmt", "updated_settings", "settle_loop",
@@ -46,7 +47,7 @@ def updated_settings(defaults: dict, kw: dict, what: str = "scene settings") -> 
     """
     unknown = set(kw) - set(defaults)
     if unknown:
-        raise ValueError(f"unknown {what}: {', '.join(sorted(unknown))}")
+        raise InputError(f"unknown {what}: {', '.join(sorted(unknown))}")
     return {**defaults, **kw}
 
 
@@ -153,7 +154,7 @@ def settle_loop(fall_steps: int, check_every: int, max_checks: int, window: int 
     """
     w = int(window)
     if w < 1 or int(max_checks) < w:
-        raise ValueError(f"need 1 ≤ window ≤ max_checks, got window {window}, max_checks {max_checks}")
+        raise InputError(f"need 1 ≤ window ≤ max_checks, got window {window}, max_checks {max_checks}")
     lines = [f"run {int(fall_steps)}"] if int(fall_steps) > 0 else []
     lines += [f"variable ke{k} equal 1e300" for k in range(1, w + 1)]
     # pre no post no: a check continues the run without LAMMPS's set-up (which also re-counts
@@ -339,7 +340,7 @@ def exact_unit_quaternions(q) -> np.ndarray:
         # the few rows with no exact neighbour: start again from a direction turned by ~1e-15
         tilt = base[todo] + (attempt + 1) * 1e-15 * np.array([0.0, 1.0, -1.0, 1.0])
         q[todo] = tilt / np.linalg.norm(tilt, axis=1, keepdims=True)
-    raise ValueError(f"no float64 quaternion of exact unit norm near {base[todo[0]].tolist()}")
+    raise InputError(f"no float64 quaternion of exact unit norm near {base[todo[0]].tolist()}")
 
 
 #: offsets (units in the last place) tried on each component, nearest first
@@ -563,7 +564,7 @@ def write_files(files: Mapping[str, str | bytes], out: str | Path, *, overwrite:
 
     out = Path(out)
     if out.exists() and not out.is_dir():
-        raise ValueError(f"{out} exists and is not a folder")
+        raise InputError(f"{out} exists and is not a folder")
     if "grains.json" in files and "clumps.csv" not in files:  # clumps built to an accuracy target: their table
         from .clump import clump_table
 
@@ -573,5 +574,5 @@ def write_files(files: Mapping[str, str | bytes], out: str | Path, *, overwrite:
     if not overwrite:
         existing = [out / p for p in files if (out / p).exists()]
         if existing:
-            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+            raise OutputExistsError(f"{existing[0]} exists; use {{overwrite}}", setting="overwrite")
     return [atomic_write(out / p, data) for p, data in files.items()]

@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..errors import InputError
+
 __all__ = ["write_deck"]
 
 
@@ -46,13 +48,13 @@ def write_deck(engine: str, templates: Sequence, out: str | Path, *, overwrite: 
     from . import SUPPORTED
 
     if engine not in SUPPORTED:
-        raise ValueError(f"engine must be one of {', '.join(SUPPORTED)}, got {engine!r}")
+        raise InputError(f"engine must be one of {', '.join(SUPPORTED)}, got {engine!r}")
     for t in templates:
         if t.shape not in SUPPORTED[engine]:
-            raise ValueError(f"{engine} does not support shape {t.shape!r}")
+            raise InputError(f"{engine} does not support shape {t.shape!r}")
     if rolling_friction > 0:
         if engine == "lammps" or any(t.shape != "clump" for t in templates):
-            raise ValueError("rolling resistance is written for clumps in Yade and LIGGGHTS decks only")
+            raise InputError("rolling resistance is written for clumps in Yade and LIGGGHTS decks only")
         if engine == "yade":
             from . import yade as engine_deck
         else:

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike, as_generator
 from .enclosure import enclosure_problems
 
@@ -107,9 +108,9 @@ def pour_counts(templates: int, grains: int, rng: RNGLike = 0) -> np.ndarray:
     (2, 1)
     """
     if templates < 1:
-        raise ValueError(f"a pour needs at least one template, got {templates}")
+        raise InputError(f"a pour needs at least one template, got {templates}")
     if not 1 <= grains <= MAX_POUR_GRAINS:
-        raise ValueError(f"a pour holds 1 to {MAX_POUR_GRAINS} grains, got {grains}")
+        raise InputError(f"a pour holds 1 to {MAX_POUR_GRAINS} grains, got {grains}")
     counts = np.full(templates, grains // templates, dtype=np.int64)
     extra = as_generator(rng).choice(templates, size=grains % templates, replace=False)
     counts[extra] += 1
@@ -142,7 +143,7 @@ def pour_copies(templates: int, count: int = 1) -> list[int]:
     [2, 2, 2]
     """
     if count * templates > MAX_POUR_GRAINS:
-        raise ValueError(f"{templates} grain files × {count} = {count * templates} grains; a pour "
+        raise InputError(f"{templates} grain files × {count} = {count * templates} grains; a pour "
                          f"holds at most {MAX_POUR_GRAINS}")
     return [count] * templates
 
@@ -273,7 +274,7 @@ def build_templates(paths: Sequence[Path], *, workers: int = 1,
         tasks = [(p, n, kwargs) for p, n in zip(paths, names)]
     else:
         if len(counts) != len(paths):
-            raise ValueError(f"{len(counts)} counts for {len(paths)} grain files")
+            raise InputError(f"{len(counts)} counts for {len(paths)} grain files")
         tasks = [(p, n, {**kwargs, "count": int(c)}) for p, n, c in zip(paths, names, counts) if c > 0]
     wrap = progress or (lambda it: it)
     if workers <= 1 or len(tasks) < 4:
@@ -310,4 +311,4 @@ def check_level_set_files(paths: Iterable[str | Path], *, unit: float, spacing: 
         try:
             check_level_set_budget(v, f, unit=unit, spacing=spacing)
         except ValueError as exc:
-            raise ValueError(f"{p}: {exc}") from None
+            raise InputError(f"{p}: {exc}") from None

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import as_generator
 from .deck import (
     GRAVITY,
@@ -111,7 +112,7 @@ def _shape_files(templates: Sequence) -> dict:
     files: dict[str, str] = {}
     for t in templates:
         if t.shape != "clump" or t.clump is None:
-            raise ValueError(f"the LAMMPS deck writes rigid clumps; {t.name} has shape {t.shape!r}")
+            raise InputError(f"the LAMMPS deck writes rigid clumps; {t.name} has shape {t.shape!r}")
         head = (f"grainforge clump of {t.source or t.name}: x y z r (m), centroid at the origin\n"
                 f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
         files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=head)
@@ -249,5 +250,5 @@ def write_deck(templates: Sequence, out: str | Path, *, settings: dict | None = 
         If a file of the deck exists and ``overwrite`` is false (nothing is written).
     """
     if any(t.shape == "polyhedron" for t in templates):
-        raise ValueError("polyhedron templates take grainforge.dem.lammps_body.write_deck")
+        raise InputError("polyhedron templates take grainforge.dem.lammps_body.write_deck")
     return write_files(deck_files(templates, settings=settings), out, overwrite=overwrite)

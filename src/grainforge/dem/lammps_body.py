@@ -40,6 +40,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import as_generator
 from .deck import (
     GRAVITY,
@@ -137,7 +138,7 @@ def hull_topology(vertices: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     v = np.asarray(vertices, dtype=np.float64)
     hull = ConvexHull(v)
     if len(hull.vertices) != len(v):
-        raise ValueError("every point must be a vertex of the convex hull")
+        raise InputError("every point must be a vertex of the convex hull")
     f = hull.simplices.astype(np.int64)
     a, b, c = v[f[:, 0]], v[f[:, 1]], v[f[:, 2]]
     inward = np.einsum("ij,ij->i", np.cross(b - a, c - a), a - v.mean(axis=0)) < 0
@@ -221,7 +222,7 @@ def body_lines(body_id: int, vertices: np.ndarray, *, faces: np.ndarray, edges: 
     doubles.append(fmt(rounded_diameter))
     body = [f"{len(vertices)} {len(edges)} {len(faces)}"] + _pack(doubles)
     if len(body) > _MAX_BODY_LINES:
-        raise ValueError(f"a hull of {len(vertices)} vertices needs {len(body)} lines in LAMMPS's read_data "
+        raise InputError(f"a hull of {len(vertices)} vertices needs {len(body)} lines in LAMMPS's read_data "
                          f"(at most {_MAX_BODY_LINES}); use fewer vertices (≤ {MAX_VERTICES} always fits)")
     return [f"{body_id} 3 {len(doubles)}"] + body
 
@@ -241,7 +242,7 @@ def _shape_files(templates: Sequence) -> tuple[dict, list]:
     topo = []
     for t in templates:
         if t.shape != "polyhedron" or t.polyhedron is None:
-            raise ValueError(f"the LAMMPS body deck writes convex polyhedra; {t.name} has shape {t.shape!r}")
+            raise InputError(f"the LAMMPS body deck writes convex polyhedra; {t.name} has shape {t.shape!r}")
         f, e = hull_topology(t.polyhedron)
         topo.append((f, e))
         head = (f"grainforge convex hull of {t.source or t.name}: x y z (m), centroid at the origin\n"

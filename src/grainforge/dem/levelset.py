@@ -6,6 +6,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.voxel import Grid, grid_for, inside_mask
 
 __all__ = ["LevelSet", "level_set", "surface_nodes", "DISTANCE_BLOCK", "MAX_NODES"]
@@ -110,7 +111,7 @@ def level_set_grid(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 
         coarsest = spacing * (n_nodes / MAX_NODES) ** (1 / 3)
         while np.prod(grid_for(v, coarsest * d, pad=int(pad)).shape) > MAX_NODES:  # the pad does not scale
             coarsest *= 1.02
-        raise ValueError(f"level-set spacing {spacing:g} of d_eq needs a {'x'.join(map(str, grid.shape))} grid "
+        raise InputError(f"level-set spacing {spacing:g} of d_eq needs a {'x'.join(map(str, grid.shape))} grid "
                          f"({n_nodes:,} nodes, more than {MAX_NODES:,}) for this grain: use a spacing of at least "
                          f"{coarsest:.3g}")
     return grid
@@ -183,9 +184,9 @@ def level_set(vertices: np.ndarray, faces: np.ndarray, *, spacing: float = 0.05,
     import trimesh
 
     if not 0 < spacing <= 0.5:
-        raise ValueError(f"spacing must be in (0, 0.5] of d_eq, got {spacing!r}")
+        raise InputError(f"spacing must be in (0, 0.5] of d_eq, got {spacing!r}")
     if int(pad) < 1:
-        raise ValueError(f"pad must be ≥ 1, got {pad!r}")
+        raise InputError(f"pad must be ≥ 1, got {pad!r}")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     grid = level_set_grid(v, f, spacing=spacing, pad=pad)

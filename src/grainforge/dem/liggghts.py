@@ -34,6 +34,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from .deck import (
     GRAVITY,
     clump_vtk_text,
@@ -75,7 +76,7 @@ _SEED_STRIDE = 1_000_003
 # LIGGGHTS refuses so small a region otherwise), and the box margins beyond the
 # walls (lower _MARGIN_LO, upper _MARGIN_HI cells, an irrational ratio) keep every cut of up to
 # 32 parts per side at least 4e-5 cells away from every node of a lattice up to 300 cells
-# wide (tests/test_dem.py) — 400 times the region's half-width.
+# wide (tests/dem/test_dem.py) — 400 times the region's half-width.
 _NODE_BOX = 2e-7
 _MARGIN_LO = 0.05
 _MARGIN_HI = 0.05 * (1 + math.sqrt(5)) / 2
@@ -246,7 +247,7 @@ def deck_seeds(count: int) -> list[int]:
     """
     table = seed_table()
     if count > len(table):
-        raise ValueError(f"a deck needs {count} random seeds; the seed table holds {len(table)}")
+        raise InputError(f"a deck needs {count} random seeds; the seed table holds {len(table)}")
     return [int(x) for x in table[(np.arange(count, dtype=np.int64) * _SEED_STRIDE) % len(table)]]
 
 
@@ -260,7 +261,7 @@ def _template_files(templates: Sequence, seeds: list[int]) -> dict:
     names, masses = [], []
     for k, t in enumerate(templates):
         if t.shape != "clump" or t.clump is None:
-            raise ValueError(f"the LIGGGHTS deck writes multisphere clumps; {t.name} has shape {t.shape!r}")
+            raise InputError(f"the LIGGGHTS deck writes multisphere clumps; {t.name} has shape {t.shape!r}")
         head = (f"grainforge clump of {t.source or t.name}: x y z r (m), centroid at the origin\n"
                 f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
         files[f"{t.name}.xyzr"] = xyzr_text(t.clump.centres, t.clump.radii, header=head)

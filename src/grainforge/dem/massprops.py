@@ -12,6 +12,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["MassProperties", "mass_properties"]
 
 
@@ -152,7 +154,7 @@ def mass_properties(vertices: np.ndarray, faces: np.ndarray) -> MassProperties:
 
     volume, centroid, second_c = second_moments(vertices, faces)
     if not np.isfinite(volume) or volume <= 0:
-        raise ValueError(f"mesh volume must be positive (closed, outward-oriented mesh), got {volume!r}")
+        raise InputError(f"mesh volume must be positive (closed, outward-oriented mesh), got {volume!r}")
     inertia = np.trace(second_c) * np.eye(3) - second_c
     inertia = 0.5 * (inertia + inertia.T)
     principal, axes = np.linalg.eigh(inertia)

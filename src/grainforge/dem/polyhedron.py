@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["convex_polyhedron", "DEFAULT_VERTICES", "engine_vertices"]
 
 #: engine -> hull vertices of ``grainforge dem --shape polyhedron`` when ``--vertices`` is not
@@ -55,7 +57,7 @@ def convex_polyhedron(vertices: np.ndarray, *, max_vertices: int | None = None) 
     if max_vertices is None or len(hull) <= max_vertices:
         return hull
     if int(max_vertices) < 4:
-        raise ValueError(f"max_vertices must be ≥ 4, got {max_vertices!r}")
+        raise InputError(f"max_vertices must be ≥ 4, got {max_vertices!r}")
     c = hull.mean(axis=0)
     a = int(np.argmax(np.linalg.norm(hull - c, axis=1)))
     b = int(np.argmax(np.linalg.norm(hull - hull[a], axis=1)))
@@ -107,5 +109,5 @@ def engine_vertices(engine: str, vertices: int | None = None) -> int:
     if vertices is None:
         return DEFAULT_VERTICES[engine]
     if engine == "lammps" and vertices > MAX_VERTICES:
-        raise ValueError(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}")
+        raise InputError(f"LAMMPS reads at most {MAX_VERTICES} vertices per body, got {vertices}")
     return vertices

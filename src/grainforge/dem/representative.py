@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike, as_generator
 
 __all__ = ["DESCRIPTORS", "TemplateChoice", "descriptor_matrix", "significant", "standardise", "ks_statistics",
@@ -120,7 +121,7 @@ def descriptor_matrix(rows: Sequence[Mapping[str, float]]) -> np.ndarray:
     for i, row in enumerate(rows):
         missing = [name for name in DESCRIPTORS if name not in row]
         if missing:
-            raise ValueError(f"grain {i}: no {', '.join(missing)}")
+            raise InputError(f"grain {i}: no {', '.join(missing)}")
         table[i] = [float(row[name]) for name in DESCRIPTORS]
     _check(table)
     return table
@@ -128,13 +129,13 @@ def descriptor_matrix(rows: Sequence[Mapping[str, float]]) -> np.ndarray:
 
 def _check(table: np.ndarray) -> None:
     if table.ndim != 2 or table.shape[1] != len(DESCRIPTORS):
-        raise ValueError(f"descriptors must be an (N, {len(DESCRIPTORS)}) table ({', '.join(DESCRIPTORS)}), "
+        raise InputError(f"descriptors must be an (N, {len(DESCRIPTORS)}) table ({', '.join(DESCRIPTORS)}), "
                          f"got shape {table.shape}")
     if len(table) == 0:
-        raise ValueError("no grains to choose from")
+        raise InputError("no grains to choose from")
     bad = np.flatnonzero(~np.isfinite(table).all(axis=1) | (table[:, -1] <= 0))
     if len(bad):
-        raise ValueError(f"grain {bad[0]}: descriptors must be finite and the size positive, "
+        raise InputError(f"grain {bad[0]}: descriptors must be finite and the size positive, "
                          f"got {table[bad[0]].tolist()}")
 
 
@@ -313,9 +314,9 @@ def choose_representative(descriptors, k: int, *, rng: RNGLike = 0, restarts: in
     _check(table)
     table = significant(table)  # sizes equal to a few ulps (grains scaled to one size) tie
     if int(k) != k or k < 1:
-        raise ValueError(f"k must be a whole number ≥ 1, got {k!r}")
+        raise InputError(f"k must be a whole number ≥ 1, got {k!r}")
     if restarts < 1:
-        raise ValueError(f"restarts must be ≥ 1, got {restarts!r}")
+        raise InputError(f"restarts must be ≥ 1, got {restarts!r}")
     rng = as_generator(rng)  # refused alike whether or not a choice is made
     n, k = len(table), int(k)
     if k >= n:

@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike
 from .massprops import MassProperties, mass_properties
 
@@ -188,18 +189,18 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, *, name: str, unit: float =
     from .enclosure import enclosure_problems
 
     if not (np.isfinite(density) and density > 0):
-        raise ValueError(f"density must be > 0 kg/m³, got {density!r}")
+        raise InputError(f"density must be > 0 kg/m³, got {density!r}")
     if not (np.isfinite(unit) and unit > 0):
-        raise ValueError(f"unit must be > 0 m, got {unit!r}")
+        raise InputError(f"unit must be > 0 m, got {unit!r}")
     if shape not in SHAPES:
-        raise ValueError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
+        raise InputError(f"shape must be one of {', '.join(SHAPES)}, got {shape!r}")
     if int(refine_iterations) < 0:
-        raise ValueError(f"refine_iterations must be ≥ 0, got {refine_iterations!r}")
+        raise InputError(f"refine_iterations must be ≥ 0, got {refine_iterations!r}")
     if int(count) < 1:
-        raise ValueError(f"count must be ≥ 1, got {count!r}")
+        raise InputError(f"count must be ≥ 1, got {count!r}")
     if target_iou is not None:
         if shape != "clump":
-            raise ValueError(f"target_iou is a clump's accuracy target; shape {shape!r} has none")
+            raise InputError(f"target_iou is a clump's accuracy target; shape {shape!r} has none")
         from .clump import check_target
 
         target_iou = check_target(target_iou)
@@ -207,10 +208,10 @@ def prepare(vertices: np.ndarray, faces: np.ndarray, *, name: str, unit: float =
     f = np.asarray(faces, dtype=np.int64)
     problems = enclosure_problems(v, f)
     if problems:
-        raise ValueError(f"{source or name}: not a closed solid ({'; '.join(problems)})")
+        raise InputError(f"{source or name}: not a closed solid ({'; '.join(problems)})")
     v, mp = _in_metres(v, f, unit)
     if size_range is not None and not size_range[0] <= mp.equivalent_diameter <= size_range[1]:
-        raise ValueError(f"{source or name}: equivalent diameter {mp.equivalent_diameter:.3g} m is outside "
+        raise InputError(f"{source or name}: equivalent diameter {mp.equivalent_diameter:.3g} m is outside "
                          f"{size_range[0]:g}–{size_range[1]:g} m (at {unit:g} m per file unit): rescale the mesh or "
                          "give its unit (metres per file unit)")
     # the grain moves to its centroid; volume, inertia about the centroid and axes do not change

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from .representative import DESCRIPTORS, TemplateChoice, choose_representative, descriptor_matrix
 
 __all__ = ["POOL_FACTOR", "POOL_MIN", "POOL_MAX", "MAX_CANDIDATES", "MEASURE_SECONDS", "TEMPLATES_CSV",
@@ -337,7 +338,7 @@ def choose_files(inputs: Sequence[str | os.PathLike], paths: Sequence[Path], *, 
         For ``k < 1``, or a file that cannot be read (named).
     """
     if k < 1:
-        raise ValueError(f"--templates must be at least 1, got {k}")
+        raise InputError(f"{{templates}} must be at least 1, got {k}", setting="templates")
     paths = list(paths)
     candidates, known, resolved, todo = _candidates(inputs, paths, k, pool)
     measured = {}

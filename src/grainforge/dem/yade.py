@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from .deck import (
     clump_vtk_text,
     fmt,
@@ -112,7 +113,7 @@ def shape_files(t) -> dict:
     """
     if t.shape == "clump":
         if t.clump is None:
-            raise ValueError(f"{t.name}: clump template without spheres")
+            raise InputError(f"{t.name}: clump template without spheres")
         head = (f"grainforge clump of {t.source or t.name}: x y z r (m), centroid at the origin\n"
                 f"spheres {t.clump.count}, coverage {t.clump.coverage:.4f}, spill {t.clump.spill:.4f}")
         return {f"{t.name}.xyzr": xyzr_text(t.clump.centres, t.clump.radii, header=head),
@@ -135,7 +136,7 @@ def shape_files(t) -> dict:
                "shape": [int(n) for n in ls.grid.shape], "units": "m, signed distance negative inside",
                "distance": [float(x) for x in np.asarray(ls.distance, dtype=np.float64).reshape(-1)]}
         return {f"{t.name}.levelset.json": json.dumps(rec) + "\n"}
-    raise ValueError(f"{t.name}: unknown shape {t.shape!r}")
+    raise InputError(f"{t.name}: unknown shape {t.shape!r}")
 
 
 def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict | None = None) -> dict:
@@ -167,7 +168,7 @@ def deck_files(templates: Sequence, *, scene: str | None = None, settings: dict 
     records = []
     shapes = {t.shape for t in templates}
     if len(shapes) > 1:
-        raise ValueError(f"a Yade deck holds one grain shape; got {', '.join(sorted(shapes))}")
+        raise InputError(f"a Yade deck holds one grain shape; got {', '.join(sorted(shapes))}")
     for t in templates:
         files.update(shape_files(t))
         rec = template_record(t)

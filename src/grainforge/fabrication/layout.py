@@ -20,6 +20,8 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["orient_principal", "orient_stable", "ShelfPacker"]
 
 
@@ -179,7 +181,7 @@ class ShelfPacker:
         """
         a, b, c = (float(e) for e in extents)
         if a > self.W or b > self.D or c > self.H:
-            raise ValueError(
+            raise InputError(
                 f"a grain of {a:.3g} x {b:.3g} x {c:.3g} mm does not fit the build volume "
                 f"{self.W:g} x {self.D:g} x {self.H:g} mm"
             )

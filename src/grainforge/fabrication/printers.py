@@ -36,6 +36,8 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import FileFormatError, InputError
+
 __all__ = ["Printer", "PRINTERS", "get_printer", "load_printers", "TECHNOLOGIES"]
 
 TECHNOLOGIES = ("polyjet", "fdm", "sla")
@@ -80,14 +82,14 @@ class Printer:
 
     def __post_init__(self):
         if self.technology not in TECHNOLOGIES:
-            raise ValueError(f"printer {self.name!r}: technology must be one of {', '.join(TECHNOLOGIES)}, "
+            raise InputError(f"printer {self.name!r}: technology must be one of {', '.join(TECHNOLOGIES)}, "
                              f"got {self.technology!r}")
         try:
             bv = tuple(float(x) for x in self.build_volume)
         except (TypeError, ValueError):
-            raise ValueError(f"printer {self.name!r}: build_volume must be three numbers (mm)") from None
+            raise InputError(f"printer {self.name!r}: build_volume must be three numbers (mm)") from None
         if len(bv) != 3 or not all(math.isfinite(x) and x > 0 for x in bv):
-            raise ValueError(f"printer {self.name!r}: build_volume must be three positive numbers (mm), got {bv}")
+            raise InputError(f"printer {self.name!r}: build_volume must be three positive numbers (mm), got {bv}")
         object.__setattr__(self, "build_volume", bv)
         res = _positive(self.name, "resolution", self.resolution)
         object.__setattr__(self, "resolution", res)
@@ -98,7 +100,7 @@ class Printer:
         if self.stacking is None:
             object.__setattr__(self, "stacking", self.technology == "polyjet")
         elif not isinstance(self.stacking, bool):
-            raise ValueError(f"printer {self.name!r}: stacking must be true or false, got {self.stacking!r}")
+            raise InputError(f"printer {self.name!r}: stacking must be true or false, got {self.stacking!r}")
 
     @property
     def default_gap(self) -> float:
@@ -172,9 +174,9 @@ def _positive(name: str, key: str, value: Any) -> float:
     try:
         v = float(value)
     except (TypeError, ValueError):
-        raise ValueError(f"printer {name!r}: {key} must be a positive number (mm), got {value!r}") from None
+        raise InputError(f"printer {name!r}: {key} must be a positive number (mm), got {value!r}") from None
     if not math.isfinite(v) or v <= 0:
-        raise ValueError(f"printer {name!r}: {key} must be a positive number (mm), got {value!r}")
+        raise InputError(f"printer {name!r}: {key} must be a positive number (mm), got {value!r}")
     return v
 
 
@@ -221,23 +223,23 @@ def load_printers(path: str | Path) -> dict[str, Printer]:
     """
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such printer profile file")
+        raise InputError(f"{path}: no such printer profile file")
     try:
         data = tomllib.loads(path.read_text(encoding="utf-8"))
     except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: not a valid TOML file ({exc})") from None
+        raise FileFormatError(f"{path}: not a valid TOML file ({exc})") from None
     tables = data.get("printer")
     if not isinstance(tables, dict) or not tables or not all(isinstance(t, dict) for t in tables.values()):
-        raise ValueError(f"{path}: expected one or more [printer.NAME] tables")
+        raise InputError(f"{path}: expected one or more [printer.NAME] tables")
     out = {}
     for name, table in tables.items():
         unknown = sorted(set(table) - _KEYS)
         if unknown:
-            raise ValueError(f"{path}: printer {name!r}: unknown key {unknown[0]!r} "
+            raise InputError(f"{path}: printer {name!r}: unknown key {unknown[0]!r} "
                              f"(allowed: {', '.join(sorted(_KEYS))})")
         missing = [k for k in ("technology", "build_volume", "resolution") if k not in table]
         if missing:
-            raise ValueError(f"{path}: printer {name!r}: missing {missing[0]!r}")
+            raise InputError(f"{path}: printer {name!r}: missing {missing[0]!r}")
         kw = dict(table)
         kw.setdefault("description", f"user profile from {path.name}")
         out[name] = Printer(name=name, source=str(path), **kw)
@@ -277,9 +279,9 @@ def get_printer(spec: str | Printer) -> Printer:
         profiles = load_printers(file)
         if name:
             if name not in profiles:
-                raise ValueError(f"{file}: no printer {name!r} (has {', '.join(profiles)})")
+                raise InputError(f"{file}: no printer {name!r} (has {', '.join(profiles)})")
             return profiles[name]
         if len(profiles) > 1:
-            raise ValueError(f"{file} holds several printers ({', '.join(profiles)}); use {file}#NAME")
+            raise InputError(f"{file} holds several printers ({', '.join(profiles)}); use {file}#NAME")
         return next(iter(profiles.values()))
-    raise ValueError(f"printer must be one of {', '.join(PRINTERS)} or a TOML profile file, got {spec!r}")
+    raise InputError(f"printer must be one of {', '.join(PRINTERS)} or a TOML profile file, got {spec!r}")

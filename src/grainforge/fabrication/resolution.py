@@ -28,6 +28,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.geodesic import MAX_SUBDIVISIONS, icosphere
 
 __all__ = ["Resolution", "chordal_deviation", "match_subdivisions", "supports_matching"]
@@ -202,7 +203,7 @@ def chordal_deviation(grain, level: int) -> float:
     """
     v = grain.vertices
     if len(v) != 10 * 4 ** (level + 1) + 2:
-        raise ValueError(f"grain is not a level-{level + 1} geodesic mesh ({len(v)} vertices)")
+        raise InputError(f"grain is not a level-{level + 1} geodesic mesh ({len(v)} vertices)")
     e, idx = _midpoint_index(level)
     chord_mid = 0.5 * (v[e[:, 0]] + v[e[:, 1]])
     return float(np.linalg.norm(v[idx] - chord_mid, axis=1).max())
@@ -268,9 +269,9 @@ def match_subdivisions(
 
     printer = get_printer(printer)
     if not supports_matching(method):
-        raise ValueError(f"method {method!r} has no subdivisions parameter; resolution matching does not apply")
+        raise InputError(f"method {method!r} has no subdivisions parameter; resolution matching does not apply")
     if not seeds:
-        raise ValueError("at least one pilot seed is needed")
+        raise InputError("at least one pilot seed is needed")
     max_level = int(min(max_level, MAX_SUBDIVISIONS - 1))
     limit = "max level"
     if max_faces is not None:

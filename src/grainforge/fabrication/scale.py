@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..params import ParameterError
 from ..units import MESH_SIZE_RANGE_MM, SIZE_RANGE_MM
 
@@ -54,7 +55,7 @@ def check_target_size(size: float, definition: str = "equivalent") -> float:
         Naming ``size`` when it is outside :data:`grainforge.units.SIZE_RANGE_MM`.
     """
     if definition not in SIZE_DEFINITIONS:
-        raise ValueError(f"size_definition must be one of {', '.join(SIZE_DEFINITIONS)}, got {definition!r}")
+        raise InputError(f"size_definition must be one of {', '.join(SIZE_DEFINITIONS)}, got {definition!r}")
     try:
         value = float(size)
     except (TypeError, ValueError):

@@ -44,6 +44,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError, OutputExistsError
 from ..geometry.moments import sphere_diameter
 from ..rng import RNGLike, as_generator
 from .layout import ShelfPacker, orient_principal, orient_stable
@@ -122,12 +123,12 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
     path = Path(task["path"])
     parts = read_parts(path)
     if len(parts) != 1:
-        raise ValueError(f"{path}: holds {len(parts)} parts; a tray takes one grain per file")
+        raise InputError(f"{path}: holds {len(parts)} parts; a tray takes one grain per file")
     part = parts[0]
     v, f = part.vertices, part.faces
     problems = solid_problems(v, f)
     if problems:
-        raise ValueError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
+        raise InputError(f"{path}: not a printable solid ({'; '.join(problems)}); see `grainforge check`")
     if task["size"] is not None:
         v = v * scale_factor(part, task["size"], task["size_definition"])
     else:  # printed as it is, in mm
@@ -135,7 +136,7 @@ def _grain_mesh(task) -> tuple[str, str, np.ndarray, np.ndarray, int | None]:
 
         problem = mesh_size_problem(v)
         if problem is not None:
-            raise ValueError(f"{path}: {problem} (or give tray --size)")
+            raise InputError(f"{path}: {problem} (or give {{size}})", setting="size")
     return path.stem, str(path), v, f, None
 
 
@@ -336,10 +337,10 @@ def _check_size_of_job(source, workers: int) -> None:
     from ..runtime.estimate import check_job, check_memory, grain_seconds
 
     n = len(source)
-    check_memory(n * ROW_BYTES, what=f"a tray of {n} grains", option="--count")
+    check_memory(n * ROW_BYTES, what=f"a tray of {n} grains", option="{count}", setting="count")
     if isinstance(source, GeneratorSource):
         check_job(n, grain_seconds(source.method, source.params), what=f"a tray of {n} {source.method} grains",
-                  option="--count", workers=workers)
+                  option="{count}", setting="count", workers=workers)
 
 
 def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, str, float]:
@@ -347,16 +348,16 @@ def _checked_request(source, printer, out, gap, overwrite: bool) -> tuple[Path, 
     out = Path(out)
     fmt = out.suffix.lower()
     if fmt not in OUT_FORMATS:
-        raise ValueError(f"--out must end in .3mf or .stl, got {out.name!r}")
+        raise InputError(f"{{out}} must end in .3mf or .stl, got {out.name!r}", setting="out")
     gap = printer.default_gap if gap is None else float(gap)
     if not np.isfinite(gap) or gap <= 0:
-        raise ValueError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
+        raise InputError(f"gap must be a positive number of millimetres (parts must never touch), got {gap!r}")
     if len(source) == 0:
-        raise ValueError("no grains to lay out")
+        raise InputError("no grains to lay out")
     if not overwrite:
         existing = _existing_outputs(out)
         if existing:
-            raise FileExistsError(f"{existing[0]} exists; use --overwrite")
+            raise OutputExistsError(f"{existing[0]} exists; use {{overwrite}}", setting="overwrite")
     return out, fmt, gap
 
 
@@ -450,7 +451,7 @@ def plates_value(plates: int | str) -> int | str:
         return "auto"
     if isinstance(plates, (int, np.integer)) and not isinstance(plates, bool) and plates >= 1:
         return int(plates)
-    raise ValueError(f"plates must be a positive number of print files or 'auto', got {plates!r}")
+    raise InputError(f"plates must be a positive number of print files or 'auto', got {plates!r}")
 
 
 def _ceil_div(a: int, b: int) -> int:
@@ -678,7 +679,7 @@ def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf
     printer = get_printer(printer)
     plates = plates_value(plates)
     if max_triangles is not None and (int(max_triangles) != max_triangles or max_triangles < 1):
-        raise ValueError(f"max_triangles must be a positive whole number, got {max_triangles!r}")
+        raise InputError(f"max_triangles must be a positive whole number, got {max_triangles!r}")
     budget = None if max_triangles is None else int(max_triangles)
     n = len(source)
     if budget is None:
@@ -698,7 +699,7 @@ def plan_tray(source: GeneratorSource | FileSource, printer, *, fmt: str = ".3mf
     else:
         files = None
     if files is not None and files > MAX_FILES:
-        raise ValueError(f"a tray of {n} grains in {files} print files is more than {MAX_FILES} files (each with its "
+        raise InputError(f"a tray of {n} grains in {files} print files is more than {MAX_FILES} files (each with its "
                          f"preview); raise --max-triangles or lower --plates")
     per_file = None if files is None else _ceil_div(n, files)
     plan = TrayPlan(source, printer, fmt, plates, budget, files, per_file, max_faces, resolution, given=given)

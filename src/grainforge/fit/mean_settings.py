@@ -16,6 +16,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from ..errors import InputError
 from .designs import IDENTIFIABLE_R2
 from .made_grains import MeasurePool
 from .sand import DESCRIPTORS, Sand
@@ -77,7 +78,7 @@ def slopes_for(slopes: str, grains: int) -> str:
     ('model', 'measured', 'measured')
     """
     if slopes not in SLOPE_CHOICES:
-        raise ValueError(f"slopes must be one of {', '.join(SLOPE_CHOICES)}, got {slopes!r}")
+        raise InputError(f"slopes must be one of {', '.join(SLOPE_CHOICES)}, got {slopes!r}")
     if slopes == "auto":
         return "measured" if grains >= SLOPES_MEASURED_FROM else "model"
     return slopes

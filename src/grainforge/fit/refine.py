@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from .acceptance import TWIN_TOL
 from .made_grains import MeasurePool
 from .recipes import grain_seed, reseed_seed
@@ -168,8 +169,9 @@ def _make_refused(tw: _Twins, pool: MeasurePool, progress, note, name) -> None:
         note(f"refused twins: {len(refused)} the generator had refused at every settings tried, moved towards the "
              f"middle of the box; {int(tw.made()[refused].sum())} made")
     if not tw.made().all():
-        raise ValueError(f"{int((~tw.made()).sum())} twin(s) could not be made at any settings tried: the "
-                         f"{tw.spec.method} generator refuses them; try another --method or --seed")
+        raise InputError(f"{int((~tw.made()).sum())} twin(s) could not be made at any settings tried: the "
+                         f"{tw.spec.method} generator refuses them; try another {{method}} or {{seed}}",
+                         setting=("method", "seed"))
 
 
 def _twin_summary(tw: _Twins) -> str:

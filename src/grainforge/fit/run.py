@@ -37,6 +37,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike, resolve_rng
 from .acceptance import CORR_TOL, KS_MAX, MEAN_TOL, TWIN_SHARE, TWIN_TOL, compare
 from .designs import DESIGN_GRAINS, IDENTIFIABLE_R2, _design_high, design, setting_identifiability
@@ -262,7 +263,7 @@ def fit_sand(
     import time
 
     if method != "auto" and method not in FITS:
-        raise ValueError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
+        raise InputError(f"method must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}")
     slopes_for(population_slopes, 0)  # refuses an unknown choice before any work
     check_sand(sand)
     seed = _root_seed(rng)

@@ -22,6 +22,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError, InputError
+
 #: the four descriptors that are matched
 DESCRIPTORS = ("sphericity", "convexity", "flatness", "elongation")
 #: Sand Atlas column of each quantity (units in the header; lengths in µm)
@@ -91,19 +93,19 @@ def _sand_text(path: Path) -> str:
     try:
         data = path.read_bytes()
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
+        raise InputError(f"{path}: cannot read ({exc.__class__.__name__}: {exc})") from None
     for magic, what in _MAGIC:
         if data.startswith(magic):
-            raise ValueError(f"{path}: not a CSV table: the file is {what}")
+            raise FileFormatError(f"{path}: not a CSV table: the file is {what}")
     if b"\x00" in data[:4096]:
-        raise ValueError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
+        raise FileFormatError(f"{path}: not a CSV table: the file holds binary data (NUL bytes)")
     try:
         return data.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
         byte = data[exc.start]
         guess = data[exc.start:exc.start + 1].decode("latin-1")
-        raise ValueError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
-                         "or Windows-1252): save the table as UTF-8") from None
+        raise FileFormatError(f"{path}: not UTF-8 text (byte 0x{byte:02x} at offset {exc.start}, {guess!r} in Latin-1 "
+                             "or Windows-1252): save the table as UTF-8") from None
 
 
 def _check_separator(path: Path, header: Sequence[str]) -> None:
@@ -112,7 +114,7 @@ def _check_separator(path: Path, header: Sequence[str]) -> None:
         joined = ",".join(header)
         for sep, name in ((";", "semicolons"), ("\t", "tabs")):
             if joined.count(sep) >= 2:
-                raise ValueError(f"{path}: the columns are separated by {name}; a Sand Atlas CSV is "
+                raise InputError(f"{path}: the columns are separated by {name}; a Sand Atlas CSV is "
                                  "comma-separated: save it with commas (and '.' as the decimal mark)")
 
 
@@ -134,7 +136,7 @@ def _check_unit_less(path: Path, header: Sequence[str], optional: Sequence[str])
     for col in optional:
         near = [] if _norm(col) in names else _same_but_unit(header, col)
         if near:
-            raise ValueError(f"{path}: column {near[0]!r} is not read: name it {col!r} (with its unit) or drop it")
+            raise InputError(f"{path}: column {near[0]!r} is not read: name it {col!r} (with its unit) or drop it")
 
 
 def _check_ids_and_volumes(path: Path, rows: Sequence[Sequence[str]], header: Mapping[str, int]) -> None:
@@ -145,7 +147,7 @@ def _check_ids_and_volumes(path: Path, rows: Sequence[Sequence[str]], header: Ma
         for line, row in enumerate(rows[1:], start=2):
             key = row[i].strip() if i < len(row) else ""
             if key and key in seen:
-                raise ValueError(f"{path}: line {line}: Particle ID {key!r} appears again (first on line "
+                raise InputError(f"{path}: line {line}: Particle ID {key!r} appears again (first on line "
                                  f"{seen[key]}): one row per grain")
             seen[key] = line
     j = next((k for h, k in header.items() if h.startswith("volume")), None)
@@ -157,7 +159,7 @@ def _check_ids_and_volumes(path: Path, rows: Sequence[Sequence[str]], header: Ma
             except ValueError:
                 ok = False
             if not ok:
-                raise ValueError(f"{path}: line {line}, column {rows[0][j]!r}: a grain's volume must be a positive "
+                raise InputError(f"{path}: line {line}, column {rows[0][j]!r}: a grain's volume must be a positive "
                                  f"number, got {cell!r}")
 
 
@@ -204,17 +206,17 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
     rows = list(csv.reader(text.splitlines()))
     rows = [r for r in rows if any(c.strip() for c in r)]
     if not rows:
-        raise ValueError(f"{path}: empty file (expected a Sand Atlas CSV with a header row)")
+        raise InputError(f"{path}: empty file (expected a Sand Atlas CSV with a header row)")
     _check_separator(path, rows[0])
     header = {_norm(h): i for i, h in enumerate(rows[0])}
     want = dict(COLUMNS)
     missing = [c for c in want.values() if _norm(c) not in header]
     if missing:
-        raise ValueError(f"{path}: not a Sand Atlas CSV: missing column(s) {', '.join(repr(c) for c in missing)}"
+        raise InputError(f"{path}: not a Sand Atlas CSV: missing column(s) {', '.join(repr(c) for c in missing)}"
                          + _near_misses(rows[0], missing))
     _check_unit_less(path, rows[0], (VOXEL_COLUMN, OPENING_COLUMN))
     if len(rows) < 2:
-        raise ValueError(f"{path}: no grains (only a header row)")
+        raise InputError(f"{path}: no grains (only a header row)")
     if _norm(VOXEL_COLUMN) in header:
         want["voxel_size"] = VOXEL_COLUMN
     if _norm(OPENING_COLUMN) in header:
@@ -227,30 +229,31 @@ def read_sand(path: str | os.PathLike, voxel_size: float | None = None) -> Sand:
             try:
                 x = float(cell)
             except ValueError:
-                raise ValueError(f"{path}: line {line}, column {col!r}: not a number: {cell!r}") from None
+                raise InputError(f"{path}: line {line}, column {col!r}: not a number: {cell!r}") from None
             unit = key in (*DESCRIPTORS, "opening")  # a ratio: at most 1
             high = SPHERICITY_MAX if key == "sphericity" else 1 + 1e-6 if unit else math.inf
             if not (math.isfinite(x) and (0 <= x if key == "opening" else 0 < x) and x <= high):
                 limit = f" (at most {SPHERICITY_MAX:g})" if key == "sphericity" else " (at most 1)" if unit else ""
-                raise ValueError(f"{path}: line {line}, column {col!r}: out of range{limit}: {cell!r}")
+                raise InputError(f"{path}: line {line}, column {col!r}: out of range{limit}: {cell!r}")
             data[key].append(x)
     _check_ids_and_volumes(path, rows, header)
     if voxel_size is None:
         if "voxel_size" not in data:
-            raise ValueError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size (--voxel-size-um)")
+            raise InputError(f"{path}: no {VOXEL_COLUMN!r} column: give the scan's voxel size ({{voxel_size}})",
+                             setting="voxel_size")
         voxel_size = float(np.median(data["voxel_size"]))
     elif "voxel_size" in data:
         column = np.asarray(data["voxel_size"])
         if not np.allclose(column, voxel_size, rtol=1e-6, atol=0):
-            raise ValueError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
+            raise InputError(f"{path}: the voxel size given ({voxel_size:g} µm) differs from the file's "
                              f"{VOXEL_COLUMN!r} column ({np.median(column):g} µm): give one of them (drop "
-                             "--voxel-size-um to use the column)")
+                             "{voxel_size} to use the column)", setting="voxel_size")
     if not (math.isfinite(voxel_size) and voxel_size > 0):
-        raise ValueError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")
+        raise InputError(f"{path}: the voxel size must be a positive number of µm, got {voxel_size!r}")
     across = np.asarray(data["equivalent_diameter"]) / voxel_size
     lo, hi = VOXELS_ACROSS
     if not (np.all(np.isfinite(across)) and across.min() >= lo and across.max() <= hi):
-        raise ValueError(f"{path}: at a voxel size of {voxel_size:g} µm its grains are {across.min():.3g} to "
+        raise InputError(f"{path}: at a voxel size of {voxel_size:g} µm its grains are {across.min():.3g} to "
                          f"{across.max():.3g} voxels across; the fit measures grains {lo:g} to {hi:g} voxels "
                          "across (is the voxel size in µm?)")
     return Sand(name=path.name, voxel_size=float(voxel_size),
@@ -314,7 +317,7 @@ def write_sand(path: str | os.PathLike, equivalent_diameter: Sequence[float], va
         cols.append(np.asarray(opening, np.float64))
         header.append(OPENING_COLUMN)
     if any(len(c) != len(d) for c in cols):
-        raise ValueError("every column needs one value per grain")
+        raise InputError("every column needs one value per grain")
     out = io.StringIO()
     w = csv.writer(out, lineterminator="\r\n")
     w.writerow(header)
@@ -389,16 +392,16 @@ def check_sand(sand: Sand) -> None:
     >>> check_sand(s)
     Traceback (most recent call last):
     ...
-    ValueError: s.csv: every grain has the same sphericity (0.8): a fit needs a spread of sizes and shapes to match
+    grainforge.errors.InputError: s.csv: every grain has the same sphericity (0.8): a fit needs a spread of sizes and shapes to match
     """
     if sand.count < MIN_GRAINS:
-        raise ValueError(f"{sand.name}: {sand.count} grain(s); a fit needs at least {MIN_GRAINS} "
+        raise InputError(f"{sand.name}: {sand.count} grain(s); a fit needs at least {MIN_GRAINS} "
                          "(fewer grains say too little about the sand's distributions)")
     opening = [] if sand.opening is None else [("opening fraction", sand.opening)]
     for key, col in [("equivalent diameter", sand.equivalent_diameter)] + [(k, sand.values[k]) for k in DESCRIPTORS] \
             + opening:
         if float(np.ptp(col)) <= 1e-9 * float(np.max(np.abs(col))):
-            raise ValueError(f"{sand.name}: every grain has the same {key} ({float(col[0]):g}): a fit needs a "
+            raise InputError(f"{sand.name}: every grain has the same {key} ({float(col[0]):g}): a fit needs a "
                              "spread of sizes and shapes to match")
 
 

@@ -6,6 +6,8 @@ from functools import cache
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["icosphere", "spherical", "MAX_SUBDIVISIONS"]
 
 MAX_SUBDIVISIONS = 8
@@ -52,7 +54,7 @@ def icosphere(subdivisions: int) -> tuple[np.ndarray, np.ndarray]:
     """
     s = int(subdivisions)
     if not 0 <= s <= MAX_SUBDIVISIONS:
-        raise ValueError(f"subdivisions must be in [0, {MAX_SUBDIVISIONS}], got {subdivisions!r}")
+        raise InputError(f"subdivisions must be in [0, {MAX_SUBDIVISIONS}], got {subdivisions!r}")
     return _icosphere(s)
 
 

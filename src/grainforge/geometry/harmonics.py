@@ -29,6 +29,8 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["real_harmonics", "legendre_equator", "degree_order", "Synthesis", "synthesis", "icosphere_synthesis"]
 
 
@@ -117,7 +119,7 @@ def real_harmonics(unit: np.ndarray, degree: int, lmin: int = 0) -> np.ndarray:
     u = np.asarray(unit, dtype=np.float64)
     L = int(degree)
     if not 0 <= lmin <= L:
-        raise ValueError(f"need 0 <= lmin <= degree, got lmin={lmin}, degree={degree}")
+        raise InputError(f"need 0 <= lmin <= degree, got lmin={lmin}, degree={degree}")
     x = np.clip(u[:, 2], -1.0, 1.0)
     s = np.hypot(u[:, 0], u[:, 1])
     theta = np.arctan2(u[:, 1], u[:, 0])

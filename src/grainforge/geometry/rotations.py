@@ -36,6 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike, as_generator
 
 __all__ = ["random_rotation", "random_quaternions", "quaternion_matrix", "quaternion_axis_angle", "axis_angle_matrix",
@@ -141,7 +142,7 @@ def random_rotation(rng: RNGLike, convention: str = "scipy") -> np.ndarray:
     (True, False)
     """
     if convention not in CONVENTIONS:
-        raise ValueError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
+        raise InputError(f"convention must be one of {', '.join(CONVENTIONS)}, got {convention!r}")
     q = as_generator(rng).standard_normal(4)
     if convention == "scalar-first":
         return quaternion_matrix(q)
@@ -186,7 +187,7 @@ def random_quaternions(count: int, rng: RNGLike) -> np.ndarray:
     """
     count = int(count)
     if count < 0:
-        raise ValueError(f"count must be ≥ 0, got {count}")
+        raise InputError(f"count must be ≥ 0, got {count}")
     q = as_generator(rng).standard_normal((count, 4))
     q /= np.linalg.norm(q, axis=1, keepdims=True)
     q *= np.where(q[:, :1] < 0, -1.0, 1.0)
@@ -285,7 +286,7 @@ def haar_angle_test(rotations) -> dict:
     w = rotation_angles(rotations)
     n = len(w)
     if n < 2:
-        raise ValueError(f"need at least 2 rotations, got {n}")
+        raise InputError(f"need at least 2 rotations, got {n}")
     res = kstest(w, lambda x: (np.asarray(x) - np.sin(x)) / np.pi)
     trace = 1.0 + 2.0 * np.cos(w)
     return {"n": n, "ks": float(res.statistic), "p": float(res.pvalue), "mean_trace": float(trace.mean()),

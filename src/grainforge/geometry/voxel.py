@@ -42,6 +42,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["Grid", "grid_for", "inside_mask", "ANCHORS", "RULES"]
 
 #: grid placements of :func:`grid_for`
@@ -132,9 +134,9 @@ def grid_for(vertices: np.ndarray, spacing: float, pad: int = 1, anchor: str = "
     ((8, 6, 6), [-0.75, -0.75, -0.75])
     """
     if not spacing > 0:
-        raise ValueError(f"spacing must be positive, got {spacing!r}")
+        raise InputError(f"spacing must be positive, got {spacing!r}")
     if anchor not in ANCHORS:
-        raise ValueError(f"anchor must be one of {', '.join(ANCHORS)}, got {anchor!r}")
+        raise InputError(f"anchor must be one of {', '.join(ANCHORS)}, got {anchor!r}")
     v = np.asarray(vertices, dtype=np.float64)
     lo, hi = v.min(axis=0), v.max(axis=0)
     if anchor == "lattice":
@@ -187,9 +189,9 @@ def inside_mask(vertices: np.ndarray, faces: np.ndarray, grid: Grid, *, axis: in
     27
     """
     if axis not in (0, 1, 2):
-        raise ValueError(f"axis must be 0, 1 or 2, got {axis!r}")
+        raise InputError(f"axis must be 0, 1 or 2, got {axis!r}")
     if rule not in RULES:
-        raise ValueError(f"rule must be one of {', '.join(RULES)}, got {rule!r}")
+        raise InputError(f"rule must be one of {', '.join(RULES)}, got {rule!r}")
     v = np.asarray(vertices, dtype=np.float64)
     f = np.asarray(faces, dtype=np.int64)
     h = grid.spacing
@@ -316,6 +318,6 @@ def _ray_toggles(v, f, xy, z0, oz, h, nz):
         if len(todo) == 0:
             break
     else:
-        raise ValueError(f"{len(todo)} voxel column(s) cross the surface an odd number of times: the mesh is not "
+        raise InputError(f"{len(todo)} voxel column(s) cross the surface an odd number of times: the mesh is not "
                          "closed")
     return toggles & 1

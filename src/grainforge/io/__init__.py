@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from .._version import __version__
+from ..errors import FileFormatError, InputError
 from .inputs import MESH_SUFFIXES
 from .sniff import what_is
 from .stl import check_stl, read_stl, stl_header
@@ -95,7 +96,7 @@ def export_bytes(obj, fmt: str = "stl", header: str | None = None) -> bytes:
     try:
         exporter = FORMATS[fmt]
     except KeyError:
-        raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}") from None
+        raise InputError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}") from None
     if header is None:
         header = f"grainforge {__version__}"
         method = getattr(obj, "method", None)
@@ -343,9 +344,9 @@ def read_mesh(path: str | os.PathLike):
 
     path = Path(path)
     if path.is_dir():
-        raise ValueError(f"{path}: is a folder, not a mesh file")
+        raise InputError(f"{path}: is a folder, not a mesh file")
     if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+        raise InputError(f"{path}: no such file")
     suffix = path.suffix.lower()
     try:
         if suffix == ".stl":
@@ -361,22 +362,22 @@ def read_mesh(path: str | os.PathLike):
                 head = fh.read(16)
             other = what_is(head)
             if other is not None:
-                raise ValueError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
+                raise FileFormatError(f"{path}: not a mesh file (it is {other}); mesh files read: {READABLE_MESHES}")
             loaded = trimesh.load(path, force="mesh", process=False)
     except ValueError as exc:
         if str(exc).startswith(f"{path}:"):  # ours: it names the file already
             raise
         detail = " ".join(str(exc).split()) or type(exc).__name__
-        raise ValueError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
+        raise FileFormatError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
+        raise InputError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # trimesh raises many types for corrupt input
         detail = " ".join(str(exc).split()) or type(exc).__name__
-        raise ValueError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
+        raise FileFormatError(f"{path}: corrupt or unsupported mesh file ({detail})") from None
     if not isinstance(loaded, trimesh.Trimesh) or len(loaded.faces) == 0:
-        raise ValueError(f"{path}: holds no triangles")
+        raise InputError(f"{path}: holds no triangles")
     if not np.isfinite(np.asarray(loaded.vertices)).all():
-        raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
+        raise InputError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
     _check_precision(path, loaded.vertices)
     return loaded
 
@@ -387,7 +388,7 @@ def _check_precision(path: Path, vertices, what: str = "the mesh") -> None:
 
     problem = precision_problem(vertices, what)
     if problem is not None:
-        raise ValueError(f"{path}: {problem}")
+        raise InputError(f"{path}: {problem}")
 
 
 def read_parts(path: str | os.PathLike) -> list:

@@ -25,6 +25,8 @@ import os
 from collections.abc import Iterable, Sequence
 from pathlib import Path
 
+from ..errors import InputError
+
 __all__ = ["MESH_SUFFIXES", "MANIFEST", "read_manifest", "manifest_files", "mesh_paths"]
 
 #: the mesh files a folder of grains is searched for
@@ -60,14 +62,14 @@ def read_manifest(path: str | os.PathLike, *, require: Sequence[str] = ()) -> li
             rows = list(reader)
             columns = reader.fieldnames or []
     except FileNotFoundError:
-        raise ValueError(f"{path}: no such file") from None
+        raise InputError(f"{path}: no such file") from None
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({exc.strerror})") from None
+        raise InputError(f"{path}: cannot read ({exc.strerror})") from None
     except (UnicodeDecodeError, csv.Error):
-        raise ValueError(f"{path}: not a grainforge manifest (not a UTF-8 CSV table)") from None
+        raise InputError(f"{path}: not a grainforge manifest (not a UTF-8 CSV table)") from None
     missing = [c for c in require if c not in columns]
     if missing:
-        raise ValueError(f"{path}: not a grainforge manifest (no {', '.join(repr(c) for c in missing)} column)")
+        raise InputError(f"{path}: not a grainforge manifest (no {', '.join(repr(c) for c in missing)} column)")
     return rows
 
 
@@ -99,7 +101,7 @@ def _folder_meshes(folder: Path) -> list[Path]:
     found = sorted(q for q in folder.iterdir()
                    if q.suffix.lower() in MESH_SUFFIXES and not q.name.startswith(".") and q.is_file())
     if not found:
-        raise ValueError(f"{folder}: no grain files (no mesh file {', '.join(MESH_SUFFIXES)} and no {MANIFEST} in "
+        raise InputError(f"{folder}: no grain files (no mesh file {', '.join(MESH_SUFFIXES)} and no {MANIFEST} in "
                          "the folder)")
     return found
 
@@ -128,7 +130,7 @@ def mesh_paths(inputs: Iterable[str | os.PathLike]) -> list[Path]:
     out: list[Path] = []
     for item in inputs:
         if str(item).strip() == "":
-            raise ValueError("an empty path")
+            raise InputError("an empty path")
         p = Path(item)
         if p.is_dir():
             out += _folder_meshes(p)
@@ -137,10 +139,10 @@ def mesh_paths(inputs: Iterable[str | os.PathLike]) -> list[Path]:
         elif p.is_file():
             out.append(p)
         else:
-            raise ValueError(f"{p}: no such file or folder")
+            raise InputError(f"{p}: no such file or folder")
     if not out:
-        raise ValueError("no grain files in the inputs")
+        raise InputError("no grain files in the inputs")
     missing = [q for q in out if not q.is_file()]
     if missing:
-        raise ValueError(f"{missing[0]}: no such file (listed in a manifest)")
+        raise InputError(f"{missing[0]}: no such file (listed in a manifest)")
     return out

@@ -23,6 +23,7 @@ from typing import BinaryIO
 import numpy as np
 
 from .._version import __version__
+from ..errors import FileFormatError, InputError
 from .sniff import what_is
 
 __all__ = ["STL_DTYPE", "TRUNCATED_FACTOR", "stl_header", "stl_triangles", "STLWriter", "check_stl", "read_stl",
@@ -119,7 +120,7 @@ class STLWriter:
 
     def close(self) -> None:
         if self.triangles >= 2**32:
-            raise ValueError(f"binary STL holds at most 2^32 - 1 triangles, got {self.triangles}; use .3mf")
+            raise InputError(f"binary STL holds at most 2^32 - 1 triangles, got {self.triangles}; use .3mf")
         end = self._fh.tell()
         self._fh.seek(self._start + 80)
         self._fh.write(struct.pack("<I", self.triangles))
@@ -167,22 +168,22 @@ def check_stl(path: str | os.PathLike) -> None:
     >>> check_stl(p)
     Traceback (most recent call last):
     ...
-    ValueError: ...t.stl: truncated binary STL: the header announces 3 facets (234 bytes) but the file has 144 bytes
+    grainforge.errors.FileFormatError: ...t.stl: truncated binary STL: the header announces 3 facets (234 bytes) but the file has 144 bytes
     """
     path = Path(path)
     size = path.stat().st_size
     with path.open("rb") as fh:
         head = fh.read(1024)
     if size == 0:
-        raise ValueError(f"{path}: empty file")
+        raise InputError(f"{path}: empty file")
     other = what_is(head)
     if other is not None:
-        raise ValueError(f"{path}: not an STL file (it is {other})")
+        raise FileFormatError(f"{path}: not an STL file (it is {other})")
     if size >= 84:
         n = int.from_bytes(head[80:84], "little") if len(head) >= 84 else -1
         if size == 84 + 50 * n:
             if n == 0:
-                raise ValueError(f"{path}: binary STL with no facets")
+                raise InputError(f"{path}: binary STL with no facets")
             return
     if head.lstrip()[:5].lower() == b"solid":
         try:
@@ -192,17 +193,17 @@ def check_stl(path: str | os.PathLike) -> None:
         if "facet" in text or "endsolid" in text or size < 1024:
             return  # ASCII STL (trimesh parses and validates it)
     if size < 84:
-        raise ValueError(f"{path}: not an STL file ({size} bytes: too short for a binary STL, and not ASCII STL)")
+        raise FileFormatError(f"{path}: not an STL file ({size} bytes: too short for a binary STL, and not ASCII STL)")
     n = int.from_bytes(head[80:84], "little")
     expected = 84 + 50 * n
     if size < expected <= TRUNCATED_FACTOR * size:  # plausibly the start of a real binary STL
-        raise ValueError(f"{path}: truncated binary STL: the header announces {n} facets "
-                         f"({expected} bytes) but the file has {size} bytes")
+        raise FileFormatError(f"{path}: truncated binary STL: the header announces {n} facets "
+                             f"({expected} bytes) but the file has {size} bytes")
     if (size - 84) % 50 == 0:
-        raise ValueError(f"{path}: corrupt binary STL: the header announces {n} facets but the file holds "
-                         f"{(size - 84) // 50}")
-    raise ValueError(f"{path}: not an STL file (neither ASCII STL nor a binary STL: facet count {n} in the "
-                     f"header does not match the file size of {size} bytes)")
+        raise FileFormatError(f"{path}: corrupt binary STL: the header announces {n} facets but the file holds "
+                             f"{(size - 84) // 50}")
+    raise FileFormatError(f"{path}: not an STL file (neither ASCII STL nor a binary STL: facet count {n} in the "
+                         f"header does not match the file size of {size} bytes)")
 
 
 def read_stl(path: str | os.PathLike):

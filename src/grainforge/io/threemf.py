@@ -37,6 +37,7 @@ from xml.sax.saxutils import quoteattr
 import numpy as np
 
 from .._version import __version__
+from ..errors import FileFormatError, InputError
 
 __all__ = [
     "ThreeMFWriter", "mesh_xml", "read_3mf", "read_3mf_file", "Part",
@@ -230,11 +231,11 @@ def read_3mf(file) -> list[Part]:
     try:
         zf = zipfile.ZipFile(file)
     except (zipfile.BadZipFile, OSError) as exc:
-        raise ValueError(f"not a 3MF file ({exc})") from None
+        raise FileFormatError(f"not a 3MF file ({exc})") from None
     with zf:
         names = {n.lower(): n for n in zf.namelist()}
         if _MODEL.lower() not in names:
-            raise ValueError("not a 3MF file (no 3D/3dmodel.model)")
+            raise FileFormatError("not a 3MF file (no 3D/3dmodel.model)")
         objects: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}
         items: list[tuple[str, np.ndarray]] = []
         with zf.open(names[_MODEL.lower()]) as fh:
@@ -261,7 +262,7 @@ def read_3mf(file) -> list[Part]:
     parts = []
     for oid, m in items:
         if oid not in objects:
-            raise ValueError(f"3MF build item refers to missing object {oid}")
+            raise InputError(f"3MF build item refers to missing object {oid}")
         name, v, f = objects[oid]
         parts.append(Part(name, v @ m[:3, :3].T + m[:3, 3], f))
     return parts
@@ -291,18 +292,19 @@ def read_3mf_file(path) -> list[Part]:
 
     path = Path(path)
     if not path.is_file():
-        raise ValueError(f"{path}: no such file")
+        raise InputError(f"{path}: no such file")
     try:
         parts = read_3mf(path)
     except (ValueError, ElementTree.ParseError) as exc:
-        raise ValueError(f"{path}: {exc}") from None
+        raise FileFormatError(f"{path}: {exc}") from None
     except OSError as exc:
-        raise ValueError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
+        raise InputError(f"{path}: cannot read ({(exc.strerror or type(exc).__name__).lower()})") from None
     except Exception as exc:  # a malformed package: missing elements or attributes, bad indices
-        raise ValueError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {' '.join(str(exc).split())})") from None
+        detail = " ".join(str(exc).split())
+        raise FileFormatError(f"{path}: corrupt 3MF file ({type(exc).__name__}: {detail})") from None
     if not parts:
-        raise ValueError(f"{path}: holds no objects")
+        raise InputError(f"{path}: holds no objects")
     for part in parts:
         if not np.isfinite(part.vertices).all():
-            raise ValueError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
+            raise InputError(f"{path}: has non-finite (NaN or infinite) vertex coordinates")
     return parts

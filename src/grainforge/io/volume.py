@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError, InputError
+
 __all__ = ["Volume", "open_volume", "write_labels", "TIFF_SUFFIXES", "LABEL_SUFFIXES", "tifffile_module"]
 
 #: suffixes read as TIFF images (a folder is read as its TIFF slices)
@@ -59,7 +61,7 @@ def tifffile_module():
     try:
         import tifffile
     except ImportError:
-        raise ValueError(TIFFFILE_HINT) from None
+        raise InputError(TIFFFILE_HINT) from None
     return tifffile
 
 
@@ -165,9 +167,9 @@ def _check_3d(path: Path, shape, what: str) -> tuple[int, int, int]:
     shape = tuple(int(s) for s in shape)
     squeezed = tuple(s for s in shape if s != 1) if len(shape) > 3 else shape
     if len(squeezed) != 3:
-        raise ValueError(f"{path}: not a 3D image: {what} has shape {shape} (a volume has 3 axes, Z Y X)")
+        raise InputError(f"{path}: not a 3D image: {what} has shape {shape} (a volume has 3 axes, Z Y X)")
     if min(squeezed) < 1:
-        raise ValueError(f"{path}: the image is empty (shape {shape})")
+        raise InputError(f"{path}: the image is empty (shape {shape})")
     return squeezed  # type: ignore[return-value]
 
 
@@ -200,7 +202,7 @@ def _tiff_voxel_size(tif) -> float | None:
         size = xy * scale
         z = meta.get("spacing")
         if z is not None and not math.isclose(float(z) * scale, size, rel_tol=1e-3):
-            raise ValueError(f"{tif.filehandle.path}: anisotropic voxels ({size:g} µm in x and y, "
+            raise InputError(f"{tif.filehandle.path}: anisotropic voxels ({size:g} µm in x and y, "
                              f"{float(z) * scale:g} µm in z): the descriptors need cubic voxels")
         return float(size) if math.isfinite(size) and size > 0 else None
     except ValueError:
@@ -241,11 +243,11 @@ def _check_tiff_whole(path: Path, series, warned: list[str]) -> None:
         ends.append(int(series.dataoffset) + int(series.nbytes))
     end = max(ends, default=0)
     if end > size:
-        raise ValueError(f"{path}: truncated TIFF image: its image data end at byte {end} but the file has {size} "
-                         "bytes; copy the file again")
+        raise FileFormatError(f"{path}: truncated TIFF image: its image data end at byte {end} but the file has {size} "
+                             "bytes; copy the file again")
     if warned:
-        raise ValueError(f"{path}: truncated or damaged TIFF image ({size} bytes; tifffile: {warned[0]}); copy "
-                         "the file again")
+        raise FileFormatError(f"{path}: truncated or damaged TIFF image ({size} bytes; tifffile: {warned[0]}); copy "
+                             "the file again")
 
 
 def _open_tiff(path: Path) -> Volume:
@@ -255,7 +257,7 @@ def _open_tiff(path: Path) -> Volume:
             tif = tifffile.TiffFile(path)
             series = tif.series[0]
         except Exception as exc:
-            raise ValueError(f"{path}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+            raise FileFormatError(f"{path}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
     with tif:
         _check_tiff_whole(path, series, warned)
         shape = _check_3d(path, series.shape, "its first series")
@@ -266,7 +268,7 @@ def _open_tiff(path: Path) -> Volume:
     if offset is not None:  # uncompressed, contiguous: map it
         return Volume(path, shape, dtype, _mapped_reader(path, offset, shape, dtype), voxel_size_um=size)
     if npages != shape[0]:
-        raise ValueError(f"{path}: a compressed TIFF with {npages} page(s) for {shape[0]} slices: save it "
+        raise InputError(f"{path}: a compressed TIFF with {npages} page(s) for {shape[0]} slices: save it "
                          "uncompressed, as one page per slice, or as .npy")
 
     def read(z0: int, z1: int) -> np.ndarray:
@@ -283,7 +285,7 @@ def _open_slices(path: Path) -> Volume:
     files = sorted((q for q in path.iterdir() if q.suffix.lower() in TIFF_SUFFIXES and q.is_file()
                     and not q.name.startswith(".")), key=_natural_key)
     if not files:
-        raise ValueError(f"{path}: a folder without TIFF slices ({', '.join(TIFF_SUFFIXES)})")
+        raise InputError(f"{path}: a folder without TIFF slices ({', '.join(TIFF_SUFFIXES)})")
     try:
         with _tifffile_warnings() as warned, tifffile.TiffFile(files[0]) as tif:
             first = tif.series[0]
@@ -293,11 +295,11 @@ def _open_slices(path: Path) -> Volume:
     except ValueError:
         raise
     except Exception as exc:
-        raise ValueError(f"{files[0]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+        raise FileFormatError(f"{files[0]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
     if len(plane) != 2:
-        raise ValueError(f"{files[0]}: a slice must be a 2D image; it has shape {first.shape}")
+        raise InputError(f"{files[0]}: a slice must be a 2D image; it has shape {first.shape}")
     if len(files) < 2:
-        raise ValueError(f"{path}: not a 3D image: one TIFF slice")
+        raise InputError(f"{path}: not a 3D image: one TIFF slice")
 
     def read(z0: int, z1: int) -> np.ndarray:
         out = np.empty((max(z1 - z0, 0), *plane), dtype)
@@ -309,12 +311,13 @@ def _open_slices(path: Path) -> Volume:
             except ValueError as exc:
                 if str(exc).startswith(str(files[z])):
                     raise
-                raise ValueError(f"{files[z]}: not a readable TIFF image ({exc})") from None
+                raise FileFormatError(f"{files[z]}: not a readable TIFF image ({exc})") from None
             except Exception as exc:
-                raise ValueError(f"{files[z]}: not a readable TIFF image ({exc.__class__.__name__}: {exc})") from None
+                raise FileFormatError(f"{files[z]}: not a readable TIFF image ({exc.__class__.__name__}: "
+                                      f"{exc})") from None
             a = np.asarray(a)
             if a.size != out[k].size or a.dtype != dtype:
-                raise ValueError(f"{files[z]}: slice of shape {a.shape} ({a.dtype}); the first is {plane} ({dtype})")
+                raise InputError(f"{files[z]}: slice of shape {a.shape} ({a.dtype}); the first is {plane} ({dtype})")
             out[k] = a.reshape(plane)
         return out
 
@@ -336,8 +339,8 @@ def _check_npy_whole(path: Path) -> None:
     need = start + math.prod(shape) * dtype.itemsize
     size = path.stat().st_size
     if size < need:
-        raise ValueError(f"{path}: truncated .npy array: its header announces a {' x '.join(map(str, shape))} "
-                         f"{dtype.name} array ({need} bytes) but the file has {size} bytes; copy the file again")
+        raise FileFormatError(f"{path}: truncated .npy array: its header announces a {' x '.join(map(str, shape))} "
+                             f"{dtype.name} array ({need} bytes) but the file has {size} bytes; copy the file again")
 
 
 def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
@@ -373,30 +376,30 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
     >>> open_volume(p, raw_shape=(3, 4, 6))
     Traceback (most recent call last):
     ...
-    ValueError: ...v.raw: 120 bytes, but a 3 x 4 x 6 uint16 image needs 144 bytes: check --raw-shape and --raw-dtype
+    grainforge.errors.InputError: ...v.raw: 120 bytes, but a 3 x 4 x 6 uint16 image needs 144 bytes: check raw_shape and raw_dtype
     """
     path = Path(path)
     if not path.exists():
-        raise ValueError(f"{path}: no such file or folder")
+        raise InputError(f"{path}: no such file or folder")
     if raw_shape is not None:
         if path.is_dir():
-            raise ValueError(f"{path}: a folder; a raw image is one file")
+            raise InputError(f"{path}: a folder; a raw image is one file")
         try:
             dtype = np.dtype(raw_dtype or "uint16")
         except TypeError:
-            raise ValueError(f"--raw-dtype {raw_dtype!r}: not a NumPy dtype (uint8, uint16, uint32, int32, ...)") \
-                from None
+            raise InputError(f"{{raw_dtype}} {raw_dtype!r}: not a NumPy dtype (uint8, uint16, uint32, int32, ...)",
+                             setting="raw_dtype") from None
         shape = tuple(int(s) for s in raw_shape)
         if len(shape) != 3 or min(shape) < 1:
-            raise ValueError(f"--raw-shape must be three positive sizes Z Y X, got {raw_shape!r}")
+            raise InputError(f"{{raw_shape}} must be three positive sizes Z Y X, got {raw_shape!r}", setting="raw_shape")
         need = math.prod(shape) * dtype.itemsize
         have = path.stat().st_size
         if have != need:
-            raise ValueError(f"{path}: {have} bytes, but a {shape[0]} x {shape[1]} x {shape[2]} {dtype.name} image "
-                             f"needs {need} bytes: check --raw-shape and --raw-dtype")
+            raise InputError(f"{path}: {have} bytes, but a {shape[0]} x {shape[1]} x {shape[2]} {dtype.name} image "
+                             f"needs {need} bytes: check {{raw_shape}} and {{raw_dtype}}", setting=("raw_shape", "raw_dtype"))
         return Volume(path, shape, dtype.newbyteorder("="), _mapped_reader(path, 0, shape, dtype))
     if raw_dtype is not None:
-        raise ValueError("--raw-dtype needs --raw-shape (a raw image's Z Y X)")
+        raise InputError("{raw_dtype} needs {raw_shape} (a raw image's Z Y X)", setting=("raw_shape", "raw_dtype"))
     if path.is_dir():
         return _open_slices(path)
     suffix = path.suffix.lower()
@@ -407,18 +410,19 @@ def open_volume(path, *, raw_shape=None, raw_dtype=None) -> Volume:
             m = np.load(path, mmap_mode="r", allow_pickle=False)
         except Exception as exc:
             _check_npy_whole(path)
-            raise ValueError(f"{path}: not a readable .npy array ({exc.__class__.__name__}: {exc})") from None
+            raise FileFormatError(f"{path}: not a readable .npy array ({exc.__class__.__name__}: {exc})") from None
         if not isinstance(m, np.memmap):
-            raise ValueError(f"{path}: not a .npy array")
+            raise FileFormatError(f"{path}: not a .npy array")
         shape = _check_3d(path, m.shape, "the array")
         if m.dtype.hasobject or m.dtype.names is not None:
-            raise ValueError(f"{path}: an array of {m.dtype}, not an image")
+            raise InputError(f"{path}: an array of {m.dtype}, not an image")
         order = "F" if (m.flags.f_contiguous and not m.flags.c_contiguous) else "C"
         offset, dtype = int(m.offset), m.dtype
         del m
         return Volume(path, shape, dtype, _mapped_reader(path, offset, shape, dtype, order))
-    raise ValueError(f"{path}: unknown image format {suffix or '(no suffix)'!r}: give a .npy, a .tif/.tiff, a "
-                     "folder of TIFF slices, or a raw file with --raw-shape Z Y X and --raw-dtype")
+    raise FileFormatError(f"{path}: unknown image format {suffix or '(no suffix)'!r}: give a .npy, a .tif/.tiff, "
+                          "a folder of TIFF slices, or a raw file with {raw_shape} Z Y X and {raw_dtype}",
+                          setting=("raw_shape", "raw_dtype"))
 
 
 def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, fmt: str | None = None) -> Path:
@@ -462,7 +466,7 @@ def write_labels(path, labels: np.ndarray, voxel_size_um: float | None = None, f
     path = Path(path)
     suffix = (fmt or path.suffix).lower()
     if suffix not in LABEL_SUFFIXES:
-        raise ValueError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
+        raise InputError(f"{path.name!r} must end in {' or '.join(LABEL_SUFFIXES)}")
     tifffile = tifffile_module() if suffix != ".npy" else None
     with atomic_file(path) as tmp:
         if suffix == ".npy":

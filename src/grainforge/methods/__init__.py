@@ -25,6 +25,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.solid import require_solid, volume_centroid
 from ..grain import Grain
 from ..rng import RNGLike, resolve_rng
@@ -62,7 +63,7 @@ def get(name: str) -> ModuleType:
     try:
         path = METHODS[name]
     except KeyError:
-        raise ValueError(f"method must be one of {', '.join(sorted(METHODS))}, got {name!r}") from None
+        raise InputError(f"method must be one of {', '.join(sorted(METHODS))}, got {name!r}") from None
     return importlib.import_module(path)
 
 

@@ -12,6 +12,8 @@ from functools import cache
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["Solid", "solid", "PRIMITIVES", "intrudes", "sat_intrudes", "sat_gap", "face_normals", "edge_directions",
            "mirror", "rotate_about", "rotation_matrix", "face_frame"]
 
@@ -48,7 +50,7 @@ def _raw_vertices(name: str) -> np.ndarray:
 
         perms = np.array(list(set(itertools.permutations([0.0, 1.0, 2.0]))))
         return _signs(perms)
-    raise ValueError(f"unknown primitive {name!r}")
+    raise InputError(f"unknown primitive {name!r}")
 
 
 #: primitive names accepted by :func:`solid` (and by ``dpa(primitive=...)``).
@@ -146,7 +148,7 @@ def solid(name: str) -> Solid:
     from scipy.spatial import ConvexHull
 
     if name not in PRIMITIVES:
-        raise ValueError(f"primitive must be one of {', '.join(PRIMITIVES)}, got {name!r}")
+        raise InputError(f"primitive must be one of {', '.join(PRIMITIVES)}, got {name!r}")
     v = _raw_vertices(name)
     hull = ConvexHull(v)
     v = v * (1.0 / hull.volume) ** (1.0 / 3.0)

@@ -35,6 +35,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.geodesic import icosphere, spherical
 from ..geometry.rotations import random_rotation
 from ..params import ParameterError, param, validate
@@ -534,7 +535,7 @@ def overlay(unit: np.ndarray, params: Params | None = None, rng: RNGLike = None)
         raise TypeError(f"params must be fso.Params, got {type(p).__name__}")
     unit = np.asarray(unit, dtype=np.float64)
     if unit.ndim != 2 or unit.shape[1] != 3:
-        raise ValueError(f"unit must have shape (N, 3), got {unit.shape}")
+        raise InputError(f"unit must have shape (N, 3), got {unit.shape}")
     f = draw_field(p, rng)
     S = wm_sum(unit, f)
     return _scale(p, f, unit, S) * S

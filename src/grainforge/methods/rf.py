@@ -51,6 +51,7 @@ from functools import cache, lru_cache
 
 import numpy as np
 
+from ..errors import InputError
 from ..geometry.geodesic import icosphere
 from ..geometry.harmonics import degree_order, icosphere_synthesis, legendre_equator
 from ..outline.contours import DEFAULT_DECAY, PRESETS, descriptor_spectrum
@@ -149,7 +150,7 @@ _KAPPA_NODES, _KAPPA_LIMIT = 64, 30.0
 
 def _check_amplitudes(amplitudes: str) -> None:
     if amplitudes not in AMPLITUDES:
-        raise ValueError(f"amplitudes must be one of {AMPLITUDES}, got {amplitudes!r}")
+        raise InputError(f"amplitudes must be one of {AMPLITUDES}, got {amplitudes!r}")
 
 
 def mean_modulus_factor(C: np.ndarray, amplitudes: str = "fixed") -> np.ndarray:

@@ -38,6 +38,7 @@ from functools import lru_cache
 
 import numpy as np
 
+from ..errors import InputError
 from ..params import ParameterError
 from ..rng import RNGLike, as_generator
 from .imaging import grain_masks, load_image
@@ -193,9 +194,9 @@ class Contour:
     def __post_init__(self):
         r = np.array(self.radii, dtype=np.float64).ravel()
         if r.size < 8:
-            raise ValueError(f"a contour needs at least 8 radii, got {r.size}")
+            raise InputError(f"a contour needs at least 8 radii, got {r.size}")
         if not np.isfinite(r).all() or r.min() <= 0:
-            raise ValueError("contour radii must be finite and positive")
+            raise InputError("contour radii must be finite and positive")
         mean = float(r.mean())
         r = r / mean
         r.setflags(write=False)
@@ -650,7 +651,7 @@ class Contour:
 
         lab = label(mask, connectivity=2)
         if lab.max() == 0:
-            raise ValueError("image holds no grain (nothing on the foreground side of the threshold)")
+            raise InputError("image holds no grain (nothing on the foreground side of the threshold)")
         sizes = np.bincount(lab.ravel())
         sizes[0] = 0
         largest = lab == int(np.argmax(sizes))
@@ -749,7 +750,7 @@ def polygon_contour(points, *, n_angles: int = DEFAULT_ANGLES, source: str = "po
     if len(p) > 1 and np.allclose(p[0], p[-1]):
         p = p[:-1]
     if len(p) < 3:
-        raise ValueError("an outline needs at least 3 points")
+        raise InputError("an outline needs at least 3 points")
     cx, cy = area_centroid(p[:, 0], p[:, 1])
     radii, star = ray_cast(p[:, 0] - cx, p[:, 1] - cy, n_angles)
     return Contour(radii, 1.0, (cx, cy), star, source)
@@ -802,7 +803,7 @@ def mask_contour(
     if not filled:
         m = binary_fill_holes(m)
     if not m.any():
-        raise ValueError("mask holds no grain")
+        raise InputError("mask holds no grain")
     padded = np.pad(m, 1).astype(np.float64)
     loops = find_contours(padded, 0.5)
     loop = max(loops, key=len)
@@ -886,7 +887,7 @@ def scan_image(
     (2, [600, 800], 1, 1)
     """
     if min_area < 0:
-        raise ValueError(f"min_area must be a non-negative number of pixels, got {min_area!r}")
+        raise InputError(f"min_area must be a non-negative number of pixels, got {min_area!r}")
     from skimage.measure import label, regionprops
 
     mask = grain_masks(load_image(image), threshold=threshold, foreground=foreground)

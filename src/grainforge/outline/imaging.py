@@ -25,6 +25,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import FileFormatError, InputError
+
 __all__ = ["load_image", "otsu_threshold", "grain_masks", "draw_contours"]
 
 
@@ -57,7 +59,7 @@ def load_image(image) -> np.ndarray:
     if isinstance(image, (str, Path)):
         path = Path(image)
         if not path.is_file():
-            raise ValueError(f"{path}: no such image file")
+            raise InputError(f"{path}: no such image file")
         from PIL import Image, UnidentifiedImageError
 
         try:
@@ -67,15 +69,15 @@ def load_image(image) -> np.ndarray:
                     im = im.convert("L")
                 arr = np.asarray(im, dtype=np.float64)
         except (UnidentifiedImageError, OSError, ValueError) as exc:
-            raise ValueError(f"{path}: cannot read image ({exc})") from None
+            raise FileFormatError(f"{path}: cannot read image ({exc})") from None
     else:
         arr = np.asarray(image, dtype=np.float64)
     if arr.ndim == 3:
         arr = arr[..., :3].mean(axis=2) if arr.shape[2] >= 3 else arr[..., 0]
     if arr.ndim != 2 or arr.size == 0 or min(arr.shape) < 3:
-        raise ValueError(f"image must be a non-empty 2D grey or colour image, got shape {arr.shape}")
+        raise InputError(f"image must be a non-empty 2D grey or colour image, got shape {arr.shape}")
     if not np.isfinite(arr).all():
-        raise ValueError("image holds non-finite values")
+        raise InputError("image holds non-finite values")
     return arr
 
 
@@ -148,10 +150,10 @@ def grain_masks(image: np.ndarray, *, threshold: float | None = None, foreground
         If the image is uniform (no threshold separates anything), or ``foreground`` is unknown.
     """
     if foreground not in ("auto", "dark", "bright"):
-        raise ValueError(f"foreground must be auto, dark or bright, got {foreground!r}")
+        raise InputError(f"foreground must be auto, dark or bright, got {foreground!r}")
     lo, hi = float(image.min()), float(image.max())
     if hi <= lo:
-        raise ValueError("image is uniform: it holds no grain")
+        raise InputError("image is uniform: it holds no grain")
     if threshold is None:
         threshold = otsu_threshold(image)
     bright = image > threshold

@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["polygon_area_centroid", "area_centroid", "ray_cast"]
 
 TWO_PI = 2.0 * np.pi
@@ -66,7 +68,7 @@ def area_centroid(x: np.ndarray, y: np.ndarray) -> tuple[float, float]:
     """
     area, cx, cy = polygon_area_centroid(x, y)
     if abs(area) < 1e-12:
-        raise ValueError("grain is too small to trace a contour")
+        raise InputError("grain is too small to trace a contour")
     return cx, cy
 
 
@@ -144,6 +146,6 @@ def ray_cast(x: np.ndarray, y: np.ndarray, n_angles: int) -> tuple[np.ndarray, b
     radii = np.full(n_angles, -np.inf)
     np.maximum.at(radii, ray, dist[ok])
     if not np.isfinite(radii).all():
-        raise ValueError("grain boundary does not enclose its centroid; cannot cast rays")
+        raise InputError("grain boundary does not enclose its centroid; cannot cast rays")
     star = bool((np.bincount(ray, minlength=n_angles) == 1).all())
     return radii, star

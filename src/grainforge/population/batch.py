@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import Any
 
+from ..errors import InputError, OutputExistsError
 from ..io import atomic_write, write_csv
 from ..params import ParameterError
 from .distributions import Distribution
@@ -278,7 +279,7 @@ def run_batch(
     from .generate import MANIFEST
 
     if workers is not None and workers < 1:
-        raise ValueError(f"workers must be >= 1, got {workers}")
+        raise InputError(f"workers must be >= 1, got {workers}")
     out = Path(out)
     journal = out / JOURNAL
     n_workers = 1 if scheduler else min(default_workers(workers), recipe.count)
@@ -292,15 +293,16 @@ def run_batch(
     saved = journal / "recipe.toml"
     if resume and saved.exists():
         if saved.read_text(encoding="utf-8") != recipe.text:
-            raise ValueError(f"{recipe.source} differs from the recipe of the batch in {out}; "
-                             "resume with the same recipe or use --overwrite")
+            raise InputError(f"{recipe.source} differs from the recipe of the batch in {out}; "
+                             "resume with the same recipe or use {overwrite}", setting="overwrite")
     elif not overwrite:
         existing = [out / n for n in names + [MANIFEST] if (out / n).exists()]
         if existing or journal.exists():
             first = existing[0] if existing else journal
-            hint = "use --overwrite (no batch journal to resume from)" if resume else "use --resume or --overwrite"
-            raise FileExistsError(f"{first} exists (not made by this batch); {hint}" if resume
-                                  else f"{first} exists (a batch is already in {out}); {hint}")
+            hint = "use {overwrite} (no batch journal to resume from)" if resume else "use {resume} or {overwrite}"
+            raise OutputExistsError(f"{first} exists (not made by this batch); {hint}" if resume
+                                    else f"{first} exists (a batch is already in {out}); {hint}",
+                                    setting=("resume", "overwrite"))
     created = [q for q in [out, *out.parents] if not q.exists()]
     try:  # armed before the folder is made: a signal while it is made leaves none behind
         out.mkdir(parents=True, exist_ok=True)

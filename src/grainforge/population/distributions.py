@@ -16,6 +16,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import RNGLike, as_generator
 
 __all__ = ["Distribution", "FixedSize", "LognormalSize", "GradingCurve"]
@@ -81,7 +82,7 @@ class Distribution:
             return -math.inf, math.inf
         if self.kind == "lognormal":
             return 0.0, math.inf
-        raise ValueError(f"{self.kind} has no interval support")
+        raise InputError(f"{self.kind} has no interval support")
 
     def typical(self) -> Any:
         """A representative value (used to check cross-parameter rules up front).

@@ -14,6 +14,7 @@ from pathlib import Path
 from typing import Any
 
 from ..analysis.descriptors import BASIC_COLUMNS, basic_descriptors
+from ..errors import InputError, OutputExistsError
 from ..fabrication.scale import check_target_size, to_size
 from ..io import FORMATS, _cell, export_bytes, file_mode
 from ..io.inputs import MANIFEST, read_manifest
@@ -321,16 +322,16 @@ def write_run(
         For bad parameters (named).
     """
     if fmt not in FORMATS:
-        raise ValueError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
+        raise InputError(f"format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     check_target_size(size, size_definition)  # before anything is generated or written
     out = Path(out)
     count = len(seeds)
     if not overwrite:
         existing = existing_outputs(out, method, count, fmt)
         if existing:
-            raise FileExistsError(
-                f"{existing[0]} exists ({len(existing)} output file(s) would be replaced); use --overwrite"
-            )
+            raise OutputExistsError(
+                f"{existing[0]} exists ({len(existing)} output file(s) would be replaced); use {{overwrite}}",
+                setting="overwrite")
     columns = manifest_columns(method, extra_columns)
     written = 0
     with staged(out) as stage:  # on success the stage is empty; on failure nothing new is left behind

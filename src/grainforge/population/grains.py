@@ -22,6 +22,7 @@ from typing import Any
 
 import numpy as np
 
+from ..errors import InputError
 from ..params import ParameterError, specs
 from ..rng import as_generator
 from .distributions import Distribution
@@ -111,7 +112,7 @@ def draw_grain(recipe: Recipe, index: int) -> tuple[int, Any, float]:
     try:
         params = params_type(**values)
     except ParameterError as exc:
-        raise ValueError(f"grain {index}: drawn params.{exc.name} {exc.reason}") from None
+        raise InputError(f"grain {index}: drawn params.{exc.name} {exc.reason}") from None
     return seed, params, size
 
 
@@ -199,7 +200,7 @@ def make_grain(recipe: Recipe, index: int) -> GrainResult:
         data, row = encode_grain(recipe.method, params, rng=seed, name=name, fmt=recipe.format, size=size,
                                  size_definition=recipe.size_definition)
     except ParameterError as exc:
-        raise ValueError(f"grain {index} (seed {seed}): params.{exc.name} {exc.reason}") from None
+        raise InputError(f"grain {index} (seed {seed}): params.{exc.name} {exc.reason}") from None
     row["sha256"] = hashlib.sha256(data).hexdigest()
     # JSON round trip: a row read back from a sidecar is identical to a fresh one.
     return GrainResult(index, name, data, json.loads(json.dumps(row)))

@@ -42,6 +42,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..errors import InputError
 from ..fabrication.scale import SIZE_DEFINITIONS
 from ..io import FORMATS
 from ..params import ParameterError, ParamSpec, specs
@@ -59,7 +60,7 @@ _DIST_KEYS = {
 _TOP_KEYS = ("method", "count", "seed", "format", "params", "size", "grains")
 
 
-class RecipeError(ValueError):
+class RecipeError(InputError):
     """A recipe field is missing or invalid.
 
     Attributes
@@ -207,7 +208,7 @@ def load_recipe(path: str | os.PathLike) -> Recipe:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ValueError(f"{path}: cannot read recipe ({exc})") from None
+        raise InputError(f"{path}: cannot read recipe ({exc})") from None
     return parse_recipe(text, source=str(path))
 
 

@@ -29,6 +29,7 @@ from contextlib import contextmanager
 from typing import Any
 
 from .._version import __version__
+from ..errors import InputError
 
 __all__ = ["CONNECT_TIMEOUT", "INSTALL", "DaskExecutor", "SchedulerLost", "VersionMismatch", "check_address",
            "connect", "dask_executor", "probe"]
@@ -61,7 +62,7 @@ class SchedulerLost(RuntimeError):
                          + (f" ({reason})" if reason else ""))
 
 
-class VersionMismatch(ValueError):
+class VersionMismatch(InputError):
     """A Dask worker runs another grainforge version than this process (its results could differ)."""
 
 
@@ -90,7 +91,7 @@ def check_address(address: str) -> str:
     >>> check_address("http://node12")
     Traceback (most recent call last):
     ...
-    ValueError: --scheduler 'http://node12': not a Dask scheduler address; give tcp://HOST:PORT, the address the scheduler prints (e.g. tcp://10.0.0.5:8786)
+    grainforge.errors.InputError: scheduler 'http://node12': not a Dask scheduler address; give tcp://HOST:PORT, the address the scheduler prints (e.g. tcp://10.0.0.5:8786)
     """
     text = str(address).strip()
     scheme, sep, rest = text.rpartition("://")
@@ -102,8 +103,8 @@ def check_address(address: str) -> str:
         host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
         ok = bool(colon and host and port.isdigit() and 0 < int(port) < 65536)
     if not ok:
-        raise ValueError(f"--scheduler {address!r}: not a Dask scheduler address; give tcp://HOST:PORT, the address "
-                         "the scheduler prints (e.g. tcp://10.0.0.5:8786)")
+        raise InputError(f"{{scheduler}} {address!r}: not a Dask scheduler address; give tcp://HOST:PORT, the address "
+                         "the scheduler prints (e.g. tcp://10.0.0.5:8786)", setting="scheduler")
     return text
 
 
@@ -140,7 +141,7 @@ def probe(address: str, timeout: float) -> None:
     >>> probe(f"tcp://127.0.0.1:{port}", 5)
     Traceback (most recent call last):
     ...
-    ValueError: cannot connect to the Dask scheduler at tcp://127.0.0.1:...: connection refused (nothing listens ...
+    grainforge.errors.InputError: cannot connect to the Dask scheduler at tcp://127.0.0.1:...: connection refused (nothing listens ...
     """
     scheme, sep, rest = address.rpartition("://")
     if (scheme if sep else "tcp") not in TCP_SCHEMES:
@@ -152,24 +153,24 @@ def probe(address: str, timeout: float) -> None:
         with socket.create_connection((host, int(port)), timeout=timeout):
             return
     except socket.gaierror:
-        raise ValueError(f"{where}: host {host!r} not found; check --scheduler") from None
+        raise InputError(f"{where}: host {host!r} not found; check {{scheduler}}", setting="scheduler") from None
     except TimeoutError:
-        raise ValueError(f"{where}: no answer within {timeout:g} s; check --scheduler, and that the scheduler "
-                         "runs and its port is open") from None
+        raise InputError(f"{where}: no answer within {timeout:g} s; check {{scheduler}}, and that the scheduler "
+                         "runs and its port is open", setting="scheduler") from None
     except ConnectionRefusedError:
-        raise ValueError(f"{where}: connection refused (nothing listens on port {port} of {host}); start the "
+        raise InputError(f"{where}: connection refused (nothing listens on port {port} of {host}); start the "
                          "scheduler (dask scheduler) or give the address it prints") from None
     except OSError as exc:
         reason = {errno.EHOSTUNREACH: "no route to the host", errno.ENETUNREACH: "network unreachable"}.get(
             exc.errno, exc.strerror or type(exc).__name__)
-        raise ValueError(f"{where}: {reason}; check --scheduler") from None
+        raise InputError(f"{where}: {reason}; check {{scheduler}}", setting="scheduler") from None
 
 
 def _distributed():
     try:
         import distributed
     except ImportError:
-        raise ValueError(f"--scheduler needs Dask distributed: {INSTALL}") from None
+        raise InputError(f"{{scheduler}} needs Dask distributed: {INSTALL}", setting="scheduler") from None
     return distributed
 
 
@@ -256,9 +257,9 @@ def connect(address: str, *, timeout: str | None = None) -> Iterator[Any]:
             client = distributed.Client(address, timeout=timeout or CONNECT_TIMEOUT, set_as_default=False)
         except (OSError, TimeoutError, ValueError) as exc:
             reason = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-            raise ValueError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
+            raise InputError(f"cannot connect to the Dask scheduler at {address}: {reason}") from None
         except MemoryError:  # something else answers there: its first bytes read as a huge Dask message
-            raise ValueError(f"cannot connect to the Dask scheduler at {address}: what answers there does not speak "
+            raise InputError(f"cannot connect to the Dask scheduler at {address}: what answers there does not speak "
                              "Dask's protocol; give the address the scheduler prints") from None
         try:
             check_versions(client, address)

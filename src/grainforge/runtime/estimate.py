@@ -13,18 +13,23 @@ Examples
 >>> t = grain_seconds("fso", get("fso").Params())
 >>> 0.005 < t < 1.0
 True
->>> check_job(10, t, what="10 fso grains", option="--count") == 10 * t  # fine: returns the estimate
+>>> check_job(10, t, what="10 fso grains", option="{count}", setting="count") == 10 * t  # fine: returns the estimate
 True
->>> check_job(10**9, t, what="1000000000 fso grains", option="--count")
+>>> check_job(10**9, t, what="1000000000 fso grains", option="{count}", setting="count")
 Traceback (most recent call last):
 ...
-grainforge.runtime.estimate.TooLargeError: 1000000000 fso grains would take about 5 years of computing (1.6e+02 ms each; limit 1 day); lower --count
+grainforge.runtime.estimate.TooLargeError: 1000000000 fso grains would take about 5 years of computing (1.6e+02 ms each; limit 1 day); lower count
+
+(the command line says ``lower --count``: a setting written ``{name}`` and given as ``setting`` is named by its
+option there, :mod:`grainforge.errors`).
 """
 
 from __future__ import annotations
 
 import os
 from typing import Any
+
+from ..errors import InputError
 
 __all__ = ["SECONDS_LIMIT", "grain_seconds", "check_job", "check_memory", "machine_memory", "duration",
            "TooLargeError", "icosphere_vertices", "dem_template_seconds"]
@@ -59,7 +64,7 @@ LEVELSET_NODE_COEFFICIENT = 5.5e-3
 LEVELSET_NODE_EXPONENT = 0.745
 
 
-class TooLargeError(ValueError):
+class TooLargeError(InputError):
     """A request that would take longer than :data:`SECONDS_LIMIT` or more memory than the machine has."""
 
 
@@ -183,7 +188,7 @@ def duration(seconds: float) -> str:
 
 
 def check_job(count: int, seconds_each: float, *, what: str, option: str, workers: int = 1,
-              advice: str | None = None) -> float:
+              advice: str | None = None, setting: str | tuple[str, ...] | None = None) -> float:
     """Total seconds for ``count`` items of ``seconds_each`` on ``workers``; refuse beyond a day.
 
     The message ends "lower ``option``", or ``advice`` when given (e.g. "raise --spacing").
@@ -202,6 +207,8 @@ def check_job(count: int, seconds_each: float, *, what: str, option: str, worker
         Processes sharing the work.
     advice : str, optional
         The message's last words instead of ``lower OPTION``.
+    setting : str or tuple of str, optional
+        The settings ``option`` or ``advice`` name as ``{name}`` (:class:`grainforge.errors.InputError`).
 
     Returns
     -------
@@ -218,7 +225,8 @@ def check_job(count: int, seconds_each: float, *, what: str, option: str, worker
         per = f"{duration(seconds_each)} each" if seconds_each >= 1 else f"{seconds_each * 1000:.2g} ms each"
         raise TooLargeError(
             f"{what} would take about {duration(total)} of computing ({per}"
-            + (f" on {workers} workers" if workers > 1 else "") + f"; limit {_limit()}); " + (advice or f"lower {option}"))
+            + (f" on {workers} workers" if workers > 1 else "") + f"; limit {_limit()}); " + (advice or f"lower {option}"),
+            setting=setting)
     return total
 
 
@@ -241,7 +249,8 @@ def machine_memory() -> int:
         return 24 * 1024**3
 
 
-def check_memory(nbytes: float, *, what: str, option: str, fraction: float = 0.5) -> float:
+def check_memory(nbytes: float, *, what: str, option: str, fraction: float = 0.5,
+                 setting: str | tuple[str, ...] | None = None) -> float:
     """Refuse when ``nbytes`` exceeds ``fraction`` of the machine's memory (the machine is shared).
 
     Parameters
@@ -254,6 +263,8 @@ def check_memory(nbytes: float, *, what: str, option: str, fraction: float = 0.5
         The option that reduces the memory.
     fraction : float, default 0.5
         Share of :func:`machine_memory` allowed.
+    setting : str or tuple of str, optional
+        The settings ``option`` names as ``{name}`` (:class:`grainforge.errors.InputError`).
 
     Returns
     -------
@@ -268,5 +279,5 @@ def check_memory(nbytes: float, *, what: str, option: str, fraction: float = 0.5
     limit = machine_memory() * fraction
     if nbytes > limit:
         raise TooLargeError(f"{what} would need about {nbytes / 1024**3:.3g} GiB of memory "
-                            f"(limit {limit / 1024**3:.3g} GiB); lower {option}")
+                            f"(limit {limit / 1024**3:.3g} GiB); lower {option}", setting=setting)
     return float(nbytes)

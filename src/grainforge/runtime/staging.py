@@ -17,6 +17,7 @@ from collections.abc import Iterator
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import OutputExistsError
 from .children import remove_leftovers
 
 __all__ = ["signals_held", "STAGING_PREFIX", "remove_stale_staging", "open_stage", "staged", "commit_stage", "discard_stage"]
@@ -128,15 +129,15 @@ def commit_stage(stage: Path, out: str | os.PathLike, *, overwrite: bool = False
 
     Raises
     ------
-    FileExistsError
-        Without ``overwrite``, when an output exists; nothing is moved then.
+    grainforge.errors.OutputExistsError
+        Without ``overwrite``, when an output exists (a ``FileExistsError``); nothing is moved then.
     """
     out = Path(out)
     items = sorted(stage.iterdir(), key=lambda p: (not p.is_dir(), p.name))
     if not overwrite:
         for p in items:
             if (out / p.name).exists():
-                raise FileExistsError(f"{out / p.name} exists; use --overwrite")
+                raise OutputExistsError(f"{out / p.name} exists; use {{overwrite}}", setting="overwrite")
     moved = []
     with signals_held():  # a signal meanwhile is answered once every output is in place
         for p in items:

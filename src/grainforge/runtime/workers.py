@@ -152,7 +152,7 @@ class WorkerPool(Executor):
     block ends on an exception (:func:`close_pool`).
 
     The attributes are this module's, not API; none has a leading underscore, as
-    ``tests/test_workers.py`` flags every private name used in this module (the standard library's
+    ``tests/runtime/test_workers.py`` flags every private name used in this module (the standard library's
     included).
     """
 

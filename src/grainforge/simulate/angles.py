@@ -14,6 +14,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["HeapAngle", "heap_angle", "tilt_failure_angle", "tilt_curve", "TILT_FAILURE"]
 
 #: the tilt test's failure threshold: a mean downslope displacement of half a grain diameter
@@ -105,10 +107,10 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     """
     s = np.asarray(spheres, dtype=np.float64)
     if s.ndim != 2 or s.shape[1] < 4 or len(s) == 0:
-        raise ValueError("spheres must be an (N, 4) array of x, y, z, r with N ≥ 1")
+        raise InputError("spheres must be an (N, 4) array of x, y, z, r with N ≥ 1")
     lo_f, hi_f = band
     if not (bin_width > 0 and grain_size > 0 and sectors >= 1 and 0 <= lo_f < hi_f <= 1):
-        raise ValueError("need bin_width > 0, grain_size > 0, sectors ≥ 1 and 0 ≤ band[0] < band[1] ≤ 1")
+        raise InputError("need bin_width > 0, grain_size > 0, sectors ≥ 1 and 0 ≤ band[0] < band[1] ≤ 1")
     xy = s[:, :2] - np.average(s[:, :2], axis=0, weights=s[:, 3] ** 3)
     rad = np.hypot(xy[:, 0], xy[:, 1])
     top = s[:, 2] + s[:, 3] - base
@@ -126,19 +128,19 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     crest = int(np.nanargmax(mean_profile))
     lo, hi = max(grain_size, lo_f * height), hi_f * height
     if not hi > lo:
-        raise ValueError("the heap is too flat or too small to measure an angle (lower than two grains)")
+        raise InputError("the heap is too flat or too small to measure an angle (lower than two grains)")
     # the slope: from the first ring past the crest below hi, outwards while the surface stays above lo
     outside = np.arange(nr) > crest
     start = np.nonzero(outside & (mean_profile <= hi))[0]
     if len(start) == 0:
-        raise ValueError("the heap is too flat or too small to measure an angle (no slope)")
+        raise InputError("the heap is too flat or too small to measure an angle (no slope)")
     i1 = int(start[0])
     below = np.nonzero((np.arange(nr) >= i1) & ~(mean_profile >= lo))[0]
     i2 = int(below[0]) if len(below) else nr
     sel = np.zeros(nr, dtype=bool)
     sel[i1:i2] = True
     if sel.sum() < 2:
-        raise ValueError("the heap is too flat or too small to measure an angle (fewer than two rings "
+        raise InputError("the heap is too flat or too small to measure an angle (fewer than two rings "
                          "of width bin_width on the slope)")
     feet = np.nonzero(outside & ~(mean_profile > grain_size))[0]
     foot = float(centres[feet[0]] - 0.5 * bin_width) if len(feet) else float(centres[-1] + 0.5 * bin_width)
@@ -152,13 +154,13 @@ def heap_angle(spheres: np.ndarray, *, bin_width: float, grain_size: float, sect
     rr = np.broadcast_to(centres, surface.shape)[ok_all]
     b, a = np.polyfit(rr, surface[ok_all], 1)
     if not b < 0:  # the fitted surface does not fall outwards: a pile of a few grains, no slope to speak of
-        raise ValueError("the heap is too flat or too small to measure an angle (its surface does not fall "
+        raise InputError("the heap is too flat or too small to measure an angle (its surface does not fall "
                          "outwards)")
     if -b * (centres[i2 - 1] - centres[i1]) < 0.25 * (hi - lo):
         # the rings chosen stand on a shelf of the heap: the line falls by less than a quarter of the band it was
         # meant to span (a heap of two grain layers measured a "slope" of 0.3 degrees this way, falling by 1 % of
         # it; a default heap of 200 grains whose slope has three rings in the band falls by 48 % of it)
-        raise ValueError("the heap is too flat or too small to measure an angle (the fitted rings are a shelf, "
+        raise InputError("the heap is too flat or too small to measure an angle (the fitted rings are a shelf, "
                          "not a slope)")
     prof = np.column_stack([centres, mean_profile])
     return HeapAngle(angle=float(np.degrees(np.arctan(-b))), spread=float(np.nanstd(per_sector)),
@@ -170,7 +172,7 @@ def _tilt_record(history) -> np.ndarray:
     """A tilt record as a (T, 2+) float64 array, or ``ValueError``."""
     h = np.asarray(history, dtype=np.float64)
     if h.ndim != 2 or h.shape[1] < 2:
-        raise ValueError("history must be a (T, 2) array of angle, displacement")
+        raise InputError("history must be a (T, 2) array of angle, displacement")
     return h
 
 

@@ -17,6 +17,7 @@ from contextlib import ExitStack
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..errors import InputError
 from .pipeline import Evaluated, RunProgress, _caption, _engine_errors, _finish, _Job, _Options, _options, _prepare
 
 __all__ = ["CalibrationResult", "CalibrationFailed", "calibration_outputs", "check_search", "use_command",
@@ -119,9 +120,9 @@ def check_search(target_angle: float, friction_range: tuple[float, float], start
     check_target(target_angle)
     low, high = friction_range
     if not (0.0 <= low < high <= 5.0):
-        raise ValueError(f"friction range: need 0 ≤ low < high ≤ 5, got {low:g} {high:g}")
+        raise InputError(f"friction range: need 0 ≤ low < high ≤ 5, got {low:g} {high:g}")
     if not low <= start <= high:  # the search starts inside its bounds (and a NaN is no μ)
-        raise ValueError(f"start: {start:g} is outside the friction range {low:g} {high:g}")
+        raise InputError(f"start: {start:g} is outside the friction range {low:g} {high:g}")
 
 
 def _option(name: str) -> str:
@@ -262,7 +263,7 @@ def calibrate_friction(test: str, inputs: Sequence[str | os.PathLike], *, out: s
 
     check_search(target_angle, friction_range, start)
     if angle is not None and test != "triaxial":
-        raise ValueError(f"--angle is the triaxial test's: calibrate {test} does not take it")
+        raise InputError(f"--angle is the triaxial test's: calibrate {test} does not take it")
     o = _options(test, inputs, settings, engine=engine, mpi=mpi, workers=workers, scheduler=scheduler, shape=shape,
                  spacing=spacing, as_spheres=as_spheres, clump_accuracy=clump_accuracy, quick=quick, resume=resume,
                  overwrite=overwrite, label=label, progress=progress)

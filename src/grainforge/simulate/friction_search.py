@@ -40,6 +40,8 @@ import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
+from ..errors import InputError
+
 __all__ = ["Evaluation", "FrictionSearch", "Unreachable", "search_friction", "calibration_estimate", "friction_uncertainty", "pooled_sd",
            "local_slope", "calibrated_angle", "calibration_seconds", "failed_calibration_runs",
            "run_calibration", "calibration_record", "write_calibration", "calibration_figure",
@@ -90,7 +92,7 @@ class FrictionSearch:
     converged: bool
 
 
-class Unreachable(ValueError):
+class Unreachable(InputError):
     """The target angle lies outside the angles reached in the μ range (``reached``: lowest, highest angle)."""
 
     def __init__(self, message: str, reached: tuple[float, float]):
@@ -117,11 +119,11 @@ def check_target(target: float) -> None:
     >>> check_target(85.0)
     Traceback (most recent call last):
     ...
-    ValueError: target angle 85° is outside 5–80°: bulk friction angles of granular materials lie there
+    grainforge.errors.InputError: target angle 85° is outside 5–80°: bulk friction angles of granular materials lie there
     """
     lo, hi = TARGET_RANGE
     if not (math.isfinite(target) and lo <= target <= hi):
-        raise ValueError(f"target angle {target:g}° is outside {lo:g}–{hi:g}°: bulk friction angles of granular "
+        raise InputError(f"target angle {target:g}° is outside {lo:g}–{hi:g}°: bulk friction angles of granular "
                          "materials lie there")
 
 
@@ -163,12 +165,12 @@ def calibrated_angle(test: str, angle: str | None = None) -> tuple[str, str]:
     if test == "triaxial":
         angle = "ultimate" if angle is None else angle
         if angle not in TRIAXIAL_ANGLES:
-            raise ValueError(f"angle must be one of {', '.join(TRIAXIAL_ANGLES)}, got {angle!r}")
+            raise InputError(f"angle must be one of {', '.join(TRIAXIAL_ANGLES)}, got {angle!r}")
         return TRIAXIAL_ANGLES[angle], f"{angle} friction angle"
     if test not in TEST_ANGLES:
-        raise ValueError(f"test must be one of {', '.join([*TEST_ANGLES, 'triaxial'])}, got {test!r}")
+        raise InputError(f"test must be one of {', '.join([*TEST_ANGLES, 'triaxial'])}, got {test!r}")
     if angle is not None:
-        raise ValueError(f"the {test} test measures one angle: no angle={angle!r}")
+        raise InputError(f"the {test} test measures one angle: no angle={angle!r}")
     return "angle_deg", TEST_ANGLES[test]
 
 
@@ -321,15 +323,15 @@ def search_friction(angle_of: Callable[[float], float], target: float, *, low: f
     (0.47, True, True)
     """
     if not (0.0 <= low < high and math.isfinite(high)):
-        raise ValueError(f"need 0 ≤ low < high, got low={low!r}, high={high!r}")
+        raise InputError(f"need 0 ≤ low < high, got low={low!r}, high={high!r}")
     if int(max_evaluations) < 2:
-        raise ValueError(f"max_evaluations must be ≥ 2, got {max_evaluations!r}")
+        raise InputError(f"max_evaluations must be ≥ 2, got {max_evaluations!r}")
     evaluations: list[Evaluation] = []
 
     def evaluate(mu: float) -> Evaluation:
         a = float(angle_of(mu))
         if not math.isfinite(a):
-            raise ValueError(f"no angle could be measured at friction {mu:.4g}")
+            raise InputError(f"no angle could be measured at friction {mu:.4g}")
         e = Evaluation(float(mu), a)
         evaluations.append(e)
         if progress is not None:

@@ -47,6 +47,7 @@ damping, the material and the scenes are the same.
 
 from __future__ import annotations
 
+from ..errors import InputError
 from .yade_scenes import scene_text
 
 __all__ = ["LEVELSET_PART", "scene_text", "scene_extra", "LEVELSET_NODES", "BASE_NODES",  # noqa: F822
@@ -121,10 +122,10 @@ def check_levelset_run(test: str, shape: str, settings) -> None:
     >>> check_levelset_run("tilt", "levelset", Settings(grains=30))
     Traceback (most recent call last):
     ...
-    ValueError: --shape levelset: a tilt layer needs --grains ≥ 49 (a periodic cell at least 4 grains wide: Yade refuses a body wider than half the cell); got 30
+    grainforge.errors.InputError: --shape levelset: a tilt layer needs --grains ≥ 49 (a periodic cell at least 4 grains wide: Yade refuses a body wider than half the cell); got 30
     """
     if shape == "levelset" and test == "tilt" and settings.grains < MIN_TILT_GRAINS:
-        raise ValueError(f"--shape levelset: a tilt layer needs --grains ≥ {MIN_TILT_GRAINS} (a periodic cell at "
+        raise InputError(f"--shape levelset: a tilt layer needs --grains ≥ {MIN_TILT_GRAINS} (a periodic cell at "
                          f"least 4 grains wide: Yade refuses a body wider than half the cell); got {settings.grains}")
 
 

@@ -43,6 +43,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import as_generator
 from .settings import Settings, scene_settings
 
@@ -100,7 +101,7 @@ def mpirun_executable() -> str:
     from .process import find_executable
 
     return find_executable("GRAINFORGE_MPIRUN", "mpirun",
-                           "--mpi: mpirun is not installed (on Debian: apt-get install openmpi-bin)")
+                           "{mpi}: mpirun is not installed (on Debian: apt-get install openmpi-bin)", setting="mpi")
 
 
 def restitution_of_local_damping(damping: float) -> float:
@@ -188,7 +189,7 @@ def _seeds(count: int, seed: int) -> list[int]:
 
     table = seed_table()
     if count > len(table):
-        raise ValueError(f"a deck needs {count} random seeds; the seed table holds {len(table)}")
+        raise InputError(f"a deck needs {count} random seeds; the seed table holds {len(table)}")
     k = (np.arange(count, dtype=np.int64) * _STRIDE + int(seed) * 7919 * count) % len(table)
     return [int(x) for x in table[k]]
 
@@ -292,7 +293,7 @@ def _plan(templates: Sequence, test: str, settings: Settings, seed: int) -> Simp
     the contacts (:func:`contact_table`), the time step, the kinetic-energy threshold and the checks."""
     for t in templates:
         if t.shape != "clump" or t.clump is None:
-            raise ValueError(f"the LIGGGHTS scenes take multisphere clumps; {t.name} has shape {t.shape!r}")
+            raise InputError(f"the LIGGGHTS scenes take multisphere clumps; {t.name} has shape {t.shape!r}")
     scene = scene_settings(settings, test, seed)
     geo = _layout(templates, test, settings, seed)
     pick, d = geo["pick"], geo["d"]

@@ -42,6 +42,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from ..errors import InputError
 from ..rng import as_generator
 from .settings import DENSEST_FRACTION, TriaxialSettings
 
@@ -165,11 +166,11 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None, available: int | No
     >>> check_ranks(TriaxialSettings(grains=100), 64)
     Traceback (most recent call last):
     ...
-    ValueError: --mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use --mpi 8 (or another count cut at most 2 ways per side), or --grains 626 or more
+    grainforge.errors.InputError: --mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use --mpi 8 (or another count cut at most 2 ways per side), or --grains 626 or more
     >>> check_ranks(TriaxialSettings(grains=200), 3, available=2)
     Traceback (most recent call last):
     ...
-    ValueError: --mpi 3: a triaxial specimen of 200 grains is about 5.5 grain diameters wide; cut 3 ways (the 3 × 1 × 1 ranks' grid) a rank's slab would be 1.8 diameters thick, under the 2 a rank needs: use --mpi 2 (or another count cut at most 2 ways per side)
+    grainforge.errors.InputError: --mpi 3: a triaxial specimen of 200 grains is about 5.5 grain diameters wide; cut 3 ways (the 3 × 1 × 1 ranks' grid) a rank's slab would be 1.8 diameters thick, under the 2 a rank needs: use --mpi 2 (or another count cut at most 2 ways per side)
     """
     from ..params import specs
 
@@ -185,7 +186,7 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None, available: int | No
     grains = math.ceil((MIN_RANK_DIAMETERS * cuts) ** 3 * DENSEST_FRACTION / (math.pi / 6.0))
     most_grains = next(s.high for s in specs(TriaxialSettings) if s.name == "grains")
     more = (available is None or mpi <= available) and grains <= most_grains
-    raise ValueError(f"--mpi {mpi}: a triaxial specimen of {settings.grains} grains is about {width:.1f} grain "
+    raise InputError(f"--mpi {mpi}: a triaxial specimen of {settings.grains} grains is about {width:.1f} grain "
                      f"diameters wide; cut {cuts} ways (the {' × '.join(map(str, grid))} ranks' grid) a rank's slab "
                      f"would be {width / cuts:.1f} diameters thick, under the {MIN_RANK_DIAMETERS:g} a rank needs: "
                      f"use --mpi {fits} (or another count cut at most {allowed} ways per side)"
@@ -199,7 +200,7 @@ def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleN
 
     for t in templates:
         if t.shape != "clump" or t.clump is None:
-            raise ValueError(f"the LIGGGHTS scenes take multisphere clumps; {t.name} has shape {t.shape!r}")
+            raise InputError(f"the LIGGGHTS scenes take multisphere clumps; {t.name} has shape {t.shape!r}")
     scene = triaxial_scene_settings(settings, seed)
     n = settings.grains
     rng = as_generator(np.random.SeedSequence([int(seed), 28]))  # the run's seed, stream 28: the layout
@@ -493,7 +494,7 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
     steps = sorted(snapshots)
     state = np.array([contact_state(snapshots[s], grain_of, radius_of, n) for s in steps]).reshape(-1, 2)
     if len(state) != len(shear):
-        raise ValueError(f"{deck}: {len(shear)} records but {len(state)} contact snapshots")
+        raise InputError(f"{deck}: {len(shear)} records but {len(state)} contact snapshots")
     q, p = sz - 0.5 * (sx + sy), (sx + sy + sz) / 3.0
     with np.errstate(invalid="ignore", divide="ignore"):
         ratio = np.where(p > 0, q / p, np.nan)

@@ -26,6 +26,8 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
+from ..errors import InputError
+
 __all__ = ["Estimate", "Note", "Count", "RunProgress", "Evaluated", "VirtualTestResult", "settings_for", "check_options",
            "check_run", "check_installed", "local_workers", "virtual_test_outputs", "run_virtual_test"]
 
@@ -205,25 +207,25 @@ def check_options(test: str | None, *, engine: str = "yade", mpi: int | None = N
     from .capabilities import check_engine
 
     if resume and overwrite:
-        raise ValueError("--resume and --overwrite exclude each other")
+        raise InputError("--resume and --overwrite exclude each other")
     if scheduler is not None:
         from ..runtime.cluster import check_address
 
         if workers is not None:
-            raise ValueError("--workers is for the local pool; the Dask cluster (--scheduler) decides its own workers")
+            raise InputError("--workers is for the local pool; the Dask cluster (--scheduler) decides its own workers")
         check_address(scheduler)
     check_engine(engine, mpi, shape, test)
     if shape != "clump" and rolling_friction:
-        raise ValueError("--rolling-friction acts at sphere contacts: use it with --shape clump (or --as-spheres)")
+        raise InputError("--rolling-friction acts at sphere contacts: use it with --shape clump (or --as-spheres)")
     if clump_accuracy is not None and (shape != "clump" or as_spheres):
-        raise ValueError("--clump-accuracy builds clumps to an accuracy: use it with --shape clump, without "
+        raise InputError("--clump-accuracy builds clumps to an accuracy: use it with --shape clump, without "
                          "--as-spheres")
     if shape != "levelset" and spacing is not None:
-        raise ValueError("--spacing is the level set's grid: use it with --shape levelset")
+        raise InputError("--spacing is the level set's grid: use it with --shape levelset")
     if shape == "levelset" and spheres is not None:
-        raise ValueError("--spheres sets a clump's size: a level set has none (--spacing sets its grid)")
+        raise InputError("--spheres sets a clump's size: a level set has none (--spacing sets its grid)")
     if shape == "levelset" and as_spheres:
-        raise ValueError("--as-spheres is the sphere baseline (one sphere per grain): use it without --shape levelset")
+        raise InputError("--as-spheres is the sphere baseline (one sphere per grain): use it without --shape levelset")
 
 
 def local_workers(workers: int | None, mpi: int | None) -> int:
@@ -352,7 +354,7 @@ def virtual_test_outputs(test: str, settings, out: str | os.PathLike, clump_accu
 def _check_out(out: str | os.PathLike, outputs: Sequence[Path], overwrite: bool) -> Path:
     """The output folder: not a file; none of ``outputs`` there unless ``overwrite``."""
     if str(out).strip() == "":
-        raise ValueError("the output folder's path is empty; give a folder name")
+        raise InputError("the output folder's path is empty; give a folder name")
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise NotADirectoryError(f"{out} is a file, not a folder")

@@ -9,13 +9,14 @@ from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 
+from ..errors import EngineMissing, InputError
 from ..runtime.children import owned_command
 
 __all__ = ["run_engine_process", "EngineFailed", "kill_running", "find_executable", "mpi_session_folder",
            "mpi_slots", "check_mpi_ranks"]
 
 
-def find_executable(variable: str, name: str, missing: str) -> str:
+def find_executable(variable: str, name: str, missing: str, setting: str | None = None) -> str:
     """Path of command ``name``, or of the command the environment variable ``variable`` names.
 
     Parameters
@@ -26,6 +27,8 @@ def find_executable(variable: str, name: str, missing: str) -> str:
         The command looked up on ``PATH`` when ``variable`` is not set.
     missing : str
         The message of the error raised when the command is not found.
+    setting : str, optional
+        The setting that asks for the command, named in ``missing`` as ``{setting}`` (``mpi``).
 
     Returns
     -------
@@ -34,14 +37,14 @@ def find_executable(variable: str, name: str, missing: str) -> str:
 
     Raises
     ------
-    FileNotFoundError
-        With the message ``missing`` when there is none.
+    grainforge.errors.EngineMissing
+        With the message ``missing`` when there is none (a ``FileNotFoundError``).
     """
     import shutil
 
     exe = shutil.which(os.environ.get(variable, name))
     if exe is None:
-        raise FileNotFoundError(missing)
+        raise EngineMissing(missing, setting=setting)
     return exe
 
 
@@ -311,7 +314,7 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
     >>> check_mpi_ranks(100000, environ={})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    ValueError: --mpi 100000: only ... rank(s) available (... core(s) here); use --mpi ... or fewer, or run ...
+    grainforge.errors.InputError: --mpi 100000: only ... rank(s) available (... core(s) here); use --mpi ... or fewer, or run ...
     >>> check_mpi_ranks(64, environ={"SLURM_NTASKS": "100000"})  # a batch allocation provides them
     """
     if mpi is None:
@@ -323,6 +326,6 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
         largest = max(1, slots // runs)
         if usable is not None:
             largest = max(1, usable(largest))
-        raise ValueError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
+        raise InputError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
                          + (" (or fewer --workers)" if runs > 1 else "")
                          + ", or run inside a batch allocation or with a hostfile that provides more")

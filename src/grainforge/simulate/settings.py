@@ -5,6 +5,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
+from ..errors import InputError
 from ..params import param, validate
 
 __all__ = ["TESTS", "GrainSettings", "Settings", "TriaxialSettings", "QUICK", "QUICK_REPOSE", "QUICK_TRIAXIAL",
@@ -234,16 +235,16 @@ def check_triaxial_run(settings: TriaxialSettings, engine: str = "yade") -> None
     >>> check_triaxial_run(TriaxialSettings(grains=30))
     Traceback (most recent call last):
     ...
-    ValueError: --grains 30: a periodic triaxial cell needs --grains ≥ 79 (a cell at least 4 grain diameters wide at a solid fraction of 0.64)
+    grainforge.errors.InputError: --grains 30: a periodic triaxial cell needs --grains ≥ 79 (a cell at least 4 grain diameters wide at a solid fraction of 0.64)
     >>> check_triaxial_run(TriaxialSettings(grains=30), "liggghts")
     Traceback (most recent call last):
     ...
-    ValueError: --grains 30: a triaxial box of walls needs --grains ≥ 79 (a box at least 4 grain diameters wide at a solid fraction of 0.64)
+    grainforge.errors.InputError: --grains 30: a triaxial box of walls needs --grains ≥ 79 (a box at least 4 grain diameters wide at a solid fraction of 0.64)
     """
     what, where = ("a triaxial box of walls", "a box") if engine == "liggghts" else ("a periodic triaxial cell",
                                                                                    "a cell")
     if settings.grains < MIN_TRIAXIAL_GRAINS:
-        raise ValueError(f"--grains {settings.grains}: {what} needs --grains ≥ {MIN_TRIAXIAL_GRAINS} ({where} at "
+        raise InputError(f"--grains {settings.grains}: {what} needs --grains ≥ {MIN_TRIAXIAL_GRAINS} ({where} at "
                          f"least {MIN_CELL_DIAMETERS:g} grain diameters wide at a solid fraction of "
                          f"{DENSEST_FRACTION:g})")
 
@@ -281,7 +282,7 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
     (4, 200, 26.57)
     """
     if test not in TESTS:
-        raise ValueError(f"test must be one of {', '.join(TESTS)}, got {test!r}")
+        raise InputError(f"test must be one of {', '.join(TESTS)}, got {test!r}")
     from ..dem.deck import grain_orientations, orientation_rows
 
     return {

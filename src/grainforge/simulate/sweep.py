@@ -33,6 +33,8 @@ import tempfile
 from collections.abc import Sequence
 from pathlib import Path
 
+from ..errors import InputError, OutputExistsError
+
 __all__ = ["JOURNAL", "SweepJournal", "open_journal", "sweep_fingerprint", "read_deck", "run_remote", "run_on_cluster", "JournalMismatch"]
 
 #: the folder inside ``--out`` that keeps the finished runs of a sweep until its outputs are committed
@@ -43,7 +45,7 @@ SETTINGS_FILE = "sweep.json"
 SEP = "+"
 
 
-class JournalMismatch(ValueError):
+class JournalMismatch(InputError):
     """A ``--resume`` whose settings or decks are not those of the interrupted sweep."""
 
 
@@ -273,8 +275,9 @@ class SweepJournal:
             f = Path(f)
             rel = f.relative_to(deck)
             if not (kept / rel).is_file() or (kept / rel).read_bytes() != f.read_bytes():
-                raise JournalMismatch(f"--resume: {rel} of {deck.name} differs from the interrupted sweep's "
-                                      f"(other inputs or templates); use --overwrite to start again")
+                raise JournalMismatch(f"{{resume}}: {rel} of {deck.name} differs from the interrupted sweep's "
+                                      "(other inputs or templates); use {overwrite} to start again",
+                                      setting=("resume", "overwrite"))
         shutil.copytree(kept, deck, copy_function=shutil.copy2, dirs_exist_ok=True)
         self.reused += 1
         return json.loads((deck / "result.json").read_text())
@@ -350,8 +353,8 @@ def open_journal(out: str | os.PathLike, fingerprint: dict, *, resume: bool = Fa
 
     Raises
     ------
-    FileExistsError
-        A journal with finished runs, without ``resume`` or ``overwrite``.
+    grainforge.errors.OutputExistsError
+        A journal with finished runs, without ``resume`` or ``overwrite`` (a ``FileExistsError``).
     JournalMismatch
         ``resume`` with other settings: one line naming the first that differs.
 
@@ -366,7 +369,7 @@ def open_journal(out: str | os.PathLike, fingerprint: dict, *, resume: bool = Fa
     >>> open_journal(d, {"--seeds": 3}, resume=True)  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    grainforge.simulate.sweep.JournalMismatch: --resume: the interrupted sweep in ... ran with --seeds 2 (now 3); ...
+    grainforge.simulate.sweep.JournalMismatch: resume: the interrupted sweep in ... ran with --seeds 2 (now 3); ...
     """
     journal = SweepJournal(Path(out) / JOURNAL, json.loads(json.dumps(fingerprint)))
     if not journal.folder.exists():
@@ -376,8 +379,9 @@ def open_journal(out: str | os.PathLike, fingerprint: dict, *, resume: bool = Fa
         journal.remove()
         return journal
     if not resume:
-        raise FileExistsError(f"{journal.folder} holds {len(runs)} finished run(s) of an interrupted sweep; "
-                              "use --resume to continue it or --overwrite to start again")
+        raise OutputExistsError(f"{journal.folder} holds {len(runs)} finished run(s) of an interrupted sweep; "
+                                "use {resume} to continue it or {overwrite} to start again",
+                                setting=("resume", "overwrite"))
     try:
         saved = json.loads((journal.folder / SETTINGS_FILE).read_text())
     except (OSError, ValueError):
@@ -385,8 +389,9 @@ def open_journal(out: str | os.PathLike, fingerprint: dict, *, resume: bool = Fa
     diff = _differences(saved, journal.fingerprint)
     if diff:
         more = f" and {len(diff) - 1} more" if len(diff) > 1 else ""
-        raise JournalMismatch(f"--resume: the interrupted sweep in {journal.folder} ran with {diff[0]}{more}; "
-                              "resume with its settings, or use --overwrite to start again")
+        raise JournalMismatch(f"{{resume}}: the interrupted sweep in {journal.folder} ran with {diff[0]}{more}; "
+                              "resume with its settings, or use {overwrite} to start again",
+                              setting=("resume", "overwrite"))
     for tmp in journal.folder.glob(".*"):  # a copy cut short by the interrupt
         shutil.rmtree(tmp, ignore_errors=True) if tmp.is_dir() else tmp.unlink(missing_ok=True)
     return journal

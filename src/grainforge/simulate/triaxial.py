@@ -27,6 +27,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
 from .settings import COMPACTION_INERTIAL_NUMBER, TriaxialSettings
 
 __all__ = ["CSV_COLUMNS", "triaxial_scene_settings", "friction_angle", "dilatancy_angle", "local_slope",
@@ -235,7 +236,7 @@ def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 
     m = np.asarray(q_over_p, dtype=np.float64)
     v = np.asarray(volumetric_strain, dtype=np.float64)
     if not (e.ndim == m.ndim == v.ndim == 1 and len(e) == len(m) == len(v)):
-        raise ValueError("axial_strain, q_over_p and volumetric_strain must be 1-D arrays of one length")
+        raise InputError("axial_strain, q_over_p and volumetric_strain must be 1-D arrays of one length")
     ok = np.isfinite(e) & np.isfinite(m) & np.isfinite(v)
     e, m, v = e[ok], m[ok], v[ok]
     nan = float("nan")

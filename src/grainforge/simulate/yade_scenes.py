@@ -31,6 +31,8 @@ can be read back and checked.
 
 from __future__ import annotations
 
+from ..errors import InputError
+
 __all__ = ["scene_text", "COMMON", "LEVELSET_PART", "REPOSE", "TILT", "TRIAXIAL"]  # noqa: F822
 
 #: the templates of ``grainforge/dem/texts/`` (package data): the shared helpers, what level sets redefine, and
@@ -91,8 +93,8 @@ def scene_text(test: str, shape: str = "clump") -> str:
     from ..dem.text import render
 
     if test not in _SCENES:
-        raise ValueError(f"test must be one of {', '.join(_SCENES)}, got {test!r}")
+        raise InputError(f"test must be one of {', '.join(_SCENES)}, got {test!r}")
     if shape not in ("clump", "levelset"):
-        raise ValueError(f"shape must be clump or levelset, got {shape!r}")
+        raise InputError(f"shape must be clump or levelset, got {shape!r}")
     parts = [_part(_HELPERS)] + ([_part(_LEVELSET)] if shape == "levelset" else [])
     return render(_SCENES[test], {"helpers": "\n\n".join(parts)})

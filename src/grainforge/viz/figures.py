@@ -36,6 +36,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["FIGURES", "make_figures", "figure1", "figure2", "figure3", "figure4", "figure5", "figure6", "figure7",
            "figure8", "figure9"]
 
@@ -433,7 +435,7 @@ def make_figures(out: str | Path, numbers=tuple(FIGURES), *, subdivisions: int =
     written, skipped = [], []
     for n in numbers:
         if n not in FIGURES:
-            raise ValueError(f"figure numbers are 1–{max(FIGURES)}, got {n!r}")
+            raise InputError(f"figure numbers are 1–{max(FIGURES)}, got {n!r}")
         name, fn = FIGURES[n]
         try:
             written.append(fn(out / name, subdivisions))

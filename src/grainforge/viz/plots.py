@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = [
     "KINDS", "manifest_columns", "plot", "figure", "zingg", "sphericity_convexity", "fd_spectrum", "size_distribution", "demo_plots",
 ]
@@ -44,7 +46,7 @@ def manifest_columns(path: str | Path) -> dict[str, list[str]]:
     path = Path(path)
     rows = read_manifest(path)
     if not rows:
-        raise ValueError(f"{path}: holds no rows")
+        raise InputError(f"{path}: holds no rows")
     from ..units import plain
 
     # headers state their unit (volume_mm3); the plots use the plain names
@@ -53,7 +55,7 @@ def manifest_columns(path: str | Path) -> dict[str, list[str]]:
 
 def _numeric(table: dict, column: str, path) -> np.ndarray:
     if column not in table:
-        raise ValueError(f"{path}: no column {column!r}")
+        raise InputError(f"{path}: no column {column!r}")
     out = np.full(len(table[column]), np.nan)
     for i, s in enumerate(table[column]):
         try:
@@ -62,7 +64,7 @@ def _numeric(table: dict, column: str, path) -> np.ndarray:
             pass
     if len(out) and not np.isfinite(out).any():
         bad = next((s for s in table[column] if s.strip()), "")
-        raise ValueError(f"{path}: column {column!r} holds no numbers" + (f" (e.g. {bad!r})" if bad else ""))
+        raise InputError(f"{path}: column {column!r} holds no numbers" + (f" (e.g. {bad!r})" if bad else ""))
     return out
 
 
@@ -165,7 +167,7 @@ def fd_spectrum(ax, tables) -> None:
             ax.plot(k[keep], D[k][keep], "--", color=color, label=f"{lab}: input ({d2:g}, {d3:g}, {d8:g})")
             drew = True
     if not drew:
-        raise ValueError(
+        raise InputError(
             "no Fourier descriptor columns (fd_LI_2 ...) or CRI input descriptors in the manifest(s); "
             "measure the grains with `grainforge analyse FILES --csv OUT.csv`"
         )
@@ -324,9 +326,9 @@ def figure(kind: str, manifests: Sequence[str | Path], *, title: str | None = No
         For an unknown kind, no manifest, or a manifest without the columns the plot needs.
     """
     if kind not in KINDS:
-        raise ValueError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
+        raise InputError(f"plot kind must be one of {', '.join(KINDS)}, got {kind!r}")
     if not manifests:
-        raise ValueError("at least one manifest is needed")
+        raise InputError("at least one manifest is needed")
     tables = [(Path(p), manifest_columns(p)) for p in manifests]
     import matplotlib
 

@@ -21,6 +21,8 @@ from pathlib import Path
 
 import numpy as np
 
+from ..errors import InputError
+
 __all__ = ["rasterize", "silhouette", "render_image", "shade", "contact_sheet", "contact_sheet_figure", "view_rotation",
            "scale_bar_length", "view_radius"]
 
@@ -499,9 +501,9 @@ def contact_sheet_figure(
     import matplotlib.pyplot as plt
 
     if len(meshes) != len(labels):
-        raise ValueError("one label per mesh is needed")
+        raise InputError("one label per mesh is needed")
     if not meshes:
-        raise ValueError("nothing to render")
+        raise InputError("nothing to render")
     n = len(meshes)
     cols = columns or int(np.ceil(np.sqrt(n)))
     rows = int(np.ceil(n / cols))

@@ -38,6 +38,8 @@ import ast
 import re
 from importlib import resources
 
+from ...errors import InputError
+
 __all__ = ["render", "inject", "script_names", "START"]
 
 #: the line ending a script's lint header (see the module text)
@@ -92,10 +94,10 @@ def inject(text: str, params: dict | None = None) -> str:
         except (ValueError, SyntaxError):
             ok = False
         if not ok:
-            raise ValueError(f"script parameter {name}: {literal} is not a Python literal")
+            raise InputError(f"script parameter {name}: {literal} is not a Python literal")
         hits = [m for m in _PARAM.finditer(text) if m.group("name") == name]
         if len(hits) != 1:
-            raise ValueError(f"script parameter {name}: {len(hits)} lines '{name} = ...  # @param' (need one)")
+            raise InputError(f"script parameter {name}: {len(hits)} lines '{name} = ...  # @param' (need one)")
         m = hits[0]
         text = text[: m.start()] + f"{name} = {literal}" + text[m.end():]
     return text
@@ -122,7 +124,7 @@ def render(name: str, params: dict | None = None) -> str:
         If there is no such script, or :func:`inject` refuses ``params``.
     """
     if name not in script_names():
-        raise ValueError(f"no engine script {name!r}; shipped: {', '.join(script_names())}")
+        raise InputError(f"no engine script {name!r}; shipped: {', '.join(script_names())}")
     text = resources.files(__name__).joinpath(name).read_text(encoding="utf-8")
     head, sep, body = text.partition(START + "\n")
     if sep and (not head or head.endswith("\n")):

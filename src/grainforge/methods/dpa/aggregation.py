@@ -14,6 +14,7 @@ from functools import cache
 
 import numpy as np
 
+from ...errors import InputError
 from ...params import ParameterError, param, validate
 from ...rng import RNGLike, as_generator
 from .._polyhedra import (
@@ -142,7 +143,7 @@ def parent_index(existing: int, exponent: float, rng: RNGLike, open_: np.ndarray
     w = parent_weights(existing, exponent) * open_[:existing]
     total = w.sum()
     if not total > 0:
-        raise ValueError("primaries: no primary has a free face left")
+        raise InputError("primaries: no primary has a free face left")
     c = np.cumsum(w)
     return int(min(np.searchsorted(c, rng.random() * c[-1], side="right"), existing - 1))
 
@@ -660,7 +661,7 @@ def separate_pinches(vertices: np.ndarray, faces: np.ndarray, gap: float = PINCH
     touch at a corner (a small fillet).  The two sides then stay ``gap`` apart
     instead of touching; the volume changes by about ``gap``/3 of the area of
     the faces around each moved vertex (≤ 2e-3 primary volumes per pinched
-    edge at the default, measured in ``tests/test_dpa.py``).
+    edge at the default, measured in ``tests/methods/test_dpa.py``).
 
     Parameters
     ----------
@@ -753,7 +754,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
         _, group, count = np.unique(key, axis=0, return_inverse=True, return_counts=True)
         group = group.reshape(-1)
         if (count > 2).any():
-            raise ValueError("primaries: a face is shared by more than two primaries")
+            raise InputError("primaries: a face is shared by more than two primaries")
         pair = np.flatnonzero(count[group] == 2)
         if len(pair):
             # a cancelled pair must run in opposite directions: start both at their smallest vertex
@@ -765,7 +766,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
             m0 = np.take_along_axis(mine, (r0[:, None] + cols) % k, axis=1)
             m1 = np.take_along_axis(other, (r1[:, None] - cols) % k, axis=1)  # reversed
             if not (m0 == m1).all():
-                raise ValueError("primaries: two primaries share a face with the same orientation")
+                raise InputError("primaries: two primaries share a face with the same orientation")
         keep = poly[count[group] == 1]
         for j in range(1, k - 1):
             tris.append(keep[:, [0, j, j + 1]])
@@ -783,7 +784,7 @@ def union_surface(agg: Aggregate) -> tuple[np.ndarray, np.ndarray, float, float]
         else:
             cavity -= vol
     if bodies != 1:
-        raise ValueError(f"primaries: the union surface has {bodies} outer bodies")
+        raise InputError(f"primaries: the union surface has {bodies} outer bodies")
     used, f = np.unique(f[keep], return_inverse=True)
     return points[used], f.reshape(-1, 3).astype(np.int64), union_volume, cavity
 

@@ -31,6 +31,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ...errors import InputError
 from ...params import ParameterError
 from ...rng import RNGLike, seed_sequence
 from ...runtime.cache import cache_dir
@@ -212,7 +213,7 @@ class Calibration:
         with open(path, newline="") as fh:
             rows = list(csv.DictReader(fh))
         if not rows:
-            raise ValueError(f"{path}: empty calibration file")
+            raise InputError(f"{path}: empty calibration file")
         plain = {f"{c}_{u}": c for c, u in UNITS.items()}
         rows = [{plain.get(k, k): v for k, v in r.items()} for r in rows]
         r0 = rows[0]
