@@ -114,3 +114,18 @@ def cluster():
     with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
                                   silence_logs=40) as c:
         yield c
+
+
+def refused_in_one_line(result, *words: str) -> str:
+    """The CLI's refusal of a user's mistake, as every command makes it: exit 2, one line on stderr (each of
+    ``words`` in it), no traceback.  ``result`` is a click ``Result`` (``runner.invoke``) or a
+    ``subprocess.CompletedProcess`` run with ``text=True``; returns the line."""
+    code = getattr(result, "exit_code", getattr(result, "returncode", None))
+    err = result.stderr or ""
+    assert code == 2, f"exit {code}:\n{err}"
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1, err
+    assert "Traceback" not in err + (getattr(result, "output", None) or getattr(result, "stdout", "") or "")
+    for w in words:
+        assert w in lines[0], lines[0]
+    return lines[0]

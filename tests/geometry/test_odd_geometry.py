@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import trimesh
 from click.testing import CliRunner
+from conftest import refused_in_one_line
 
 from grainforge.analysis.measure import analyse_file, solid_grain
 from grainforge.cli.main import cli
@@ -58,13 +59,9 @@ def files(tmp_path_factory):
 
 
 def _one_line(r, *words):
-    assert r.exit_code == 2, r.output
-    lines = r.stderr.strip().splitlines()
-    assert len(lines) == 1, r.stderr
-    for w in words:
-        assert w in lines[0], lines[0]
+    line = refused_in_one_line(r, *words)
     assert "holds no triangles" not in r.output
-    return lines[0]
+    return line
 
 
 # ---- cavities ------------------------------------------------------------------------------------------------

@@ -13,7 +13,7 @@ import shutil
 
 import numpy as np
 import pytest
-from conftest import require_engine
+from conftest import refused_in_one_line, require_engine
 
 from grainforge.cli.main import cli
 from grainforge.params import ParameterError
@@ -123,12 +123,6 @@ def test_summarise_over_seeds():
     assert s["runs"] == 2 and s["angle_mean_deg"] == 32.0 and s["angle_sd_deg"] == pytest.approx(2 ** 1.5)
 
 
-def _one_line_exit_2(result):
-    assert result.exit_code == 2, result.output
-    lines = [ln for ln in result.stderr.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "Traceback" not in result.output
-
-
 @pytest.fixture
 def grains(tmp_path, runner):
     out = tmp_path / "g"
@@ -146,7 +140,7 @@ def grains(tmp_path, runner):
 def test_bad_settings_give_one_line_and_exit_2(runner, grains, tmp_path, args, message):
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), *args])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert message in r.stderr
     assert not out.exists()
 
@@ -155,7 +149,7 @@ def test_a_folder_without_grains_is_refused(runner, tmp_path):
     empty = tmp_path / "empty"
     empty.mkdir()
     r = runner.invoke(cli, ["simulate", "tilt", str(empty), "--out", str(tmp_path / "sim")])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert "no grain files" in r.stderr
     assert not (tmp_path / "sim").exists()
 
@@ -168,7 +162,7 @@ def test_a_mesh_yade_cannot_load_is_refused(runner, tmp_path):
     box = trimesh.creation.box()
     trimesh.Trimesh(box.vertices, box.faces[:-1]).export(bad)
     r = runner.invoke(cli, ["simulate", "repose", str(bad), "--out", str(tmp_path / "sim"), "--quick"])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert "open.stl" in r.stderr and re.search("not a (closed|valid) solid", r.stderr)
     assert not (tmp_path / "sim").exists()
 
@@ -313,7 +307,7 @@ REFUSED = [
 def test_settings_an_engine_cannot_run_are_refused_up_front(runner, grains, tmp_path, test, args, message):
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", test, str(grains), "--out", str(out), "--quick", *args])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert message in r.stderr
     assert not out.exists()
 
@@ -322,7 +316,7 @@ def test_a_level_set_tilt_too_narrow_for_yades_periodic_cell_is_refused(runner, 
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--shape", "levelset",
                             "--grains", "30"])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert "needs --grains ≥ 49" in r.stderr
     assert not out.exists()
 
@@ -353,7 +347,7 @@ def test_an_engine_that_is_not_installed_is_refused_up_front(runner, grains, tmp
     monkeypatch.setenv("GRAINFORGE_YADE", str(tmp_path / "no-such-yade"))
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "repose", str(grains), "--out", str(out), "--quick"])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert "Yade is not installed" in r.stderr
     assert not out.exists()
 
@@ -370,7 +364,7 @@ def test_liggghts_or_mpirun_not_installed_is_refused_up_front(runner, grains, tm
     monkeypatch.setenv(variable, str(tmp_path / "no-such-engine"))
     out = tmp_path / "sim"
     r = runner.invoke(cli, ["simulate", "tilt", str(grains), "--out", str(out), "--quick", *args])
-    _one_line_exit_2(r)
+    refused_in_one_line(r)
     assert message in r.stderr
     assert not out.exists()
 
