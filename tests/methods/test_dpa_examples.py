@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_solid_contract import assert_valid_stl
+from geometry.test_solid_contract import assert_valid_stl
 
 import grainforge
 from grainforge.cli.main import cli

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
-from test_dem_engines import require  # skips, or fails under GRAINFORGE_REQUIRE_ENGINES=1
+from dem.test_dem_engines import require  # skips, or fails under GRAINFORGE_REQUIRE_ENGINES=1
 
 from grainforge.cli.main import cli
 from grainforge.simulate import QUICK, Settings, build_population

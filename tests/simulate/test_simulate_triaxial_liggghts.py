@@ -59,7 +59,7 @@ def test_the_deck_is_the_same_for_a_seed_and_differs_between_seeds(templates):
 
 def test_grain_k_takes_row_k_of_the_scenes_orientations(templates):
     """The deck inserts grain k in row k of the orientations the Yade scene of that seed places it in."""
-    from test_orientations import assert_uniform, liggghts_quaternions, matrices
+    from dem.test_orientations import assert_uniform, liggghts_quaternions, matrices
 
     settings = TriaxialSettings(**{**QUICK_TRIAXIAL_LIGGGHTS, "grains": 300})
     files = lt.triaxial_deck_files(templates, settings, 5)

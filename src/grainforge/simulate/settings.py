@@ -302,12 +302,15 @@ def scene_settings(settings: Settings, test: str, seed: int) -> dict:
 #: Yade seconds per grain and run (one core): a fixed part and a part per contact sphere, fitted to the
 #: repose runs of docs/simulate.md (200 grains of 1 and of 10 spheres: about 50 and 100 s a run)
 YADE_GRAIN_SECONDS, YADE_SPHERE_SECONDS = 0.25, 0.03
-#: LIGGGHTS's time for a run, as a fraction of the Yade model's: measured 0.30 for a tilt of 200 FSO grains
-#: of 10-sphere clumps (82 s of CPU a run), 0.08-0.19 for repose heaps of 2,000 grains and 0.1 for a tilt of
-#: 100 spheres (docs/benchmarks.md); the largest is kept, so the estimate stays above what was measured
-ENGINE_FACTOR = {"yade": 1.0, "liggghts": 0.3}
-#: a tilt run takes longer than a repose run of as many grains (the tilt steps; docs/simulate.md)
-TEST_FACTOR = {"repose": 1.0, "tilt": 2.5}
+#: LIGGGHTS's time for a run, as a fraction of the Yade model's, per test: a tilt of 200 FSO grains of 10-sphere
+#: clumps took 82 s of CPU a run (0.47 of the Yade tilt model), repose heaps of 2,000 grains 0.08-0.19 of the
+#: repose model, a tilt of 100 spheres 0.1 (docs/benchmarks.md); the largest of each test is kept
+ENGINE_FACTOR = {"yade": {"repose": 1.0, "tilt": 1.0}, "liggghts": {"repose": 0.2, "tilt": 0.5}}
+#: a tilt run of as many grains as a repose run, as a fraction of it: a layer on a small periodic plate, tilted
+#: in steps. The quick tilt of 30 rough spheres (6-sphere clumps, from 15° in 1° steps) took 22 s of CPU in all
+#: (the model: 27 s), the quick tilt calibration of the rough angular grains 1.9 min (1.5 min), a 50-grain tilt of
+#: 10-sphere clumps 29 s (50 s) (benchmarks/doc_costs.py; docs/benchmarks.md)
+TEST_FACTOR = {"repose": 1.0, "tilt": 1.6}
 #: seconds of a command's own start and end (its imports, the figure, results.csv): about 2.5 s of CPU
 START_SECONDS = 3.0
 #: seconds of an engine's start-up and of reading its run back, per run: Yade's own imports take about 2.2 s of
@@ -319,8 +322,8 @@ TEMPLATE_SECONDS, TEMPLATE_SPHERE_SECONDS = 0.08, 0.0005
 YADE_SPHERE_BYTES = 4096.0
 #: Yade seconds per level-set grain and run (one core, repose; the tilt factor applies): a 50-grain level-set
 #: tilt of the rough spheres (150 surface nodes a grain) took 611 s, 21 times the 10-sphere clumps' 29 s
-#: (docs/simulate.md); set with the clump model's margin over its measured runs (about 2.4 times)
-YADE_LEVELSET_GRAIN_SECONDS = 12.0
+#: (docs/simulate.md); the model gives it 640 s
+YADE_LEVELSET_GRAIN_SECONDS = 8.5
 #: Yade's memory per level-set grid node of each grain (its distance field, copied per body)
 YADE_LEVELSET_NODE_BYTES = 16.0
 
@@ -401,7 +404,7 @@ def check_size(test: str, settings: Settings, *, available: int, make_seconds: f
         make = templates * (make_seconds + dem_template_seconds("levelset", spacing=spacing))
         per_run = TEST_FACTOR[test] * settings.grains * YADE_LEVELSET_GRAIN_SECONDS
     if test != "triaxial":
-        per_run *= ENGINE_FACTOR[engine]
+        per_run *= ENGINE_FACTOR[engine][test]
     per_run += RUN_START_SECONDS[engine]
     at_once = max(1, min(int(workers), settings.seeds, default_workers()))
     total = START_SECONDS + make + per_run * settings.seeds / at_once
