@@ -308,7 +308,7 @@ YADE_GRAIN_SECONDS, YADE_SPHERE_SECONDS = 0.25, 0.03
 ENGINE_FACTOR = {"yade": {"repose": 1.0, "tilt": 1.0}, "liggghts": {"repose": 0.2, "tilt": 0.5}}
 #: a tilt run of as many grains as a repose run, as a fraction of it: a layer on a small periodic plate, tilted
 #: in steps. The quick tilt of 30 rough spheres (6-sphere clumps, from 15° in 1° steps) took 22 s of CPU in all
-#: (the model: 27 s), the quick tilt calibration of the rough angular grains 1.9 min (1.5 min), a 50-grain tilt of
+#: (the model: 29 s), the quick tilt calibration of the rough angular grains 1.9 min (87 s), a 50-grain tilt of
 #: 10-sphere clumps 29 s (50 s) (benchmarks/doc_costs.py; docs/benchmarks.md)
 TEST_FACTOR = {"repose": 1.0, "tilt": 1.6}
 #: seconds of a command's own start and end (its imports, the figure, results.csv): about 2.5 s of CPU
