@@ -1,8 +1,9 @@
 """grainforge: realistic, printable 3D grain shapes for geotechnical research.
 
-The three generators of Hanaor et al., *3D printable geomaterials*:
-:func:`fso` (Fractal Surface Overlay), and the others as they land, each
-returning an immutable :class:`Grain`.
+The three generators of Hanaor et al., *3D printable geomaterials* —
+:func:`fso` (Fractal Surface Overlay), :func:`cri` (Contour Rotation
+Interpolation) and :func:`dpa` (Directed Polyhedra Aggregation) — and two more,
+:func:`angular` and :func:`rf`, each returning an immutable :class:`Grain`.
 
 The names below, and the submodules (``grainforge.geometry.solid``, ...), are imported
 on first use, so that ``import grainforge`` is quick (the command line starts,
