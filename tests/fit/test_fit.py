@@ -318,6 +318,8 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
 def test_twins_of_a_small_population_meet_the_criteria(design_cache):
     """A twin fit of 60 rows of the synthetic rf sand (made by rf, so every grain is reachable): every
     criterion holds (the full-size criteria on Ottawa and the synthetic sands: benchmarks/fit_twins.py)."""
+    require_long_lane("every criterion on 60 twins (1 min of CPU in CI); the plumbing and pairing tests check the "
+                      "fit's outputs, benchmarks/fit_twins.py the criteria at full size")
     from grainforge.fit import TWIN_TOL, fit_sand
 
     result = fit_sand(read_sand(RF_SAND), "rf", count=60, refine=3, design_grains=128, max_across=TEST_ACROSS,
@@ -359,6 +361,8 @@ def test_the_synthetic_angular_sands_mean_settings_are_recovered_and_reseeding_r
     sand's means allows (docs/fit.md, "What the fitted settings say about the sand").  And the twins that the
     refinement leaves off by more than 0.03 (a third: their own seed puts them out of the settings' reach) are
     mostly brought within it by other seeds."""
+    require_long_lane("a recovery of the mean settings from 100 twins (3 min of CPU in CI); the suite's other "
+                      "twin-fit tests check the fit, benchmarks/fit_recovery.py the recovery at full size")
     from grainforge.fit import TWIN_TOL, fit_sand
 
     sand = read_sand(ANGULAR_SAND)

@@ -184,8 +184,10 @@ def test_an_interrupted_calibration_resumes_from_its_finished_friction_seed_runs
     from _processes import kill_sessions
 
     require_engine("yade")
-    # the tilt from 20° in 2° steps: each quick run about 6 s instead of 14
-    args = ["simulate", "calibrate", "tilt", str(grains), "--target-angle", "30", "--quick", "--max-frictions", "2",
+    # the tilt from 20° in 2° steps: each quick run about 6 s instead of 14. The search tries μ = 0.5, then halves
+    # it while the angle is above the target: these grains measure about 39° and 32° there, so a target of 36°
+    # is bracketed by the two frictions allowed (at 30° the second friction was still above it: refused)
+    args = ["simulate", "calibrate", "tilt", str(grains), "--target-angle", "36", "--quick", "--max-frictions", "2",
             "--workers", "1", "--tilt-start", "20", "--tilt-step", "2"]
     ref = runner.invoke(cli, [*args, "--out", str(tmp_path / "ref")])
     assert ref.exit_code == 0, ref.output
