@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
 from ..units import with_unit
 from .help_style import option
 from .options import (
@@ -92,7 +93,7 @@ def _check_atlas(files, atlas: dict, workers: int, option: str) -> None:
                             workers=workers, unit="mm")
     except TooLargeError as exc:
         raise click.UsageError(str(exc)) from None
-    except ValueError as exc:
+    except InputError as exc:
         raise click.BadParameter(str(exc), param_hint=option) from None
 
 

@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
 from .help_style import option
 from .options import (
     EXIT_CHECK_FAILED,
@@ -106,7 +107,7 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
     if grains is None:
         try:
             counts = pour_copies(n_templates, 1 if count is None else count)
-        except ValueError as exc:
+        except InputError as exc:
             raise click.BadParameter(str(exc), param_hint="--count") from None
     else:
         counts = pour_counts(n_templates, grains, rng=0 if seed is None else seed).tolist()
@@ -176,7 +177,7 @@ def _representation(engine: str, shape: str, spheres: int, clump_accuracy, verti
 
         try:
             vertices = engine_vertices(engine, vertices)
-        except ValueError as exc:
+        except InputError as exc:
             raise click.BadParameter(str(exc), param_hint="--vertices") from None
     return spheres, vertices
 

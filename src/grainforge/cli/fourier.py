@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import click
 
+from ..errors import InputError
 from .help_style import option
 from .options import FINITE_FLOAT, FiniteFloatRange, overwrite_option
 from .paths import OutPath, output_file
@@ -50,7 +51,7 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
         output_file(csv_path, overwrite=overwrite, option="--csv", suffixes=(".csv",))
     try:
         check_rays(rays)
-    except ValueError as exc:
+    except InputError as exc:
         raise click.BadParameter(str(exc), param_hint="'--rays'") from None
     all_rows = []
     border = small = bad = 0
@@ -59,7 +60,7 @@ def fourier(images, csv_path, overwrite, min_area, threshold, foreground, rays, 
         try:
             rows, scan = micrograph_rows(path, min_area=min_area, threshold=threshold,
                                           foreground=foreground, rays=rays, pixel_size=pixel_size)
-        except ValueError as exc:
+        except InputError as exc:
             message = " ".join(str(exc).split())
             failed.append(path)
             if len(images) == 1:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import click
 
+from ..errors import InputError
 from .help_style import option
 from .options import FloatList
 
@@ -40,5 +41,5 @@ def check(params) -> None:
         for path in params.images.split(","):
             try:
                 load_image_contour(path)
-            except ValueError as exc:
+            except InputError as exc:
                 raise click.BadParameter(str(exc), param_hint="'--images'") from None

@@ -11,6 +11,7 @@ from typing import Any
 
 import click
 
+from ..errors import InputError
 from ..fabrication.scale import SIZE_DEFINITIONS
 from ..io import FORMATS
 from ..params import ParameterError, ParamSpec, specs
@@ -172,7 +173,7 @@ def _remember_printer(ctx, param, value):
 
         try:
             value = get_printer(value)
-        except ValueError as exc:
+        except InputError as exc:
             raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
         ctx.meta[PRINTER_KEY] = value
     return value

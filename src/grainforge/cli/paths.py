@@ -34,6 +34,8 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
+
 __all__ = ["OutPath", "output_file", "output_dir", "check_writable", "mesh_inputs", "refuse_existing"]
 
 #: suffixes of the mesh files a folder argument expands to
@@ -163,7 +165,7 @@ def mesh_inputs(paths: Iterable[str | os.PathLike], what: str = "FILES") -> list
 
     try:
         return mesh_paths(paths)
-    except ValueError as exc:
+    except InputError as exc:
         raise click.BadParameter(str(exc), param_hint=what) from None
 
 

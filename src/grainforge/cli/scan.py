@@ -7,6 +7,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
 from .analyse import table_text
 from .help_style import option
 from .options import FiniteFloatRange, overwrite_option, voxel_size_flag, voxel_size_options, workers_option
@@ -200,7 +201,7 @@ def _segment_image(volume, image, marker_distance, marker_depth, ignore_labels=F
     try:
         volume, seg_info = sc.segment_volume(volume, marker_distance=marker_distance, marker_depth=marker_depth,
                                              ignore_labels=ignore_labels, name=str(image))
-    except ValueError as exc:
+    except InputError as exc:
         raise click.UsageError(str(exc)) from None
     click.echo(f"segmented: {seg_info['grains']} grain(s) from {seg_info['markers']} marker(s) (typical "
                f"diameter {seg_info['typical_diameter']:.3g} voxels; markers at least {seg_info['min_distance']} "

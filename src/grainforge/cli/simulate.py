@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
 from ..simulate.capabilities import TILT_ONLY
 from .help_style import option
 from .options import EXIT_CHECK_FAILED, param_options
@@ -29,7 +30,7 @@ def check_options(test: str | None, values: dict, *, engine: str, mpi: int | Non
               spheres=values.get("spheres"), clump_accuracy=clump_accuracy,
               rolling_friction=values.get("rolling_friction"), scheduler=scheduler, workers=workers, resume=resume,
               overwrite=overwrite)
-    except ValueError as exc:
+    except InputError as exc:
         raise click.UsageError(str(exc)) from None
 
 

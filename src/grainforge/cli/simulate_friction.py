@@ -8,6 +8,7 @@ from pathlib import Path
 
 import click
 
+from ..errors import InputError
 from ..simulate.calibration import use_command
 from ..simulate.capabilities import TILT_ONLY
 from .help_style import option
@@ -92,7 +93,7 @@ def _check_search(target_angle: float, friction_range: tuple[float, float], star
 
     try:
         check_target(target_angle)
-    except ValueError as exc:
+    except InputError as exc:
         raise click.BadParameter(str(exc), param_hint="--target-angle") from None
     low, high = friction_range
     if not (0.0 <= low < high <= 5.0):

@@ -12,6 +12,7 @@ from contextlib import contextmanager
 
 import click
 
+from ..errors import InputError
 from ..simulate.capabilities import ENGINE_NAMES, ENGINES, SHAPES
 from .help_style import option
 from .options import FiniteFloatRange, bad_parameter, clump_accuracy_option, overwrite_option, workers_option
@@ -114,7 +115,7 @@ def run_settings(test: str, values: dict, quick: bool, shape: str, clump_accurac
         raise bad_parameter(exc) from None
     try:
         check_run(test, settings, engine=engine, mpi=mpi, workers=workers, shape=shape, scheduler=scheduler)
-    except ValueError as exc:
+    except InputError as exc:
         raise click.UsageError(str(exc)) from None
     return settings
 
