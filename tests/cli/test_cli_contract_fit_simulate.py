@@ -311,7 +311,7 @@ def test_an_mpi_refusal_suggests_only_commands_that_are_accepted(test, options, 
     """``simulate --engine liggghts --mpi N`` refused (beyond the cores or the allocation, or a triaxial specimen
     too small for N ranks' slabs): every command its line suggests (``--mpi M``, ``--grains G``, fewer
     ``--workers``) passes every check on the same machine, up to the start of the work, where the test stops it."""
-    import grainforge.cli.interrupts as interrupts
+    import grainforge.cli.work as work
 
     monkeypatch.setattr("os.sched_getaffinity", lambda pid: {0, 1})  # a 2-core machine
     monkeypatch.setattr("os.cpu_count", lambda: 2)
@@ -323,7 +323,7 @@ def test_an_mpi_refusal_suggests_only_commands_that_are_accepted(test, options, 
     def accepted(*args, **kwargs):
         raise _Accepted()
 
-    monkeypatch.setattr(interrupts, "ready_for_work", accepted)
+    monkeypatch.setattr(work, "ready_for_work", accepted)
     args = ["simulate", *test, str(inputs / "ang"), "--out", "o", "--engine", "liggghts", *options]
     r = _invoke(args)
     lines = r.stderr.strip().splitlines()

@@ -57,7 +57,7 @@ def calibrate_dpa(primitive, primaries, exponents, repeats, seed, workers, out, 
     except ParameterError as exc:
         raise bad_parameter(exc) from None
     from ..runtime.staging import commit_stage, staged
-    from .interrupts import signals_held
+    from .work import signals_held
 
     with staged(out) as stage:  # the table and its figure appear together, or neither (an interrupt while drawing)
         cal.write_csv(stage / csv_path.name)

@@ -139,7 +139,7 @@ def dem(inputs, out, engine, shape, density, rolling_friction, spheres, refine, 
                    "stops when another sphere adds no coverage", err=True)
     from ..dem.engines import write_deck
     from ..dem.template_choice import write_chosen_templates
-    from .interrupts import signals_held
+    from .work import signals_held
 
     with signals_held():  # the deck's files appear together: a signal meanwhile is answered once they are all written
         written = write_deck(engine, templates, out, overwrite=overwrite, rolling_friction=rolling_friction)
@@ -214,7 +214,7 @@ def _estimate(files: int, shape: str, spheres: int, refine: int, spacing: float,
     work over a minute."""
     from ..dem.inputs import template_seconds
     from ..runtime.estimate import TooLargeError, check_job
-    from .interrupts import say_estimate
+    from .work import say_estimate
 
     each = template_seconds(shape, spheres=spheres, refine_iterations=refine, spacing=spacing, accuracy=accuracy)
     refining = shape == "clump" and refine > 0  # the model counts every iteration: an upper bound

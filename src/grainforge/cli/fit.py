@@ -23,7 +23,7 @@ from .progress import progress_bar
 #: (docs/cli-contract.md): a script can tell it from success (0) and from a refusal (2)
 EXIT_NOT_PASSED = EXIT_CHECK_FAILED
 
-#: modules a fit loads before any work (see cli.interrupts)
+#: modules a fit loads before any work (see cli.work.preload)
 HEAVY_MODULES = ("trimesh", "scipy.optimize", "scipy.stats", "scipy.ndimage", "skimage.measure",
                  "grainforge.analysis.atlas", "grainforge.methods", "grainforge.population", "grainforge.runtime.workers",
                  "grainforge.io", "matplotlib.pyplot")
@@ -102,7 +102,7 @@ def fit(sand, out, voxel_size, method, count, refine, reseed, population_grains,
     import sys
 
     from ..fit import FITS, OUTPUTS, check_sand, read_sand, write_outputs
-    from .interrupts import signals_held
+    from .work import signals_held
 
     if method != "auto" and method not in FITS:
         raise click.BadParameter(f"must be one of {', '.join(list(FITS) + ['auto'])}, got {method!r}",
@@ -159,7 +159,7 @@ def _run_fit(s, out, executor, kw: dict, max_minutes: float):
     from ..runtime.cluster import SchedulerLost
     from ..runtime.estimate import TooLargeError, duration
     from ..runtime.workers import default_workers
-    from .interrupts import ready_for_work
+    from .work import ready_for_work
 
     cores = executor.workers if executor is not None else None
     kw["workers"] = default_workers(kw["workers"])

@@ -14,7 +14,8 @@ import click
 
 from .._version import __version__
 from .errors import options_named, report
-from .interrupts import leave_if_signalled, leave_on_signal, signals_raised
+from .interrupts import signals_raised
+from .leaving import leave_if_signalled, leave_on_signal
 
 #: suffixes of a 3D image (a μCT scan's volume) that ``analyse`` hands to ``scan``
 IMAGE_SUFFIXES = (".tif", ".tiff", ".npy", ".raw")

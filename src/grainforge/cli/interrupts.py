@@ -5,34 +5,30 @@ Some libraries guard their optional imports with ``except BaseException``
 is swallowed and the command would run on to its end as if nothing had
 happened; and an exception raised in the middle of a C extension's import
 can leave it half made (a crash at exit was seen).  So a command loads its
-heavy modules with :func:`preload`, after its checks and before any work:
-a signal meanwhile ends the command at once with the usual line and code
-(nothing is written yet, no process started), without raising anything
-into the importing code.  :func:`signals_held` instead holds the signals
-for a block that must not stop half-way (moving finished outputs into
-place) and delivers the first one as it ends.
+heavy modules with :func:`grainforge.cli.work.preload`, after its checks and
+before any work: a signal meanwhile ends the command at once with the usual
+line and code (nothing is written yet, no process started), without raising
+anything into the importing code.  :func:`grainforge.cli.work.signals_held`
+instead holds the signals for a block that must not stop half-way (moving
+finished outputs into place) and delivers the first one as it ends.  How the
+process leaves after the command: :mod:`grainforge.cli.leaving`.
 """
 
 from __future__ import annotations
 
-import atexit
-import importlib
 import os
 import signal
 import sys
 import threading
 import time
-from collections.abc import Iterable
 from contextlib import contextmanager
 
 from .startup import SIGNALS
 from .startup import exit_now as _exit_now
 from .startup import usual as _usual
+from .work import preload
 
-__all__ = ["signals_held", "preload", "ready_for_work", "say_estimate", "say_short_estimate", "STARTUP_MODULES",
-           "Terminated", "arm_starting", "signals_raised", "leave_on_signal", "leave_if_signalled",
-           "run_as_console_script",
-           "SIGNAL_GRACE", "RESEND_AFTER"]
+__all__ = ["STARTUP_MODULES", "Terminated", "arm_starting", "signals_raised", "SIGNAL_GRACE", "RESEND_AFTER"]
 
 #: modules every working command needs, loaded by ``cli.main`` at start-up, while a signal still ends the
 #: process at once (nothing written, no process started): trimesh swallows a ``KeyboardInterrupt`` raised
@@ -57,7 +53,7 @@ class Terminated(BaseException):
 #    a finalizer) and ends the process after ``SIGNAL_GRACE`` whatever happens;
 # 3. after the command (the outputs are in place or removed): a signal is recorded, and the process leaves
 #    from an exit hook the moment the interpreter is done, with the signal's line and code if one came
-#    (``_at_exit``), so none is lost during the interpreter's (slow) teardown.
+#    (``grainforge.cli.leaving``), so none is lost during the interpreter's (slow) teardown.
 #
 # An inherited *ignored* SIGINT stays ignored (the POSIX convention for background jobs), so does an
 # ignored SIGTERM.  A multiprocessing worker imports the program's main module too (as ``__mp_main__``): it
@@ -188,27 +184,6 @@ def _late(signum, frame):  # pragma: no cover - exercised by a real signal
     _LATE.append(signum)
 
 
-def _at_exit() -> None:  # pragma: no cover - runs as the console script leaves
-    """The console script's last exit hook (registered first, so run last): leave now, with the code of the
-    signal that came while the command ended or the interpreter finished (threads, other exit hooks), if any;
-    the interpreter's teardown, during which a signal would be lost, is skipped."""
-    if threading.current_thread() is threading.main_thread():
-        signal.pthread_sigmask(signal.SIG_BLOCK, set(SIGNALS))
-    pending = (_LEAVING + _LATE)[:1]
-    if not _CODE and not pending:  # an unexpected error: Python reports it and leaves as usual
-        return
-    code = _CODE[0] if _CODE else 1
-    if pending and not _SAID:
-        code = _say(pending[0])
-    for stream in (sys.stdout, sys.stderr):
-        try:
-            stream.flush()
-        except Exception:  # a closed pipe: nothing more can be said
-            pass
-    if code is None or isinstance(code, int):
-        os._exit(code or 0)
-
-
 def _signal_in_finalizer(hook):
     """An unraisable-exception hook: a signal's exception raised inside a finalizer (where Python would print it
     and go on) is raised again, by the signal, in the main thread; anything else goes to ``hook``."""
@@ -268,103 +243,3 @@ def signals_raised(args=None):
             signal.signal(s, _late if _CONSOLE else _usual(s) if previous[s] is _exit_now else previous[s])
         if not (_CONSOLE and _SAID):  # leaving on a signal: _say's silence stays
             sys.unraisablehook, sys.excepthook = hook, excepthook
-
-
-def leave_on_signal(exc: BaseException) -> None:
-    """Leave by the signal's path (its line once, exit 128 + the signal) if ``exc`` is a stop signal's exception;
-    else return."""
-    if isinstance(exc, Terminated):
-        sys.exit(_say(signal.SIGTERM))
-    if isinstance(exc, KeyboardInterrupt):
-        sys.exit(_say(signal.SIGINT))
-
-
-def leave_if_signalled() -> None:
-    """Leave by the signal's path if a stop signal is being honoured: an error on its way is its echo, not an
-    error (an extension whose initialisation the signal broke raises "ImportError: initialization failed")."""
-    if _LEAVING:
-        sys.exit(_say(_LEAVING[0]))
-
-
-def run_as_console_script(run) -> None:
-    """Run ``run()`` (the command line) as the process: its signals at every moment, its exit code kept for the
-    last exit hook, which leaves without the interpreter's teardown (see the top of this module)."""
-    _CONSOLE.append(True)
-    arm_starting()
-    atexit.register(_at_exit)  # the first exit hook, so the last to run
-    try:
-        run()
-    except SystemExit as exc:
-        _CODE.append(exc.code)
-        raise
-    except _SIGNAL_EXCEPTIONS as exc:  # raised as the command ended, before its handlers were switched
-        code = _say(signal.SIGTERM if isinstance(exc, Terminated) else signal.SIGINT)  # (once)
-        _CODE.append(code)
-        raise SystemExit(code) from None
-
-
-def signals_held():
-    """Hold SIGINT and SIGTERM for a block that must not stop half-way and deliver the first as it ends
-    (:func:`grainforge.runtime.staging.signals_held`, imported when used: this module is loaded before the
-    command's signal handlers are armed, so it imports the standard library only)."""
-    from ..runtime.staging import signals_held as held
-
-    return held()
-
-
-def preload(modules: Iterable[str]) -> None:
-    """Import ``modules``; a SIGINT or SIGTERM meanwhile ends the process at once (exit 130 or 143, one line).
-
-    Call it only where nothing needs cleaning up: before any output or process exists.
-
-    Examples
-    --------
-    >>> preload(["json"])
-    """
-    from ..runtime.staging import _handled
-
-    with _handled(_exit_now):
-        for name in modules:
-            importlib.import_module(name)
-
-
-def ready_for_work(modules: Iterable[str], seconds: float, *, bound: str = "about",
-                   most: float | None = None) -> None:
-    """Before a long job: load the plotting backend and ``modules`` (:func:`preload`), then, when
-    the job is estimated at over a minute, say so on stderr (a shorter one of 10 s or more:
-    :func:`say_short_estimate`, once the inputs are read).
-
-    ``seconds`` is the job's estimate; ``bound`` words it ("about", "at most about"); ``most``, the
-    longest it may take where that differs (a search that may need more runs than usual).
-    """
-    preload(["matplotlib"])
-    import matplotlib
-
-    matplotlib.use("Agg")
-    preload(modules)  # before any work: no lazy import later can swallow a Ctrl-C
-    say_estimate(seconds, bound=bound, most=most)
-
-
-#: estimates longer than this are said before any work; shorter ones of at least SHORT_JOB_SECONDS when the
-#: inputs have been read (:func:`say_short_estimate`), so that a refused input is still the only line
-LONG_JOB_SECONDS, SHORT_JOB_SECONDS = 60.0, 10.0
-
-
-def say_estimate(seconds: float, *, bound: str = "about", most: float | None = None,
-                 within: tuple[float, float] = (LONG_JOB_SECONDS, float("inf"))) -> None:
-    """On stderr, the job's estimated time when it is over ``within[0]`` and at most ``within[1]`` seconds
-    (by default over a minute), and the longest it may take when ``most`` is given and larger."""
-    import click
-
-    from ..runtime.estimate import duration
-
-    if within[0] < seconds <= within[1]:
-        longest = f"at most {duration(most)}; " if most is not None and most > seconds else ""
-        click.echo(f"estimated time: {bound} {duration(seconds)} ({longest}a rough model; the progress bar shows "
-                   "the measured rate)", err=True)
-
-
-def say_short_estimate(seconds: float, *, most: float | None = None) -> None:
-    """The estimate of a job of 10 s to a minute, once its inputs are read and before its main work (a longer
-    one was said by :func:`ready_for_work`)."""
-    say_estimate(seconds, most=most, within=(SHORT_JOB_SECONDS, LONG_JOB_SECONDS))

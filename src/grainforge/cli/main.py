@@ -21,7 +21,7 @@ def main() -> None:  # console-script entry point
     from .startup import arm
 
     arm()  # first: a signal while the rest loads ends the process at once, in one line
-    from .interrupts import run_as_console_script
+    from .leaving import run_as_console_script
 
     def run() -> None:
         from .group import cli

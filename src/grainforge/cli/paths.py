@@ -90,7 +90,7 @@ def check_writable(path: str | os.PathLike, option: str | None = None) -> None:
     base = _first_existing(target)
     if not base.is_dir():
         raise click.UsageError(f"{_hint(option)}cannot write {path}: {base} is a file, not a folder")
-    from .interrupts import signals_held
+    from .work import signals_held
 
     with signals_held():  # a Ctrl-C between the probe's creation and removal must not leave it behind
         try:

@@ -82,8 +82,8 @@ def scan(image, voxel_size_um, raw_shape, raw_dtype, atlas_csv, segment, ignore_
     from ..io.outputs import OutputSet
     from ..runtime.estimate import TooLargeError, check_memory
     from ..runtime.workers import default_workers
-    from .interrupts import preload, say_estimate
     from .progress import progress_bar
+    from .work import preload, say_estimate
 
     marker_distance, marker_depth = _check_options(image, segment, marker_distance, marker_depth, labels_out,
                                                    atlas_csv, meshes, voxel_size_um, overwrite, ignore_labels)

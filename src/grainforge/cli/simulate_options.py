@@ -20,7 +20,7 @@ from .options import FiniteFloatRange, bad_parameter, clump_accuracy_option, ove
 __all__ = ["HEAVY_MODULES", "run_options", "scheduler_option", "resume_option", "run_settings", "Reporter",
            "run_failures"]
 
-#: modules a run loads before any work (cli.interrupts.preload: a lazy import later could swallow a Ctrl-C)
+#: modules a run loads before any work (cli.work.preload: a lazy import later could swallow a Ctrl-C)
 HEAVY_MODULES = ("tqdm", "trimesh", "scipy.optimize", "scipy.ndimage", "scipy.spatial", "scipy.spatial.transform",
                  "grainforge.io", "grainforge.geometry.solid", "grainforge.methods", "grainforge.population",
                  "grainforge.fabrication.scale", "grainforge.dem.inputs", "grainforge.dem.template",
@@ -172,13 +172,13 @@ class Reporter:
 
     def __call__(self, event) -> None:
         from ..simulate import pipeline as p
-        from . import interrupts
+        from . import work
 
         if isinstance(event, p.Estimate) and not event.inputs_read:
-            interrupts.ready_for_work(self.modules, event.seconds, bound="about", most=event.most)
+            work.ready_for_work(self.modules, event.seconds, bound="about", most=event.most)
         elif isinstance(event, p.Estimate):
             self._close()
-            interrupts.say_short_estimate(event.seconds, most=event.most)
+            work.say_short_estimate(event.seconds, most=event.most)
         elif isinstance(event, p.Count):
             self._count(event)
         elif isinstance(event, p.Note):
