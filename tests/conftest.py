@@ -17,11 +17,6 @@ settings.register_profile(
 settings.register_profile("thorough", max_examples=300, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 settings.load_profile(os.environ.get("GRAINFORGE_HYPOTHESIS", "default"))
 
-# The tests that run decks under mpirun themselves (as a user does) let a waiting rank yield its core, as every
-# run grainforge starts does (simulate.process.mpi_session_folder): two spinning ranks beside the suite's other
-# process took 400 s for a pour that takes 12 s
-os.environ.setdefault("OMPI_MCA_mpi_yield_when_idle", "1")
-
 # The signal tests interrupt commands as a terminal's Ctrl-C does. A suite started in the background of a
 # non-interactive shell (`nohup make test &`) inherits SIGINT ignored, and so would every command it starts:
 # a command rightly leaves an inherited ignored SIGINT alone, and six signal tests then fail. The suite runs

@@ -183,8 +183,7 @@ def mpi_session_folder() -> Iterator[dict]:
     Yields
     ------
     dict
-        ``TMPDIR`` and Open MPI's MCA variables naming the temporary folder (and letting a waiting rank yield
-        its core), to add to ``mpirun``'s environment.
+        ``TMPDIR`` and Open MPI's MCA variables naming the temporary folder, to add to ``mpirun``'s environment.
 
     Examples
     --------
@@ -200,12 +199,8 @@ def mpi_session_folder() -> Iterator[dict]:
     _remove_stale_mpi_folders()
     folder = tempfile.mkdtemp(prefix=f"{MPI_TMP_PREFIX}{os.getpid()}-")
     try:
-        # TMPDIR: Open MPI's and PMIx's default; the MCA settings name it for Open MPI 4 (ORTE) and 5 (PRRTE).
-        # The ranks yield the core while they wait for a message (unless the user's environment says otherwise):
-        # Open MPI spins by default when the ranks fit the cores, and beside any other busy process (a second
-        # run, the user's work) two spinning ranks took 400 s for a LIGGGHTS pour that takes 12 s yielding
-        yield {"TMPDIR": folder, "OMPI_MCA_orte_tmpdir_base": folder, "PRTE_MCA_prte_tmpdir_base": folder,
-               "OMPI_MCA_mpi_yield_when_idle": os.environ.get("OMPI_MCA_mpi_yield_when_idle", "1")}
+        # TMPDIR: Open MPI's and PMIx's default; the MCA settings name it for Open MPI 4 (ORTE) and 5 (PRRTE)
+        yield {"TMPDIR": folder, "OMPI_MCA_orte_tmpdir_base": folder, "PRTE_MCA_prte_tmpdir_base": folder}
     finally:
         _remove_folder(folder)
 
