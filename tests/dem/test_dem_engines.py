@@ -468,7 +468,12 @@ def test_lammps_clump_deck_under_mpirun_matches_one_rank(lmp, mpirun, population
 
 @pytest.mark.slow
 def test_lammps_polyhedron_deck_under_mpirun_matches_one_rank(lmp, mpirun, population, tmp_path):
+    from conftest import require_long_lane
+
     from grainforge.dem.lammps_body import MICRO
+
+    require_long_lane("a polyhedron pour on 1 and 2 ranks (70 s of CPU in CI); in the suite LAMMPS's domain "
+                      "decomposition is checked on the clump deck, the polyhedron deck on one rank")
 
     L, M = MICRO["length"], MICRO["mass"]
     one, two = mpi_decks(population, tmp_path, "lammps", "--shape", "polyhedron", "--vertices", "8")
