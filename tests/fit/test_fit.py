@@ -173,7 +173,8 @@ def design_cache(tmp_path_factory):
 
 
 def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cache, monkeypatch):
-    """Fast lane: a tiny twin fit (80 design grains, 40 twins measured at 20 voxels across, one refinement):
+    """Fast lane: a tiny twin fit (80 design grains, 40 twins measured at 20 voxels across, one refinement, the
+    sand's mean settings from 10 twins a round):
     fit.csv has its columns, pairs every twin with a distinct sand row whose values it copies, gives the twin its
     sand grain's size, and fit-stats.csv's Spearman correlations are those of fit.csv's columns."""
     import grainforge.fit as fitmod
@@ -181,8 +182,8 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
 
     sand = read_sand(RF_SAND)
     lines = []
-    result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, cache=design_cache,
-                      log=lines.append)
+    result = fit_sand(sand, "rf", count=40, refine=1, design_grains=80, max_across=20.0, population_grains=10,
+                      cache=design_cache, log=lines.append)
     phases = [line.split(":")[0] for line in lines]
     assert phases[:7] == ["design rf", "design rf", "twins", "population 1", "population 2", "population",
                           "refine 1"]
@@ -241,7 +242,7 @@ def test_twins_pair_sand_rows_and_fit_csv_holds_both_grains(tmp_path, design_cac
         assert float(r["difference"]) == pytest.approx(known[k][1]) and r["pass"] == str(known[k][0] >= 0.9)
     # the sand's mean settings from its descriptors' means: in the log, the recipe's header and fit-stats.csv
     pop = result.population
-    assert list(pop.mean) == list(known) and pop.grains == 40
+    assert list(pop.mean) == list(known) and pop.grains == 10
     assert pop.text() in lines[5] and f"the sand's mean settings (± standard error): {pop.text()}" in result.recipe
     pop_rows = [r for r in csv.DictReader(paths[2].read_text(encoding="utf-8").splitlines())
                 if r["statistic"] == "population"]
@@ -260,14 +261,14 @@ def test_a_twin_the_generator_refuses_is_moved_until_it_is_made(design_cache):
 
     lines = []
     result = fit_sand(read_sand(RF_SAND), "rf", count=40, refine=0, reseed=0, design_grains=80, max_across=20.0,
-                      cache=design_cache, log=lines.append)
+                      population_grains=10, cache=design_cache, log=lines.append)
     tries = [line for line in lines if line.startswith("refused twins")]
     assert tries and all(re.search(r": (\d+) the generator had refused", t) for t in tries), lines
     assert int(re.search(r": (\d+) the generator", tries[0])[1]) >= 1
     assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
 
 
-@pytest.mark.slow  # about 360 grains at 25 to 40 voxels across, 128 of them the design (about a minute of CPU)
+@pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, 80 of them the design (about 45 s of CPU)
 def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     """A tiny design and population: grain i of the recipe, made as batch makes it, measures exactly as the fit
     measured it; fit.png is drawn; the design is cached."""
@@ -275,9 +276,9 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     from grainforge.fit import fit_sand, measure_made_grain, write_outputs
 
     sand = read_sand(RF_SAND)
-    kw = dict(refine=1, design_grains=128, max_across=TEST_ACROSS, cache=design_cache)
-    result = fit_sand(sand, "rf", count=30, population_grains=10, **kw)
-    assert len(result.generated) == 30
+    kw = dict(refine=1, design_grains=80, max_across=TEST_ACROSS, cache=design_cache)
+    result = fit_sand(sand, "rf", count=20, population_grains=10, **kw)
+    assert len(result.generated) == 20
     for i in (0, 7):
         again = measure_made_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
         assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
@@ -290,24 +291,24 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     i = reseeded[0]
     again = measure_made_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
-    # the counts below on 10 twins (the design is the same 128 grains, from the cache)
+    # the counts below on 10 twins (the design is the same 80 grains, from the cache)
     again = fit_sand(sand, "rf", count=10, **{**kw, "refine": 0, "reseed": 0})
     # the design came from the cache; rf's surface settings are not determined by the means (five settings, four
     # means), so no spread sensitivity is measured for them: the estimate's two rounds remade the 10, no more
     assert again.grains_measured == 10 * (1 + fitmod.POPULATION_ROUNDS)
     assert not any(again.population.spread.values())
-    # the mean-settings estimate remakes as many twins as asked, each round, and the estimate counts them
-    fewer = fit_sand(sand, "rf", count=10, population_grains=5, **{**kw, "refine": 0, "reseed": 0})
-    assert fewer.grains_measured == 10 + 5 * fitmod.POPULATION_ROUNDS and fewer.population.grains == 5
-    assert fitmod.fit_grains("rf", count=10, design_grains=128, refine=0, population_grains=5,
-                             cached=lambda m: True)[0] == fewer.grains_measured
-    # with slopes measured on the grains: each of rf's 5 settings raised and lowered on the 5 grains, counted
+    # the mean-settings estimate remakes as many twins as asked (5 of the 10), each round, and with slopes measured
+    # on the grains each of rf's 5 settings raised and lowered on those 5 grains; the estimate counts them all
     lines = []
     measured = fit_sand(sand, "rf", count=10, population_grains=5, population_slopes="measured", log=lines.append,
                         **{**kw, "refine": 0, "reseed": 0})
+    assert measured.population.grains == 5
     assert measured.grains_measured == 10 + 5 * fitmod.POPULATION_ROUNDS + 2 * 5 * 5
-    assert fitmod.fit_grains("rf", count=10, design_grains=128, refine=0, population_grains=5,
+    assert fitmod.fit_grains("rf", count=10, design_grains=80, refine=0, population_grains=5,
                              population_slopes="measured", cached=lambda m: True)[0] == measured.grains_measured
+    # with the slopes a population this small takes by default (the design model's), only the 5 grains a round
+    assert fitmod.fit_grains("rf", count=10, design_grains=80, refine=0, population_grains=5,
+                             cached=lambda m: True)[0] == 10 + 5 * fitmod.POPULATION_ROUNDS
     assert any(line.startswith("population slopes: measured on 5 grains") for line in lines), lines
     assert all(np.isfinite(v) for v in measured.population.mean.values())
     with pytest.raises(ValueError, match="slopes"):
