@@ -315,7 +315,7 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
         fit_sand(sand, "rf", count=50, population_slopes="guessed", **kw)
 
 
-@pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, the design shared with the plumbing test
+@pytest.mark.slow  # about 380 grains at 25 to 40 voxels across, 128 of them its design
 def test_twins_of_a_small_population_meet_the_criteria(design_cache):
     """A twin fit of 60 rows of the synthetic rf sand (made by rf, so every grain is reachable): every
     criterion holds (the full-size criteria on Ottawa and the synthetic sands: benchmarks/fit_twins.py)."""
