@@ -241,9 +241,10 @@ def test_simulate_chooses_from_a_recipe_pool_and_from_files(population):
 def test_simulate_prints_the_ks_line_and_writes_templates_csv(runner, population, tmp_path):
     require_engine("yade")
     out = tmp_path / "sim"
-    # 30 grains: the templates' line and file are the point, not the heap (a quick repose heap has 120)
+    # 30 grains of soft contacts (E = 1e5 Pa: a third of the steps): the templates' line and file are the point,
+    # not the heap (a quick repose heap has 120)
     r = runner.invoke(cli, ["simulate", "repose", str(population / "grains"), "--out", str(out), "--quick",
-                            "--templates", "8", "--grains", "30"])
+                            "--templates", "8", "--grains", "30", "--young", "1e5"])
     # exit 3: a run failed its own check (a heap of 30 grains may measure no angle), named on stderr
     assert r.exit_code == 0 or (r.exit_code == 3 and "check failed: seed" in r.stderr), r.output
     line = [ln for ln in r.stdout.splitlines() if ln.startswith("templates:")]
