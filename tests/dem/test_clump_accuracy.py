@@ -225,8 +225,10 @@ def test_calibrate_prints_a_command_with_the_target():
 def test_quick_simulate_with_a_target_in_yade(grain_files, tmp_path):
     require_engine("yade")
     out = tmp_path / "tilt"
+    # the clumps' target is the point, not the angle: soft contacts (E = 1e5 Pa: a third of the steps), tilted from
+    # 20° in 2° steps
     r = CliRunner().invoke(cli, ["simulate", "tilt", str(grain_files), "--out", str(out), "--quick",
-                                 "--clump-accuracy", "0.6"])
+                                 "--clump-accuracy", "0.6", "--young", "1e5", "--tilt-start", "20", "--tilt-step", "2"])
     assert r.exit_code in (0, 3), r.output
     with open(out / "clumps.csv", newline="") as fh:
         rows = list(csv.DictReader(fh))
