@@ -87,10 +87,12 @@ def mesh_truth(files):
 
 
 def make_deck(population, tmp_path, engine, *extra):
+    """A deck of the 20 grains (clumps of 8 spheres unless ``extra`` gives a --shape or --spheres: the contacts
+    cost the run, and every check here holds for any clump) and the meshes' mass properties."""
     out = tmp_path / engine
     r = CliRunner().invoke(cli, ["dem", str(population / "fso"), str(population / "cri"), str(population / "dpa"),
                                  "--out", str(out), "--engine", engine, "--density", str(DENSITY),
-                                 *([] if "--shape" in extra or "--spheres" in extra else ["--spheres", "20"]), *extra])
+                                 *([] if "--shape" in extra or "--spheres" in extra else ["--spheres", "8"]), *extra])
     assert r.exit_code == 0, r.output
     files = sorted(population.glob("*/*.stl"))
     assert len(files) == 20
@@ -154,9 +156,7 @@ def check_placed(report, out, truth):
 
 
 def test_yade_deck_runs(yade, population, tmp_path):  # the engine first: skip before generating grains
-    # clumps of 8 spheres (the other engines' decks: 20): Yade's contacts cost most; the mass, placement and
-    # settling checks hold for any clump
-    out, truth = make_deck(population, tmp_path, "yade", "--spheres", "8")
+    out, truth = make_deck(population, tmp_path, "yade")
     proc = run([yade, "-n", "-x", "run.py"], cwd=out)
     # run by hand, the deck names Yade's temporary folder first and removes it as it ends (Yade leaves it)
     (named,) = [ln.split()[1] for ln in proc.stdout.splitlines() if ln.startswith("grainforge-tempdir ")]
@@ -277,7 +277,7 @@ def test_liggghts_deck_runs(liggghts, population, tmp_path):
 def test_lammps_deck_runs(lmp, population, tmp_path):
     from grainforge.dem.lammps import rotation_matrix
 
-    out, truth = make_deck(population, tmp_path, "lammps")
+    out, truth = make_deck(population, tmp_path, "lammps", "--spheres", "20")  # as cheap as 8 spheres in LAMMPS
     run([lmp, "-in", "in.run"], cwd=out)
     deck = json.loads((out / "grains.json").read_text())
     place = {p["mol"]: p for p in deck["placements"]}
