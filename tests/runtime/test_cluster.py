@@ -122,13 +122,13 @@ def test_a_worker_killed_mid_run_has_its_files_rerun_and_the_table_is_the_same(c
 
 @pytest.fixture
 def small_fit(monkeypatch):
-    """The CLI's fit on 20 twins instead of its 500 minimum: every other step is the command's own."""
+    """The CLI's fit on 10 twins instead of its 500 minimum: every other step is the command's own."""
     import grainforge.fit as fitmod
 
     real = fitmod.fit_sand
 
     def fit_sand(sand, method, **kw):
-        return real(sand, method, **{**kw, "count": 20})
+        return real(sand, method, **{**kw, "count": 10})
 
     monkeypatch.setattr(fitmod, "fit_sand", fit_sand)
 
