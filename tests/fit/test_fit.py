@@ -268,7 +268,7 @@ def test_a_twin_the_generator_refuses_is_moved_until_it_is_made(design_cache):
     assert result.stats["refused"] == 0 and np.all(np.isfinite(result.generated))
 
 
-@pytest.mark.slow  # about 250 grains at 25 to 40 voxels across, 80 of them the design (about 45 s of CPU)
+@pytest.mark.slow  # about 210 grains at 25 to 40 voxels across, 80 of them the design (about 40 s of CPU)
 def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     """A tiny design and population: grain i of the recipe, made as batch makes it, measures exactly as the fit
     measured it; fit.png is drawn; the design is cached."""
@@ -291,25 +291,25 @@ def test_twin_fit_plumbing_on_a_tiny_population(tmp_path, design_cache):
     i = reseeded[0]
     again = measure_made_grain(result.recipe, i, voxel_size_um=sand.voxel_size, max_across=TEST_ACROSS)
     assert np.allclose(again[:5], result.generated[i], atol=1e-9), i
-    # the counts below on 10 twins (the design is the same 80 grains, from the cache)
-    again = fit_sand(sand, "rf", count=10, **{**kw, "refine": 0, "reseed": 0})
+    # the counts below on 6 twins (the design is the same 80 grains, from the cache)
+    again = fit_sand(sand, "rf", count=6, **{**kw, "refine": 0, "reseed": 0})
     # the design came from the cache; rf's surface settings are not determined by the means (five settings, four
-    # means), so no spread sensitivity is measured for them: the estimate's two rounds remade the 10, no more
-    assert again.grains_measured == 10 * (1 + fitmod.POPULATION_ROUNDS)
+    # means), so no spread sensitivity is measured for them: the estimate's two rounds remade the 6, no more
+    assert again.grains_measured == 6 * (1 + fitmod.POPULATION_ROUNDS)
     assert not any(again.population.spread.values())
-    # the mean-settings estimate remakes as many twins as asked (5 of the 10), each round, and with slopes measured
-    # on the grains each of rf's 5 settings raised and lowered on those 5 grains; the estimate counts them all
+    # the mean-settings estimate remakes as many twins as asked (3 of the 6), each round, and with slopes measured
+    # on the grains each of rf's 5 settings raised and lowered on those 3 grains; the estimate counts them all
     lines = []
-    measured = fit_sand(sand, "rf", count=10, population_grains=5, population_slopes="measured", log=lines.append,
+    measured = fit_sand(sand, "rf", count=6, population_grains=3, population_slopes="measured", log=lines.append,
                         **{**kw, "refine": 0, "reseed": 0})
-    assert measured.population.grains == 5
-    assert measured.grains_measured == 10 + 5 * fitmod.POPULATION_ROUNDS + 2 * 5 * 5
-    assert fitmod.fit_grains("rf", count=10, design_grains=80, refine=0, population_grains=5,
+    assert measured.population.grains == 3
+    assert measured.grains_measured == 6 + 3 * fitmod.POPULATION_ROUNDS + 2 * 5 * 3
+    assert fitmod.fit_grains("rf", count=6, design_grains=80, refine=0, population_grains=3,
                              population_slopes="measured", cached=lambda m: True)[0] == measured.grains_measured
-    # with the slopes a population this small takes by default (the design model's), only the 5 grains a round
-    assert fitmod.fit_grains("rf", count=10, design_grains=80, refine=0, population_grains=5,
-                             cached=lambda m: True)[0] == 10 + 5 * fitmod.POPULATION_ROUNDS
-    assert any(line.startswith("population slopes: measured on 5 grains") for line in lines), lines
+    # with the slopes a population this small takes by default (the design model's), only the 3 grains a round
+    assert fitmod.fit_grains("rf", count=6, design_grains=80, refine=0, population_grains=3,
+                             cached=lambda m: True)[0] == 6 + 3 * fitmod.POPULATION_ROUNDS
+    assert any(line.startswith("population slopes: measured on 3 grains") for line in lines), lines
     assert all(np.isfinite(v) for v in measured.population.mean.values())
     with pytest.raises(ValueError, match="slopes"):
         fit_sand(sand, "rf", count=50, population_slopes="guessed", **kw)
