@@ -107,7 +107,19 @@ triaxial = _command("triaxial", """Drained triaxial compression: a periodic cell
     """)
 
 
-@click.group()
+class _SimulateGroup(click.Group):
+    """``simulate``'s commands, and ``simulate calibrate material`` (the material calibration, whose first
+    argument would otherwise be ``calibrate``'s TEST)."""
+
+    def resolve_command(self, ctx, args):
+        if args[:2] == ["calibrate", "material"]:
+            from .simulate_material import material
+
+            return "calibrate material", material, args[2:]
+        return super().resolve_command(ctx, args)
+
+
+@click.group(cls=_SimulateGroup)
 def simulate():
     """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table, drained triaxial test): shape's effect
     on bulk friction."""

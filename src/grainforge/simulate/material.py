@@ -488,7 +488,7 @@ def _targets(targets) -> tuple[Target, ...]:
 def calibrate_material(inputs: Sequence[str | os.PathLike], *, out: str | os.PathLike, targets, settings: Mapping,
                        angle: str | None = None, friction_range: tuple[float, float] = FRICTION_RANGE,
                        rolling_friction_range: tuple[float, float] = ROLLING_FRICTION_RANGE, budget: int = 16,
-                       initial_points: int = 6, given: Mapping | None = None, engine: str = "yade",
+                       initial_points: int | None = None, given: Mapping | None = None, engine: str = "yade",
                        mpi: int | None = None, workers: int | None = None, scheduler: str | None = None,
                        shape: str = "clump", as_spheres: bool = False, clump_accuracy: float | None = None,
                        quick: bool = False, resume: bool = False, overwrite: bool = False, label: str | None = None,
@@ -515,7 +515,8 @@ def calibrate_material(inputs: Sequence[str | os.PathLike], *, out: str | os.Pat
     friction_range, rolling_friction_range : (float, float)
         The bounds of μ (0 ≤ low < high ≤ 5) and of μ_r (0 ≤ low < high ≤ 1).
     budget, initial_points : int
-        The most points run, and those of the initial design (2 ≤ initial_points ≤ budget).
+        The most points run, and those of the initial design (2 ≤ initial_points ≤ budget; default 6, at most
+        ``budget``).
     given : mapping, optional
         The settings given by name, repeated in the commands that use (μ, μ_r).
     engine, mpi, workers, scheduler, shape, as_spheres, clump_accuracy, quick, resume, overwrite, label
@@ -543,6 +544,7 @@ def calibrate_material(inputs: Sequence[str | os.PathLike], *, out: str | os.Pat
     from .surrogate import check_search
 
     targets = check_targets(_targets(targets), angle)
+    initial_points = min(6, int(budget)) if initial_points is None else initial_points
     check_search(targets, friction_range, rolling_friction_range, int(budget), int(initial_points))
     if shape != "clump":
         raise InputError("{shape}: μ_r acts at sphere contacts: a material calibration runs clumps (--shape clump)",
