@@ -224,17 +224,23 @@ def _prepare(opts: dict, stack: ExitStack, out, outputs, search: dict):
     if executor is None:
         check_installed(first.engine, first.mpi)
     first.say(Estimate(seconds, most))
-    made, say = {}, first.say
-    for t, o in opts.items():
-        chosen = choose_grains(o.inputs, o.settings, pool=pool[t],
-                               workers=workers if executor is None else default_workers(),
-                               progress=lambda done, total: say(Count("grains", done, total)))
+    made, say, cache = {}, first.say, {}
+    for t, o in opts.items():  # tests whose templates' settings agree share them (chosen and made once)
+        key = (o.settings.templates, o.settings.size, pool[t])
+        if key not in cache:
+            cache[key] = choose_grains(o.inputs, o.settings, pool=pool[t],
+                                       workers=workers if executor is None else default_workers(),
+                                       progress=lambda done, total: say(Count("grains", done, total)))
+        chosen = cache[key]
         o.say(Note(f"{t}: " + chosen.summary() + f"; templates-{t}.csv"))
-        what = "clumps" if o.shape == "clump" else "level sets"
-        templates = build_population(o.inputs, o.settings, as_spheres=o.as_spheres, shape=o.shape, spacing=o.spacing,
-                                     chosen=chosen, progress=lambda done, total, w=what: say(Count(w, done, total)),
-                                     **({} if o.clump_accuracy is None else {"clump_accuracy": o.clump_accuracy}))
-        made[t] = (chosen, templates)
+        made_key = key + (o.settings.spheres, o.settings.density)
+        if made_key not in cache:
+            what = "clumps" if o.shape == "clump" else "level sets"
+            cache[made_key] = build_population(
+                o.inputs, o.settings, as_spheres=o.as_spheres, shape=o.shape, spacing=o.spacing, chosen=chosen,
+                progress=lambda done, total, w=what: say(Count(w, done, total)),
+                **({} if o.clump_accuracy is None else {"clump_accuracy": o.clump_accuracy}))
+        made[t] = (chosen, cache[made_key])
     first.say(Estimate(seconds, most, inputs_read=True))
     return out, journal, executor, workers, made
 
@@ -344,8 +350,9 @@ def material_record(search, rows: Sequence[dict], *, targets: Sequence[Target], 
                    f"constant × RBF + white noise, fitted to every seed's angle) on a {GRID}×{GRID} grid; misfit "
                    "Σ((predicted − target)/target_sd)²; reached when the best misfit ≤ misfit_threshold (χ² 95 %, "
                    "one degree per target)"),
-        "uncertainty": (f"friction_bounds, rolling_friction_bounds: the extent of the grid points whose misfit, "
-                        f"each target_sd widened by the posterior sd, is within {REGION_DELTA:g} of the best's"),
+        "uncertainty": ("friction_bounds, rolling_friction_bounds: the extent of the grid points whose misfit, "
+                        "each target_sd widened by the posterior sd there, is at most misfit_threshold (or within "
+                        f"{REGION_DELTA:g} of the best's, when larger)"),
         "settings": {t: {k: v for k, v in as_dict(s).items() if k not in ("friction", "rolling_friction")}
                      for t, s in settings.items()},
         "commands": commands, "failed_runs": failed_calibration_runs(rows),

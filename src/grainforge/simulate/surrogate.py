@@ -25,10 +25,10 @@ The search (docs/simulate.md, *Calibrating μ and μ_r together*):
    (``M ≤`` :func:`noise_misfit`, the 95 % quantile of χ² with one degree per target) and every surrogate's
    posterior standard deviation there is below half its σ_target.
 
-The result is the grid point of least predicted misfit; its uncertainty is the extent of the region whose
-misfit, with each σ_target widened by the surrogate's posterior standard deviation, lies within
-:data:`REGION_DELTA` (Δχ² of a 68 % region of two parameters) of the least: μ's and μ_r's lowest and highest
-there.  A best point whose misfit is above :func:`noise_misfit` is not a fit: the targets are not reached
+The result is the grid point of least predicted misfit; its uncertainty is the extent of the region within
+the noise: the grid points whose misfit, each σ_target widened by the surrogate's posterior standard deviation
+there, is at most :func:`noise_misfit` (or within :data:`REGION_DELTA`, Δχ² of a 68 % region of two
+parameters, of the best's when that is larger): μ's and μ_r's lowest and highest there.  A best point whose misfit is above :func:`noise_misfit` is not a fit: the targets are not reached
 together within the bounds (``reached`` False).
 """
 
@@ -199,6 +199,7 @@ def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], seed: int) -
     from sklearn.exceptions import ConvergenceWarning
     from sklearn.gaussian_process import GaussianProcessRegressor
     from sklearn.gaussian_process.kernels import RBF, ConstantKernel, WhiteKernel
+    from threadpoolctl import threadpool_limits
 
     out = {}
     for name, y in angles.items():
@@ -206,8 +207,9 @@ def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], seed: int) -
         kernel = (ConstantKernel(25.0, (1e-2, 1e4)) * RBF([0.5, 0.5], (0.05, 20.0))
                   + WhiteKernel(1.0, (1e-4, 1e2)))
         gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=3, random_state=seed)
-        with warnings.catch_warnings():  # a length or a noise at its bound is an answer, not an error
-            warnings.simplefilter("ignore", ConvergenceWarning)
+        # matrices of a few tens of rows: BLAS threads cost more than they bring (7× on a busy 2-core machine)
+        with warnings.catch_warnings(), threadpool_limits(1):
+            warnings.simplefilter("ignore", ConvergenceWarning)  # a length or a noise at its bound is an answer
             gp.fit(x, y - y.mean())
         gp.offset_ = float(y.mean())
         out[name] = gp
@@ -392,7 +394,7 @@ def _result(gps, surface, targets, grid, low, span, points, threshold, converged
     """The best point, its region and the grid of the finished search."""
     best = int(np.argmin(surface["misfit"]))
     x = low + grid * span
-    region = surface["widened"] <= surface["widened"][best] + REGION_DELTA
+    region = surface["widened"] <= max(threshold, surface["widened"][best] + REGION_DELTA)
     region[best] = True
     bounds = [(float(x[region, i].min()), float(x[region, i].max())) for i in range(2)]
     predicted = {t.name: (float(surface["means"][t.name][best]), float(surface["sds"][t.name][best]))
