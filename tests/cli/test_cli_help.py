@@ -15,6 +15,8 @@ def _commands(group=cli, path=()):
         yield path + (name,), cmd
         if isinstance(cmd, click.Group):
             yield from _commands(cmd, path + (name,))
+    for name, cmd in sorted(getattr(group, "two_words", {}).items()):  # simulate calibrate material
+        yield path + tuple(name.split()), cmd
 
 
 COMMANDS = list(_commands())

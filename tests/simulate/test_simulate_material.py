@@ -13,7 +13,7 @@ from pathlib import Path
 import _material_stand_in as stand_in
 import numpy as np
 import pytest
-from conftest import require_engine, require_long_lane
+from conftest import require_engine
 
 from grainforge.cli.main import cli
 from grainforge.simulate import MaterialCalibration, calibrate_material, settings_for
@@ -228,10 +228,9 @@ def test_calibrate_test_still_takes_one_target_and_names_material(runner, tmp_pa
 
 @pytest.mark.slow
 def test_a_quick_material_calibration_in_liggghts(runner, tmp_path):
-    """Two points of a quick tilt and a quick triaxial test in LIGGGHTS, one seed each: every output, each run's
-    angle in calibration.csv, and a line that says whether the targets are reached."""
-    require_long_lane("two points of a quick tilt and triaxial test in LIGGGHTS, about 80 s of CPU; the stand-in "
-                      "engine's tests check the search and the outputs meanwhile")
+    """Two points of a quick tilt and a quick triaxial test in LIGGGHTS, one seed each (about 30 s of CPU, the
+    engine's included): every output, each run's angle in calibration.csv, and a line that says whether the
+    targets are reached."""
     require_engine("liggghts")
     out = tmp_path / "cal"
     r = runner.invoke(cli, ["simulate", "calibrate", "material", str(RECIPE), "--target", "tilt=30",

@@ -133,8 +133,10 @@ def _register():
     from . import calibrate_dpa as calibrate
     from . import simulate_friction as simulate_calibrate
     from .options import apply_help_style
+    from .simulate_material import material
 
     simulate.simulate.add_command(simulate_calibrate.calibrate)
+    simulate.simulate.two_words["calibrate material"] = material
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,

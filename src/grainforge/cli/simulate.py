@@ -108,14 +108,15 @@ triaxial = _command("triaxial", """Drained triaxial compression: a periodic cell
 
 
 class _SimulateGroup(click.Group):
-    """``simulate``'s commands, and ``simulate calibrate material`` (the material calibration, whose first
-    argument would otherwise be ``calibrate``'s TEST)."""
+    """``simulate``'s commands, and commands of two words (``simulate calibrate material``, whose second word
+    would otherwise be ``calibrate``'s TEST), registered in :attr:`two_words` by :mod:`grainforge.cli.group`."""
+
+    two_words: dict = {}
 
     def resolve_command(self, ctx, args):
-        if args[:2] == ["calibrate", "material"]:
-            from .simulate_material import material
-
-            return "calibrate material", material, args[2:]
+        name = " ".join(args[:2])
+        if name in self.two_words:
+            return name, self.two_words[name], args[2:]
         return super().resolve_command(ctx, args)
 
 

@@ -46,7 +46,7 @@ class _Reporter(Reporter):
 @click.command(name="calibrate material")
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @option("--target", "targets", multiple=True, required=True, metavar="TEST=ANGLE[:SD]",
-        help="A measured angle to reach, degrees (5 to 80), and its spread SD (default 1): tilt=38, repose=34 or "
+        help="A measured angle to reach, degrees (5 to 80), and its spread SD, 1 unless given: tilt=38, repose=34 or "
              "triaxial=37:1.5 (its ultimate friction angle, or --angle peak). Once per test.")
 @option("--angle", type=click.Choice(["ultimate", "peak"]), default=None, show_default="ultimate",
         help="The triaxial target's friction angle: ultimate (results.csv's ultimate_friction_deg) or peak.")

@@ -382,9 +382,12 @@ def material_line(record: dict, label: str, out: str | os.PathLike) -> str:
     runs = f"({record['points']} points, {record['runs']} runs); {Path(out) / 'calibration.json'}"
     where = f"friction {record['friction']:.3f}, rolling friction {record['rolling_friction']:.3f}"
     if not record["reached"]:
+        unsure = [t for t in record["targets"] if t["predicted_sd_deg"] > t["target_sd_deg"]]
+        why = (f"; the surrogate is still unsure there (± {max(t['predicted_sd_deg'] for t in unsure):.1f}°): "
+               f"more points (budget) may reach them" if unsure else "")
         return (f"{label}: {wanted} are not reached together with friction in {_span(record['friction_range'])} "
                 f"and rolling friction in {_span(record['rolling_friction_range'])}: the closest point, {where}, "
-                f"gives {angles} (misfit {record['misfit']:.3g} > {record['misfit_threshold']:.3g}) {runs}")
+                f"gives {angles} (misfit {record['misfit']:.3g} > {record['misfit_threshold']:.3g}){why} {runs}")
     note = "" if record["converged"] else f" (budget of {record['budget']} points spent)"
     return (f"{label}: friction {record['friction']:.3f} ({_span(record['friction_bounds'])}), rolling friction "
             f"{record['rolling_friction']:.3f} ({_span(record['rolling_friction_bounds'])}) reach {wanted} "
@@ -418,7 +421,7 @@ def material_figure(search, targets: Sequence[Target], caption: str | None = Non
     from .results import add_caption
 
     g = search.grid
-    fig, ax = plt.subplots(figsize=(6.8, 5.0), dpi=120)
+    fig, ax = plt.subplots(figsize=(6.8, 6.0), dpi=120)
     field = ax.contourf(g["friction"], g["rolling_friction"], np.log10(1.0 + g["misfit"]), levels=20, cmap="viridis_r")
     fig.colorbar(field, ax=ax, label="log₁₀(1 + predicted misfit)")
     ax.contour(g["friction"], g["rolling_friction"], np.log10(1.0 + g["misfit"]),
@@ -444,7 +447,7 @@ def material_figure(search, targets: Sequence[Target], caption: str | None = Non
     ax.set_ylabel("rolling resistance μ_r")
     wanted = ", ".join(f"{t.name} {t.angle:g}°" for t in targets)
     ax.set_title(f"material calibration on {wanted}: misfit map", fontsize=10)
-    ax.legend(fontsize=7, loc="upper right", framealpha=0.85)
+    ax.legend(fontsize=7, loc="upper center", bbox_to_anchor=(0.55, -0.12), ncol=2, frameon=False)
     add_caption(fig, caption)
     return fig
 
@@ -552,7 +555,8 @@ def calibrate_material(inputs: Sequence[str | os.PathLike], *, out: str | os.Pat
 
     targets = check_targets(_targets(targets), angle)
     initial_points = min(6, int(budget)) if initial_points is None else initial_points
-    check_search(targets, friction_range, rolling_friction_range, int(budget), int(initial_points))
+    check_search(targets, friction_range=friction_range, rolling_range=rolling_friction_range, budget=int(budget),
+                 initial=int(initial_points))
     if shape != "clump":
         raise InputError("{shape}: μ_r acts at sphere contacts: a material calibration runs clumps (--shape clump)",
                          setting="shape")
@@ -608,7 +612,7 @@ def _stages(opts: dict, prepared, targets, search: dict, given: dict) -> Materia
                 found = search_material(angles_of, targets, friction_range=tuple(search["friction_range"]),
                                         rolling_friction_range=tuple(search["rolling_friction_range"]),
                                         budget=search["budget"], initial_points=search["initial_points"],
-                                        seed=first.settings.seed)
+                                        rng=first.settings.seed)
         except JournalMismatch:  # --resume: a kept run's deck is not this one's (the user's to decide)
             raise
         except InputError as exc:  # an angle that could not be measured

@@ -10,7 +10,7 @@ Notes
 The search (docs/simulate.md, *Calibrating μ and μ_r together*):
 
 1. **Initial design**: ``initial_points`` points of a scrambled Latin hypercube over the bounds
-   (:class:`scipy.stats.qmc.LatinHypercube`, seeded from ``seed``: the same arguments give the same points).
+   (:class:`scipy.stats.qmc.LatinHypercube`, seeded from ``rng``: the same arguments give the same points).
 2. **Surrogates**: after each point, one Gaussian process per target over (μ, μ_r) in the unit square
    (scikit-learn's :class:`~sklearn.gaussian_process.GaussianProcessRegressor`; a constant × anisotropic RBF
    kernel plus a :class:`~sklearn.gaussian_process.kernels.WhiteKernel` for the seed-to-seed noise), fitted to
@@ -78,7 +78,18 @@ class Point:
     angles: Mapping[str, tuple]
 
     def mean(self, name: str) -> float:
-        """The seed-averaged angle of target ``name`` (degrees)."""
+        """The seed-averaged angle of a target.
+
+        Parameters
+        ----------
+        name : str
+            The target's name.
+
+        Returns
+        -------
+        float
+            The mean of its seeds' angles, degrees.
+        """
         return float(np.mean(self.angles[name]))
 
 
@@ -148,8 +159,8 @@ def noise_misfit(n_targets: int) -> float:
     return float(chi2.ppf(0.95, n_targets))
 
 
-def design_points(n: int, low: Sequence[float], high: Sequence[float], seed: int) -> np.ndarray:
-    """``n`` points of a scrambled Latin hypercube over the box ``[low, high]``, the same for the same ``seed``.
+def design_points(n: int, low: Sequence[float], high: Sequence[float], rng=None) -> np.ndarray:
+    """``n`` points of a scrambled Latin hypercube over the box ``[low, high]``, the same for the same seed.
 
     Parameters
     ----------
@@ -157,8 +168,8 @@ def design_points(n: int, low: Sequence[float], high: Sequence[float], seed: int
         The number of points.
     low, high : sequence of float
         The box's corners.
-    seed : int
-        The hypercube's random seed.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The hypercube's randomness (:func:`grainforge.rng.as_generator`).
 
     Returns
     -------
@@ -175,11 +186,13 @@ def design_points(n: int, low: Sequence[float], high: Sequence[float], seed: int
     """
     from scipy.stats import qmc
 
-    sampler = qmc.LatinHypercube(d=len(low), rng=np.random.default_rng(seed))
+    from ..rng import as_generator
+
+    sampler = qmc.LatinHypercube(d=len(low), rng=as_generator(rng))
     return qmc.scale(sampler.random(n), low, high)
 
 
-def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], seed: int) -> dict:
+def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], restarts: int = 0) -> dict:
     """One Gaussian process per target over the unit square, fitted to every seed's angle.
 
     Parameters
@@ -188,8 +201,9 @@ def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], seed: int) -
         ``(n, 2)`` points in the unit square, one per seed angle.
     angles : mapping of str to numpy.ndarray
         Each target's ``n`` angles (degrees), by name.
-    seed : int
-        The optimizer restarts' random state (the same data give the same surrogates).
+    restarts : int
+        The random state of the optimizer's restarts (the same data and ``restarts`` give the same
+        surrogates).
 
     Returns
     -------
@@ -206,7 +220,7 @@ def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], seed: int) -
         y = np.asarray(y, dtype=np.float64)
         kernel = (ConstantKernel(25.0, (1e-2, 1e4)) * RBF([0.5, 0.5], (0.05, 20.0))
                   + WhiteKernel(1.0, (1e-4, 1e2)))
-        gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=3, random_state=seed)
+        gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=3, random_state=int(restarts))
         # matrices of a few tens of rows: BLAS threads cost more than they bring (7× on a busy 2-core machine)
         with warnings.catch_warnings(), threadpool_limits(1):
             warnings.simplefilter("ignore", ConvergenceWarning)  # a length or a noise at its bound is an answer
@@ -277,7 +291,7 @@ def _settled(surface: dict, targets: Sequence[Target], grid: np.ndarray, done: n
                for p, close in zip(points, near) if close)
 
 
-def _fit_all(points: Sequence[Point], targets: Sequence[Target], low, span, seed: int) -> dict:
+def _fit_all(points: Sequence[Point], targets: Sequence[Target], low, span, restarts: int) -> dict:
     """The surrogates of every target, fitted to every seed's angle of the points run."""
     x, angles = [], {t.name: [] for t in targets}
     for p in points:
@@ -285,10 +299,10 @@ def _fit_all(points: Sequence[Point], targets: Sequence[Target], low, span, seed
         x += [[(p.friction - low[0]) / span[0], (p.rolling_friction - low[1]) / span[1]]] * n
         for t in targets:
             angles[t.name] += list(p.angles[t.name])
-    return fit_surrogates(np.array(x), {k: np.array(v) for k, v in angles.items()}, seed)
+    return fit_surrogates(np.array(x), {k: np.array(v) for k, v in angles.items()}, restarts)
 
 
-def check_search(targets: Sequence[Target], friction_range: tuple[float, float],
+def check_search(targets: Sequence[Target], *, friction_range: tuple[float, float],
                  rolling_range: tuple[float, float], budget: int, initial: int) -> None:
     """Refuse targets, bounds or a budget the search cannot use (one line naming the setting).
 
@@ -322,7 +336,7 @@ def check_search(targets: Sequence[Target], friction_range: tuple[float, float],
 def search_material(angles_of: Callable[[int, float, float], Mapping[str, Sequence[float]]],
                     targets: Sequence[Target], *, friction_range: tuple[float, float] = (0.1, 1.5),
                     rolling_friction_range: tuple[float, float] = (0.0, 0.5), budget: int = 16, initial_points: int = 6,
-                    seed: int = 0, progress: Callable[[Point], None] | None = None) -> MaterialSearch:
+                    rng=0, progress: Callable[[Point], None] | None = None) -> MaterialSearch:
     """The (μ, μ_r) in the bounds at which every target's angle is reached (see the module's notes).
 
     Parameters
@@ -338,8 +352,9 @@ def search_material(angles_of: Callable[[int, float, float], Mapping[str, Sequen
         The most points run.
     initial_points : int
         The points of the initial design (2 ≤ initial_points ≤ budget).
-    seed : int
-        The design's and the surrogates' random seed.
+    rng : None, int, numpy.random.SeedSequence or numpy.random.Generator
+        The design's and the surrogates' randomness (:func:`grainforge.rng.as_generator`; an int: the same
+        points for the same arguments).
     progress : callable, optional
         Called with each :class:`Point` as it is run.
 
@@ -361,7 +376,12 @@ def search_material(angles_of: Callable[[int, float, float], Mapping[str, Sequen
     >>> s.reached, round(s.friction, 1), round(s.rolling_friction, 1)
     (True, 0.7, 0.1)
     """
-    check_search(targets, friction_range, rolling_friction_range, int(budget), int(initial_points))
+    from ..rng import as_generator
+
+    check_search(targets, friction_range=friction_range, rolling_range=rolling_friction_range, budget=int(budget),
+                 initial=int(initial_points))
+    rng = as_generator(rng)
+    restarts = int(rng.integers(2 ** 31))
     low = np.array([friction_range[0], rolling_friction_range[0]], dtype=np.float64)
     span = np.array([friction_range[1], rolling_friction_range[1]], dtype=np.float64) - low
     points: list[Point] = []
@@ -376,11 +396,11 @@ def search_material(angles_of: Callable[[int, float, float], Mapping[str, Sequen
         if progress is not None:
             progress(points[-1])
 
-    for u in (design_points(int(initial_points), low, low + span, seed) - low) / span:
+    for u in (design_points(int(initial_points), low, low + span, rng) - low) / span:
         run(u)
     grid, threshold = _grid(), noise_misfit(len(targets))
     while True:
-        gps = _fit_all(points, targets, low, span, seed)
+        gps = _fit_all(points, targets, low, span, restarts)
         surface = _surface(gps, targets, grid)
         done = np.array([[(p.friction - low[0]) / span[0], (p.rolling_friction - low[1]) / span[1]] for p in points])
         converged = _settled(surface, targets, grid, done, points, threshold)
