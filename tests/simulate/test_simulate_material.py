@@ -245,3 +245,28 @@ def test_a_quick_material_calibration_in_liggghts(runner, tmp_path):
     assert all(math.isfinite(float(r["angle_deg"])) for r in rows)
     assert ("are not reached together" in r.stdout) == (not record["reached"])
     assert (out / "calibration.png").stat().st_size > 20_000
+
+
+def _record(**changes):
+    record = {"targets": [{"test": "tilt", "target_angle_deg": 38.0, "target_sd_deg": 1.0,
+                           "predicted_angle_deg": 37.8, "predicted_sd_deg": 0.3}],
+              "friction": 0.6, "rolling_friction": 0.2, "friction_bounds": [0.5, 0.7],
+              "rolling_friction_bounds": [0.1, 0.3], "friction_range": [0.1, 1.5], "rolling_friction_range": [0.0, 0.5],
+              "misfit": 0.04, "misfit_threshold": 3.84, "reached": True, "converged": True, "budget": 16, "points": 7,
+              "runs": 14}
+    return {**record, **changes}
+
+
+def test_the_line_says_when_the_region_is_wide_and_when_the_surrogate_is_unsure():
+    from grainforge.simulate.material import material_line
+
+    line = material_line(_record(), "sand", "out")
+    assert line == ("sand: friction 0.600 (0.5–0.7), rolling friction 0.200 (0.1–0.3) reach tilt 38° (predicted "
+                    "tilt 37.8°) (7 points, 14 runs); out/calibration.json")
+    wide = material_line(_record(rolling_friction_bounds=[0.0, 0.4], converged=False), "sand", "out")
+    assert "(budget of 16 points spent); the region within the noise spans over half the rolling friction range" in wide
+    unsure = _record(reached=False, misfit=9.0, targets=[{**_record()["targets"][0], "predicted_sd_deg": 2.5}])
+    line = material_line(unsure, "sand", "out")
+    assert line.startswith("sand: tilt 38° are not reached together with friction in 0.1–1.5 and rolling friction "
+                           "in 0–0.5: the closest point, friction 0.600, rolling friction 0.200, gives tilt 37.8°")
+    assert "the surrogate is still unsure there (± 2.5°): more points (budget) may reach them" in line

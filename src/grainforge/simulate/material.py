@@ -297,6 +297,10 @@ def _point_runs(opts: dict, made: dict, stage: Path, job: dict, angle: str | Non
     return angles_of
 
 
+def _wide(bounds, searched) -> bool:
+    return bounds[1] - bounds[0] > 0.5 * (searched[1] - searched[0])
+
+
 def _span(bounds) -> str:
     return f"{bounds[0]:.3g}–{bounds[1]:.3g}"
 
@@ -389,6 +393,10 @@ def material_line(record: dict, label: str, out: str | os.PathLike) -> str:
                 f"and rolling friction in {_span(record['rolling_friction_range'])}: the closest point, {where}, "
                 f"gives {angles} (misfit {record['misfit']:.3g} > {record['misfit_threshold']:.3g}){why} {runs}")
     note = "" if record["converged"] else f" (budget of {record['budget']} points spent)"
+    wide = [n for n in ("friction", "rolling_friction") if _wide(record[f"{n}_bounds"], record[f"{n}_range"])]
+    if wide:
+        note += (f"; the region within the noise spans over half the {' and '.join(w.replace('_', ' ') for w in wide)}"
+                 " range: more points or another target would narrow it")
     return (f"{label}: friction {record['friction']:.3f} ({_span(record['friction_bounds'])}), rolling friction "
             f"{record['rolling_friction']:.3f} ({_span(record['rolling_friction_bounds'])}) reach {wanted} "
             f"(predicted {angles}){note} {runs}")

@@ -218,8 +218,9 @@ def fit_surrogates(x: np.ndarray, angles: Mapping[str, np.ndarray], restarts: in
     out = {}
     for name, y in angles.items():
         y = np.asarray(y, dtype=np.float64)
-        kernel = (ConstantKernel(25.0, (1e-2, 1e4)) * RBF([0.5, 0.5], (0.05, 20.0))
-                  + WhiteKernel(1.0, (1e-4, 1e2)))
+        # the noise floor 0.1° (one seed a point gives the noise nothing to be fitted to: it would interpolate)
+        kernel = (ConstantKernel(25.0, (1e-2, 1e4)) * RBF([0.5, 0.5], (0.1, 20.0))
+                  + WhiteKernel(1.0, (1e-2, 1e2)))
         gp = GaussianProcessRegressor(kernel, n_restarts_optimizer=3, random_state=int(restarts))
         # matrices of a few tens of rows: BLAS threads cost more than they bring (7× on a busy 2-core machine)
         with warnings.catch_warnings(), threadpool_limits(1):
