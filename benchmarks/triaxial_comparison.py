@@ -67,7 +67,7 @@ def command(args, shape: str, packing: str, out: Path) -> list[str]:
     _, recipe, as_spheres, _ = next(s for s in SHAPES if s[0] == shape)
     cmd = ["nice", "-n", str(args.nice), sys.executable, "-c", CLI, "simulate", "triaxial", str(ROOT / recipe),
            "--packing", packing, "--grains", str(args.grains), "--seeds", str(args.seeds), "--workers", "1",
-           "--friction", f"{args.friction:g}", "--confining-kpa", f"{args.confining_kpa:g}",
+           "--friction", f"{args.friction:g}", "--rolling-friction", f"{args.rolling_friction:g}", "--confining-kpa", f"{args.confining_kpa:g}",
            "--axial-strain", f"{args.axial_strain:g}", "--inertial-number", f"{args.inertial_number:g}",
            "--out", str(out)]
     if args.engine != "yade":
@@ -161,9 +161,19 @@ def _stat(values, fmt: str) -> str:
     return f"{format(m, fmt)} ± {format(sd, fmt.replace('+', ''))}"
 
 
+def critical(rows: list[dict]) -> str:
+    """The table's e at the end (the clumps' in brackets) and how many seeds end at a critical state (rows of a
+    run before these columns: not measured)."""
+    if "critical_state" not in rows[0]:
+        return "not measured | not measured"
+    e = _stat([float(r["critical_void_ratio"]) for r in rows], ".3f")
+    ec = _stat([float(r["critical_void_ratio_clumps"]) for r in rows], ".3f")
+    return f"{e} ({ec}) | {sum(r['critical_state'] == 'True' for r in rows)} of {len(rows)}"
+
+
 def table(cases: list[dict]) -> str:
     head = ("| shape | packing | seeds | e₀ | peak φ (at ε₁) | ultimate φ (last 5 %) | largest ψ | ε_v at the end "
-            "| lateral σ₃ error, median / max | steps | CPU s |")
+            "| e at the end (clumps') | at a critical state | lateral σ₃ error, median / max | steps | CPU s |")
     lines = [head, "|" + "---|" * (head.count("|") - 1)]
     for c in cases:
         rows = c["rows"]
@@ -176,7 +186,7 @@ def table(cases: list[dict]) -> str:
         lines.append(
             f"| {c['shape']} | {c['packing']} | {len(rows)} | {_stat(f('initial_void_ratio'), '.3f')} | {peak} "
             f"| {_stat(f('ultimate_friction_deg'), '.1f')}° | {_stat(psi, '.1f')}° "
-            f"| {_stat([100 * x for x in ev], '+.1f')} % (at {100 * end:.0f} %) "
+            f"| {_stat([100 * x for x in ev], '+.1f')} % (at {100 * end:.0f} %) | {critical(rows)} "
             f"| {100 * max(f('lateral_stress_error_median')):.2f} % / {100 * max(f('lateral_stress_error_max')):.1f} % "
             f"| {int(sum(f('steps'))):,} | {'' if cpu is None else f'{cpu:.0f}'} |")
     total = sum(c["run"].get("cpu_s", 0.0) for c in cases)
@@ -233,6 +243,12 @@ def figure(cases: list[dict], title: str):
     return fig
 
 
+def rolling(row: dict) -> str:
+    """The figure title's rolling resistance (nothing when none)."""
+    mu_r = float(row.get("setting_rolling_friction") or 0.0)
+    return f", μ_r = {mu_r:g}" if mu_r > 0 else ""
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=None,
@@ -247,6 +263,8 @@ def main(argv=None) -> int:
     ap.add_argument("--inertial-number", type=float, default=1e-3)
     ap.add_argument("--friction", type=float, default=0.95, help="contact friction (calibrated on the rough "
                     "spheres' tilt angle, 38 deg)")
+    ap.add_argument("--rolling-friction", type=float, default=0.0, help="rolling resistance μ_r of every contact "
+                    "(0: none)")
     ap.add_argument("--confining-kpa", type=float, default=20.0)
     ap.add_argument("--spheres", type=int, default=10, help="spheres per clump (the sphere baseline: 1)")
     ap.add_argument("--cases", default="", help="run only these, comma-separated slugs, e.g. rough-angular-loose")
@@ -278,7 +296,7 @@ def main(argv=None) -> int:
     print(table(cases))
     r = cases[0]["rows"][0]
     title = (f"drained triaxial, σ′₃ = {float(r['confining_kpa']):g} kPa, {r['grains']} grains, μ = "
-             f"{float(r['setting_friction']):g}, I = {float(r['setting_inertial_number']):g}, "
+             f"{float(r['setting_friction']):g}{rolling(r)}, I = {float(r['setting_inertial_number']):g}, "
              f"{len(cases[0]['rows'])} seed(s) a case, the rough grains as clumps of {r['setting_spheres']} spheres "
              f"({engine_name(r)})")
     fig = figure(cases, title)

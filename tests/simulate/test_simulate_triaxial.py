@@ -18,7 +18,9 @@ from grainforge.cli.main import cli
 from grainforge.simulate import QUICK_TRIAXIAL, TriaxialSettings
 from grainforge.simulate.settings import MIN_TRIAXIAL_GRAINS, check_size, triaxial_steps
 from grainforge.simulate.triaxial import (
+    CRITICAL_DILATANCY_RATE,
     CSV_COLUMNS,
+    critical_state,
     dilatancy_angle,
     friction_angle,
     local_slope,
@@ -89,6 +91,25 @@ def test_the_peak_is_not_one_noisy_record_and_the_ultimate_state_is_the_last_5_p
     tail = m.copy()
     tail[e >= 0.95 * e[-1]] = 1.0
     assert triaxial_angles(e, tail, ev).ultimate_friction_deg == pytest.approx(float(friction_angle(1.0)), abs=1e-9)
+
+
+def test_the_synthetic_dense_curve_ends_at_a_critical_state_and_a_cut_one_does_not():
+    """The synthetic curve's volume and stress ratio are steady past 20 % (ψ → 0, M = 31°'s): a critical state
+    at 25 %; cut at 8 % (still dilating, M still falling) it is not; e_cs is the void ratio over the last 5 %."""
+    e, m, ev = _synthetic()
+    void = 0.6 + (1.0 + 0.6) * (-ev)  # e = e₀ + (1 + e₀)(−ε_v) for small strains: dilation raises it
+    cs = critical_state(e, m, ev, void)
+    assert cs["critical_state"] and abs(cs["final_dilatancy_rate"]) < 0.01
+    assert cs["critical_void_ratio"] == pytest.approx(void[e >= 0.95 * e[-1]].mean(), rel=1e-12)
+    short = e <= 0.08
+    cut = critical_state(e[short], m[short], ev[short], void[short])
+    assert not cut["critical_state"] and cut["final_dilatancy_rate"] < -CRITICAL_DILATANCY_RATE
+    # a steady volume under a stress ratio still rising 20 % across the window is not a critical state either
+    rising = m * (1.0 + np.clip((e - 0.2) / 0.05, 0.0, 1.0) * 0.2)
+    assert not critical_state(e, rising, ev, void)["critical_state"]
+    assert math.isnan(critical_state([0.0, 0.1], [1.0, 1.0], [0.0, 0.0], [0.6, 0.6])["critical_void_ratio"])
+    with pytest.raises(ValueError, match="window"):
+        critical_state(e, m, ev, void, window=0.0)
 
 
 def test_triaxial_angles_of_a_curve_too_short_are_nan():
@@ -222,6 +243,17 @@ def test_quick_dense_and_loose_triaxial_in_yade(runner, spheres, tmp_path):
         assert np.allclose(col["p_love_weber"], col["p"], rtol=1e-6)
         # the void ratio follows the volumetric strain: (1 + e) = (1 + e0)(1 - ε_v)
         assert np.allclose(1.0 + void, (1.0 + void[0]) * (1.0 - ev), rtol=1e-9)
+        # against the clumps' volume, from the deck's own coverage and spill of each grain drawn
+        deck = json.loads((run / "grains.json").read_text())
+        by_name = {g["name"]: g for g in deck["grains"]}
+        drawn = [by_name[name] for name in result["placed"]["drawn"]]
+        clumps = sum(g["volume"] * g["coverage"] / (1.0 - g["spill"]) for g in drawn)
+        assert result["solid_volume_clumps"] == pytest.approx(clumps, rel=1e-9)
+        e_c = (1.0 + void[0]) * result["solid_volume"] / result["solid_volume_clumps"] - 1.0
+        assert float(row["initial_void_ratio_clumps"]) == pytest.approx(e_c, rel=1e-6)
+        assert 0.0 < float(row["initial_void_ratio_clumps"]) != pytest.approx(void[0], rel=1e-3)
+        assert float(row["state_parameter"]) == pytest.approx(void[0] - float(row["critical_void_ratio"]), abs=1e-9)
+        assert row["critical_state"] in ("True", "False")
         check_placed_as_the_deck_says(run)
         assert (out / "triaxial.png").stat().st_size > 10_000
         found[packing] = (float(row["initial_void_ratio"]), ev)

@@ -237,13 +237,17 @@ def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleN
     r_max = max(float(templates[k].clump.radii.max()) for k in used)
     dt = scene["dt_safety"] * math.sqrt(m_min / (settings.young * r_max))
     solid = float(sum(templates[k].props.volume for k in pick))
+    # the clumps' volumes: their spheres' union, coverage x mesh volume / (1 - spill) (measured on a grid)
+    solid_clumps = float(sum(templates[k].props.volume * templates[k].clump.coverage
+                             / (1.0 - templates[k].clump.spill) for k in pick))
     rho = float(mass.sum()) / solid
     sigma = 1e3 * settings.confining_kpa
     rate = settings.inertial_number * math.sqrt(sigma / rho) / d
     rate_c = COMPACTION_INERTIAL_NUMBER * math.sqrt(sigma / rho) / d
     return SimpleNamespace(scene=scene, n=n, pick=pick, used=used, d=d, cell=cell, nodes=nodes, length=length,
                            half_plate=half_plate, half_box=half_box, r_grain=r_grain, table=table, dt=dt,
-                           solid=solid, rho=rho, mass=float(mass.sum()), sigma=sigma, rate=rate, rate_c=rate_c)
+                           solid=solid, solid_clumps=solid_clumps, rho=rho, mass=float(mass.sum()), sigma=sigma,
+                           rate=rate, rate_c=rate_c)
 
 
 def _plate_stl(axis: int, position: float, half: float) -> str:
@@ -360,7 +364,8 @@ def triaxial_deck_files(templates: Sequence, settings: TriaxialSettings, seed: i
             files[f"wall-{name}{side}.stl"] = _plate_stl(a, sign * 0.5 * float(plan.length[a]), plan.half_plate)
     files["in.run"] = _run_text(plan, settings, seed)
     rec = {"test": "triaxial", "seed": int(seed), "grains": plan.n, "d_mean": plan.d, "dt": plan.dt,
-           "grain_density": plan.rho, "solid_volume": plan.solid, "confining": plan.sigma,
+           "grain_density": plan.rho, "solid_volume": plan.solid,
+           "solid_volume_clumps": plan.solid_clumps, "confining": plan.sigma,
            "packing": settings.packing, "strain_rate": plan.rate, "compaction_strain_rate": plan.rate_c,
            "inertial_number": plan.rate * plan.d * math.sqrt(plan.rho / plan.sigma), "contact": plan.table,
            "contact_radius": plan.r_grain,
@@ -505,6 +510,7 @@ def collect_triaxial(deck: str | os.PathLike) -> dict:
     lost = len(initial) - len(final)
     out = {k: rec[k] for k in ("test", "grains", "d_mean", "grain_density", "solid_volume", "confining", "packing",
                                "strain_rate", "compaction_strain_rate", "inertial_number", "dt")}
+    out["solid_volume_clumps"] = rec.get("solid_volume_clumps", solid)  # a deck written before it was recorded
     out.update(inserted=len(initial), lost=lost, compacted=bool(run["compacted"]), settled=bool(run["settled"]),
                void_ratio_compacted=(run["volume_compacted"] - solid) / solid,
                void_ratio_initial=float((volume[0] - solid) / solid), cell_final=[lx[-1], ly[-1], lz[-1]],

@@ -96,13 +96,15 @@ def figure_caption(test: str, settings, *, templates: Sequence, label: str, engi
     Returns
     -------
     str
-        ``engine · population: N grains from T templates, representation · [μ ·] rate``.
+        ``engine · population: N grains from T templates, representation · [μ[, μ_r] ·] rate``.
 
     Examples
     --------
     >>> from .settings import Settings
     >>> figure_caption("tilt", Settings(), templates=[], label="sand.toml")
     'Yade · sand.toml: 200 grains from 0 templates · μ = 0.5 · tilt 0.5° every 8 √(d/g) from 10°'
+    >>> figure_caption("tilt", Settings(rolling_friction=0.2), templates=[], label="sand.toml").split(" · ")[2]
+    'μ = 0.5, μ_r = 0.2'
     """
     from .settings import LIFT_SPEED, TILT_HOLD
 
@@ -126,7 +128,9 @@ def figure_caption(test: str, settings, *, templates: Sequence, label: str, engi
     else:
         rates = [float(r["strain_rate_per_s"]) for r in rows if r.get("strain_rate_per_s") is not None]
         rate = f"sheared at I = {settings.inertial_number:g}" + (f" (ε̇ = {rates[0]:.3g}/s)" if rates else "")
-    parts = [name, population] + ([f"μ = {settings.friction:g}"] if friction else []) + [rate]
+    mu_r = float(getattr(settings, "rolling_friction", 0.0) or 0.0)
+    contact = f"μ = {settings.friction:g}" + (f", μ_r = {mu_r:g}" if mu_r > 0 else "")
+    parts = [name, population] + ([contact] if friction else []) + [rate]
     return " · ".join(parts)
 
 

@@ -260,6 +260,76 @@ def triaxial_angles(axial_strain, q_over_p, volumetric_strain, *, window: int = 
                           max_dilatancy_strain=float(e[j]))
 
 
+#: the end of a curve is a critical state when, over its last :data:`CRITICAL_WINDOW` fraction of axial strain,
+#: the volume is steady (\|dε_v/dε₁\| at most :data:`CRITICAL_DILATANCY_RATE`, a dilatancy angle within about
+#: ±1.5°) and so is the stress ratio (its least-squares trend changes q/p′ by at most
+#: :data:`CRITICAL_STRESS_CHANGE` of its mean across the window)
+CRITICAL_WINDOW = 0.2
+CRITICAL_DILATANCY_RATE = 0.05
+CRITICAL_STRESS_CHANGE = 0.05
+
+
+def critical_state(axial_strain, q_over_p, volumetric_strain, void_ratio, *,
+                   window: float = CRITICAL_WINDOW) -> dict:
+    """Whether a triaxial curve ends at a critical state, and the void ratio there.
+
+    Fits straight lines to ε_v(ε₁) and q/p′(ε₁) over the last ``window`` fraction of the axial strain range: the
+    end is a critical state when both are steady (:data:`CRITICAL_DILATANCY_RATE`,
+    :data:`CRITICAL_STRESS_CHANGE`). The critical void ratio e_cs is the mean void ratio over the last 5 % of the
+    range (the window of the ultimate friction angle, :func:`triaxial_angles`), whether or not the end is steady:
+    the flag says whether to read it as one.
+
+    Parameters
+    ----------
+    axial_strain, q_over_p, volumetric_strain, void_ratio : (N,) array_like
+        The curve, strains compression positive, in increasing strain.
+    window : float
+        The fraction of the axial strain range, at its end, that must be steady (0 < window ≤ 1).
+
+    Returns
+    -------
+    dict
+        ``critical_void_ratio`` (e_cs), ``final_dilatancy_rate`` (dε_v/dε₁ over the window, negative while the
+        specimen dilates), ``final_stress_ratio_change`` (the fitted change of q/p′ across the window over its
+        mean) and ``critical_state`` (bool); NaN and False for a curve of under 3 points.
+
+    Raises
+    ------
+    InputError
+        If ``window`` is not in (0, 1].
+
+    Examples
+    --------
+    >>> e = np.linspace(0, 0.3, 301)
+    >>> steady = critical_state(e, np.full_like(e, 1.2), -0.1 * np.minimum(e, 0.15), 0.7 + np.minimum(e, 0.15))
+    >>> round(steady["critical_void_ratio"], 3), steady["critical_state"]
+    (0.85, True)
+    >>> critical_state(e, np.full_like(e, 1.2), -0.5 * e, 0.7 + e)["critical_state"]  # still dilating
+    False
+    """
+    if not 0.0 < window <= 1.0:
+        raise InputError(f"window must be in (0, 1], not {window}")
+    e, m, v, void = (np.asarray(a, dtype=np.float64) for a in (axial_strain, q_over_p, volumetric_strain,
+                                                             void_ratio))
+    ok = np.isfinite(e) & np.isfinite(m) & np.isfinite(v) & np.isfinite(void)
+    e, m, v, void = e[ok], m[ok], v[ok], void[ok]
+    nan = float("nan")
+    if len(e) < 3 or not e[-1] > e[0]:
+        return {"critical_void_ratio": nan, "final_dilatancy_rate": nan, "final_stress_ratio_change": nan,
+                "critical_state": False}
+    span = e[-1] - e[0]
+    tail = e >= e[-1] - window * span
+    if tail.sum() < 3:
+        tail[-3:] = True
+    rate = float(np.polyfit(e[tail], v[tail], 1)[0])
+    slope = float(np.polyfit(e[tail], m[tail], 1)[0])
+    change = slope * (e[tail][-1] - e[tail][0]) / abs(float(m[tail].mean()))
+    e_cs = float(void[e >= e[-1] - 0.05 * span].mean())
+    steady = abs(rate) <= CRITICAL_DILATANCY_RATE and abs(change) <= CRITICAL_STRESS_CHANGE
+    return {"critical_void_ratio": e_cs, "final_dilatancy_rate": rate, "final_stress_ratio_change": float(change),
+            "critical_state": bool(steady)}
+
+
 def curve_table(result: dict) -> np.ndarray:
     """The curve of a triaxial ``result.json`` as the (N, 7) array of :data:`CSV_COLUMNS` (stresses in kPa).
 
@@ -326,11 +396,21 @@ def measure_triaxial(result: dict) -> dict:
     if not (math.isfinite(lateral_median) and lateral_median <= 0.05):
         problems.append(f"the lateral stress strayed {100 * lateral_median:.0f} % (median) from the confining "
                         "stress")
+    cs = critical_state(e, col["q_over_p"], col["volumetric_strain"], col["void_ratio"])
+    e0 = float(result["void_ratio_initial"])
+    # the same specimen's void ratio counted against its clumps' volume (the spheres' union, which covers less of
+    # an angular grain than the mesh and spills a little past it) instead of the meshes'
+    to_clumps = float(result["solid_volume"]) / float(result.get("solid_volume_clumps", result["solid_volume"]))
     row = {"test": "triaxial", "grains": result["grains"], "inserted": result["inserted"], "lost": result["lost"],
            "packing": result["packing"], "compaction_at_rest": bool(result["compacted"]),
            "at_rest_before_shearing": settled, "void_ratio_compacted": result["void_ratio_compacted"],
-           "initial_void_ratio": result["void_ratio_initial"],
+           "initial_void_ratio": e0, "initial_void_ratio_clumps": (1.0 + e0) * to_clumps - 1.0,
            "final_void_ratio": float(col["void_ratio"][-1]) if len(e) else float("nan"),
+           "critical_void_ratio": cs["critical_void_ratio"],
+           "critical_void_ratio_clumps": (1.0 + cs["critical_void_ratio"]) * to_clumps - 1.0,
+           "state_parameter": e0 - cs["critical_void_ratio"], "critical_state": cs["critical_state"],
+           "final_dilatancy_rate": cs["final_dilatancy_rate"],
+           "final_stress_ratio_change": cs["final_stress_ratio_change"],
            "peak_friction_deg": angles.peak_friction_deg, "peak_q_over_p": angles.peak_q_over_p,
            "peak_axial_strain": angles.peak_strain, "ultimate_friction_deg": angles.ultimate_friction_deg,
            "ultimate_q_over_p": angles.ultimate_q_over_p, "max_dilatancy_deg": angles.max_dilatancy_deg,
@@ -367,6 +447,9 @@ def summarise_triaxial(rows: Sequence[dict]) -> str:
     ...          "ultimate_friction_deg": 31.0, "max_dilatancy_deg": 14.0, "inertial_number": 1e-3}]
     >>> summarise_triaxial(rows)
     'dense, e0 0.560 ± 0.014: peak friction angle 41.0° ± 1.4°, ultimate 30.5° ± 0.7°, largest dilatancy angle 13.0° ± 1.4° (sd over 2 seeds; I = 0.001)'
+    >>> rows = [{**r, "critical_void_ratio": 0.7, "critical_state": r is rows[0]} for r in rows]
+    >>> summarise_triaxial(rows).split("; ", 2)[-1]
+    'e at the end 0.700 ± 0.000, a critical state (steady volume and stress ratio) in 1 of 2'
     """
 
     def stat(key, fmt, unit=""):
@@ -379,9 +462,14 @@ def summarise_triaxial(rows: Sequence[dict]) -> str:
 
     seeds = f"sd over {len(rows)} seeds" if len(rows) > 1 else "one seed"
     inertial = max(float(r["inertial_number"]) for r in rows)
-    return (f"{rows[0]['packing']}, e0 {stat('initial_void_ratio', '.3f')}: peak friction angle "
+    line = (f"{rows[0]['packing']}, e0 {stat('initial_void_ratio', '.3f')}: peak friction angle "
             f"{stat('peak_friction_deg', '.1f', '°')}, ultimate {stat('ultimate_friction_deg', '.1f', '°')}, "
             f"largest dilatancy angle {stat('max_dilatancy_deg', '.1f', '°')} ({seeds}; I = {inertial:.2g})")
+    if all("critical_state" in r for r in rows):
+        steady = sum(bool(r["critical_state"]) for r in rows)
+        line += (f"; e at the end {stat('critical_void_ratio', '.3f')}, a critical state (steady volume and stress "
+                 f"ratio) in {steady} of {len(rows)}")
+    return line
 
 
 def write_triaxial_csv(result: dict, path: str | Path) -> Path:
