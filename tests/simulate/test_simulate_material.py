@@ -135,6 +135,25 @@ def test_the_same_arguments_give_the_same_bytes_with_any_worker_count(material_e
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 
 
+@pytest.mark.slow
+def test_on_a_dask_cluster_the_outputs_are_the_local_ones(material_engine, monkeypatch, runner, tmp_path):
+    """Each run a task of a LocalCluster of two worker processes (they import the stand-in engine, passed as the
+    run's function): the same calibration.csv, calibration.json and calibration.png as one local worker."""
+    distributed = pytest.importorskip("distributed")
+    import os
+
+    tests = str(Path(stand_in.__file__).parent)
+    monkeypatch.setenv("PYTHONPATH", os.pathsep.join([tests, os.environ.get("PYTHONPATH", "")]))
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    assert _calibrate(runner, local, "--workers", "1").exit_code == 0
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0",
+                                  silence_logs=40) as cluster:
+        r = _calibrate(runner, remote, "--scheduler", cluster.scheduler_address)
+    assert r.exit_code == 0, r.output
+    for name in ("calibration.csv", "calibration.json", "calibration.png"):
+        assert (local / name).read_bytes() == (remote / name).read_bytes(), name
+
+
 def test_a_resumed_calibration_reuses_the_finished_runs_and_gives_the_same_outputs(material_engine, monkeypatch,
                                                                                        runner, tmp_path):
     import grainforge.simulate.engine as engine
