@@ -20,8 +20,16 @@ from .simulate_options import Reporter, run_failures, run_options, run_settings
 __all__ = ["material"]
 
 
+#: what the search loads on its way (loaded before any work: a lazy import later could swallow a Ctrl-C)
+SEARCH_MODULES = ("grainforge.simulate.surrogate", "scipy.stats.qmc", "sklearn.gaussian_process", "threadpoolctl")
+
+
 class _Reporter(Reporter):
     """The calibration's progress: the seeds' bar names the point, a line after each point."""
+
+    def __init__(self, *args, **kwargs):
+        super().__init__(*args, **kwargs)
+        self.modules += SEARCH_MODULES
 
     def __call__(self, event) -> None:
         from ..simulate.material import PointEvaluated
