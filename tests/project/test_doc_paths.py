@@ -97,7 +97,12 @@ def resolve(args: list[str]) -> tuple[click.Command, list[str]]:
     """The grainforge (sub)command ``args`` runs and its remaining arguments."""
     cmd: click.Command = cli
     args = list(args)
-    while isinstance(cmd, click.Group) and args and args[0] in cmd.commands:
+    while isinstance(cmd, click.Group) and args:
+        two = getattr(cmd, "two_words", {}).get(" ".join(args[:2]))  # simulate calibrate material
+        if two is not None:
+            return two, args[2:]
+        if args[0] not in cmd.commands:
+            break
         cmd = cmd.commands[args.pop(0)]
     return cmd, args
 

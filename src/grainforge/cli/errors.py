@@ -27,6 +27,7 @@ from ..errors import GrainforgeError, name_settings
 #: a setting whose option is not ``--`` and its name with dashes (``raw_shape`` -> ``--raw-shape``)
 FLAGS = {
     "voxel_size": "--voxel-size-um",
+    "targets": "--target",  # simulate calibrate material: one --target per test
 }
 
 #: the OSError numbers that are about the user's own paths (beside the FileNotFoundError, PermissionError,

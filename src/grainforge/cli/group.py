@@ -112,7 +112,7 @@ def help_sections(group: click.Group) -> list[tuple[str, list[tuple[str, str]]]]
         (f"{name} {sub_name}", sub.get_short_help_str(limit=200))
         for name, cmd in sorted(group.commands.items())
         if isinstance(cmd, click.Group) and cmd is not generate
-        for sub_name, sub in sorted(cmd.commands.items())
+        for sub_name, sub in sorted({**cmd.commands, **getattr(cmd, "two_words", {})}.items())
     ]
     return [("Generator methods (grainforge generate METHOD)", methods), ("Subcommands", subcommands)]
 
@@ -133,8 +133,10 @@ def _register():
     from . import calibrate_dpa as calibrate
     from . import simulate_friction as simulate_calibrate
     from .options import apply_help_style
+    from .simulate_material import material
 
     simulate.simulate.add_command(simulate_calibrate.calibrate)
+    simulate.simulate.two_words["calibrate material"] = material
 
     for command in (
         generate.generate, render.render, demo.demo, check.check, tray.tray, batch.batch,

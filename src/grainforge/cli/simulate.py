@@ -107,7 +107,20 @@ triaxial = _command("triaxial", """Drained triaxial compression: a periodic cell
     """)
 
 
-@click.group()
+class _SimulateGroup(click.Group):
+    """``simulate``'s commands, and commands of two words (``simulate calibrate material``, whose second word
+    would otherwise be ``calibrate``'s TEST), registered in :attr:`two_words` by :mod:`grainforge.cli.group`."""
+
+    two_words: dict = {}
+
+    def resolve_command(self, ctx, args):
+        name = " ".join(args[:2])
+        if name in self.two_words:
+            return name, self.two_words[name], args[2:]
+        return super().resolve_command(ctx, args)
+
+
+@click.group(cls=_SimulateGroup)
 def simulate():
     """Virtual bulk tests in Yade or LIGGGHTS (angle of repose, tilt table, drained triaxial test): shape's effect
     on bulk friction."""

@@ -25,7 +25,7 @@ def _option(name: str) -> str:
 
 
 @click.command(name="calibrate")
-@click.argument("test", type=click.Choice(["tilt", "repose", "triaxial"]))
+@click.argument("test", type=click.Choice(["tilt", "repose", "triaxial", "material"]))
 @click.argument("inputs", nargs=-1, required=True, type=click.Path(path_type=Path))
 @option("--target-angle", type=FINITE_FLOAT, required=True,
         help="The measured angle to reach, degrees (5 to 80): a tilt failure angle, an angle of repose, or a "
@@ -56,10 +56,15 @@ def calibrate(test, inputs, target_angle, angle, out, friction_range, start, tol
     `simulate tilt`; the test's options as for `simulate TEST`.  A bounded search on the seed-averaged
     angle (bracket, then secant steps: a few frictions, every seed at each), all other settings fixed.
     Writes every run, μ with its uncertainty (seed spread over the local slope) and a figure of angle
-    against μ, and prints the `grainforge simulate` command that uses μ.  See docs/simulate.md.
+    against μ, and prints the `grainforge simulate` command that uses μ.  `simulate calibrate material`
+    fits μ and the rolling resistance μ_r together to several tests' angles (its own --help).  See
+    docs/simulate.md.
     """
     from ..simulate.calibration import calibrate_friction, calibration_outputs
 
+    if test == "material":  # `simulate calibrate material ...` is its own command: TEST was not right after calibrate
+        raise click.UsageError("calibrate material takes its own options (--target TEST=ANGLE): write material "
+                               "right after calibrate (grainforge simulate calibrate material --help)")
     _check_search(target_angle, friction_range, start)
     _check_test_options(test, values, angle)
     options = dict(engine=engine, mpi=mpi, shape=shape, spacing=spacing, as_spheres=as_spheres,

@@ -21,11 +21,13 @@ Yade's Cundall–Strack law), the same material and the same time-step rule.
 Nothing is tuned to the paper's numbers; the contact friction is an input.
 
 The whole run of ``grainforge simulate TEST`` (checks, journal, estimate, templates, staged outputs) is
-:func:`run_virtual_test`; a friction calibration's, :func:`calibrate_friction`.
+:func:`run_virtual_test`; a friction calibration's, :func:`calibrate_friction`; a calibration of μ and the
+rolling resistance μ_r together against several tests, :func:`calibrate_material`.
 """
 
 from .calibration import CalibrationFailed, CalibrationResult, calibrate_friction
 from .engine import EngineFailed, measure_result, run_test, run_yade, summarise, write_test_deck, yade_executable
+from .material import MaterialCalibration, calibrate_material
 from .pipeline import VirtualTestResult, run_virtual_test, settings_for
 from .run_folders import FAILED_PREFIX, commit_stage, discard_stage, keep_failed, open_stage, staged
 from .settings import QUICK, QUICK_REPOSE, QUICK_TRIAXIAL, TESTS, Settings, TriaxialSettings, check_size, scene_settings
@@ -34,4 +36,5 @@ from .specimen import build_population, check_inputs
 __all__ = ["TESTS", "Settings", "TriaxialSettings", "QUICK", "QUICK_REPOSE", "QUICK_TRIAXIAL", "yade_executable", "scene_settings", "check_inputs", "build_population",
            "write_test_deck", "run_yade", "measure_result", "run_test", "summarise", "check_size", "open_stage", "staged",
            "commit_stage", "discard_stage", "EngineFailed", "keep_failed", "FAILED_PREFIX", "settings_for", "run_virtual_test",
-           "VirtualTestResult", "calibrate_friction", "CalibrationResult", "CalibrationFailed"]
+           "VirtualTestResult", "calibrate_friction", "CalibrationResult", "CalibrationFailed", "calibrate_material",
+           "MaterialCalibration"]

@@ -400,7 +400,9 @@ def measure_triaxial(result: dict) -> dict:
     e0 = float(result["void_ratio_initial"])
     # the same specimen's void ratio counted against its clumps' volume (the spheres' union, which covers less of
     # an angular grain than the mesh and spills a little past it) instead of the meshes'
-    to_clumps = float(result["solid_volume"]) / float(result.get("solid_volume_clumps", result["solid_volume"]))
+    # (a run without the two volumes, e.g. recorded before they were: the meshes' void ratio for both)
+    solid = result.get("solid_volume", 1.0)
+    to_clumps = float(solid) / float(result.get("solid_volume_clumps", solid))
     row = {"test": "triaxial", "grains": result["grains"], "inserted": result["inserted"], "lost": result["lost"],
            "packing": result["packing"], "compaction_at_rest": bool(result["compacted"]),
            "at_rest_before_shearing": settled, "void_ratio_compacted": result["void_ratio_compacted"],
