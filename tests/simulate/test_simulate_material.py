@@ -130,7 +130,8 @@ def test_the_command_recovers_the_known_point_and_prints_the_commands(material_e
 def test_the_same_arguments_give_the_same_bytes_with_any_worker_count(material_engine, runner, tmp_path):
     a, b = tmp_path / "a", tmp_path / "b"
     assert _calibrate(runner, a, "--workers", "1").exit_code == 0
-    assert _calibrate(runner, b, "--workers", "2").exit_code == 0
+    r = _calibrate(runner, b, "--workers", "2")
+    assert r.exit_code == 0, r.output
     for name in ("calibration.csv", "calibration.json", "calibration.png"):
         assert (a / name).read_bytes() == (b / name).read_bytes(), name
 

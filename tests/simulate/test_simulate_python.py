@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from conftest import require_engine
 
+from grainforge.errors import OutputExistsError
 from grainforge.simulate import CalibrationResult, VirtualTestResult, calibrate_friction, run_virtual_test, settings_for
 from grainforge.simulate.pipeline import Count, Estimate, Evaluated, Note, RunProgress
 
@@ -102,7 +103,8 @@ def test_a_virtual_test_returns_its_result_and_prints_nothing(stand_in_engine, t
     assert {e.what for e in events if isinstance(e, Count)} == {"grains", "clumps"}
     # the same call again is refused (nothing replaced), then replaces them with overwrite
     before = (result.out / "results.csv").stat().st_mtime_ns
-    with pytest.raises(FileExistsError, match="exists .*; use --overwrite"):
+    # an OutputExistsError (a FileExistsError) naming the setting as Python does
+    with pytest.raises(OutputExistsError, match="exists .*; use overwrite$"):
         run_virtual_test("tilt", [RECIPE], out=tmp_path / "t", settings=settings, quick=True, workers=1)
     assert (result.out / "results.csv").stat().st_mtime_ns == before
     again = run_virtual_test("tilt", [RECIPE], out=tmp_path / "t", settings=settings, quick=True, workers=1,
@@ -111,10 +113,11 @@ def test_a_virtual_test_returns_its_result_and_prints_nothing(stand_in_engine, t
 
 
 @pytest.mark.parametrize("options, message", [
-    ({"resume": True, "overwrite": True}, "--resume and --overwrite exclude each other"),
-    ({"engine": "yade", "mpi": 2}, "--mpi"),
-    ({"shape": "levelset", "as_spheres": True}, "--as-spheres is the sphere baseline"),
-    ({"spacing": 0.1}, "--spacing is the level set's grid"),
+    # the library names its settings as Python does (the command line names its options instead)
+    ({"resume": True, "overwrite": True}, "resume and overwrite exclude each other"),
+    ({"engine": "yade", "mpi": 2}, "mpi: yade runs one process per seed"),
+    ({"shape": "levelset", "as_spheres": True}, "as_spheres is the sphere baseline"),
+    ({"spacing": 0.1}, "spacing is the level set's grid: use it with shape levelset"),
 ])
 def test_options_that_do_not_go_together_are_refused_before_any_work(options, message, stand_in_engine, tmp_path):
     settings = settings_for("tilt", quick=True)

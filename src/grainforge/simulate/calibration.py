@@ -263,7 +263,7 @@ def calibrate_friction(test: str, inputs: Sequence[str | os.PathLike], *, out: s
 
     check_search(target_angle, friction_range, start)
     if angle is not None and test != "triaxial":
-        raise InputError(f"--angle is the triaxial test's: calibrate {test} does not take it")
+        raise InputError(f"{{angle}} is the triaxial test's: calibrate {test} does not take it", setting="angle")
     o = _options(test, inputs, settings, engine=engine, mpi=mpi, workers=workers, scheduler=scheduler, shape=shape,
                  spacing=spacing, as_spheres=as_spheres, clump_accuracy=clump_accuracy, quick=quick, resume=resume,
                  overwrite=overwrite, label=label, progress=progress)

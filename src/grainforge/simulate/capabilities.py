@@ -60,19 +60,20 @@ def check_engine(engine: str, mpi: int | None, shape: str, test: str | None = No
     >>> check_engine("yade", None, "levelset", "triaxial")
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --shape levelset: simulate triaxial's yade scene takes --shape clump only (Yade's level-set contact gains energy in a frictionless collision, a grain pair parting with 20 times its kinetic energy: a specimen never comes to rest at the confining stress; docs/simulate.md)
+    grainforge.errors.InputError: shape levelset: simulate triaxial's yade scene takes shape clump only (Yade's level-set contact gains energy in a frictionless collision, a grain pair parting with 20 times its kinetic energy: a specimen never comes to rest at the confining stress; docs/simulate.md)
     """
     runs = TEST_RUNS.get(test, RUNS)
     if not runs[engine]:
         what = f"simulate {test}" if test in TEST_RUNS else "simulate"
-        raise InputError(f"--engine {engine}: {what} has no {engine} scene yet (grainforge dem "
-                               f"--engine {engine} writes a pour deck); use --engine yade")
+        raise InputError(f"{{engine}} {engine}: {what} has no {engine} scene yet (grainforge dem "
+                         f"--engine {engine} writes a pour deck); use {{engine}} yade", setting="engine")
     if mpi is not None and engine not in MPI_ENGINES:
-        raise InputError(f"--mpi: {engine} runs one process per seed here, not under mpirun; "
-                               "use --workers for runs at once (or --engine liggghts --mpi N)")
+        raise InputError(f"{{mpi}}: {engine} runs one process per seed here, not under mpirun; "
+                         "use {workers} for runs at once (or {engine} liggghts {mpi} N)",
+                         setting=("mpi", "workers", "engine"))
     if shape not in runs[engine]:
         what = f"simulate {test}'s {engine} scene takes" if test in TEST_RUNS else f"simulate's {engine} scenes take"
         why = TEST_SHAPE_WHY.get((test, engine, shape))
-        raise InputError(f"--shape {shape}: {what} "
-                               f"{', '.join('--shape ' + s for s in runs[engine])} only ("
-                               + (why or f"grainforge dem --shape {shape} writes the deck") + ")")
+        raise InputError(f"{{shape}} {shape}: {what} "
+                         f"{', '.join('{shape} ' + s for s in runs[engine])} only ("
+                         + (why or f"grainforge dem --shape {shape} writes the deck") + ")", setting="shape")

@@ -122,11 +122,12 @@ def check_levelset_run(test: str, shape: str, settings) -> None:
     >>> check_levelset_run("tilt", "levelset", Settings(grains=30))
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --shape levelset: a tilt layer needs --grains ≥ 49 (a periodic cell at least 4 grains wide: Yade refuses a body wider than half the cell); got 30
+    grainforge.errors.InputError: shape levelset: a tilt layer needs grains ≥ 49 (a periodic cell at least 4 grains wide: Yade refuses a body wider than half the cell); got 30
     """
     if shape == "levelset" and test == "tilt" and settings.grains < MIN_TILT_GRAINS:
-        raise InputError(f"--shape levelset: a tilt layer needs --grains ≥ {MIN_TILT_GRAINS} (a periodic cell at "
-                         f"least 4 grains wide: Yade refuses a body wider than half the cell); got {settings.grains}")
+        raise InputError(f"{{shape}} levelset: a tilt layer needs {{grains}} ≥ {MIN_TILT_GRAINS} (a periodic cell at "
+                         f"least 4 grains wide: Yade refuses a body wider than half the cell); got {settings.grains}",
+                         setting=("shape", "grains"))
 
 
 def quick_levelset(test: str, shape: str) -> dict:

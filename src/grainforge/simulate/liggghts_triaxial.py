@@ -166,11 +166,11 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None, available: int | No
     >>> check_ranks(TriaxialSettings(grains=100), 64)
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use --mpi 8 (or another count cut at most 2 ways per side), or --grains 626 or more
+    grainforge.errors.InputError: mpi 64: a triaxial specimen of 100 grains is about 4.3 grain diameters wide; cut 4 ways (the 4 × 4 × 4 ranks' grid) a rank's slab would be 1.1 diameters thick, under the 2 a rank needs: use mpi 8 (or another count cut at most 2 ways per side), or grains 626 or more
     >>> check_ranks(TriaxialSettings(grains=200), 3, available=2)
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --mpi 3: a triaxial specimen of 200 grains is about 5.5 grain diameters wide; cut 3 ways (the 3 × 1 × 1 ranks' grid) a rank's slab would be 1.8 diameters thick, under the 2 a rank needs: use --mpi 2 (or another count cut at most 2 ways per side)
+    grainforge.errors.InputError: mpi 3: a triaxial specimen of 200 grains is about 5.5 grain diameters wide; cut 3 ways (the 3 × 1 × 1 ranks' grid) a rank's slab would be 1.8 diameters thick, under the 2 a rank needs: use mpi 2 (or another count cut at most 2 ways per side)
     """
     from ..params import specs
 
@@ -186,11 +186,11 @@ def check_ranks(settings: TriaxialSettings, mpi: int | None, available: int | No
     grains = math.ceil((MIN_RANK_DIAMETERS * cuts) ** 3 * DENSEST_FRACTION / (math.pi / 6.0))
     most_grains = next(s.high for s in specs(TriaxialSettings) if s.name == "grains")
     more = (available is None or mpi <= available) and grains <= most_grains
-    raise InputError(f"--mpi {mpi}: a triaxial specimen of {settings.grains} grains is about {width:.1f} grain "
+    raise InputError(f"{{mpi}} {mpi}: a triaxial specimen of {settings.grains} grains is about {width:.1f} grain "
                      f"diameters wide; cut {cuts} ways (the {' × '.join(map(str, grid))} ranks' grid) a rank's slab "
                      f"would be {width / cuts:.1f} diameters thick, under the {MIN_RANK_DIAMETERS:g} a rank needs: "
-                     f"use --mpi {fits} (or another count cut at most {allowed} ways per side)"
-                     + (f", or --grains {grains} or more" if more else ""))
+                     f"use {{mpi}} {fits} (or another count cut at most {allowed} ways per side)"
+                     + (f", or {{grains}} {grains} or more" if more else ""), setting=("mpi", "grains"))
 
 
 def _plan(templates: Sequence, settings: TriaxialSettings, seed: int) -> SimpleNamespace:

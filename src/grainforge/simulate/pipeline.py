@@ -26,7 +26,7 @@ from contextlib import ExitStack, contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..errors import InputError
+from ..errors import InputError, OutputExistsError
 
 __all__ = ["Estimate", "Note", "Count", "RunProgress", "Evaluated", "VirtualTestResult", "settings_for", "check_options",
            "check_run", "check_installed", "local_workers", "virtual_test_outputs", "run_virtual_test"]
@@ -207,25 +207,29 @@ def check_options(test: str | None, *, engine: str = "yade", mpi: int | None = N
     from .capabilities import check_engine
 
     if resume and overwrite:
-        raise InputError("--resume and --overwrite exclude each other")
+        raise InputError("{resume} and {overwrite} exclude each other", setting=("resume", "overwrite"))
     if scheduler is not None:
         from ..runtime.cluster import check_address
 
         if workers is not None:
-            raise InputError("--workers is for the local pool; the Dask cluster (--scheduler) decides its own workers")
+            raise InputError("{workers} is for the local pool; the Dask cluster ({scheduler}) decides its own workers",
+                             setting=("workers", "scheduler"))
         check_address(scheduler)
     check_engine(engine, mpi, shape, test)
     if shape != "clump" and rolling_friction:
-        raise InputError("--rolling-friction acts at sphere contacts: use it with --shape clump (or --as-spheres)")
+        raise InputError("{rolling_friction} acts at sphere contacts: use it with {shape} clump (or {as_spheres})",
+                         setting=("rolling_friction", "shape", "as_spheres"))
     if clump_accuracy is not None and (shape != "clump" or as_spheres):
-        raise InputError("--clump-accuracy builds clumps to an accuracy: use it with --shape clump, without "
-                         "--as-spheres")
+        raise InputError("{clump_accuracy} builds clumps to an accuracy: use it with {shape} clump, without "
+                         "{as_spheres}", setting=("clump_accuracy", "shape", "as_spheres"))
     if shape != "levelset" and spacing is not None:
-        raise InputError("--spacing is the level set's grid: use it with --shape levelset")
+        raise InputError("{spacing} is the level set's grid: use it with {shape} levelset", setting=("spacing", "shape"))
     if shape == "levelset" and spheres is not None:
-        raise InputError("--spheres sets a clump's size: a level set has none (--spacing sets its grid)")
+        raise InputError("{spheres} sets a clump's size: a level set has none ({spacing} sets its grid)",
+                         setting=("spheres", "spacing"))
     if shape == "levelset" and as_spheres:
-        raise InputError("--as-spheres is the sphere baseline (one sphere per grain): use it without --shape levelset")
+        raise InputError("{as_spheres} is the sphere baseline (one sphere per grain): use it without {shape} levelset",
+                         setting=("as_spheres", "shape"))
 
 
 def local_workers(workers: int | None, mpi: int | None) -> int:
@@ -361,7 +365,7 @@ def _check_out(out: str | os.PathLike, outputs: Sequence[Path], overwrite: bool)
     existing = [p for p in outputs if p.exists()] if not overwrite else []
     if existing:
         more = f" ({len(existing)} output files would be replaced)" if len(existing) > 1 else ""
-        raise FileExistsError(f"{existing[0]} exists{more}; use --overwrite")
+        raise OutputExistsError(f"{existing[0]} exists{more}; use {{overwrite}}", setting="overwrite")
     return out
 
 

@@ -314,7 +314,7 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
     >>> check_mpi_ranks(100000, environ={})  # doctest: +ELLIPSIS
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --mpi 100000: only ... rank(s) available (... core(s) here); use --mpi ... or fewer, or run ...
+    grainforge.errors.InputError: mpi 100000: only ... rank(s) available (... core(s) here); use mpi ... or fewer, or run ...
     >>> check_mpi_ranks(64, environ={"SLURM_NTASKS": "100000"})  # a batch allocation provides them
     """
     if mpi is None:
@@ -322,10 +322,11 @@ def check_mpi_ranks(mpi: int | None, workers: int | None = None, environ: dict |
     slots, source = mpi_slots(environ)
     runs = workers or 1
     if mpi * runs > slots:
-        what = f"--mpi {mpi}" + (f" × --workers {runs}" if runs > 1 else "")
+        what = f"{{mpi}} {mpi}" + (f" × {{workers}} {runs}" if runs > 1 else "")
         largest = max(1, slots // runs)
         if usable is not None:
             largest = max(1, usable(largest))
-        raise InputError(f"{what}: only {slots} rank(s) available ({source}); use --mpi {largest} or fewer"
-                         + (" (or fewer --workers)" if runs > 1 else "")
-                         + ", or run inside a batch allocation or with a hostfile that provides more")
+        raise InputError(f"{what}: only {slots} rank(s) available ({source}); use {{mpi}} {largest} or fewer"
+                         + (" (or fewer {workers})" if runs > 1 else "")
+                         + ", or run inside a batch allocation or with a hostfile that provides more",
+                         setting=("mpi", "workers"))

@@ -235,18 +235,18 @@ def check_triaxial_run(settings: TriaxialSettings, engine: str = "yade") -> None
     >>> check_triaxial_run(TriaxialSettings(grains=30))
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --grains 30: a periodic triaxial cell needs --grains ≥ 79 (a cell at least 4 grain diameters wide at a solid fraction of 0.64)
+    grainforge.errors.InputError: grains 30: a periodic triaxial cell needs grains ≥ 79 (a cell at least 4 grain diameters wide at a solid fraction of 0.64)
     >>> check_triaxial_run(TriaxialSettings(grains=30), "liggghts")
     Traceback (most recent call last):
     ...
-    grainforge.errors.InputError: --grains 30: a triaxial box of walls needs --grains ≥ 79 (a box at least 4 grain diameters wide at a solid fraction of 0.64)
+    grainforge.errors.InputError: grains 30: a triaxial box of walls needs grains ≥ 79 (a box at least 4 grain diameters wide at a solid fraction of 0.64)
     """
     what, where = ("a triaxial box of walls", "a box") if engine == "liggghts" else ("a periodic triaxial cell",
                                                                                    "a cell")
     if settings.grains < MIN_TRIAXIAL_GRAINS:
-        raise InputError(f"--grains {settings.grains}: {what} needs --grains ≥ {MIN_TRIAXIAL_GRAINS} ({where} at "
+        raise InputError(f"{{grains}} {settings.grains}: {what} needs {{grains}} ≥ {MIN_TRIAXIAL_GRAINS} ({where} at "
                          f"least {MIN_CELL_DIAMETERS:g} grain diameters wide at a solid fraction of "
-                         f"{DENSEST_FRACTION:g})")
+                         f"{DENSEST_FRACTION:g})", setting="grains")
 
 
 def scene_settings(settings: Settings, test: str, seed: int) -> dict:

@@ -30,6 +30,7 @@ import json
 import os
 import shutil
 import tempfile
+import threading
 from collections.abc import Sequence
 from pathlib import Path
 
@@ -295,7 +296,8 @@ class SweepJournal:
         self.folder.mkdir(parents=True, exist_ok=True)
         settings = self.folder / SETTINGS_FILE
         if not settings.is_file():
-            tmp = self.folder / f".{SETTINGS_FILE}.{os.getpid()}.tmp"
+            # a name of its own per thread too: runs finishing at once in one process record at once
+            tmp = self.folder / f".{SETTINGS_FILE}.{os.getpid()}.{threading.get_ident()}.tmp"
             tmp.write_text(json.dumps(self.fingerprint, indent=1, sort_keys=True) + "\n")
             tmp.replace(settings)
         tmp = Path(tempfile.mkdtemp(prefix=".run-", dir=self.folder))
