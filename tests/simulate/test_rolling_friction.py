@@ -265,7 +265,7 @@ def test_rolling_resistance_raises_the_spheres_ultimate_friction_angle(engine, t
     if engine == "yade":
         from conftest import require_long_lane
 
-        require_long_lane("Yade's two 100-sphere triaxial runs to 20 % (2-4 min of CPU); in the suite the same "
+        require_long_lane("Yade's two 100-sphere triaxial runs to 20 % (81 s idle, 4 min under load); in the suite the same "
                           "rise is checked in LIGGGHTS, and Yade's rolling law on a sphere on an incline")
     spheres = tmp_path / "grains"
     r = CliRunner().invoke(cli, ["generate", "cri", "--out", str(spheres), "--count", "3", "--size", "2",
